@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Create (or update) the project's virtual environment in .venv and install
+# everything the library, the tests and the ROS 2 graph need. Idempotent: a second
+# run only checks that what is installed matches pyproject.toml.
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$here"
+PY="${PYTHON:-python3}"
+if [ ! -x .venv/bin/python ]; then
+  echo "[setup] creating .venv with $($PY --version)"
+  "$PY" -m venv .venv
+fi
+stamp=.venv/.fahv-installed
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+  echo "[setup] installing fahv and its dependencies into .venv"
+  .venv/bin/python -m pip install --quiet --upgrade pip 2>&1 | grep -v "^WARNING: Location" || true
+  .venv/bin/python -m pip install --quiet -e '.[dev]' 2>&1 | grep -v "^WARNING: Location" || true
+  .venv/bin/python -c "import fahv, numpy, scipy, cvxpy, control" \
+    || { echo "[setup] error: installation incomplete" >&2; exit 1; }
+  touch "$stamp"
+fi
+echo "[setup] .venv ready ($(.venv/bin/python --version))"

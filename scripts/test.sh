@@ -1,0 +1,8 @@
+#!/usr/bin/env bash
+# Install everything (scripts/setup.sh) and run the test suite and the linter.
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$here"
+bash scripts/setup.sh
+.venv/bin/ruff check src tests benchmarks
+.venv/bin/python -m pytest "$@"

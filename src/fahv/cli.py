@@ -1,0 +1,279 @@
+"""The ``fahv`` command line.
+
+Subcommands (more arrive with the control and SIL layers)::
+
+    fahv trim      trim table at a point or over a grid of the envelope
+    fahv tp        TP model transformation report (singular values, error)
+    fahv figures   modelling figures (paper Fig. 2, 3, 4, 5, 8) as PNG
+
+Every command that uses the vehicle takes ``--vehicle FILE``. Errors name the
+input at fault and exit with status 2 (bad input) or 1 (failure).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from fahv.errors import FahvError
+
+
+def _vehicle(args):
+    from fahv.vehicle import load_vehicle
+
+    return load_vehicle(args.vehicle)
+
+
+def _add_vehicle(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--vehicle",
+        metavar="FILE",
+        default=None,
+        help="vehicle data file (YAML); default: the packaged Parker 2007 curve fit "
+        "with representative flexible data",
+    )
+
+
+def cmd_trim(args) -> int:
+    """Print the trim at (h, V) or over a grid."""
+    from fahv.trim import trim
+
+    veh = _vehicle(args)
+    env = veh.envelope
+    if args.grid:
+        pts = [
+            (h, V)
+            for h in np.linspace(env.h_min, env.h_max, args.grid[0])
+            for V in np.linspace(env.V_min, env.V_max, args.grid[1])
+        ]
+    else:
+        pts = [(args.h, args.V)]
+    rows = []
+    for h, V in pts:
+        tp = trim(veh, float(h), float(V), args.model)
+        rows.append(
+            {
+                "h_ft": h,
+                "V_ft_s": V,
+                "alpha_deg": np.degrees(tp.alpha),
+                "delta_e_deg": np.degrees(tp.delta_e),
+                "Phi": tp.Phi,
+                "eta_1": tp.eta_1,
+                "eta_2": tp.eta_2,
+                "residual_scaled": tp.residual,
+            }
+        )
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    print(f"trim of {args.model.upper()} ({veh.source_file})")
+    print(
+        f"{'h [ft]':>10} {'V [ft/s]':>10} {'alpha [deg]':>12} {'delta_e [deg]':>14} "
+        f"{'Phi':>8} {'eta_1':>8} {'eta_2':>8} {'residual':>10}"
+    )
+    for r in rows:
+        print(
+            f"{r['h_ft']:10.1f} {r['V_ft_s']:10.2f} {r['alpha_deg']:12.4f} "
+            f"{r['delta_e_deg']:14.4f} {r['Phi']:8.5f} {r['eta_1']:8.4f} {r['eta_2']:8.4f} "
+            f"{r['residual_scaled']:10.2e}"
+        )
+    return 0
+
+
+def _notch_arg(s: str):
+    from fahv.notch import NotchFilter
+
+    try:
+        vals = [float(v) for v in s.split(",")]
+        return NotchFilter(*vals)
+    except (ValueError, TypeError) as exc:
+        raise argparse.ArgumentTypeError(
+            f"--notch expects omega_z,eps_z,omega_p,eps_p (e.g. 19.05,0.02,19.05,0.5): {exc}"
+        ) from None
+
+
+def _shape(s: str) -> tuple[int, int]:
+    try:
+        a, b = (int(v) for v in s.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected AxB (e.g. 4x5), got {s!r}") from None
+    return a, b
+
+
+def _tp(args, veh, kind, shape, notch=None):
+    from fahv.tp_model import build_tp_model
+
+    def bar(it):
+        return tqdm(it, desc=f"linearise {kind.upper()}", unit="pt", leave=False, disable=None)
+
+    return build_tp_model(
+        veh, kind, shape[0], shape[1], args.samples[0], args.samples[1], notch, bar
+    )
+
+
+def cmd_tp(args) -> int:
+    """TP transformation report."""
+    from fahv.tp_model import approximation_error, offgrid_points
+
+    veh = _vehicle(args)
+    notch = args.notch if args.model == "ecm" else None
+    if args.model == "ecm" and notch is None:
+        raise FahvError("--model ecm needs --notch omega_z,eps_z,omega_p,eps_p")
+    tp = _tp(args, veh, args.model, args.vertices, notch)
+    from fahv.linearize import linearize
+
+    def sample(h, V):
+        lm = linearize(veh, h, V, args.model, notch)
+        return lm.A, lm.B
+
+    pts = offgrid_points(tp, args.random_points, args.seed)
+    err = approximation_error(tp, sample, pts)
+    report = {
+        "model": args.model,
+        "vertices": tp.n_vertices,
+        "shape": list(tp.shape),
+        "sampling_grid": list(args.samples),
+        "singular_values_h": (tp.sv_h[:6] / tp.sv_h[0]).tolist(),
+        "singular_values_V": (tp.sv_V[:6] / tp.sv_V[0]).tolist(),
+        "max_weight_per_vertex_h": tp.W_h.max(axis=0).tolist(),
+        "max_weight_per_vertex_V": tp.W_V.max(axis=0).tolist(),
+        "error": err,
+    }
+    if args.json:
+        print(json.dumps(report, indent=1))
+        return 0
+    print(
+        f"TP model of {args.model.upper()}: {tp.shape[0]} x {tp.shape[1]} = {tp.n_vertices} "
+        f"vertices, sampled on {args.samples[0]} x {args.samples[1]} points"
+    )
+    print("normalised singular values of the centred unfoldings:")
+    print("  h:", " ".join(f"{s:.2e}" for s in report["singular_values_h"]))
+    print("  V:", " ".join(f"{s:.2e}" for s in report["singular_values_V"]))
+    print("largest weight reached by each h-vertex:", " ".join(f"{w:.3f}" for w in tp.W_h.max(0)))
+    print("largest weight reached by each V-vertex:", " ".join(f"{w:.3f}" for w in tp.W_V.max(0)))
+    print(
+        f"approximation error over {err['n_points']} off-grid points "
+        f"(||S_tp - S||_F / ||S||_F, scaled): max {err['max_rel']:.2e}, "
+        f"mean {err['mean_rel']:.2e}; largest scaled entry error {err['max_abs_scaled']:.2e}"
+    )
+    return 0
+
+
+def cmd_figures(args) -> int:
+    """Write the modelling figures."""
+    from fahv import plots
+    from fahv.linearize import classify_modes, linearize
+    from fahv.notch import NotchFilter
+
+    veh = _vehicle(args)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    h, V = args.point
+    modes = {
+        m.name: m
+        for m in classify_modes(
+            linearize(veh, h, V, "cm").A, veh.params.omega_1, veh.params.omega_2
+        )
+    }
+    w1, w2 = modes["flexible 1"].wn, modes["flexible 2"].wn
+    notch1 = NotchFilter(w1, args.eps_z, w1, 0.5)
+    notch2 = NotchFilter(w2, args.eps_z, w2, 0.5)
+    written = [
+        plots.pole_map(veh, h, V, out / "fig04_pole_map.png"),
+        plots.notch_effect(veh, h, V, w1, args.eps_z, out / "fig03_notch_effect.png"),
+        plots.notch_modes(
+            veh,
+            h,
+            V,
+            {
+                f"notch on mode 1 ({w1:.2f} rad/s)": notch1,
+                f"notch on mode 2 ({w2:.2f} rad/s)": notch2,
+            },
+            out / "fig05_notch_modes.png",
+        ),
+    ]
+    ph, pv = args.offgrid
+    tp = _tp(args, veh, "dm", (4, 5))
+    written.append(plots.bode_dm_vs_lpv(veh, tp, ph, pv, out / "fig02_bode_dm_vs_lpv.png"))
+    tpe = _tp(args, veh, "ecm", (2, 3), notch1)
+    written.append(
+        plots.bode_ecm_vs_lpv(veh, tpe, notch1, ph, pv, out / "fig08_bode_ecm_vs_lpv.png")
+    )
+    for p in written:
+        print(p)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Argument parser of the ``fahv`` command."""
+    ap = argparse.ArgumentParser(prog="fahv", description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("trim", help="trim table (eq. 5) at a point or over a grid")
+    _add_vehicle(p)
+    p.add_argument("--h", type=float, default=85500.0, help="altitude [ft]")
+    p.add_argument("--V", type=float, default=7900.0, help="speed [ft/s]")
+    p.add_argument(
+        "--grid",
+        type=int,
+        nargs=2,
+        metavar=("NH", "NV"),
+        help="trim over an NH x NV grid of the envelope instead",
+    )
+    p.add_argument("--model", choices=("dm", "cm"), default="dm")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=cmd_trim)
+
+    p = sub.add_parser("tp", help="TP model transformation report (eq. 11)")
+    _add_vehicle(p)
+    p.add_argument("--model", choices=("dm", "cm", "ecm"), default="dm")
+    p.add_argument("--vertices", type=_shape, default=(4, 5), metavar="RHxRV")
+    p.add_argument("--samples", type=_shape, default=(21, 21), metavar="NHxNV")
+    p.add_argument("--notch", type=_notch_arg, default=None, metavar="omega_z,eps_z,omega_p,eps_p")
+    p.add_argument("--random-points", type=int, default=50)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_tp)
+
+    p = sub.add_parser("figures", help="modelling figures (paper Fig. 2, 3, 4, 5, 8)")
+    _add_vehicle(p)
+    p.add_argument("--out", default="docs/figures", help="output folder")
+    p.add_argument(
+        "--point",
+        type=float,
+        nargs=2,
+        default=(85500.0, 7900.0),
+        metavar=("H", "V"),
+        help="flight condition of Fig. 3-5",
+    )
+    p.add_argument(
+        "--offgrid",
+        type=float,
+        nargs=2,
+        default=(85730.0, 8013.0),
+        metavar=("H", "V"),
+        help="off-grid flight condition of Fig. 2 and 8",
+    )
+    p.add_argument("--eps-z", type=float, default=0.02, help="notch numerator damping")
+    p.add_argument("--samples", type=_shape, default=(21, 21), metavar="NHxNV")
+    p.set_defaults(func=cmd_figures)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``fahv``; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (FahvError, ValueError) as exc:
+        print(f"fahv {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,21 @@
+"""Exceptions raised by fahv. Each names the input at fault and what was expected."""
+
+
+class FahvError(Exception):
+    """Base class of every error fahv raises on purpose."""
+
+
+class VehicleDataError(FahvError, ValueError):
+    """A vehicle data file is missing, malformed, or holds a non-physical value."""
+
+
+class EnvelopeError(FahvError, ValueError):
+    """A flight condition (h, V) lies outside the flight envelope."""
+
+
+class TrimError(FahvError, RuntimeError):
+    """No equilibrium exists within the input limits, or the solver did not converge."""
+
+
+class DesignError(FahvError, RuntimeError):
+    """An offline design step failed or a certificate did not hold."""
