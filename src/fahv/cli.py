@@ -5,6 +5,7 @@ Subcommands (more arrive with the control and SIL layers)::
     fahv trim      trim table at a point or over a grid of the envelope
     fahv tp        TP model transformation report (singular values, error)
     fahv figures   modelling figures (paper Fig. 2, 3, 4, 5, 8) as PNG
+    fahv tube      tube feasibility study (W by source, F, Z, input room)
 
 Every command that uses the vehicle takes ``--vehicle FILE``. Errors name the
 input at fault and exit with status 2 (bad input) or 1 (failure).
@@ -209,6 +210,76 @@ def cmd_figures(args) -> int:
     return 0
 
 
+def cmd_tube(args) -> int:
+    """Tube feasibility study: W by source, F and Z, box tube, input room."""
+    import warnings
+
+    from fahv.plant import PAPER_UNCERTAINTY
+    from fahv.tube.feasibility import tube_feasibility
+    from fahv.vehicle import STATE_NAMES
+
+    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+    veh = _vehicle(args)
+    tp = _tp(args, veh, args.model, args.vertices)
+    dev = np.array([600, 250, np.radians(1), np.radians(1), np.radians(2), 0.5, 5, 0.05, 1.0])
+    du = np.array([0.1, np.radians(3)])
+    Dx = veh.state_scale
+    for treatment in args.treatment:
+
+        def bar(it, treatment=treatment):
+            return tqdm(it, desc=f"sample W ({treatment})", leave=False, disable=None)
+
+        res = tube_feasibility(
+            veh,
+            tp,
+            args.Ts,
+            PAPER_UNCERTAINTY,
+            args.rho_f,
+            dev,
+            du,
+            args.samples_w,
+            args.seed,
+            args.margin,
+            treatment,
+            tuple(args.lam),
+            progress=bar,
+        )
+        print(
+            f"\n== fault treatment '{treatment}', design model {args.model.upper()} "
+            f"({tp.n_vertices} vertices), Ts = {args.Ts} s, {res.W.n_samples} samples =="
+        )
+        print("W half-widths per step, scaled by the state scales (no margin):")
+        print(f"  {'state':>10} " + " ".join(f"{k:>11}" for k in res.W.parts))
+        for j, name in enumerate(STATE_NAMES):
+            vals = " ".join(f"{res.W.parts[k][j] / Dx[j]:11.4g}" for k in res.W.parts)
+            print(f"  {name:>10} {vals}")
+        if res.tube is None:
+            print(f"tube: no certified tube: {res.error}")
+            continue
+        t = res.tube
+        print(
+            f"tube: ellipsoid, lam = {t.lam}, certificate min eigenvalue "
+            f"{t.min_eigs.min():.2e} over {t.min_eigs.size} vertices (verified)"
+        )
+        print("  bounding box of Z / scale:", " ".join(f"{v:.3g}" for v in t.z_box / Dx))
+        print(
+            f"  attitude bounds: alpha {np.degrees(t.z_box[2]):.3f} deg, "
+            f"theta {np.degrees(t.z_box[3]):.3f} deg"
+        )
+        print(
+            f"  input room {res.room[0]:.4f} / {np.degrees(res.room[1]):.3f} deg; "
+            f"tightening max|F e| {t.tightening[0]:.4f} / "
+            f"{np.degrees(t.tightening[1]):.3f} deg; left for the nominal input "
+            f"{res.nominal_room[0]:.4f} / {np.degrees(res.nominal_room[1]):.3f} deg"
+        )
+        b = res.box
+        print(
+            f"  paper's box tube (eq. 25-28): {'feasible' if b.feasible else 'infeasible'}; "
+            f"max rho(|A_i + B_i F|) = {b.spectral_radius_abs.max():.3f}"
+        )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Argument parser of the ``fahv`` command."""
     ap = argparse.ArgumentParser(prog="fahv", description=__doc__.split("\n\n")[0])
@@ -262,6 +333,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--eps-z", type=float, default=0.02, help="notch numerator damping")
     p.add_argument("--samples", type=_shape, default=(21, 21), metavar="NHxNV")
     p.set_defaults(func=cmd_figures)
+    p = sub.add_parser("tube", help="tube feasibility study: W (eq. 19), F, Z, eq. (30)")
+    _add_vehicle(p)
+    p.add_argument("--model", choices=("dm", "cm"), default="cm", help="LPV design model")
+    p.add_argument("--vertices", type=_shape, default=(4, 5), metavar="RHxRV")
+    p.add_argument("--samples", type=_shape, default=(21, 21), metavar="NHxNV")
+    p.add_argument("--Ts", type=float, default=0.02, help="sampling period [s]")
+    p.add_argument("--rho-f", type=float, default=0.9, help="elevator effectiveness")
+    p.add_argument("--samples-w", type=int, default=300, help="samples bounding W")
+    p.add_argument("--margin", type=float, default=1.2, help="margin on the sampled W")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--lam", type=float, nargs="+", default=[0.98, 0.99, 0.995])
+    p.add_argument(
+        "--treatment", nargs="+", choices=("box", "polytopic"), default=["box", "polytopic"]
+    )
+    p.set_defaults(func=cmd_tube)
     return ap
 
 
