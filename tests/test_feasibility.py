@@ -22,8 +22,9 @@ def tp_cm(vehicle):
 def _run(vehicle, tp, treatment):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return tube_feasibility(vehicle, tp, 0.02, PAPER_UNCERTAINTY, 0.9, DEV, DU, 60, 0, 1.2,
-                                treatment, (0.98, 0.99))
+        return tube_feasibility(
+            vehicle, tp, 0.02, PAPER_UNCERTAINTY, 0.9, DEV, DU, 60, 0, 1.2, treatment, (0.98, 0.99)
+        )
 
 
 def test_input_room(vehicle):
