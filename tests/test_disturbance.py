@@ -7,23 +7,24 @@ from fahv.plant import PAPER_UNCERTAINTY
 from fahv.tp_model import build_tp_model
 from fahv.tube.disturbance import sample_disturbance
 
+DEV = np.array([600, 250, np.radians(1), np.radians(1), np.radians(2), 0.5, 5, 0.05, 1.0])
+DU = np.array([0.1, np.radians(3)])
+
+
+def _sample(vehicle, tp, margin=1.2):
+    return sample_disturbance(
+        vehicle, tp, 0.02, PAPER_UNCERTAINTY, 0.9, DEV, DU, 25, seed=0, margin=margin
+    )
+
 
 @pytest.fixture(scope="module")
-def wset(vehicle):
-    tp = build_tp_model(vehicle, "cm", 4, 5, 11, 11)
-    dev = np.array([600, 250, np.radians(1), np.radians(1), np.radians(2), 0.5, 5, 0.05, 1.0])
-    return sample_disturbance(
-        vehicle,
-        tp,
-        0.02,
-        PAPER_UNCERTAINTY,
-        0.9,
-        dev,
-        np.array([0.1, np.radians(3)]),
-        25,
-        seed=0,
-        margin=1.2,
-    )
+def tp_cm(vehicle):
+    return build_tp_model(vehicle, "cm", 4, 5, 11, 11)
+
+
+@pytest.fixture(scope="module")
+def wset(vehicle, tp_cm):
+    return _sample(vehicle, tp_cm)
 
 
 def test_w_is_margin_times_total(wset):
@@ -43,21 +44,7 @@ def test_cm_design_model_error_is_small(vehicle, wset):
     assert wset.parts["model"][4] / vehicle.state_scale[4] < 0.01
 
 
-def test_seeded_and_reproducible(vehicle, wset):
-    tp = build_tp_model(vehicle, "cm", 4, 5, 11, 11)
-    dev = np.array([600, 250, np.radians(1), np.radians(1), np.radians(2), 0.5, 5, 0.05, 1.0])
-    again = sample_disturbance(
-        vehicle,
-        tp,
-        0.02,
-        PAPER_UNCERTAINTY,
-        0.9,
-        dev,
-        np.array([0.1, np.radians(3)]),
-        25,
-        seed=0,
-        margin=1.2,
-    )
-    np.testing.assert_array_equal(again.w_max, wset.w_max)
+def test_seeded_and_reproducible(vehicle, tp_cm, wset):
+    np.testing.assert_array_equal(_sample(vehicle, tp_cm).w_max, wset.w_max)
     with pytest.raises(ValueError, match="margin"):
-        sample_disturbance(vehicle, tp, 0.02, PAPER_UNCERTAINTY, 0.9, dev, dev[:2], 1, 0, 0.5)
+        _sample(vehicle, tp_cm, margin=0.5)

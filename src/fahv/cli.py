@@ -200,10 +200,10 @@ def cmd_figures(args) -> int:
     ]
     ph, pv = args.offgrid
     tp = _tp(args, veh, "dm", (4, 5))
-    written.append(plots.bode_dm_vs_lpv(veh, tp, ph, pv, out / "fig02_bode_dm_vs_lpv.png"))
+    written.append(plots.bode_model_vs_lpv(veh, tp, ph, pv, out / "fig02_bode_dm_vs_lpv.png"))
     tpe = _tp(args, veh, "ecm", (2, 3), notch1)
     written.append(
-        plots.bode_ecm_vs_lpv(veh, tpe, notch1, ph, pv, out / "fig08_bode_ecm_vs_lpv.png")
+        plots.bode_model_vs_lpv(veh, tpe, ph, pv, out / "fig08_bode_ecm_vs_lpv.png", notch1)
     )
     for p in written:
         print(p)

@@ -90,20 +90,29 @@ def pole_map(vehicle: Vehicle, h: float, V: float, path: Path) -> Path:
     return path
 
 
-def bode_dm_vs_lpv(vehicle: Vehicle, tp, h: float, V: float, path: Path) -> Path:
-    """Bode of the DM Jacobian vs the polytopic LPV model at an off-grid p (Fig. 2)."""
-    lm = linearize(vehicle, h, V, "dm")
+def bode_model_vs_lpv(
+    vehicle: Vehicle, tp, h: float, V: float, path: Path, notch: NotchFilter | None = None
+) -> Path:
+    """Bode of the Jacobian linearisation vs the polytopic LPV model at an off-grid p.
+
+    Paper Fig. 2 (``tp.kind == "dm"``) and Fig. 8 (``tp.kind == "ecm"``, codesigned
+    model; ``notch`` required). Channels q (or q') / delta_e, alpha / delta_e, V / Phi.
+    """
+    kind = tp.kind
+    lm = linearize(vehicle, h, V, kind, notch)
     A_tp, B_tp = tp.system(h, V)
+    name_m = kind.upper()
+    q_name = "q' / delta_e" if kind == "ecm" else "q / delta_e"
     fig, am, ph = _bode_axes(
-        f"DM (solid) vs {tp.n_vertices}-vertex polytopic LPV (dashed), "
+        f"{name_m} (solid) vs {tp.n_vertices}-vertex polytopic LPV (dashed), "
         f"h = {h:.0f} ft, V = {V:.0f} ft/s"
     )
     for out, inp, name, c in (
-        (Q, DELTA_E, "q / delta_e", "tab:red"),
+        (Q, DELTA_E, q_name, "tab:red"),
         (ALPHA, DELTA_E, "alpha / delta_e", "tab:blue"),
         (IV, PHI, "V / Phi", "tab:green"),
     ):
-        _bode_line(am, ph, _W, _freq(lm.A, lm.B, out, inp), color=c, lw=2, label=f"DM {name}")
+        _bode_line(am, ph, _W, _freq(lm.A, lm.B, out, inp), color=c, lw=2, label=f"{name_m} {name}")
         _bode_line(
             am, ph, _W, _freq(A_tp, B_tp, out, inp), color="k", ls="--", lw=1, label=f"LPV {name}"
         )
@@ -183,32 +192,6 @@ def notch_modes(
         _bode_line(am, ph, _W, _with_notch(lm.A, lm.B, nf), lw=1.3, label=label)
     am.set_xlim(1, 200)
     am.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def bode_ecm_vs_lpv(
-    vehicle: Vehicle, tp, notch: NotchFilter, h: float, V: float, path: Path
-) -> Path:
-    """Bode of the ECM Jacobian vs the codesigned polytopic LPV model (Fig. 8)."""
-    lm = linearize(vehicle, h, V, "ecm", notch)
-    A_tp, B_tp = tp.system(h, V)
-    fig, am, ph = _bode_axes(
-        f"ECM (solid) vs codesigned {tp.n_vertices}-vertex LPV (dashed), "
-        f"h = {h:.0f} ft, V = {V:.0f} ft/s"
-    )
-    for out, inp, name, c in (
-        (Q, DELTA_E, "q' / delta_e", "tab:red"),
-        (ALPHA, DELTA_E, "alpha / delta_e", "tab:blue"),
-        (IV, PHI, "V / Phi", "tab:green"),
-    ):
-        _bode_line(am, ph, _W, _freq(lm.A, lm.B, out, inp), color=c, lw=2, label=f"ECM {name}")
-        _bode_line(
-            am, ph, _W, _freq(A_tp, B_tp, out, inp), color="k", ls="--", lw=1, label=f"LPV {name}"
-        )
-    am.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
