@@ -5,15 +5,21 @@ import pytest
 
 from fahv.plant import PAPER_UNCERTAINTY
 from fahv.tp_model import build_tp_model
-from fahv.tube.disturbance import sample_disturbance
-
-DEV = np.array([600, 250, np.radians(1), np.radians(1), np.radians(2), 0.5, 5, 0.05, 1.0])
-DU = np.array([0.1, np.radians(3)])
+from fahv.tube.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
 
 
 def _sample(vehicle, tp, margin=1.2):
     return sample_disturbance(
-        vehicle, tp, 0.02, PAPER_UNCERTAINTY, 0.9, DEV, DU, 25, seed=0, margin=margin
+        vehicle,
+        tp,
+        0.02,
+        PAPER_UNCERTAINTY,
+        0.9,
+        DEFAULT_DEV_BOX,
+        DEFAULT_DU_BOX,
+        25,
+        seed=0,
+        margin=margin,
     )
 
 
@@ -33,7 +39,7 @@ def test_w_is_margin_times_total(wset):
 
 
 def test_fault_dominates_flexible_and_pitch_rows(vehicle, wset):
-    dom = wset.dominant(vehicle.state_scale)
+    dom = wset.dominant()
     # the 10 % elevator loss on a ~12-15 deg deflection drives q and eta_2 through
     # M_delta_e and N2_delta_e; measured: fault 0.065 vs parameters 0.030 (q, scaled)
     assert dom[4] == "fault" and dom[8] == "fault"

@@ -7,11 +7,9 @@ import pytest
 
 from fahv.plant import PAPER_UNCERTAINTY
 from fahv.tp_model import build_tp_model
+from fahv.tube.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX
 from fahv.tube.feasibility import input_room, tube_feasibility
 from fahv.tube.feedback import verify_tube
-
-DEV = np.array([600, 250, np.radians(1), np.radians(1), np.radians(2), 0.5, 5, 0.05, 1.0])
-DU = np.array([0.1, np.radians(3)])
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +21,18 @@ def _run(vehicle, tp, treatment):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return tube_feasibility(
-            vehicle, tp, 0.02, PAPER_UNCERTAINTY, 0.9, DEV, DU, 60, 0, 1.2, treatment, (0.98, 0.99)
+            vehicle,
+            tp,
+            0.02,
+            PAPER_UNCERTAINTY,
+            0.9,
+            DEFAULT_DEV_BOX,
+            DEFAULT_DU_BOX,
+            60,
+            0,
+            1.2,
+            treatment,
+            (0.98, 0.99),
         )
 
 

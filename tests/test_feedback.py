@@ -46,6 +46,14 @@ def test_tube_is_invariant_by_sampling(tube):
     assert worst <= 1.0 + 1e-9
 
 
+def test_contains_boundary_and_outside(tube):
+    L = np.linalg.cholesky(tube.N)
+    e = L @ np.array([0.6, 0.8])  # on the boundary of Z (unit vector mapped by L)
+    assert tube.contains(e)
+    assert not tube.contains(1.01 * e)
+    assert tube.contains(0.5 * e, scale=0.5) and not tube.contains(0.51 * e, scale=0.5)
+
+
 def test_tightening_is_support_of_FZ(tube):
     L = np.linalg.cholesky(tube.N)
     d = np.random.default_rng(0).normal(size=(2, 2000))

@@ -215,14 +215,13 @@ def cmd_tube(args) -> int:
     import warnings
 
     from fahv.plant import PAPER_UNCERTAINTY
+    from fahv.tube.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX
     from fahv.tube.feasibility import tube_feasibility
     from fahv.vehicle import STATE_NAMES
 
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     veh = _vehicle(args)
     tp = _tp(args, veh, args.model, args.vertices)
-    dev = np.array([600, 250, np.radians(1), np.radians(1), np.radians(2), 0.5, 5, 0.05, 1.0])
-    du = np.array([0.1, np.radians(3)])
     Dx = veh.state_scale
     for treatment in args.treatment:
 
@@ -235,8 +234,8 @@ def cmd_tube(args) -> int:
             args.Ts,
             PAPER_UNCERTAINTY,
             args.rho_f,
-            dev,
-            du,
+            DEFAULT_DEV_BOX,
+            DEFAULT_DU_BOX,
             args.samples_w,
             args.seed,
             args.margin,

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fahv.vehicle import DELTA_E, PHI, InputLimits, VehicleParams, cm_rhs
+from fahv.vehicle import DELTA_E, InputLimits, VehicleParams, cm_rhs
 
 #: Parameters of the uncertainty box of sec. 5.1 and their relative bounds.
 PAPER_UNCERTAINTY = {
@@ -188,5 +188,4 @@ __all__ = [
     "ElevatorFault",
     "FaultInjector",
     "Plant",
-    "PHI",
 ]

@@ -24,6 +24,15 @@ from fahv.plant import perturb, rk4_step
 from fahv.trim import trim
 from fahv.vehicle import DELTA_E, cm_rhs
 
+#: Half-widths of the state deviations sampled for W (h ft, V ft/s, alpha rad, theta rad,
+#: q rad/s, eta_1, eta_1_dot, eta_2, eta_2_dot): the Case 1 step (600 ft, 250 ft/s) and a
+#: few scale units of the attitude and flexible states (docs/control_design.md).
+DEFAULT_DEV_BOX = np.array(
+    [600.0, 250.0, np.radians(1.0), np.radians(1.0), np.radians(2.0), 0.5, 5.0, 0.05, 1.0]
+)
+#: Half-widths of the input deviations sampled for W (Phi, delta_e rad).
+DEFAULT_DU_BOX = np.array([0.1, np.radians(3.0)])
+
 
 @dataclass(frozen=True)
 class DisturbanceSet:
@@ -45,8 +54,8 @@ class DisturbanceSet:
     margin: float
     n_samples: int
 
-    def dominant(self, scale: np.ndarray) -> list[str]:
-        """Name of the dominant source for each state (by scaled magnitude)."""
+    def dominant(self) -> list[str]:
+        """Name of the largest single source ("model", "parameters", "fault") per state."""
         names = ["model", "parameters", "fault"]
         return [
             names[int(np.argmax([self.parts[k][j] for k in names]))] for j in range(self.w_max.size)
@@ -107,6 +116,10 @@ def sample_disturbance(
     names = list(uncertainty)
     parts = {k: np.zeros(9) for k in ("model", "parameters", "fault", "total")}
     rng_iter = range(n_samples) if progress is None else progress(range(n_samples))
+
+    def nom(x_, u_):
+        return cm_rhs(x_, u_, vp)
+
     for _ in rng_iter:
         hc = rng.uniform(env.h_min, env.h_max)
         Vc = rng.uniform(env.V_min, env.V_max)
@@ -126,9 +139,6 @@ def sample_disturbance(
         )
         uf = us.copy()
         uf[DELTA_E] *= rho_f
-
-        def nom(x_, u_):
-            return cm_rhs(x_, u_, vp)
 
         def per(x_, u_, vpp=vpp):
             return cm_rhs(x_, u_, vpp)

@@ -13,11 +13,14 @@ the tube used is an ellipsoid Z = {e : e' N^-1 e <= 1} designed jointly with F::
 
 By the S-procedure this gives (A_cl e + w)' N^-1 (A_cl e + w) <= lam e'N^-1 e +
 sum mu_j w_j^2 <= 1 for every e in Z and |w_j| <= w_j: Z is RPI for the whole box W
-and all vertices. Its top-left 2x2 block is LMI (24) with a decay rate lam < 1.
+and all vertices. Deleting the middle row and column leaves
+[[lam N, (A_i N + B_i M)'], [A_i N + B_i M, N]] >= 0, i.e. LMI (24) with a decay
+rate lam < 1, so F stabilises every vertex.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cvxpy as cp
@@ -213,7 +216,7 @@ def design_tube(
         min_eigs=np.zeros(R),
     )
     eigs = verify_tube(A, B, tube, Dx, Du)
-    return TubeDesign(**{**tube.__dict__, "min_eigs": eigs})
+    return dataclasses.replace(tube, min_eigs=eigs)
 
 
 @dataclass(frozen=True)
