@@ -43,3 +43,18 @@ def test_bad_parameters():
         NotchFilter(200.0, 0.02, 200.0, 0.5).discretize(0.02)
     with pytest.raises(ValueError, match="must be finite"):
         DiscreteNotch(NotchFilter(20.0, 0.02, 20.0, 0.5), 0.02).step(float("nan"))
+
+
+def test_discrete_notch_matches_python_control_tustin():
+    """The trapezoidal form has the transfer function of control.c2d(tustin, prewarp)."""
+    import control
+
+    nf = NotchFilter(19.05, 0.02, 19.05, 0.5)
+    Ts = 0.02
+    ref = nf.discretize(Ts)
+    f = DiscreteNotch(nf, Ts)
+    # impulse response of both, 200 samples
+    y = [f.step(1.0 if k == 0 else 0.0) for k in range(200)]
+    _, y_ref = control.impulse_response(ref, T=np.arange(200) * Ts)
+    # python-control scales a discrete impulse response by 1/Ts (unit-area impulse)
+    np.testing.assert_allclose(y, np.ravel(y_ref) * Ts, atol=1e-9)

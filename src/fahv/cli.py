@@ -6,6 +6,8 @@ Subcommands (more arrive with the control and SIL layers)::
     fahv tp        TP model transformation report (singular values, error)
     fahv figures   modelling figures (paper Fig. 2, 3, 4, 5, 8) as PNG
     fahv tube      tube feasibility study (W by source, F, Z, input room)
+    fahv design    offline design of a case file: certified artefacts + ROS parameters
+    fahv simulate  in-process closed loop of a case: metrics table per variant
 
 Every command that uses the vehicle takes ``--vehicle FILE``. Errors name the
 input at fault and exit with status 2 (bad input) or 1 (failure).
@@ -279,6 +281,114 @@ def cmd_tube(args) -> int:
     return 0
 
 
+def _artefact_dir(case, out):
+    return Path(out) if out else Path("offline_design") / "artefacts" / case.name
+
+
+def cmd_design(args) -> int:
+    """Offline design of a case: print every certificate, write the artefacts."""
+    import warnings
+
+    from fahv.case import load_case
+    from fahv.design import run_design, save_design
+
+    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+    case = load_case(args.case)
+
+    def bar(it):
+        return tqdm(it, desc="sample W", leave=False, disable=None)
+
+    design = run_design(case, progress=bar)
+    out = save_design(design, _artefact_dir(case, args.out))
+    print(f"design hash {design.summary['design_hash']}; artefacts written to {out}/")
+    return 0
+
+
+#: Rows of the metrics table: key, label, format.
+METRIC_ROWS = (
+    ("settling_time_h_s", "settling time h (10 ft) [s]", "{:.1f}"),
+    ("settling_time_V_s", "settling time V (2 ft/s) [s]", "{:.1f}"),
+    ("h_err_final_ft", "h error at the end [ft]", "{:.2f}"),
+    ("V_err_final_fps", "V error at the end [ft/s]", "{:.2f}"),
+    ("h_err_rms_after_settle_ft", "h RMS error after settling [ft]", "{:.2f}"),
+    ("V_err_rms_after_settle_fps", "V RMS error after settling [ft/s]", "{:.2f}"),
+    ("alpha_err_max_deg", "max |alpha - alpha_r| [deg]", "{:.3f}"),
+    ("theta_err_max_deg", "max |theta - theta_r| [deg]", "{:.3f}"),
+    ("attitude_within_0.5deg", "attitude within +/-0.5 deg", "{}"),
+    ("eta_1_dev_peak", "peak |eta_1 - eta_1,r|", "{:.4f}"),
+    ("eta_2_dev_peak", "peak |eta_2 - eta_2,r|", "{:.4f}"),
+    ("eta_1_dot_rms_after_fault", "RMS eta_1_dot after fault [1/s]", "{:.5f}"),
+    ("eta_2_dot_rms_after_fault", "RMS eta_2_dot after fault [1/s]", "{:.5f}"),
+    ("Phi_min", "Phi min", "{:.4f}"),
+    ("Phi_max", "Phi max", "{:.4f}"),
+    ("delta_e_min_deg", "delta_e min [deg]", "{:.3f}"),
+    ("delta_e_max_deg", "delta_e max [deg]", "{:.3f}"),
+    ("input_limit_violations", "steps with a command beyond limits", "{}"),
+    ("tube_fraction_inside", "fraction of steps with e in Z", "{:.4f}"),
+    ("tube_level_max", "max e' Z^-1 e", "{:.4f}"),
+)
+
+
+def format_metrics(table: dict[str, dict]) -> str:
+    """Metrics of several runs as a text table, one column per run."""
+    names = list(table)
+    width = max(12, *(len(n) for n in names))
+    lines = [f"{'metric':<36} " + " ".join(f"{n:>{width}}" for n in names)]
+    for key, label, fmt in METRIC_ROWS:
+        cells = []
+        for n in names:
+            v = table[n].get(key)
+            cells.append(f"{'-' if v is None else fmt.format(v):>{width}}")
+        lines.append(f"{label:<36} " + " ".join(cells))
+    return "\n".join(lines)
+
+
+def cmd_simulate(args) -> int:
+    """In-process closed loop of a case; prints the metrics table of every variant."""
+    import warnings
+
+    from fahv.case import load_case
+    from fahv.design import load_design, run_design, save_design
+    from fahv.errors import DesignError
+    from fahv.sim import metrics, simulate
+    from fahv.vehicle import load_vehicle
+
+    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+    case = load_case(args.case)
+    out = _artefact_dir(case, args.design)
+    try:
+        design = load_design(out)
+        if design.case != _jsonable(case.data):
+            raise DesignError("case file changed since the design")
+    except DesignError as exc:
+        print(f"no valid design in {out} ({exc}); designing first")
+        design = run_design(case)
+        save_design(design, out)
+    variants = args.variant or case["variants"]
+    limits = load_vehicle().limits
+    table = {}
+    for v in variants:
+
+        def bar(it, v=v):
+            return tqdm(it, desc=v, leave=False, disable=None)
+
+        run = simulate(design, v, args.duration, progress=bar)
+        table[v] = metrics(run, limits, case["fault"]["t_onset"])
+        if run.info.get("rmpc_solves"):
+            table[v]["rmpc_solves"] = run.info["rmpc_solves"]
+            table[v]["rmpc_failed"] = run.info["rmpc_failed"]
+    if args.json:
+        print(json.dumps(table, indent=2))
+    else:
+        print(f"case {case.name}, design {design.summary['design_hash']}")
+        print(format_metrics(table))
+    return 0
+
+
+def _jsonable(data):
+    return json.loads(json.dumps(data, default=list))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Argument parser of the ``fahv`` command."""
     ap = argparse.ArgumentParser(prog="fahv", description=__doc__.split("\n\n")[0])
@@ -347,6 +457,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--treatment", nargs="+", choices=("box", "polytopic"), default=["box", "polytopic"]
     )
     p.set_defaults(func=cmd_tube)
+    p = sub.add_parser("design", help="offline design of a case: artefacts + ROS parameters")
+    p.add_argument("case", help="case file, e.g. offline_design/case1.yaml")
+    p.add_argument("--out", default=None, help="artefact folder (offline_design/artefacts/NAME)")
+    p.set_defaults(func=cmd_design)
+    p = sub.add_parser("simulate", help="in-process closed loop of a case, metrics table")
+    p.add_argument("case", help="case file")
+    p.add_argument("--design", default=None, help="artefact folder (designed if missing)")
+    p.add_argument("--variant", nargs="+", default=None, help="variants (default: the case's)")
+    p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_simulate)
     return ap
 
 

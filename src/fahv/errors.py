@@ -19,3 +19,11 @@ class TrimError(FahvError, RuntimeError):
 
 class DesignError(FahvError, RuntimeError):
     """An offline design step failed or a certificate did not hold."""
+
+
+class CaseError(FahvError, ValueError):
+    """A case file is missing, malformed, or holds an unknown or out-of-range key."""
+
+
+class RunError(FahvError, RuntimeError):
+    """A closed-loop run or a recorded run file cannot be used."""

@@ -126,24 +126,42 @@ class DiscreteNotch:
 
     Notes
     -----
-    x_q(k+1) = A_d x_q(k) + B_d q(k), q'(k) = C_d x_q(k) + D_d q(k), with
-    (A_d, B_d, C_d, D_d) from :meth:`NotchFilter.discretize` (python-control).
+    Tustin (bilinear) discretisation prewarped at omega_z, written as the trapezoidal
+    rule on the continuous state of eq. (39) with alpha = tan(omega_z Ts / 2) / omega_z::
+
+        x_q(k) = (I - alpha A_q)^-1 [(I + alpha A_q) x_q(k-1) + alpha B_q (q(k-1) + q(k))]
+        q'(k)  = C_q x_q(k) + D_q q(k)
+
+    Its transfer function is that of ``NotchFilter.discretize`` (python-control's
+    ``c2d(..., "tustin", prewarp_frequency=omega_z)``, checked in the tests), and its
+    state ``x_q`` is in the coordinates of the continuous filter, i.e. the x_q1, x_q2
+    of the ECM state (eq. 43) that the adjustable Tube-MPC feeds back.
     """
 
     def __init__(self, notch: NotchFilter, Ts: float, q0: float = 0.0) -> None:
-        sys = notch.discretize(Ts)
-        self.A_d = np.asarray(sys.A, float)
-        self.B_d = np.asarray(sys.B, float).ravel()
-        self.C_d = np.asarray(sys.C, float).ravel()
-        self.D_d = float(np.asarray(sys.D).item())
-        self.Ts = Ts
-        # steady state for constant input q0: x = (I - A_d)^-1 B_d q0
-        self.x_q = np.linalg.solve(np.eye(2) - self.A_d, self.B_d * q0)
+        notch.discretize(Ts)  # validates Ts against the notch frequency
+        A, B, C, D = notch.ss()
+        A, B, C = np.asarray(A, float), np.asarray(B, float).ravel(), np.asarray(C, float)
+        alpha = math.tan(notch.omega_z * Ts / 2.0) / notch.omega_z
+        M = np.linalg.inv(np.eye(2) - alpha * A)
+        self._Ad = M @ (np.eye(2) + alpha * A)
+        self._Bd = alpha * M @ B
+        self.C_q, self.D_q, self.Ts = C.ravel(), float(D), Ts
+        if not math.isfinite(q0):
+            raise ValueError(f"notch filter initial pitch rate q0 must be finite, got {q0}")
+        self.x_q = -np.linalg.solve(A, B * q0)  # steady state of eq. (39) for q = q0
+        self._q_prev = float(q0)
 
     def step(self, q: float) -> float:
-        """Filter one sample of the pitch rate q [rad/s]; returns q' [rad/s]."""
+        """Filter one sample of the pitch rate q [rad/s]; returns q' [rad/s].
+
+        Raises
+        ------
+        ValueError
+            If q is not finite (the filter state is left unchanged).
+        """
         if not math.isfinite(q):
             raise ValueError(f"notch filter input q must be finite, got {q}")
-        y = float(self.C_d @ self.x_q + self.D_d * q)
-        self.x_q = self.A_d @ self.x_q + self.B_d * q
-        return y
+        self.x_q = self._Ad @ self.x_q + self._Bd * (self._q_prev + q)
+        self._q_prev = float(q)
+        return float(self.C_q @ self.x_q + self.D_q * q)

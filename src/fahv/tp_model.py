@@ -36,6 +36,24 @@ from scipy import optimize, signal
 from fahv.errors import DesignError
 
 
+def tp_weights(h, V, h_grid, V_grid, W_h, W_V) -> np.ndarray:
+    """Vertex weights tau_i(p) (R,) = w_h,a(h) w_V,b(V), i = a r_V + b, eq. (11).
+
+    Parameters
+    ----------
+    h, V : float
+        Scheduling variables [ft, ft/s], clipped to the grids.
+    h_grid : (N_h,) ndarray
+    V_grid : (N_V,) ndarray
+    W_h : (N_h, r_h) ndarray
+    W_V : (N_V, r_V) ndarray
+        Sampled weighting functions, linearly interpolated.
+    """
+    wh = np.array([np.interp(h, h_grid, W_h[:, a]) for a in range(W_h.shape[1])])
+    wv = np.array([np.interp(V, V_grid, W_V[:, b]) for b in range(W_V.shape[1])])
+    return np.outer(wh, wv).ravel()
+
+
 @dataclass(frozen=True)
 class DiscretePolytope:
     """Discrete polytopic LPV model x(k+1) = sum_i tau_i(p) (A_i x + B_i u), eq. (12).
@@ -119,9 +137,7 @@ class TPModel:
             envelope), so a plant that leaves the envelope transiently gets the
             weights of the nearest boundary point.
         """
-        wh = np.array([np.interp(h, self.h_grid, self.W_h[:, a]) for a in range(self.W_h.shape[1])])
-        wv = np.array([np.interp(V, self.V_grid, self.W_V[:, b]) for b in range(self.W_V.shape[1])])
-        return np.outer(wh, wv).ravel()
+        return tp_weights(h, V, self.h_grid, self.V_grid, self.W_h, self.W_V)
 
     def system(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
         """Continuous A(p) (n, n), B(p) (n, m) = sum_i tau_i(p) [A_i, B_i], eq. (11)."""

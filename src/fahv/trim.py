@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
+from scipy import interpolate, optimize
 
 from fahv.errors import TrimError
 from fahv.linearize import jacobian_complex_step
@@ -188,4 +188,89 @@ def trim_grid(vehicle: Vehicle, h_grid, V_grid, model: str = "dm", notch=None):
     return rows
 
 
-__all__ = ["TRIM_TOL", "TrimPoint", "trim", "trim_grid", "DELTA_E", "PHI", "ETA1", "ETA2", "THETA"]
+@dataclass(frozen=True)
+class TrimMap:
+    """Trim map x_r(p), u_r(p) over the envelope, eq. (5), interpolated between trims.
+
+    Attributes
+    ----------
+    h_grid : (N_h,) ndarray
+        Altitudes [ft] of the trim grid (ascending, at least 4).
+    V_grid : (N_V,) ndarray
+        Speeds [ft/s] (ascending, at least 4).
+    x_r : (N_h, N_V, n) ndarray
+        Trim states (n = 9 for DM/CM, 11 for ECM).
+    u_r : (N_h, N_V, 2) ndarray
+        Trim inputs [Phi, delta_e rad].
+
+    Notes
+    -----
+    Bicubic splines (``scipy.interpolate.RectBivariateSpline``) of each component.
+    (h, V) is clipped to the grid, which covers the envelope.
+    """
+
+    h_grid: np.ndarray
+    V_grid: np.ndarray
+    x_r: np.ndarray
+    u_r: np.ndarray
+
+    def __post_init__(self) -> None:
+        nh, nv = len(self.h_grid), len(self.V_grid)
+        if nh < 4 or nv < 4:
+            raise ValueError(f"trim map needs at least a 4 x 4 grid, got {nh} x {nv}")
+        if self.x_r.shape[:2] != (nh, nv) or self.u_r.shape != (nh, nv, 2):
+            raise ValueError(
+                f"trim map arrays x_r {self.x_r.shape} / u_r {self.u_r.shape} do not match "
+                f"the grid {nh} x {nv}"
+            )
+        vals = np.concatenate([self.x_r, self.u_r], axis=2)
+        if not np.all(np.isfinite(vals)):
+            raise ValueError("trim map contains non-finite values")
+        splines = [
+            interpolate.RectBivariateSpline(self.h_grid, self.V_grid, vals[:, :, j])
+            for j in range(vals.shape[2])
+        ]
+        object.__setattr__(self, "_splines", splines)
+
+    @property
+    def n_x(self) -> int:
+        """State dimension of the map."""
+        return self.x_r.shape[2]
+
+    def __call__(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
+        """(x_r (n,), u_r (2,)) at (h [ft], V [ft/s]), clipped to the grid."""
+        h = min(max(float(h), self.h_grid[0]), self.h_grid[-1])
+        V = min(max(float(V), self.V_grid[0]), self.V_grid[-1])
+        v = np.array([sp(h, V, grid=False) for sp in self._splines], dtype=float)
+        n = self.n_x
+        return v[:n], v[n:]
+
+
+def trim_map(vehicle: Vehicle, n_h: int = 13, n_V: int = 13, model: str = "cm", notch=None):
+    """Trim the model on an n_h x n_V grid over the envelope and build a :class:`TrimMap`.
+
+    ``model="ecm"`` (with ``notch``) gives the 11-state trim x_r' of eq. (41).
+    Raises as :func:`trim`.
+    """
+    env = vehicle.envelope
+    hg = np.linspace(env.h_min, env.h_max, n_h)
+    Vg = np.linspace(env.V_min, env.V_max, n_V)
+    rows = trim_grid(vehicle, hg, Vg, model, notch)
+    x = np.array([[tp.x_r_ecm if model == "ecm" else tp.x_r for tp in row] for row in rows])
+    u = np.array([[tp.u_r for tp in row] for row in rows])
+    return TrimMap(hg, Vg, x, u)
+
+
+__all__ = [
+    "TRIM_TOL",
+    "TrimPoint",
+    "TrimMap",
+    "trim",
+    "trim_grid",
+    "trim_map",
+    "DELTA_E",
+    "PHI",
+    "ETA1",
+    "ETA2",
+    "THETA",
+]

@@ -22,7 +22,7 @@ import numpy as np
 
 from fahv.plant import perturb, rk4_step
 from fahv.trim import trim
-from fahv.vehicle import DELTA_E, cm_rhs
+from fahv.vehicle import DELTA_E, make_model
 
 #: Half-widths of the state deviations sampled for W (h ft, V ft/s, alpha rad, theta rad,
 #: q rad/s, eta_1, eta_1_dot, eta_2, eta_2_dot): the Case 1 step (600 ft, 250 ft/s) and a
@@ -75,6 +75,7 @@ def sample_disturbance(
     margin: float,
     n_sub: int = 10,
     progress=None,
+    notch=None,
 ) -> DisturbanceSet:
     """Bound W by sampling, eq. (13)-(19).
 
@@ -89,8 +90,9 @@ def sample_disturbance(
         Relative parameter bounds (e.g. :data:`fahv.plant.PAPER_UNCERTAINTY`).
     rho_f : float
         Elevator effectiveness after the fault.
-    dev_box : (9,) ndarray
-        Half-widths of the state deviations x = x_s - x_r sampled (unscaled).
+    dev_box : (n,) ndarray
+        Half-widths of the state deviations x = x_s - x_r sampled (unscaled); n = 9
+        for a CM/DM model, 11 for the ECM (notch states last).
     du_box : (2,) ndarray
         Half-widths of the input deviations u = u_s - u_r sampled.
     n_samples : int
@@ -102,6 +104,9 @@ def sample_disturbance(
         RK4 steps per Ts for the nonlinear one-step prediction.
     progress : callable, optional
         Iterable wrapper (tqdm).
+    notch : fahv.notch.NotchFilter, optional
+        Required when ``tp.kind == "ecm"``: the one-step predictions then use the
+        ECM (eq. 40) and the trim x_r' of eq. (41).
 
     Returns
     -------
@@ -109,27 +114,32 @@ def sample_disturbance(
     """
     if margin < 1.0:
         raise ValueError(f"disturbance margin must be >= 1, got {margin}")
+    kind = "ecm" if tp.kind == "ecm" else "cm"
+    n = tp.A_vertices.shape[1]
+    dev_box = np.asarray(dev_box, float)
+    if dev_box.shape != (n,):
+        raise ValueError(f"disturbance dev_box must have {n} entries, got {dev_box.shape}")
     rng = np.random.default_rng(seed)
     env = vehicle.envelope
     disc = tp.discretize(Ts)
     vp = vehicle.params
     names = list(uncertainty)
-    parts = {k: np.zeros(9) for k in ("model", "parameters", "fault", "total")}
+    parts = {k: np.zeros(n) for k in ("model", "parameters", "fault", "total")}
     rng_iter = range(n_samples) if progress is None else progress(range(n_samples))
 
-    def nom(x_, u_):
-        return cm_rhs(x_, u_, vp)
+    nom = make_model(kind, vp, notch).f
 
     for _ in rng_iter:
         hc = rng.uniform(env.h_min, env.h_max)
         Vc = rng.uniform(env.V_min, env.V_max)
         tr = trim(vehicle, hc, Vc)
-        x = rng.uniform(-1, 1, 9) * dev_box
-        xs = tr.x_r + x
+        x_r = tr.x_r_ecm if kind == "ecm" else tr.x_r
+        x = rng.uniform(-1, 1, n) * dev_box
+        xs = x_r + x
         # keep the scheduling point inside the envelope
         xs[0] = np.clip(xs[0], env.h_min, env.h_max)
         xs[1] = np.clip(xs[1], env.V_min, env.V_max)
-        x = xs - tr.x_r
+        x = xs - x_r
         u = rng.uniform(-1, 1, 2) * du_box
         us = tr.u_r + u
         w = tp.weights(xs[0], xs[1])
@@ -140,13 +150,11 @@ def sample_disturbance(
         uf = us.copy()
         uf[DELTA_E] *= rho_f
 
-        def per(x_, u_, vpp=vpp):
-            return cm_rhs(x_, u_, vpp)
-
-        x_nom = rk4_step(nom, xs, us, Ts, n_sub) - tr.x_r
-        x_par = rk4_step(per, xs, us, Ts, n_sub) - tr.x_r
-        x_flt = rk4_step(nom, xs, uf, Ts, n_sub) - tr.x_r
-        x_all = rk4_step(per, xs, uf, Ts, n_sub) - tr.x_r
+        per = make_model(kind, vpp, notch).f
+        x_nom = rk4_step(nom, xs, us, Ts, n_sub) - x_r
+        x_par = rk4_step(per, xs, us, Ts, n_sub) - x_r
+        x_flt = rk4_step(nom, xs, uf, Ts, n_sub) - x_r
+        x_all = rk4_step(per, xs, uf, Ts, n_sub) - x_r
         for key, val in (
             ("model", x_nom - x_lpv),
             ("parameters", x_par - x_nom),
