@@ -76,7 +76,7 @@ def test_missing_or_broken_case_file(tmp_path):
         load_case(p)
 
 
-def test_vertex_count_beyond_samples_rejected(raw, tmp_path):
+def test_vertex_count_beyond_samples_rejected(raw):
     c = quick(raw, vertices=[30, 5])
     with pytest.raises(DesignError, match="vertices"):
         run_design(c, log=lambda *_: None)

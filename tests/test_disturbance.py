@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from fahv.plant import PAPER_UNCERTAINTY
-from fahv.tp_model import build_tp_model
 from fahv.tube.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
 
 
@@ -21,11 +20,6 @@ def _sample(vehicle, tp, margin=1.2):
         seed=0,
         margin=margin,
     )
-
-
-@pytest.fixture(scope="module")
-def tp_cm(vehicle):
-    return build_tp_model(vehicle, "cm", 4, 5, 11, 11)
 
 
 @pytest.fixture(scope="module")

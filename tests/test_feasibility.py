@@ -6,15 +6,9 @@ import numpy as np
 import pytest
 
 from fahv.plant import PAPER_UNCERTAINTY
-from fahv.tp_model import build_tp_model
 from fahv.tube.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX
 from fahv.tube.feasibility import input_room, tube_feasibility
 from fahv.tube.feedback import verify_tube
-
-
-@pytest.fixture(scope="module")
-def tp_cm(vehicle):
-    return build_tp_model(vehicle, "cm", 4, 5, 11, 11)
 
 
 def _run(vehicle, tp, treatment):

@@ -107,8 +107,12 @@ def _pair(val, path, key, lo=1):
     return tuple(val)
 
 
-def _range(ok: bool, path: str, key: str, what: str, val) -> None:
-    if not ok:
+def _require(d: dict, path: str, key: str, ok, what: str) -> None:
+    """Raise CaseError naming ``key`` (dotted) and its value unless ok(value)."""
+    val = d
+    for part in key.split("."):
+        val = val[part]
+    if not ok(val):
         raise CaseError(f"{path}: key '{key}' {what}, got {val!r}")
 
 
@@ -118,48 +122,48 @@ def case_from_mapping(data: Any, path: str = "<mapping>") -> Case:
     Raises
     ------
     CaseError
-        Naming the key at fault.
+        Naming the key at fault and its value.
     """
     d = _check(data, SCHEMA, path, "")
-    _range(d["design_model"] in ("cm", "ecm"), path, "design_model", "must be cm or ecm", d)
+    fault_kinds = ("none", "loss_of_effectiveness", "stuck", "bias", "dropout")
+    Ts = d["Ts"]
+    _require(d, path, "design_model", lambda v: v in ("cm", "ecm"), "must be cm or ecm")
     d["vertices"] = _pair(d["vertices"], path, "vertices")
     d["samples"] = _pair(d["samples"], path, "samples", lo=4)
     d["trim_grid"] = _pair(d["trim_grid"], path, "trim_grid", lo=4)
     d["rmpc"]["vertices"] = _pair(d["rmpc"]["vertices"], path, "rmpc.vertices")
-    _range(0.0 < d["Ts"] <= 0.1, path, "Ts", "must be in (0, 0.1] s", d["Ts"])
-    _range(d["duration"] >= 10 * d["Ts"], path, "duration", "must be >= 10 Ts", d["duration"])
-    _range(1 <= d["plant_substeps"] <= 100, path, "plant_substeps", "must be 1..100", None)
+    for key, ok, what in (
+        ("Ts", lambda v: 0.0 < v <= 0.1, "must be in (0, 0.1] s"),
+        ("duration", lambda v: v >= 10 * Ts, "must be >= 10 Ts"),
+        ("plant_substeps", lambda v: 1 <= v <= 100, "must be 1..100"),
+        ("command.kind", lambda v: v in ("step", "ramp"), "must be step or ramp"),
+        ("fault.kind", lambda v: v in fault_kinds, f"must be one of {fault_kinds}"),
+        ("fault.rho_f", lambda v: 0.0 < v <= 1.0, "must be in (0, 1]"),
+        ("uncertainty.scale", lambda v: 0.0 <= v <= 1.0, "must be in [0, 1]"),
+        ("disturbance.samples", lambda v: v >= 10, "must be >= 10"),
+        ("disturbance.margin", lambda v: v >= 1.0, "must be >= 1"),
+        (
+            "tube.lam",
+            lambda v: bool(v) and all(isinstance(x, float) and 0.0 < x < 1.0 for x in v),
+            "must be a non-empty list of floats in (0, 1)",
+        ),
+        ("tube.tau", lambda v: 0.0 < v <= 1.0, "must be in (0, 1]"),
+        ("nominal.lam", lambda v: 0.0 < v < 1.0, "must be in (0, 1)"),
+        ("nominal.level_max", lambda v: 0.0 < v <= 1.0, "must be in (0, 1]"),
+        ("rmpc.resolve_every", lambda v: v >= 1, "must be >= 1"),
+        (
+            "variants",
+            lambda v: bool(v) and all(x in VARIANTS for x in v),
+            f"must be a non-empty list from {VARIANTS}",
+        ),
+        ("notch.omega_z", lambda v: 0.0 < v < math.pi / Ts, "must be in (0, pi/Ts)"),
+        ("notch.omega_p", lambda v: 0.0 < v < math.pi / Ts, "must be in (0, pi/Ts)"),
+    ):
+        _require(d, path, key, ok, what)
     if d["design_model"] == "ecm" and not d["notch"]["enabled"]:
         raise CaseError(f"{path}: key 'notch.enabled' must be true for design_model ecm")
-    c = d["command"]
-    _range(c["kind"] in ("step", "ramp"), path, "command.kind", "must be step or ramp", c["kind"])
-    f = d["fault"]
-    kinds = ("none", "loss_of_effectiveness", "stuck", "bias", "dropout")
-    _range(f["kind"] in kinds, path, "fault.kind", f"must be one of {kinds}", f["kind"])
-    _range(0.0 < f["rho_f"] <= 1.0, path, "fault.rho_f", "must be in (0, 1]", f["rho_f"])
-    _range(0.0 <= d["uncertainty"]["scale"] <= 1.0, path, "uncertainty.scale", "must be 0..1", None)
-    _range(d["disturbance"]["samples"] >= 10, path, "disturbance.samples", "must be >= 10", None)
-    _range(d["disturbance"]["margin"] >= 1.0, path, "disturbance.margin", "must be >= 1", None)
-    lams = d["tube"]["lam"]
-    _range(
-        bool(lams) and all(isinstance(x, float) and 0.0 < x < 1.0 for x in lams),
-        path,
-        "tube.lam",
-        "must be a non-empty list of floats in (0, 1)",
-        lams,
-    )
-    _range(0.0 < d["tube"]["tau"] <= 1.0, path, "tube.tau", "must be in (0, 1]", None)
-    _range(0.0 < d["nominal"]["lam"] < 1.0, path, "nominal.lam", "must be in (0, 1)", None)
-    lm = d["nominal"]["level_max"]
-    _range(0.0 < lm <= 1.0, path, "nominal.level_max", "must be in (0, 1]", lm)
-    _range(d["rmpc"]["resolve_every"] >= 1, path, "rmpc.resolve_every", "must be >= 1", None)
-    bad = [v for v in d["variants"] if v not in VARIANTS]
-    _range(bool(d["variants"]) and not bad, path, "variants", f"must be from {VARIANTS}", bad)
     if d["design_model"] == "ecm" and set(d["variants"]) - {"tube_mpc"}:
         raise CaseError(f"{path}: key 'variants': an ECM case runs only 'tube_mpc'")
-    n = d["notch"]
-    for k in ("omega_z", "omega_p"):
-        _range(0.0 < n[k] < math.pi / d["Ts"], path, f"notch.{k}", "must be in (0, pi/Ts)", n[k])
     return Case(Path(path), d)
 
 

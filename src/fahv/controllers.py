@@ -22,6 +22,7 @@ import numpy as np
 from fahv.errors import DesignError
 from fahv.tp_model import tp_weights
 from fahv.tube.lmi import SDP_SOLVER, scale_vertices
+from fahv.tube.nominal import contraction
 
 COMMAND_KINDS = ("step", "ramp")
 
@@ -376,15 +377,11 @@ class RobustMPC:
         if self._prob.status not in ("optimal", "optimal_inaccurate") or self._Q.value is None:
             return False
         Qs = 0.5 * (self._Q.value + self._Q.value.T)
-        try:
-            L = np.linalg.cholesky(Qs)
-        except np.linalg.LinAlgError:
-            return False
         Ks = self._Y.value @ np.linalg.inv(Qs)
-        c = max(
-            np.linalg.norm(np.linalg.solve(L, (self._As[i] + self._Bs[i] @ Ks) @ L), 2)
-            for i in range(self._As.shape[0])
-        )
+        try:
+            c = contraction(self._As, self._Bs, Ks, Qs)
+        except np.linalg.LinAlgError:  # Q not positive definite
+            return False
         ratio = np.sqrt(np.einsum("ij,jk,ik->i", Ks, Qs, Ks)) / self.u_room_s
         if not (c < 1.0 and np.all(ratio <= 1.0 + 1e-6)):
             return False

@@ -184,13 +184,13 @@ def run_design(case: Case, progress=None, log=print) -> Design:
             f"tightened input set U minus F Z is empty (eq. 30): room {room}, "
             f"tightening {tau * tube.tightening}"
         )
-    tg = c["trim_grid"]
-    tm = trim_map(veh, tg[0], tg[1], kind, notch if kind == "ecm" else None)
     cmd = c["command"]
-    x_start, _ = tm(cmd["h0"], cmd["V0"])
-    x_end, _ = tm(cmd["h_c"], cmd["V_c"])
     veh.envelope.check(cmd["h0"], cmd["V0"])
     veh.envelope.check(cmd["h_c"], cmd["V_c"])
+    tg = c["trim_grid"]
+    tm = trim_map(veh, tg[0], tg[1], kind, notch if kind == "ecm" else None)
+    x_start, _ = tm(cmd["h0"], cmd["V0"])
+    x_end, _ = tm(cmd["h_c"], cmd["V_c"])
     dvec = x_start - x_end
     Dn = Dx * np.maximum(1.0, np.abs(dvec) / Dx)  # command-sized scaling of the nominal LMI
     nominal = design_nominal(disc.A, disc.B, dvec, u_n_max, Dn, u_n_max, c["nominal"]["lam"])

@@ -30,7 +30,7 @@ from fahv.controllers import (
 )
 from fahv.errors import RunError
 from fahv.notch import DiscreteNotch, NotchFilter
-from fahv.plant import ElevatorFault, FaultInjector, Plant
+from fahv.plant import ElevatorFault, FaultInjector, Plant, saturate
 from fahv.trim import TrimMap
 from fahv.vehicle import ALPHA, ETA1, ETA1_DOT, ETA2, ETA2_DOT, THETA, H, Q, V, load_vehicle
 
@@ -173,13 +173,14 @@ def simulate(design, variant: str, duration: float | None = None, progress=None)
     nf = notch_of(case, variant, a["omega_flex"])
     notch = DiscreteNotch(nf, Ts) if nf is not None else None
     fault = FaultInjector(fault_of(case))
-    nominal = NominalTrajectory(
-        lpv_of(design), tm, a["K"], a["Q"], cmd, Ts, case["nominal"]["level_max"]
-    )
-    nominal.reset(measured_state(x0, 0.0, notch, n))
     tube = TubeMPC(a["F"], a["N"], case["tube"]["tau"])
-    rmpc = None
-    if variant == "rmpc":
+    rmpc = nominal = None
+    if variant != "rmpc":
+        nominal = NominalTrajectory(
+            lpv_of(design), tm, a["K"], a["Q"], cmd, Ts, case["nominal"]["level_max"]
+        )
+        nominal.reset(measured_state(x0, 0.0, notch, n))
+    else:
         r = case["rmpc"]
         rmpc = RobustMPC(
             a["rmpc_A"],
@@ -220,7 +221,7 @@ def simulate(design, variant: str, duration: float | None = None, progress=None)
             ("x_r", ref.x_r[:9]),
             ("x_n", ref.x_n),
             ("u", u),
-            ("ua", np.clip(ua, veh.limits.u_min, veh.limits.u_max)),
+            ("ua", saturate(ua, veh.limits)),
             ("hc", hc),
             ("Vc", Vc),
             ("hg", ref.h_g),
@@ -262,17 +263,28 @@ def _settling_time(t, err, tol, t_from):
 def metrics(run: RunResult, limits, t_fault: float | None) -> dict[str, float]:
     """Metrics of a run (the issue's table): tracking, attitude, flexible, inputs, tube.
 
+    Parameters
+    ----------
+    run : RunResult
+    limits : fahv.vehicle.InputLimits
+        Actuator limits (sec. 5.1) the commands u (N, 2) are checked against.
+    t_fault : float or None
+        Fault onset [s]; None or beyond the run: the flexible RMS is over the run.
+
+    Returns
+    -------
+    dict
+        Keys and units as in ``fahv simulate`` (ft, ft/s, deg, s; NaN where a value
+        does not exist, e.g. a settling time that is never reached).
+
     Attitude errors are against the trim of the governed reference x_r (the
     equilibrium the vehicle is steered to). Tracking errors are against the case
     command. Flexible RMS values are over t >= t_fault (the whole run without fault).
     """
     t, x = run.t, run.x
     eh, eV = x[:, H] - run.h_c, x[:, V] - run.V_c
-    t_cmd_end = float(
-        t[np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0][-1]]
-        if np.any((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))
-        else 0.0
-    )
+    moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
+    t_cmd_end = float(t[moving[-1]]) if moving.size else 0.0
     ts_h = _settling_time(t, eh, SETTLE_TOL["h"], t_cmd_end)
     ts_V = _settling_time(t, eV, SETTLE_TOL["V"], t_cmd_end)
     t_settle = max(ts_h, ts_V) if not (math.isnan(ts_h) or math.isnan(ts_V)) else math.nan
