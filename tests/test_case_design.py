@@ -1,39 +1,17 @@
 """Case files, the offline design of a case and its artefacts, and a short closed loop."""
 
 import copy
-import warnings
 
 import numpy as np
 import pytest
 
+from conftest import CASE1, quick
 from fahv.case import case_from_mapping, load_case
-from fahv.design import load_design, ros_parameters, run_design, save_design
+from fahv.design import load_design, run_design, save_design
 from fahv.errors import CaseError, DesignError
+from fahv.params import node_parameters
 from fahv.sim import metrics, simulate
 from fahv.vehicle import load_vehicle
-from fahv.yamlio import load_yaml
-
-CASE1 = "offline_design/case1.yaml"
-
-
-@pytest.fixture(scope="module")
-def raw():
-    with open(CASE1) as fh:
-        return load_yaml(fh.read())
-
-
-def quick(raw, **changes):
-    """Case 1 with a small W sample (CI) and the given top-level changes."""
-    d = copy.deepcopy(raw)
-    d["disturbance"]["samples"] = 40
-    d.update(changes)
-    return case_from_mapping(d, "quick.yaml")
-
-
-@pytest.fixture(scope="module")
-def design(raw):
-    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    return run_design(quick(raw), log=lambda *_: None)
 
 
 def test_case_files_load():
@@ -116,8 +94,8 @@ def test_design_certificates_and_artefacts(design, tmp_path):
 
 
 def test_ros_parameter_file(design):
-    p = ros_parameters(design)
-    tm = p["tube_mpc"]["ros__parameters"]
+    p = node_parameters(design)
+    tm = p["tube_mpc"]
     assert tm["F_shape"] == [2, 9]
     np.testing.assert_allclose(np.reshape(tm["F"], tm["F_shape"]), design.arrays["F"])
     assert set(p) == {"plant", "fault_injector", "notch_filter", "nominal_trajectory", "tube_mpc"}

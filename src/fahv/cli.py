@@ -343,19 +343,17 @@ def format_metrics(table: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
-def cmd_simulate(args) -> int:
-    """In-process closed loop of a case; prints the metrics table of every variant."""
+def _load_or_design(case_path, design_dir):
+    """The valid design of a case file, designing it first if missing or outdated."""
     import warnings
 
     from fahv.case import load_case
     from fahv.design import load_design, run_design, save_design
     from fahv.errors import DesignError
-    from fahv.sim import metrics, simulate
-    from fahv.vehicle import load_vehicle
 
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    case = load_case(args.case)
-    out = _artefact_dir(case, args.design)
+    case = load_case(case_path)
+    out = _artefact_dir(case, design_dir)
     try:
         design = load_design(out)
         if design.case != _jsonable(case.data):
@@ -364,6 +362,17 @@ def cmd_simulate(args) -> int:
         print(f"no valid design in {out} ({exc}); designing first")
         design = run_design(case)
         save_design(design, out)
+    return case, design
+
+
+def cmd_simulate(args) -> int:
+    """In-process closed loop of a case; records each variant to bags/, prints metrics."""
+    from fahv.runlog import RunWriter
+    from fahv.sil import ROOT, run_metadata, run_name
+    from fahv.sim import metrics, simulate
+    from fahv.vehicle import load_vehicle
+
+    case, design = _load_or_design(args.case, args.design)
     variants = args.variant or case["variants"]
     limits = load_vehicle().limits
     table = {}
@@ -372,8 +381,21 @@ def cmd_simulate(args) -> int:
         def bar(it, v=v):
             return tqdm(it, desc=v, leave=False, disable=None)
 
-        run = simulate(design, v, args.duration, progress=bar)
-        table[v] = metrics(run, limits, case["fault"]["t_onset"])
+        duration = case["duration"] if args.duration is None else args.duration
+        writer = None
+        if not args.no_record:
+            bag = Path(args.out or ROOT / "bags") / run_name(case.name, v, "sim")
+            writer = RunWriter(bag, run_metadata(design, v, "simulate", duration), case["Ts"])
+        try:
+            run = simulate(design, v, args.duration, progress=bar, writer=writer)
+        except BaseException as exc:
+            if writer is not None:
+                writer.close(f"failed: {type(exc).__name__}: {exc}")
+            raise
+        if writer is not None:
+            writer.close("complete")
+            print(f"{v}: run written to {writer.path}")
+        table[v] = metrics(run, limits)
         if run.info.get("rmpc_solves"):
             table[v]["rmpc_solves"] = run.info["rmpc_solves"]
             table[v]["rmpc_failed"] = run.info["rmpc_failed"]
@@ -383,6 +405,48 @@ def cmd_simulate(args) -> int:
         print(f"case {case.name}, design {design.summary['design_hash']}")
         print(format_metrics(table))
     return 0
+
+
+def cmd_sil(args) -> int:
+    """Run a case through the ROS 2 node graph, recorded to MCAP; metrics of the run."""
+    import warnings
+
+    from fahv.runlog import read_run
+    from fahv.sil import ROOT, run_sil
+    from fahv.sim import metrics, run_result_of
+    from fahv.vehicle import load_vehicle
+
+    case, design = _load_or_design(args.case, args.design)
+    variant = args.variant or case["variants"][0]
+    res = run_sil(
+        design,
+        variant,
+        args.duration,
+        Path(args.out or ROOT / "bags"),
+        args.watchdog,
+        quiet=args.quiet,
+    )
+    if not res.bag.is_dir():
+        print(f"error: the run produced no recording ({res.bag})", file=sys.stderr)
+        return 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = read_run(res.bag)
+    run = run_result_of(rec)
+    print(f"run written to {res.bag}")
+    print(
+        f"status {rec.metadata.get('status', '?')}, {run.t.size} steps, wall time "
+        f"{res.wall_s:.1f} s, real-time factor {res.real_time_factor:.2f} "
+        f"(simulated {res.simulated_s:g} s)"
+    )
+    if run.t.size:
+        table = {variant: metrics(run, load_vehicle().limits)}
+        if args.json:
+            print(json.dumps(table, indent=2))
+        else:
+            print(f"case {case.name}, design {design.summary['design_hash']}")
+            print(format_metrics(table))
+    return 0 if res.returncode == 0 else 1
 
 
 def _jsonable(data):
@@ -466,8 +530,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--design", default=None, help="artefact folder (designed if missing)")
     p.add_argument("--variant", nargs="+", default=None, help="variants (default: the case's)")
     p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    p.add_argument("--out", default=None, help="folder of the recorded runs (default bags/)")
+    p.add_argument("--no-record", action="store_true", help="do not write the runs to MCAP")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_simulate)
+    p = sub.add_parser(
+        "sil", help="the ROS 2 node graph of a case in lockstep, recorded to bags/<run>/ (MCAP)"
+    )
+    p.add_argument("case", help="case file, e.g. offline_design/case1.yaml")
+    p.add_argument(
+        "--design", default=None, help="artefact folder (default offline_design/artefacts/NAME)"
+    )
+    p.add_argument("--variant", default=None, help="variant (default: the case's first)")
+    p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    p.add_argument("--out", default=None, help="folder of the recorded runs (default bags/)")
+    p.add_argument("--watchdog", type=float, default=10.0, help="node watchdog [s wall time]")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--json", action="store_true", help="metrics as JSON")
+    p.set_defaults(func=cmd_sil)
     return ap
 
 

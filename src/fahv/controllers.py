@@ -16,13 +16,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import cvxpy as cp
 import numpy as np
 
 from fahv.errors import DesignError
 from fahv.tp_model import tp_weights
 from fahv.tube.lmi import SDP_SOLVER, scale_vertices
-from fahv.tube.nominal import contraction
 
 COMMAND_KINDS = ("step", "ramp")
 
@@ -332,6 +330,8 @@ class RobustMPC:
     def __init__(self, A, B, u_room, psi, sigma, Dx, Du, resolve_every: int) -> None:
         if resolve_every < 1:
             raise ValueError(f"RMPC resolve_every must be >= 1, got {resolve_every}")
+        import cvxpy as cp  # imported here: the other controllers start without it
+
         As, Bs = scale_vertices(np.asarray(A, float), np.asarray(B, float), Dx, Du)
         R, n, m = Bs.shape
         self.Dx, self.Du, self.resolve_every = np.asarray(Dx), np.asarray(Du), resolve_every
@@ -368,6 +368,10 @@ class RobustMPC:
         self.have_gain = False
 
     def _solve(self, dx: np.ndarray) -> bool:
+        import cvxpy as cp
+
+        from fahv.tube.nominal import contraction
+
         self._x0.value = dx / self.Dx
         self.n_solves += 1
         try:

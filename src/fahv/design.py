@@ -28,6 +28,7 @@ from fahv.case import Case
 from fahv.errors import DesignError
 from fahv.linearize import classify_modes, linearize
 from fahv.notch import NotchFilter
+from fahv.params import node_parameters, parameter_file
 from fahv.plant import PAPER_UNCERTAINTY, perturb
 from fahv.tp_model import build_tp_model
 from fahv.trim import trim_map
@@ -246,59 +247,6 @@ def run_design(case: Case, progress=None, log=print) -> Design:
     return design
 
 
-def ros_parameters(design: Design) -> dict:
-    """ROS 2 parameter file content ``{node: {"ros__parameters": {...}}}``.
-
-    Matrices are flattened row-major with their shape in ``<name>_shape``; every node
-    also gets ``case``, ``design_hash`` and ``Ts``.
-    """
-    a, c = design.arrays, design.case
-
-    def mat(name):
-        arr = np.asarray(a[name], float)
-        return {name: arr.ravel().tolist(), f"{name}_shape": list(arr.shape)}
-
-    common = {"case": c["name"], "design_hash": design.summary["design_hash"], "Ts": c["Ts"]}
-    cmd, f, n = c["command"], c["fault"], c["notch"]
-    nodes = {
-        "plant": {
-            **common,
-            "duration": c["duration"],
-            "plant_substeps": c["plant_substeps"],
-            **{f"params.{k}": v for k, v in design.summary["plant_params"].items()},
-            "h0": cmd["h0"],
-            "V0": cmd["V0"],
-        },
-        "fault_injector": {
-            **common,
-            "kind": f["kind"],
-            "t_onset": f["t_onset"],
-            "rho_f": f["rho_f"],
-            "bias_deg": f["bias_deg"],
-        },
-        "notch_filter": {**common, **{k: n[k] for k in ("omega_z", "eps_z", "omega_p", "eps_p")}},
-        "nominal_trajectory": {
-            **common,
-            **{f"command.{k}": v for k, v in cmd.items()},
-            "level_max": c["nominal"]["level_max"],
-            **mat("A"),
-            **mat("B"),
-            **mat("h_grid"),
-            **mat("V_grid"),
-            **mat("W_h"),
-            **mat("W_V"),
-            **mat("K"),
-            **mat("Q"),
-            **mat("trim_h"),
-            **mat("trim_V"),
-            **mat("trim_x"),
-            **mat("trim_u"),
-        },
-        "tube_mpc": {**common, "tau": c["tube"]["tau"], **mat("F"), **mat("N")},
-    }
-    return {k: {"ros__parameters": v} for k, v in nodes.items()}
-
-
 def save_design(design: Design, out_dir: str | Path) -> Path:
     """Write ``design.npz``, ``design.json`` and ``params.yaml`` into out_dir atomically.
 
@@ -315,7 +263,7 @@ def save_design(design: Design, out_dir: str | Path) -> Path:
             json.dumps({"case": design.case, "summary": design.summary}, indent=2, default=list)
         )
         (tmp / "params.yaml").write_text(
-            yaml.safe_dump(ros_parameters(design), sort_keys=False, width=120)
+            yaml.safe_dump(parameter_file(node_parameters(design)), sort_keys=False, width=120)
         )
         if out.exists():
             shutil.rmtree(out)
@@ -351,7 +299,6 @@ __all__ = [
     "Design",
     "perturbed_params",
     "run_design",
-    "ros_parameters",
     "save_design",
     "load_design",
 ]

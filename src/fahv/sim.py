@@ -1,16 +1,19 @@
-"""In-process closed loop: the same plant, filter, controller and fault classes as the nodes.
+"""In-process closed loop: the node computations of the SIL graph, called in its order.
 
-One step k (t_k = k Ts), the order of the node graph (ARCHITECTURE.md)::
+One step k (t_k = k Ts), the order of the node graph (ARCHITECTURE.md), each line one
+``*Core`` of :mod:`fahv.loop` built from that node's parameters
+(:func:`fahv.params.node_parameters`)::
 
-    x_k  = plant state                      (plant)
-    q'_k = notch(q_k)                       (notch_filter)
-    ref_k = nominal.step()                  (nominal_trajectory)
-    u_k  = controller(x_meas_k, ref_k)      (tube_mpc / rmpc)
-    u_f,k = fault(t_k, u_k)                 (fault_injector)
-    plant integrates [t_k, t_k+1] with saturated u_f,k held (ZOH).
+    state_k   = plant.state()                               (plant, + /clock)
+    q'_k      = notch.on_state(state_k)                     (notch_filter)
+    ref_k     = nominal.on_state(state_k)                   (nominal_trajectory)
+    u_k, Z_k  = controller.on_inputs(state_k, q'_k, ref_k)  (tube_mpc / rmpc)
+    u_f,k, f_k = fault.on_command(u_k)                      (fault_injector)
+    plant.advance(u_f,k): integrate [t_k, t_k+1], saturated u_f,k held (ZOH).
 
-The measured state is the plant state with q replaced by q' when the notch is in the
-loop (eq. 38, Case 1) or the 11-state ECM vector [.., q', .., x_q] (eq. 43, Case 2).
+The messages of every step can be written to a run file (:class:`fahv.runlog.RunWriter`)
+with the same topics and types as the SIL recorder, and :func:`run_result` turns the
+messages of either kind of run into arrays.
 """
 
 from __future__ import annotations
@@ -20,19 +23,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fahv.controllers import (
-    Command,
-    NominalOutput,
-    NominalTrajectory,
-    PolytopicLPV,
-    RobustMPC,
-    TubeMPC,
-)
 from fahv.errors import RunError
-from fahv.notch import DiscreteNotch, NotchFilter
-from fahv.plant import ElevatorFault, FaultInjector, Plant, saturate
-from fahv.trim import TrimMap
-from fahv.vehicle import ALPHA, ETA1, ETA1_DOT, ETA2, ETA2_DOT, THETA, H, Q, V, load_vehicle
+from fahv.loop import (
+    STATE_FIELDS,
+    ControllerCore,
+    FaultCore,
+    NominalCore,
+    NotchCore,
+    PlantCore,
+    clock_msg,
+    n_steps_of,
+)
+from fahv.params import node_parameters
+from fahv.runlog import Recording, step_arrays
+from fahv.vehicle import ALPHA, ETA1, ETA1_DOT, ETA2, ETA2_DOT, THETA, H, V
 
 #: Tracking counts as settled when |h - h_c| <= 10 ft and |V - V_c| <= 2 ft/s.
 SETTLE_TOL = {"h": 10.0, "V": 2.0}
@@ -49,23 +53,25 @@ class RunResult:
     t : (N,) ndarray
         Simulated time [s].
     x : (N, 9) ndarray
-        Plant state.
+        Plant state [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s].
     q_f : (N,) ndarray
-        Filtered pitch rate q' (q when there is no notch).
+        Filtered pitch rate q' [rad/s] (q when there is no notch).
     x_r : (N, 9) ndarray
         Trim state of the governed reference (first 9 components).
     x_n : (N, n) ndarray
         Nominal state (deviation).
     u : (N, 2) ndarray
-        Controller command.
+        Controller command [Phi, delta_e rad].
     u_applied : (N, 2) ndarray
-        Input after the fault and the saturation.
+        Input after the fault injector (the plant saturates it).
     h_c, V_c : (N,) ndarray
-        Case command; ``h_g``, ``V_g`` the governed reference.
+        Case command [ft, ft/s]; ``h_g``, ``V_g`` the governed reference.
     tube_level : (N,) ndarray
         e' (tau^2 N)^-1 e (<= 1 inside the tube; NaN for the RMPC).
+    fault_active : (N,) bool ndarray
+        Fault applied at the step.
     info : dict
-        Variant, case name, fault, counters.
+        Variant, case name, metadata.
     """
 
     t: np.ndarray
@@ -80,72 +86,84 @@ class RunResult:
     h_g: np.ndarray
     V_g: np.ndarray
     tube_level: np.ndarray
+    fault_active: np.ndarray
     info: dict = field(default_factory=dict)
 
 
-def trim_map_of(design) -> TrimMap:
-    """The :class:`TrimMap` stored in a design."""
-    a = design.arrays
-    return TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+def run_result(records: dict, info: dict | None = None) -> RunResult:
+    """Arrays of a run from its step-aligned messages.
 
+    Parameters
+    ----------
+    records : dict[str, list[dict]]
+        Per loop topic (:data:`fahv.runlog.TOPICS`), the message dicts of steps
+        0..N-1 in order (e.g. from :func:`fahv.runlog.step_arrays`).
+    info : dict, optional
+        Stored as ``RunResult.info``.
 
-def lpv_of(design) -> PolytopicLPV:
-    """The nominal discrete :class:`PolytopicLPV` stored in a design."""
-    a = design.arrays
-    return PolytopicLPV(a["A"], a["B"], a["h_grid"], a["V_grid"], a["W_h"], a["W_V"])
-
-
-def command_of(case: dict) -> Command:
-    """The :class:`Command` of a case."""
-    c = case["command"]
-    return Command(c["h0"], c["V0"], c["h_c"], c["V_c"], c["t_start"], c["kind"], c["t_ramp"])
-
-
-def fault_of(case: dict) -> ElevatorFault:
-    """The :class:`ElevatorFault` of a case."""
-    f = case["fault"]
-    return ElevatorFault(f["kind"], f["t_onset"], f["rho_f"], math.radians(f["bias_deg"]))
-
-
-def notch_of(case: dict, variant: str, omega_flex) -> NotchFilter | None:
-    """Notch in the q feedback for a variant: the case's, the mode-2 one, or None."""
-    n = case["notch"]
-    if variant == "tube_mpc_no_notch" or not n["enabled"]:
-        return None
-    if variant == "tube_mpc_notch2":
-        w = float(omega_flex[1])
-        return NotchFilter(w, n["eps_z"], w, n["eps_p"])
-    return NotchFilter(n["omega_z"], n["eps_z"], n["omega_p"], n["eps_p"])
-
-
-def measured_state(x: np.ndarray, q_f: float, notch: DiscreteNotch | None, n: int) -> np.ndarray:
-    """Controller state (n,) from the plant state x (9,) and the filter.
-
-    n = 9: x with q replaced by q' (when a notch is used); n = 11: the ECM vector
-    [h, V, alpha, theta, q', eta.., x_q1, x_q2] of eq. (43).
+    Raises
+    ------
+    RunError
+        If the topics do not hold the same number of steps.
     """
-    xm = np.array(x, dtype=float)
-    if notch is not None:
-        xm[Q] = q_f
-    if n == 11:
-        if notch is None:
-            raise RunError("the 11-state (ECM) controller needs the notch filter states")
-        xm = np.concatenate([xm, notch.x_q])
-    return xm
+    st, qf, nom = records["/hsv/state"], records["/hsv/q_filtered"], records["/hsv/nominal"]
+    cmd, act = records["/hsv/control_command"], records["/hsv/actuator_command"]
+    tube, fs = records["/hsv/tube_status"], records["/hsv/fault_status"]
+    lens = {len(v) for v in (st, qf, nom, cmd, act, tube, fs)}
+    if len(lens) != 1:
+        raise RunError(f"run topics hold different numbers of steps: {sorted(lens)}")
+
+    def col(msgs, name):
+        return np.array([m[name] for m in msgs], dtype=float)
+
+    def mat(msgs, name, width=None):
+        rows = [np.asarray(m[name], float)[:width] for m in msgs]
+        return np.array(rows) if rows else np.zeros((0, width or 0))
+
+    return RunResult(
+        col(st, "t"),
+        np.stack([col(st, f) for f in STATE_FIELDS], axis=1) if st else np.zeros((0, 9)),
+        col(qf, "q_f"),
+        mat(nom, "x_r", 9),
+        mat(nom, "x_n"),
+        np.stack([col(cmd, "phi"), col(cmd, "delta_e")], axis=1) if cmd else np.zeros((0, 2)),
+        np.stack([col(act, "phi"), col(act, "delta_e")], axis=1) if act else np.zeros((0, 2)),
+        col(nom, "h_c"),
+        col(nom, "v_c"),
+        col(nom, "h_g"),
+        col(nom, "v_g"),
+        col(tube, "level"),
+        np.array([bool(m["active"]) for m in fs], dtype=bool),
+        dict(info or {}),
+    )
 
 
-def simulate(design, variant: str, duration: float | None = None, progress=None) -> RunResult:
+def run_result_of(rec: Recording) -> RunResult:
+    """:class:`RunResult` of a recorded run (complete steps only)."""
+    n, aligned = step_arrays(rec)
+    return run_result(aligned, {**rec.metadata, "steps": n})
+
+
+def simulate(
+    design,
+    variant: str | None = None,
+    duration: float | None = None,
+    progress=None,
+    writer=None,
+) -> RunResult:
     """Run one variant of a designed case in process.
 
     Parameters
     ----------
     design : fahv.design.Design
-    variant : str
-        One of :data:`fahv.case.VARIANTS` listed in the case.
+    variant : str, optional
+        One of the case's variants (:data:`fahv.case.VARIANTS`); the first by default.
     duration : float, optional
         Simulated time [s]; the case duration by default.
     progress : callable, optional
         Iterable wrapper (tqdm).
+    writer : fahv.runlog.RunWriter, optional
+        Receives every message of every step (the SIL graph's topics).
 
     Returns
     -------
@@ -156,98 +174,55 @@ def simulate(design, variant: str, duration: float | None = None, progress=None)
     RunError
         On an unknown variant, or if the plant state becomes non-finite (the run
         stops there and the message gives the time).
+    ParameterError
+        If the design gives a node an invalid parameter.
     """
     case = design.case
+    variant = case["variants"][0] if variant is None else variant
     if variant not in case["variants"]:
         raise RunError(f"variant '{variant}' is not in the case's variants {case['variants']}")
-    Ts = case["Ts"]
-    T = case["duration"] if duration is None else duration
-    n_steps = int(round(T / Ts))
-    veh = load_vehicle()
-    a = design.arrays
-    tm = trim_map_of(design)
-    n = design.n_x
-    cmd = command_of(case)
-    x0 = tm(cmd.h0, cmd.V0)[0][:9]
-    plant = Plant(design.plant_params(veh), veh.limits, x0, Ts, case["plant_substeps"])
-    nf = notch_of(case, variant, a["omega_flex"])
-    notch = DiscreteNotch(nf, Ts) if nf is not None else None
-    fault = FaultInjector(fault_of(case))
-    tube = TubeMPC(a["F"], a["N"], case["tube"]["tau"])
-    rmpc = nominal = None
-    if variant != "rmpc":
-        nominal = NominalTrajectory(
-            lpv_of(design), tm, a["K"], a["Q"], cmd, Ts, case["nominal"]["level_max"]
+    p = node_parameters(design, variant)
+    if duration is not None:
+        for node in p.values():
+            node["duration"] = float(duration)
+    ctrl_node = "rmpc" if "rmpc" in p else "tube_mpc"
+    plant = PlantCore(p["plant"])
+    notch = NotchCore(p["notch_filter"])
+    nominal = NominalCore(p["nominal_trajectory"])
+    ctrl = ControllerCore(p[ctrl_node], ctrl_node)
+    fault = FaultCore(p["fault_injector"])
+    Ts = p["plant"]["Ts"]
+    records = {
+        t: []
+        for t in (
+            "/clock",
+            "/hsv/state",
+            "/hsv/q_filtered",
+            "/hsv/nominal",
+            "/hsv/control_command",
+            "/hsv/tube_status",
+            "/hsv/actuator_command",
+            "/hsv/fault_status",
         )
-        nominal.reset(measured_state(x0, 0.0, notch, n))
-    else:
-        r = case["rmpc"]
-        rmpc = RobustMPC(
-            a["rmpc_A"],
-            a["rmpc_B"],
-            a["u_room"],
-            np.full(9, r["psi"]),
-            np.full(2, r["sigma"]),
-            a["Dx"][:9],
-            a["Du"],
-            r["resolve_every"],
-        )
-    rec = {k: [] for k in ("x", "q_f", "x_r", "x_n", "u", "ua", "hc", "Vc", "hg", "Vg", "lvl")}
+    }
+    n_steps = n_steps_of(p["plant"])
     steps = range(n_steps) if progress is None else progress(range(n_steps))
     for k in steps:
-        t = k * Ts
-        x = plant.x.copy()
-        if not np.all(np.isfinite(x)):
-            raise RunError(f"{variant}: plant state not finite at t = {t:.2f} s")
-        q_f = notch.step(float(x[Q])) if notch is not None else float(x[Q])
-        xm = measured_state(x, q_f, notch, n)
-        if rmpc is None:
-            ref = nominal.step()
-        else:  # the traditional RMPC tracks the raw command, without governor
-            x_c, u_c = tm(*cmd(t))
-            ref = NominalOutput(*cmd(t), x_c, u_c, np.zeros(n), np.zeros(2), math.nan)
-        if rmpc is not None:
-            u = rmpc.step(k, xm[:9], ref)
-            lvl = math.nan
-        else:
-            u = tube.step(xm, ref)
-            lvl = tube.tube_level(tube.error(xm, ref))
-        ua = fault.apply(t, u)
-        plant.step(ua)
-        hc, Vc = cmd(t)
-        for key, val in (
-            ("x", x),
-            ("q_f", q_f),
-            ("x_r", ref.x_r[:9]),
-            ("x_n", ref.x_n),
-            ("u", u),
-            ("ua", saturate(ua, veh.limits)),
-            ("hc", hc),
-            ("Vc", Vc),
-            ("hg", ref.h_g),
-            ("Vg", ref.V_g),
-            ("lvl", lvl),
-        ):
-            rec[key].append(val)
+        state = plant.state()
+        qf = notch.on_state(state)
+        nom = nominal.on_state(state)
+        cmd, tube = ctrl.on_inputs(state, qf, nom)
+        act, fs = fault.on_command(cmd)
+        plant.advance(act)
+        msgs = (clock_msg(k, Ts), state, qf, nom, cmd, tube, act, fs)
+        for topic, msg in zip(records, msgs, strict=True):
+            records[topic].append(msg)
+            if writer is not None:
+                writer.write(topic, k, msg)
     info = {"variant": variant, "case": case["name"], "Ts": Ts, "fault": case["fault"]}
-    if rmpc is not None:
-        info.update(rmpc_solves=rmpc.n_solves, rmpc_failed=rmpc.n_failed)
-    r = {k: np.array(v) for k, v in rec.items()}
-    return RunResult(
-        np.arange(n_steps) * Ts,
-        r["x"],
-        r["q_f"],
-        r["x_r"],
-        r["x_n"],
-        r["u"],
-        r["ua"],
-        r["hc"],
-        r["Vc"],
-        r["hg"],
-        r["Vg"],
-        r["lvl"],
-        info,
-    )
+    if ctrl.rmpc is not None:
+        info.update(rmpc_solves=ctrl.rmpc.n_solves, rmpc_failed=ctrl.rmpc.n_failed)
+    return run_result(records, info)
 
 
 def _settling_time(t, err, tol, t_from):
@@ -260,7 +235,7 @@ def _settling_time(t, err, tol, t_from):
     return float(t[bad[-1] + 1])
 
 
-def metrics(run: RunResult, limits, t_fault: float | None) -> dict[str, float]:
+def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, float]:
     """Metrics of a run (the issue's table): tracking, attitude, flexible, inputs, tube.
 
     Parameters
@@ -268,8 +243,9 @@ def metrics(run: RunResult, limits, t_fault: float | None) -> dict[str, float]:
     run : RunResult
     limits : fahv.vehicle.InputLimits
         Actuator limits (sec. 5.1) the commands u (N, 2) are checked against.
-    t_fault : float or None
-        Fault onset [s]; None or beyond the run: the flexible RMS is over the run.
+    t_fault : float, optional
+        Fault onset [s]; by default the first step with the fault active. None (no
+        active fault) or beyond the run: the flexible RMS is over the run.
 
     Returns
     -------
@@ -282,6 +258,10 @@ def metrics(run: RunResult, limits, t_fault: float | None) -> dict[str, float]:
     command. Flexible RMS values are over t >= t_fault (the whole run without fault).
     """
     t, x = run.t, run.x
+    if t.size == 0:
+        raise RunError("the run holds no complete step: no metrics")
+    if t_fault is None and np.any(run.fault_active):
+        t_fault = float(t[np.argmax(run.fault_active)])
     eh, eV = x[:, H] - run.h_c, x[:, V] - run.V_c
     moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
     t_cmd_end = float(t[moving[-1]]) if moving.size else 0.0
@@ -328,12 +308,8 @@ __all__ = [
     "SETTLE_TOL",
     "ATTITUDE_BOUND_DEG",
     "RunResult",
-    "trim_map_of",
-    "lpv_of",
-    "command_of",
-    "fault_of",
-    "notch_of",
-    "measured_state",
+    "run_result",
+    "run_result_of",
     "simulate",
     "metrics",
 ]

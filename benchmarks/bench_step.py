@@ -1,0 +1,45 @@
+"""Cost of one control step per node computation, in process (no ROS), Case 1.
+
+Prints milliseconds per step of each fahv.loop core and of the whole step; the SIL
+graph adds the DDS hops on top (its per-step time is printed by the plant node and by
+`fahv sil` as the real-time factor).
+
+Usage: .venv/bin/python benchmarks/bench_step.py [ARTEFACT_DIR] [STEPS]
+"""
+
+import sys
+import time
+
+from fahv.design import load_design
+from fahv.loop import ControllerCore, FaultCore, NominalCore, NotchCore, PlantCore
+from fahv.params import node_parameters
+
+art = sys.argv[1] if len(sys.argv) > 1 else "offline_design/artefacts/case1"
+n = int(sys.argv[2]) if len(sys.argv) > 2 else 2000
+p = node_parameters(load_design(art))
+plant, notch = PlantCore(p["plant"]), NotchCore(p["notch_filter"])
+nom, ctrl = NominalCore(p["nominal_trajectory"]), ControllerCore(p["tube_mpc"])
+fault = FaultCore(p["fault_injector"])
+t = dict.fromkeys(("plant", "notch_filter", "nominal_trajectory", "tube_mpc", "fault_injector"), 0.0)
+clock = time.perf_counter
+for _ in range(n):
+    a = clock()
+    s = plant.state()
+    b = clock()
+    q = notch.on_state(s)
+    c = clock()
+    r = nom.on_state(s)
+    d = clock()
+    u, _z = ctrl.on_inputs(s, q, r)
+    e = clock()
+    act, _f = fault.on_command(u)
+    f = clock()
+    plant.advance(act)
+    g = clock()
+    for key, dt in zip(t, (b - a + g - f, c - b, d - c, e - d, f - e), strict=True):
+        t[key] += dt
+total = sum(t.values())
+print(f"{n} steps of {art} ({n * p['plant']['Ts']:.0f} s simulated)")
+for key, v in t.items():
+    print(f"  {key:<20} {1e3 * v / n:7.3f} ms/step")
+print(f"  {'whole step':<20} {1e3 * total / n:7.3f} ms/step (real-time factor {p['plant']['Ts'] * n / total:.0f})")

@@ -1,0 +1,1 @@
+"""Recorder, replay and the SIL runner of the graph."""

@@ -1,0 +1,156 @@
+"""``recorder`` node: every loop topic, raw (no deserialisation), into one rosbag2/MCAP run.
+
+Raw subscriptions hand over the CDR bytes as received; the recorder reads only the
+step index k at the head of each message (or the /clock stamp) to set the log time to
+simulated time t_k = k Ts, and writes through :class:`fahv.runlog.RunWriter` (ros2
+profile, full message definitions, offered QoS, summary with statistics and indexes,
+run metadata). It stops by itself once every topic holds ``duration / Ts`` steps; on
+SIGINT/SIGTERM, a lost graph (watchdog) or an error it still closes the file, with the
+reason in the run metadata (``status``).
+
+Parameters: ``bag`` (folder to create), ``Ts``, ``duration``, ``watchdog_s``,
+``metadata_json`` (JSON object of run metadata: case, design_hash, variant, ...).
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import sys
+import time
+
+from hsv_common.lockstep import (
+    EXIT_OK,
+    LOOP_QOS,
+    READY_QOS,
+    WatchdogError,
+    main,
+    msg_type_of,
+)
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from fahv.errors import RunError
+from fahv.params import ParameterError
+from fahv.runlog import TOPICS, RunWriter, code_version
+
+
+def step_of(topic: str, data: bytes, Ts_ns: int) -> int:
+    """Step index k of a serialised loop message (little- or big-endian CDR).
+
+    Every hsv_interfaces message starts with ``int64 k``; /clock carries t_k.
+    """
+    endian = "<" if data[1] == 1 else ">"
+    if topic == "/clock":
+        sec, nsec = struct.unpack_from(f"{endian}iI", data, 4)
+        return int(round((sec * 1_000_000_000 + nsec) / Ts_ns))
+    return struct.unpack_from(f"{endian}q", data, 4)[0]
+
+
+class Recorder(Node):
+    """Raw recorder of the loop topics."""
+
+    ROLE = "recorder"
+
+    def __init__(self) -> None:
+        super().__init__("recorder")
+        get = {}
+        for name, default, desc in (
+            ("bag", "", "run folder to create (bags/<run>)"),
+            ("Ts", 0.02, "control period [s]"),
+            ("duration", 0.0, "simulated duration [s]; the recorder stops after it"),
+            ("watchdog_s", 10.0, "wall time without any message that ends the run [s]"),
+            ("metadata_json", "{}", "run metadata as a JSON object"),
+        ):
+            self.declare_parameter(name, default, ParameterDescriptor(description=desc))
+            get[name] = self.get_parameter(name).value
+        if not get["bag"]:
+            raise ParameterError("recorder: parameter 'bag' is missing")
+        if not (isinstance(get["Ts"], float) and get["Ts"] > 0):
+            raise ParameterError(f"recorder: parameter 'Ts' must be > 0, got {get['Ts']!r}")
+        try:
+            meta = json.loads(get["metadata_json"])
+            assert isinstance(meta, dict)
+        except (ValueError, AssertionError):
+            raise ParameterError(
+                "recorder: parameter 'metadata_json' is not a JSON object"
+            ) from None
+        meta.setdefault("code_version", code_version())
+        meta.setdefault("source", "sil")
+        self.Ts_ns = int(round(get["Ts"] * 1e9))
+        self.n_steps = int(round(get["duration"] / get["Ts"]))
+        self.watchdog_s = get["watchdog_s"]
+        try:
+            self.writer = RunWriter(get["bag"], meta, get["Ts"])
+        except RunError as exc:
+            raise ParameterError(f"recorder: parameter 'bag': {exc}") from None
+        self.next_k = dict.fromkeys(TOPICS, 0)
+        self.anomalies = dict.fromkeys(TOPICS, 0)
+        self.subs = [
+            self.create_subscription(
+                msg_type_of(t), t, lambda data, t=t: self._record(t, data), LOOP_QOS, raw=True
+            )
+            for t in TOPICS
+        ]
+        self.ready_pub = self.create_publisher(String, "/hsv/ready", READY_QOS)
+        self.ready = False
+        self.done = False
+        self.k = 0
+        self.last_msg = time.monotonic()
+        self.started = False
+        self.t0 = time.monotonic()
+
+    def _record(self, topic: str, data: bytes) -> None:
+        k = step_of(topic, data, self.Ts_ns)
+        if k != self.next_k[topic]:
+            self.anomalies[topic] += 1
+            self.get_logger().warning(
+                f"{topic}: step {k} received, step {self.next_k[topic]} expected"
+            )
+        self.next_k[topic] = max(self.next_k[topic], k + 1)
+        self.writer.write_raw(topic, k, data)
+        self.last_msg = time.monotonic()
+        self.started = True
+        done = min(self.writer.counts.values())
+        if done > self.k:
+            self.k = done
+            if self.k % 500 == 0:
+                print(f"progress {self.k} {self.n_steps}", flush=True)
+        if self.n_steps and done >= self.n_steps:
+            self.done = True
+
+    def poll(self) -> None:
+        """Readiness and the watchdog of a silent graph."""
+        if not self.ready:
+            if all(s.get_publisher_count() >= 1 for s in self.subs):
+                self.ready = True
+                self.ready_pub.publish(String(data="recorder"))
+                self.get_logger().info(f"recording {len(self.subs)} topics to {self.writer.path}")
+            return
+        idle = time.monotonic() - (self.last_msg if self.started else self.t0)
+        limit = self.watchdog_s if self.started else max(60.0, self.watchdog_s)
+        if idle > limit:
+            behind = min(self.writer.counts, key=self.writer.counts.get)
+            raise WatchdogError(
+                f"recorder: no message for {limit:g} s at step {self.k} ({behind} is behind)"
+            )
+
+    def close(self, status: int) -> None:
+        """Finish the file with the run status and the anomaly counts."""
+        for t, n in self.anomalies.items():
+            self.writer.set_metadata(f"anomalies{t.replace('/', '.')}", n)
+        self.writer.set_metadata("wall_time_s", f"{time.monotonic() - self.t0:.3f}")
+        if self.done:
+            reason = "complete"
+        elif status == EXIT_OK:
+            reason = "interrupted"
+        else:
+            reason = f"interrupted (exit status {status})"
+        self.writer.close(reason)
+        print(f"closed {self.writer.path} ({reason}, {self.k} steps)", flush=True)
+
+
+def run(args=None) -> None:
+    """Entry point ``ros2 run hsv_bringup recorder``."""
+    sys.exit(main(Recorder, args, linger_s=0.0))

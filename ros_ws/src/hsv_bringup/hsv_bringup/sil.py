@@ -1,0 +1,211 @@
+"""``sil`` runner: start the node graph of one run, supervise it, stop every node.
+
+There is no ``launch`` on this machine (ENVIRONMENT.md), so this runner starts the
+installed executables itself, each with the run's parameter file, in the order
+recorder, notch_filter, nominal_trajectory, controller, fault_injector, plant (the
+plant waits until every other node has announced itself, so the order only saves
+time). It watches the processes: the run succeeds when every node exits 0 after the
+last step; the first node that exits non-zero or is killed fails the run, the others
+get SIGINT (the recorder closes its file), then SIGKILL after a grace period, and the
+runner exits 1 naming that node and showing the end of its log.
+
+Usually started by ``fahv sil CASE``, which writes the parameter file; by hand::
+
+    sil --params-file RUN_PARAMS.yaml --log-dir DIR [--controller tube_mpc|rmpc]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import yaml
+
+LOOP_NODES = ("notch_filter", "nominal_trajectory", "{controller}", "fault_injector", "plant")
+PACKAGE = {
+    "recorder": "hsv_bringup",
+    "notch_filter": "hsv_ctrl",
+    "nominal_trajectory": "hsv_ctrl",
+    "tube_mpc": "hsv_ctrl",
+    "rmpc": "hsv_ctrl",
+    "fault_injector": "hsv_plant",
+    "plant": "hsv_plant",
+}
+
+
+def executable(name: str) -> Path:
+    """Installed executable ``<prefix>/lib/<pkg>/<name>`` found on AMENT_PREFIX_PATH.
+
+    Raises
+    ------
+    FileNotFoundError
+        If no prefix holds it (the workspace is not built or not sourced).
+    """
+    pkg = PACKAGE[name]
+    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+        exe = Path(prefix) / "lib" / pkg / name
+        if prefix and exe.is_file():
+            return exe
+    raise FileNotFoundError(
+        f"executable {pkg}/{name} not found on AMENT_PREFIX_PATH: build ros_ws and source "
+        "ros_ws/install/setup.bash"
+    )
+
+
+def _tail(path: Path, n: int = 12) -> str:
+    try:
+        lines = path.read_text(errors="replace").splitlines()
+    except OSError:
+        return ""
+    return "\n".join("    " + ln for ln in lines[-n:])
+
+
+class Graph:
+    """The processes of one run."""
+
+    def __init__(self, params_file: Path, log_dir: Path, controller: str, env: dict) -> None:
+        self.params_file, self.log_dir, self.env = params_file, log_dir, env
+        self.names = ["recorder"] + [n.format(controller=controller) for n in LOOP_NODES]
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.logs: dict[str, Path] = {}
+        self.progress = (0, 0)
+
+    def start(self) -> None:
+        """Start every node (own process group, output to <log_dir>/<node>.log)."""
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        for name in self.names:
+            self.logs[name] = self.log_dir / f"{name}.log"
+            cmd = [str(executable(name)), "--ros-args", "--params-file", str(self.params_file)]
+            pipe = name == "recorder"
+            with open(self.logs[name], "w") as log:
+                p = subprocess.Popen(
+                    cmd,
+                    stdout=subprocess.PIPE if pipe else log,
+                    stderr=subprocess.STDOUT,
+                    env=self.env,
+                    start_new_session=True,
+                    text=True,
+                )
+            self.procs[name] = p
+            if pipe:
+                threading.Thread(
+                    target=self._follow, args=(p, self.logs[name]), daemon=True
+                ).start()
+
+    def _follow(self, p: subprocess.Popen, path: Path) -> None:
+        with open(path, "w") as log:
+            for line in p.stdout:
+                log.write(line)
+                log.flush()
+                if line.startswith("progress "):
+                    _, k, n = line.split()
+                    self.progress = (int(k), int(n))
+
+    def stop(self, grace_s: float = 15.0) -> None:
+        """SIGINT to every running node, SIGKILL after the grace period."""
+        for p in self.procs.values():
+            if p.poll() is None:
+                try:
+                    os.killpg(p.pid, signal.SIGINT)
+                except ProcessLookupError:
+                    pass
+        t_end = time.monotonic() + grace_s
+        for p in self.procs.values():
+            try:
+                p.wait(timeout=max(0.1, t_end - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+
+    def supervise(self, on_progress=None) -> tuple[str | None, int]:
+        """Wait for the end of the run; returns (failed node or None, its exit status)."""
+        while True:
+            running = 0
+            for name in self.names:
+                rc = self.procs[name].poll()
+                if rc is None:
+                    running += 1
+                elif rc != 0:
+                    return name, rc
+            if on_progress is not None:
+                on_progress(*self.progress)
+            if running == 0:
+                return None, 0
+            time.sleep(0.1)
+
+
+def describe(rc: int) -> str:
+    """Human form of a process exit status."""
+    if rc < 0:
+        return f"killed by signal {signal.Signals(-rc).name}"
+    return {2: "bad parameter", 3: "watchdog", 4: "stopped by a signal"}.get(
+        rc, f"exit status {rc}"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the graph once; returns 0 on success, 1 if a node failed, 130 if interrupted."""
+    ap = argparse.ArgumentParser(prog="sil", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--params-file", type=Path, required=True)
+    ap.add_argument("--log-dir", type=Path, required=True)
+    ap.add_argument("--controller", choices=("tube_mpc", "rmpc"), default="tube_mpc")
+    ap.add_argument("--quiet", action="store_true", help="no progress line")
+    args = ap.parse_args(argv)
+    try:
+        params = yaml.safe_load(args.params_file.read_text())
+        bag = params["recorder"]["ros__parameters"]["bag"]
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
+        print(f"sil: parameter file {args.params_file} unusable: {exc}", file=sys.stderr)
+        return 2
+    env = dict(os.environ)
+    env.setdefault("ROS_DOMAIN_ID", str(random.Random(os.getpid()).randint(1, 100)))
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    env["PYTHONUNBUFFERED"] = "1"
+    graph = Graph(args.params_file, args.log_dir, args.controller, env)
+    stop = {"sig": None}
+
+    def on_signal(signum, frame):
+        stop["sig"] = signum
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_signal)
+    last = [0.0]
+
+    def show(k, n):
+        if args.quiet or not n or time.monotonic() - last[0] < 2.0:
+            return
+        last[0] = time.monotonic()
+        print(f"sil: step {k}/{n} ({100.0 * k / n:.0f} %)", file=sys.stderr, flush=True)
+
+    try:
+        graph.start()
+        failed, rc = graph.supervise(show)
+    except KeyboardInterrupt:
+        print("sil: interrupted; stopping every node", file=sys.stderr)
+        graph.stop()
+        print(f"sil: run (interrupted) written to {bag}", file=sys.stderr)
+        return 130
+    except FileNotFoundError as exc:
+        print(f"sil: {exc}", file=sys.stderr)
+        graph.stop()
+        return 2
+    if failed is not None:
+        print(f"sil: node '{failed}' failed ({describe(rc)}); stopping the graph", file=sys.stderr)
+        graph.stop()
+        print(f"--- end of {graph.logs[failed]}\n{_tail(graph.logs[failed])}", file=sys.stderr)
+        print(f"sil: run (incomplete) written to {bag}", file=sys.stderr)
+        return 1
+    print(f"sil: run written to {bag}", file=sys.stderr)
+    return 0
+
+
+def run() -> None:
+    """Entry point ``ros2 run hsv_bringup sil``."""
+    sys.exit(main())

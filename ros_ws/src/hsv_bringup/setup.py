@@ -1,0 +1,23 @@
+"""ament_python package hsv_bringup."""
+
+from setuptools import setup
+
+setup(
+    name="hsv_bringup",
+    version="0.1.0",
+    packages=["hsv_bringup"],
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/hsv_bringup"]),
+        ("share/hsv_bringup", ["package.xml"]),
+        ("share/hsv_bringup/config", ["config/graph.yaml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="fahv maintainers",
+    maintainer_email="maintainers@fahv.example.org",
+    description="MCAP recorder, replay and the SIL runner of the flexible hypersonic vehicle graph.",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": ["recorder = hsv_bringup.recorder:run", "sil = hsv_bringup.sil:run"],
+    },
+)

@@ -1,0 +1,1 @@
+"""Shared ROS 2 plumbing of the hsv_* nodes: lockstep, parameters, message conversion."""

@@ -1,0 +1,412 @@
+"""Lockstep plumbing shared by every node of the SIL graph (no model or control maths).
+
+A :class:`LockstepNode` declares the typed parameters of its node from
+:data:`fahv.params.SPECS` (with descriptions and ranges), validates them, builds the
+library object it adapts, and then only moves messages:
+
+- Inputs are buffered per step index k; the node calls :meth:`LockstepNode.on_step`
+  once it holds every input of its current step, publishes the outputs of that step
+  and moves to k + 1. A message of an already processed step (stale) or a second
+  message of a buffered step (duplicate) is counted and logged, never used.
+- Reliable, keep-last QoS on every loop topic (:data:`fahv.runlog.LOOP_QOS`).
+- Start-up: a node announces itself on ``/hsv/ready`` (transient local) once all its
+  subscriptions see their publishers and all its publishers see every expected
+  subscriber (:data:`GRAPH`); the plant starts step 0 only when every node of the
+  graph has announced itself.
+- A wall-clock watchdog (parameter ``watchdog_s``) turns a silent or dead peer into
+  an error naming the topic and the node that should have sent it (exit status 3).
+
+Exit status of :func:`main`: 0 done, 2 bad parameter, 3 watchdog, 4 stopped by a
+signal before the end, 1 any other error.
+"""
+
+from __future__ import annotations
+
+import array
+import os
+import signal
+import sys
+import time
+
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+
+from fahv.loop import n_steps_of
+from fahv.params import SPECS, ParameterError, validate
+from fahv.runlog import QOS_DEPTH, TOPICS
+
+#: node -> (input topics, output topics) of one control step (ARCHITECTURE.md).
+GRAPH = {
+    "plant": (("/hsv/actuator_command",), ("/clock", "/hsv/state")),
+    "notch_filter": (("/hsv/state",), ("/hsv/q_filtered",)),
+    "nominal_trajectory": (("/hsv/state",), ("/hsv/nominal",)),
+    "tube_mpc": (
+        ("/hsv/state", "/hsv/q_filtered", "/hsv/nominal"),
+        ("/hsv/control_command", "/hsv/tube_status"),
+    ),
+    "fault_injector": (
+        ("/hsv/control_command",),
+        ("/hsv/actuator_command", "/hsv/fault_status"),
+    ),
+    "recorder": (tuple(TOPICS), ()),
+}
+GRAPH["rmpc"] = GRAPH["tube_mpc"]
+#: Nodes of the full graph, the default of parameter ``graph_nodes``.
+DEFAULT_GRAPH = [
+    "recorder",
+    "notch_filter",
+    "nominal_trajectory",
+    "tube_mpc",
+    "fault_injector",
+    "plant",
+]
+
+LOOP_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=QOS_DEPTH,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+READY_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=20,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+#: Parameter services cost every spin of every node (more entities in the wait set).
+START_PARAMETER_SERVICES = os.environ.get("HSV_PARAM_SERVICES", "0") == "1"
+EXIT_OK, EXIT_ERROR, EXIT_PARAM, EXIT_WATCHDOG, EXIT_SIGNAL = 0, 1, 2, 3, 4
+
+
+class WatchdogError(RuntimeError):
+    """A peer went silent for longer than the watchdog time."""
+
+
+def msg_type(topic: str):
+    """ROS message class of a loop topic."""
+    pkg, _, name = TOPICS[topic].split("/")
+    module = __import__(f"{pkg}.msg", fromlist=[name])
+    return getattr(module, name)
+
+
+def to_dict(msg) -> dict:
+    """Message -> dict of its fields; float64[] as float64 ndarrays, nested as dicts."""
+    out = {}
+    for name in msg.get_fields_and_field_types():
+        v = getattr(msg, name)
+        if isinstance(v, array.array | np.ndarray | list):
+            v = np.asarray(v, dtype=float)
+        elif hasattr(v, "get_fields_and_field_types"):
+            v = to_dict(v)
+        out[name] = v
+    return out
+
+
+def to_msg(topic: str, fields: dict):
+    """Dict of fields (:mod:`fahv.loop`) -> message of a loop topic."""
+    msg = msg_type(topic)()
+    _fill(msg, fields)
+    return msg
+
+
+def _fill(msg, fields: dict) -> None:
+    for name in msg.get_fields_and_field_types():
+        v = fields[name]
+        if isinstance(v, dict):
+            _fill(getattr(msg, name), v)
+        elif isinstance(v, np.ndarray | list | tuple):
+            arr = array.array("d")
+            arr.frombytes(np.ascontiguousarray(v, dtype=np.float64).tobytes())
+            setattr(msg, name, arr)
+        elif isinstance(v, np.floating):
+            setattr(msg, name, float(v))
+        else:
+            setattr(msg, name, v)
+
+
+_ROS_TYPE = {
+    "double": Parameter.Type.DOUBLE,
+    "int": Parameter.Type.INTEGER,
+    "string": Parameter.Type.STRING,
+    "bool": Parameter.Type.BOOL,
+}
+
+
+def declare_parameters(node: Node, spec_name: str) -> dict:
+    """Declare the typed parameters of :data:`fahv.params.SPECS` [spec_name] and validate.
+
+    Returns the raw values (matrices flat plus ``<name>_shape``), the form the
+    :mod:`fahv.loop` cores take.
+
+    Raises
+    ------
+    ParameterError
+        Naming the key: wrong type in the file, out of range, missing, bad shape, NaN.
+    """
+    values = {}
+    for p in SPECS[spec_name]:
+        decls = [(p.name, _ROS_TYPE.get(p.kind, Parameter.Type.DOUBLE_ARRAY), p)]
+        if p.kind == "matrix":
+            decls.append((f"{p.name}_shape", Parameter.Type.INTEGER_ARRAY, p))
+        for name, typ, spec in decls:
+            desc = ParameterDescriptor(description=spec.description)
+            if spec.kind == "double" and np.isfinite(spec.lo) and np.isfinite(spec.hi):
+                desc.floating_point_range = [
+                    FloatingPointRange(from_value=float(spec.lo), to_value=float(spec.hi))
+                ]
+            elif spec.kind == "int" and np.isfinite(spec.lo) and np.isfinite(spec.hi):
+                desc.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi))]
+            try:
+                node.declare_parameter(name, typ, desc)
+                values[name] = node.get_parameter(name).value
+            except rclpy.exceptions.ParameterUninitializedException:
+                values[name] = None
+            except (
+                rclpy.exceptions.InvalidParameterTypeException,
+                rclpy.exceptions.InvalidParameterValueException,
+            ) as exc:
+                raise ParameterError(
+                    f"{node.get_name()}: parameter '{name}' is invalid: {exc}"
+                ) from None
+    for key, v in values.items():
+        if isinstance(v, array.array | list):
+            values[key] = list(v)
+    validate(spec_name, values)
+    return values
+
+
+class LockstepNode(Node):
+    """Base of every loop node: parameters, buffering by step, readiness, watchdog.
+
+    Subclasses set ``ROLE`` (a key of :data:`GRAPH`) and implement :meth:`make_core`
+    and :meth:`on_step`.
+    """
+
+    ROLE = ""
+
+    def __init__(self, name: str | None = None) -> None:
+        super().__init__(
+            name or self.ROLE,
+            start_parameter_services=START_PARAMETER_SERVICES,
+        )
+        self.declare_parameter(
+            "graph_nodes",
+            DEFAULT_GRAPH,
+            ParameterDescriptor(description="nodes of the running graph (readiness check)"),
+        )
+        self.graph_nodes = list(self.get_parameter("graph_nodes").value)
+        raw = declare_parameters(self, self.spec_name())
+        self.p = validate(self.spec_name(), raw)
+        self.Ts = self.p["Ts"]
+        self.n_steps = n_steps_of(self.p)
+        self.watchdog_s = self.p["watchdog_s"]
+        self.inputs, self.outputs = GRAPH[self.ROLE]
+        self.make_core(raw)
+        self.k = 0
+        self.buf = {t: {} for t in self.inputs}
+        self.stale = 0
+        self.duplicate = 0
+        self.pubs = {t: self.create_publisher(msg_type_of(t), t, LOOP_QOS) for t in self.outputs}
+        self.subs = [
+            self.create_subscription(
+                msg_type_of(t), t, lambda m, t=t: self._receive(t, m), LOOP_QOS
+            )
+            for t in self.inputs
+        ]
+        self.ready_pub = self.create_publisher(String, "/hsv/ready", READY_QOS)
+        self.ready = False
+        self.done = False
+        self.last_progress = time.monotonic()
+        self.t_ready = time.monotonic()
+
+    # -- to implement -------------------------------------------------------------
+    def spec_name(self) -> str:
+        """Parameter specification used (defaults to the node name)."""
+        return self.get_name()
+
+    def make_core(self, p: dict) -> None:
+        """Build the library object(s) from the validated parameters."""
+        raise NotImplementedError
+
+    def on_step(self, k: int, inputs: dict) -> list[tuple[str, dict]]:
+        """Outputs (topic, fields) of step k given {topic: fields} of its inputs."""
+        raise NotImplementedError
+
+    def close(self, status: int) -> None:
+        """Called once when the node stops, with its exit status."""
+
+    # -- machinery ------------------------------------------------------------------
+    def _receive(self, topic: str, msg) -> None:
+        k = msg.k
+        if k < self.k:
+            self.stale += 1
+            self.get_logger().warning(f"stale {topic} of step {k} at step {self.k}: ignored")
+            return
+        if k in self.buf[topic]:
+            self.duplicate += 1
+            self.get_logger().warning(f"duplicate {topic} of step {k}: ignored")
+            return
+        self.buf[topic][k] = msg
+        self._advance()
+
+    def _advance(self) -> None:
+        while not self.done and all(self.k in b for b in self.buf.values()):
+            inputs = {t: to_dict(self.buf[t].pop(self.k)) for t in self.inputs}
+            for topic, fields in self.on_step(self.k, inputs):
+                self.pubs[topic].publish(to_msg(topic, fields))
+            self.k += 1
+            self.last_progress = time.monotonic()
+            if self.k >= self.n_steps:
+                self.finish()
+
+    def finish(self) -> None:
+        """Mark the run as complete for this node."""
+        self.done = True
+        wall = time.monotonic() - self.t_ready
+        self.get_logger().info(
+            f"done: {self.k} steps in {wall:.2f} s wall ({1e3 * wall / max(self.k, 1):.2f} ms per "
+            f"step), {self.stale} stale and {self.duplicate} duplicate messages"
+        )
+
+    def expected_subscribers(self, topic: str) -> int:
+        """Nodes of the running graph that consume a topic."""
+        return sum(
+            1 for n in self.graph_nodes if n in GRAPH and topic in GRAPH[n][0] and n != self.ROLE
+        )
+
+    def matched(self) -> list[str]:
+        """Topics whose peers are not matched yet (empty when ready)."""
+        missing = [
+            t for t, s in zip(self.inputs, self.subs, strict=True) if s.get_publisher_count() < 1
+        ]
+        missing += [
+            t
+            for t, pub in self.pubs.items()
+            if pub.get_subscription_count() < self.expected_subscribers(t)
+        ]
+        return missing
+
+    def poll(self) -> None:
+        """Called between spins: readiness announcement and the watchdog."""
+        if not self.ready:
+            if not self.matched():
+                self.ready = True
+                self.ready_pub.publish(String(data=self.get_name()))
+                self.get_logger().info("all peers matched: ready")
+                self.last_progress = self.t_ready = time.monotonic()
+            return
+        self.check_watchdog()
+
+    def producer_of(self, topic: str) -> str:
+        """Name of the graph node that publishes a topic."""
+        for n in self.graph_nodes:
+            if n in GRAPH and topic in GRAPH[n][1]:
+                return n
+        return "?"
+
+    def check_watchdog(self) -> None:
+        """Raise :class:`WatchdogError` naming the silent peer.
+
+        Raises
+        ------
+        WatchdogError
+            If no step was completed for ``watchdog_s`` seconds of wall time.
+        """
+        if self.done or time.monotonic() - self.last_progress <= self.watchdog_s:
+            return
+        missing = [t for t in self.inputs if self.k not in self.buf[t]] or list(self.inputs)
+        peers = ", ".join(f"{t} from {self.producer_of(t)}" for t in missing)
+        raise WatchdogError(
+            f"{self.get_name()}: no {peers} for step {self.k} within {self.watchdog_s:g} s "
+            "(peer dead or silent)"
+        )
+
+
+def msg_type_of(topic: str):
+    """Message class of a topic (the Clock of rosgraph_msgs for /clock)."""
+    if topic == "/clock":
+        from rosgraph_msgs.msg import Clock
+
+        return Clock
+    return msg_type(topic)
+
+
+def make_executor():
+    """Executor of every node: rclpy's EventsExecutor unless ``HSV_EXECUTOR=single``.
+
+    The events executor (rclpy.experimental, C++ event queue) runs the Case 1 graph
+    about 1.4x faster than the SingleThreadedExecutor on this 2-core machine
+    (6.5 vs 9.3 ms per step, measured); ENVIRONMENT.md saw it hang in another test,
+    so the SIL integration tests (lockstep, kill, SIGINT, watchdog) run with it, and
+    ``HSV_EXECUTOR=single`` selects the classic executor.
+    """
+    if os.environ.get("HSV_EXECUTOR", "events") == "single":
+        return SingleThreadedExecutor()
+    from rclpy.experimental.events_executor import EventsExecutor
+
+    return EventsExecutor()
+
+
+class _Stop:
+    def __init__(self) -> None:
+        self.signal = None
+
+    def __call__(self, signum, frame) -> None:
+        self.signal = signum
+
+
+def main(node_cls, args=None, linger_s: float = 1.0) -> int:
+    """Run one node until its last step, a signal, or an error; returns the exit status.
+
+    SIGINT and SIGTERM stop the spin loop cleanly (the node's :meth:`close` runs, so
+    the recorder finishes its file).
+    """
+    stop = _Stop()
+    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    node = None
+    status = EXIT_OK
+    name = node_cls.ROLE
+    try:
+        node = node_cls()
+        name = node.get_name()
+        ex = make_executor()
+        ex.add_node(node)
+        while not node.done and stop.signal is None:
+            ex.spin_once(timeout_sec=0.05)
+            node.poll()
+        if stop.signal is not None and not node.done:
+            print(f"[{name}] stopped by signal {stop.signal} at step {node.k}", file=sys.stderr)
+            status = EXIT_SIGNAL
+        else:  # let reliable QoS deliver the last messages before the writers go away
+            t_end = time.monotonic() + linger_s
+            while time.monotonic() < t_end and stop.signal is None:
+                ex.spin_once(timeout_sec=0.05)
+    except ParameterError as exc:
+        print(f"[{name}] parameter error: {exc}", file=sys.stderr)
+        status = EXIT_PARAM
+    except WatchdogError as exc:
+        print(f"[{name}] watchdog: {exc}", file=sys.stderr)
+        status = EXIT_WATCHDOG
+    except Exception as exc:  # report any failure with the node's name, then the traceback
+        import traceback
+
+        print(f"[{name}] error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        traceback.print_exc()
+        status = EXIT_ERROR
+    finally:
+        if node is not None:
+            try:
+                node.close(status)
+            finally:
+                node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return status

@@ -1,0 +1,1 @@
+"""Notch filter, nominal trajectory and controller nodes (adapters of fahv.loop)."""

@@ -1,0 +1,28 @@
+"""``notch_filter`` node: the notch filter on the pitch rate (eq. 38-39), q -> q'."""
+
+from __future__ import annotations
+
+import sys
+
+from hsv_common.lockstep import LockstepNode, main
+
+from fahv.loop import NotchCore
+
+
+class NotchFilterNode(LockstepNode):
+    """Adapter of :class:`fahv.loop.NotchCore`."""
+
+    ROLE = "notch_filter"
+
+    def make_core(self, p: dict) -> None:
+        """Build the library object from the raw node parameters."""
+        self.core = NotchCore(p)
+
+    def on_step(self, k: int, inputs: dict) -> list:
+        """Outputs of step k (see LockstepNode.on_step)."""
+        return [("/hsv/q_filtered", self.core.on_state(inputs["/hsv/state"]))]
+
+
+def run(args=None) -> None:
+    """Entry point ``ros2 run hsv_ctrl notch_filter``."""
+    sys.exit(main(NotchFilterNode, args))

@@ -1,0 +1,1 @@
+"""Plant and fault-injector nodes of the SIL graph (adapters of fahv.loop)."""

@@ -1,0 +1,38 @@
+"""``fault_injector`` node: actuator faults between the controller and the plant.
+
+Loss of elevator effectiveness (rho_f, onset, eq. 15), stuck elevator, elevator bias
+and dropped commands (``kind`` parameter), applied by ``fahv.loop.FaultCore``; the
+fault applied at every step is announced on /hsv/fault_status.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from hsv_common.lockstep import LockstepNode, main
+
+from fahv.loop import FaultCore
+
+
+class FaultInjectorNode(LockstepNode):
+    """Adapter of :class:`fahv.loop.FaultCore`."""
+
+    ROLE = "fault_injector"
+
+    def make_core(self, p: dict) -> None:
+        """Build the library object from the raw node parameters."""
+        self.core = FaultCore(p)
+        self.announced = False
+
+    def on_step(self, k: int, inputs: dict) -> list:
+        """Outputs of step k (see LockstepNode.on_step)."""
+        act, status = self.core.on_command(inputs["/hsv/control_command"])
+        if status["active"] and not self.announced:
+            self.announced = True
+            self.get_logger().warning(f"fault {status['kind']} active from t = {status['t']:.2f} s")
+        return [("/hsv/fault_status", status), ("/hsv/actuator_command", act)]
+
+
+def run(args=None) -> None:
+    """Entry point ``ros2 run hsv_plant fault_injector``."""
+    sys.exit(main(FaultInjectorNode, args))

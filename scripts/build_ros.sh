@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Build the ROS 2 workspace (ros_ws/) with colcon from the ROS 2 Jazzy wheels in .venv
+# (ENVIRONMENT.md). Idempotent: colcon rebuilds only what changed. Needs scripts/setup.sh.
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$here/ros_ws"
+venv="$here/.venv"
+export PATH="$venv/bin:$PATH"
+export AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+export CMAKE_PREFIX_PATH="$venv${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
+export PYTHON_EXECUTABLE="$venv/bin/python"
+colcon build --event-handlers console_cohesion- summary+ \
+  --cmake-args -DPython3_EXECUTABLE="$venv/bin/python" -DBUILD_TESTING=OFF \
+  2>&1 | tail -n 30
+test -f install/setup.bash || { echo "[build_ros] error: ros_ws/install/setup.bash missing" >&2; exit 1; }
+echo "[build_ros] ros_ws built ($(ls install | grep -c hsv_) hsv packages)"
