@@ -20,7 +20,8 @@ p = node_parameters(load_design(art))
 plant, notch = PlantCore(p["plant"]), NotchCore(p["notch_filter"])
 nom, ctrl = NominalCore(p["nominal_trajectory"]), ControllerCore(p["tube_mpc"])
 fault = FaultCore(p["fault_injector"])
-t = dict.fromkeys(("plant", "notch_filter", "nominal_trajectory", "tube_mpc", "fault_injector"), 0.0)
+names = ("plant", "notch_filter", "nominal_trajectory", "tube_mpc", "fault_injector")
+t = dict.fromkeys(names, 0.0)
 clock = time.perf_counter
 for _ in range(n):
     a = clock()
@@ -42,4 +43,5 @@ total = sum(t.values())
 print(f"{n} steps of {art} ({n * p['plant']['Ts']:.0f} s simulated)")
 for key, v in t.items():
     print(f"  {key:<20} {1e3 * v / n:7.3f} ms/step")
-print(f"  {'whole step':<20} {1e3 * total / n:7.3f} ms/step (real-time factor {p['plant']['Ts'] * n / total:.0f})")
+rtf = p["plant"]["Ts"] * n / total
+print(f"  {'whole step':<20} {1e3 * total / n:7.3f} ms/step (real-time factor {rtf:.0f})")

@@ -126,3 +126,14 @@ def test_run_from_another_program_lists_unknown_topics(tmp_path):
     assert all(len(v) == 0 for v in rec.records.values())
     with pytest.raises(RunError, match="no complete step"):
         metrics(run_result_of(rec), load_vehicle().limits)
+
+
+def test_paper_style_figures_of_a_recorded_run(recorded, tmp_path):
+    from fahv.runplots import GROUPS, plot_group
+
+    run = run_result_of(read_run(recorded[0]))
+    for group in GROUPS:
+        path = plot_group(group, [("a", run), ("b", run)], tmp_path / f"{group}.png")
+        assert path.stat().st_size > 10_000
+    with pytest.raises(ValueError, match="no run"):
+        plot_group("trajectory", [], tmp_path / "x.png")

@@ -449,6 +449,65 @@ def cmd_sil(args) -> int:
     return 0 if res.returncode == 0 else 1
 
 
+def cmd_plot(args) -> int:
+    """Paper-style figures of one or several recorded runs, overlaid."""
+    import warnings
+
+    from fahv.runlog import read_run
+    from fahv.runplots import GROUPS, plot_group
+    from fahv.sim import run_result_of
+
+    runs = []
+    for path in args.runs:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            rec = read_run(path)
+        for w in caught:
+            print(f"warning: {w.message}", file=sys.stderr)
+        run = run_result_of(rec)
+        if run.t.size == 0:
+            raise FahvError(f"{path}: no complete step of the loop topics to plot")
+        label = (
+            f"{rec.metadata.get('variant', Path(path).name)} ({rec.metadata.get('source', '?')})"
+        )
+        runs.append((label, run))
+    out = Path(args.out)
+    for group in GROUPS:
+        if group == "flexible_rates":
+            continue
+        print(plot_group(group, runs, out / f"{group}.{args.format}"))
+    return 0
+
+
+def cmd_paper_figures(args) -> int:
+    """Simulate every variant of Cases 1 and 2 (recorded) and write Fig. 9-17."""
+    from fahv.runlog import RunWriter
+    from fahv.runplots import paper_figures
+    from fahv.sil import ROOT, run_metadata, run_name
+    from fahv.sim import simulate
+
+    runs = {}
+    for case_path in args.cases:
+        case, design = _load_or_design(case_path, None)
+        for v in case["variants"]:
+            duration = case["duration"] if args.duration is None else args.duration
+            bag = ROOT / "bags" / run_name(case.name, v, "sim")
+            with RunWriter(bag, run_metadata(design, v, "simulate", duration), case["Ts"]) as w:
+                runs[(case.name, v)] = simulate(
+                    design,
+                    v,
+                    args.duration,
+                    writer=w,
+                    progress=lambda it, d=f"{case.name} {v}": tqdm(
+                        it, desc=d, leave=False, disable=None
+                    ),
+                )
+            print(f"{case.name} {v}: run written to {bag}")
+    for path in paper_figures(runs, args.out):
+        print(path)
+    return 0
+
+
 def _jsonable(data):
     return json.loads(json.dumps(data, default=list))
 
@@ -548,6 +607,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument("--json", action="store_true", help="metrics as JSON")
     p.set_defaults(func=cmd_sil)
+    p = sub.add_parser("plot", help="paper-style figures of recorded runs, overlaid")
+    p.add_argument("runs", nargs="+", help="run folders or .mcap files")
+    p.add_argument("--out", default="figures", help="output folder")
+    p.add_argument("--format", choices=("png", "pdf"), default="png")
+    p.set_defaults(func=cmd_plot)
+    p = sub.add_parser(
+        "paper-figures", help="simulate Cases 1 and 2 (all variants, recorded) and write Fig. 9-17"
+    )
+    p.add_argument(
+        "--cases", nargs="+", default=["offline_design/case1.yaml", "offline_design/case2.yaml"]
+    )
+    p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    p.add_argument("--out", default="docs/figures")
+    p.set_defaults(func=cmd_paper_figures)
     return ap
 
 
