@@ -35,7 +35,7 @@ from fahv.loop import (
     n_steps_of,
 )
 from fahv.params import node_parameters
-from fahv.runlog import Recording, step_arrays
+from fahv.runlog import TOPICS, Recording, step_arrays
 from fahv.vehicle import ALPHA, ETA1, ETA1_DOT, ETA2, ETA2_DOT, THETA, H, V
 
 #: Tracking counts as settled when |h - h_c| <= 10 ft and |V - V_c| <= 2 ft/s.
@@ -192,19 +192,7 @@ def simulate(
     ctrl = ControllerCore(p[ctrl_node], ctrl_node)
     fault = FaultCore(p["fault_injector"])
     Ts = p["plant"]["Ts"]
-    records = {
-        t: []
-        for t in (
-            "/clock",
-            "/hsv/state",
-            "/hsv/q_filtered",
-            "/hsv/nominal",
-            "/hsv/control_command",
-            "/hsv/tube_status",
-            "/hsv/actuator_command",
-            "/hsv/fault_status",
-        )
-    }
+    records = {t: [] for t in TOPICS}  # the graph order of one step
     n_steps = n_steps_of(p["plant"])
     steps = range(n_steps) if progress is None else progress(range(n_steps))
     for k in steps:

@@ -139,15 +139,16 @@ _ROS_TYPE = {
 
 
 def declare_parameters(node: Node, spec_name: str) -> dict:
-    """Declare the typed parameters of :data:`fahv.params.SPECS` [spec_name] and validate.
+    """Declare the typed parameters of :data:`fahv.params.SPECS` [spec_name].
 
-    Returns the raw values (matrices flat plus ``<name>_shape``), the form the
-    :mod:`fahv.loop` cores take.
+    Returns the raw values (matrices flat plus ``<name>_shape``), the form
+    :func:`fahv.params.validate` and the :mod:`fahv.loop` cores take.
 
     Raises
     ------
     ParameterError
-        Naming the key: wrong type in the file, out of range, missing, bad shape, NaN.
+        Naming the key, for a value of the wrong type in the file or outside the
+        declared range (the remaining checks are :func:`fahv.params.validate`).
     """
     values = {}
     for p in SPECS[spec_name]:
@@ -177,7 +178,6 @@ def declare_parameters(node: Node, spec_name: str) -> dict:
     for key, v in values.items():
         if isinstance(v, array.array | list):
             values[key] = list(v)
-    validate(spec_name, values)
     return values
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 import time
 
-from hsv_common.lockstep import READY_QOS, LockstepNode, main, to_msg
+from hsv_common.lockstep import READY_QOS, LockstepNode, WatchdogError, main, to_msg
 from std_msgs.msg import String
 
 from fahv.loop import PlantCore, clock_msg
@@ -40,8 +40,6 @@ class PlantNode(LockstepNode):
             waiting = [n for n in self.graph_nodes if n != "plant" and n not in self.peers_ready]
             if self.matched() or waiting:
                 if time.monotonic() - self.last_progress > max(60.0, self.watchdog_s):
-                    from hsv_common.lockstep import WatchdogError
-
                     raise WatchdogError(
                         f"plant: graph not ready after {max(60.0, self.watchdog_s):g} s; "
                         f"waiting for {waiting or self.matched()}"
