@@ -1,6 +1,6 @@
 """The ``fahv`` command line.
 
-Subcommands (more arrive with the control and SIL layers)::
+Subcommands::
 
     fahv trim      trim table at a point or over a grid of the envelope
     fahv tp        TP model transformation report (singular values, error)
@@ -8,6 +8,13 @@ Subcommands (more arrive with the control and SIL layers)::
     fahv tube      tube feasibility study (W by source, F, Z, input room)
     fahv design    offline design of a case file: certified artefacts + ROS parameters
     fahv simulate  in-process closed loop of a case: metrics table per variant
+    fahv sil       the ROS 2 node graph of a case in lockstep, recorded to MCAP
+    fahv plot      paper-style figures of recorded runs, overlaid
+    fahv paper-figures   Fig. 9-17 of the paper from Cases 1 and 2
+    fahv inspect   topics, metadata, step anomalies and metrics of a run
+    fahv export    one CSV / Parquet table per topic, with units
+    fahv compare   metrics of two runs side by side
+    fahv replay    republish a run over DDS, e.g. into a fresh tube_mpc node
 
 Every command that uses the vehicle takes ``--vehicle FILE``. Errors name the
 input at fault and exit with status 2 (bad input) or 1 (failure).
@@ -305,44 +312,6 @@ def cmd_design(args) -> int:
 
 
 #: Rows of the metrics table: key, label, format.
-METRIC_ROWS = (
-    ("settling_time_h_s", "settling time h (10 ft) [s]", "{:.1f}"),
-    ("settling_time_V_s", "settling time V (2 ft/s) [s]", "{:.1f}"),
-    ("h_err_final_ft", "h error at the end [ft]", "{:.2f}"),
-    ("V_err_final_fps", "V error at the end [ft/s]", "{:.2f}"),
-    ("h_err_rms_after_settle_ft", "h RMS error after settling [ft]", "{:.2f}"),
-    ("V_err_rms_after_settle_fps", "V RMS error after settling [ft/s]", "{:.2f}"),
-    ("alpha_err_max_deg", "max |alpha - alpha_r| [deg]", "{:.3f}"),
-    ("theta_err_max_deg", "max |theta - theta_r| [deg]", "{:.3f}"),
-    ("attitude_within_0.5deg", "attitude within +/-0.5 deg", "{}"),
-    ("eta_1_dev_peak", "peak |eta_1 - eta_1,r|", "{:.4f}"),
-    ("eta_2_dev_peak", "peak |eta_2 - eta_2,r|", "{:.4f}"),
-    ("eta_1_dot_rms_after_fault", "RMS eta_1_dot after fault [1/s]", "{:.5f}"),
-    ("eta_2_dot_rms_after_fault", "RMS eta_2_dot after fault [1/s]", "{:.5f}"),
-    ("Phi_min", "Phi min", "{:.4f}"),
-    ("Phi_max", "Phi max", "{:.4f}"),
-    ("delta_e_min_deg", "delta_e min [deg]", "{:.3f}"),
-    ("delta_e_max_deg", "delta_e max [deg]", "{:.3f}"),
-    ("input_limit_violations", "steps with a command beyond limits", "{}"),
-    ("tube_fraction_inside", "fraction of steps with e in Z", "{:.4f}"),
-    ("tube_level_max", "max e' Z^-1 e", "{:.4f}"),
-)
-
-
-def format_metrics(table: dict[str, dict]) -> str:
-    """Metrics of several runs as a text table, one column per run."""
-    names = list(table)
-    width = max(12, *(len(n) for n in names))
-    lines = [f"{'metric':<36} " + " ".join(f"{n:>{width}}" for n in names)]
-    for key, label, fmt in METRIC_ROWS:
-        cells = []
-        for n in names:
-            v = table[n].get(key)
-            cells.append(f"{'-' if v is None else fmt.format(v):>{width}}")
-        lines.append(f"{label:<36} " + " ".join(cells))
-    return "\n".join(lines)
-
-
 def _load_or_design(case_path, design_dir):
     """The valid design of a case file, designing it first if missing or outdated."""
     import warnings
@@ -365,11 +334,37 @@ def _load_or_design(case_path, design_dir):
     return case, design
 
 
+def _simulate_recorded(design, variant: str, duration, out_dir):
+    """simulate() with a progress bar, recorded to ``out_dir/<run>/`` unless it is None.
+
+    The run folder also gets the run's ROS parameter file (``params.yaml``, the same
+    a SIL run gets), so ``fahv replay --node ...`` can start nodes against it.
+    """
+    from fahv.runlog import RunWriter
+    from fahv.sil import run_metadata, run_name, write_run_params
+    from fahv.sim import simulate
+
+    case = design.case
+    desc = f"{case['name']} {variant}"
+
+    def bar(it):
+        return tqdm(it, desc=desc, leave=False, disable=None)
+
+    if out_dir is None:
+        return simulate(design, variant, duration, progress=bar)
+    d = case["duration"] if duration is None else duration
+    bag = Path(out_dir) / run_name(case["name"], variant, "sim")
+    with RunWriter(bag, run_metadata(design, variant, "simulate", d), case["Ts"]) as writer:
+        write_run_params(design, variant, bag, bag / "params.yaml", duration, 10.0)
+        run = simulate(design, variant, duration, progress=bar, writer=writer)
+    print(f"{desc}: run written to {bag}")
+    return run
+
+
 def cmd_simulate(args) -> int:
     """In-process closed loop of a case; records each variant to bags/, prints metrics."""
-    from fahv.runlog import RunWriter
-    from fahv.sil import ROOT, run_metadata, run_name
-    from fahv.sim import metrics, simulate
+    from fahv.sil import ROOT
+    from fahv.sim import metrics
     from fahv.vehicle import load_vehicle
 
     case, design = _load_or_design(args.case, args.design)
@@ -377,31 +372,14 @@ def cmd_simulate(args) -> int:
     limits = load_vehicle().limits
     table = {}
     for v in variants:
-
-        def bar(it, v=v):
-            return tqdm(it, desc=v, leave=False, disable=None)
-
-        duration = case["duration"] if args.duration is None else args.duration
-        writer = None
-        if not args.no_record:
-            bag = Path(args.out or ROOT / "bags") / run_name(case.name, v, "sim")
-            writer = RunWriter(bag, run_metadata(design, v, "simulate", duration), case["Ts"])
-        try:
-            run = simulate(design, v, args.duration, progress=bar, writer=writer)
-        except BaseException as exc:
-            if writer is not None:
-                writer.close(f"failed: {type(exc).__name__}: {exc}")
-            raise
-        if writer is not None:
-            writer.close("complete")
-            print(f"{v}: run written to {writer.path}")
+        out = None if args.no_record else Path(args.out or ROOT / "bags")
+        run = _simulate_recorded(design, v, args.duration, out)
         table[v] = metrics(run, limits)
-        if run.info.get("rmpc_solves"):
-            table[v]["rmpc_solves"] = run.info["rmpc_solves"]
-            table[v]["rmpc_failed"] = run.info["rmpc_failed"]
     if args.json:
-        print(json.dumps(table, indent=2))
+        print(_json(table))
     else:
+        from fahv.runtools import format_metrics
+
         print(f"case {case.name}, design {design.summary['design_hash']}")
         print(format_metrics(table))
     return 0
@@ -442,28 +420,123 @@ def cmd_sil(args) -> int:
     if run.t.size:
         table = {variant: metrics(run, load_vehicle().limits)}
         if args.json:
-            print(json.dumps(table, indent=2))
+            print(_json(table))
         else:
+            from fahv.runtools import format_metrics
+
             print(f"case {case.name}, design {design.summary['design_hash']}")
             print(format_metrics(table))
     return 0 if res.returncode == 0 else 1
 
 
-def cmd_plot(args) -> int:
-    """Paper-style figures of one or several recorded runs, overlaid."""
+def _read(path):
+    """read_run, its warnings (truncated file) printed to stderr."""
     import warnings
 
     from fahv.runlog import read_run
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rec = read_run(path)
+    for w in caught:
+        print(f"warning: {w.message}", file=sys.stderr)
+    return rec
+
+
+def _json(obj) -> str:
+    """Strict JSON (NaN and infinities as null)."""
+
+    def clean(v):
+        if isinstance(v, dict):
+            return {str(k): clean(x) for k, x in v.items()}
+        if isinstance(v, list | tuple):
+            return [clean(x) for x in v]
+        if isinstance(v, float) and not np.isfinite(v):
+            return None
+        if isinstance(v, np.generic):
+            return clean(v.item())
+        return v
+
+    return json.dumps(clean(obj), indent=2)
+
+
+def cmd_inspect(args) -> int:
+    """Topics, metadata, step anomalies and metrics of a recorded run."""
+    from fahv.runtools import format_summary, summarize
+    from fahv.vehicle import load_vehicle
+
+    s = summarize(_read(args.run), load_vehicle().limits)
+    print(_json(s) if args.json else format_summary(s))
+    return 0
+
+
+def cmd_export(args) -> int:
+    """One table per loop topic (CSV or Parquet) with a column dictionary."""
+    from fahv.runlog import bag_paths
+    from fahv.runtools import export_run
+
+    folder, _ = bag_paths(args.run)
+    out = Path(args.out) if args.out else folder / f"export_{args.format}"
+    for path in export_run(_read(args.run), out, args.format):
+        print(path)
+    return 0
+
+
+def cmd_compare(args) -> int:
+    """Metrics of two runs side by side with their differences."""
+    from fahv.runlog import bag_paths
+    from fahv.runtools import compare, format_metrics, summarize
+    from fahv.vehicle import load_vehicle
+
+    lim = load_vehicle().limits
+    a, b = (summarize(_read(r), lim) for r in (args.a, args.b))
+    names = tuple(
+        f"{tag}: {s['metadata'].get('variant', bag_paths(r)[0].name)}"
+        f" ({s['metadata'].get('source', '?')})"
+        for tag, s, r in (("A", a, args.a), ("B", b, args.b))
+    )
+    c = compare(a, b, names)
+    if args.json:
+        print(_json(c))
+        return 0
+    print(f"A = {a['file']}\nB = {b['file']}")
+    for k, (va, vb) in c["metadata"].items():
+        print(f"  {k}: A {va!s} | B {vb!s}")
+    print(format_metrics(c["table"]))
+    return 0
+
+
+def cmd_replay(args) -> int:
+    """Republish a recorded run (raw CDR), optionally into nodes under test."""
+    from fahv.sil import run_replay
+
+    res = run_replay(
+        args.run,
+        nodes=args.node or (),
+        topics=args.topics,
+        capture=args.capture,
+        out=args.out,
+        rate=0.0 if args.fast else args.rate,
+        steps=args.steps,
+        watchdog_s=args.watchdog,
+        quiet=args.quiet,
+    )
+    if res.returncode != 0:
+        print(f"fahv replay: failed (logs in {res.log_dir})", file=sys.stderr)
+        return 1
+    if res.out is not None:
+        print(f"replayed run written to {res.out}")
+    return 0
+
+
+def cmd_plot(args) -> int:
+    """Paper-style figures of one or several recorded runs, overlaid."""
     from fahv.runplots import GROUPS, plot_group
     from fahv.sim import run_result_of
 
     runs = []
     for path in args.runs:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            rec = read_run(path)
-        for w in caught:
-            print(f"warning: {w.message}", file=sys.stderr)
+        rec = _read(path)
         run = run_result_of(rec)
         if run.t.size == 0:
             raise FahvError(f"{path}: no complete step of the loop topics to plot")
@@ -481,28 +554,14 @@ def cmd_plot(args) -> int:
 
 def cmd_paper_figures(args) -> int:
     """Simulate every variant of Cases 1 and 2 (recorded) and write Fig. 9-17."""
-    from fahv.runlog import RunWriter
     from fahv.runplots import paper_figures
-    from fahv.sil import ROOT, run_metadata, run_name
-    from fahv.sim import simulate
+    from fahv.sil import ROOT
 
     runs = {}
     for case_path in args.cases:
         case, design = _load_or_design(case_path, None)
         for v in case["variants"]:
-            duration = case["duration"] if args.duration is None else args.duration
-            bag = ROOT / "bags" / run_name(case.name, v, "sim")
-            with RunWriter(bag, run_metadata(design, v, "simulate", duration), case["Ts"]) as w:
-                runs[(case.name, v)] = simulate(
-                    design,
-                    v,
-                    args.duration,
-                    writer=w,
-                    progress=lambda it, d=f"{case.name} {v}": tqdm(
-                        it, desc=d, leave=False, disable=None
-                    ),
-                )
-            print(f"{case.name} {v}: run written to {bag}")
+            runs[(case.name, v)] = _simulate_recorded(design, v, args.duration, ROOT / "bags")
     for path in paper_figures(runs, args.out):
         print(path)
     return 0
@@ -612,6 +671,42 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="figures", help="output folder")
     p.add_argument("--format", choices=("png", "pdf"), default="png")
     p.set_defaults(func=cmd_plot)
+    p = sub.add_parser("inspect", help="topics, metadata, step anomalies and metrics of a run")
+    p.add_argument("run", help="run folder or .mcap file")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=cmd_inspect)
+    p = sub.add_parser("export", help="one table per topic (CSV or Parquet) with units")
+    p.add_argument("run", help="run folder or .mcap file")
+    p.add_argument("--format", choices=("csv", "parquet"), default="csv")
+    p.add_argument("--out", default=None, help="output folder (default <run>/export_<format>)")
+    p.set_defaults(func=cmd_export)
+    p = sub.add_parser("compare", help="metrics of two runs side by side, with differences")
+    p.add_argument("a", help="run A (folder or .mcap)")
+    p.add_argument("b", help="run B (folder or .mcap)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_compare)
+    p = sub.add_parser(
+        "replay",
+        help="republish a run's loop topics (raw CDR) over DDS, optionally into nodes under test",
+    )
+    p.add_argument("run", help="run folder or .mcap file")
+    p.add_argument("--topics", nargs="+", default=None, help="topics to republish")
+    p.add_argument(
+        "--node",
+        nargs="+",
+        default=None,
+        help="nodes to test against the replay with the run's parameters (e.g. tube_mpc)",
+    )
+    p.add_argument(
+        "--capture", nargs="+", default=None, help="topics to capture (default: the nodes' outputs)"
+    )
+    p.add_argument("--out", default=None, help="run folder for the replayed + captured messages")
+    p.add_argument("--rate", type=float, default=1.0, help="1: recorded timing, r: r x faster")
+    p.add_argument("--fast", action="store_true", help="as fast as possible (lockstep on captures)")
+    p.add_argument("--steps", type=int, default=0, help="steps to replay (0: all)")
+    p.add_argument("--watchdog", type=float, default=10.0, help="node watchdog [s wall time]")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(func=cmd_replay)
     p = sub.add_parser(
         "paper-figures", help="simulate Cases 1 and 2 (all variants, recorded) and write Fig. 9-17"
     )
@@ -629,7 +724,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (FahvError, ValueError) as exc:
+    except (FahvError, ValueError, OSError) as exc:
         print(f"fahv {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

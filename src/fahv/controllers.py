@@ -306,10 +306,17 @@ class RobustMPC:
 
     At every ``resolve_every``-th step, minimise gamma subject to (33)-(35) with the
     current state x(k) - x_r (in place of x_n; x_r the trim of the raw command, no
-    governor) and the full input room (no tube),
-    and apply u = u_r + K (x - x_r) until the next solve. If a solve fails or its
-    result is not certified (contraction of E(Q) >= 1 or input bound exceeded), the
-    previous gain is kept and the failure is counted.
+    governor) and the full input room (no tube), and apply u = u_r + K (x - x_r)
+    until the next solve.
+
+    Each solve is certified numerically: contraction of E(Q) < 1 for every vertex,
+    the input bound on E(Q), and x(k) - x_r inside E(Q). When the min-gamma solve
+    is not certified (large set-point steps put its optimum on the edge of
+    feasibility, where gamma ~ 1e6 and interior-point solvers lose accuracy), the
+    same LMIs are solved for the largest margin s (s (x - x_r) in E(Q), s <= 1.1)
+    and that feasible, certified (Q, Y) is used: it is still a Kothare gain, only
+    not cost-optimal (counted in ``n_fallback``). If both fail, the previous gain
+    is kept and the failure is counted (``n_failed``).
 
     Parameters
     ----------
@@ -325,7 +332,15 @@ class RobustMPC:
         State and input scales.
     resolve_every : int
         Steps between LMI solves (>= 1).
+
+    Raises
+    ------
+    ValueError
+        If ``resolve_every`` < 1.
     """
+
+    #: Upper bound on the margin s of the fallback problem (s >= 1 is required).
+    S_CAP = 1.1
 
     def __init__(self, A, B, u_room, psi, sigma, Dx, Du, resolve_every: int) -> None:
         if resolve_every < 1:
@@ -342,11 +357,9 @@ class RobustMPC:
         Y = cp.Variable((m, n))
         g = cp.Variable()
         Xd = cp.Variable(m)
+        s = cp.Variable()
         ps, ss = np.sqrt(np.asarray(psi, float)), np.sqrt(np.asarray(sigma, float))
-        cons = [
-            cp.bmat([[np.ones((1, 1)), self._x0[None, :]], [self._x0[:, None], Qv]]) >> 0,
-            Xd <= self.u_room_s**2,
-        ]
+        lmis = [Xd <= self.u_room_s**2]  # (33)-(35) without the initial-state LMI
         for i in range(R):
             AQ = As[i] @ Qv + Bs[i] @ Y
             blk = cp.bmat(
@@ -357,38 +370,58 @@ class RobustMPC:
                     [np.diag(ss) @ Y, np.zeros((m, n)), np.zeros((m, n)), g * np.eye(m)],
                 ]
             )
-            cons.append(0.5 * (blk + blk.T) >> 0)
+            lmis.append(0.5 * (blk + blk.T) >> 0)
         blk = cp.bmat([[cp.diag(Xd), Y], [Y.T, Qv]])
-        cons.append(0.5 * (blk + blk.T) >> 0)
-        self._prob = cp.Problem(cp.Minimize(g), cons)
+        lmis.append(0.5 * (blk + blk.T) >> 0)
+
+        def contains(x):  # x' Q^-1 x <= 1 as an LMI (33)
+            return cp.bmat([[np.ones((1, 1)), x[None, :]], [x[:, None], Qv]]) >> 0
+
+        self._prob = cp.Problem(cp.Minimize(g), [contains(self._x0), *lmis])
+        self._prob_margin = cp.Problem(
+            cp.Maximize(s), [contains(s * self._x0), s <= self.S_CAP, *lmis]
+        )
         self._Q, self._Y = Qv, Y
         self.K = np.zeros((m, n))
         self.n_solves = 0
+        self.n_fallback = 0
         self.n_failed = 0
         self.have_gain = False
 
-    def _solve(self, dx: np.ndarray) -> bool:
+    def _certified_gain(self, prob, x0s: np.ndarray) -> np.ndarray | None:
+        """Solve ``prob``; return the scaled gain if its result is certified, else None."""
         import cvxpy as cp
 
         from fahv.tube.nominal import contraction
 
-        self._x0.value = dx / self.Dx
-        self.n_solves += 1
         try:
-            self._prob.solve(solver=SDP_SOLVER)
+            prob.solve(solver=SDP_SOLVER)
         except cp.error.SolverError:
-            return False
-        if self._prob.status not in ("optimal", "optimal_inaccurate") or self._Q.value is None:
-            return False
+            return None
+        if prob.status not in ("optimal", "optimal_inaccurate") or self._Q.value is None:
+            return None
         Qs = 0.5 * (self._Q.value + self._Q.value.T)
-        Ks = self._Y.value @ np.linalg.inv(Qs)
         try:
+            Ks = self._Y.value @ np.linalg.inv(Qs)
             c = contraction(self._As, self._Bs, Ks, Qs)
-        except np.linalg.LinAlgError:  # Q not positive definite
-            return False
+        except np.linalg.LinAlgError:  # Q singular or not positive definite
+            return None
         ratio = np.sqrt(np.einsum("ij,jk,ik->i", Ks, Qs, Ks)) / self.u_room_s
-        if not (c < 1.0 and np.all(ratio <= 1.0 + 1e-6)):
-            return False
+        level = float(x0s @ np.linalg.solve(Qs, x0s))
+        if not (c < 1.0 and np.all(ratio <= 1.0 + 1e-6) and level <= 1.0 + 1e-6):
+            return None
+        return Ks
+
+    def _solve(self, dx: np.ndarray) -> bool:
+        x0s = dx / self.Dx
+        self._x0.value = x0s
+        self.n_solves += 1
+        Ks = self._certified_gain(self._prob, x0s)
+        if Ks is None:
+            Ks = self._certified_gain(self._prob_margin, x0s)
+            if Ks is None:
+                return False
+            self.n_fallback += 1
         self.K = Ks * self.Du[:, None] / self.Dx[None, :]
         return True
 

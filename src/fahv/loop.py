@@ -31,8 +31,65 @@ from fahv.errors import RunError
 from fahv.notch import DiscreteNotch, NotchFilter
 from fahv.params import validate
 from fahv.plant import ElevatorFault, FaultInjector, Plant
+from fahv.runlog import TOPICS
 from fahv.trim import TrimMap
 from fahv.vehicle import DELTA_E, PHI, Q, load_vehicle
+
+#: node -> (input topics, output topics) of one control step (ARCHITECTURE.md).
+#: ``replay`` (hsv_bringup) may publish and capture any loop topic.
+GRAPH = {
+    "plant": (("/hsv/actuator_command",), ("/clock", "/hsv/state")),
+    "notch_filter": (("/hsv/state",), ("/hsv/q_filtered",)),
+    "nominal_trajectory": (("/hsv/state",), ("/hsv/nominal",)),
+    "tube_mpc": (
+        ("/hsv/state", "/hsv/q_filtered", "/hsv/nominal"),
+        ("/hsv/control_command", "/hsv/tube_status"),
+    ),
+    "fault_injector": (
+        ("/hsv/control_command",),
+        ("/hsv/actuator_command", "/hsv/fault_status"),
+    ),
+    "recorder": (tuple(TOPICS), ()),
+    "replay": (tuple(TOPICS), tuple(TOPICS)),
+}
+GRAPH["rmpc"] = GRAPH["tube_mpc"]
+#: Nodes of the full graph in start order, the default of parameter ``graph_nodes``.
+DEFAULT_GRAPH = [
+    "recorder",
+    "notch_filter",
+    "nominal_trajectory",
+    "tube_mpc",
+    "fault_injector",
+    "plant",
+]
+
+
+def graph_nodes(controller: str = "tube_mpc") -> list[str]:
+    """Nodes of a full run with the given controller node (``tube_mpc`` or ``rmpc``)."""
+    return [controller if n == "tube_mpc" else n for n in DEFAULT_GRAPH]
+
+
+def replay_topics(nodes) -> tuple[list[str], list[str]]:
+    """(inputs to replay, outputs to capture) for testing ``nodes`` against a run.
+
+    The inputs are the loop topics the nodes consume and do not produce themselves;
+    the outputs are what they produce.
+
+    Raises
+    ------
+    RunError
+        On a node that is not in :data:`GRAPH`.
+    """
+    unknown = [n for n in nodes if n not in GRAPH or n in ("recorder", "replay")]
+    if unknown:
+        raise RunError(
+            f"cannot replay into {unknown}: nodes are {sorted(set(GRAPH) - {'recorder', 'replay'})}"
+        )
+    produced = [t for n in nodes for t in GRAPH[n][1]]
+    consumed = [t for n in nodes for t in GRAPH[n][0]]
+    inputs = [t for t in TOPICS if t in consumed and t not in produced]
+    return inputs, [t for t in TOPICS if t in produced]
+
 
 #: Field names of VehicleState after k, t, in plant state order (eq. 1-3).
 STATE_FIELDS = ("h", "v", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
@@ -281,6 +338,9 @@ class ControllerCore:
             "level": level,
             "inside": bool(level <= 1.0),
             "e": e,
+            "lmi_solves": 0 if self.rmpc is None else self.rmpc.n_solves,
+            "lmi_fallback": 0 if self.rmpc is None else self.rmpc.n_fallback,
+            "lmi_failed": 0 if self.rmpc is None else self.rmpc.n_failed,
         }
         return cmd, tube
 

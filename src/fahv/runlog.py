@@ -20,6 +20,7 @@ import functools
 import json
 import math
 import os
+import struct
 import subprocess
 import warnings
 from dataclasses import dataclass, field
@@ -252,10 +253,45 @@ def _to_dict(obj) -> dict:
     return out
 
 
-def decode(topic: str, data: bytes) -> dict:
-    """Message dict of CDR bytes on a loop topic (inverse of :func:`encode`)."""
-    ts = typestore()
+def decode(topic: str, data: bytes, ts=None) -> dict:
+    """Message dict of CDR bytes on a loop topic (inverse of :func:`encode`).
+
+    ``ts``: typestore to decode with (default :func:`typestore`; a run written with
+    an older definition is decoded with its own, see :func:`file_typestore`).
+    """
+    ts = typestore() if ts is None else ts
     return _to_dict(ts.deserialize_cdr(bytes(data), TOPICS[topic]))
+
+
+@functools.cache
+def file_typestore(msgtype: str, msgdef: str):
+    """Typestore that decodes ``msgtype`` with the definition stored in a run file.
+
+    Runs keep the full definition of every schema, so a run recorded before a
+    message gained a field still decodes (the missing field is then absent from
+    the message dicts).
+
+    Raises
+    ------
+    RunError
+        If the stored definition does not parse.
+    """
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    try:
+        ts.register(get_types_from_msg(msgdef, msgtype))
+    except Exception as exc:  # rosbags raises several parser errors
+        raise RunError(f"the stored definition of {msgtype} does not parse: {exc}") from None
+    return ts
+
+
+def _decoder_of(schema: Schema | None):
+    """Typestore for a loop-topic schema: ours when the definitions agree."""
+    if schema is None:
+        return typestore()
+    text = schema.data.decode(errors="replace")
+    if schema.name in typestore().types and text == typestore().generate_msgdef(schema.name)[0]:
+        return typestore()
+    return file_typestore(schema.name, text)
 
 
 class TruncatedRunWarning(UserWarning):
@@ -279,6 +315,8 @@ class Recording:
         (unknown topics included, not decoded).
     truncated : bool
         The file ended before its footer; what was complete was read.
+    schemas : dict[str, str]
+        Stored message definition of each topic's type.
     """
 
     path: Path
@@ -286,6 +324,15 @@ class Recording:
     records: dict = field(default_factory=dict)
     topics: dict = field(default_factory=dict)
     truncated: bool = False
+    schemas: dict = field(default_factory=dict)
+
+    @property
+    def sim_span(self) -> tuple[float, float]:
+        """(first, last) log time [s] over every topic; (nan, nan) when empty."""
+        ts = [
+            v for t in self.topics.values() for v in (t["first_ns"], t["last_ns"]) if v is not None
+        ]
+        return (min(ts) * 1e-9, max(ts) * 1e-9) if ts else (math.nan, math.nan)
 
 
 def _bag_custom_data(serialized: str) -> dict:
@@ -298,12 +345,74 @@ def _bag_custom_data(serialized: str) -> dict:
     return {str(k): str(v) for k, v in (info.get("custom_data") or {}).items()}
 
 
+class _Stream:
+    """MCAP records of a run file in file order; ``complete`` once the footer was read.
+
+    A file that ends early stops the iteration at its last complete record.
+
+    Raises
+    ------
+    RunError
+        If the file is missing or is not an MCAP file.
+    """
+
+    MAGIC = b"\x89MCAP0\r\n"
+
+    def __init__(self, run: str | Path) -> None:
+        _, self.path = bag_paths(run)
+        if not self.path.is_file():
+            raise RunError(f"run file {self.path} does not exist")
+        with open(self.path, "rb") as f:
+            if f.read(8) != self.MAGIC:
+                raise RunError(f"{self.path} is not an MCAP file (bad magic bytes)")
+        self.complete = False
+
+    def __iter__(self):
+        with open(self.path, "rb") as f:
+            try:
+                for r in StreamReader(f).records:
+                    if isinstance(r, Footer):
+                        self.complete = True
+                    yield r
+            except (McapError, EOFError, ValueError, KeyError, struct.error):
+                return  # truncated: keep what was complete, the caller warns
+
+    def warn_if_truncated(self, n: int, stacklevel: int = 3) -> None:
+        """TruncatedRunWarning if the footer was not reached (``n`` messages read)."""
+        if not self.complete:
+            warnings.warn(
+                f"{self.path} is truncated (recorder stopped before closing it): read {n} "
+                "messages up to the last complete chunk",
+                TruncatedRunWarning,
+                stacklevel=stacklevel,
+            )
+
+
+def stored_metadata(run: str | Path) -> dict:
+    """Run metadata without reading the messages: metadata.yaml, else run.json.
+
+    Returns an empty dict when neither file is readable.
+    """
+    folder, _ = bag_paths(run)
+    try:
+        meta = _bag_custom_data((folder / "metadata.yaml").read_text())
+        if meta:
+            return meta
+    except OSError:
+        pass
+    try:
+        return {k: str(v) for k, v in json.loads((folder / "run.json").read_text()).items()}
+    except (OSError, ValueError, AttributeError):
+        return {}
+
+
 def read_run(run: str | Path) -> Recording:
     """Read a run (bag folder or .mcap file) in one pass.
 
     A file that ends early (recorder killed) is read up to its last complete
     chunk and a :class:`TruncatedRunWarning` says so. Topics that are not loop
-    topics are listed with their counts, not decoded.
+    topics are listed with their counts, not decoded; a loop topic recorded with
+    an older definition is decoded with the stored one.
 
     Raises
     ------
@@ -311,57 +420,51 @@ def read_run(run: str | Path) -> Recording:
         If the file is missing, not an MCAP file, or a loop-topic message does not
         decode with its definition; the message names the file.
     """
-    _, path = bag_paths(run)
-    if not path.is_file():
-        raise RunError(f"run file {path} does not exist")
+    stream = _Stream(run)
+    path = stream.path
     rec = Recording(path)
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
     records = {t: [] for t in TOPICS}
-    complete = False
-    with open(path, "rb") as f:
-        head = f.read(8)
-        if head != b"\x89MCAP0\r\n":
-            raise RunError(f"{path} is not an MCAP file (bad magic bytes)")
-        f.seek(0)
-        try:
-            for r in StreamReader(f).records:
-                if isinstance(r, Schema):
-                    schemas[r.id] = r
-                elif isinstance(r, Channel):
-                    channels[r.id] = r
-                    schema = schemas.get(r.schema_id)
-                    rec.topics.setdefault(
-                        r.topic,
-                        {
-                            "type": schema.name if schema else "",
-                            "count": 0,
-                            "first_ns": None,
-                            "last_ns": None,
-                        },
-                    )
-                elif isinstance(r, Message):
-                    ch = channels.get(r.channel_id)
-                    if ch is None:
-                        continue
-                    info = rec.topics[ch.topic]
-                    info["count"] += 1
-                    info["first_ns"] = r.log_time if info["first_ns"] is None else info["first_ns"]
-                    info["last_ns"] = r.log_time
-                    if ch.topic in TOPICS and info["type"] == TOPICS[ch.topic]:
-                        try:
-                            records[ch.topic].append(decode(ch.topic, r.data))
-                        except Exception as exc:  # rosbags raises several types
-                            raise RunError(
-                                f"{path}: a message on {ch.topic} does not decode: {exc}"
-                            ) from None
-                elif isinstance(r, Metadata) and r.name == "rosbag2":
-                    rec.metadata.update(_bag_custom_data(r.metadata.get("serialized_metadata", "")))
-                elif isinstance(r, Footer):
-                    complete = True
-        except (McapError, EOFError, ValueError, KeyError):
-            pass  # truncated: keep what was complete, warn below
-    rec.truncated = not complete
+    decoders = {}
+    for r in stream:
+        if isinstance(r, Schema):
+            schemas[r.id] = r
+        elif isinstance(r, Channel):
+            channels[r.id] = r
+            schema = schemas.get(r.schema_id)
+            if schema is not None:
+                rec.schemas[r.topic] = schema.data.decode(errors="replace")
+            rec.topics.setdefault(
+                r.topic,
+                {
+                    "type": schema.name if schema else "",
+                    "count": 0,
+                    "first_ns": None,
+                    "last_ns": None,
+                },
+            )
+        elif isinstance(r, Message):
+            ch = channels.get(r.channel_id)
+            if ch is None:
+                continue
+            info = rec.topics[ch.topic]
+            info["count"] += 1
+            info["first_ns"] = r.log_time if info["first_ns"] is None else info["first_ns"]
+            info["last_ns"] = r.log_time
+            if ch.topic in TOPICS and info["type"] == TOPICS[ch.topic]:
+                try:
+                    ts = decoders.get(ch.id)
+                    if ts is None:
+                        ts = decoders[ch.id] = _decoder_of(schemas.get(ch.schema_id))
+                    records[ch.topic].append(decode(ch.topic, r.data, ts))
+                except Exception as exc:  # rosbags raises several types
+                    raise RunError(
+                        f"{path}: a message on {ch.topic} does not decode: {exc}"
+                    ) from None
+        elif isinstance(r, Metadata) and r.name == "rosbag2":
+            rec.metadata.update(_bag_custom_data(r.metadata.get("serialized_metadata", "")))
+    rec.truncated = not stream.complete
     if not rec.metadata:
         side = path.parent / "run.json"
         if side.is_file():
@@ -369,16 +472,69 @@ def read_run(run: str | Path) -> Recording:
                 rec.metadata = {k: str(v) for k, v in json.loads(side.read_text()).items()}
             except (OSError, ValueError):
                 pass
-    if rec.truncated:
-        n = sum(t["count"] for t in rec.topics.values())
-        warnings.warn(
-            f"{path} is truncated (recorder stopped before closing it): read {n} messages "
-            "up to the last complete chunk",
-            TruncatedRunWarning,
-            stacklevel=2,
-        )
+    stream.warn_if_truncated(sum(t["count"] for t in rec.topics.values()))
     rec.records = records
     return rec
+
+
+def iter_raw(run: str | Path, topics=None):
+    """Raw messages of a run in file order, for replay.
+
+    Parameters
+    ----------
+    run : path
+        Bag folder or .mcap file.
+    topics : iterable of str, optional
+        Only these topics (default: every topic).
+
+    Yields
+    ------
+    (topic, msgtype, log_time_ns, data) : (str, str, int, bytes)
+        ``data`` is the CDR payload as recorded.
+
+    Raises
+    ------
+    RunError
+        If the file is missing or not an MCAP file. A truncated file ends the
+        iteration early with a :class:`TruncatedRunWarning`.
+    """
+    stream = _Stream(run)
+    wanted = None if topics is None else set(topics)
+    schemas, channels, n = {}, {}, 0
+    for r in stream:
+        if isinstance(r, Schema):
+            schemas[r.id] = r.name
+        elif isinstance(r, Channel):
+            channels[r.id] = (r.topic, schemas.get(r.schema_id, ""))
+        elif isinstance(r, Message) and r.channel_id in channels:
+            topic, msgtype = channels[r.channel_id]
+            if wanted is None or topic in wanted:
+                n += 1
+                yield topic, msgtype, r.log_time, bytes(r.data)
+    stream.warn_if_truncated(n, stacklevel=2)
+
+
+def step_anomalies(rec: Recording) -> dict[str, dict[str, int]]:
+    """Step-index anomalies of each loop topic, from the messages themselves.
+
+    Returns
+    -------
+    dict
+        Per loop topic: ``duplicate`` (a step index seen again), ``out_of_order``
+        (a step index lower than one already seen) and ``missing`` (indices absent
+        between 0 and the highest seen).
+    """
+    out = {}
+    for topic, msgs in rec.records.items():
+        ks = [i for i, _ in enumerate(msgs)] if topic == "/clock" else [int(m["k"]) for m in msgs]
+        seen, dup, ooo, top = set(), 0, 0, -1
+        for k in ks:
+            dup += k in seen
+            ooo += k < top and k not in seen
+            seen.add(k)
+            top = max(top, k)
+        out[topic] = {"duplicate": dup, "out_of_order": ooo, "missing": top + 1 - len(seen)}
+    return out
 
 
 def step_arrays(rec: Recording) -> tuple[int, dict]:
@@ -421,5 +577,9 @@ __all__ = [
     "TruncatedRunWarning",
     "Recording",
     "read_run",
+    "stored_metadata",
+    "iter_raw",
+    "file_typestore",
+    "step_anomalies",
     "step_arrays",
 ]

@@ -10,6 +10,7 @@ workspace's environment with an isolated ``ROS_DOMAIN_ID`` and
 
 from __future__ import annotations
 
+import hashlib
 import json
 import random
 import subprocess
@@ -21,6 +22,7 @@ from pathlib import Path
 import yaml
 
 from fahv.errors import RunError
+from fahv.loop import graph_nodes
 from fahv.params import node_parameters, parameter_file
 from fahv.runlog import code_version
 
@@ -30,15 +32,38 @@ WS = ROOT / "ros_ws"
 PACKAGES = ("hsv_interfaces", "hsv_common", "hsv_plant", "hsv_ctrl", "hsv_bringup")
 
 
+def sources_hash(ws: Path = WS) -> str:
+    """SHA-256 over every source file of ``ws/src`` (message files included).
+
+    The packages are installed as copies (no ``--symlink-install``), so a changed
+    node or message needs a rebuild; :func:`workspace_built` compares this hash
+    with the one the last build recorded.
+    """
+    h = hashlib.sha256()
+    for f in sorted((ws / "src").rglob("*")):
+        if f.is_file() and "__pycache__" not in f.parts:
+            h.update(str(f.relative_to(ws)).encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def write_build_stamp(ws: Path = WS) -> None:
+    """Record :func:`sources_hash` after a successful build (``scripts/build_ros.sh``)."""
+    (ws / "install" / ".fahv_sources").write_text(sources_hash(ws))
+
+
 def workspace_built(ws: Path = WS) -> bool:
-    """True if every hsv package is installed in ``ws/install``."""
-    return (ws / "install" / "setup.bash").is_file() and all(
-        (ws / "install" / p / "share" / p / "package.xml").is_file() for p in PACKAGES
+    """True if every hsv package is installed in ``ws/install`` from the current sources."""
+    stamp = ws / "install" / ".fahv_sources"
+    return (
+        (ws / "install" / "setup.bash").is_file()
+        and all((ws / "install" / p / "share" / p / "package.xml").is_file() for p in PACKAGES)
+        and stamp.is_file()
+        and stamp.read_text() == sources_hash(ws)
     )
 
 
 def ensure_built(ws: Path = WS, log=print) -> None:
-    """Build the workspace with colcon if a package is missing.
+    """Build the workspace with colcon if a package is missing or its sources changed.
 
     Raises
     ------
@@ -142,14 +167,7 @@ def write_run_params(
     content["/**"] = {
         "ros__parameters": {
             "use_sim_time": True,
-            "graph_nodes": [
-                "recorder",
-                "notch_filter",
-                "nominal_trajectory",
-                controller,
-                "fault_injector",
-                "plant",
-            ],
+            "graph_nodes": graph_nodes(controller),
         }
     }
     for node, values in (overrides or {}).items():
@@ -230,6 +248,135 @@ def run_sil(
     return SilRun(bag, rc, wall, sim_s)
 
 
+@dataclass
+class ReplayRun:
+    """Outcome of one replay (:func:`run_replay`)."""
+
+    out: Path | None
+    returncode: int
+    wall_s: float
+    log_dir: Path
+
+
+def _ros_list(values) -> list[str]:
+    """A string-array parameter; [""] stands for empty (a YAML [] has no type)."""
+    return list(values) or [""]
+
+
+def run_replay(
+    run: str | Path,
+    nodes=(),
+    topics=None,
+    capture=None,
+    out: str | Path | None = None,
+    rate: float = 1.0,
+    steps: int = 0,
+    watchdog_s: float = 10.0,
+    quiet: bool = False,
+    log=print,
+) -> ReplayRun:
+    """Republish a recorded run (``replay`` node), optionally into nodes under test.
+
+    Parameters
+    ----------
+    run : path
+        Run folder (or its .mcap file).
+    nodes : sequence of str
+        Nodes to start against the replay (e.g. ``["tube_mpc"]``), with the
+        parameters the run was made with (``<run>/params.yaml``).
+    topics : sequence of str, optional
+        Topics to republish; default: the inputs of ``nodes`` they do not produce
+        (:func:`fahv.loop.replay_topics`), or every loop topic without nodes.
+    capture : sequence of str, optional
+        Topics to capture (lockstep on them); default: the outputs of ``nodes``.
+    out : path, optional
+        Run folder to write (replayed + captured messages); None: not recorded.
+    rate : float
+        1: recorded timing, r: r times faster, 0: as fast as possible.
+    steps : int
+        Steps to replay (0: all); the nodes under test run that many steps.
+    watchdog_s : float
+        Wall-clock watchdog of every node [s].
+
+    Returns
+    -------
+    ReplayRun
+        ``returncode`` 0 when the replay (and every node) finished.
+
+    Raises
+    ------
+    RunError
+        If the run is missing, a node is unknown, the run has no parameter file
+        for a node under test, or the workspace cannot be built.
+    """
+    from fahv.loop import replay_topics
+    from fahv.runlog import bag_paths, stored_metadata
+
+    folder, mcap = bag_paths(run)
+    if not mcap.is_file():
+        raise RunError(f"run file {mcap} does not exist")
+    inputs, outputs = replay_topics(nodes)
+    topics = list(inputs if topics is None and nodes else (topics or []))
+    capture = list(outputs if capture is None else capture)
+    content = {}
+    if nodes:
+        pfile = folder / "params.yaml"
+        try:
+            recorded = yaml.safe_load(pfile.read_text())
+        except (OSError, yaml.YAMLError) as exc:
+            raise RunError(f"cannot start {list(nodes)}: parameters of the run: {exc}") from None
+        for n in nodes:
+            if n not in recorded:
+                raise RunError(f"{pfile} has no parameters for node '{n}'")
+            p = dict(recorded[n]["ros__parameters"])
+            if steps:
+                p["duration"] = steps * float(p["Ts"])
+            content[n] = {"ros__parameters": p}
+    meta = stored_metadata(folder)
+    content["replay"] = {
+        "ros__parameters": {
+            "run": str(mcap.resolve()),
+            "topics": _ros_list(topics),
+            "rate": float(rate),
+            "capture": _ros_list(capture),
+            "out": "" if out is None else str(Path(out).resolve()),
+            "wait_for": _ros_list(nodes),
+            "steps": int(steps),
+            "watchdog_s": float(watchdog_s),
+            "metadata_json": json.dumps(
+                {k: meta[k] for k in ("case", "variant", "design_hash", "Ts") if k in meta}
+            ),
+        }
+    }
+    content["/**"] = {
+        "ros__parameters": {
+            "use_sim_time": "/clock" in topics or not topics,
+            "graph_nodes": ["replay", *nodes],
+        }
+    }
+    ensure_built(log=log)
+    env = ros_env()
+    env.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100)))
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    work = WS / "log" / "replay" / time.strftime("%Y%m%d-%H%M%S")
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "params.yaml").write_text(yaml.safe_dump(content, sort_keys=False, width=120))
+    cmd = [
+        str(WS / "install" / "hsv_bringup" / "lib" / "hsv_bringup" / "sil"),
+        "--params-file",
+        str(work / "params.yaml"),
+        "--log-dir",
+        str(work / "logs"),
+        "--nodes",
+        "replay",
+        *nodes,
+    ] + (["--quiet"] if quiet else [])
+    log(f"replay of {folder.name} into {list(nodes) or 'the graph'}: logs in {work}")
+    t0 = time.monotonic()
+    rc = subprocess.run(cmd, env=env).returncode
+    return ReplayRun(None if out is None else Path(out), rc, time.monotonic() - t0, work)
+
+
 __all__ = [
     "ROOT",
     "WS",
@@ -241,4 +388,6 @@ __all__ = [
     "run_metadata",
     "write_run_params",
     "run_sil",
+    "ReplayRun",
+    "run_replay",
 ]

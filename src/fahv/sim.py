@@ -40,6 +40,8 @@ from fahv.vehicle import ALPHA, ETA1, ETA1_DOT, ETA2, ETA2_DOT, THETA, H, V
 
 #: Tracking counts as settled when |h - h_c| <= 10 ft and |V - V_c| <= 2 ft/s.
 SETTLE_TOL = {"h": 10.0, "V": 2.0}
+#: Counters of the RMPC's LMI solves in /hsv/tube_status (``lmi_<name>``).
+LMI_COUNTS = ("solves", "fallback", "failed")
 #: Attitude error bound of sec. 5.1 [deg].
 ATTITUDE_BOUND_DEG = 0.5
 
@@ -70,6 +72,9 @@ class RunResult:
         e' (tau^2 N)^-1 e (<= 1 inside the tube; NaN for the RMPC).
     fault_active : (N,) bool ndarray
         Fault applied at the step.
+    lmi_counts : (3,) int ndarray
+        RMPC LMI solves, certified fallbacks and rejected solves over the run
+        (zeros for the tube laws).
     info : dict
         Variant, case name, metadata.
     """
@@ -87,6 +92,7 @@ class RunResult:
     V_g: np.ndarray
     tube_level: np.ndarray
     fault_active: np.ndarray
+    lmi_counts: np.ndarray
     info: dict = field(default_factory=dict)
 
 
@@ -134,6 +140,7 @@ def run_result(records: dict, info: dict | None = None) -> RunResult:
         col(nom, "v_g"),
         col(tube, "level"),
         np.array([bool(m["active"]) for m in fs], dtype=bool),
+        np.array([tube[-1].get(f"lmi_{c}", 0) if tube else 0 for c in LMI_COUNTS], dtype=int),
         dict(info or {}),
     )
 
@@ -208,8 +215,6 @@ def simulate(
             if writer is not None:
                 writer.write(topic, k, msg)
     info = {"variant": variant, "case": case["name"], "Ts": Ts, "fault": case["fault"]}
-    if ctrl.rmpc is not None:
-        info.update(rmpc_solves=ctrl.rmpc.n_solves, rmpc_failed=ctrl.rmpc.n_failed)
     return run_result(records, info)
 
 
@@ -264,6 +269,7 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     u, lo, hi = run.u, limits.u_min, limits.u_max
     viol = np.maximum(np.maximum(lo - u, u - hi), 0.0)
     lvl = run.tube_level
+    lmi = {f"rmpc_lmi_{c}": int(v) for c, v in zip(LMI_COUNTS, run.lmi_counts, strict=True)}
     return {
         "settling_time_h_s": ts_h,
         "settling_time_V_s": ts_V,
@@ -289,6 +295,7 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
         if np.all(np.isfinite(lvl))
         else math.nan,
         "tube_level_max": float(np.nanmax(lvl)) if np.any(np.isfinite(lvl)) else math.nan,
+        **(lmi if run.lmi_counts.any() else {}),
     }
 
 

@@ -9,7 +9,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/hsv_bringup"]),
         ("share/hsv_bringup", ["package.xml"]),
-        ("share/hsv_bringup/config", ["config/graph.yaml"]),
+        ("share/hsv_bringup/config", ["config/graph.yaml", "config/foxglove_layout.json"]),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
@@ -18,6 +18,10 @@ setup(
     description="MCAP recorder, replay and the SIL runner of the flexible hypersonic vehicle graph.",
     license="Apache-2.0",
     entry_points={
-        "console_scripts": ["recorder = hsv_bringup.recorder:run", "sil = hsv_bringup.sil:run"],
+        "console_scripts": [
+            "recorder = hsv_bringup.recorder:run",
+            "replay = hsv_bringup.replay:run",
+            "sil = hsv_bringup.sil:run",
+        ],
     },
 )

@@ -9,9 +9,11 @@ last step; the first node that exits non-zero or is killed fails the run, the ot
 get SIGINT (the recorder closes its file), then SIGKILL after a grace period, and the
 runner exits 1 naming that node and showing the end of its log.
 
-Usually started by ``fahv sil CASE``, which writes the parameter file; by hand::
+Usually started by ``fahv sil CASE`` (or ``fahv replay``), which writes the parameter
+file; by hand::
 
     sil --params-file RUN_PARAMS.yaml --log-dir DIR [--controller tube_mpc|rmpc]
+    sil --params-file REPLAY_PARAMS.yaml --log-dir DIR --nodes replay tube_mpc
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ PACKAGE = {
     "nominal_trajectory": "hsv_ctrl",
     "tube_mpc": "hsv_ctrl",
     "rmpc": "hsv_ctrl",
+    "replay": "hsv_bringup",
     "fault_injector": "hsv_plant",
     "plant": "hsv_plant",
 }
@@ -70,9 +73,9 @@ def _tail(path: Path, n: int = 12) -> str:
 class Graph:
     """The processes of one run."""
 
-    def __init__(self, params_file: Path, log_dir: Path, controller: str, env: dict) -> None:
+    def __init__(self, params_file: Path, log_dir: Path, names: list[str], env: dict) -> None:
         self.params_file, self.log_dir, self.env = params_file, log_dir, env
-        self.names = ["recorder"] + [n.format(controller=controller) for n in LOOP_NODES]
+        self.names = list(names)
         self.procs: dict[str, subprocess.Popen] = {}
         self.logs: dict[str, Path] = {}
         self.progress = (0, 0)
@@ -83,7 +86,7 @@ class Graph:
         for name in self.names:
             self.logs[name] = self.log_dir / f"{name}.log"
             cmd = [str(executable(name)), "--ros-args", "--params-file", str(self.params_file)]
-            pipe = name == "recorder"
+            pipe = name in ("recorder", "replay")  # they print progress lines
             with open(self.logs[name], "w") as log:
                 p = subprocess.Popen(
                     cmd,
@@ -156,19 +159,33 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--params-file", type=Path, required=True)
     ap.add_argument("--log-dir", type=Path, required=True)
     ap.add_argument("--controller", choices=("tube_mpc", "rmpc"), default="tube_mpc")
+    ap.add_argument(
+        "--nodes",
+        nargs="+",
+        choices=sorted(PACKAGE),
+        default=None,
+        help="nodes to start (default: recorder and the loop nodes with --controller)",
+    )
     ap.add_argument("--quiet", action="store_true", help="no progress line")
     args = ap.parse_args(argv)
     try:
         params = yaml.safe_load(args.params_file.read_text())
-        bag = params["recorder"]["ros__parameters"]["bag"]
-    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
+        names = args.nodes or ["recorder"] + [
+            n.format(controller=args.controller) for n in LOOP_NODES
+        ]
+        bag = next(
+            params[n]["ros__parameters"].get(key)
+            for n, key in (("recorder", "bag"), ("replay", "out"))
+            if n in names
+        )
+    except (OSError, yaml.YAMLError, KeyError, TypeError, StopIteration) as exc:
         print(f"sil: parameter file {args.params_file} unusable: {exc}", file=sys.stderr)
         return 2
     env = dict(os.environ)
     env.setdefault("ROS_DOMAIN_ID", str(random.Random(os.getpid()).randint(1, 100)))
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     env["PYTHONUNBUFFERED"] = "1"
-    graph = Graph(args.params_file, args.log_dir, args.controller, env)
+    graph = Graph(args.params_file, args.log_dir, names, env)
     stop = {"sig": None}
 
     def on_signal(signum, frame):
@@ -202,7 +219,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"--- end of {graph.logs[failed]}\n{_tail(graph.logs[failed])}", file=sys.stderr)
         print(f"sil: run (incomplete) written to {bag}", file=sys.stderr)
         return 1
-    print(f"sil: run written to {bag}", file=sys.stderr)
+    print(f"sil: run written to {bag or '(not recorded)'}", file=sys.stderr)
     return 0
 
 

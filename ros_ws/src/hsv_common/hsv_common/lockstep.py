@@ -37,35 +37,9 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from fahv.loop import n_steps_of
+from fahv.loop import DEFAULT_GRAPH, GRAPH, n_steps_of
 from fahv.params import SPECS, ParameterError, validate
 from fahv.runlog import QOS_DEPTH, TOPICS
-
-#: node -> (input topics, output topics) of one control step (ARCHITECTURE.md).
-GRAPH = {
-    "plant": (("/hsv/actuator_command",), ("/clock", "/hsv/state")),
-    "notch_filter": (("/hsv/state",), ("/hsv/q_filtered",)),
-    "nominal_trajectory": (("/hsv/state",), ("/hsv/nominal",)),
-    "tube_mpc": (
-        ("/hsv/state", "/hsv/q_filtered", "/hsv/nominal"),
-        ("/hsv/control_command", "/hsv/tube_status"),
-    ),
-    "fault_injector": (
-        ("/hsv/control_command",),
-        ("/hsv/actuator_command", "/hsv/fault_status"),
-    ),
-    "recorder": (tuple(TOPICS), ()),
-}
-GRAPH["rmpc"] = GRAPH["tube_mpc"]
-#: Nodes of the full graph, the default of parameter ``graph_nodes``.
-DEFAULT_GRAPH = [
-    "recorder",
-    "notch_filter",
-    "nominal_trajectory",
-    "tube_mpc",
-    "fault_injector",
-    "plant",
-]
 
 LOOP_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,

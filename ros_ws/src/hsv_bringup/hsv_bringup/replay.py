@@ -1,0 +1,237 @@
+"""``replay`` node: republish recorded loop topics (raw CDR) from a run file.
+
+Reads a run (rosbag2 folder or .mcap; a truncated file up to its last complete
+chunk) and publishes the selected topics step by step, exactly the bytes that were
+recorded, with the loop QoS. Timing: ``rate`` 1.0 follows the recorded simulated
+time in wall time, r > 0 is r times faster, 0 is as fast as possible.
+
+Regression use: with ``capture`` topics (the outputs of the node(s) under test),
+the replay runs in lockstep: step k + 1 is published only after every captured topic
+that has a publisher delivered step k, so nothing is dropped however slow the node
+is. With ``out`` the replayed and the captured messages are written to a new run
+(same format as the recorder's), to compare with the original.
+
+Parameters: ``run`` (file to replay), ``topics`` (default every loop topic of the
+run), ``rate``, ``capture``, ``out``, ``wait_for`` (nodes that must announce
+themselves on /hsv/ready before step 0), ``steps`` (0: all), ``watchdog_s``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+from hsv_common.lockstep import (
+    EXIT_OK,
+    LOOP_QOS,
+    READY_QOS,
+    WatchdogError,
+    main,
+    msg_type_of,
+)
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from fahv.errors import RunError
+from fahv.params import ParameterError
+from fahv.runlog import TOPICS, RunWriter, code_version, iter_raw
+from hsv_bringup.recorder import step_of
+
+
+def load_steps(run: str, topics: list[str] | None, steps: int) -> tuple[list, float, list]:
+    """Recorded messages grouped by step.
+
+    Parameters
+    ----------
+    run : str
+        Bag folder or .mcap file.
+    topics : list of str or None
+        Topics to load; None: every loop topic present in the run.
+    steps : int
+        Number of steps to keep (0: all).
+
+    Returns
+    -------
+    ([(log_ns, [(topic, data), ...]), ...], Ts [s], topics loaded)
+
+    Raises
+    ------
+    ParameterError
+        If the run cannot be read, lacks a selected topic or holds fewer than 2 steps.
+    """
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            groups: dict[int, list] = {}
+            seen = set()
+            for topic, _, log_ns, data in iter_raw(run, topics or list(TOPICS)):
+                groups.setdefault(log_ns, []).append((topic, data))
+                seen.add(topic)
+        for w in caught:
+            print(f"[replay] warning: {w.message}", file=sys.stderr)
+    except RunError as exc:
+        raise ParameterError(f"replay: parameter 'run': {exc}") from None
+    topics = topics or [t for t in TOPICS if t in seen]
+    missing = [t for t in topics if t not in seen]
+    if missing:
+        raise ParameterError(f"replay: parameter 'topics': {missing} not in the run {run}")
+    times = sorted(groups)
+    if len(times) < 2:
+        raise ParameterError(f"replay: parameter 'run': {run} holds fewer than 2 steps")
+    if steps:
+        times = times[:steps]
+    return [(t, groups[t]) for t in times], (times[1] - times[0]) * 1e-9, topics
+
+
+class Replay(Node):
+    """Publisher of a recorded run, optionally in lockstep with captured topics."""
+
+    ROLE = "replay"
+
+    def __init__(self) -> None:
+        super().__init__("replay")
+        get = {}
+        for name, default, desc in (
+            ("run", "", "run to replay (bag folder or .mcap)"),
+            ("topics", [""], "topics to republish (default: every loop topic of the run)"),
+            ("rate", 1.0, "1: recorded timing, r: r times faster, 0: as fast as possible"),
+            ("capture", [""], "topics to capture from the graph (lockstep on them)"),
+            ("out", "", "run folder to write (replayed + captured); empty: none"),
+            ("wait_for", [""], "nodes to wait for on /hsv/ready before step 0"),
+            ("steps", 0, "steps to replay (0: all)"),
+            ("watchdog_s", 10.0, "wall time without a captured step that ends the run [s]"),
+            ("metadata_json", "{}", "extra run metadata (JSON object)"),
+        ):
+            self.declare_parameter(name, default, ParameterDescriptor(description=desc))
+            v = self.get_parameter(name).value
+            get[name] = [x for x in v if x] if isinstance(v, list) else v
+        if not get["run"]:
+            raise ParameterError("replay: parameter 'run' is missing")
+        if get["rate"] < 0:
+            raise ParameterError(f"replay: parameter 'rate' must be >= 0, got {get['rate']}")
+        bad = [t for t in get["topics"] + get["capture"] if t not in TOPICS]
+        if bad:
+            raise ParameterError(f"replay: {bad} are not loop topics {list(TOPICS)}")
+        self.steps, Ts, self.topics = load_steps(get["run"], get["topics"] or None, get["steps"])
+        self.Ts_ns = int(round(Ts * 1e9))
+        self.rate = float(get["rate"])
+        self.watchdog_s = float(get["watchdog_s"])
+        self.wait_for = set(get["wait_for"])
+        self.pubs = {t: self.create_publisher(msg_type_of(t), t, LOOP_QOS) for t in self.topics}
+        self.capture = [t for t in get["capture"] if t not in self.topics]
+        self.got = dict.fromkeys(self.capture, -1)
+        self.subs = {
+            t: self.create_subscription(
+                msg_type_of(t), t, lambda data, t=t: self._capture(t, data), LOOP_QOS, raw=True
+            )
+            for t in self.capture
+        }
+        self.ready_names: set[str] = set()
+        self.create_subscription(
+            String, "/hsv/ready", lambda m: self.ready_names.add(m.data), READY_QOS
+        )
+        self.writer = None
+        if get["out"]:
+            try:
+                meta = json.loads(get["metadata_json"])
+                assert isinstance(meta, dict)
+            except (ValueError, AssertionError):
+                raise ParameterError(
+                    "replay: parameter 'metadata_json' is not a JSON object"
+                ) from None
+            meta.update(
+                source="replay",
+                replayed_from=str(Path(get["run"]).resolve()),
+                replayed_topics=",".join(self.topics),
+                captured_topics=",".join(self.capture),
+            )
+            meta.setdefault("code_version", code_version())
+            try:
+                self.writer = RunWriter(get["out"], meta, Ts)
+            except RunError as exc:
+                raise ParameterError(f"replay: parameter 'out': {exc}") from None
+        self.lockstep: list[str] = []
+        self.started = False
+        self.done = False
+        self.k = 0  # next step to publish
+        self.t0 = 0.0
+        self.last_progress = time.monotonic()
+
+    def _capture(self, topic: str, data: bytes) -> None:
+        k = step_of(topic, data, self.Ts_ns)
+        self.got[topic] = max(self.got[topic], k)
+        if self.writer is not None:
+            self.writer.write_raw(topic, k, data)
+        self.last_progress = time.monotonic()
+
+    def _matched(self) -> bool:
+        if not self.wait_for <= self.ready_names:
+            return False
+        if self.wait_for and any(p.get_subscription_count() < 1 for p in self.pubs.values()):
+            return False
+        return True
+
+    def poll(self) -> None:
+        """Start when the peers are ready; publish what the lockstep and timing allow."""
+        if not self.started:
+            if not self._matched():
+                if time.monotonic() - self.last_progress > max(60.0, self.watchdog_s):
+                    missing = sorted(self.wait_for - self.ready_names)
+                    raise WatchdogError(f"replay: nodes {missing} never announced themselves")
+                return
+            self.lockstep = [t for t, s in self.subs.items() if s.get_publisher_count() >= 1]
+            self.get_logger().info(
+                f"replaying {len(self.steps)} steps of {self.topics}; lockstep on {self.lockstep}"
+            )
+            self.started = True
+            self.t0 = time.monotonic()
+            self.last_progress = self.t0
+        log0 = self.steps[0][0]
+        for _ in range(200):  # then let the executor deliver callbacks
+            if self.k >= len(self.steps):
+                break
+            if self.lockstep and min(self.got[t] for t in self.lockstep) < self.k - 1:
+                break
+            log_ns, msgs = self.steps[self.k]
+            if self.rate > 0 and time.monotonic() < self.t0 + (log_ns - log0) * 1e-9 / self.rate:
+                break
+            for topic, data in msgs:
+                self.pubs[topic].publish(data)
+                if self.writer is not None:
+                    self.writer.write_raw(topic, step_of(topic, data, self.Ts_ns), data)
+            self.k += 1
+            self.last_progress = time.monotonic()
+            if self.k % 500 == 0:
+                print(f"progress {self.k} {len(self.steps)}", flush=True)
+        last = len(self.steps) - 1
+        if self.k >= len(self.steps) and all(self.got[t] >= last for t in self.lockstep):
+            self.done = True
+            return
+        if time.monotonic() - self.last_progress > self.watchdog_s:
+            behind = [t for t in self.lockstep if self.got[t] < self.k - 1]
+            raise WatchdogError(
+                f"replay: no {behind} for step {self.k - 1} within {self.watchdog_s:g} s "
+                "(node under test dead or silent)"
+            )
+
+    def close(self, status: int) -> None:
+        """Finish the output run with its status."""
+        if self.writer is None:
+            return
+        if self.done:
+            reason = "complete"
+        elif status == EXIT_OK:
+            reason = "interrupted"
+        else:
+            reason = f"interrupted (exit status {status})"
+        self.writer.close(reason)
+        print(f"closed {self.writer.path} ({reason}, {self.k} steps replayed)", flush=True)
+
+
+def run(args=None) -> None:
+    """Entry point ``ros2 run hsv_bringup replay``."""
+    sys.exit(main(Replay, args, linger_s=0.5))
