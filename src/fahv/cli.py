@@ -556,9 +556,17 @@ def cmd_paper_figures(args) -> int:
     """Simulate every variant of Cases 1 and 2 (recorded) and write Fig. 9-17."""
     from fahv.runplots import paper_figures
     from fahv.sil import ROOT
+    from fahv.sim import run_result_of
 
     runs = {}
-    for case_path in args.cases:
+    for path in args.runs or []:  # recorded runs (simulated or SIL) instead of new ones
+        rec = _read(path)
+        key = (rec.metadata.get("case"), rec.metadata.get("variant"))
+        if None in key:
+            raise FahvError(f"{path}: no case/variant in the run metadata")
+        runs[key] = run_result_of(rec)
+        print(f"{key[0]} {key[1]}: {path} ({rec.metadata.get('source', '?')})")
+    for case_path in [] if args.runs else args.cases:
         case, design = _load_or_design(case_path, None)
         for v in case["variants"]:
             runs[(case.name, v)] = _simulate_recorded(design, v, args.duration, ROOT / "bags")
@@ -714,6 +722,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--cases", nargs="+", default=["offline_design/case1.yaml", "offline_design/case2.yaml"]
     )
     p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    p.add_argument(
+        "--runs", nargs="+", default=None, help="use these recorded runs instead of simulating"
+    )
     p.add_argument("--out", default="docs/figures")
     p.set_defaults(func=cmd_paper_figures)
     return ap

@@ -383,6 +383,7 @@ class RobustMPC:
         )
         self._Q, self._Y = Qv, Y
         self.K = np.zeros((m, n))
+        self.Q_s = None  # scaled Q of the gain in use
         self.n_solves = 0
         self.n_fallback = 0
         self.n_failed = 0
@@ -423,6 +424,7 @@ class RobustMPC:
                 return False
             self.n_fallback += 1
         self.K = Ks * self.Du[:, None] / self.Dx[None, :]
+        self.Q_s = 0.5 * (self._Q.value + self._Q.value.T)
         return True
 
     def step(self, k: int, x: np.ndarray, ref: NominalOutput) -> np.ndarray:

@@ -85,8 +85,8 @@ def plot_group(group: str, runs: list, path: str | Path, title: str | None = Non
     fig, axes = plt.subplots(len(panels), 1, figsize=(8, 2.3 * len(panels) + 0.8), sharex=True)
     axes = np.atleast_1d(axes)
     for ax, (ylabel, fn) in zip(axes, panels, strict=True):
-        for label, run in runs:
-            ax.plot(run.t, fn(run), lw=1.0, label=label)
+        for i, (label, run) in enumerate(runs):  # dashes keep overlapping runs visible
+            ax.plot(run.t, fn(run), lw=1.0, ls=LINESTYLES[i % len(LINESTYLES)], label=label)
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
     if group == "trajectory":
@@ -141,6 +141,10 @@ LABELS = {
     "tube_mpc_notch2": "Tube-MPC + notch on mode 2",
     "rmpc": "RMPC (Kothare)",
 }
+
+
+#: Line style of the i-th run of a figure.
+LINESTYLES = ("-", (0, (5, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)))
 
 
 def paper_figures(runs: dict, out_dir: str | Path) -> list[Path]:
