@@ -177,6 +177,13 @@ def write_run_params(
     return content
 
 
+def _runner(work: Path, args: list[str], quiet: bool) -> list[str]:
+    """Command line of the hsv_bringup ``sil`` runner for a run folder ``work``."""
+    exe = WS / "install" / "hsv_bringup" / "lib" / "hsv_bringup" / "sil"
+    cmd = [str(exe), "--params-file", str(work / "params.yaml"), "--log-dir", str(work / "logs")]
+    return cmd + args + (["--quiet"] if quiet else [])
+
+
 def run_sil(
     design,
     variant: str | None = None,
@@ -226,15 +233,7 @@ def run_sil(
     )
     sim_s = params["plant"]["ros__parameters"]["duration"]
     controller = "rmpc" if "rmpc" in params else "tube_mpc"
-    cmd = [
-        str(WS / "install" / "hsv_bringup" / "lib" / "hsv_bringup" / "sil"),
-        "--params-file",
-        str(work / "params.yaml"),
-        "--log-dir",
-        str(work / "logs"),
-        "--controller",
-        controller,
-    ] + (["--quiet"] if quiet else [])
+    cmd = _runner(work, ["--controller", controller], quiet)
     log(f"SIL run {name}: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}, logs in {work}")
     t0 = time.monotonic()
     rc = subprocess.run(cmd, env=env).returncode
@@ -361,16 +360,7 @@ def run_replay(
     work = WS / "log" / "replay" / time.strftime("%Y%m%d-%H%M%S")
     work.mkdir(parents=True, exist_ok=True)
     (work / "params.yaml").write_text(yaml.safe_dump(content, sort_keys=False, width=120))
-    cmd = [
-        str(WS / "install" / "hsv_bringup" / "lib" / "hsv_bringup" / "sil"),
-        "--params-file",
-        str(work / "params.yaml"),
-        "--log-dir",
-        str(work / "logs"),
-        "--nodes",
-        "replay",
-        *nodes,
-    ] + (["--quiet"] if quiet else [])
+    cmd = _runner(work, ["--nodes", "replay", *nodes], quiet)
     log(f"replay of {folder.name} into {list(nodes) or 'the graph'}: logs in {work}")
     t0 = time.monotonic()
     rc = subprocess.run(cmd, env=env).returncode

@@ -14,26 +14,26 @@ Parameters: ``bag`` (folder to create), ``Ts``, ``duration``, ``watchdog_s``,
 
 from __future__ import annotations
 
-import json
 import struct
 import sys
 import time
 
 from hsv_common.lockstep import (
-    EXIT_OK,
     LOOP_QOS,
     READY_QOS,
     WatchdogError,
+    declare_plain,
+    end_reason,
     main,
     msg_type_of,
+    run_metadata_param,
 )
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from std_msgs.msg import String
 
 from fahv.errors import RunError
 from fahv.params import ParameterError
-from fahv.runlog import TOPICS, RunWriter, code_version
+from fahv.runlog import TOPICS, RunWriter
 
 
 def step_of(topic: str, data: bytes, Ts_ns: int) -> int:
@@ -55,28 +55,21 @@ class Recorder(Node):
 
     def __init__(self) -> None:
         super().__init__("recorder")
-        get = {}
-        for name, default, desc in (
-            ("bag", "", "run folder to create (bags/<run>)"),
-            ("Ts", 0.02, "control period [s]"),
-            ("duration", 0.0, "simulated duration [s]; the recorder stops after it"),
-            ("watchdog_s", 10.0, "wall time without any message that ends the run [s]"),
-            ("metadata_json", "{}", "run metadata as a JSON object"),
-        ):
-            self.declare_parameter(name, default, ParameterDescriptor(description=desc))
-            get[name] = self.get_parameter(name).value
+        get = declare_plain(
+            self,
+            (
+                ("bag", "", "run folder to create (bags/<run>)"),
+                ("Ts", 0.02, "control period [s]"),
+                ("duration", 0.0, "simulated duration [s]; the recorder stops after it"),
+                ("watchdog_s", 10.0, "wall time without any message that ends the run [s]"),
+                ("metadata_json", "{}", "run metadata as a JSON object"),
+            ),
+        )
         if not get["bag"]:
             raise ParameterError("recorder: parameter 'bag' is missing")
         if not (isinstance(get["Ts"], float) and get["Ts"] > 0):
             raise ParameterError(f"recorder: parameter 'Ts' must be > 0, got {get['Ts']!r}")
-        try:
-            meta = json.loads(get["metadata_json"])
-            assert isinstance(meta, dict)
-        except (ValueError, AssertionError):
-            raise ParameterError(
-                "recorder: parameter 'metadata_json' is not a JSON object"
-            ) from None
-        meta.setdefault("code_version", code_version())
+        meta = run_metadata_param("recorder", get["metadata_json"])
         meta.setdefault("source", "sil")
         self.Ts_ns = int(round(get["Ts"] * 1e9))
         self.n_steps = int(round(get["duration"] / get["Ts"]))
@@ -141,12 +134,7 @@ class Recorder(Node):
         for t, n in self.anomalies.items():
             self.writer.set_metadata(f"anomalies{t.replace('/', '.')}", n)
         self.writer.set_metadata("wall_time_s", f"{time.monotonic() - self.t0:.3f}")
-        if self.done:
-            reason = "complete"
-        elif status == EXIT_OK:
-            reason = "interrupted"
-        else:
-            reason = f"interrupted (exit status {status})"
+        reason = end_reason(self.done, status)
         self.writer.close(reason)
         print(f"closed {self.writer.path} ({reason}, {self.k} steps)", flush=True)
 

@@ -18,27 +18,27 @@ themselves on /hsv/ready before step 0), ``steps`` (0: all), ``watchdog_s``.
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 import warnings
 from pathlib import Path
 
 from hsv_common.lockstep import (
-    EXIT_OK,
     LOOP_QOS,
     READY_QOS,
     WatchdogError,
+    declare_plain,
+    end_reason,
     main,
     msg_type_of,
+    run_metadata_param,
 )
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from std_msgs.msg import String
 
 from fahv.errors import RunError
 from fahv.params import ParameterError
-from fahv.runlog import TOPICS, RunWriter, code_version, iter_raw
+from fahv.runlog import TOPICS, RunWriter, iter_raw
 from hsv_bringup.recorder import step_of
 
 
@@ -94,21 +94,20 @@ class Replay(Node):
 
     def __init__(self) -> None:
         super().__init__("replay")
-        get = {}
-        for name, default, desc in (
-            ("run", "", "run to replay (bag folder or .mcap)"),
-            ("topics", [""], "topics to republish (default: every loop topic of the run)"),
-            ("rate", 1.0, "1: recorded timing, r: r times faster, 0: as fast as possible"),
-            ("capture", [""], "topics to capture from the graph (lockstep on them)"),
-            ("out", "", "run folder to write (replayed + captured); empty: none"),
-            ("wait_for", [""], "nodes to wait for on /hsv/ready before step 0"),
-            ("steps", 0, "steps to replay (0: all)"),
-            ("watchdog_s", 10.0, "wall time without a captured step that ends the run [s]"),
-            ("metadata_json", "{}", "extra run metadata (JSON object)"),
-        ):
-            self.declare_parameter(name, default, ParameterDescriptor(description=desc))
-            v = self.get_parameter(name).value
-            get[name] = [x for x in v if x] if isinstance(v, list) else v
+        get = declare_plain(
+            self,
+            (
+                ("run", "", "run to replay (bag folder or .mcap)"),
+                ("topics", [""], "topics to republish (default: every loop topic of the run)"),
+                ("rate", 1.0, "1: recorded timing, r: r times faster, 0: as fast as possible"),
+                ("capture", [""], "topics to capture from the graph (lockstep on them)"),
+                ("out", "", "run folder to write (replayed + captured); empty: none"),
+                ("wait_for", [""], "nodes to wait for on /hsv/ready before step 0"),
+                ("steps", 0, "steps to replay (0: all)"),
+                ("watchdog_s", 10.0, "wall time without a captured step that ends the run [s]"),
+                ("metadata_json", "{}", "extra run metadata (JSON object)"),
+            ),
+        )
         if not get["run"]:
             raise ParameterError("replay: parameter 'run' is missing")
         if get["rate"] < 0:
@@ -136,20 +135,13 @@ class Replay(Node):
         )
         self.writer = None
         if get["out"]:
-            try:
-                meta = json.loads(get["metadata_json"])
-                assert isinstance(meta, dict)
-            except (ValueError, AssertionError):
-                raise ParameterError(
-                    "replay: parameter 'metadata_json' is not a JSON object"
-                ) from None
+            meta = run_metadata_param("replay", get["metadata_json"])
             meta.update(
                 source="replay",
                 replayed_from=str(Path(get["run"]).resolve()),
                 replayed_topics=",".join(self.topics),
                 captured_topics=",".join(self.capture),
             )
-            meta.setdefault("code_version", code_version())
             try:
                 self.writer = RunWriter(get["out"], meta, Ts)
             except RunError as exc:
@@ -222,12 +214,7 @@ class Replay(Node):
         """Finish the output run with its status."""
         if self.writer is None:
             return
-        if self.done:
-            reason = "complete"
-        elif status == EXIT_OK:
-            reason = "interrupted"
-        else:
-            reason = f"interrupted (exit status {status})"
+        reason = end_reason(self.done, status)
         self.writer.close(reason)
         print(f"closed {self.writer.path} ({reason}, {self.k} steps replayed)", flush=True)
 

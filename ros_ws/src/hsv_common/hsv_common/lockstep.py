@@ -23,6 +23,7 @@ signal before the end, 1 any other error.
 from __future__ import annotations
 
 import array
+import json
 import os
 import signal
 import sys
@@ -153,6 +154,47 @@ def declare_parameters(node: Node, spec_name: str) -> dict:
         if isinstance(v, array.array | list):
             values[key] = list(v)
     return values
+
+
+def declare_plain(node: Node, specs) -> dict:
+    """Declare untyped-by-spec parameters ``(name, default, description)``; their values.
+
+    String-array values drop empty strings (``[""]`` stands for an empty list, since a
+    YAML ``[]`` has no parameter type).
+    """
+    values = {}
+    for name, default, desc in specs:
+        node.declare_parameter(name, default, ParameterDescriptor(description=desc))
+        v = node.get_parameter(name).value
+        values[name] = [x for x in v if x] if isinstance(v, list) else v
+    return values
+
+
+def run_metadata_param(node_name: str, text: str) -> dict:
+    """Parameter ``metadata_json`` as a dict, with ``code_version`` filled in.
+
+    Raises
+    ------
+    ParameterError
+        If it is not a JSON object.
+    """
+    from fahv.runlog import code_version
+
+    try:
+        meta = json.loads(text)
+    except ValueError:
+        meta = None
+    if not isinstance(meta, dict):
+        raise ParameterError(f"{node_name}: parameter 'metadata_json' is not a JSON object")
+    meta.setdefault("code_version", code_version())
+    return meta
+
+
+def end_reason(done: bool, status: int) -> str:
+    """Run status for a recorded run: complete, interrupted, or with the exit status."""
+    if done:
+        return "complete"
+    return "interrupted" if status == EXIT_OK else f"interrupted (exit status {status})"
 
 
 class LockstepNode(Node):
