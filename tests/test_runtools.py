@@ -215,3 +215,10 @@ def test_run_recorded_with_an_older_definition_still_decodes(tmp_path):
 def test_export_rejects_an_unknown_format(runs, tmp_path):
     with pytest.raises(RunError, match="unknown export format"):
         export_run(read_run(runs["tube_mpc"][0]), tmp_path, "xlsx")
+
+
+def test_simulate_overrides_node_parameters_and_names_unknown_nodes(design):
+    run = simulate(design, "tube_mpc", 0.1, overrides={"notch_filter": {"enabled": False}})
+    np.testing.assert_array_equal(run.q_f, run.x[:, 4])  # no filter: q' = q
+    with pytest.raises(RunError, match="override for node 'bogus'"):
+        simulate(design, "tube_mpc", 0.1, overrides={"bogus": {"x": 1}})

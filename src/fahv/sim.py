@@ -157,6 +157,7 @@ def simulate(
     duration: float | None = None,
     progress=None,
     writer=None,
+    overrides: dict | None = None,
 ) -> RunResult:
     """Run one variant of a designed case in process.
 
@@ -171,6 +172,9 @@ def simulate(
         Iterable wrapper (tqdm).
     writer : fahv.runlog.RunWriter, optional
         Receives every message of every step (the SIL graph's topics).
+    overrides : dict, optional
+        Node parameter overrides ``{node: {name: value}}`` applied last (e.g.
+        ``{"rmpc": {"resolve_every": 50}}``); validated like every parameter.
 
     Returns
     -------
@@ -192,6 +196,10 @@ def simulate(
     if duration is not None:
         for node in p.values():
             node["duration"] = float(duration)
+    for node, values in (overrides or {}).items():
+        if node not in p:
+            raise RunError(f"override for node '{node}', which is not in the run: {sorted(p)}")
+        p[node].update(values)
     ctrl_node = "rmpc" if "rmpc" in p else "tube_mpc"
     plant = PlantCore(p["plant"])
     notch = NotchCore(p["notch_filter"])
