@@ -389,11 +389,11 @@ class RobustMPC:
         self.n_failed = 0
         self.have_gain = False
 
-    def _certified_gain(self, prob, x0s: np.ndarray) -> np.ndarray | None:
-        """Solve ``prob``; return the scaled gain if its result is certified, else None."""
+    def _certified_gain(self, prob, x0s: np.ndarray) -> tuple | None:
+        """Solve ``prob``; (K, Q) in scaled units if its result is certified, else None."""
         import cvxpy as cp
 
-        from fahv.tube.nominal import contraction
+        from fahv.tube.nominal import contraction, input_ratio
 
         try:
             prob.solve(solver=SDP_SOLVER)
@@ -407,24 +407,24 @@ class RobustMPC:
             c = contraction(self._As, self._Bs, Ks, Qs)
         except np.linalg.LinAlgError:  # Q singular or not positive definite
             return None
-        ratio = np.sqrt(np.einsum("ij,jk,ik->i", Ks, Qs, Ks)) / self.u_room_s
+        ratio = input_ratio(Ks, Qs, self.u_room_s)
         level = float(x0s @ np.linalg.solve(Qs, x0s))
         if not (c < 1.0 and np.all(ratio <= 1.0 + 1e-6) and level <= 1.0 + 1e-6):
             return None
-        return Ks
+        return Ks, Qs
 
     def _solve(self, dx: np.ndarray) -> bool:
         x0s = dx / self.Dx
         self._x0.value = x0s
         self.n_solves += 1
-        Ks = self._certified_gain(self._prob, x0s)
-        if Ks is None:
-            Ks = self._certified_gain(self._prob_margin, x0s)
-            if Ks is None:
+        gain = self._certified_gain(self._prob, x0s)
+        if gain is None:
+            gain = self._certified_gain(self._prob_margin, x0s)
+            if gain is None:
                 return False
             self.n_fallback += 1
+        Ks, self.Q_s = gain
         self.K = Ks * self.Du[:, None] / self.Dx[None, :]
-        self.Q_s = 0.5 * (self._Q.value + self._Q.value.T)
         return True
 
     def step(self, k: int, x: np.ndarray, ref: NominalOutput) -> np.ndarray:

@@ -155,7 +155,7 @@ def topic_table(rec: Recording, topic: str) -> tuple[dict, dict]:
     if topic == "/clock":
         t = np.array([m["clock"]["sec"] + 1e-9 * m["clock"]["nanosec"] for m in msgs], float)
         return {"t": t}, {"t": units["t"]}
-    names = list(msgs[0]) if msgs else [n for n in units]
+    names = list(msgs[0]) if msgs else list(units)
     cols, meta = {}, {}
     for name in names:
         unit, desc = units.get(name, ("", ""))
@@ -214,6 +214,8 @@ def export_run(rec: Recording, out_dir: str | Path, fmt: str = "csv") -> list[Pa
         On an unknown format or when the run holds no loop-topic message.
     """
     import pyarrow as pa
+    import pyarrow.csv as pacsv
+    import pyarrow.parquet as pq
 
     if fmt not in ("csv", "parquet"):
         raise RunError(f"unknown export format '{fmt}': csv or parquet")
@@ -239,16 +241,10 @@ def export_run(rec: Recording, out_dir: str | Path, fmt: str = "csv") -> list[Pa
         )
         path = out / f"{table_name(topic)}.{fmt}"
         if fmt == "parquet":
-            import pyarrow.parquet as pq
-
             pq.write_table(table, path)
         else:
-            import pyarrow.csv as pacsv
-
             pacsv.write_csv(table, path)
         written.append(path)
-    import pyarrow.csv as pacsv
-
     dictionary = out / "columns.csv"
     pacsv.write_csv(pa.Table.from_pylist(rows), dictionary)
     info = out / "run.json"
@@ -365,9 +361,10 @@ def format_summary(s: dict, column: str | None = None) -> str:
             f"{_fmt(t['rate_hz'], '{:.2f}'):>10}  {'yes' if t['loop'] else 'no (not decoded)'}"
         )
     lines.append("")
-    bad = {t: v for t, v in s["step_anomalies"].items() if any(v.values())} | {
-        t: {"recorder out-of-order": n} for t, n in s["recorder_anomalies"].items() if n
-    }
+    bad = {t: {k: n for k, n in v.items() if n} for t, v in s["step_anomalies"].items()}
+    for t, n in s["recorder_anomalies"].items():
+        bad.setdefault(t, {})["recorder out-of-order"] = n
+    bad = {t: v for t, v in bad.items() if any(v.values())}
     if bad:
         lines.append("step anomalies:")
         lines += [

@@ -249,7 +249,19 @@ def run_sil(
 
 @dataclass
 class ReplayRun:
-    """Outcome of one replay (:func:`run_replay`)."""
+    """Outcome of one replay (:func:`run_replay`).
+
+    Attributes
+    ----------
+    out : Path or None
+        Run folder written by the replay node (None when not recorded).
+    returncode : int
+        Exit status of the ``sil`` runner: 0 when the replay and every node finished.
+    wall_s : float
+        Wall time of the whole replay, start-up included [s].
+    log_dir : Path
+        Folder with the parameter file and the node logs.
+    """
 
     out: Path | None
     returncode: int
@@ -315,8 +327,9 @@ def run_replay(
     if not mcap.is_file():
         raise RunError(f"run file {mcap} does not exist")
     inputs, outputs = replay_topics(nodes)
-    topics = list(inputs if topics is None and nodes else (topics or []))
-    capture = list(outputs if capture is None else capture)
+    if topics is None:
+        topics = inputs if nodes else []  # []: the replay node takes every loop topic
+    topics, capture = list(topics), list(outputs if capture is None else capture)
     content = {}
     if nodes:
         pfile = folder / "params.yaml"

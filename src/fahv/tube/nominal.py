@@ -96,6 +96,24 @@ def contraction(A, B, K, Q) -> float:
     )
 
 
+def input_ratio(K, Q, u_max) -> np.ndarray:
+    """Largest |K_j x| / u_max,j over E(Q), i.e. sqrt(K_j Q K_j') / u_max,j (LMI 35).
+
+    Parameters
+    ----------
+    K : (m, n) ndarray
+    Q : (n, n) ndarray, positive definite
+    u_max : (m,) ndarray
+        Input bounds, in the units of K x.
+
+    Returns
+    -------
+    (m,) ndarray
+        <= 1 where the input bound holds on the whole ellipsoid E(Q).
+    """
+    return np.sqrt(np.einsum("ij,jk,ik->i", K, Q, K)) / np.asarray(u_max, float)
+
+
 def verify_nominal(A, B, nd: NominalDesign, Dx, Du) -> dict[str, float]:
     """Re-check the certificate of (33)-(35) numerically.
 
@@ -143,7 +161,7 @@ def verify_nominal(A, B, nd: NominalDesign, Dx, Du) -> dict[str, float]:
     rho = max(max(abs(np.linalg.eigvals(As[i] + Bs[i] @ Ks))) for i in range(As.shape[0]))
     if not rho < 1.0:
         raise DesignError(f"certificate failed: nominal closed loop not stable, rho = {rho:.6g}")
-    ratio = float(np.max(np.sqrt(np.einsum("ij,jk,ik->i", nd.K, nd.Q, nd.K)) / nd.u_max))
+    ratio = float(np.max(input_ratio(nd.K, nd.Q, nd.u_max)))
     if not ratio <= 1.0 + 1e-6:
         raise DesignError(
             f"certificate failed: nominal input bound (35) exceeded, ratio {ratio:.6g}"

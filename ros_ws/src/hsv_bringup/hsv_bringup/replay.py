@@ -82,9 +82,10 @@ def load_steps(run: str, topics: list[str] | None, steps: int) -> tuple[list, fl
     times = sorted(groups)
     if len(times) < 2:
         raise ParameterError(f"replay: parameter 'run': {run} holds fewer than 2 steps")
+    Ts = min(b - a for a, b in zip(times, times[1:], strict=False)) * 1e-9  # a step may be missing
     if steps:
         times = times[:steps]
-    return [(t, groups[t]) for t in times], (times[1] - times[0]) * 1e-9, topics
+    return [(t, groups[t]) for t in times], Ts, topics
 
 
 class Replay(Node):
