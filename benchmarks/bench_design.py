@@ -7,8 +7,8 @@ import sys
 import time
 import warnings
 
-from fahv.case import load_case
-from fahv.design import run_design
+from fahv.design.case import load_case
+from fahv.design.pipeline import run_design
 
 warnings.filterwarnings("ignore", message="Solution may be inaccurate")
 path = sys.argv[1] if len(sys.argv) > 1 else "offline_design/case1.yaml"

@@ -12,9 +12,10 @@ import sys
 import time
 import warnings
 
-from fahv.design import load_design
-from fahv.sim import metrics, simulate
-from fahv.vehicle import load_vehicle
+from fahv.design.artefacts import load_design
+from fahv.loop.simulate import simulate
+from fahv.model.vehicle import load_vehicle
+from fahv.runs.metrics import metrics
 
 warnings.filterwarnings("ignore", message="Solution may be inaccurate")
 art = sys.argv[1] if len(sys.argv) > 1 else "offline_design/artefacts/case1"

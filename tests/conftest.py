@@ -3,11 +3,11 @@ import warnings
 
 import pytest
 
-from fahv.case import case_from_mapping
-from fahv.design import run_design
-from fahv.tp_model import build_tp_model
-from fahv.vehicle import load_vehicle
-from fahv.yamlio import load_yaml
+from fahv.config.yamlio import load_yaml
+from fahv.design.case import case_from_mapping
+from fahv.design.pipeline import run_design
+from fahv.model.tp_model import build_tp_model
+from fahv.model.vehicle import load_vehicle
 
 CASE1 = "offline_design/case1.yaml"
 
@@ -35,6 +35,12 @@ def quick(raw, **changes):
     d["disturbance"]["samples"] = 40
     d.update(changes)
     return case_from_mapping(d, "quick.yaml")
+
+
+@pytest.fixture(scope="session")
+def make_case(raw):
+    """Factory of quick cases: ``make_case(**changes)`` (Case 1, small W sample)."""
+    return lambda **changes: quick(raw, **changes)
 
 
 @pytest.fixture(scope="session")

@@ -21,8 +21,16 @@ class DesignError(FahvError, RuntimeError):
     """An offline design step failed or a certificate did not hold."""
 
 
-class CaseError(FahvError, ValueError):
+class ConfigError(FahvError, ValueError):
+    """A configuration value (case file, campaign file, node parameter) is invalid."""
+
+
+class CaseError(ConfigError):
     """A case file is missing, malformed, or holds an unknown or out-of-range key."""
+
+
+class ParameterError(ConfigError):
+    """A node parameter is missing, of the wrong type or shape, non-finite or out of range."""
 
 
 class RunError(FahvError, RuntimeError):

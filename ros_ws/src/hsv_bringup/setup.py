@@ -9,7 +9,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/hsv_bringup"]),
         ("share/hsv_bringup", ["package.xml"]),
-        ("share/hsv_bringup/config", ["config/graph.yaml", "config/foxglove_layout.json"]),
+        ("share/hsv_bringup/config", ["config/foxglove_layout.json"]),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

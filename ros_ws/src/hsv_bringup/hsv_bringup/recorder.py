@@ -22,7 +22,7 @@ from hsv_common.lockstep import (
     LOOP_QOS,
     READY_QOS,
     WatchdogError,
-    declare_plain,
+    declare_validated,
     end_reason,
     main,
     msg_type_of,
@@ -31,9 +31,10 @@ from hsv_common.lockstep import (
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from fahv.errors import RunError
-from fahv.params import ParameterError
-from fahv.runlog import TOPICS, RunWriter
+from fahv.errors import ParameterError, RunError
+from fahv.loop.graph import TOPICS
+from fahv.runs.bag import RunWriter
+from fahv.runs.nodes import RECORDER
 
 
 def step_of(topic: str, data: bytes, Ts_ns: int) -> int:
@@ -55,20 +56,7 @@ class Recorder(Node):
 
     def __init__(self) -> None:
         super().__init__("recorder")
-        get = declare_plain(
-            self,
-            (
-                ("bag", "", "run folder to create (bags/<run>)"),
-                ("Ts", 0.02, "control period [s]"),
-                ("duration", 0.0, "simulated duration [s]; the recorder stops after it"),
-                ("watchdog_s", 10.0, "wall time without any message that ends the run [s]"),
-                ("metadata_json", "{}", "run metadata as a JSON object"),
-            ),
-        )
-        if not get["bag"]:
-            raise ParameterError("recorder: parameter 'bag' is missing")
-        if not (isinstance(get["Ts"], float) and get["Ts"] > 0):
-            raise ParameterError(f"recorder: parameter 'Ts' must be > 0, got {get['Ts']!r}")
+        get = declare_validated(self, RECORDER)
         meta = run_metadata_param("recorder", get["metadata_json"])
         meta.setdefault("source", "sil")
         self.Ts_ns = int(round(get["Ts"] * 1e9))

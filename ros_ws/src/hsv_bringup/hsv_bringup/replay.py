@@ -27,7 +27,7 @@ from hsv_common.lockstep import (
     LOOP_QOS,
     READY_QOS,
     WatchdogError,
-    declare_plain,
+    declare_validated,
     end_reason,
     main,
     msg_type_of,
@@ -36,9 +36,10 @@ from hsv_common.lockstep import (
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from fahv.errors import RunError
-from fahv.params import ParameterError
-from fahv.runlog import TOPICS, RunWriter, iter_raw
+from fahv.errors import ParameterError, RunError
+from fahv.loop.graph import TOPICS
+from fahv.runs.bag import RunWriter, iter_raw
+from fahv.runs.nodes import REPLAY
 from hsv_bringup.recorder import step_of
 
 
@@ -95,27 +96,7 @@ class Replay(Node):
 
     def __init__(self) -> None:
         super().__init__("replay")
-        get = declare_plain(
-            self,
-            (
-                ("run", "", "run to replay (bag folder or .mcap)"),
-                ("topics", [""], "topics to republish (default: every loop topic of the run)"),
-                ("rate", 1.0, "1: recorded timing, r: r times faster, 0: as fast as possible"),
-                ("capture", [""], "topics to capture from the graph (lockstep on them)"),
-                ("out", "", "run folder to write (replayed + captured); empty: none"),
-                ("wait_for", [""], "nodes to wait for on /hsv/ready before step 0"),
-                ("steps", 0, "steps to replay (0: all)"),
-                ("watchdog_s", 10.0, "wall time without a captured step that ends the run [s]"),
-                ("metadata_json", "{}", "extra run metadata (JSON object)"),
-            ),
-        )
-        if not get["run"]:
-            raise ParameterError("replay: parameter 'run' is missing")
-        if get["rate"] < 0:
-            raise ParameterError(f"replay: parameter 'rate' must be >= 0, got {get['rate']}")
-        bad = [t for t in get["topics"] + get["capture"] if t not in TOPICS]
-        if bad:
-            raise ParameterError(f"replay: {bad} are not loop topics {list(TOPICS)}")
+        get = declare_validated(self, REPLAY)
         self.steps, Ts, self.topics = load_steps(get["run"], get["topics"] or None, get["steps"])
         self.Ts_ns = int(round(Ts * 1e9))
         self.rate = float(get["rate"])

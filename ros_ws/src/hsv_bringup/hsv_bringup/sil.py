@@ -1,10 +1,10 @@
 """``sil`` runner: start the node graph of one run, supervise it, stop every node.
 
-There is no ``launch`` on this machine (ENVIRONMENT.md), so this runner starts the
-installed executables itself, each with the run's parameter file, in the order
-recorder, notch_filter, nominal_trajectory, controller, fault_injector, plant (the
-plant waits until every other node has announced itself, so the order only saves
-time). It watches the processes: the run succeeds when every node exits 0 after the
+There is no ``launch`` among the ROS 2 wheels this project installs, so this runner
+starts the installed executables itself, each with the run's parameter file, in the
+order of the node table (:data:`fahv.loop.graph.NODES`: recorder, notch_filter,
+nominal_trajectory, controller, fault_injector, plant; the plant waits until every
+other node has announced itself, so the order only saves time). It watches the processes: the run succeeds when every node exits 0 after the
 last step; the first node that exits non-zero or is killed fails the run, the others
 get SIGINT (the recorder closes its file), then SIGKILL after a grace period, and the
 runner exits 1 naming that node and showing the end of its log.
@@ -30,18 +30,7 @@ from pathlib import Path
 
 import yaml
 
-LOOP_NODES = ("notch_filter", "nominal_trajectory", "{controller}", "fault_injector", "plant")
-PACKAGE = {
-    "recorder": "hsv_bringup",
-    "notch_filter": "hsv_ctrl",
-    "nominal_trajectory": "hsv_ctrl",
-    "tube_mpc": "hsv_ctrl",
-    "rmpc": "hsv_ctrl",
-    "replay": "hsv_bringup",
-    "fault_injector": "hsv_plant",
-    "plant": "hsv_plant",
-}
-
+from fahv.loop.graph import CONTROLLER_NODES, NODES, graph_nodes
 
 def executable(name: str) -> Path:
     """Installed executable ``<prefix>/lib/<pkg>/<name>`` found on AMENT_PREFIX_PATH.
@@ -51,7 +40,7 @@ def executable(name: str) -> Path:
     FileNotFoundError
         If no prefix holds it (the workspace is not built or not sourced).
     """
-    pkg = PACKAGE[name]
+    pkg = NODES[name].package
     for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
         exe = Path(prefix) / "lib" / pkg / name
         if prefix and exe.is_file():
@@ -158,11 +147,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="sil", description=__doc__.split("\n\n")[0])
     ap.add_argument("--params-file", type=Path, required=True)
     ap.add_argument("--log-dir", type=Path, required=True)
-    ap.add_argument("--controller", choices=("tube_mpc", "rmpc"), default="tube_mpc")
+    ap.add_argument("--controller", choices=CONTROLLER_NODES, default="tube_mpc")
     ap.add_argument(
         "--nodes",
         nargs="+",
-        choices=sorted(PACKAGE),
+        choices=sorted(NODES),
         default=None,
         help="nodes to start (default: recorder and the loop nodes with --controller)",
     )
@@ -170,9 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         params = yaml.safe_load(args.params_file.read_text())
-        names = args.nodes or ["recorder"] + [
-            n.format(controller=args.controller) for n in LOOP_NODES
-        ]
+        names = args.nodes or graph_nodes(args.controller)
         bag = next(
             params[n]["ros__parameters"].get(key)
             for n, key in (("recorder", "bag"), ("replay", "out"))

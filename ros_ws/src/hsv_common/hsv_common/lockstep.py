@@ -38,9 +38,11 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from fahv.loop import DEFAULT_GRAPH, GRAPH, n_steps_of
-from fahv.params import SPECS, ParameterError, validate
-from fahv.runlog import QOS_DEPTH, TOPICS
+from fahv.config import Field
+from fahv.config.spec import validate_flat
+from fahv.errors import ParameterError
+from fahv.loop.graph import DEFAULT_GRAPH, GRAPH, QOS_DEPTH, TOPICS, n_steps_of, producer_of
+from fahv.loop.params import specs, validate
 
 LOOP_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
@@ -106,38 +108,51 @@ def _fill(msg, fields: dict) -> None:
 
 
 _ROS_TYPE = {
-    "double": Parameter.Type.DOUBLE,
+    "float": Parameter.Type.DOUBLE,
     "int": Parameter.Type.INTEGER,
-    "string": Parameter.Type.STRING,
+    "str": Parameter.Type.STRING,
     "bool": Parameter.Type.BOOL,
+    "floats": Parameter.Type.DOUBLE_ARRAY,
+    "ints": Parameter.Type.INTEGER_ARRAY,
+    "strs": Parameter.Type.STRING_ARRAY,
+    "matrix": Parameter.Type.DOUBLE_ARRAY,
 }
 
 
-def declare_parameters(node: Node, spec_name: str) -> dict:
-    """Declare the typed parameters of :data:`fahv.params.SPECS` [spec_name].
+def descriptor(f: Field) -> ParameterDescriptor:
+    """ROS parameter descriptor of a config field: description (unit, range, equation) and
+    the numeric range when both ends are finite."""
+    desc = ParameterDescriptor(description=f.doc())
+    if f.lo is not None and f.hi is not None:
+        if f.type == "float":
+            desc.floating_point_range = [
+                FloatingPointRange(from_value=float(f.lo), to_value=float(f.hi))
+            ]
+        elif f.type == "int":
+            desc.integer_range = [IntegerRange(from_value=int(f.lo), to_value=int(f.hi))]
+    return desc
 
-    Returns the raw values (matrices flat plus ``<name>_shape``), the form
-    :func:`fahv.params.validate` and the :mod:`fahv.loop` cores take.
+
+def declare_parameters(node: Node, fields) -> dict:
+    """Declare typed parameters from config fields; return their raw values.
+
+    Matrices are declared as a double array plus ``<name>_shape``. A parameter the
+    parameter file does not set is None (absent: its default or "missing" is decided
+    by :func:`fahv.config.spec.validate_flat`, the one validation).
 
     Raises
     ------
     ParameterError
         Naming the key, for a value of the wrong type in the file or outside the
-        declared range (the remaining checks are :func:`fahv.params.validate`).
+        declared range.
     """
     values = {}
-    for p in SPECS[spec_name]:
-        decls = [(p.name, _ROS_TYPE.get(p.kind, Parameter.Type.DOUBLE_ARRAY), p)]
-        if p.kind == "matrix":
-            decls.append((f"{p.name}_shape", Parameter.Type.INTEGER_ARRAY, p))
-        for name, typ, spec in decls:
-            desc = ParameterDescriptor(description=spec.description)
-            if spec.kind == "double" and np.isfinite(spec.lo) and np.isfinite(spec.hi):
-                desc.floating_point_range = [
-                    FloatingPointRange(from_value=float(spec.lo), to_value=float(spec.hi))
-                ]
-            elif spec.kind == "int" and np.isfinite(spec.lo) and np.isfinite(spec.hi):
-                desc.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi))]
+    for f in fields:
+        decls = [(f.name, _ROS_TYPE[f.type], descriptor(f))]
+        if f.type == "matrix":
+            shape = ParameterDescriptor(description=f"shape of {f.name}")
+            decls.append((f"{f.name}_shape", Parameter.Type.INTEGER_ARRAY, shape))
+        for name, typ, desc in decls:
             try:
                 node.declare_parameter(name, typ, desc)
                 values[name] = node.get_parameter(name).value
@@ -152,22 +167,27 @@ def declare_parameters(node: Node, spec_name: str) -> dict:
                 ) from None
     for key, v in values.items():
         if isinstance(v, array.array | list):
-            values[key] = list(v)
+            v = [x for x in v if x != ""] if _is_str_list(v) else list(v)
+            values[key] = v if v or key.endswith("_shape") else None
     return values
 
 
-def declare_plain(node: Node, specs) -> dict:
-    """Declare untyped-by-spec parameters ``(name, default, description)``; their values.
+def _is_str_list(v) -> bool:
+    return isinstance(v, list) and bool(v) and isinstance(v[0], str)
 
-    String-array values drop empty strings (``[""]`` stands for an empty list, since a
-    YAML ``[]`` has no parameter type).
+
+def declare_validated(node: Node, fields) -> dict:
+    """Declare config fields as parameters and validate them (the one validation).
+
+    String arrays drop empty strings (``[""]`` stands for an empty list, since a YAML
+    ``[]`` has no parameter type).
+
+    Raises
+    ------
+    ParameterError
+        Naming the node and the key.
     """
-    values = {}
-    for name, default, desc in specs:
-        node.declare_parameter(name, default, ParameterDescriptor(description=desc))
-        v = node.get_parameter(name).value
-        values[name] = [x for x in v if x] if isinstance(v, list) else v
-    return values
+    return validate_flat(fields, declare_parameters(node, fields), node.get_name(), ParameterError)
 
 
 def run_metadata_param(node_name: str, text: str) -> dict:
@@ -178,7 +198,7 @@ def run_metadata_param(node_name: str, text: str) -> dict:
     ParameterError
         If it is not a JSON object.
     """
-    from fahv.runlog import code_version
+    from fahv.version import code_version
 
     try:
         meta = json.loads(text)
@@ -217,13 +237,13 @@ class LockstepNode(Node):
             ParameterDescriptor(description="nodes of the running graph (readiness check)"),
         )
         self.graph_nodes = list(self.get_parameter("graph_nodes").value)
-        raw = declare_parameters(self, self.spec_name())
+        raw = declare_parameters(self, specs()[self.spec_name()])
         self.p = validate(self.spec_name(), raw)
         self.Ts = self.p["Ts"]
         self.n_steps = n_steps_of(self.p)
         self.watchdog_s = self.p["watchdog_s"]
         self.inputs, self.outputs = GRAPH[self.ROLE]
-        self.make_core(raw)
+        self.make_core(self.p)
         self.k = 0
         self.buf = {t: {} for t in self.inputs}
         self.stale = 0
@@ -247,7 +267,7 @@ class LockstepNode(Node):
         return self.get_name()
 
     def make_core(self, p: dict) -> None:
-        """Build the library object(s) from the validated parameters."""
+        """Build the library object(s) from the validated parameters ``p``."""
         raise NotImplementedError
 
     def on_step(self, k: int, inputs: dict) -> list[tuple[str, dict]]:
@@ -321,10 +341,7 @@ class LockstepNode(Node):
 
     def producer_of(self, topic: str) -> str:
         """Name of the graph node that publishes a topic."""
-        for n in self.graph_nodes:
-            if n in GRAPH and topic in GRAPH[n][1]:
-                return n
-        return "?"
+        return producer_of(topic, self.graph_nodes)
 
     def check_watchdog(self) -> None:
         """Raise :class:`WatchdogError` naming the silent peer.

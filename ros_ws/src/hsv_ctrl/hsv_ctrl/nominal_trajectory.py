@@ -10,7 +10,7 @@ import sys
 
 from hsv_common.lockstep import LockstepNode, main
 
-from fahv.loop import NominalCore
+from fahv.loop.cores import NominalCore
 
 
 class NominalTrajectoryNode(LockstepNode):

@@ -6,7 +6,7 @@ import sys
 
 from hsv_common.lockstep import LockstepNode, main
 
-from fahv.loop import NotchCore
+from fahv.loop.cores import NotchCore
 
 
 class NotchFilterNode(LockstepNode):

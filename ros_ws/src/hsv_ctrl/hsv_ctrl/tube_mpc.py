@@ -11,7 +11,7 @@ import sys
 
 from hsv_common.lockstep import LockstepNode, main
 
-from fahv.loop import ControllerCore
+from fahv.loop.cores import ControllerCore
 
 
 class TubeMPCNode(LockstepNode):
@@ -21,7 +21,7 @@ class TubeMPCNode(LockstepNode):
 
     def make_core(self, p: dict) -> None:
         """Build the library object from the raw node parameters."""
-        self.core = ControllerCore(p, self.spec_name())
+        self.core = ControllerCore(p)
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""

@@ -11,7 +11,7 @@ import sys
 
 from hsv_common.lockstep import LockstepNode, main
 
-from fahv.loop import FaultCore
+from fahv.loop.cores import FaultCore
 
 
 class FaultInjectorNode(LockstepNode):

@@ -13,7 +13,8 @@ import time
 from hsv_common.lockstep import READY_QOS, LockstepNode, WatchdogError, main, to_msg
 from std_msgs.msg import String
 
-from fahv.loop import PlantCore, clock_msg
+from fahv.loop.cores import PlantCore
+from fahv.loop.graph import clock_msg
 
 
 class PlantNode(LockstepNode):

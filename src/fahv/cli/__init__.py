@@ -1,0 +1,53 @@
+"""The ``fahv`` command line.
+
+Subcommands::
+
+    fahv trim      trim table at a point or over a grid of the envelope
+    fahv tp        TP model transformation report (singular values, error)
+    fahv figures   modelling figures (paper Fig. 2, 3, 4, 5, 8) as PNG
+    fahv tube      tube feasibility study (W by source, F, Z, input room)
+    fahv design    offline design of a case file: certified artefacts + ROS parameters
+    fahv simulate  in-process closed loop of a case: metrics table per variant
+    fahv sil       the ROS 2 node graph of a case in lockstep, recorded to MCAP
+    fahv plot      paper-style figures of recorded runs, overlaid
+    fahv paper-figures   Fig. 9-17 of the paper from Cases 1 and 2
+    fahv inspect   topics, metadata, step anomalies and metrics of a run
+    fahv export    one CSV / Parquet table per topic, with units
+    fahv compare   metrics of two runs side by side
+    fahv replay    republish a run over DDS, e.g. into a fresh tube_mpc node
+
+Every command that uses the vehicle takes ``--vehicle FILE``. Errors name the
+input at fault and exit with status 2 (bad input) or 1 (failure).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from fahv.cli import design, inspect, modelling, run
+from fahv.errors import FahvError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Argument parser of the ``fahv`` command."""
+    ap = argparse.ArgumentParser(prog="fahv", description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    for group in (modelling, design, run, inspect):
+        group.add_parsers(sub)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``fahv``; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (FahvError, ValueError, OSError) as exc:
+        print(f"fahv {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

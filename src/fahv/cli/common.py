@@ -1,0 +1,71 @@
+"""Helpers shared by the command groups: vehicle option, argument types, JSON, run reading."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from fahv.model.vehicle import load_vehicle
+from fahv.runs.bag import read_run
+
+
+def vehicle_of(args):
+
+    return load_vehicle(args.vehicle)
+
+
+def add_vehicle_option(p: argparse.ArgumentParser) -> None:
+    """Add ``--vehicle FILE`` to a command."""
+    p.add_argument(
+        "--vehicle",
+        metavar="FILE",
+        default=None,
+        help="vehicle data file (YAML); default: the packaged Parker 2007 curve fit "
+        "with representative flexible data",
+    )
+
+
+def shape_arg(s: str) -> tuple[int, int]:
+    """Argument type ``AxB`` -> (A, B)."""
+    try:
+        a, b = (int(v) for v in s.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected AxB (e.g. 4x5), got {s!r}") from None
+    return a, b
+
+
+def artefact_dir(case, out) -> Path:
+    """Artefact folder of a case: ``out`` or ``offline_design/artefacts/<case name>``."""
+    return Path(out) if out else Path("offline_design") / "artefacts" / case.name
+
+
+def read_run_warned(path):
+    """read_run, its warnings (truncated file) printed to stderr."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rec = read_run(path)
+    for w in caught:
+        print(f"warning: {w.message}", file=sys.stderr)
+    return rec
+
+
+def to_json(obj) -> str:
+    """Strict JSON (NaN and infinities as null)."""
+
+    def clean(v):
+        if isinstance(v, dict):
+            return {str(k): clean(x) for k, x in v.items()}
+        if isinstance(v, list | tuple):
+            return [clean(x) for x in v]
+        if isinstance(v, float) and not np.isfinite(v):
+            return None
+        if isinstance(v, np.generic):
+            return clean(v.item())
+        return v
+
+    return json.dumps(clean(obj), indent=2)

@@ -1,0 +1,207 @@
+"""``fahv simulate``, ``sil``, ``replay``, ``paper-figures``: runs of the closed loop."""
+
+from __future__ import annotations
+
+import sys
+import warnings
+from pathlib import Path
+
+from tqdm import tqdm
+
+from fahv.cli.common import add_vehicle_option, read_run_warned, to_json
+from fahv.cli.design import load_or_design
+from fahv.errors import FahvError
+from fahv.loop.simulate import simulate
+from fahv.runs.bag import RunWriter, read_run, run_result_of
+from fahv.runs.metrics import metrics
+from fahv.runs.plots import paper_figures
+from fahv.runs.replay import run_replay
+from fahv.runs.sil import run_metadata, run_name, run_sil, write_run_params
+from fahv.runs.tools import format_metrics
+from fahv.runs.workspace import ROOT
+
+
+def _simulate_recorded(design, variant: str, duration, out_dir):
+    """simulate() with a progress bar, recorded to ``out_dir/<run>/`` unless it is None.
+
+    The run folder also gets the run's ROS parameter file (``params.yaml``, the same
+    a SIL run gets), so ``fahv replay --node ...`` can start nodes against it.
+    """
+
+    case = design.case
+    desc = f"{case['name']} {variant}"
+
+    def bar(it):
+        return tqdm(it, desc=desc, leave=False, disable=None)
+
+    if out_dir is None:
+        return simulate(design, variant, duration, progress=bar)
+    d = case["duration"] if duration is None else duration
+    bag = Path(out_dir) / run_name(case["name"], variant, "sim")
+    with RunWriter(bag, run_metadata(design, variant, "simulate", d), case["Ts"]) as writer:
+        write_run_params(design, variant, bag, bag / "params.yaml", duration, 10.0)
+        run = simulate(design, variant, duration, progress=bar, writer=writer)
+    print(f"{desc}: run written to {bag}")
+    return run
+
+
+def cmd_simulate(args) -> int:
+    """In-process closed loop of a case; records each variant to bags/, prints metrics."""
+
+    case, design, vehicle = load_or_design(args.case, args.design, args.vehicle)
+    variants = args.variant or case["variants"]
+    limits = vehicle.limits
+    table = {}
+    for v in variants:
+        out = None if args.no_record else Path(args.out or ROOT / "bags")
+        run = _simulate_recorded(design, v, args.duration, out)
+        table[v] = metrics(run, limits)
+    if args.json:
+        print(to_json(table))
+    else:
+        print(f"case {case.name}, design {design.summary['design_hash']}")
+        print(format_metrics(table))
+    return 0
+
+
+def cmd_sil(args) -> int:
+    """Run a case through the ROS 2 node graph, recorded to MCAP; metrics of the run."""
+    case, design, vehicle = load_or_design(args.case, args.design, args.vehicle)
+    variant = args.variant or case["variants"][0]
+    res = run_sil(
+        design,
+        variant,
+        args.duration,
+        Path(args.out or ROOT / "bags"),
+        args.watchdog,
+        quiet=args.quiet,
+    )
+    if not res.bag.is_dir():
+        print(f"error: the run produced no recording ({res.bag})", file=sys.stderr)
+        return 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = read_run(res.bag)
+    run = run_result_of(rec)
+    print(f"run written to {res.bag}")
+    print(
+        f"status {rec.metadata.get('status', '?')}, {run.t.size} steps, wall time "
+        f"{res.wall_s:.1f} s, real-time factor {res.real_time_factor:.2f} "
+        f"(simulated {res.simulated_s:g} s)"
+    )
+    if run.t.size:
+        table = {variant: metrics(run, vehicle.limits)}
+        if args.json:
+            print(to_json(table))
+        else:
+            from fahv.runs.tools import format_metrics
+
+            print(f"case {case.name}, design {design.summary['design_hash']}")
+            print(format_metrics(table))
+    return 0 if res.returncode == 0 else 1
+
+
+def cmd_replay(args) -> int:
+    """Republish a recorded run (raw CDR), optionally into nodes under test."""
+
+    res = run_replay(
+        args.run,
+        nodes=args.node or (),
+        topics=args.topics,
+        capture=args.capture,
+        out=args.out,
+        rate=0.0 if args.fast else args.rate,
+        steps=args.steps,
+        watchdog_s=args.watchdog,
+        quiet=args.quiet,
+    )
+    if res.returncode != 0:
+        print(f"fahv replay: failed (logs in {res.log_dir})", file=sys.stderr)
+        return 1
+    if res.out is not None:
+        print(f"replayed run written to {res.out}")
+    return 0
+
+
+def cmd_paper_figures(args) -> int:
+    """Simulate every variant of Cases 1 and 2 (recorded) and write Fig. 9-17."""
+
+    runs = {}
+    for path in args.runs or []:  # recorded runs (simulated or SIL) instead of new ones
+        rec = read_run_warned(path)
+        key = (rec.metadata.get("case"), rec.metadata.get("variant"))
+        if None in key:
+            raise FahvError(f"{path}: no case/variant in the run metadata")
+        runs[key] = run_result_of(rec)
+        print(f"{key[0]} {key[1]}: {path} ({rec.metadata.get('source', '?')})")
+    for case_path in [] if args.runs else args.cases:
+        case, design, _ = load_or_design(case_path, None, args.vehicle)
+        for v in case["variants"]:
+            runs[(case.name, v)] = _simulate_recorded(design, v, args.duration, ROOT / "bags")
+    for path in paper_figures(runs, args.out):
+        print(path)
+    return 0
+
+
+def add_parsers(sub) -> None:
+    """Add the parsers of this command group."""
+    p = sub.add_parser("simulate", help="in-process closed loop of a case, metrics table")
+    p.add_argument("case", help="case file")
+    p.add_argument("--design", default=None, help="artefact folder (designed if missing)")
+    p.add_argument("--variant", nargs="+", default=None, help="variants (default: the case's)")
+    p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    p.add_argument("--out", default=None, help="folder of the recorded runs (default bags/)")
+    p.add_argument("--no-record", action="store_true", help="do not write the runs to MCAP")
+    p.add_argument("--json", action="store_true")
+    add_vehicle_option(p)
+    p.set_defaults(func=cmd_simulate)
+    p = sub.add_parser(
+        "sil", help="the ROS 2 node graph of a case in lockstep, recorded to bags/<run>/ (MCAP)"
+    )
+    p.add_argument("case", help="case file, e.g. offline_design/case1.yaml")
+    p.add_argument(
+        "--design", default=None, help="artefact folder (default offline_design/artefacts/NAME)"
+    )
+    p.add_argument("--variant", default=None, help="variant (default: the case's first)")
+    p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    p.add_argument("--out", default=None, help="folder of the recorded runs (default bags/)")
+    p.add_argument("--watchdog", type=float, default=10.0, help="node watchdog [s wall time]")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--json", action="store_true", help="metrics as JSON")
+    add_vehicle_option(p)
+    p.set_defaults(func=cmd_sil)
+    p = sub.add_parser(
+        "replay",
+        help="republish a run's loop topics (raw CDR) over DDS, optionally into nodes under test",
+    )
+    p.add_argument("run", help="run folder or .mcap file")
+    p.add_argument("--topics", nargs="+", default=None, help="topics to republish")
+    p.add_argument(
+        "--node",
+        nargs="+",
+        default=None,
+        help="nodes to test against the replay with the run's parameters (e.g. tube_mpc)",
+    )
+    p.add_argument(
+        "--capture", nargs="+", default=None, help="topics to capture (default: the nodes' outputs)"
+    )
+    p.add_argument("--out", default=None, help="run folder for the replayed + captured messages")
+    p.add_argument("--rate", type=float, default=1.0, help="1: recorded timing, r: r x faster")
+    p.add_argument("--fast", action="store_true", help="as fast as possible (lockstep on captures)")
+    p.add_argument("--steps", type=int, default=0, help="steps to replay (0: all)")
+    p.add_argument("--watchdog", type=float, default=10.0, help="node watchdog [s wall time]")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(func=cmd_replay)
+    p = sub.add_parser(
+        "paper-figures", help="simulate Cases 1 and 2 (all variants, recorded) and write Fig. 9-17"
+    )
+    p.add_argument(
+        "--cases", nargs="+", default=["offline_design/case1.yaml", "offline_design/case2.yaml"]
+    )
+    p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    p.add_argument(
+        "--runs", nargs="+", default=None, help="use these recorded runs instead of simulating"
+    )
+    p.add_argument("--out", default="docs/figures")
+    add_vehicle_option(p)
+    p.set_defaults(func=cmd_paper_figures)

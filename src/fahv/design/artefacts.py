@@ -1,0 +1,173 @@
+"""Design artefacts: the certified arrays of one case, their provenance, saving and loading.
+
+A design records where it came from (:func:`provenance`): the case content hash, the
+vehicle data file and its hash, and the hash of the library code the design depends
+on. :func:`stale_reason` compares a saved design with the current inputs, so a design
+whose case, vehicle file or code changed is redone, never reused.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fahv.errors import DesignError
+from fahv.model.vehicle import VehicleParams
+
+
+@dataclass
+class Design:
+    """Artefacts of one case (unscaled units unless stated).
+
+    Attributes
+    ----------
+    case : dict
+        The validated case data.
+    arrays : dict[str, ndarray]
+        ``A``, ``B`` (R, n, n/m) discrete nominal vertices; ``h_grid``, ``V_grid``,
+        ``W_h``, ``W_V`` TP weighting functions; ``Dx``, ``Du`` scales; ``w_max`` (n,)
+        W; ``F`` (2, n), ``N`` (n, n) tube; ``K`` (2, n), ``Q`` (n, n) nominal;
+        ``u_room``, ``u_n_max`` (2,); ``trim_h``, ``trim_V``, ``trim_x`` (Nh, NV, n),
+        ``trim_u`` (Nh, NV, 2); ``rmpc_A``, ``rmpc_B`` (DM vertices);
+        ``omega_flex`` (2,) flexible-mode frequencies at the initial trim [rad/s].
+    summary : dict
+        Scalars: certificates, W breakdown, plant parameters, hash.
+    """
+
+    case: dict
+    arrays: dict = field(default_factory=dict)
+    summary: dict = field(default_factory=dict)
+
+    @property
+    def n_x(self) -> int:
+        """Design-model state dimension (9 or 11)."""
+        return self.arrays["A"].shape[1]
+
+    def content_hash(self) -> str:
+        """sha256 over the case data, the provenance and every array (16 hex characters)."""
+        h = hashlib.sha256(json.dumps(self.case, sort_keys=True, default=str).encode())
+        h.update(json.dumps(self.summary.get("provenance", {}), sort_keys=True).encode())
+        for k in sorted(self.arrays):
+            a = np.ascontiguousarray(self.arrays[k])
+            h.update(k.encode())
+            h.update(str(a.shape).encode())
+            h.update(a.tobytes())
+        return h.hexdigest()[:16]
+
+    def plant_params(self, vehicle) -> VehicleParams:
+        """The perturbed parameter set of the simulated vehicle (summary['plant_params'])."""
+        return dataclasses.replace(vehicle.params, **self.summary["plant_params"])
+
+
+def save_design(design: Design, out_dir: str | Path, extra: dict | None = None) -> Path:
+    """Write ``design.npz``, ``design.json`` and ``extra`` files into out_dir atomically.
+
+    ``extra`` maps file names to text (the CLI adds the ROS 2 parameter file).
+
+    The files are written to a temporary sibling folder that replaces ``out_dir`` only
+    when all of them are complete, so a failure never leaves half an artefact set.
+    Returns out_dir.
+    """
+    out = Path(out_dir)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        np.savez(tmp / "design.npz", **design.arrays)
+        (tmp / "design.json").write_text(
+            json.dumps({"case": design.case, "summary": design.summary}, indent=2, default=list)
+        )
+        for name, text in (extra or {}).items():
+            (tmp / name).write_text(text)
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out
+
+
+def load_design(out_dir: str | Path) -> Design:
+    """Read the artefacts written by :func:`save_design`.
+
+    Raises
+    ------
+    DesignError
+        If a file is missing or the content hash does not match.
+    """
+    out = Path(out_dir)
+    try:
+        meta = json.loads((out / "design.json").read_text())
+        with np.load(out / "design.npz") as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, KeyError) as exc:
+        raise DesignError(f"design artefacts in {out} are missing or unreadable: {exc}") from None
+    design = Design(meta["case"], arrays, meta["summary"])
+    if design.content_hash() != meta["summary"].get("design_hash"):
+        raise DesignError(f"design artefacts in {out} do not match their hash: re-run fahv design")
+    return design
+
+
+#: Library packages a design depends on (their source is hashed into the provenance).
+DESIGN_PACKAGES = ("config", "synthesis", "model", "plant", "control", "design")
+
+
+def code_hash() -> str:
+    """sha256 over the source of the packages a design depends on (16 hex characters)."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for pkg in DESIGN_PACKAGES:
+        for f in sorted((root / pkg).rglob("*.py")):
+            h.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def provenance(case, vehicle) -> dict:
+    """Where a design comes from: case hash, vehicle file and hash, code version and hash.
+
+    Parameters
+    ----------
+    case : fahv.design.case.Case
+    vehicle : fahv.model.vehicle.Vehicle
+        The vehicle the design is made for (its ``source_file`` is recorded).
+    """
+    from fahv.version import __version__
+
+    vfile = "" if vehicle.packaged else str(Path(vehicle.source_file).resolve())
+    return {
+        "case_file": str(case.path),
+        "case_hash": case.content_hash(),
+        "vehicle_file": vfile,
+        "vehicle_name": vehicle.name,
+        "vehicle_hash": vehicle.data_hash,
+        "code_version": __version__,
+        "code_hash": code_hash(),
+    }
+
+
+def stale_reason(design: Design, case, vehicle) -> str | None:
+    """Why a saved design cannot be reused for (case, vehicle); None if it can.
+
+    Compares the case hash, the vehicle file hash and the code hash of the design's
+    provenance with the current ones.
+    """
+    old = design.summary.get("provenance")
+    if not old:
+        return "the design has no provenance record"
+    new = provenance(case, vehicle)
+    for key, what in (
+        ("case_hash", "case file"),
+        ("vehicle_hash", "vehicle file"),
+        ("code_hash", "design code"),
+    ):
+        if old.get(key) != new[key]:
+            return f"the {what} changed since the design"
+    return None

@@ -1,0 +1,205 @@
+"""Case files (``offline_design/*.yaml``): the scenario and design choices of one case.
+
+The schema is declared once in the configuration language (:mod:`fahv.config`):
+:func:`case_spec` assembles it from the fields below, the fault kinds of
+:data:`fahv.plant.faults.FAULTS` and the sections of the control laws of
+:data:`fahv.control.LAWS` (a law's section is required only when a listed variant
+uses the law). The physics and the scenario (Ts, duration, command, fault,
+uncertainty, notch, design model) must be given; numerical knobs (sample counts,
+seeds, margins, trim grid, LMI factors) have defaults, and the defaults a case used
+are reported by the design. The node parameters of the SIL graph reuse the same
+fields (:mod:`fahv.loop.params`), so a range is written once.
+
+Loading fails with :class:`fahv.errors.CaseError` naming the file and the dotted key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fahv.config import Check, Field, Section, validate
+from fahv.config.spec import lookup as _get
+from fahv.config.yamlio import load_yaml
+from fahv.control import LAWS, VARIANTS
+from fahv.errors import CaseError
+from fahv.plant.faults import FAULTS, fault_fields
+
+TS = Field("Ts", "float", "control period Ts", unit="s", lo=0.0, hi=0.1, lo_open=True)
+DURATION = Field("duration", "float", "simulated duration of a run", unit="s", lo=0.0, lo_open=True)
+PLANT_SUBSTEPS = Field(
+    "plant_substeps", "int", "RK4 steps per control period (plant integrator)", lo=1, hi=100,
+    default=5,
+)  # fmt: skip
+
+NOTCH = (
+    Field("enabled", "bool", "notch filter on the q feedback (false: q passes through)"),
+    Field("omega_z", "float", "notch zero frequency omega_z", unit="rad/s", lo=0.0,
+          lo_open=True, equation="eq. (38)"),
+    Field("eps_z", "float", "notch zero damping eps_z", lo=0.0, hi=10.0, equation="eq. (38)"),
+    Field("omega_p", "float", "notch pole frequency omega_p", unit="rad/s", lo=0.0,
+          lo_open=True, equation="eq. (38)"),
+    Field("eps_p", "float", "notch pole damping eps_p", lo=0.0, hi=10.0, lo_open=True,
+          equation="eq. (38)"),
+)  # fmt: skip
+
+COMMAND = (
+    Field("kind", "str", "command shape: step at t_start, or ramp over t_ramp",
+          choices=("step", "ramp")),
+    Field("h0", "float", "initial trim altitude", unit="ft", lo=0.0, hi=2e5),
+    Field("V0", "float", "initial trim velocity", unit="ft/s", lo=0.0, hi=2e4),
+    Field("h_c", "float", "commanded altitude", unit="ft", lo=0.0, hi=2e5),
+    Field("V_c", "float", "commanded velocity", unit="ft/s", lo=0.0, hi=2e4),
+    Field("t_start", "float", "time the command starts to change", unit="s", lo=0.0),
+    Field("t_ramp", "float", "ramp duration", unit="s", lo=0.0, default=0.0,
+          when=lambda r: _get(r, "command.kind") == "ramp", when_text="command.kind is ramp"),
+)  # fmt: skip
+
+T_ONSET = Field(
+    "t_onset", "float", "fault onset time", unit="s", lo=0.0, default=math.inf,
+    when=lambda r: (_get(r, "fault.kind") or r.get("kind")) not in (None, "none"),
+    when_text="kind is not none",
+)  # fmt: skip
+
+UNCERTAINTY = (
+    Field("seed", "int", "seed of the parameter draw s_p ~ U(-1, 1)", lo=0),
+    Field("scale", "float", "fraction of the sec. 5.1 uncertainty box", lo=0.0, hi=1.0),
+)
+
+
+def fault_section() -> Section:
+    """The ``fault`` section: kind (from the fault registry), onset, the kind's parameters."""
+    kind = Field("kind", "str", "actuator fault kind", choices=FAULTS.names)
+    return Section("fault", (kind, T_ONSET, *fault_fields()), "actuator fault (eq. 15 ...)")
+
+
+def case_spec() -> Section:
+    """The whole case-file declaration, with the registered fault kinds and laws."""
+    law_sections = tuple(cls.section for _, cls in LAWS.items() if cls.section is not None)
+    return Section(
+        "",
+        (
+            Field("name", "str", "case name (artefact folder and run names)"),
+            Field("description", "str", "what the case is", default=""),
+            Field("design_model", "str", "LPV design model: CM (Case 1) or codesigned ECM "
+                  "(Case 2)", choices=("cm", "ecm"), equation="eq. (1-3) / (40)"),
+            Field("vertices", "ints", "TP vertices of the design model (h, V)", lo=1, length=2,
+                  equation="eq. (11)"),
+            Field("samples", "ints", "TP sampling grid over the envelope (h, V)", lo=4,
+                  length=2, default=(21, 21), equation="eq. (11)"),
+            TS,
+            DURATION,
+            PLANT_SUBSTEPS,
+            Field("trim_grid", "ints", "trim map grid (h, V), bicubic interpolation", lo=4,
+                  length=2, default=(13, 13)),
+            Section("notch", NOTCH, "notch filter on q", checks=(
+                Check("omega_z", lambda r: r["notch"]["omega_z"] < math.pi / r["Ts"],
+                      "must be below the Nyquist frequency pi/Ts"),
+                Check("omega_p", lambda r: r["notch"]["omega_p"] < math.pi / r["Ts"],
+                      "must be below the Nyquist frequency pi/Ts"),
+            )),
+            Section("command", COMMAND, "altitude and velocity command (sec. 5.1)", checks=(
+                Check("t_ramp", lambda r: r["command"]["kind"] != "ramp"
+                      or r["command"]["t_ramp"] > 0.0, "must be > 0 for a ramp"),
+            )),
+            fault_section(),
+            Section("uncertainty", UNCERTAINTY, "plant parameters p (1 + s_p scale rel_p)"),
+            Section("disturbance", (
+                Field("samples", "int", "samples bounding W", lo=10, default=300,
+                      equation="eq. (13-19)"),
+                Field("seed", "int", "seed of the W samples", lo=0, default=0),
+                Field("margin", "float", "factor on the sampled W", lo=1.0, default=1.2),
+            ), "disturbance set W by sampling"),
+            Section("tube", (
+                Field("lam", "floats", "contraction factors tried in the tube LMI", lo=0.0,
+                      hi=1.0, lo_open=True, hi_open=True, default=(0.98, 0.99, 0.995),
+                      equation="LMI (24)"),
+                Field("tau", "float", "adjustable factor tau (1: eq. 36)", lo=0.0, hi=1.0,
+                      lo_open=True, default=1.0, equation="eq. (53-54)"),
+            ), "tube: F and Z"),
+            Section("nominal", (
+                Field("lam", "float", "decay factor of (34')", lo=0.0, hi=1.0, lo_open=True,
+                      hi_open=True, default=0.9995, equation="LMI (34)"),
+                Field("level_max", "float", "governor bound on x_n' Q^-1 x_n", lo=0.0, hi=1.0,
+                      lo_open=True, default=0.999),
+            ), "nominal gain K and its ellipsoid"),
+            *law_sections,
+            Field("variants", "strs", "variants to run (law + notch setting)",
+                  choices=VARIANTS.names),
+        ),
+        "case file",
+        checks=(
+            Check("duration", lambda r: r["duration"] >= 10 * r["Ts"], "must be >= 10 Ts"),
+            Check("notch.enabled", lambda r: r["design_model"] != "ecm" or r["notch"]["enabled"],
+                  "must be true for design_model ecm"),
+            Check("variants", lambda r: r["design_model"] != "ecm"
+                  or set(r["variants"]) <= {"tube_mpc"}, "an ECM case runs only 'tube_mpc'"),
+        ),
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Case:
+    """A validated case file.
+
+    Attributes
+    ----------
+    path : Path
+        File it was read from.
+    data : dict
+        Validated content, defaults filled in (see :func:`case_spec`).
+    defaults_used : dict
+        ``{dotted key: value}`` of every default the file relied on.
+    """
+
+    path: Path
+    data: dict
+    defaults_used: dict = field(default_factory=dict)
+
+    def __getitem__(self, key: str) -> Any:
+        """Top-level entry of the case."""
+        return self.data[key]
+
+    @property
+    def name(self) -> str:
+        """Case name (used for artefact folders and run files)."""
+        return self.data["name"]
+
+    def content_hash(self) -> str:
+        """sha256 of the validated content (defaults included), first 16 hex characters."""
+        text = json.dumps(self.data, sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def case_from_mapping(data: Any, path: str = "<mapping>") -> Case:
+    """Validate a case mapping against :func:`case_spec` and return a :class:`Case`.
+
+    Raises
+    ------
+    CaseError
+        Naming the file, the dotted key and the value at fault.
+    """
+    v = validate(case_spec(), data, path, CaseError)
+    return Case(Path(path), v.values, v.defaults_used)
+
+
+def load_case(path: str | Path) -> Case:
+    """Read and validate a case file.
+
+    Raises
+    ------
+    CaseError
+        If the file is missing, is not YAML, or does not validate (naming the key).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise CaseError(f"case file not found: {p}")
+    try:
+        data = load_yaml(p.read_text())
+    except Exception as exc:  # yaml errors carry the line number
+        raise CaseError(f"{p}: not a valid YAML file: {exc}") from None
+    return case_from_mapping(data, str(p))

@@ -1,0 +1,214 @@
+"""Offline design of a case: case file -> certified artefacts and a ROS 2 parameter file.
+
+Steps (paper sec. 3-4, Algorithm 1): notch filter; TP model of the design model (CM
+for Case 1, codesigned ECM for Case 2); disturbance set W (eq. 13-19); F and the
+invariant tube Z (LMI 24, eq. 25-28) over the healthy and faulty vertices; tightened
+inputs (eq. 30, with Z' = tau Z for the adjustable law, eq. 53); trim map; nominal
+gain K (LMI 33-35); the DM LPV model of the RMPC baseline; the perturbed plant
+parameters. Every certificate is re-checked; nothing is written unless all hold, and
+the artefacts are written to a temporary folder renamed into place at the end.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fahv.config.spec import defaults_text
+from fahv.control import LAWS, VARIANTS
+from fahv.design.artefacts import Design, provenance
+from fahv.design.case import Case
+from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
+from fahv.design.feasibility import fault_vertices, input_room
+from fahv.errors import DesignError
+from fahv.model.linearize import classify_modes, linearize
+from fahv.model.notch import NotchFilter
+from fahv.model.tp_model import build_tp_model
+from fahv.model.trim import trim_map
+from fahv.model.vehicle import Q, load_vehicle
+from fahv.plant.faults import make_fault
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturbed_params
+from fahv.synthesis.feedback import design_tube, verify_tube
+from fahv.synthesis.nominal import design_nominal, verify_nominal
+from fahv.version import __version__
+
+
+def _notch(case: Case) -> NotchFilter:
+    n = case["notch"]
+    return NotchFilter(n["omega_z"], n["eps_z"], n["omega_p"], n["eps_p"])
+
+
+@dataclass(frozen=True)
+class DesignContext:
+    """What a control law's offline part (:meth:`fahv.control.ControlLaw.design`) sees.
+
+    Attributes
+    ----------
+    case : dict
+        Validated case data.
+    vehicle : fahv.model.vehicle.Vehicle
+    arrays : dict
+        Arrays designed so far (the TP model, W, F, Z, K, Q, trim map ...).
+    log : callable
+        Receives one line per step.
+    """
+
+    case: dict
+    vehicle: object
+    arrays: dict
+    log: object
+
+
+def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
+    """Compute and verify every artefact of ``case``.
+
+    Parameters
+    ----------
+    case : Case
+    vehicle : fahv.model.vehicle.Vehicle, optional
+        The vehicle to design for; the packaged vehicle file by default.
+    progress : callable, optional
+        Iterable wrapper for long loops (tqdm).
+    log : callable
+        Receives one line per step and per certificate.
+
+    Returns
+    -------
+    Design
+
+    Raises
+    ------
+    DesignError
+        If an LMI is infeasible or a certificate fails (the message names which).
+    """
+    veh = load_vehicle() if vehicle is None else vehicle
+    if case.defaults_used:
+        log("defaults used by the case file:\n" + defaults_text(case.defaults_used))
+    c = case.data
+    kind, Ts = c["design_model"], c["Ts"]
+    notch = _notch(case)
+    r_h, r_V = c["vertices"]
+    n_h, n_V = c["samples"]
+    if r_h > n_h or r_V > n_V:
+        raise DesignError(f"vertices {c['vertices']} exceed the TP samples {c['samples']}")
+    tp = build_tp_model(veh, kind, r_h, r_V, n_h, n_V, notch if kind == "ecm" else None)
+    if tp.n_vertices != r_h * r_V:
+        raise DesignError(
+            f"case asks for {r_h * r_V} vertices, the TP model has {tp.n_vertices}: the "
+            "sampled tensor does not have that rank"
+        )
+    disc = tp.discretize(Ts)
+    Dx, Du = tp.state_scale, tp.input_scale
+    log(f"TP model: {kind.upper()}, {tp.n_vertices} vertices, Ts = {Ts} s")
+    lin = linearize(veh, c["command"]["h0"], c["command"]["V0"], "cm")
+    modes = {m.name: m.wn for m in classify_modes(lin.A, veh.params.omega_1, veh.params.omega_2)}
+    omega_flex = np.array([modes["flexible 1"], modes["flexible 2"]])
+    dev_box = DEFAULT_DEV_BOX
+    if kind == "ecm":
+        dev_box = np.concatenate([DEFAULT_DEV_BOX, 2.0 * notch.state_scale(Dx[Q])])
+    d = c["disturbance"]
+    unc = {k: v * c["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
+    W = sample_disturbance(
+        veh,
+        tp,
+        Ts,
+        unc,
+        1.0,
+        dev_box,
+        DEFAULT_DU_BOX,
+        d["samples"],
+        d["seed"],
+        d["margin"],
+        progress=progress,
+        notch=notch if kind == "ecm" else None,
+    )
+    log(
+        f"W: {d['samples']} samples, margin {d['margin']}; dominant source per state: "
+        + ", ".join(W.dominant())
+    )
+    fault = make_fault(c["fault"]["kind"], c["fault"]["t_onset"], c["fault"])
+    rho_f = fault.design_effectiveness()
+    Af, Bf = fault_vertices(disc.A, disc.B, rho_f)
+    room = input_room(veh)
+    tube = design_tube(Af, Bf, W.w_max, Dx, Du, room, tuple(c["tube"]["lam"]))
+    eigs = verify_tube(Af, Bf, tube, Dx, Du)
+    log(
+        f"certificate F, Z (LMI 24 + S-procedure, {Af.shape[0]} vertices incl. rho_f = "
+        f"{rho_f}): min eigenvalue {eigs.min():.3e} >= 0, lam = {tube.lam}  OK"
+    )
+    tau = c["tube"]["tau"]
+    u_n_max = room - tau * tube.tightening
+    log(
+        f"tightened inputs (eq. 30{', 53 with tau = ' + str(tau) if tau < 1 else ''}): "
+        f"room {room[0]:.4f} / {np.degrees(room[1]):.3f} deg, tightening "
+        f"{tau * tube.tightening[0]:.4f} / {np.degrees(tau * tube.tightening[1]):.3f} deg"
+    )
+    if np.any(u_n_max <= 0.0):
+        raise DesignError(
+            f"tightened input set U minus F Z is empty (eq. 30): room {room}, "
+            f"tightening {tau * tube.tightening}"
+        )
+    cmd = c["command"]
+    veh.envelope.check(cmd["h0"], cmd["V0"])
+    veh.envelope.check(cmd["h_c"], cmd["V_c"])
+    tg = c["trim_grid"]
+    tm = trim_map(veh, tg[0], tg[1], kind, notch if kind == "ecm" else None)
+    x_start, _ = tm(cmd["h0"], cmd["V0"])
+    x_end, _ = tm(cmd["h_c"], cmd["V_c"])
+    dvec = x_start - x_end
+    Dn = Dx * np.maximum(1.0, np.abs(dvec) / Dx)  # command-sized scaling of the nominal LMI
+    nominal = design_nominal(disc.A, disc.B, dvec, u_n_max, Dn, u_n_max, c["nominal"]["lam"])
+    cert = verify_nominal(disc.A, disc.B, nominal, Dn, u_n_max)
+    log(
+        f"certificate K (LMI 33-35'): contraction {cert['contraction']:.6f} < 1, input "
+        f"ratio {cert['input_ratio']:.4f} <= 1, LMI min eigenvalue "
+        f"{cert['lmi34_min_eig']:.2e}, fraction of the command in E(Q) s = {nominal.s:.3f}  OK"
+    )
+    arrays = {
+        "A": disc.A,
+        "B": disc.B,
+        "h_grid": tp.h_grid,
+        "V_grid": tp.V_grid,
+        "W_h": tp.W_h,
+        "W_V": tp.W_V,
+        "Dx": Dx,
+        "Du": Du,
+        "w_max": W.w_max,
+        "F": tube.F,
+        "N": tube.N,
+        "K": nominal.K,
+        "Q": nominal.Q,
+        "u_room": room,
+        "u_n_max": u_n_max,
+        "trim_h": tm.h_grid,
+        "trim_V": tm.V_grid,
+        "trim_x": tm.x_r,
+        "trim_u": tm.u_r,
+        "omega_flex": omega_flex,
+    }
+    arrays["x0"] = np.asarray(x_start[:9], float)  # plant initial state: trim at (h0, V0)
+    ctx = DesignContext(c, veh, arrays, log)
+    for name in dict.fromkeys(VARIANTS[v].law for v in c["variants"]):
+        arrays.update(LAWS[name].design(ctx))
+    summary = {
+        "code_version": __version__,
+        "provenance": provenance(case, veh),
+        "defaults_used": {
+            k: list(v) if isinstance(v, tuple) else v for k, v in case.defaults_used.items()
+        },
+        "n_vertices": int(tp.n_vertices),
+        "W_parts": {k: v.tolist() for k, v in W.parts.items()},
+        "W_dominant": W.dominant(),
+        "tube": {
+            "lam": tube.lam,
+            "min_eig": float(eigs.min()),
+            "tightening": (tau * tube.tightening).tolist(),
+            "z_box": tube.z_box.tolist(),
+        },
+        "nominal": {**cert, "s": nominal.s, "lam": nominal.lam},
+        "plant_params": perturbed_params(veh, c["uncertainty"]["seed"], c["uncertainty"]["scale"]),
+    }
+    design = Design(c, arrays, summary)
+    design.summary["design_hash"] = design.content_hash()
+    return design

@@ -1,0 +1,178 @@
+r"""The SIL graph, written once: loop topics, their message types, and the node table.
+
+One control step k (t_k = k Ts) flows through the nodes in this order::
+
+    plant --state_k--> notch_filter --q'_k--> tube_mpc --u_k--> fault_injector --u_f,k--> plant
+      \--state_k--> nominal_trajectory --(x_r, u_r, x_n, u_n)_k--/
+
+:data:`NODES` is the only description of the graph: the ROS nodes take their topics
+from it, the SIL runner its executables and start order, the recorder its topics,
+:func:`fahv.loop.simulate.simulate` its call order, and ``docs/architecture.md`` its
+table (:func:`markdown_table`, checked by a test).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fahv.errors import RunError
+
+#: Message definitions (``*.msg``), also the sources of the hsv_interfaces package.
+MSG_DIR = Path(__file__).resolve().parents[1] / "msg"
+#: ROS 2 package of the loop messages.
+PKG = "hsv_interfaces"
+
+#: Loop topics -> ROS 2 message type, in the order of one control step.
+TOPICS = {
+    "/clock": "rosgraph_msgs/msg/Clock",
+    "/hsv/state": f"{PKG}/msg/VehicleState",
+    "/hsv/q_filtered": f"{PKG}/msg/FilteredPitchRate",
+    "/hsv/nominal": f"{PKG}/msg/NominalTrajectory",
+    "/hsv/control_command": f"{PKG}/msg/ControlCommand",
+    "/hsv/tube_status": f"{PKG}/msg/TubeStatus",
+    "/hsv/actuator_command": f"{PKG}/msg/ControlCommand",
+    "/hsv/fault_status": f"{PKG}/msg/FaultStatus",
+}
+
+#: History depth of the loop topics' QoS: reliable, keep-last, volatile.
+QOS_DEPTH = 50
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """One node of the graph.
+
+    Attributes
+    ----------
+    name : str
+        Node name and executable name (``<prefix>/lib/<package>/<name>``).
+    package : str
+        ROS 2 package that installs the executable.
+    inputs, outputs : tuple of str
+        Loop topics consumed and produced at each step (keys of :data:`TOPICS`).
+    kind : {"loop", "controller", "recorder", "replay"}
+        Loop nodes and the controller run every step; the recorder and the replay
+        are tools around the loop.
+    description : str
+        What the node does (one line, with the paper's equations).
+    """
+
+    name: str
+    package: str
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    kind: str
+    description: str
+
+
+_CONTROLLER_IN = ("/hsv/state", "/hsv/q_filtered", "/hsv/nominal")
+_CONTROLLER_OUT = ("/hsv/control_command", "/hsv/tube_status")
+
+#: The node table, in start order (the plant starts last: it is the lockstep master).
+NODES: dict[str, NodeSpec] = {
+    n.name: n
+    for n in (
+        NodeSpec("recorder", "hsv_bringup", tuple(TOPICS), (), "recorder",
+                 "every loop topic, raw CDR, into one rosbag2/MCAP run"),
+        NodeSpec("notch_filter", "hsv_ctrl", ("/hsv/state",), ("/hsv/q_filtered",), "loop",
+                 "notch filter on q (eq. 37-39): q -> q'"),
+        NodeSpec("nominal_trajectory", "hsv_ctrl", ("/hsv/state",), ("/hsv/nominal",), "loop",
+                 "reference x_r, u_r and nominal x_n, u_n (eq. 20/46, governor)"),
+        NodeSpec("tube_mpc", "hsv_ctrl", _CONTROLLER_IN, _CONTROLLER_OUT, "controller",
+                 "control law of the run (eq. 36 / 54), tube status"),
+        NodeSpec("rmpc", "hsv_ctrl", _CONTROLLER_IN, _CONTROLLER_OUT, "controller",
+                 "the controller node under the name of the RMPC baseline"),
+        NodeSpec("fault_injector", "hsv_plant", ("/hsv/control_command",),
+                 ("/hsv/actuator_command", "/hsv/fault_status"), "loop",
+                 "actuator faults between controller and plant (eq. 15 ...)"),
+        NodeSpec("plant", "hsv_plant", ("/hsv/actuator_command",), ("/clock", "/hsv/state"),
+                 "loop", "nonlinear CM (eq. 1-3), RK4, lockstep master, /clock"),
+        NodeSpec("replay", "hsv_bringup", tuple(TOPICS), tuple(TOPICS), "replay",
+                 "republishes a recorded run (raw CDR), captures outputs"),
+    )
+}  # fmt: skip
+
+#: node -> (input topics, output topics) of one control step.
+GRAPH = {n.name: (n.inputs, n.outputs) for n in NODES.values()}
+#: Names of the controller node (one adapter, two executable names).
+CONTROLLER_NODES = tuple(n.name for n in NODES.values() if n.kind == "controller")
+
+
+def graph_nodes(controller: str = "tube_mpc", record: bool = True) -> list[str]:
+    """Nodes of one run in start order: the loop, the controller node, the recorder.
+
+    Raises
+    ------
+    RunError
+        If ``controller`` is not one of :data:`CONTROLLER_NODES`.
+    """
+    if controller not in CONTROLLER_NODES:
+        raise RunError(f"controller node must be one of {CONTROLLER_NODES}, got {controller!r}")
+    keep = {"loop"} | ({"recorder"} if record else set())
+    return [n.name for n in NODES.values() if n.kind in keep or n.name == controller]
+
+
+#: Nodes of the full graph in start order, the default of parameter ``graph_nodes``.
+DEFAULT_GRAPH = graph_nodes()
+
+
+def producer_of(topic: str, nodes=None) -> str:
+    """Name of the loop node that publishes ``topic`` (among ``nodes``; '?' if none)."""
+    for n in NODES.values():
+        if n.kind != "replay" and topic in n.outputs and (nodes is None or n.name in nodes):
+            return n.name
+    return "?"
+
+
+def replay_topics(nodes) -> tuple[list[str], list[str]]:
+    """(inputs to replay, outputs to capture) for testing ``nodes`` against a run.
+
+    The inputs are the loop topics the nodes consume and do not produce themselves;
+    the outputs are what they produce.
+
+    Raises
+    ------
+    RunError
+        On a node that is not a loop node of :data:`NODES`.
+    """
+    testable = sorted(n.name for n in NODES.values() if n.kind in ("loop", "controller"))
+    unknown = [n for n in nodes if n not in testable]
+    if unknown:
+        raise RunError(f"cannot replay into {unknown}: nodes are {testable}")
+    produced = [t for n in nodes for t in GRAPH[n][1]]
+    consumed = [t for n in nodes for t in GRAPH[n][0]]
+    inputs = [t for t in TOPICS if t in consumed and t not in produced]
+    return inputs, [t for t in TOPICS if t in produced]
+
+
+def markdown_table() -> str:
+    """The node table as Markdown (the table of ``docs/architecture.md``)."""
+    rows = ["| node | package | consumes | produces | does |", "|---|---|---|---|---|"]
+    for n in NODES.values():
+        cons = "every loop topic" if n.inputs == tuple(TOPICS) else ", ".join(n.inputs)
+        prod = "every loop topic" if n.outputs == tuple(TOPICS) else ", ".join(n.outputs)
+        rows.append(f"| `{n.name}` | {n.package} | {cons} | {prod or '-'} | {n.description} |")
+    return "\n".join(rows)
+
+
+#: Field names of VehicleState after k, t, in plant state order (eq. 1-3).
+STATE_FIELDS = ("h", "v", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
+
+
+def n_steps_of(p: dict) -> int:
+    """Number of control steps of a run: round(duration / Ts)."""
+    return int(round(p["duration"] / p["Ts"]))
+
+
+def clock_msg(k: int, Ts: float) -> dict:
+    """rosgraph_msgs/Clock of step k: t_k = k Ts in whole nanoseconds."""
+    ns = k * int(round(Ts * 1e9))
+    return {"clock": {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}}
+
+
+def state_vector(msg: dict) -> np.ndarray:
+    """Plant state x (9,) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s] from a VehicleState dict."""
+    return np.array([msg[f] for f in STATE_FIELDS], dtype=float)

@@ -1,0 +1,284 @@
+"""Node parameters of the SIL graph: declarations, validation, and their values per run.
+
+Every parameter is a :class:`fahv.config.Field`; scenario values reuse the case
+file's fields (:mod:`fahv.design.case`), so Ts, the command, the notch and the fault
+have one range everywhere. :func:`specs` lists the parameters of each node (the
+controller's include every registered law's own parameters, the fault injector's
+every registered fault kind's); the ROS nodes generate their descriptors from it
+(``hsv_common``) and call :func:`validate` once at start-up, as the in-process
+simulator does on the same dictionaries, so both build the same objects from the
+same numbers.
+
+A design becomes parameters with :func:`node_parameters`: one standard ROS 2
+parameter file (``<node>: ros__parameters: {...}``) per run; matrices are flattened
+row-major with their shape in ``<name>_shape``. No ROS import here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from fahv.config import Field
+from fahv.config.spec import validate_flat
+from fahv.control import LAWS, VARIANTS
+from fahv.design.case import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, T_ONSET, TS
+from fahv.errors import ParameterError
+from fahv.loop.graph import CONTROLLER_NODES
+from fahv.plant.faults import FAULTS, fault_fields
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+
+COMMON = (
+    Field("case", "str", "case name of the design (offline_design/<case>.yaml)"),
+    Field("design_hash", "str", "content hash of the design artefacts"),
+    TS,
+    DURATION,
+    Field("watchdog_s", "float", "wall-clock time without a peer message that is an error",
+          unit="s", lo=0.1, hi=3600.0, default=10.0),
+)  # fmt: skip
+
+
+def _matrix(name: str, description: str) -> Field:
+    return Field(name, "matrix", description)
+
+
+def _prefixed(fields, prefix: str) -> list[Field]:
+    return [dataclasses.replace(f, name=prefix + f.name) for f in fields]
+
+
+def specs() -> dict[str, tuple[Field, ...]]:
+    """Parameters of every loop node, by node name (built from the registries).
+
+    Returns
+    -------
+    dict
+        ``{node: (Field, ...)}`` for plant, fault_injector, notch_filter,
+        nominal_trajectory and each controller node name.
+    """
+    controller = (
+        *COMMON,
+        Field("law", "str", "control law", choices=LAWS.names),
+        Field("tau", "float", "adjustable factor tau (1 for eq. 36)", lo=0.0, hi=1.0,
+              lo_open=True, equation="eq. (54)"),
+        _matrix("F", "robust feedback gain F (2, n) (LMI 24)"),
+        _matrix("N", "tube shape Z = {e: e' N^-1 e <= 1} (n, n) (eq. 25-28)"),
+        *(f for _, cls in LAWS.items() for f in cls.parameters),
+    )  # fmt: skip
+    out = {
+        "plant": (
+            *COMMON,
+            PLANT_SUBSTEPS,
+            Field("vehicle_file", "str", "vehicle data file (YAML); empty: the packaged one",
+                  default=""),
+            _matrix("x0", "initial plant state (9,) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]"),
+            *(Field(f"params.{k}", "float", f"true (perturbed) value of vehicle parameter {k}")
+              for k in PAPER_UNCERTAINTY),
+        ),
+        "fault_injector": (
+            *COMMON,
+            Field("kind", "str", "actuator fault kind", choices=FAULTS.names),
+            T_ONSET,
+            *fault_fields(),
+        ),
+        "notch_filter": (*COMMON, *NOTCH),
+        "nominal_trajectory": (
+            *COMMON,
+            *_prefixed(COMMAND, "command."),
+            Field("mode", "str", "governor: nominal system with reference governor (eq. 20/46);"
+                  " command: trim of the raw command, x_n = 0", choices=("governor", "command")),
+            Field("level_max", "float", "governor bound on x_n' Q^-1 x_n", lo=0.0, hi=1.0,
+                  lo_open=True),
+            _matrix("x0", "initial measured state (n,) in design-model order"),
+            _matrix("A", "nominal discrete LPV vertices A_i (R, n, n) (eq. 12)"),
+            _matrix("B", "nominal discrete LPV vertices B_i (R, n, 2) (eq. 12)"),
+            _matrix("h_grid", "TP weight grid in altitude [ft]"),
+            _matrix("V_grid", "TP weight grid in velocity [ft/s]"),
+            _matrix("W_h", "TP weighting functions of h on h_grid (eq. 11)"),
+            _matrix("W_V", "TP weighting functions of V on V_grid (eq. 11)"),
+            _matrix("K", "nominal gain K (2, n) (LMI 32-35)"),
+            _matrix("Q", "certified nominal ellipsoid Q (n, n) (LMI 33)"),
+            _matrix("trim_h", "trim map altitudes [ft]"),
+            _matrix("trim_V", "trim map velocities [ft/s]"),
+            _matrix("trim_x", "trim states (N_h, N_V, n)"),
+            _matrix("trim_u", "trim inputs (N_h, N_V, 2)"),
+        ),
+    }  # fmt: skip
+    for name in CONTROLLER_NODES:
+        out[name] = controller
+    return out
+
+
+def _expect(node: str, name: str, arr: np.ndarray, shape: tuple) -> None:
+    if arr.shape != shape:
+        raise ParameterError(f"{node}: parameter '{name}' has shape {arr.shape}, expected {shape}")
+
+
+def _check_shapes(node: str, v: dict) -> None:
+    """Cross-parameter shape checks of the matrices of one node."""
+    if node == "plant":
+        _expect(node, "x0", v["x0"], (9,))
+    elif node == "nominal_trajectory":
+        A = v["A"]
+        if A.ndim != 3 or A.shape[1] != A.shape[2]:
+            raise ParameterError(f"{node}: parameter 'A' must have shape (R, n, n), got {A.shape}")
+        R, n = A.shape[0], A.shape[1]
+        nh, nv = v["W_h"].shape[-1], v["W_V"].shape[-1]
+        for name, shape in (
+            ("B", (R, n, 2)),
+            ("K", (2, n)),
+            ("Q", (n, n)),
+            ("x0", (n,)),
+            ("h_grid", (v["h_grid"].size,)),
+            ("V_grid", (v["V_grid"].size,)),
+            ("W_h", (v["h_grid"].size, nh)),
+            ("W_V", (v["V_grid"].size, nv)),
+            ("trim_x", (v["trim_h"].size, v["trim_V"].size, n)),
+            ("trim_u", (v["trim_h"].size, v["trim_V"].size, 2)),
+        ):
+            _expect(node, name, v[name], shape)
+        if nh * nv != R:
+            raise ParameterError(
+                f"{node}: parameter 'A' has {R} vertices but the weights give {nh} x {nv}"
+            )
+    elif node in CONTROLLER_NODES:
+        F = v["F"]
+        if F.ndim != 2 or F.shape[0] != 2:
+            raise ParameterError(f"{node}: parameter 'F' must have shape (2, n), got {F.shape}")
+        _expect(node, "N", v["N"], (F.shape[1], F.shape[1]))
+
+
+def validate(node: str, values: dict) -> dict:
+    """Check every parameter of ``node`` and return them typed (the one validation).
+
+    Parameters
+    ----------
+    node : str
+        A key of :func:`specs`.
+    values : dict
+        Parameter name -> value as loaded from the parameter file (flat names with
+        dots, matrices flattened plus ``<name>_shape``). Unknown names are ignored.
+
+    Returns
+    -------
+    dict
+        Name -> value; matrices as ndarrays of their shape.
+
+    Raises
+    ------
+    ParameterError
+        Naming the node and the key: missing, wrong type, non-finite (NaN/inf in a
+        matrix included), out of range, or a shape inconsistent with the others.
+    """
+    all_specs = specs()
+    if node not in all_specs:
+        raise ParameterError(f"unknown node '{node}', expected one of {sorted(all_specs)}")
+    out = validate_flat(all_specs[node], values, node, ParameterError)
+    _check_shapes(node, out)
+    return out
+
+
+def _flat(name: str, value) -> dict:
+    """``{name: value}``; an array becomes ``{name: flat list, name_shape: shape}``."""
+    if isinstance(value, np.ndarray):
+        arr = np.asarray(value, float)
+        return {name: arr.ravel().tolist(), f"{name}_shape": list(arr.shape)}
+    return {name: value}
+
+
+def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0) -> dict:
+    """Parameters of every loop node for one variant of a designed case.
+
+    Parameters
+    ----------
+    design : fahv.design.artefacts.Design
+    variant : str, optional
+        A variant of the case (:data:`fahv.control.VARIANTS`; default: the case's
+        first). The variant gives the law (its controller node, the nominal node's
+        mode, the law's own parameters) and the notch setting: as in the case,
+        off, or centred on flexible mode 2.
+    watchdog_s : float
+        Wall-clock watchdog of every node [s].
+
+    Returns
+    -------
+    dict
+        ``{node: {name: value}}`` with matrices flattened (lists) plus ``<name>_shape``;
+        wrap each in ``{"ros__parameters": ...}`` for a ROS 2 parameter file.
+
+    Raises
+    ------
+    ParameterError
+        If the variant is not one of the case's.
+    """
+    a, c = design.arrays, design.case
+    variant = c["variants"][0] if variant is None else variant
+    if variant not in c["variants"]:
+        raise ParameterError(f"variant '{variant}' is not in the case's variants {c['variants']}")
+    v = VARIANTS[variant]
+    law = LAWS[v.law]
+    n = a["A"].shape[1]
+
+    def mat(name, arr=None):
+        return _flat(name, np.asarray(a[name] if arr is None else arr, float))
+
+    common = {
+        "case": c["name"],
+        "design_hash": design.summary["design_hash"],
+        "Ts": float(c["Ts"]),
+        "duration": float(c["duration"]),
+        "watchdog_s": float(watchdog_s),
+    }
+    cmd, f, nt = c["command"], c["fault"], c["notch"]
+    x0 = np.asarray(a["x0"], float)
+    notch = {k: float(nt[k]) for k in ("omega_z", "eps_z", "omega_p", "eps_p")}
+    enabled = bool(nt["enabled"]) and v.notch != "off"
+    if v.notch == "mode2":
+        w2 = float(a["omega_flex"][1])
+        notch.update(omega_z=w2, omega_p=w2)
+    x0_meas = x0.copy()
+    if enabled:
+        x0_meas[4] = 0.0  # the filter starts in steady state at q = 0 (trim)
+    if n == 11:
+        x0_meas = np.concatenate([x0_meas, np.zeros(2)])
+    tau = float(c["tube"]["tau"]) if law.reference == "governor" else 1.0
+    fault = {"kind": f["kind"], "t_onset": float(f["t_onset"])}
+    fault.update({p.name: f[p.name] for p in FAULTS[f["kind"]].parameters})
+    controller = {**common, "law": law.name, "tau": tau, **mat("F"), **mat("N")}
+    for name, value in law.node_values(a, c).items():
+        controller.update(_flat(name, value))
+    return {
+        "plant": {
+            **common,
+            "plant_substeps": int(c["plant_substeps"]),
+            "vehicle_file": design.summary.get("provenance", {}).get("vehicle_file", ""),
+            **mat("x0", x0),
+            **{f"params.{k}": float(val) for k, val in design.summary["plant_params"].items()},
+        },
+        "fault_injector": {**common, **fault},
+        "notch_filter": {**common, "enabled": enabled, **notch},
+        "nominal_trajectory": {
+            **common,
+            **{f"command.{k}": (val if k == "kind" else float(val)) for k, val in cmd.items()},
+            "mode": law.reference,
+            "level_max": float(c["nominal"]["level_max"]),
+            **mat("x0", x0_meas),
+            **{
+                k: val
+                for name in ("A", "B", "h_grid", "V_grid", "W_h", "W_V", "K", "Q")
+                + ("trim_h", "trim_V", "trim_x", "trim_u")
+                for k, val in mat(name).items()
+            },
+        },
+        law.node: controller,
+    }
+
+
+def controller_node(params: dict) -> str:
+    """Name of the controller node among a run's node parameters."""
+    return next(n for n in CONTROLLER_NODES if n in params)
+
+
+def parameter_file(nodes: dict) -> dict:
+    """``{node: {"ros__parameters": params}}``: the layout of a ROS 2 parameter file."""
+    return {k: {"ros__parameters": v} for k, v in nodes.items()}

@@ -1,0 +1,256 @@
+"""Trim (equilibrium) of the longitudinal models over the flight envelope.
+
+For level flight at (h, V): gamma = theta - alpha = 0, q = 0, eta_dot = 0 and
+x_dot = 0 (sec. 3.1, "let x_s_dot = l_i(x_s, u_s) = 0"). The rigid rows give three
+equations (V_dot = alpha_dot = q_dot = 0) in (alpha, delta_e, Phi); the flexible rows
+then give eta_i = N_i / omega_i^2. In the paper's CM the flexible states do not enter
+L, D, T, M, and at rest eta_ddot = 0, so CM and DM have the same trim (M = 0).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import interpolate, optimize
+
+from fahv.errors import TrimError
+from fahv.model.dynamics import dm_rhs, forces, make_model
+from fahv.model.jacobian import jacobian_complex_step
+from fahv.model.vehicle import ALPHA, Q, Vehicle, VehicleParams
+from fahv.model.vehicle import V as IV
+
+#: Residual tolerance of a trim, in scaled units (state derivative / state scale).
+TRIM_TOL = 1e-8
+
+
+@dataclass(frozen=True)
+class TrimPoint:
+    """Equilibrium of eq. (5) at (h, V).
+
+    Attributes
+    ----------
+    h, V : float
+        Altitude [ft] and speed [ft/s].
+    alpha, delta_e : float
+        Angle of attack and elevator [rad] (theta = alpha, q = 0).
+    Phi : float
+        Fuel-to-air ratio [-].
+    eta_1, eta_2 : float
+        Flexible coordinates at rest (eta_dot = 0).
+    residual : float
+        max |f(x_r, u_r)_i / scale_i| over all states of the model trimmed.
+    """
+
+    h: float
+    V: float
+    alpha: float
+    delta_e: float
+    Phi: float
+    eta_1: float
+    eta_2: float
+    residual: float
+
+    @property
+    def x_r(self) -> np.ndarray:
+        """Trim state of CM/DM, shape (9,), eq. (5)."""
+        return np.array(
+            [self.h, self.V, self.alpha, self.alpha, 0.0, self.eta_1, 0.0, self.eta_2, 0.0]
+        )
+
+    @property
+    def x_r_ecm(self) -> np.ndarray:
+        """Trim state of ECM, shape (11,), eq. (41): q' = 0, x_q = 0."""
+        return np.concatenate([self.x_r, [0.0, 0.0]])
+
+    @property
+    def u_r(self) -> np.ndarray:
+        """Trim input [Phi, delta_e rad], shape (2,), eq. (5)."""
+        return np.array([self.Phi, self.delta_e])
+
+
+def _rigid_residual(z, h, V, vp: VehicleParams, zs):
+    alpha, de, Phi = z * zs
+    x = np.array([h, V, alpha, alpha, 0.0, 0.0, 0.0, 0.0, 0.0], dtype=np.result_type(z, float))
+    f = dm_rhs(x, np.array([Phi, de]), vp)
+    # rows V_dot [ft/s^2], alpha_dot [rad/s], q_dot [rad/s^2] scaled to ~1 for 1 deg
+    return np.array([f[IV] / 10.0, f[ALPHA] / 0.0174533, f[Q] / 0.0174533])
+
+
+def trim(
+    vehicle: Vehicle,
+    h: float,
+    V: float,
+    model: str = "dm",
+    guess: tuple[float, float, float] | None = None,
+    notch=None,
+) -> TrimPoint:
+    """Trim the model at (h, V) for level flight.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+    h : float
+        Altitude [ft], inside ``vehicle.envelope``.
+    V : float
+        Speed [ft/s], inside ``vehicle.envelope``.
+    model : {"dm", "cm", "ecm"}
+        Model whose full residual is checked (the equilibrium is the same).
+    guess : (alpha rad, delta_e rad, Phi), optional
+        Starting point of the Newton iteration.
+    notch : NotchFilter, optional
+        Needed for ``model="ecm"``.
+
+    Returns
+    -------
+    TrimPoint
+
+    Raises
+    ------
+    EnvelopeError
+        If (h, V) is outside the envelope (the message gives the envelope).
+    TrimError
+        If the solver does not converge, the residual exceeds ``TRIM_TOL``
+        (scaled), or the trim input violates the input limits.
+    """
+    vehicle.envelope.check(h, V)
+    vp = vehicle.params
+    zs = np.array([0.0174533, 0.0174533, 0.05])
+    z0 = np.array(guess if guess is not None else (0.028, 0.21, 0.27)) / zs
+
+    def fun(z):
+        return _rigid_residual(z, h, V, vp, zs)
+
+    def jac(z):
+        return jacobian_complex_step(fun, z)
+
+    sol = optimize.root(fun, z0, jac=jac, method="hybr", options={"xtol": 1e-14})
+    z = sol.x
+    for _ in range(3):  # Newton polish with the exact (complex-step) Jacobian
+        z = z - np.linalg.solve(jac(z), fun(z))
+    alpha, de, Phi = z * zs
+    if not np.all(np.isfinite(z)):
+        raise TrimError(f"trim at h = {h} ft, V = {V} ft/s did not converge ({sol.message})")
+    _, _, _, _, N1, N2 = forces(np.array([h, V, alpha]), np.array([Phi, de]), vp)
+    eta_1, eta_2 = N1 / vp.omega_1**2, N2 / vp.omega_2**2
+    tp = TrimPoint(h, V, alpha, de, Phi, eta_1, eta_2, 0.0)
+    mdl = make_model(model, vehicle, notch)
+    x_r = tp.x_r_ecm if model == "ecm" else tp.x_r
+    scale = mdl.state_scale(vehicle, notch)
+    resid = float(np.max(np.abs(mdl.f(x_r, tp.u_r) / scale)))
+    tp = TrimPoint(h, V, alpha, de, Phi, eta_1, eta_2, resid)
+    if not resid < TRIM_TOL:
+        raise TrimError(
+            f"no trim at h = {h} ft, V = {V} ft/s: scaled residual {resid:.3e} "
+            f"exceeds {TRIM_TOL:.0e} ({sol.message})"
+        )
+    lim = vehicle.limits
+    if not (lim.Phi_min <= Phi <= lim.Phi_max):
+        raise TrimError(
+            f"trim at h = {h} ft, V = {V} ft/s needs Phi = {Phi:.4f}, outside "
+            f"the limits [{lim.Phi_min}, {lim.Phi_max}]"
+        )
+    if not (lim.delta_e_min <= de <= lim.delta_e_max):
+        raise TrimError(
+            f"trim at h = {h} ft, V = {V} ft/s needs delta_e = "
+            f"{np.degrees(de):.3f} deg, outside the limits "
+            f"[{np.degrees(lim.delta_e_min):.1f}, "
+            f"{np.degrees(lim.delta_e_max):.1f}] deg"
+        )
+    return tp
+
+
+def trim_grid(vehicle: Vehicle, h_grid, V_grid, model: str = "dm", notch=None):
+    """Trim over a grid; returns a list of lists ``[[TrimPoint for V in V_grid] for h]``.
+
+    Consecutive points start from their neighbour's solution. Raises as :func:`trim`.
+    """
+    rows = []
+    for h in h_grid:
+        row, guess = [], None
+        for V in V_grid:
+            tp = trim(vehicle, float(h), float(V), model, guess, notch)
+            guess = (tp.alpha, tp.delta_e, tp.Phi)
+            row.append(tp)
+        rows.append(row)
+    return rows
+
+
+@dataclass(frozen=True)
+class TrimMap:
+    """Trim map x_r(p), u_r(p) over the envelope, eq. (5), interpolated between trims.
+
+    Attributes
+    ----------
+    h_grid : (N_h,) ndarray
+        Altitudes [ft] of the trim grid (ascending, at least 4).
+    V_grid : (N_V,) ndarray
+        Speeds [ft/s] (ascending, at least 4).
+    x_r : (N_h, N_V, n) ndarray
+        Trim states (n = 9 for DM/CM, 11 for ECM).
+    u_r : (N_h, N_V, 2) ndarray
+        Trim inputs [Phi, delta_e rad].
+
+    Notes
+    -----
+    Bicubic interpolating splines (``scipy.interpolate.RectBivariateSpline``) of each
+    component, evaluated together as one ``scipy.interpolate.NdBSpline``.
+    (h, V) is clipped to the grid, which covers the envelope.
+    """
+
+    h_grid: np.ndarray
+    V_grid: np.ndarray
+    x_r: np.ndarray
+    u_r: np.ndarray
+
+    def __post_init__(self) -> None:
+        nh, nv = len(self.h_grid), len(self.V_grid)
+        if nh < 4 or nv < 4:
+            raise ValueError(f"trim map needs at least a 4 x 4 grid, got {nh} x {nv}")
+        if self.x_r.shape[:2] != (nh, nv) or self.u_r.shape != (nh, nv, 2):
+            raise ValueError(
+                f"trim map arrays x_r {self.x_r.shape} / u_r {self.u_r.shape} do not match "
+                f"the grid {nh} x {nv}"
+            )
+        vals = np.concatenate([self.x_r, self.u_r], axis=2)
+        if not np.all(np.isfinite(vals)):
+            raise ValueError("trim map contains non-finite values")
+        splines = [
+            interpolate.RectBivariateSpline(self.h_grid, self.V_grid, vals[:, :, j])
+            for j in range(vals.shape[2])
+        ]
+        # One vector-valued tensor-product B-spline with the fitted coefficients of all
+        # components: the same function, evaluated in one call (about 10x faster).
+        tx, ty = splines[0].get_knots()
+        coef = np.stack(
+            [sp.get_coeffs().reshape(len(tx) - 4, len(ty) - 4) for sp in splines], axis=-1
+        )
+        object.__setattr__(self, "_spline", interpolate.NdBSpline((tx, ty), coef, 3))
+
+    @property
+    def n_x(self) -> int:
+        """State dimension of the map."""
+        return self.x_r.shape[2]
+
+    def __call__(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
+        """(x_r (n,), u_r (2,)) at (h [ft], V [ft/s]), clipped to the grid."""
+        h = min(max(float(h), self.h_grid[0]), self.h_grid[-1])
+        V = min(max(float(V), self.V_grid[0]), self.V_grid[-1])
+        v = self._spline(np.array([h, V]))
+        n = self.n_x
+        return v[:n], v[n:]
+
+
+def trim_map(vehicle: Vehicle, n_h: int = 13, n_V: int = 13, model: str = "cm", notch=None):
+    """Trim the model on an n_h x n_V grid over the envelope and build a :class:`TrimMap`.
+
+    ``model="ecm"`` (with ``notch``) gives the 11-state trim x_r' of eq. (41).
+    Raises as :func:`trim`.
+    """
+    env = vehicle.envelope
+    hg = np.linspace(env.h_min, env.h_max, n_h)
+    Vg = np.linspace(env.V_min, env.V_max, n_V)
+    rows = trim_grid(vehicle, hg, Vg, model, notch)
+    x = np.array([[tp.x_r_ecm if model == "ecm" else tp.x_r for tp in row] for row in rows])
+    u = np.array([[tp.u_r for tp in row] for row in rows])
+    return TrimMap(hg, Vg, x, u)

@@ -1,0 +1,386 @@
+"""Vehicle data and the longitudinal models CM (eq. 1-3), DM (eq. 4) and ECM (eq. 40).
+
+State vector of CM and DM (eq. 5, 7), shape (9,), units ft, ft/s, rad, rad/s::
+
+    x = [h, V, alpha, theta, q, eta_1, eta_1_dot, eta_2, eta_2_dot]
+
+Input vector, shape (2,)::
+
+    u = [Phi, delta_e]        (fuel-to-air ratio [-], elevator deflection [rad])
+
+State vector of ECM (eq. 43), shape (11,)::
+
+    x' = [h, V, alpha, theta, q', eta_1, eta_1_dot, eta_2, eta_2_dot, x_q1, x_q2]
+
+where q' is the notch-filtered pitch rate and x_q1, x_q2 the notch states (eq. 39).
+
+All model functions accept real or complex arrays (complex-step differentiation in
+:mod:`fahv.linearize` relies on it), and never use ``abs`` or branches on the state.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from fahv.config.yamlio import load_yaml
+from fahv.errors import EnvelopeError, VehicleDataError
+
+# Named indices: CM / DM state (eq. 7).
+H, V, ALPHA, THETA, Q, ETA1, ETA1_DOT, ETA2, ETA2_DOT = range(9)
+# ECM adds the notch states (eq. 43); index Q holds q' in ECM.
+X_Q1, X_Q2 = 9, 10
+# Inputs.
+PHI, DELTA_E = 0, 1
+
+STATE_NAMES: tuple[str, ...] = (
+    "h",
+    "V",
+    "alpha",
+    "theta",
+    "q",
+    "eta_1",
+    "eta_1_dot",
+    "eta_2",
+    "eta_2_dot",
+)
+STATE_UNITS: tuple[str, ...] = ("ft", "ft/s", "rad", "rad", "rad/s", "-", "1/s", "-", "1/s")
+ECM_STATE_NAMES: tuple[str, ...] = (
+    "h",
+    "V",
+    "alpha",
+    "theta",
+    "q_prime",
+    "eta_1",
+    "eta_1_dot",
+    "eta_2",
+    "eta_2_dot",
+    "x_q1",
+    "x_q2",
+)
+INPUT_NAMES: tuple[str, ...] = ("Phi", "delta_e")
+INPUT_UNITS: tuple[str, ...] = ("-", "rad")
+
+DEFAULT_VEHICLE_FILE = "vehicle_parker2007.yaml"
+
+#: Parameters that must be strictly positive for the model to be physical.
+_POSITIVE = ("m", "I_yy", "S", "c_bar", "g", "rho_0", "h_s", "omega_1", "omega_2")
+#: Parameters that must be non-negative.
+_NON_NEGATIVE = ("zeta_1", "zeta_2", "h_0")
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """Physical parameters of eq. (1)-(3), English units per unit width.
+
+    Attributes are the paper's symbols: ``m`` [slug/ft], ``I_yy`` [slug ft^2/ft],
+    ``S`` [ft^2/ft], ``c_bar`` [ft], ``z_T`` [ft], ``g`` [ft/s^2], ``rho_0``
+    [slug/ft^3], ``h_0`` [ft], ``h_s`` [ft], aerodynamic coefficients (per rad),
+    thrust coefficients ``beta_1..beta_8`` [lbf/ft per rad^k], and the flexible
+    data ``zeta_i``, ``omega_i`` [rad/s], ``psi_i`` and ``N*`` coefficients.
+    Use :func:`dataclasses.replace` to perturb a parameter (uncertainty sampling).
+    """
+
+    m: float
+    I_yy: float
+    S: float
+    c_bar: float
+    z_T: float
+    g: float
+    rho_0: float
+    h_0: float
+    h_s: float
+    C_L_alpha: float
+    C_L_de: float
+    C_L_0: float
+    C_D_alpha2: float
+    C_D_alpha: float
+    C_D_de2: float
+    C_D_de: float
+    C_D_0: float
+    C_M_alpha2: float
+    C_M_alpha: float
+    C_M_0: float
+    c_e: float
+    beta_1: float
+    beta_2: float
+    beta_3: float
+    beta_4: float
+    beta_5: float
+    beta_6: float
+    beta_7: float
+    beta_8: float
+    zeta_1: float
+    omega_1: float
+    psi_1: float
+    zeta_2: float
+    omega_2: float
+    psi_2: float
+    N1_alpha2: float
+    N1_alpha: float
+    N1_0: float
+    N2_alpha2: float
+    N2_alpha: float
+    N2_de: float
+    N2_0: float
+
+    def replace(self, **changes: float) -> VehicleParams:
+        """Return a copy with some parameters changed (e.g. ``m=330.0``)."""
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class Envelope:
+    """Flight envelope Gamma = [h_min, h_max] x [V_min, V_max] (ft, ft/s), sec. 5.1."""
+
+    h_min: float
+    h_max: float
+    V_min: float
+    V_max: float
+
+    def contains(self, h: float, V: float, rtol: float = 1e-12) -> bool:
+        """True if (h, V) lies in the closed envelope (relative tolerance ``rtol``)."""
+        th = rtol * max(abs(self.h_max), 1.0)
+        tv = rtol * max(abs(self.V_max), 1.0)
+        return (self.h_min - th <= h <= self.h_max + th) and (
+            self.V_min - tv <= V <= self.V_max + tv
+        )
+
+    def check(self, h: float, V: float) -> None:
+        """Raise :class:`EnvelopeError` naming the envelope if (h, V) lies outside it."""
+        if not (np.isfinite(h) and np.isfinite(V)) or not self.contains(h, V):
+            raise EnvelopeError(
+                f"flight condition h = {h} ft, V = {V} ft/s lies outside the flight envelope "
+                f"h in [{self.h_min}, {self.h_max}] ft, V in [{self.V_min}, {self.V_max}] ft/s"
+            )
+
+
+@dataclass(frozen=True)
+class InputLimits:
+    """Actuator limits of sec. 5.1: Phi in [Phi_min, Phi_max], delta_e in rad."""
+
+    Phi_min: float
+    Phi_max: float
+    delta_e_min: float
+    delta_e_max: float
+
+    @property
+    def u_min(self) -> np.ndarray:
+        """Lower input bounds, shape (2,), [-, rad]."""
+        return np.array([self.Phi_min, self.delta_e_min])
+
+    @property
+    def u_max(self) -> np.ndarray:
+        """Upper input bounds, shape (2,), [-, rad]."""
+        return np.array([self.Phi_max, self.delta_e_max])
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """Everything loaded from one vehicle data file.
+
+    Attributes
+    ----------
+    params : VehicleParams
+        Model parameters of eq. (1)-(3).
+    envelope : Envelope
+        Flight envelope (sec. 5.1).
+    limits : InputLimits
+        Actuator limits (sec. 5.1).
+    state_scale : (9,) ndarray
+        Typical deviation magnitudes of x, used to scale before SVD/LMI work.
+    input_scale : (2,) ndarray
+        Typical deviation magnitudes of u.
+    representative : tuple of str
+        Names of parameters that are representative, not published.
+    source_file : str
+        Path of the file the data came from (``<packaged>/...`` for the packaged one).
+    name : str
+        Vehicle name from the file.
+    data_hash : str
+        sha256 of the file's text (16 hex characters; "" when built from a mapping).
+    """
+
+    params: VehicleParams
+    envelope: Envelope
+    limits: InputLimits
+    state_scale: np.ndarray
+    input_scale: np.ndarray
+    representative: tuple[str, ...]
+    source_file: str
+    name: str = ""
+    data_hash: str = ""
+
+    @property
+    def packaged(self) -> bool:
+        """True for the vehicle file shipped with fahv."""
+        return self.source_file.startswith("<packaged>")
+
+
+def _number(value: Any, key: str, path: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise VehicleDataError(f"{path}: '{key}' must be a number, got {value!r}")
+    out = float(value)
+    if not math.isfinite(out):
+        raise VehicleDataError(f"{path}: '{key}' must be finite, got {value!r}")
+    return out
+
+
+def _entry(section: Mapping[str, Any], key: str, path: str, prefix: str) -> Mapping[str, Any]:
+    full = f"{prefix}.{key}"
+    if key not in section:
+        raise VehicleDataError(f"{path}: missing key '{full}'")
+    entry = section[key]
+    if not isinstance(entry, Mapping):
+        raise VehicleDataError(f"{path}: '{full}' must be a mapping with 'value', 'unit', 'source'")
+    return entry
+
+
+def vehicle_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Vehicle:
+    """Build a :class:`Vehicle` from the parsed YAML structure of a vehicle file.
+
+    Parameters
+    ----------
+    data : mapping
+        Parsed file with sections ``parameters``, ``envelope``, ``input_limits``,
+        ``scales`` (see ``src/fahv/data/vehicle_parker2007.yaml``).
+    path : str
+        Name used in error messages.
+
+    Returns
+    -------
+    Vehicle
+
+    Raises
+    ------
+    VehicleDataError
+        On a missing key, a non-numeric or non-finite value, a parameter entry
+        without a ``source``, an unknown parameter, or a non-physical value
+        (e.g. ``m <= 0``); the message names the key.
+    """
+    if not isinstance(data, Mapping):
+        raise VehicleDataError(f"{path}: top level must be a mapping, got {type(data).__name__}")
+    for section in ("parameters", "envelope", "input_limits", "scales"):
+        if section not in data:
+            raise VehicleDataError(f"{path}: missing key '{section}'")
+        if not isinstance(data[section], Mapping):
+            raise VehicleDataError(f"{path}: '{section}' must be a mapping")
+    params_in = data["parameters"]
+    fields = [f.name for f in dataclasses.fields(VehicleParams)]
+    unknown = sorted(set(params_in) - set(fields))
+    if unknown:
+        raise VehicleDataError(f"{path}: unknown parameter(s) {unknown}; expected {fields}")
+    values: dict[str, float] = {}
+    representative: list[str] = []
+    for key in fields:
+        entry = _entry(params_in, key, path, "parameters")
+        if "value" not in entry:
+            raise VehicleDataError(f"{path}: missing key 'parameters.{key}.value'")
+        if not entry.get("source"):
+            raise VehicleDataError(f"{path}: 'parameters.{key}' has no 'source'")
+        values[key] = _number(entry["value"], f"parameters.{key}", path)
+        if entry.get("representative", False):
+            representative.append(key)
+    for key in _POSITIVE:
+        if values[key] <= 0.0:
+            raise VehicleDataError(
+                f"{path}: 'parameters.{key}' = {values[key]} is not physical (must be > 0)"
+            )
+    for key in _NON_NEGATIVE:
+        if values[key] < 0.0:
+            raise VehicleDataError(
+                f"{path}: 'parameters.{key}' = {values[key]} is not physical (must be >= 0)"
+            )
+
+    def bounds(section: str, key: str) -> tuple[float, float]:
+        entry = _entry(data[section], key, path, section)
+        for b in ("min", "max"):
+            if b not in entry:
+                raise VehicleDataError(f"{path}: missing key '{section}.{key}.{b}'")
+        lo = _number(entry["min"], f"{section}.{key}.min", path)
+        hi = _number(entry["max"], f"{section}.{key}.max", path)
+        if not lo < hi:
+            raise VehicleDataError(f"{path}: '{section}.{key}' needs min < max, got [{lo}, {hi}]")
+        return lo, hi
+
+    h_lo, h_hi = bounds("envelope", "h")
+    v_lo, v_hi = bounds("envelope", "V")
+    if v_lo <= 0.0:
+        raise VehicleDataError(f"{path}: 'envelope.V.min' = {v_lo} is not physical (must be > 0)")
+    phi_lo, phi_hi = bounds("input_limits", "Phi")
+    de_lo, de_hi = bounds("input_limits", "delta_e")
+
+    def scale(key: str) -> float:
+        entry = _entry(data["scales"], key, path, "scales")
+        if "value" not in entry:
+            raise VehicleDataError(f"{path}: missing key 'scales.{key}.value'")
+        s = _number(entry["value"], f"scales.{key}", path)
+        if s <= 0.0:
+            raise VehicleDataError(f"{path}: 'scales.{key}' = {s} must be > 0")
+        return s
+
+    return Vehicle(
+        params=VehicleParams(**values),
+        envelope=Envelope(h_lo, h_hi, v_lo, v_hi),
+        limits=InputLimits(phi_lo, phi_hi, math.radians(de_lo), math.radians(de_hi)),
+        state_scale=np.array(
+            [scale(k) for k in STATE_NAMES[:4]] + [scale("q")] + [scale(k) for k in STATE_NAMES[5:]]
+        ),
+        input_scale=np.array([scale(k) for k in INPUT_NAMES]),
+        representative=tuple(representative),
+        source_file=path,
+        name=str(data.get("name", "")),
+    )
+
+
+def load_vehicle(path: str | Path | None = None) -> Vehicle:
+    """Load and validate a vehicle data file (YAML).
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        Vehicle file; ``None`` loads the packaged Parker et al. 2007 curve fit with
+        representative flexible data (``fahv/data/vehicle_parker2007.yaml``).
+
+    Returns
+    -------
+    Vehicle
+
+    Raises
+    ------
+    VehicleDataError
+        If the file does not exist, is not valid YAML, or any entry is invalid
+        (see :func:`vehicle_from_mapping`); the message names the file and key.
+    """
+    if path is None:
+        ref = resources.files("fahv.data").joinpath(DEFAULT_VEHICLE_FILE)
+        text, name = ref.read_text(), f"<packaged>/{DEFAULT_VEHICLE_FILE}"
+    else:
+        p = Path(path)
+        name = str(p)
+        try:
+            text = p.read_text()
+        except FileNotFoundError:
+            raise VehicleDataError(f"vehicle file not found: {name}") from None
+        except OSError as exc:
+            raise VehicleDataError(f"cannot read vehicle file {name}: {exc}") from None
+    try:
+        data = load_yaml(text)
+    except yaml.YAMLError as exc:
+        raise VehicleDataError(f"{name}: not valid YAML: {exc}") from None
+    digest = hashlib.sha256(text.encode()).hexdigest()[:16]
+    return dataclasses.replace(vehicle_from_mapping(data, name), data_hash=digest)
+
+
+# ---------------------------------------------------------------------------------
+# Forces and moments, eq. (2)-(3)
+# ---------------------------------------------------------------------------------

@@ -1,0 +1,534 @@
+"""Recorded runs: the loop topics, their message types, and rosbag2/MCAP files.
+
+A run is a rosbag2 bag (as ``ros2 bag record -s mcap`` writes it): a folder
+``bags/<run>/`` holding one ``<run>.mcap`` (ros2 profile: ``ros2msg`` schemas with the
+full definition, ``cdr`` messages, ``offered_qos_profiles`` channel metadata,
+summary with statistics and indexes, a ``rosbag2`` metadata record) and
+``metadata.yaml``. Log time is simulated time. Files are written with the
+``rosbags`` library's rosbag2 writer, so rosbag2 (``ros2 bag info``), Foxglove and
+``rosbags`` open them; the run metadata (case, design hash, code version, variant,
+fault, source) is in the bag's ``custom_data``.
+
+The SIL recorder writes the raw CDR bytes it receives; the in-process simulator
+serialises the same dicts (:mod:`fahv.loop`) with the same definitions
+(``src/fahv/msg/*.msg``, also the sources of the ``hsv_interfaces`` package).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import os
+import struct
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+from mcap.exceptions import McapError
+from mcap.records import Channel, Footer, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from fahv.errors import RunError
+from fahv.loop.graph import MSG_DIR, PKG, QOS_DEPTH, TOPICS
+from fahv.loop.simulate import RunResult, run_result
+
+_INF = QosTime(2147483647, 4294967295)
+LOOP_QOS = Qos(
+    QosHistory.KEEP_LAST,
+    QOS_DEPTH,
+    QosReliability.RELIABLE,
+    QosDurability.VOLATILE,
+    _INF,
+    _INF,
+    QosLiveliness.AUTOMATIC,
+    _INF,
+    False,
+)
+
+
+@functools.cache
+def typestore():
+    """Typestore (rosbags) of ROS 2 Jazzy plus the ``hsv_interfaces`` messages.
+
+    Raises
+    ------
+    RunError
+        If a message definition file is missing.
+    """
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    types = {}
+    for name in sorted({t for t in TOPICS.values() if t.startswith(PKG)}):
+        path = MSG_DIR / f"{name.rsplit('/', 1)[1]}.msg"
+        try:
+            types.update(get_types_from_msg(path.read_text(), name))
+        except OSError as exc:
+            raise RunError(f"message definition {path} is unreadable: {exc}") from None
+    ts.register(types)
+    return ts
+
+
+def bag_paths(run: str | Path) -> tuple[Path, Path]:
+    """(bag folder, .mcap file) of a run given either of them."""
+    p = Path(run)
+    if p.suffix == ".mcap":
+        return p.parent, p
+    return p, p / f"{p.name}.mcap"
+
+
+class RunWriter:
+    """Writer of one run: a rosbag2 bag with one MCAP file and every loop topic.
+
+    Parameters
+    ----------
+    path : str or Path
+        Bag folder to create (must not exist); the file is ``<path>/<name>.mcap``.
+    metadata : dict[str, str]
+        Run metadata stored as the bag's custom data (case, design_hash,
+        code_version, variant, source, fault ...); values are converted to str.
+    Ts : float
+        Control period [s]: message log time is k Ts in nanoseconds.
+
+    Raises
+    ------
+    RunError
+        If the folder exists or cannot be created.
+
+    Notes
+    -----
+    Use as a context manager or call :meth:`close`; ``close(status=...)`` records
+    how the run ended in the metadata (complete, interrupted, failed: ...).
+    """
+
+    def __init__(self, path: str | Path, metadata: dict, Ts: float) -> None:
+        self.path = Path(path)
+        if self.path.exists():
+            raise RunError(f"run folder {self.path} exists already")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._ts = typestore()
+        self.Ts_ns = int(round(Ts * 1e9))
+        self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        for key, value in metadata.items():
+            self._writer.set_custom_data(key, str(value))
+        try:
+            self._writer.open()
+        except OSError as exc:
+            raise RunError(f"cannot create run {self.path}: {exc}") from None
+        self._conns = {
+            topic: self._writer.add_connection(
+                topic, msgtype, typestore=self._ts, offered_qos_profiles=[LOOP_QOS]
+            )
+            for topic, msgtype in TOPICS.items()
+        }
+        self.counts = dict.fromkeys(TOPICS, 0)
+        self._closed = False
+        self.metadata = {k: str(v) for k, v in metadata.items()}
+        self._write_sidecar(status="running")
+
+    def _write_sidecar(self, **extra) -> None:
+        """run.json: the metadata, readable even if the process dies before close."""
+        tmp = self.path / ".run.json.tmp"
+        tmp.write_text(json.dumps({**self.metadata, **extra}, indent=1))
+        os.replace(tmp, self.path / "run.json")
+
+    def log_time(self, k: int) -> int:
+        """Log time [ns] of step k: k Ts."""
+        return k * self.Ts_ns
+
+    def write_raw(self, topic: str, k: int, data: bytes) -> None:
+        """Append serialised CDR bytes of step k on a loop topic."""
+        self._writer.write(self._conns[topic], self.log_time(k), bytes(data))
+        self.counts[topic] += 1
+
+    def write(self, topic: str, k: int, fields: dict) -> None:
+        """Serialise a message dict (:mod:`fahv.loop` field names) and append it."""
+        self.write_raw(topic, k, encode(topic, fields))
+
+    def set_metadata(self, key: str, value) -> None:
+        """Add or replace one metadata entry before the run is closed."""
+        self.metadata[key] = str(value)
+        self._writer.set_custom_data(key, str(value))
+
+    def close(self, status: str = "complete") -> None:
+        """Finish the file (summary, indexes, metadata.yaml); idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self.set_metadata("status", status)
+        self.set_metadata("steps_recorded", min(self.counts.values()))
+        self._writer.close()
+        self._write_sidecar()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        self.close("complete" if exc_type is None else f"failed: {exc_type.__name__}: {exc}")
+
+
+def _to_ros(ts, msgtype: str, fields: dict):
+    cls = ts.types[msgtype]
+    kwargs = {}
+    for name in cls.__dataclass_fields__:
+        if name == "__msgtype__":
+            continue
+        v = fields[name]
+        if isinstance(v, dict):
+            sub = ts.fielddefs[msgtype][1]
+            subtype = dict(sub)[name][1]
+            v = _to_ros(ts, subtype, v)
+        elif isinstance(v, np.ndarray) or isinstance(v, list | tuple):
+            v = np.asarray(v, dtype=np.float64)
+        kwargs[name] = v
+    return cls(**kwargs)
+
+
+def encode(topic: str, fields: dict) -> bytes:
+    """CDR bytes of a loop-topic message given as a dict.
+
+    Raises
+    ------
+    KeyError
+        If a field is missing.
+    """
+    ts = typestore()
+    msgtype = TOPICS[topic]
+    return bytes(ts.serialize_cdr(_to_ros(ts, msgtype, fields), msgtype))
+
+
+def _to_dict(obj) -> dict:
+    out = {}
+    for name in obj.__dataclass_fields__:
+        if name == "__msgtype__":
+            continue
+        v = getattr(obj, name)
+        out[name] = _to_dict(v) if hasattr(v, "__dataclass_fields__") else v
+    return out
+
+
+def decode(topic: str, data: bytes, ts=None) -> dict:
+    """Message dict of CDR bytes on a loop topic (inverse of :func:`encode`).
+
+    ``ts``: typestore to decode with (default :func:`typestore`; a run written with
+    an older definition is decoded with its own, see :func:`file_typestore`).
+    """
+    ts = typestore() if ts is None else ts
+    return _to_dict(ts.deserialize_cdr(bytes(data), TOPICS[topic]))
+
+
+@functools.cache
+def file_typestore(msgtype: str, msgdef: str):
+    """Typestore that decodes ``msgtype`` with the definition stored in a run file.
+
+    Runs keep the full definition of every schema, so a run recorded before a
+    message gained a field still decodes (the missing field is then absent from
+    the message dicts).
+
+    Raises
+    ------
+    RunError
+        If the stored definition does not parse.
+    """
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    try:
+        ts.register(get_types_from_msg(msgdef, msgtype))
+    except Exception as exc:  # rosbags raises several parser errors
+        raise RunError(f"the stored definition of {msgtype} does not parse: {exc}") from None
+    return ts
+
+
+def _decoder_of(schema: Schema | None):
+    """Typestore for a loop-topic schema: ours when the definitions agree."""
+    if schema is None:
+        return typestore()
+    text = schema.data.decode(errors="replace")
+    if schema.name in typestore().types and text == typestore().generate_msgdef(schema.name)[0]:
+        return typestore()
+    return file_typestore(schema.name, text)
+
+
+class TruncatedRunWarning(UserWarning):
+    """A run file ends before its summary (the recorder was killed): read up to there."""
+
+
+@dataclass
+class Recording:
+    """Content of a run file.
+
+    Attributes
+    ----------
+    path : Path
+        The .mcap file.
+    metadata : dict[str, str]
+        Run metadata (bag custom data, or run.json for a file without summary).
+    records : dict[str, list[dict]]
+        Decoded messages of each loop topic (:data:`TOPICS`), in file order.
+    topics : dict[str, dict]
+        Every topic of the file: ``type``, ``count``, ``first_ns``, ``last_ns``
+        (unknown topics included, not decoded).
+    truncated : bool
+        The file ended before its footer; what was complete was read.
+    schemas : dict[str, str]
+        Stored message definition of each topic's type.
+    """
+
+    path: Path
+    metadata: dict = field(default_factory=dict)
+    records: dict = field(default_factory=dict)
+    topics: dict = field(default_factory=dict)
+    truncated: bool = False
+    schemas: dict = field(default_factory=dict)
+
+    @property
+    def sim_span(self) -> tuple[float, float]:
+        """(first, last) log time [s] over every topic; (nan, nan) when empty."""
+        ts = [
+            v for t in self.topics.values() for v in (t["first_ns"], t["last_ns"]) if v is not None
+        ]
+        return (min(ts) * 1e-9, max(ts) * 1e-9) if ts else (math.nan, math.nan)
+
+
+def _bag_custom_data(serialized: str) -> dict:
+    try:
+        info = yaml.safe_load(serialized) or {}
+    except yaml.YAMLError:
+        return {}
+    if "rosbag2_bagfile_information" in info:
+        info = info["rosbag2_bagfile_information"]
+    return {str(k): str(v) for k, v in (info.get("custom_data") or {}).items()}
+
+
+class _Stream:
+    """MCAP records of a run file in file order; ``complete`` once the footer was read.
+
+    A file that ends early stops the iteration at its last complete record.
+
+    Raises
+    ------
+    RunError
+        If the file is missing or is not an MCAP file.
+    """
+
+    MAGIC = b"\x89MCAP0\r\n"
+
+    def __init__(self, run: str | Path) -> None:
+        _, self.path = bag_paths(run)
+        if not self.path.is_file():
+            raise RunError(f"run file {self.path} does not exist")
+        with open(self.path, "rb") as f:
+            if f.read(8) != self.MAGIC:
+                raise RunError(f"{self.path} is not an MCAP file (bad magic bytes)")
+        self.complete = False
+
+    def __iter__(self):
+        with open(self.path, "rb") as f:
+            try:
+                for r in StreamReader(f).records:
+                    if isinstance(r, Footer):
+                        self.complete = True
+                    yield r
+            except (McapError, EOFError, ValueError, KeyError, struct.error):
+                return  # truncated: keep what was complete, the caller warns
+
+    def warn_if_truncated(self, n: int, stacklevel: int = 3) -> None:
+        """TruncatedRunWarning if the footer was not reached (``n`` messages read)."""
+        if not self.complete:
+            warnings.warn(
+                f"{self.path} is truncated (recorder stopped before closing it): read {n} "
+                "messages up to the last complete chunk",
+                TruncatedRunWarning,
+                stacklevel=stacklevel,
+            )
+
+
+def stored_metadata(run: str | Path) -> dict:
+    """Run metadata without reading the messages: metadata.yaml, else run.json.
+
+    Returns an empty dict when neither file is readable.
+    """
+    folder, _ = bag_paths(run)
+    try:
+        meta = _bag_custom_data((folder / "metadata.yaml").read_text())
+        if meta:
+            return meta
+    except OSError:
+        pass
+    try:
+        return {k: str(v) for k, v in json.loads((folder / "run.json").read_text()).items()}
+    except (OSError, ValueError, AttributeError):
+        return {}
+
+
+def read_run(run: str | Path) -> Recording:
+    """Read a run (bag folder or .mcap file) in one pass.
+
+    A file that ends early (recorder killed) is read up to its last complete
+    chunk and a :class:`TruncatedRunWarning` says so. Topics that are not loop
+    topics are listed with their counts, not decoded; a loop topic recorded with
+    an older definition is decoded with the stored one.
+
+    Raises
+    ------
+    RunError
+        If the file is missing, not an MCAP file, or a loop-topic message does not
+        decode with its definition; the message names the file.
+    """
+    stream = _Stream(run)
+    path = stream.path
+    rec = Recording(path)
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    records = {t: [] for t in TOPICS}
+    decoders = {}
+    for r in stream:
+        if isinstance(r, Schema):
+            schemas[r.id] = r
+        elif isinstance(r, Channel):
+            channels[r.id] = r
+            schema = schemas.get(r.schema_id)
+            if schema is not None:
+                rec.schemas[r.topic] = schema.data.decode(errors="replace")
+            rec.topics.setdefault(
+                r.topic,
+                {
+                    "type": schema.name if schema else "",
+                    "count": 0,
+                    "first_ns": None,
+                    "last_ns": None,
+                },
+            )
+        elif isinstance(r, Message):
+            ch = channels.get(r.channel_id)
+            if ch is None:
+                continue
+            info = rec.topics[ch.topic]
+            info["count"] += 1
+            info["first_ns"] = r.log_time if info["first_ns"] is None else info["first_ns"]
+            info["last_ns"] = r.log_time
+            if ch.topic in TOPICS and info["type"] == TOPICS[ch.topic]:
+                try:
+                    ts = decoders.get(ch.id)
+                    if ts is None:
+                        ts = decoders[ch.id] = _decoder_of(schemas.get(ch.schema_id))
+                    records[ch.topic].append(decode(ch.topic, r.data, ts))
+                except Exception as exc:  # rosbags raises several types
+                    raise RunError(
+                        f"{path}: a message on {ch.topic} does not decode: {exc}"
+                    ) from None
+        elif isinstance(r, Metadata) and r.name == "rosbag2":
+            rec.metadata.update(_bag_custom_data(r.metadata.get("serialized_metadata", "")))
+    rec.truncated = not stream.complete
+    if not rec.metadata:
+        side = path.parent / "run.json"
+        if side.is_file():
+            try:
+                rec.metadata = {k: str(v) for k, v in json.loads(side.read_text()).items()}
+            except (OSError, ValueError):
+                pass
+    stream.warn_if_truncated(sum(t["count"] for t in rec.topics.values()))
+    rec.records = records
+    return rec
+
+
+def iter_raw(run: str | Path, topics=None):
+    """Raw messages of a run in file order, for replay.
+
+    Parameters
+    ----------
+    run : path
+        Bag folder or .mcap file.
+    topics : iterable of str, optional
+        Only these topics (default: every topic).
+
+    Yields
+    ------
+    (topic, msgtype, log_time_ns, data) : (str, str, int, bytes)
+        ``data`` is the CDR payload as recorded.
+
+    Raises
+    ------
+    RunError
+        If the file is missing or not an MCAP file. A truncated file ends the
+        iteration early with a :class:`TruncatedRunWarning`.
+    """
+    stream = _Stream(run)
+    wanted = None if topics is None else set(topics)
+    schemas, channels, n = {}, {}, 0
+    for r in stream:
+        if isinstance(r, Schema):
+            schemas[r.id] = r.name
+        elif isinstance(r, Channel):
+            channels[r.id] = (r.topic, schemas.get(r.schema_id, ""))
+        elif isinstance(r, Message) and r.channel_id in channels:
+            topic, msgtype = channels[r.channel_id]
+            if wanted is None or topic in wanted:
+                n += 1
+                yield topic, msgtype, r.log_time, bytes(r.data)
+    stream.warn_if_truncated(n, stacklevel=2)
+
+
+def step_anomalies(rec: Recording) -> dict[str, dict[str, int]]:
+    """Step-index anomalies of each loop topic, from the messages themselves.
+
+    Returns
+    -------
+    dict
+        Per loop topic: ``duplicate`` (a step index seen again), ``out_of_order``
+        (a step index lower than one already seen) and ``missing`` (indices absent
+        between 0 and the highest seen).
+    """
+    out = {}
+    for topic, msgs in rec.records.items():
+        ks = [i for i, _ in enumerate(msgs)] if topic == "/clock" else [int(m["k"]) for m in msgs]
+        seen, dup, ooo, top = set(), 0, 0, -1
+        for k in ks:
+            dup += k in seen
+            ooo += k < top and k not in seen
+            seen.add(k)
+            top = max(top, k)
+        out[topic] = {"duplicate": dup, "out_of_order": ooo, "missing": top + 1 - len(seen)}
+    return out
+
+
+def step_arrays(rec: Recording) -> tuple[int, dict]:
+    """Steps present on every loop topic, and the records aligned by step index k.
+
+    Returns
+    -------
+    n : int
+        Number of consecutive steps 0..n-1 present on all loop topics.
+    aligned : dict[str, list[dict]]
+        Per topic, the message of each step 0..n-1 (the first one if duplicated).
+    """
+    aligned = {}
+    n = math.inf
+    for topic, msgs in rec.records.items():
+        by_k = {}
+        for i, m in enumerate(msgs):
+            k = i if topic == "/clock" else int(m["k"])
+            by_k.setdefault(k, m)
+        m = 0
+        while m in by_k:
+            m += 1
+        n = min(n, m)
+        aligned[topic] = by_k
+    n = 0 if n == math.inf else int(n)
+    return n, {t: [v[k] for k in range(n)] for t, v in aligned.items()}
+
+
+def run_result_of(rec: Recording) -> RunResult:
+    """:class:`RunResult` of a recorded run (complete steps only)."""
+    n, aligned = step_arrays(rec)
+    return run_result(aligned, {**rec.metadata, "steps": n})

@@ -1,0 +1,99 @@
+"""Metrics of a run: tracking, attitude, flexible modes, inputs, tube (the metrics table)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fahv.errors import RunError
+from fahv.loop.simulate import LMI_COUNTS, RunResult
+from fahv.model.vehicle import ALPHA, ETA1, ETA1_DOT, ETA2, ETA2_DOT, THETA, H, V
+
+#: Tracking counts as settled when |h - h_c| <= 10 ft and |V - V_c| <= 2 ft/s.
+SETTLE_TOL = {"h": 10.0, "V": 2.0}
+
+
+#: Attitude error bound of sec. 5.1 [deg].
+ATTITUDE_BOUND_DEG = 0.5
+
+
+def _settling_time(t, err, tol, t_from):
+    """First time after t_from from which |err| <= tol until the end (NaN if never)."""
+    bad = np.nonzero((np.abs(err) > tol) & (t >= t_from))[0]
+    if bad.size == 0:
+        return float(t_from)
+    if bad[-1] == t.size - 1:
+        return math.nan
+    return float(t[bad[-1] + 1])
+
+
+def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, float]:
+    """Metrics of a run (the issue's table): tracking, attitude, flexible, inputs, tube.
+
+    Parameters
+    ----------
+    run : RunResult
+    limits : fahv.vehicle.InputLimits
+        Actuator limits (sec. 5.1) the commands u (N, 2) are checked against.
+    t_fault : float, optional
+        Fault onset [s]; by default the first step with the fault active. None (no
+        active fault) or beyond the run: the flexible RMS is over the run.
+
+    Returns
+    -------
+    dict
+        Keys and units as in ``fahv simulate`` (ft, ft/s, deg, s; NaN where a value
+        does not exist, e.g. a settling time that is never reached).
+
+    Attitude errors are against the trim of the governed reference x_r (the
+    equilibrium the vehicle is steered to). Tracking errors are against the case
+    command. Flexible RMS values are over t >= t_fault (the whole run without fault).
+    """
+    t, x = run.t, run.x
+    if t.size == 0:
+        raise RunError("the run holds no complete step: no metrics")
+    if t_fault is None and np.any(run.fault_active):
+        t_fault = float(t[np.argmax(run.fault_active)])
+    eh, eV = x[:, H] - run.h_c, x[:, V] - run.V_c
+    moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
+    t_cmd_end = float(t[moving[-1]]) if moving.size else 0.0
+    ts_h = _settling_time(t, eh, SETTLE_TOL["h"], t_cmd_end)
+    ts_V = _settling_time(t, eV, SETTLE_TOL["V"], t_cmd_end)
+    t_settle = max(ts_h, ts_V) if not (math.isnan(ts_h) or math.isnan(ts_V)) else math.nan
+    after = t >= (t_settle if not math.isnan(t_settle) else t[-1])
+    tf = t_fault if t_fault is not None and t_fault < t[-1] else t[0]
+    post = t >= tf
+    ea = np.degrees(x[:, ALPHA] - run.x_r[:, ALPHA])
+    et = np.degrees(x[:, THETA] - run.x_r[:, THETA])
+    u, lo, hi = run.u, limits.u_min, limits.u_max
+    viol = np.maximum(np.maximum(lo - u, u - hi), 0.0)
+    lvl = run.tube_level
+    lmi = {f"rmpc_lmi_{c}": int(v) for c, v in zip(LMI_COUNTS, run.lmi_counts, strict=True)}
+    return {
+        "settling_time_h_s": ts_h,
+        "settling_time_V_s": ts_V,
+        "h_err_max_after_settle_ft": float(np.abs(eh[after]).max()),
+        "V_err_max_after_settle_fps": float(np.abs(eV[after]).max()),
+        "h_err_rms_after_settle_ft": float(np.sqrt(np.mean(eh[after] ** 2))),
+        "V_err_rms_after_settle_fps": float(np.sqrt(np.mean(eV[after] ** 2))),
+        "h_err_final_ft": float(eh[-1]),
+        "V_err_final_fps": float(eV[-1]),
+        "alpha_err_max_deg": float(np.abs(ea).max()),
+        "theta_err_max_deg": float(np.abs(et).max()),
+        "attitude_within_0.5deg": bool(max(np.abs(ea).max(), np.abs(et).max()) <= 0.5),
+        "eta_1_dev_peak": float(np.abs(x[:, ETA1] - run.x_r[:, ETA1]).max()),
+        "eta_2_dev_peak": float(np.abs(x[:, ETA2] - run.x_r[:, ETA2]).max()),
+        "eta_1_dot_rms_after_fault": float(np.sqrt(np.mean(x[post, ETA1_DOT] ** 2))),
+        "eta_2_dot_rms_after_fault": float(np.sqrt(np.mean(x[post, ETA2_DOT] ** 2))),
+        "Phi_min": float(u[:, 0].min()),
+        "Phi_max": float(u[:, 0].max()),
+        "delta_e_min_deg": float(np.degrees(u[:, 1].min())),
+        "delta_e_max_deg": float(np.degrees(u[:, 1].max())),
+        "input_limit_violations": int(np.count_nonzero(viol.max(axis=1) > 0.0)),
+        "tube_fraction_inside": float(np.mean(lvl <= 1.0))
+        if np.all(np.isfinite(lvl))
+        else math.nan,
+        "tube_level_max": float(np.nanmax(lvl)) if np.any(np.isfinite(lvl)) else math.nan,
+        **(lmi if run.lmi_counts.any() else {}),
+    }

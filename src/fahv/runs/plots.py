@@ -1,0 +1,159 @@
+"""Paper-style figures of closed-loop runs (Yang et al. 2022, Fig. 9-17).
+
+Each function takes runs as ``[(label, RunResult), ...]`` (from ``fahv simulate``,
+``fahv sil`` or a recorded file, :func:`fahv.sim.run_result_of`), overlays them with
+a legend and writes one figure (PNG or PDF by the suffix). Drawing is matplotlib
+(Agg). Time in s, angles in deg.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from fahv.model.vehicle import ALPHA, ETA1, ETA1_DOT, ETA2, ETA2_DOT, THETA, H, Q, V  # noqa: E402
+
+#: Figure groups: name -> (title, [(ylabel, function of a run -> values)]).
+GROUPS = {
+    "trajectory": (
+        "Altitude and velocity",
+        [("h [ft]", lambda r: r.x[:, H]), ("V [ft/s]", lambda r: r.x[:, V])],
+    ),
+    "attitude": (
+        "Angle of attack, pitch angle, pitch rate",
+        [
+            ("alpha [deg]", lambda r: np.degrees(r.x[:, ALPHA])),
+            ("theta [deg]", lambda r: np.degrees(r.x[:, THETA])),
+            ("q [deg/s]", lambda r: np.degrees(r.x[:, Q])),
+        ],
+    ),
+    "flexible": (
+        "Generalised flexible coordinates",
+        [
+            ("eta_1", lambda r: r.x[:, ETA1]),
+            ("eta_1_dot [1/s]", lambda r: r.x[:, ETA1_DOT]),
+            ("eta_2", lambda r: r.x[:, ETA2]),
+            ("eta_2_dot [1/s]", lambda r: r.x[:, ETA2_DOT]),
+        ],
+    ),
+    "flexible_rates": (
+        "Derivatives of the flexible coordinates",
+        [
+            ("eta_1_dot [1/s]", lambda r: r.x[:, ETA1_DOT]),
+            ("eta_2_dot [1/s]", lambda r: r.x[:, ETA2_DOT]),
+        ],
+    ),
+    "inputs": (
+        "Control inputs (controller command)",
+        [("Phi [-]", lambda r: r.u[:, 0]), ("delta_e [deg]", lambda r: np.degrees(r.u[:, 1]))],
+    ),
+    "tube": (
+        "Tube error against Z: e' (tau^2 N)^-1 e (<= 1 inside)",
+        [("tube level", lambda r: r.tube_level)],
+    ),
+}
+
+
+def plot_group(group: str, runs: list, path: str | Path, title: str | None = None) -> Path:
+    """Write one figure group (:data:`GROUPS`) of several runs overlaid.
+
+    Parameters
+    ----------
+    group : str
+        Key of :data:`GROUPS`.
+    runs : list of (str, RunResult)
+    path : path
+        Output file (.png or .pdf).
+    title : str, optional
+        Figure title (default: the group's).
+
+    Raises
+    ------
+    KeyError
+        On an unknown group.
+    ValueError
+        If there is no run.
+    """
+    if not runs:
+        raise ValueError("no run to plot")
+    default_title, panels = GROUPS[group]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(8, 2.3 * len(panels) + 0.8), sharex=True)
+    axes = np.atleast_1d(axes)
+    for ax, (ylabel, fn) in zip(axes, panels, strict=True):
+        for i, (label, run) in enumerate(runs):  # dashes keep overlapping runs visible
+            ax.plot(run.t, fn(run), lw=1.0, ls=LINESTYLES[i % len(LINESTYLES)], label=label)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, alpha=0.3)
+    if group == "trajectory":
+        label0, r0 = runs[0]
+        axes[0].plot(r0.t, r0.h_c, "k--", lw=0.8, label="command")
+        axes[1].plot(r0.t, r0.V_c, "k--", lw=0.8, label="command")
+    if group == "tube":
+        axes[0].axhline(1.0, color="k", ls="--", lw=0.8, label="boundary of Z")
+    axes[0].legend(loc="best", fontsize=8)
+    axes[-1].set_xlabel("t [s]")
+    fig.suptitle(title or default_title)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+#: The paper's simulation figures: number -> (case, group, variants, title).
+PAPER_FIGURES = {
+    9: (
+        "case1",
+        "trajectory",
+        ("tube_mpc", "tube_mpc_no_notch", "rmpc"),
+        "Fig. 9: trajectory, Case 1",
+    ),
+    10: ("case1", "attitude", ("tube_mpc", "tube_mpc_no_notch", "rmpc"), "Fig. 10: states, Case 1"),
+    11: (
+        "case1",
+        "flexible",
+        ("tube_mpc", "tube_mpc_no_notch", "rmpc"),
+        "Fig. 11: flexible coordinates, Case 1",
+    ),
+    12: ("case1", "inputs", ("tube_mpc", "tube_mpc_no_notch", "rmpc"), "Fig. 12: inputs, Case 1"),
+    13: (
+        "case1",
+        "flexible_rates",
+        ("tube_mpc_notch2", "tube_mpc_no_notch", "tube_mpc"),
+        "Fig. 13: flexible rates with the notch on mode 2, Case 1",
+    ),
+    14: ("case2", "trajectory", ("tube_mpc",), "Fig. 14: trajectory, Case 2 (adjustable, tau 0.8)"),
+    15: ("case2", "attitude", ("tube_mpc",), "Fig. 15: states, Case 2"),
+    16: ("case2", "flexible", ("tube_mpc",), "Fig. 16: flexible coordinates, Case 2"),
+    17: ("case2", "inputs", ("tube_mpc",), "Fig. 17: inputs, Case 2"),
+}
+
+#: Legend labels of the variants.
+LABELS = {
+    "tube_mpc": "Tube-MPC + notch",
+    "tube_mpc_no_notch": "Tube-MPC, no notch",
+    "tube_mpc_notch2": "Tube-MPC + notch on mode 2",
+    "rmpc": "RMPC (Kothare)",
+}
+
+
+#: Line style of the i-th run of a figure.
+LINESTYLES = ("-", (0, (5, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)))
+
+
+def paper_figures(runs: dict, out_dir: str | Path) -> list[Path]:
+    """Write Fig. 9-17 from ``{(case, variant): RunResult}``; skips a figure with no run."""
+    out = []
+    for num, (case, group, variants, title) in PAPER_FIGURES.items():
+        sel = [(LABELS.get(v, v), runs[(case, v)]) for v in variants if (case, v) in runs]
+        if sel:
+            out.append(
+                plot_group(group, sel, Path(out_dir) / f"fig{num:02d}_{case}_{group}.png", title)
+            )
+    return out

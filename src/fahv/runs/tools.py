@@ -1,0 +1,435 @@
+"""Inspect, export and compare recorded runs (``fahv inspect``, ``export``, ``compare``).
+
+Works on every run file with our loop topics (:data:`fahv.runlog.TOPICS`): runs of
+the SIL node graph and of the in-process simulator alike. Topics of other programs
+are listed, never decoded; a truncated run is used up to its last complete chunk.
+
+Column names and units of the exported tables come from the message definitions
+(``src/fahv/msg/*.msg``: ``type name  # description [unit]``); array fields are
+split into one column per component named after the state or input
+(``x_r.alpha``, ``u_n.delta_e``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from fahv.errors import RunError
+from fahv.loop.graph import MSG_DIR, TOPICS
+from fahv.model.vehicle import load_vehicle
+from fahv.runs.bag import Recording, run_result_of, step_anomalies
+from fahv.runs.metrics import metrics
+
+#: Rows of the metrics table: (key of :func:`fahv.sim.metrics`, label, format).
+METRIC_ROWS = (
+    ("settling_time_h_s", "settling time h (10 ft) [s]", "{:.1f}"),
+    ("settling_time_V_s", "settling time V (2 ft/s) [s]", "{:.1f}"),
+    ("h_err_final_ft", "h error at the end [ft]", "{:.2f}"),
+    ("V_err_final_fps", "V error at the end [ft/s]", "{:.2f}"),
+    ("h_err_rms_after_settle_ft", "h RMS error after settling [ft]", "{:.2f}"),
+    ("V_err_rms_after_settle_fps", "V RMS error after settling [ft/s]", "{:.2f}"),
+    ("alpha_err_max_deg", "max |alpha - alpha_r| [deg]", "{:.3f}"),
+    ("theta_err_max_deg", "max |theta - theta_r| [deg]", "{:.3f}"),
+    ("attitude_within_0.5deg", "attitude within +/-0.5 deg", "{}"),
+    ("eta_1_dev_peak", "peak |eta_1 - eta_1,r|", "{:.4f}"),
+    ("eta_2_dev_peak", "peak |eta_2 - eta_2,r|", "{:.4f}"),
+    ("eta_1_dot_rms_after_fault", "RMS eta_1_dot after fault [1/s]", "{:.5f}"),
+    ("eta_2_dot_rms_after_fault", "RMS eta_2_dot after fault [1/s]", "{:.5f}"),
+    ("Phi_min", "Phi min", "{:.4f}"),
+    ("Phi_max", "Phi max", "{:.4f}"),
+    ("delta_e_min_deg", "delta_e min [deg]", "{:.3f}"),
+    ("delta_e_max_deg", "delta_e max [deg]", "{:.3f}"),
+    ("input_limit_violations", "steps with a command beyond limits", "{}"),
+    ("tube_fraction_inside", "fraction of steps with e in Z", "{:.4f}"),
+    ("tube_level_max", "max e' Z^-1 e", "{:.4f}"),
+    ("rmpc_lmi_solves", "RMPC LMI solves", "{}"),
+    ("rmpc_lmi_fallback", "RMPC solves via max-margin fallback", "{}"),
+    ("rmpc_lmi_failed", "RMPC solves rejected (gain kept)", "{}"),
+)
+
+#: Component names and units of the state vectors (design-model order, ECM last).
+STATE_COMPONENTS = (
+    ("h", "ft"),
+    ("V", "ft/s"),
+    ("alpha", "rad"),
+    ("theta", "rad"),
+    ("q", "rad/s"),
+    ("eta_1", "-"),
+    ("eta_1_dot", "1/s"),
+    ("eta_2", "-"),
+    ("eta_2_dot", "1/s"),
+    ("x_q1", "-"),
+    ("x_q2", "-"),
+)
+INPUT_COMPONENTS = (("Phi", "-"), ("delta_e", "rad"))
+#: Components of each array field of the loop messages.
+ARRAY_COMPONENTS = {
+    "x_r": STATE_COMPONENTS,
+    "x_n": STATE_COMPONENTS,
+    "e": STATE_COMPONENTS,
+    "u_r": INPUT_COMPONENTS,
+    "u_n": INPUT_COMPONENTS,
+    "x_q": (("x_q1", "-"), ("x_q2", "-")),
+}
+
+_FIELD = re.compile(r"^\s*([\w/]+(?:\[\])?)\s+(\w+)\s*(?:#\s*(.*))?$")
+_UNIT = re.compile(r"\[([^\]]+)\]\s*(?:\(.*\))?\s*$")
+
+
+def format_metrics(table: dict[str, dict]) -> str:
+    """Metrics of several runs as a text table, one column per run.
+
+    Parameters
+    ----------
+    table : dict[str, dict]
+        Column name -> metrics dict (:func:`fahv.sim.metrics`); a missing key or
+        None prints as ``-``.
+    """
+    names = list(table)
+    width = max(12, *(len(n) for n in names))
+    lines = [f"{'metric':<36} " + " ".join(f"{n:>{width}}" for n in names)]
+    for key, label, fmt in METRIC_ROWS:
+        if all(table[n].get(key) is None for n in names):
+            continue
+        cells = []
+        for n in names:
+            v = table[n].get(key)
+            cells.append(f"{'-' if v is None else fmt.format(v):>{width}}")
+        lines.append(f"{label:<36} " + " ".join(cells))
+    return "\n".join(lines)
+
+
+def field_units(msgtype: str) -> dict[str, tuple[str, str]]:
+    """Field -> (unit, description) of a loop message type, from its .msg comments.
+
+    Parameters
+    ----------
+    msgtype : str
+        ``hsv_interfaces/msg/<Name>`` or ``rosgraph_msgs/msg/Clock``.
+
+    Raises
+    ------
+    RunError
+        If the definition file of an ``hsv_interfaces`` type is missing.
+    """
+    if msgtype == "rosgraph_msgs/msg/Clock":
+        return {"t": ("s", "simulated time t_k")}
+    path = MSG_DIR / f"{msgtype.rsplit('/', 1)[1]}.msg"
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise RunError(f"message definition {path} is unreadable: {exc}") from None
+    out = {}
+    for line in text.splitlines():
+        m = _FIELD.match(line)
+        if not m or line.lstrip().startswith("#"):
+            continue
+        desc = (m.group(3) or "").strip()
+        u = _UNIT.search(desc)
+        out[m.group(2)] = (u.group(1) if u else "-", desc)
+    return out
+
+
+def topic_table(rec: Recording, topic: str) -> tuple[dict, dict]:
+    """Columns of one loop topic of a run, one row per message in file order.
+
+    Returns
+    -------
+    columns : dict[str, ndarray or list]
+        Column name -> values (float64/int64/bool arrays, lists of str).
+    meta : dict[str, tuple[str, str]]
+        Column name -> (unit, description).
+
+    Raises
+    ------
+    RunError
+        If ``topic`` is not a loop topic.
+    """
+    if topic not in TOPICS:
+        raise RunError(f"{topic} is not a loop topic: {list(TOPICS)}")
+    msgs = rec.records.get(topic, [])
+    units = field_units(TOPICS[topic])
+    if topic == "/clock":
+        t = np.array([m["clock"]["sec"] + 1e-9 * m["clock"]["nanosec"] for m in msgs], float)
+        return {"t": t}, {"t": units["t"]}
+    names = list(msgs[0]) if msgs else list(units)
+    cols, meta = {}, {}
+    for name in names:
+        unit, desc = units.get(name, ("", ""))
+        values = [m.get(name) for m in msgs]
+        if name in ARRAY_COMPONENTS or (values and isinstance(values[0], np.ndarray)):
+            comps = ARRAY_COMPONENTS.get(name, ())
+            width = max((len(v) for v in values), default=0)
+            for i in range(width):
+                cname, cunit = comps[i] if i < len(comps) else (str(i), unit)
+                col = np.full(len(values), math.nan)
+                for j, v in enumerate(values):
+                    if i < len(v):
+                        col[j] = v[i]
+                cols[f"{name}.{cname}"] = col
+                meta[f"{name}.{cname}"] = (cunit, desc)
+            continue
+        if values and isinstance(values[0], str):
+            cols[name] = [str(v) for v in values]
+        elif values and isinstance(values[0], bool | np.bool_):
+            cols[name] = np.array(values, dtype=bool)
+        elif values and isinstance(values[0], int | np.integer):
+            cols[name] = np.array(values, dtype=np.int64)
+        else:
+            cols[name] = np.array(values, dtype=float)
+        meta[name] = (unit, desc)
+    return cols, meta
+
+
+def table_name(topic: str) -> str:
+    """File stem of a topic's table: ``/hsv/state`` -> ``hsv_state``."""
+    return topic.strip("/").replace("/", "_")
+
+
+def export_run(rec: Recording, out_dir: str | Path, fmt: str = "csv") -> list[Path]:
+    """Write one table per loop topic, a column dictionary and the run metadata.
+
+    Parameters
+    ----------
+    rec : fahv.runlog.Recording
+    out_dir : path
+        Folder to write (created).
+    fmt : {"csv", "parquet"}
+        CSV (header row of column names) or Parquet (each field carries its unit
+        and description as field metadata).
+
+    Returns
+    -------
+    list of Path
+        Files written: ``<topic>.csv|parquet`` per loop topic present,
+        ``columns.csv`` (topic, column, unit, description) and ``run.json``
+        (metadata, topics, schemas).
+
+    Raises
+    ------
+    RunError
+        On an unknown format or when the run holds no loop-topic message.
+    """
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+    import pyarrow.parquet as pq
+
+    if fmt not in ("csv", "parquet"):
+        raise RunError(f"unknown export format '{fmt}': csv or parquet")
+    present = [t for t in TOPICS if rec.records.get(t)]
+    if not present:
+        raise RunError(
+            f"{rec.path}: no message on any loop topic {list(TOPICS)}: nothing to export"
+        )
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written, rows = [], []
+    for topic in present:
+        cols, meta = topic_table(rec, topic)
+        fields, arrays = [], []
+        for name, values in cols.items():
+            arr = pa.array(values)
+            unit, desc = meta[name]
+            fields.append(pa.field(name, arr.type, metadata={"unit": unit, "description": desc}))
+            arrays.append(arr)
+            rows.append({"topic": topic, "column": name, "unit": unit, "description": desc})
+        table = pa.Table.from_arrays(
+            arrays, schema=pa.schema(fields, metadata={"topic": topic, "type": TOPICS[topic]})
+        )
+        path = out / f"{table_name(topic)}.{fmt}"
+        if fmt == "parquet":
+            pq.write_table(table, path)
+        else:
+            pacsv.write_csv(table, path)
+        written.append(path)
+    dictionary = out / "columns.csv"
+    pacsv.write_csv(pa.Table.from_pylist(rows), dictionary)
+    info = out / "run.json"
+    info.write_text(
+        json.dumps(
+            {
+                "source": str(rec.path),
+                "truncated": rec.truncated,
+                "metadata": rec.metadata,
+                "topics": rec.topics,
+                "schemas": rec.schemas,
+            },
+            indent=1,
+        )
+    )
+    return [*written, dictionary, info]
+
+
+def run_metrics(rec: Recording, limits) -> tuple[dict | None, str]:
+    """Metrics of a run, or None and the reason when it holds no complete step.
+
+    Parameters
+    ----------
+    rec : fahv.runlog.Recording
+    limits : fahv.vehicle.InputLimits
+    """
+    run = run_result_of(rec)
+    if run.t.size == 0:
+        return None, "no complete step on every loop topic: no metrics"
+    return metrics(run, limits), f"{run.t.size} complete steps"
+
+
+def summarize(rec: Recording, limits) -> dict:
+    """Everything ``fahv inspect`` reports about a run, as plain JSON-able data.
+
+    Returns
+    -------
+    dict
+        ``file``, ``size_bytes``, ``complete`` (footer read), ``metadata``,
+        ``topics`` (type, count, first_s, last_s, rate_hz in simulated time,
+        ``loop`` whether it is one of ours), ``sim_time_s`` [first, last],
+        ``recorder_anomalies`` (out-of-order arrivals counted by the SIL recorder),
+        ``step_anomalies`` (duplicate / out-of-order / missing step indices per
+        loop topic, from the messages), ``metrics`` (or None) and ``metrics_note``.
+    """
+    topics = {}
+    for name, t in rec.topics.items():
+        first = None if t["first_ns"] is None else t["first_ns"] * 1e-9
+        last = None if t["last_ns"] is None else t["last_ns"] * 1e-9
+        rate = (t["count"] - 1) / (last - first) if t["count"] > 1 and last > first else None
+        topics[name] = {
+            "type": t["type"],
+            "count": t["count"],
+            "first_s": first,
+            "last_s": last,
+            "rate_hz": rate,
+            "loop": name in TOPICS and t["type"] == TOPICS[name],
+        }
+    span = rec.sim_span
+    m, note = run_metrics(rec, limits)
+    recorder = {
+        k.removeprefix("anomalies").replace(".", "/"): int(v)
+        for k, v in rec.metadata.items()
+        if k.startswith("anomalies") and v.lstrip("-").isdigit()
+    }
+    return {
+        "file": str(rec.path),
+        "size_bytes": rec.path.stat().st_size,
+        "complete": not rec.truncated,
+        "metadata": dict(rec.metadata),
+        "topics": topics,
+        "sim_time_s": None if math.isnan(span[0]) else [span[0], span[1]],
+        "recorder_anomalies": recorder,
+        "step_anomalies": {t: v for t, v in step_anomalies(rec).items() if rec.topics.get(t)},
+        "metrics": m,
+        "metrics_note": note,
+    }
+
+
+#: Metadata keys ``fahv inspect`` prints on their own line.
+SUMMARY_KEYS = ("case", "variant", "source", "status", "design_hash", "code_version", "fault")
+
+
+def _fmt(v, spec: str = "{:g}") -> str:
+    return "-" if v is None else spec.format(v)
+
+
+def format_summary(s: dict, column: str | None = None) -> str:
+    """Text report of :func:`summarize` (the metrics table as ``fahv sil`` prints it).
+
+    ``column``: header of the metrics column (default: the run's variant).
+    """
+    md = s["metadata"]
+    lines = [
+        f"run           {s['file']} ({s['size_bytes'] / 1e6:.2f} MB, "
+        f"{'complete' if s['complete'] else 'TRUNCATED: read up to the last complete chunk'})",
+    ]
+    for key in SUMMARY_KEYS:
+        if key in md:
+            lines.append(f"{key:<13} {md[key]}")
+    extra = sorted(k for k in md if k not in SUMMARY_KEYS and not k.startswith("anomalies"))
+    if extra:
+        lines.append("metadata      " + ", ".join(f"{k}={md[k]}" for k in extra))
+    span = s["sim_time_s"]
+    lines.append(
+        "sim time      " + ("no messages" if span is None else f"{span[0]:g} .. {span[1]:g} s")
+    )
+    lines.append("")
+    width = max([len(t) for t in s["topics"]] + [5])
+    lines.append(f"{'topic':<{width}}  {'type':<38} {'count':>7} {'rate [Hz]':>10}  loop")
+    for name, t in s["topics"].items():
+        lines.append(
+            f"{name:<{width}}  {t['type']:<38} {t['count']:>7} "
+            f"{_fmt(t['rate_hz'], '{:.2f}'):>10}  {'yes' if t['loop'] else 'no (not decoded)'}"
+        )
+    lines.append("")
+    bad = {t: {k: n for k, n in v.items() if n} for t, v in s["step_anomalies"].items()}
+    for t, n in s["recorder_anomalies"].items():
+        bad.setdefault(t, {})["recorder out-of-order"] = n
+    bad = {t: v for t, v in bad.items() if any(v.values())}
+    if bad:
+        lines.append("step anomalies:")
+        lines += [
+            f"  {t}: " + ", ".join(f"{k} {n}" for k, n in v.items() if n) for t, v in bad.items()
+        ]
+    else:
+        lines.append("step anomalies: none (no duplicate, out-of-order or missing step)")
+    lines.append("")
+    if s["metrics"] is None:
+        lines.append(f"metrics: {s['metrics_note']}")
+    else:
+        lines.append(f"metrics ({s['metrics_note']}):")
+        lines.append(format_metrics({column or md.get("variant", "run"): s["metrics"]}))
+    return "\n".join(lines)
+
+
+def compare(a: dict, b: dict, names: tuple[str, str]) -> dict:
+    """Metric differences of two runs.
+
+    Parameters
+    ----------
+    a, b : dict
+        :func:`summarize` of each run (metrics must exist).
+    names : (str, str)
+        Column names of the runs.
+
+    Returns
+    -------
+    dict
+        ``table``: {name_a: metrics, name_b: metrics, "B - A": differences of the
+        numeric metrics}; ``metadata``: keys whose values differ, as (a, b).
+
+    Raises
+    ------
+    RunError
+        If a run has no metrics.
+    """
+    for s, n in ((a, names[0]), (b, names[1])):
+        if s["metrics"] is None:
+            raise RunError(f"{n}: {s['metrics_note']}")
+    ma, mb = a["metrics"], b["metrics"]
+    diff = {}
+    for k in ma.keys() | mb.keys():
+        va, vb = ma.get(k), mb.get(k)
+        numeric = all(isinstance(v, int | float) and not isinstance(v, bool) for v in (va, vb))
+        diff[k] = vb - va if numeric else None
+    keys = sorted(
+        k
+        for k in a["metadata"].keys() | b["metadata"].keys()
+        if a["metadata"].get(k) != b["metadata"].get(k)
+    )
+    return {
+        "table": {names[0]: ma, names[1]: mb, "B - A": diff},
+        "metadata": {k: (a["metadata"].get(k), b["metadata"].get(k)) for k in keys},
+    }
+
+
+def run_vehicle(rec: Recording):
+    """The vehicle a recorded run was made with (metadata ``vehicle_file``; packaged if "").
+
+    Raises
+    ------
+    VehicleDataError
+        If the recorded vehicle file is gone or invalid (the message names it).
+    """
+    return load_vehicle(rec.metadata.get("vehicle_file") or None)

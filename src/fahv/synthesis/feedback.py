@@ -1,0 +1,260 @@
+"""Robust feedback gain F (LMI 24) and the robust positively invariant tube Z (eq. 25-28).
+
+Z shape. The paper's box Z = {|e| <= z} (eq. 25) is RPI for e+ = A_cl,i e + w,
+w in W, iff |A_cl,i| z + w_max <= z for every vertex i (eq. 26-28 by Farkas' lemma),
+which needs the spectral radius of |A_cl,i| below 1 -- a property of the
+coordinates, not of stability. On this vehicle it fails (see :func:`box_tube`), so
+the tube used is an ellipsoid Z = {e : e' N^-1 e <= 1} designed jointly with F::
+
+    [[lam N, 0,        (A_i N + B_i M)'],
+     [0,     diag(mu), I               ],      >= 0  for every vertex i,
+     [A_i N + B_i M, I, N              ]]
+    sum_j mu_j w_j^2 <= 1 - lam,   F = M N^-1.
+
+By the S-procedure this gives (A_cl e + w)' N^-1 (A_cl e + w) <= lam e'N^-1 e +
+sum mu_j w_j^2 <= 1 for every e in Z and |w_j| <= w_j: Z is RPI for the whole box W
+and all vertices. Deleting the middle row and column leaves
+[[lam N, (A_i N + B_i M)'], [A_i N + B_i M, N]] >= 0, i.e. LMI (24) with a decay
+rate lam < 1, so F stabilises every vertex.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import cvxpy as cp
+import numpy as np
+
+from fahv.errors import DesignError
+from fahv.synthesis.lmi import SDP_SOLVER, require_psd, scale_vertices
+
+
+@dataclass(frozen=True)
+class TubeDesign:
+    """Robust feedback gain and invariant tube (unscaled units).
+
+    Attributes
+    ----------
+    F : (m, n) ndarray
+        Auxiliary feedback gain of eq. (21)/(36).
+    N : (n, n) ndarray
+        Shape matrix of Z = {e : e' N^-1 e <= 1}.
+    lam : float
+        Contraction factor of the S-procedure certificate.
+    mu : (n,) ndarray
+        S-procedure multipliers (scaled coordinates).
+    w_max : (n,) ndarray
+        Half-widths of the box W the tube was designed for.
+    tightening : (m,) ndarray
+        max over Z of |(F e)_j| = sqrt(F_j N F_j'), eq. (30).
+    z_box : (n,) ndarray
+        Half-widths of the smallest box containing Z: sqrt(diag N).
+    min_eigs : (R,) ndarray
+        Smallest eigenvalue of each vertex LMI after the solve (scaled).
+    """
+
+    F: np.ndarray
+    N: np.ndarray
+    lam: float
+    mu: np.ndarray
+    w_max: np.ndarray
+    tightening: np.ndarray
+    z_box: np.ndarray
+    min_eigs: np.ndarray
+
+    def contains(self, e: np.ndarray, scale: float = 1.0) -> bool:
+        """True if the error e (n,) lies in scale * Z."""
+        return float(e @ np.linalg.solve(self.N, e)) <= scale**2 * (1.0 + 1e-9)
+
+
+def _rpi_matrix(Acl, lam, mu, N):
+    n = N.shape[0]
+    top = np.hstack([lam * N, np.zeros((n, n)), (Acl @ N).T])
+    mid = np.hstack([np.zeros((n, n)), np.diag(mu), np.eye(n)])
+    bot = np.hstack([Acl @ N, np.eye(n), N])
+    return np.vstack([top, mid, bot])
+
+
+def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
+    """Re-check the RPI certificate of ``tube`` numerically for every vertex.
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+        Discrete vertices (unscaled).
+    tube : TubeDesign
+    Dx : (n,) ndarray
+    Du : (m,) ndarray
+        Scaling used for the design.
+
+    Returns
+    -------
+    (R,) ndarray
+        Smallest eigenvalue of each vertex certificate (scaled).
+
+    Raises
+    ------
+    DesignError
+        If lam is not in (0, 1), sum mu_j w_j^2 > 1 - lam, N is not positive
+        definite, or a vertex certificate matrix has a negative eigenvalue.
+    """
+    As, Bs = scale_vertices(A, B, Dx, Du)
+    Ns = tube.N / np.outer(Dx, Dx)
+    Fs = tube.F * Dx[None, :] / Du[:, None]
+    ws = tube.w_max / Dx
+    if not 0.0 < tube.lam < 1.0:
+        raise DesignError(f"certificate failed: contraction lam = {tube.lam} not in (0, 1)")
+    budget = float(tube.mu @ ws**2)
+    if budget > (1.0 - tube.lam) * (1 + 1e-9):
+        raise DesignError(f"certificate failed: sum mu w^2 = {budget:.6g} > 1 - lam")
+    if np.any(tube.mu < -1e-12):
+        raise DesignError("certificate failed: negative S-procedure multiplier")
+    require_psd(Ns, "tube shape matrix N")
+    eigs = []
+    for i in range(As.shape[0]):
+        Acl = As[i] + Bs[i] @ Fs
+        eigs.append(
+            require_psd(
+                _rpi_matrix(Acl, tube.lam, tube.mu, Ns), f"RPI LMI at vertex {i}", rtol=1e-12
+            )
+        )
+    return np.array(eigs)
+
+
+def design_tube(
+    A, B, w_max, Dx, Du, u_room, lam_grid=(0.9, 0.95, 0.97, 0.98, 0.99, 0.995), state_weight=None
+) -> TubeDesign:
+    """Design F and the ellipsoidal RPI tube Z for the box W = {|w| <= w_max}.
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+        Discrete polytope vertices (unscaled), eq. (12).
+    w_max : (n,) array_like
+        Half-widths of W (unscaled), eq. (19).
+    Dx : (n,) ndarray
+    Du : (m,) ndarray
+        State and input scaling.
+    u_room : (m,) array_like
+        Input room around trim (unscaled); the objective is the tightening
+        sum_j (max_Z |F_j e| / u_room_j)^2, i.e. eq. (30) kept as small as possible.
+    lam_grid : sequence of float
+        Contraction factors tried (the LMI is linear for fixed lam).
+    state_weight : (n,) array_like, optional
+        Weight of diag(N) (scaled) in the objective: smaller attitude tubes.
+
+    Returns
+    -------
+    TubeDesign
+        Certified by :func:`verify_tube`.
+
+    Raises
+    ------
+    DesignError
+        If no lam gives a feasible LMI or the certificate check fails.
+    """
+    As, Bs = scale_vertices(np.asarray(A), np.asarray(B), Dx, Du)
+    R, n, m = Bs.shape
+    ws = np.asarray(w_max, float) / Dx
+    room = np.asarray(u_room, float) / Du
+    sw = np.ones(n) * 1e-3 if state_weight is None else np.asarray(state_weight, float)
+    best = None
+    for lam in lam_grid:
+        N = cp.Variable((n, n), symmetric=True)
+        M = cp.Variable((m, n))
+        mu = cp.Variable(n, nonneg=True)
+        t = cp.Variable(m)
+        eps = 1e-5  # strict margin, so the solver's tolerance cannot break the check
+        cons = [N >> eps * np.eye(n), mu @ (ws**2) <= (1.0 - lam) * (1.0 - 1e-6)]
+        for i in range(R):
+            AN = As[i] @ N + Bs[i] @ M
+            blk = cp.bmat(
+                [
+                    [lam * N, np.zeros((n, n)), AN.T],
+                    [np.zeros((n, n)), cp.diag(mu), np.eye(n)],
+                    [AN, np.eye(n), N],
+                ]
+            )
+            cons.append(0.5 * (blk + blk.T) >> eps * np.eye(3 * n))
+        for j in range(m):
+            blk = cp.bmat(
+                [[cp.reshape(t[j], (1, 1), order="F"), M[j : j + 1, :]], [M[j : j + 1, :].T, N]]
+            )
+            cons.append(0.5 * (blk + blk.T) >> 0)
+        obj = cp.Minimize(cp.sum(cp.multiply(t, 1.0 / room**2)) + sw @ cp.diag(N))
+        prob = cp.Problem(obj, cons)
+        try:
+            prob.solve(solver=SDP_SOLVER)
+        except cp.error.SolverError:
+            continue
+        if prob.status not in ("optimal", "optimal_inaccurate"):
+            continue
+        if best is None or prob.value < best[0]:
+            best = (prob.value, lam, N.value, M.value, mu.value)
+    if best is None:
+        raise DesignError(
+            "tube LMI (24) with RPI condition is infeasible for every lam in "
+            f"{list(lam_grid)}: W is too large for any common ellipsoidal tube"
+        )
+    _, lam, Ns, Ms, mus = best
+    Ns = 0.5 * (Ns + Ns.T)
+    Fs = Ms @ np.linalg.inv(Ns)
+    F = Fs * Du[:, None] / Dx[None, :]
+    N = Ns * np.outer(Dx, Dx)
+    mus = np.maximum(mus, 0.0)
+    tube = TubeDesign(
+        F=F,
+        N=N,
+        lam=float(lam),
+        mu=mus,
+        w_max=np.asarray(w_max, float),
+        tightening=np.sqrt(np.einsum("ij,jk,ik->i", F, N, F)),
+        z_box=np.sqrt(np.diag(N)),
+        min_eigs=np.zeros(R),
+    )
+    eigs = verify_tube(A, B, tube, Dx, Du)
+    return dataclasses.replace(tube, min_eigs=eigs)
+
+
+@dataclass(frozen=True)
+class BoxTubeResult:
+    """Outcome of the paper's box-shaped tube (eq. 25-28) for a given F.
+
+    Attributes
+    ----------
+    feasible : bool
+    z : (n,) ndarray or None
+        Half-widths of the minimal box RPI set (unscaled) when feasible.
+    spectral_radius_abs : (R,) ndarray
+        rho(|A_i + B_i F|) in scaled coordinates; a box exists only if all < 1.
+    """
+
+    feasible: bool
+    z: np.ndarray | None
+    spectral_radius_abs: np.ndarray
+
+
+def box_tube(A, B, F, w_max, Dx, Du) -> BoxTubeResult:
+    """Smallest box Z = {|e| <= z} with |A_cl,i| z + w_max <= z for all i (eq. 25-28).
+
+    Solved as the LP min sum z (eq. 28: Farkas' lemma turns the robust constraint (27)
+    into this linear one for a box) with cvxpy/HiGHS in scaled coordinates. The result
+    is re-checked elementwise.
+    """
+    As, Bs = scale_vertices(np.asarray(A), np.asarray(B), Dx, Du)
+    Fs = F * Dx[None, :] / Du[:, None]
+    ws = np.asarray(w_max, float) / Dx
+    absA = [np.abs(As[i] + Bs[i] @ Fs) for i in range(As.shape[0])]
+    rho = np.array([max(abs(np.linalg.eigvals(a))) for a in absA])
+    z = cp.Variable(ws.size)
+    prob = cp.Problem(cp.Minimize(cp.sum(z)), [a @ z + ws <= z for a in absA] + [z >= 0])
+    prob.solve(solver="HIGHS")
+    if prob.status != "optimal":
+        return BoxTubeResult(False, None, rho)
+    zs = z.value
+    if any(np.any(a @ zs + ws > zs * (1 + 1e-9) + 1e-12) for a in absA):
+        raise DesignError("certificate failed: box tube LP solution is not invariant")
+    return BoxTubeResult(True, zs * Dx, rho)

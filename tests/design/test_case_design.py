@@ -1,0 +1,146 @@
+"""Case files, the offline design of a case and its artefacts, and a short closed loop."""
+
+import copy
+
+import numpy as np
+import pytest
+
+from fahv.design.artefacts import load_design, save_design
+from fahv.design.case import case_from_mapping, load_case
+from fahv.design.pipeline import run_design
+from fahv.errors import CaseError, DesignError
+from fahv.loop.params import node_parameters
+from fahv.loop.simulate import simulate
+from fahv.model.vehicle import load_vehicle
+from fahv.runs.metrics import metrics
+
+
+def test_case_files_load():
+    for path in ("offline_design/case1.yaml", "offline_design/case2.yaml"):
+        c = load_case(path)
+        assert c["Ts"] == 0.02
+    assert load_case("offline_design/case2.yaml")["tube"]["tau"] == 0.8
+
+
+@pytest.mark.parametrize(
+    "mutate, match",
+    [
+        (lambda d: d.update(extra=1), "unknown key 'extra'"),
+        (lambda d: d["notch"].pop("eps_p"), "missing key 'notch.eps_p'"),
+        (lambda d: d["command"].update(h0="high"), "'command.h0' must be float"),
+        (lambda d: d.update(Ts=0.5), "'Ts' must be in"),
+        (lambda d: d.update(Ts=0.0), "'Ts' must be in"),
+        # a Ts the design cannot meet: notch above the Nyquist frequency pi/Ts
+        (lambda d: d["notch"].update(omega_z=200.0), "'notch.omega_z' must be below the Nyquist"),
+        (lambda d: d.update(vertices=[4]), "'vertices' must have 2 entries"),
+        (lambda d: d["tube"].update(tau=1.5), "'tube.tau'"),
+        (lambda d: d["fault"].update(kind="fire"), "'fault.kind'"),
+        (lambda d: d.update(variants=["magic"]), "'variants'"),
+        (lambda d: d["command"].update(V0=float("nan")), "'command.V0' must be finite"),
+        (lambda d: d["fault"].update(rho_f=1.5), r"'fault.rho_f' must be in \(0, 1\]"),
+        (lambda d: d["fault"].pop("rho_f"), "missing key 'fault.rho_f' .required when kind is"),
+        (lambda d: d.pop("rmpc"), "missing section 'rmpc' .required when a variant uses"),
+        (lambda d: d["disturbance"].update(sample=3), "unknown key 'disturbance.sample'"),
+        (lambda d: d.pop("Ts"), "missing key 'Ts'"),
+    ],
+)
+def test_bad_case_rejected_naming_key(raw, mutate, match):
+    d = copy.deepcopy(raw)
+    mutate(d)
+    with pytest.raises(CaseError, match=match):
+        case_from_mapping(d, "bad.yaml")
+
+
+def test_missing_or_broken_case_file(tmp_path):
+    with pytest.raises(CaseError, match="not found"):
+        load_case(tmp_path / "nope.yaml")
+    p = tmp_path / "broken.yaml"
+    p.write_text("name: [unclosed\n")
+    with pytest.raises(CaseError, match="not a valid YAML"):
+        load_case(p)
+
+
+def test_vertex_count_beyond_samples_rejected(make_case):
+    c = make_case(vertices=[30, 5])
+    with pytest.raises(DesignError, match="vertices"):
+        run_design(c, log=lambda *_: None)
+
+
+def test_infeasible_design_writes_nothing(make_case, tmp_path, monkeypatch):
+    """No tube fits (input room shrunk to nothing): error names eq. (30), no artefact."""
+    import fahv.design.pipeline as dmod
+
+    monkeypatch.setattr(dmod, "input_room", lambda veh: np.array([1e-3, 1e-4]))
+    out = tmp_path / "art"
+    with pytest.raises(DesignError, match=r"eq\. 30|U minus F Z|infeasible|certificate failed"):
+        save_design(run_design(make_case(), log=lambda *_: None), out)
+    assert not out.exists()
+
+
+def test_design_certificates_and_artefacts(design, tmp_path):
+    s = design.summary
+    assert s["tube"]["min_eig"] > 0.0
+    assert s["nominal"]["contraction"] < 1.0
+    assert s["nominal"]["input_ratio"] <= 1.0
+    assert 0.2 < s["nominal"]["s"] <= 1.0
+    assert design.arrays["A"].shape == (20, 9, 9)
+    # tightened room is positive and smaller than the room (eq. 30)
+    assert np.all(design.arrays["u_n_max"] > 0)
+    assert np.all(design.arrays["u_n_max"] < design.arrays["u_room"])
+    out = save_design(design, tmp_path / "case1")
+    back = load_design(out)
+    assert back.summary["design_hash"] == design.summary["design_hash"]
+    np.testing.assert_array_equal(back.arrays["F"], design.arrays["F"])
+    # tampering is detected by the hash
+    z = dict(back.arrays)
+    z["F"] = z["F"] * 1.01
+    np.savez(out / "design.npz", **z)
+    with pytest.raises(DesignError, match="hash"):
+        load_design(out)
+
+
+def test_ros_parameter_file(design):
+    p = node_parameters(design)
+    tm = p["tube_mpc"]
+    assert tm["F_shape"] == [2, 9]
+    np.testing.assert_allclose(np.reshape(tm["F"], tm["F_shape"]), design.arrays["F"])
+    assert set(p) == {"plant", "fault_injector", "notch_filter", "nominal_trajectory", "tube_mpc"}
+
+
+def test_short_closed_loop(design):
+    """10 s of Case 1 with the notch: inside the tube, within limits, climbing."""
+    run = simulate(design, "tube_mpc", duration=10.0)
+    m = metrics(run, load_vehicle().limits, design.case["fault"]["t_onset"])
+    assert run.x.shape == (500, 9)
+    assert m["tube_fraction_inside"] == 1.0
+    assert m["input_limit_violations"] == 0
+    assert m["alpha_err_max_deg"] < 0.5
+    assert run.x[-1, 0] > 85500.0 + 1.0 and run.x[-1, 1] > 7900.0 + 5.0
+    # the governor never lets the nominal state leave E(Q)
+    lv = np.einsum("ki,ij,kj->k", run.x_n, np.linalg.inv(design.arrays["Q"]), run.x_n)
+    assert lv.max() <= design.case["nominal"]["level_max"] * (1 + 1e-9)
+
+
+def test_defaulted_knobs_may_be_omitted(raw):
+    """Only the physics and the scenario are required: knobs default, and are reported."""
+    d = copy.deepcopy(raw)
+    for key in ("samples", "trim_grid", "plant_substeps", "disturbance", "nominal"):
+        d.pop(key)
+    for key in ("vertices", "resolve_every"):
+        d["rmpc"].pop(key)
+    d["tube"].pop("lam")
+    c = case_from_mapping(d, "lean.yaml")
+    full = case_from_mapping(raw, "full.yaml")
+    assert c.data == full.data  # case1.yaml sets every knob to its default
+    assert c.defaults_used["disturbance.samples"] == 300
+    assert c.defaults_used["rmpc.resolve_every"] == 250
+    assert set(c.defaults_used) >= {"samples", "trim_grid", "tube.lam", "nominal.lam"}
+    assert full.defaults_used == {}
+
+
+def test_section_only_required_when_used(raw):
+    d = copy.deepcopy(raw)
+    d["variants"] = ["tube_mpc"]
+    d.pop("rmpc")
+    c = case_from_mapping(d, "no_rmpc.yaml")
+    assert "rmpc" not in c.data

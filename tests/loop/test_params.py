@@ -1,0 +1,69 @@
+"""Node parameters: the checks every node runs at start-up, and the variants."""
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from fahv.errors import ParameterError
+from fahv.loop.cores import build_core
+from fahv.loop.params import node_parameters, validate
+
+
+@pytest.fixture(scope="module")
+def params(design):
+    return node_parameters(design)
+
+
+def test_every_node_validates(params):
+    for node, values in params.items():
+        out = validate(node, values)
+        assert out["Ts"] == 0.02
+    assert validate("tube_mpc", params["tube_mpc"])["F"].shape == (2, 9)
+
+
+@pytest.mark.parametrize(
+    ("node", "key", "value", "message"),
+    [
+        ("tube_mpc", "F_shape", [2, 8], "parameter 'F' has 18 values, but 'F_shape' = \\[2, 8\\]"),
+        ("tube_mpc", "N_shape", [3, 3], "parameter 'N'"),
+        ("tube_mpc", "tau", 1.5, r"parameter 'tau' must be in \(0, 1\], got 1.5"),
+        ("tube_mpc", "law", "pid", "parameter 'law' must be one of"),
+        ("notch_filter", "omega_z", "fast", "parameter 'omega_z' must be float"),
+        ("fault_injector", "rho_f", None, "parameter 'rho_f' is missing"),
+        ("plant", "x0_shape", [8], "parameter 'x0' has 9 values"),
+        ("nominal_trajectory", "K_shape", [9, 2], "parameter 'K' has shape \\(9, 2\\)"),
+    ],
+)
+def test_bad_parameter_names_the_key(params, node, key, value, message):
+    bad = copy.deepcopy(params[node])
+    bad[key] = value
+    with pytest.raises(ParameterError, match=message):
+        validate(node, bad)
+
+
+def test_nan_in_a_matrix_is_rejected(params):
+    bad = copy.deepcopy(params["tube_mpc"])
+    bad["F"][3] = math.nan
+    with pytest.raises(ParameterError, match="parameter 'F' has a non-finite value at index 3"):
+        build_core("tube_mpc", bad)
+
+
+def test_variants(design):
+    no_notch = node_parameters(design, "tube_mpc_no_notch")
+    assert no_notch["notch_filter"]["enabled"] is False
+    assert (
+        build_core("notch_filter", no_notch["notch_filter"]).on_state(
+            {"k": 0, "t": 0.0, "q": 0.25}
+        )["q_f"]
+        == 0.25
+    )
+    notch2 = node_parameters(design, "tube_mpc_notch2")["notch_filter"]
+    assert notch2["omega_z"] == pytest.approx(design.arrays["omega_flex"][1], rel=1e-12)
+    rmpc = node_parameters(design, "rmpc")
+    assert "rmpc" in rmpc and "tube_mpc" not in rmpc
+    assert rmpc["nominal_trajectory"]["mode"] == "command"
+    assert np.asarray(rmpc["rmpc"]["rmpc_A"]).size == 20 * 81
+    with pytest.raises(ParameterError, match="variant 'pid'"):
+        node_parameters(design, "pid")

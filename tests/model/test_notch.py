@@ -1,0 +1,60 @@
+"""Notch filter, eq. (37)-(39)."""
+
+import numpy as np
+import pytest
+
+from fahv.model.notch import DiscreteNotch, NotchFilter
+
+
+def test_notch_depth_and_passband():
+    nf = NotchFilter(20.0, 0.02, 20.0, 0.5)
+    mag = nf.magnitude([0.1, 20.0, 500.0])
+    assert mag[1] == pytest.approx(0.02 / 0.5, rel=1e-9)  # depth eps_z / eps_p at omega_z
+    assert mag[0] == pytest.approx(1.0, abs=1e-3)  # unity far below
+    assert mag[2] == pytest.approx(1.0, abs=1e-2)  # and far above the notch
+
+
+def test_state_space_matches_tf():
+    nf = NotchFilter(19.0, 0.03, 22.0, 0.6)
+    A, B, C, D = nf.ss()
+    for w in (1.0, 19.0, 40.0):
+        s = 1j * w
+        H_ss = C @ np.linalg.solve(s * np.eye(2) - A, B) + D
+        H_tf = (s**2 / 19**2 + 2 * 0.03 * s / 19 + 1) / (s**2 / 22**2 + 2 * 0.6 * s / 22 + 1)
+        assert H_ss == pytest.approx(H_tf, rel=1e-10)
+
+
+def test_discrete_notch_kills_sinusoid_at_centre():
+    Ts, w = 0.02, 19.05
+    nf = DiscreteNotch(NotchFilter(w, 0.0, w, 0.5), Ts)
+    t = np.arange(0, 20, Ts)
+    y = np.array([nf.step(np.sin(w * tk)) for tk in t])
+    # tustin with prewarp places the zero exactly at w: residual from the transient only
+    assert np.max(np.abs(y[t > 10])) < 1e-3
+    nf2 = DiscreteNotch(NotchFilter(w, 0.0, w, 0.5), Ts)
+    y2 = np.array([nf2.step(np.sin(2.0 * tk)) for tk in t])
+    assert np.max(np.abs(y2[t > 10])) == pytest.approx(1.0, abs=0.02)  # 2 rad/s passes
+
+
+def test_bad_parameters():
+    with pytest.raises(ValueError, match="omega_z"):
+        NotchFilter(-1.0, 0.02, 20.0, 0.5)
+    with pytest.raises(ValueError, match="Nyquist"):
+        NotchFilter(200.0, 0.02, 200.0, 0.5).discretize(0.02)
+    with pytest.raises(ValueError, match="must be finite"):
+        DiscreteNotch(NotchFilter(20.0, 0.02, 20.0, 0.5), 0.02).step(float("nan"))
+
+
+def test_discrete_notch_matches_python_control_tustin():
+    """The trapezoidal form has the transfer function of control.c2d(tustin, prewarp)."""
+    import control
+
+    nf = NotchFilter(19.05, 0.02, 19.05, 0.5)
+    Ts = 0.02
+    ref = nf.discretize(Ts)
+    f = DiscreteNotch(nf, Ts)
+    # impulse response of both, 200 samples
+    y = [f.step(1.0 if k == 0 else 0.0) for k in range(200)]
+    _, y_ref = control.impulse_response(ref, T=np.arange(200) * Ts)
+    # python-control scales a discrete impulse response by 1/Ts (unit-area impulse)
+    np.testing.assert_allclose(y, np.ravel(y_ref) * Ts, atol=1e-9)

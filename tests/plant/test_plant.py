@@ -1,0 +1,85 @@
+"""Plant integrator, parameter perturbation and fault models."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from fahv.errors import ConfigError
+from fahv.model.dynamics import cm_rhs
+from fahv.model.trim import trim
+from fahv.plant.faults import FaultInjector, LossOfEffectiveness, make_fault
+from fahv.plant.integrator import Plant, rk4_step
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturb
+
+
+def test_rk4_matches_adaptive_reference(vehicle):
+    tp = trim(vehicle, 85500.0, 7900.0)
+    x0 = tp.x_r + np.array([0, 0, 1e-3, 0, 2e-3, 0.05, 0, 0.01, 0])
+    u = tp.u_r + np.array([0.01, -0.005])
+    # 0.2 s with Ts = 0.02 s, 10 RK4 steps per period (dt = 2 ms, omega_2 dt = 0.1)
+    x = x0.copy()
+    for _ in range(10):
+        x = rk4_step(lambda a, b: cm_rhs(a, b, vehicle.params), x, u, 0.02, 10)
+    ref = solve_ivp(
+        lambda t, y: cm_rhs(y, u, vehicle.params),
+        (0, 0.2),
+        x0,
+        rtol=1e-11,
+        atol=1e-12,
+        method="DOP853",
+    ).y[:, -1]
+    err = np.abs(x - ref) / vehicle.state_scale
+    # RK4 phase error of mode 2: (omega_2 dt)^4 / 120 * omega_2 t = 8e-6 rad times an
+    # eta_2_dot amplitude of ~0.05 -> ~4e-7 (measured 3.4e-7); rigid states ~1e-11
+    assert err.max() < 1e-6
+    assert err[:4].max() < 1e-9
+
+
+def test_trim_is_equilibrium_of_plant(vehicle):
+    tp = trim(vehicle, 85500.0, 7900.0, "cm")
+    p = Plant(vehicle.params, vehicle.limits, tp.x_r, 0.02, 10)
+    for _ in range(50):
+        p.step(tp.u_r)
+    # 1 s; the unstable short period (+1.7 1/s) amplifies rounding only to ~1e-12
+    assert np.max(np.abs(p.x - tp.x_r) / vehicle.state_scale) < 1e-8
+
+
+def test_plant_saturates_and_rejects_bad_input(vehicle):
+    tp = trim(vehicle, 85500.0, 7900.0)
+    p = Plant(vehicle.params, vehicle.limits, tp.x_r, 0.02, 10)
+    with pytest.raises(ValueError, match="finite"):
+        p.step(np.array([np.nan, 0.2]))
+    with pytest.raises(ValueError, match="9 finite values"):
+        Plant(vehicle.params, vehicle.limits, np.zeros(8), 0.02, 10)
+
+
+def test_perturb_box(vehicle):
+    signs = {k: 1.0 for k in PAPER_UNCERTAINTY}
+    vp = perturb(vehicle.params, PAPER_UNCERTAINTY, signs)
+    assert vp.m == pytest.approx(330.0, rel=1e-12)
+    assert vp.c_e == pytest.approx(-1.2897 * 1.03, rel=1e-12)
+    assert vp.beta_2 == vehicle.params.beta_2  # not in the box
+    with pytest.raises(ValueError, match="unknown parameter 'mass'"):
+        perturb(vehicle.params, {"mass": 0.1}, {})
+
+
+def test_fault_models():
+    u = np.array([0.3, 0.2])
+    loe = FaultInjector(make_fault("loss_of_effectiveness", 100.0, {"rho_f": 0.9}))
+    np.testing.assert_allclose(loe.apply(99.98, u), u)
+    np.testing.assert_allclose(loe.apply(100.0, u), [0.3, 0.18])  # whole deflection scaled
+    stuck = FaultInjector(make_fault("stuck", 1.0, {}))
+    stuck.apply(0.5, np.array([0.3, 0.1]))
+    assert stuck.apply(1.0, np.array([0.3, 0.25]))[1] == pytest.approx(0.1)
+    assert stuck.apply(2.0, np.array([0.3, -0.2]))[1] == pytest.approx(0.1)
+    bias = FaultInjector(make_fault("bias", 0.0, {"bias_deg": math.degrees(0.01)}))
+    assert bias.apply(0.0, u)[1] == pytest.approx(0.21)
+    drop = FaultInjector(make_fault("dropout", 1.0, {}))
+    drop.apply(0.9, np.array([0.3, 0.1]))
+    np.testing.assert_allclose(drop.apply(1.0, np.array([0.5, 0.3])), [0.3, 0.1])
+    with pytest.raises(ConfigError, match="needs parameter"):
+        LossOfEffectiveness(0.0)
+    with pytest.raises(ConfigError, match="unknown fault kind 'melted'"):
+        make_fault("melted", 0.0, {})

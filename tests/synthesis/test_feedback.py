@@ -1,0 +1,104 @@
+"""Tube design: F (LMI 24), ellipsoidal RPI Z, the paper's box LP, and failing certificates."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fahv.errors import DesignError
+from fahv.synthesis.feedback import box_tube, design_tube, verify_tube
+
+# two-vertex unstable discrete system, 2 states, 1 input
+A = np.array([[[1.05, 0.1], [0.0, 0.98]], [[1.02, 0.12], [0.02, 0.95]]])
+B = np.array([[[0.0], [0.1]], [[0.0], [0.12]]])
+W = np.array([0.01, 0.02])
+ONE2, ONE1 = np.ones(2), np.ones(1)
+
+
+@pytest.fixture(scope="module")
+def tube():
+    return design_tube(A, B, W, ONE2, ONE1, np.array([1.0]), lam_grid=(0.8, 0.9, 0.95))
+
+
+def test_tube_certificate_and_stability(tube):
+    assert 0 < tube.lam < 1
+    assert tube.min_eigs.min() >= -1e-9
+    for i in range(2):
+        rho = max(abs(np.linalg.eigvals(A[i] + B[i] @ tube.F)))
+        assert rho < 1.0  # LMI (24) implies a stabilising F at every vertex
+
+
+def test_tube_is_invariant_by_sampling(tube):
+    """e on the boundary of Z, w at the vertices of W, any vertex: e+ stays in Z."""
+    rng = np.random.default_rng(3)
+    L = np.linalg.cholesky(tube.N)
+    worst = 0.0
+    for _ in range(300):
+        d = rng.normal(size=2)
+        e = L @ (d / np.linalg.norm(d))
+        for _ in range(2):
+            for s in ([1, 1], [1, -1], [-1, 1], [-1, -1]):
+                # convex combinations of the vertices are covered by the LMI too
+                th = rng.uniform()
+                Acl = th * (A[0] + B[0] @ tube.F) + (1 - th) * (A[1] + B[1] @ tube.F)
+                ep = Acl @ e + np.array(s) * W
+                worst = max(worst, float(ep @ np.linalg.solve(tube.N, ep)))
+    assert worst <= 1.0 + 1e-9
+
+
+def test_contains_boundary_and_outside(tube):
+    L = np.linalg.cholesky(tube.N)
+    e = L @ np.array([0.6, 0.8])  # on the boundary of Z (unit vector mapped by L)
+    assert tube.contains(e)
+    assert not tube.contains(1.01 * e)
+    assert tube.contains(0.5 * e, scale=0.5) and not tube.contains(0.51 * e, scale=0.5)
+
+
+def test_tightening_is_support_of_FZ(tube):
+    L = np.linalg.cholesky(tube.N)
+    d = np.random.default_rng(0).normal(size=(2, 2000))
+    e = L @ (d / np.linalg.norm(d, axis=0))
+    assert np.max(np.abs(tube.F @ e)) <= tube.tightening[0] * (1 + 1e-12)
+    assert np.max(np.abs(tube.F @ e)) > 0.99 * tube.tightening[0]
+
+
+def test_unstable_F_is_rejected(tube):
+    bad = dataclasses.replace(tube, F=np.zeros_like(tube.F))  # open loop is unstable
+    with pytest.raises(DesignError, match="certificate failed"):
+        verify_tube(A, B, bad, ONE2, ONE1)
+
+
+def test_too_small_tube_is_rejected(tube):
+    bad = dataclasses.replace(tube, N=0.25 * tube.N)
+    with pytest.raises(DesignError, match="certificate failed"):
+        verify_tube(A, B, bad, ONE2, ONE1)
+
+
+def test_bad_multipliers_rejected(tube):
+    with pytest.raises(DesignError, match="lam"):
+        verify_tube(A, B, dataclasses.replace(tube, lam=1.0), ONE2, ONE1)
+    with pytest.raises(DesignError, match="sum mu w"):
+        verify_tube(A, B, dataclasses.replace(tube, mu=tube.mu * 10), ONE2, ONE1)
+
+
+def test_infeasible_W_raises():
+    with pytest.raises(DesignError, match="infeasible"):
+        # disturbance acting on a state the input cannot reach, unstable there
+        A1 = np.array([[[1.2, 0.0], [0.0, 0.5]]])
+        B1 = np.array([[[0.0], [1.0]]])
+        design_tube(A1, B1, W, ONE2, ONE1, np.array([1.0]), lam_grid=(0.9,))
+
+
+def test_box_tube_diagonal_exact():
+    Ad = np.array([[[0.5, 0.0], [0.0, 0.8]]])
+    res = box_tube(Ad, np.zeros((1, 2, 1)), np.zeros((1, 2)), W, ONE2, ONE1)
+    assert res.feasible
+    np.testing.assert_allclose(res.z, W / (1 - np.array([0.5, 0.8])), rtol=1e-7)
+
+
+def test_box_tube_infeasible_when_abs_radius_exceeds_one():
+    th = 1.0  # rotation by 1 rad, contraction 0.9: stable, but rho(|A|) = 0.9 (|cos|+|sin|)
+    R = 0.9 * np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    res = box_tube(R[None], np.zeros((1, 2, 1)), np.zeros((1, 2)), W, ONE2, ONE1)
+    assert res.spectral_radius_abs[0] == pytest.approx(0.9 * (np.cos(1) + np.sin(1)), rel=1e-9)
+    assert not res.feasible
