@@ -5,4 +5,6 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 bash scripts/setup.sh
 .venv/bin/ruff check src tests benchmarks ros_ws/src
+# layer contracts of pyproject.toml; the ROS packages are analysed from their sources
+PYTHONPATH="$(printf '%s:' "$here"/ros_ws/src/hsv_*)" .venv/bin/lint-imports
 .venv/bin/python -m pytest "$@"

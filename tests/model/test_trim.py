@@ -1,4 +1,4 @@
-"""Trim against the numbers of MODEL_DATA.md / issue 2 (Parker 2007 rigid curve fit)."""
+"""Trim against the numbers of docs/vehicle_data.md / issue 2 (Parker 2007 rigid curve fit)."""
 
 import numpy as np
 import pytest

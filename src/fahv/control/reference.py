@@ -1,6 +1,6 @@
 """Online parts of the control laws: nominal trajectory, Tube-MPC (eq. 36 / 54), RMPC.
 
-One step of the loop (ARCHITECTURE.md), all in deviation coordinates around the trim
+One step of the loop (docs/architecture.md), all in deviation coordinates around the trim
 x_r(g), u_r(g) of the governed reference g = (h_g, V_g)::
 
     NominalTrajectory.step()       -> x_r, u_r, x_n, u_n = K x_n         (eq. 20, 33-35)
@@ -107,7 +107,7 @@ class NominalTrajectory:
     The nominal state is X_n = x_r(g) + x_n. Each step it moves by the nominal LPV
     model scheduled at the governed reference g, and g moves toward the command
     c(t) by the largest fraction s in [0, 1] that keeps x_n in the certified
-    ellipsoid E(Q) of :func:`fahv.tube.nominal.design_nominal` (incremental
+    ellipsoid E(Q) of :func:`fahv.synthesis.nominal.design_nominal` (incremental
     reference governor, Gilbert & Kolmanovsky 2002). Since E(Q) is invariant with
     contraction < 1, s = 0 is always admissible, so x_n stays in E(Q) and
     |u_n,j| <= u_n,max,j at every step, by construction.
@@ -117,7 +117,7 @@ class NominalTrajectory:
     lpv : PolytopicLPV
         Nominal (healthy) discrete LPV model.
     trim_map : callable
-        (h, V) -> (x_r (n,), u_r (2,)), e.g. :class:`fahv.trim.TrimMap`.
+        (h, V) -> (x_r (n,), u_r (2,)), e.g. :class:`fahv.model.trim.TrimMap`.
     K : (m, n) ndarray
     Q : (n, n) ndarray
         Nominal gain and certified ellipsoid.

@@ -83,8 +83,8 @@ def sample_disturbance(
 
     Parameters
     ----------
-    vehicle : fahv.vehicle.Vehicle
-    tp : fahv.tp_model.TPModel
+    vehicle : fahv.model.vehicle.Vehicle
+    tp : fahv.model.tp_model.TPModel
         Continuous polytopic model; discretised here with Ts.
     Ts : float
         Sampling period [s].
@@ -106,7 +106,7 @@ def sample_disturbance(
         RK4 steps per Ts for the nonlinear one-step prediction.
     progress : callable, optional
         Iterable wrapper (tqdm).
-    notch : fahv.notch.NotchFilter, optional
+    notch : fahv.model.notch.NotchFilter, optional
         Required when ``tp.kind == "ecm"``: the one-step predictions then use the
         ECM (eq. 40) and the trim x_r' of eq. (41).
 

@@ -94,8 +94,8 @@ def tube_feasibility(
 ) -> FeasibilityResult:
     """Sample W, design F and Z, try the box tube, report the input room left.
 
-    Parameters are those of :func:`fahv.tube.disturbance.sample_disturbance` and
-    :func:`fahv.tube.feedback.design_tube`; ``treatment`` is "box" or "polytopic".
+    Parameters are those of :func:`fahv.design.disturbance.sample_disturbance` and
+    :func:`fahv.synthesis.feedback.design_tube`; ``treatment`` is "box" or "polytopic".
     """
     if treatment not in ("box", "polytopic"):
         raise ValueError(f"fault treatment must be 'box' or 'polytopic', got {treatment!r}")

@@ -89,7 +89,7 @@ class PlantCore:
 
 
 class NotchCore:
-    """Notch filter node on q (eq. 38-39, :class:`fahv.notch.DiscreteNotch`)."""
+    """Notch filter node on q (eq. 38-39, :class:`fahv.model.notch.DiscreteNotch`)."""
 
     def __init__(self, p: dict) -> None:
         self.enabled = p["enabled"]

@@ -1,8 +1,8 @@
 """In-process closed loop: the node computations of the SIL graph, called in its order.
 
-One step k (t_k = k Ts), the order of the node graph (ARCHITECTURE.md), each line one
-``*Core`` of :mod:`fahv.loop` built from that node's parameters
-(:func:`fahv.params.node_parameters`)::
+One step k (t_k = k Ts), the order of the node graph (docs/architecture.md), each line one
+``*Core`` of :mod:`fahv.loop.cores` built from that node's parameters
+(:func:`fahv.loop.params.node_parameters`)::
 
     state_k   = plant.state()                               (plant, + /clock)
     q'_k      = notch.on_state(state_k)                     (notch_filter)
@@ -11,7 +11,7 @@ One step k (t_k = k Ts), the order of the node graph (ARCHITECTURE.md), each lin
     u_f,k, f_k = fault.on_command(u_k)                      (fault_injector)
     plant.advance(u_f,k): integrate [t_k, t_k+1], saturated u_f,k held (ZOH).
 
-The messages of every step can be written to a run file (:class:`fahv.runlog.RunWriter`)
+The messages of every step can be written to a run file (:class:`fahv.runs.bag.RunWriter`)
 with the same topics and types as the SIL recorder, and :func:`run_result` turns the
 messages of either kind of run into arrays.
 """
@@ -87,8 +87,8 @@ def run_result(records: dict, info: dict | None = None) -> RunResult:
     Parameters
     ----------
     records : dict[str, list[dict]]
-        Per loop topic (:data:`fahv.runlog.TOPICS`), the message dicts of steps
-        0..N-1 in order (e.g. from :func:`fahv.runlog.step_arrays`).
+        Per loop topic (:data:`fahv.loop.graph.TOPICS`), the message dicts of steps
+        0..N-1 in order (e.g. from :func:`fahv.runs.bag.step_arrays`).
     info : dict, optional
         Stored as ``RunResult.info``.
 
@@ -144,12 +144,12 @@ def simulate(
     ----------
     design : fahv.design.Design
     variant : str, optional
-        One of the case's variants (:data:`fahv.case.VARIANTS`); the first by default.
+        One of the case's variants (:data:`fahv.control.VARIANTS`); the first by default.
     duration : float, optional
         Simulated time [s]; the case duration by default.
     progress : callable, optional
         Iterable wrapper (tqdm).
-    writer : fahv.runlog.RunWriter, optional
+    writer : fahv.runs.bag.RunWriter, optional
         Receives every message of every step (the SIL graph's topics).
     overrides : dict, optional
         Node parameter overrides ``{node: {name: value}}`` applied last (e.g.

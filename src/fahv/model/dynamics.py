@@ -29,7 +29,7 @@ def density(h, vp: VehicleParams):
     """Air density rho(h) [slug/ft^3], eq. (3) with the exponent (h - h_0)/h_s.
 
     The paper prints ``exp(-h-h_s/h_0)``; the exponential model of Parker et al.
-    2007 is ``rho_0 exp(-(h - h_0)/h_s)`` (MODEL_DATA.md).
+    2007 is ``rho_0 exp(-(h - h_0)/h_s)`` (docs/vehicle_data.md).
     """
     return vp.rho_0 * np.exp(-(h - vp.h_0) / vp.h_s)
 
@@ -288,7 +288,7 @@ def make_model(kind: str, vehicle: Vehicle | VehicleParams, notch=None) -> Model
     ----------
     kind : {"dm", "cm", "ecm"}
     vehicle : Vehicle or VehicleParams
-    notch : fahv.notch.NotchFilter, optional
+    notch : fahv.model.notch.NotchFilter, optional
         Required for "ecm".
     """
     params = vehicle.params if isinstance(vehicle, Vehicle) else vehicle

@@ -3,7 +3,7 @@
 Derivatives are exact to machine precision by complex-step differentiation
 (Squire & Trapp 1998; Martins, Sturdza & Alonso 2003): for a real-analytic f,
 df/dx_i = Im f(x + i h e_i) / h with no subtractive cancellation, so h = 1e-30 can
-be used. The model functions in :mod:`fahv.vehicle` are written to be analytic.
+be used. The model functions in :mod:`fahv.model.vehicle` are written to be analytic.
 They are checked against central finite differences in the tests.
 """
 
@@ -48,11 +48,11 @@ def linearize(vehicle, h: float, V: float, kind: str = "dm", notch=None) -> Line
 
     Parameters
     ----------
-    vehicle : fahv.vehicle.Vehicle
+    vehicle : fahv.model.vehicle.Vehicle
     h, V : float
         Flight condition [ft, ft/s], inside the envelope.
     kind : {"dm", "cm", "ecm"}
-    notch : fahv.notch.NotchFilter, optional
+    notch : fahv.model.notch.NotchFilter, optional
         Required for "ecm".
 
     Returns
@@ -62,7 +62,7 @@ def linearize(vehicle, h: float, V: float, kind: str = "dm", notch=None) -> Line
     Raises
     ------
     EnvelopeError, TrimError
-        As :func:`fahv.trim.trim`.
+        As :func:`fahv.model.trim.trim`.
     """
     from fahv.model.dynamics import make_model
     from fahv.model.trim import trim

@@ -20,7 +20,7 @@ class PolytopicLPV:
         Discrete vertices A_i, B_i (unscaled, deviation coordinates).
     h_grid, V_grid : ndarray
     W_h, W_V : ndarray
-        Sampled weighting functions (see :func:`fahv.tp_model.tp_weights`).
+        Sampled weighting functions (see :func:`fahv.model.tp_model.tp_weights`).
     """
 
     A: np.ndarray

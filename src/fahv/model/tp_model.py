@@ -361,7 +361,7 @@ def build_tp_model(
 
     Parameters
     ----------
-    vehicle : fahv.vehicle.Vehicle
+    vehicle : fahv.model.vehicle.Vehicle
     kind : {"dm", "cm", "ecm"}
     r_h, r_V : int
         Weighting functions per dimension (Case 1: 4 x 5 = 20; Case 2: 2 x 3 = 6).

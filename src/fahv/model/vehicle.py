@@ -15,7 +15,7 @@ State vector of ECM (eq. 43), shape (11,)::
 where q' is the notch-filtered pitch rate and x_q1, x_q2 the notch states (eq. 39).
 
 All model functions accept real or complex arrays (complex-step differentiation in
-:mod:`fahv.linearize` relies on it), and never use ``abs`` or branches on the state.
+:mod:`fahv.model.linearize` relies on it), and never use ``abs`` or branches on the state.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ summary with statistics and indexes, a ``rosbag2`` metadata record) and
 fault, source) is in the bag's ``custom_data``.
 
 The SIL recorder writes the raw CDR bytes it receives; the in-process simulator
-serialises the same dicts (:mod:`fahv.loop`) with the same definitions
+serialises the same dicts (:mod:`fahv.loop.cores`) with the same definitions
 (``src/fahv/msg/*.msg``, also the sources of the ``hsv_interfaces`` package).
 """
 
@@ -153,7 +153,7 @@ class RunWriter:
         self.counts[topic] += 1
 
     def write(self, topic: str, k: int, fields: dict) -> None:
-        """Serialise a message dict (:mod:`fahv.loop` field names) and append it."""
+        """Serialise a message dict (:mod:`fahv.loop.cores` field names) and append it."""
         self.write_raw(topic, k, encode(topic, fields))
 
     def set_metadata(self, key: str, value) -> None:

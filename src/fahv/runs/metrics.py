@@ -34,7 +34,7 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     Parameters
     ----------
     run : RunResult
-    limits : fahv.vehicle.InputLimits
+    limits : fahv.model.vehicle.InputLimits
         Actuator limits (sec. 5.1) the commands u (N, 2) are checked against.
     t_fault : float, optional
         Fault onset [s]; by default the first step with the fault active. None (no

@@ -1,7 +1,7 @@
 """Paper-style figures of closed-loop runs (Yang et al. 2022, Fig. 9-17).
 
 Each function takes runs as ``[(label, RunResult), ...]`` (from ``fahv simulate``,
-``fahv sil`` or a recorded file, :func:`fahv.sim.run_result_of`), overlays them with
+``fahv sil`` or a recorded file, :func:`fahv.runs.bag.run_result_of`), overlays them with
 a legend and writes one figure (PNG or PDF by the suffix). Drawing is matplotlib
 (Agg). Time in s, angles in deg.
 """

@@ -1,6 +1,6 @@
 """Inspect, export and compare recorded runs (``fahv inspect``, ``export``, ``compare``).
 
-Works on every run file with our loop topics (:data:`fahv.runlog.TOPICS`): runs of
+Works on every run file with our loop topics (:data:`fahv.loop.graph.TOPICS`): runs of
 the SIL node graph and of the in-process simulator alike. Topics of other programs
 are listed, never decoded; a truncated run is used up to its last complete chunk.
 
@@ -25,7 +25,7 @@ from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import Recording, run_result_of, step_anomalies
 from fahv.runs.metrics import metrics
 
-#: Rows of the metrics table: (key of :func:`fahv.sim.metrics`, label, format).
+#: Rows of the metrics table: (key of :func:`fahv.runs.metrics.metrics`, label, format).
 METRIC_ROWS = (
     ("settling_time_h_s", "settling time h (10 ft) [s]", "{:.1f}"),
     ("settling_time_V_s", "settling time V (2 ft/s) [s]", "{:.1f}"),
@@ -87,7 +87,7 @@ def format_metrics(table: dict[str, dict]) -> str:
     Parameters
     ----------
     table : dict[str, dict]
-        Column name -> metrics dict (:func:`fahv.sim.metrics`); a missing key or
+        Column name -> metrics dict (:func:`fahv.runs.metrics.metrics`); a missing key or
         None prints as ``-``.
     """
     names = list(table)
@@ -196,7 +196,7 @@ def export_run(rec: Recording, out_dir: str | Path, fmt: str = "csv") -> list[Pa
 
     Parameters
     ----------
-    rec : fahv.runlog.Recording
+    rec : fahv.runs.bag.Recording
     out_dir : path
         Folder to write (created).
     fmt : {"csv", "parquet"}
@@ -270,8 +270,8 @@ def run_metrics(rec: Recording, limits) -> tuple[dict | None, str]:
 
     Parameters
     ----------
-    rec : fahv.runlog.Recording
-    limits : fahv.vehicle.InputLimits
+    rec : fahv.runs.bag.Recording
+    limits : fahv.model.vehicle.InputLimits
     """
     run = run_result_of(rec)
     if run.t.size == 0:

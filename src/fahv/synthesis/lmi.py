@@ -6,7 +6,7 @@ import numpy as np
 
 from fahv.errors import DesignError
 
-#: Solver used for every LMI (interior point, handles SDP cones); see ENVIRONMENT.md.
+#: Solver used for every LMI (interior point, handles SDP cones); see docs/environment.md.
 SDP_SOLVER = "CLARABEL"
 
 

@@ -10,7 +10,7 @@ X = diag(X_jj)::
 K = Y Q^-1. (34') is the paper's (34) with the cost terms replaced by a decay factor
 lam < 1 (its limit gamma_n -> infinity with V+ <= lam V); it makes the invariance of
 E(Q) = {x' Q^-1 x <= 1} strict, so the certificate survives the solver tolerance and
-leaves room for the reference governor of :mod:`fahv.controllers`.
+leaves room for the reference governor of :mod:`fahv.control`.
 
 E(Q) contains x_n0, is invariant for every vertex and keeps |K_j x| <= u_n,max,j inside
 it, so a K computed once stays valid along the whole nominal trajectory as long as the

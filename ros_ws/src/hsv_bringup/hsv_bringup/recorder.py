@@ -2,7 +2,7 @@
 
 Raw subscriptions hand over the CDR bytes as received; the recorder reads only the
 step index k at the head of each message (or the /clock stamp) to set the log time to
-simulated time t_k = k Ts, and writes through :class:`fahv.runlog.RunWriter` (ros2
+simulated time t_k = k Ts, and writes through :class:`fahv.runs.bag.RunWriter` (ros2
 profile, full message definitions, offered QoS, summary with statistics and indexes,
 run metadata). It stops by itself once every topic holds ``duration / Ts`` steps; on
 SIGINT/SIGTERM, a lost graph (watchdog) or an error it still closes the file, with the

@@ -1,14 +1,14 @@
 """Lockstep plumbing shared by every node of the SIL graph (no model or control maths).
 
 A :class:`LockstepNode` declares the typed parameters of its node from
-:data:`fahv.params.SPECS` (with descriptions and ranges), validates them, builds the
+:data:`fahv.loop.params.specs` (with descriptions and ranges), validates them, builds the
 library object it adapts, and then only moves messages:
 
 - Inputs are buffered per step index k; the node calls :meth:`LockstepNode.on_step`
   once it holds every input of its current step, publishes the outputs of that step
   and moves to k + 1. A message of an already processed step (stale) or a second
   message of a buffered step (duplicate) is counted and logged, never used.
-- Reliable, keep-last QoS on every loop topic (:data:`fahv.runlog.LOOP_QOS`).
+- Reliable, keep-last QoS on every loop topic (:data:`fahv.loop.graph.QOS_DEPTH`).
 - Start-up: a node announces itself on ``/hsv/ready`` (transient local) once all its
   subscriptions see their publishers and all its publishers see every expected
   subscriber (:data:`GRAPH`); the plant starts step 0 only when every node of the
@@ -86,7 +86,7 @@ def to_dict(msg) -> dict:
 
 
 def to_msg(topic: str, fields: dict):
-    """Dict of fields (:mod:`fahv.loop`) -> message of a loop topic."""
+    """Dict of fields (:mod:`fahv.loop.cores`) -> message of a loop topic."""
     msg = msg_type(topic)()
     _fill(msg, fields)
     return msg
@@ -375,7 +375,7 @@ def make_executor():
 
     The events executor (rclpy.experimental, C++ event queue) runs the Case 1 graph
     about 1.4x faster than the SingleThreadedExecutor on this 2-core machine
-    (6.5 vs 9.3 ms per step, measured); ENVIRONMENT.md saw it hang in another test,
+    (6.5 vs 9.3 ms per step, measured); docs/environment.md saw it hang in another test,
     so the SIL integration tests (lockstep, kill, SIGINT, watchdog) run with it, and
     ``HSV_EXECUTOR=single`` selects the classic executor.
     """

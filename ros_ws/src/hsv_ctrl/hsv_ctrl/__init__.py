@@ -1,1 +1,1 @@
-"""Notch filter, nominal trajectory and controller nodes (adapters of fahv.loop)."""
+"""Notch filter, nominal trajectory and controller nodes (adapters of fahv.loop.cores)."""

@@ -1,1 +1,1 @@
-"""Plant and fault-injector nodes of the SIL graph (adapters of fahv.loop)."""
+"""Plant and fault-injector nodes of the SIL graph (adapters of fahv.loop.cores)."""
