@@ -18,6 +18,8 @@ from fahv.runs.metrics import metrics
 from fahv.runs.replay import run_replay
 from fahv.runs.sil import run_sil
 
+pytestmark = pytest.mark.ros  # every test here runs the built node graph
+
 T = 4.0
 N = 200
 

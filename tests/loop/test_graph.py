@@ -1,0 +1,39 @@
+"""The node table is written once: the runner, the recorder and the docs read it."""
+
+from pathlib import Path
+
+from fahv.loop.graph import (
+    DEFAULT_GRAPH,
+    GRAPH,
+    NODES,
+    TOPICS,
+    graph_nodes,
+    markdown_table,
+    replay_topics,
+)
+
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "architecture.md"
+
+
+def test_docs_show_the_node_table():
+    text = DOCS.read_text()
+    table = text.split("<!-- node-table -->")[1].split("<!-- /node-table -->")[0]
+    assert table.strip() == markdown_table().strip()
+
+
+def test_graph_nodes_follow_the_table():
+    assert DEFAULT_GRAPH == [
+        "recorder", "notch_filter", "nominal_trajectory", "tube_mpc", "fault_injector", "plant"
+    ]  # fmt: skip
+    assert graph_nodes("rmpc", record=False) == [
+        "notch_filter", "nominal_trajectory", "rmpc", "fault_injector", "plant"
+    ]  # fmt: skip
+    assert NODES["recorder"].inputs == tuple(TOPICS)
+    # every loop topic has exactly one producer among the loop nodes of a run
+    for topic in TOPICS:
+        producers = [n for n in graph_nodes() if topic in GRAPH[n][1]]
+        assert len(producers) == 1, topic
+    assert replay_topics(["tube_mpc"]) == (
+        ["/hsv/state", "/hsv/q_filtered", "/hsv/nominal"],
+        ["/hsv/control_command", "/hsv/tube_status"],
+    )
