@@ -11,16 +11,14 @@ import sys
 import time
 
 from fahv.design.artefacts import load_design
-from fahv.loop.cores import ControllerCore, FaultCore, NominalCore, NotchCore, PlantCore
+from fahv.loop.cores import build_core
 from fahv.loop.params import node_parameters
 
 art = sys.argv[1] if len(sys.argv) > 1 else "offline_design/artefacts/case1"
 n = int(sys.argv[2]) if len(sys.argv) > 2 else 2000
 p = node_parameters(load_design(art))
-plant, notch = PlantCore(p["plant"]), NotchCore(p["notch_filter"])
-nom, ctrl = NominalCore(p["nominal_trajectory"]), ControllerCore(p["tube_mpc"])
-fault = FaultCore(p["fault_injector"])
 names = ("plant", "notch_filter", "nominal_trajectory", "tube_mpc", "fault_injector")
+plant, notch, nom, ctrl, fault = (build_core(name, p[name]) for name in names)
 t = dict.fromkeys(names, 0.0)
 clock = time.perf_counter
 for _ in range(n):

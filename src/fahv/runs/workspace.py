@@ -10,7 +10,7 @@ from pathlib import Path
 from fahv.errors import RunError
 
 #: Repository root (the library is installed in editable mode from it).
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 WS = ROOT / "ros_ws"
