@@ -5,7 +5,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 # spelled in pieces so that this file does not match itself
-OUTSIDE = tuple(n + ".md" for n in ("ARCHITECTURE", "ENVIRONMENT", "MODEL_DATA")) + ("../" + "shared",)
+NAMES = ("ARCHITECTURE", "ENVIRONMENT", "MODEL_DATA")
+OUTSIDE = tuple(n + ".md" for n in NAMES) + ("../" + "shared",)
 
 
 def test_no_tracked_file_cites_documents_outside_the_repository():

@@ -15,7 +15,7 @@ from fahv.runs.bag import read_run
 
 
 def vehicle_of(args):
-
+    """The vehicle of ``--vehicle FILE`` (the packaged one when not given)."""
     return load_vehicle(args.vehicle)
 
 

@@ -25,7 +25,6 @@ def _with_limits(rec):
 
 def cmd_inspect(args) -> int:
     """Topics, metadata, step anomalies and metrics of a recorded run."""
-
     s = summarize(*_with_limits(read_run_warned(args.run)))
     print(to_json(s) if args.json else format_summary(s))
     return 0
@@ -33,7 +32,6 @@ def cmd_inspect(args) -> int:
 
 def cmd_export(args) -> int:
     """One table per loop topic (CSV or Parquet) with a column dictionary."""
-
     folder, _ = bag_paths(args.run)
     out = Path(args.out) if args.out else folder / f"export_{args.format}"
     for path in export_run(read_run_warned(args.run), out, args.format):
@@ -43,7 +41,6 @@ def cmd_export(args) -> int:
 
 def cmd_compare(args) -> int:
     """Metrics of two runs side by side with their differences."""
-
     a, b = (summarize(*_with_limits(read_run_warned(r))) for r in (args.a, args.b))
     names = tuple(
         f"{tag}: {s['metadata'].get('variant', bag_paths(r)[0].name)}"
@@ -63,7 +60,6 @@ def cmd_compare(args) -> int:
 
 def cmd_plot(args) -> int:
     """Paper-style figures of one or several recorded runs, overlaid."""
-
     runs = []
     for path in args.runs:
         rec = read_run_warned(path)

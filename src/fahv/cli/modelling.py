@@ -1,4 +1,4 @@
-"""``fahv trim``, ``tp``, ``figures``, ``tube``: the modelling layer and the tube feasibility study."""
+"""``fahv trim``, ``tp``, ``figures``, ``tube``: modelling layer and tube feasibility study."""
 
 from __future__ import annotations
 
@@ -25,7 +25,6 @@ from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
 def cmd_trim(args) -> int:
     """Print the trim at (h, V) or over a grid."""
-
     veh = vehicle_of(args)
     env = veh.envelope
     if args.grid:
@@ -91,7 +90,6 @@ def _tp(args, veh, kind, shape, notch=None):
 
 def cmd_tp(args) -> int:
     """TP transformation report."""
-
     veh = vehicle_of(args)
     notch = args.notch if args.model == "ecm" else None
     if args.model == "ecm" and notch is None:
@@ -137,7 +135,6 @@ def cmd_tp(args) -> int:
 
 def cmd_figures(args) -> int:
     """Write the modelling figures."""
-
     veh = vehicle_of(args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -27,7 +27,6 @@ def _simulate_recorded(design, variant: str, duration, out_dir):
     The run folder also gets the run's ROS parameter file (``params.yaml``, the same
     a SIL run gets), so ``fahv replay --node ...`` can start nodes against it.
     """
-
     case = design.case
     desc = f"{case['name']} {variant}"
 
@@ -47,7 +46,6 @@ def _simulate_recorded(design, variant: str, duration, out_dir):
 
 def cmd_simulate(args) -> int:
     """In-process closed loop of a case; records each variant to bags/, prints metrics."""
-
     case, design, vehicle = load_or_design(args.case, args.design, args.vehicle)
     variants = args.variant or case["variants"]
     limits = vehicle.limits
@@ -103,7 +101,6 @@ def cmd_sil(args) -> int:
 
 def cmd_replay(args) -> int:
     """Republish a recorded run (raw CDR), optionally into nodes under test."""
-
     res = run_replay(
         args.run,
         nodes=args.node or (),
@@ -125,7 +122,6 @@ def cmd_replay(args) -> int:
 
 def cmd_paper_figures(args) -> int:
     """Simulate every variant of Cases 1 and 2 (recorded) and write Fig. 9-17."""
-
     runs = {}
     for path in args.runs or []:  # recorded runs (simulated or SIL) instead of new ones
         rec = read_run_warned(path)

@@ -231,6 +231,7 @@ class CommandReference:
         self.trim_map, self.command, self.n, self.Ts, self.k = trim_map, command, n, Ts, 0
 
     def step(self) -> NominalOutput:
+        """Reference of the current step (x_n = 0, u_n = 0), then advance one step."""
         h, V = self.command(self.k * self.Ts)
         x_r, u_r = self.trim_map(h, V)
         self.k += 1

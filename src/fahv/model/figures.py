@@ -8,8 +8,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import control
 import matplotlib
+
+import control
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402

@@ -1,4 +1,4 @@
-"""Discrete polytopic LPV model, eq. (12): vertex systems and their TP weighting functions, evaluated online."""
+"""Discrete polytopic LPV model, eq. (12): vertex systems and TP weights, evaluated online."""
 
 from __future__ import annotations
 

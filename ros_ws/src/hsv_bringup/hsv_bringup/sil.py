@@ -1,13 +1,13 @@
 """``sil`` runner: start the node graph of one run, supervise it, stop every node.
 
-There is no ``launch`` among the ROS 2 wheels this project installs, so this runner
-starts the installed executables itself, each with the run's parameter file, in the
-order of the node table (:data:`fahv.loop.graph.NODES`: recorder, notch_filter,
-nominal_trajectory, controller, fault_injector, plant; the plant waits until every
-other node has announced itself, so the order only saves time). It watches the processes: the run succeeds when every node exits 0 after the
-last step; the first node that exits non-zero or is killed fails the run, the others
-get SIGINT (the recorder closes its file), then SIGKILL after a grace period, and the
-runner exits 1 naming that node and showing the end of its log.
+There is no ``launch`` among the ROS 2 wheels this project installs, so this runner starts the
+installed executables itself, each with the run's parameter file, in the order of the
+node table (:data:`fahv.loop.graph.NODES`: recorder, notch_filter, nominal_trajectory,
+controller, fault_injector, plant; the plant waits until every other node has announced
+itself, so the order only saves time). It watches the processes: the run succeeds when
+every node exits 0 after the last step; the first node that exits non-zero or is killed
+fails the run, the others get SIGINT (the recorder closes its file), then SIGKILL after
+a grace period, and the runner exits 1 naming that node and showing the end of its log.
 
 Usually started by ``fahv sil CASE`` (or ``fahv replay``), which writes the parameter
 file; by hand::
@@ -31,6 +31,7 @@ from pathlib import Path
 import yaml
 
 from fahv.loop.graph import CONTROLLER_NODES, NODES, graph_nodes
+
 
 def executable(name: str) -> Path:
     """Installed executable ``<prefix>/lib/<pkg>/<name>`` found on AMENT_PREFIX_PATH.

@@ -120,8 +120,11 @@ _ROS_TYPE = {
 
 
 def descriptor(f: Field) -> ParameterDescriptor:
-    """ROS parameter descriptor of a config field: description (unit, range, equation) and
-    the numeric range when both ends are finite."""
+    """ROS parameter descriptor of a config field.
+
+    Description with unit, range and equation; the numeric range when both ends are
+    finite.
+    """
     desc = ParameterDescriptor(description=f.doc())
     if f.lo is not None and f.hi is not None:
         if f.type == "float":
