@@ -3,9 +3,10 @@
 Each ``*Core`` is built from that node's validated parameters
 (:func:`fahv.loop.params.validate`, called once by :func:`build_core`) and maps the
 step-k input messages to its step-k output messages. Messages are plain dicts with the
-field names of the ``hsv_interfaces`` definitions (``src/fahv/msg/*.msg``). The ROS nodes in ``ros_ws/``
-convert ROS messages to these dicts and back and call exactly these methods; the
-in-process simulator (:func:`fahv.loop.simulate.simulate`) calls them in the graph's order.
+field names of the ``hsv_interfaces`` definitions (``src/fahv/msg/*.msg``). The ROS
+nodes in ``ros_ws/`` convert ROS messages to these dicts and back and call exactly
+these methods; the in-process simulator (:func:`fahv.loop.simulate.simulate`) calls
+them in the graph's order.
 The lockstep makes both the same computation (docs/architecture.md)::
 
     plant.state(k) -> notch.on_state -> nominal.on_state -> controller.on_inputs
