@@ -7,7 +7,7 @@ import re
 
 import numpy as np
 import pytest
-from fahv.cli.commands import main
+from fahv.cli import main
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
