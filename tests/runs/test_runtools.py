@@ -7,10 +7,10 @@ import re
 
 import numpy as np
 import pytest
-from fahv.cli import main
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from fahv.cli import main
 from fahv.errors import RunError
 from fahv.loop.graph import MSG_DIR, STATE_FIELDS, TOPICS
 from fahv.loop.simulate import simulate
