@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import warnings
 from pathlib import Path
 
@@ -54,11 +55,18 @@ def cmd_design(args) -> int:
     return 0
 
 
-def load_or_design(case_path, design_dir, vehicle_file=None, log=print):
+def _stderr(line: str) -> None:
+    print(line, file=sys.stderr)
+
+
+def load_or_design(case_path, design_dir, vehicle_file=None, log=_stderr):
     """The valid design of a case file for a vehicle, designed first if missing or stale.
 
     A saved design is reused only if its provenance matches the case content, the
     vehicle file and the design code (:func:`fahv.design.artefacts.stale_reason`).
+
+    The design report goes to ``log`` (stderr by default, so that ``--json`` output
+    on stdout stays machine-readable).
 
     Returns
     -------
