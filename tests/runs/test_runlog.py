@@ -7,7 +7,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from fahv.errors import RunError
-from fahv.loop.graph import STATE_FIELDS, TOPICS
+from fahv.loop.graph import QOS_DEPTH, STATE_FIELDS, TOPICS
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import RunWriter, TruncatedRunWarning, bag_paths, read_run, run_result_of
@@ -51,7 +51,7 @@ def test_rosbags_reads_every_message_with_full_definitions(recorded):
         assert "MSG: builtin_interfaces/Time" in conns["/clock"].msgdef.data
         assert "float64 eta_2_dot" in conns["/hsv/state"].msgdef.data
         qos = conns["/hsv/state"].ext.offered_qos_profiles[0]
-        assert qos.reliability.name == "RELIABLE" and qos.depth == 50
+        assert qos.reliability.name == "RELIABLE" and qos.depth == QOS_DEPTH
         counts = dict.fromkeys(TOPICS, 0)
         h = []
         for conn, t_ns, raw in reader.messages():
