@@ -14,6 +14,7 @@ from fahv.control import LAWS, VARIANTS
 from fahv.control.base import ControlLaw, register_law, unregister_law
 from fahv.control.tube_mpc import TubeMPC
 from fahv.design.case import case_from_mapping
+from fahv.errors import CaseError
 from fahv.loop.params import node_parameters, specs
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import DELTA_E
@@ -50,7 +51,7 @@ class HalfFeedback(ControlLaw):
         return u, {"e": e, "level": self.tube.tube_level(e)}
 
 
-class ElevatorReversal(FaultKind):
+class ElevatorScale(FaultKind):
     """From onset the elevator command is scaled by ``factor`` (a test fault)."""
 
     name = "elevator_scale"
@@ -64,7 +65,7 @@ class ElevatorReversal(FaultKind):
 @pytest.fixture
 def registered():
     register_law(HalfFeedback)
-    register_fault(ElevatorReversal)
+    register_fault(ElevatorScale)
     yield
     unregister_law("half_feedback")
     FAULTS.unregister("elevator_scale")
@@ -99,5 +100,5 @@ def test_dummy_law_and_fault_run_through_simulate(registered, raw, design):
 def test_unknown_law_or_fault_names_the_registry(raw):
     d = copy.deepcopy(raw)
     d["fault"]["kind"] = "elevator_scale"
-    with pytest.raises(Exception, match="'fault.kind' must be one of"):
+    with pytest.raises(CaseError, match="'fault.kind' must be one of"):
         case_from_mapping(d, "x.yaml")

@@ -257,12 +257,12 @@ def validate(
     for fn in pending:  # conditional entries need the whole document first (the list
         fn(root)  # grows while it runs when a conditional section holds conditional keys
     for sec, prefix in _sections(spec, ""):
-        if prefix and _get(root, prefix.rstrip(".")) is None:
+        if prefix and lookup(root, prefix.rstrip(".")) is None:
             continue
         for c in sec.checks:
             if not c.ok(root):
                 key = prefix + c.key
-                raise error(f"{source}: key '{key}' {c.message}, got {_get(root, key)!r}")
+                raise error(f"{source}: key '{key}' {c.message}, got {lookup(root, key)!r}")
     return Validated(root, defaults)
 
 
@@ -283,9 +283,6 @@ def lookup(root: Mapping, key: str) -> Any:
             return None
         v = v[part]
     return v
-
-
-_get = lookup
 
 
 def _section(spec, data, source, prefix, error, defaults, pending) -> dict:

@@ -61,7 +61,13 @@ class ControlLaw:
         ----------
         ctx : object
             The design context of :func:`fahv.design.pipeline.run_design`
-            (``vehicle``, ``case`` data, ``Ts``, ``samples``, ``log``).
+            (:class:`fahv.design.pipeline.DesignContext`: ``case`` data, ``vehicle``,
+            the ``arrays`` designed so far, ``log``).
+
+        Returns
+        -------
+        dict
+            Name -> ndarray, added to the design's arrays (and to its hash).
         """
         return {}
 

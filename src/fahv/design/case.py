@@ -23,11 +23,11 @@ from pathlib import Path
 from typing import Any
 
 from fahv.config import Check, Field, Section, validate
-from fahv.config.spec import lookup as _get
+from fahv.config.spec import lookup
 from fahv.config.yamlio import load_yaml
 from fahv.control import LAWS, VARIANTS
 from fahv.errors import CaseError
-from fahv.plant.faults import FAULTS, fault_fields
+from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
 
 TS = Field("Ts", "float", "control period Ts", unit="s", lo=0.0, hi=0.1, lo_open=True)
 DURATION = Field("duration", "float", "simulated duration of a run", unit="s", lo=0.0, lo_open=True)
@@ -56,13 +56,7 @@ COMMAND = (
     Field("V_c", "float", "commanded velocity", unit="ft/s", lo=0.0, hi=2e4),
     Field("t_start", "float", "time the command starts to change", unit="s", lo=0.0),
     Field("t_ramp", "float", "ramp duration", unit="s", lo=0.0, default=0.0,
-          when=lambda r: _get(r, "command.kind") == "ramp", when_text="command.kind is ramp"),
-)  # fmt: skip
-
-T_ONSET = Field(
-    "t_onset", "float", "fault onset time", unit="s", lo=0.0, default=math.inf,
-    when=lambda r: (_get(r, "fault.kind") or r.get("kind")) not in (None, "none"),
-    when_text="kind is not none",
+          when=lambda r: lookup(r, "command.kind") == "ramp", when_text="command.kind is ramp"),
 )  # fmt: skip
 
 UNCERTAINTY = (
@@ -73,8 +67,7 @@ UNCERTAINTY = (
 
 def fault_section() -> Section:
     """The ``fault`` section: kind (from the fault registry), onset, the kind's parameters."""
-    kind = Field("kind", "str", "actuator fault kind", choices=FAULTS.names)
-    return Section("fault", (kind, T_ONSET, *fault_fields()), "actuator fault (eq. 15 ...)")
+    return Section("fault", (FAULT_KIND, T_ONSET, *fault_fields()), "actuator fault (eq. 15 ...)")
 
 
 def case_spec() -> Section:

@@ -1,16 +1,18 @@
-"""Offline design of a case: case file -> certified artefacts and a ROS 2 parameter file.
+"""Offline design of a case: case file -> certified artefacts with their provenance.
 
 Steps (paper sec. 3-4, Algorithm 1): notch filter; TP model of the design model (CM
 for Case 1, codesigned ECM for Case 2); disturbance set W (eq. 13-19); F and the
 invariant tube Z (LMI 24, eq. 25-28) over the healthy and faulty vertices; tightened
 inputs (eq. 30, with Z' = tau Z for the adjustable law, eq. 53); trim map; nominal
-gain K (LMI 33-35); the DM LPV model of the RMPC baseline; the perturbed plant
+gain K (LMI 33-35); the offline part of every law a variant uses (e.g. the DM LPV model of the RMPC
+baseline); the perturbed plant
 parameters. Every certificate is re-checked; nothing is written unless all hold, and
 the artefacts are written to a temporary folder renamed into place at the end.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +28,7 @@ from fahv.model.linearize import classify_modes, linearize
 from fahv.model.notch import NotchFilter
 from fahv.model.tp_model import build_tp_model
 from fahv.model.trim import trim_map
-from fahv.model.vehicle import Q, load_vehicle
+from fahv.model.vehicle import Q, Vehicle, load_vehicle
 from fahv.plant.faults import make_fault
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturbed_params
 from fahv.synthesis.feedback import design_tube, verify_tube
@@ -55,9 +57,9 @@ class DesignContext:
     """
 
     case: dict
-    vehicle: object
+    vehicle: Vehicle
     arrays: dict
-    log: object
+    log: Callable[[str], None]
 
 
 def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:

@@ -23,10 +23,10 @@ import numpy as np
 from fahv.config import Field
 from fahv.config.spec import validate_flat
 from fahv.control import LAWS, VARIANTS
-from fahv.design.case import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, T_ONSET, TS
+from fahv.design.case import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, TS
 from fahv.errors import ParameterError
 from fahv.loop.graph import CONTROLLER_NODES
-from fahv.plant.faults import FAULTS, fault_fields
+from fahv.plant.faults import FAULT_KIND, FAULTS, T_ONSET, fault_fields
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
 COMMON = (
@@ -77,7 +77,7 @@ def specs() -> dict[str, tuple[Field, ...]]:
         ),
         "fault_injector": (
             *COMMON,
-            Field("kind", "str", "actuator fault kind", choices=FAULTS.names),
+            FAULT_KIND,
             T_ONSET,
             *fault_fields(),
         ),
@@ -275,8 +275,17 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
 
 
 def controller_node(params: dict) -> str:
-    """Name of the controller node among a run's node parameters."""
-    return next(n for n in CONTROLLER_NODES if n in params)
+    """Name of the controller node among a run's node parameters (keys: node names).
+
+    Raises
+    ------
+    ParameterError
+        If none of :data:`fahv.loop.graph.CONTROLLER_NODES` is among them.
+    """
+    for name in CONTROLLER_NODES:
+        if name in params:
+            return name
+    raise ParameterError(f"no controller node {CONTROLLER_NODES} among {sorted(params)}")
 
 
 def parameter_file(nodes: dict) -> dict:

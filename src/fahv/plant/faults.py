@@ -189,20 +189,29 @@ class Dropout(FaultKind):
         return u if held is None else held.copy()
 
 
+def fault_kind_of(root) -> str | None:
+    """``kind`` of a case's fault section (``fault.kind``) or of flat node parameters."""
+    return lookup(root, "fault.kind") or lookup(root, "kind")
+
+
+#: Fault kind (case key ``fault.kind``, fault-injector parameter ``kind``).
+FAULT_KIND = Field("kind", "str", "actuator fault kind", choices=FAULTS.names)
+#: Onset time, used by every kind but ``none``.
+T_ONSET = Field(
+    "t_onset", "float", "fault onset time", unit="s", lo=0.0, default=math.inf,
+    when=lambda r: fault_kind_of(r) not in (None, "none"), when_text="kind is not none",
+)  # fmt: skip
+
+
 def fault_fields() -> list[Field]:
     """Parameters of every registered kind, each used only with its kind (for configs)."""
     return [
         dataclasses.replace(
-            f, when=lambda root, name=name: _kind_of(root) == name, when_text=f"kind is {name}"
+            f, when=lambda root, name=name: fault_kind_of(root) == name, when_text=f"kind is {name}"
         )
         for name, cls in FAULTS.items()
         for f in cls.parameters
     ]
-
-
-def _kind_of(root) -> str | None:
-    """``kind`` of a case's fault section or of flat fault-injector parameters."""
-    return lookup(root, "fault.kind") or lookup(root, "kind")
 
 
 def make_fault(kind: str, t_onset: float, params: dict) -> FaultKind:
