@@ -42,7 +42,8 @@ class ControlLaw:
     name: ClassVar[str] = ""
     #: Controller node (executable) that runs the law.
     node: ClassVar[str] = "tube_mpc"
-    #: Mode of the nominal_trajectory node: ``governor`` (nominal system with the
+    #: Mode of the nominal_trajectory node: ``mpc`` (online tracking MPC,
+    #: :mod:`fahv.control.nominal_mpc`), ``governor`` (nominal system with the
     #: reference governor, eq. 20/46) or ``command`` (trim of the raw command).
     reference: ClassVar[str] = "governor"
     #: Case-file section the law needs (required only when a variant uses the law).

@@ -183,6 +183,9 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         "Q": nominal.Q,
         "u_room": room,
         "u_n_max": u_n_max,
+        # tightened absolute limits of the nominal input (eq. 30, asymmetric)
+        "u_lo": veh.limits.u_min + tau * tube.tightening,
+        "u_hi": veh.limits.u_max - tau * tube.tightening,
         "trim_h": tm.h_grid,
         "trim_V": tm.V_grid,
         "trim_x": tm.x_r,

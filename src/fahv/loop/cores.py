@@ -20,6 +20,12 @@ import dataclasses
 import numpy as np
 
 from fahv.control import LAWS
+from fahv.control.nominal_mpc import (
+    InputDisturbanceEstimator,
+    MPCSettings,
+    TrackingMPC,
+    TrackingNominal,
+)
 from fahv.control.reference import Command, CommandReference, NominalOutput, NominalTrajectory
 from fahv.errors import RunError
 from fahv.loop.graph import CONTROLLER_NODES, GRAPH, STATE_FIELDS, n_steps_of, state_vector
@@ -133,7 +139,11 @@ def nominal_output(msg: dict) -> NominalOutput:
 
 
 class NominalCore:
-    """Nominal-trajectory node: governed nominal system (eq. 20/46) or the raw command."""
+    """Nominal-trajectory node: tracking MPC, governed nominal system (eq. 20/46) or command.
+
+    Inputs of step k: the VehicleState of step k (the trigger; the MPC's estimator uses
+    it) and the controller's command of step k - 1 (``None`` at k = 0).
+    """
 
     def __init__(self, p: dict) -> None:
         c = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith("command.")}
@@ -142,7 +152,25 @@ class NominalCore:
         )
         tm = TrimMap(p["trim_h"], p["trim_V"], p["trim_x"], p["trim_u"])
         n = p["A"].shape[1]
-        if p["mode"] == "governor":
+        self.mpc = None
+        if p["mode"] == "mpc":
+            lpv = PolytopicLPV(p["A"], p["B"], p["h_grid"], p["V_grid"], p["W_h"], p["W_V"])
+            m = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith("mpc.")}
+            q_w = np.concatenate([np.asarray(m["q_w"], float), np.zeros(n - 9)])
+            st = MPCSettings(
+                int(m["M"]), int(m["N"]), q_w, np.asarray(m["r_w"], float),
+                np.asarray(m["t_w"], float), np.asarray(m["dtheta_max"], float),
+                np.asarray(m["reschedule"], float), float(np.radians(m["att_max"])),
+            )  # fmt: skip
+            self.mpc = TrackingMPC(
+                lpv, tm, p["K"], p["Q"], p["u_lo"], p["u_hi"], p["Dx"], p["Du"], st
+            )
+            est = None
+            if m["est_tau"] > 0.0:
+                est = InputDisturbanceEstimator(p["Dx"][:9], min(1.0, p["Ts"] / m["est_tau"]))
+            self.source = TrackingNominal(self.mpc, self.command, p["Ts"], est)
+            self.source.reset(p["x0"])
+        elif p["mode"] == "governor":
             lpv = PolytopicLPV(p["A"], p["B"], p["h_grid"], p["V_grid"], p["W_h"], p["W_V"])
             self.source = NominalTrajectory(
                 lpv, tm, p["K"], p["Q"], self.command, p["Ts"], p["level_max"]
@@ -152,10 +180,22 @@ class NominalCore:
             self.source = CommandReference(tm, self.command, n, p["Ts"])
         self.k = 0
 
-    def on_state(self, state: dict) -> dict:
-        """NominalTrajectory of step k (VehicleState k is the step trigger)."""
+    def on_state(self, state: dict, previous: dict | None = None) -> dict:
+        """NominalTrajectory of step k from VehicleState k and ControlCommand k - 1.
+
+        ``previous`` (the command of step k - 1) is used only by the MPC's estimator.
+        """
         _check_step("nominal_trajectory", "state", state, self.k)
-        ref = self.source.step()
+        if self.mpc is not None:
+            u_prev = None
+            if previous is not None:
+                _check_step("nominal_trajectory", "control_command", previous, self.k - 1)
+                u_prev = np.array([previous["phi"], previous["delta_e"]], float)
+            ref = self.source.step(state_vector(state), u_prev)
+            st, d = self.mpc.stats, self.source.d
+        else:
+            ref = self.source.step()
+            st, d = None, np.zeros(2)
         h_c, V_c = self.command(state["t"])
         self.k += 1
         return {
@@ -170,6 +210,10 @@ class NominalCore:
             "x_n": ref.x_n,
             "u_n": ref.u_n,
             "level": ref.level,
+            "qp_solves": st.solves if st else 0,
+            "qp_fallback": st.fallback if st else 0,
+            "qp_terminal": st.terminal if st else 0,
+            "d_hat": d,
         }
 
 
@@ -233,6 +277,9 @@ class ControllerCore:
             "lmi_solves": s.get("lmi_solves", 0),
             "lmi_fallback": s.get("lmi_fallback", 0),
             "lmi_failed": s.get("lmi_failed", 0),
+            "qp_solves": int(nominal.get("qp_solves", 0)),
+            "qp_fallback": int(nominal.get("qp_fallback", 0)),
+            "qp_terminal": int(nominal.get("qp_terminal", 0)),
         }
         return cmd, tube
 

@@ -57,6 +57,8 @@ class NodeSpec:
         ROS 2 package that installs the executable.
     inputs, outputs : tuple of str
         Loop topics consumed and produced at each step (keys of :data:`TOPICS`).
+    previous : tuple of str
+        Loop topics consumed from the previous step k - 1 (none at k = 0).
     kind : {"loop", "controller", "recorder", "replay"}
         Loop nodes and the controller run every step; the recorder and the replay
         are tools around the loop.
@@ -70,6 +72,7 @@ class NodeSpec:
     outputs: tuple[str, ...]
     kind: str
     description: str
+    previous: tuple[str, ...] = ()
 
 
 _CONTROLLER_IN = ("/hsv/state", "/hsv/q_filtered", "/hsv/nominal")
@@ -84,7 +87,8 @@ NODES: dict[str, NodeSpec] = {
         NodeSpec("notch_filter", "hsv_ctrl", ("/hsv/state",), ("/hsv/q_filtered",), "loop",
                  "notch filter on q (eq. 37-39): q -> q'"),
         NodeSpec("nominal_trajectory", "hsv_ctrl", ("/hsv/state",), ("/hsv/nominal",), "loop",
-                 "reference x_r, u_r and nominal x_n, u_n (eq. 20/46, governor)"),
+                 "nominal MPC (QP) with disturbance estimate, or governor (eq. 20/46)",
+                 previous=("/hsv/control_command",)),
         NodeSpec("tube_mpc", "hsv_ctrl", _CONTROLLER_IN, _CONTROLLER_OUT, "controller",
                  "control law of the run (eq. 36 / 54), tube status"),
         NodeSpec("rmpc", "hsv_ctrl", _CONTROLLER_IN, _CONTROLLER_OUT, "controller",
@@ -99,8 +103,10 @@ NODES: dict[str, NodeSpec] = {
     )
 }  # fmt: skip
 
-#: node -> (input topics, output topics) of one control step.
-GRAPH = {n.name: (n.inputs, n.outputs) for n in NODES.values()}
+#: node -> (input topics, output topics) of one control step (inputs of step k - 1 included).
+GRAPH = {n.name: (n.inputs + n.previous, n.outputs) for n in NODES.values()}
+#: node -> topics it takes from the previous step.
+PREVIOUS = {n.name: n.previous for n in NODES.values()}
 #: Names of the controller node (one adapter, two executable names).
 CONTROLLER_NODES = tuple(n.name for n in NODES.values() if n.kind == "controller")
 
@@ -156,7 +162,9 @@ def markdown_table() -> str:
     """The node table as Markdown (the table of ``docs/architecture.md``)."""
     rows = ["| node | package | consumes | produces | does |", "|---|---|---|---|---|"]
     for n in NODES.values():
-        cons = "every loop topic" if n.inputs == tuple(TOPICS) else ", ".join(n.inputs)
+        cons = "every loop topic" if n.inputs == tuple(TOPICS) else ", ".join(
+            n.inputs + tuple(f"{t} (step k-1)" for t in n.previous)
+        )
         prod = "every loop topic" if n.outputs == tuple(TOPICS) else ", ".join(n.outputs)
         rows.append(f"| `{n.name}` | {n.package} | {cons} | {prod or '-'} | {n.description} |")
     return "\n".join(rows)

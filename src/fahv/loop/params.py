@@ -23,6 +23,7 @@ import numpy as np
 from fahv.config import Field
 from fahv.config.spec import validate_flat
 from fahv.control import LAWS, VARIANTS
+from fahv.control.tube_mpc import MPC_SECTION
 from fahv.design.case import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, TS
 from fahv.errors import ParameterError
 from fahv.loop.graph import CONTROLLER_NODES
@@ -85,8 +86,14 @@ def specs() -> dict[str, tuple[Field, ...]]:
         "nominal_trajectory": (
             *COMMON,
             *_prefixed(COMMAND, "command."),
-            Field("mode", "str", "governor: nominal system with reference governor (eq. 20/46);"
-                  " command: trim of the raw command, x_n = 0", choices=("governor", "command")),
+            Field("mode", "str", "mpc: online tracking MPC (QP); governor: nominal system with "
+                  "reference governor (eq. 20/46); command: trim of the raw command, x_n = 0",
+                  choices=("mpc", "governor", "command")),
+            *_prefixed(MPC_SECTION.entries, "mpc."),
+            _matrix("u_lo", "tightened lower input limits (2,) [-, rad] (eq. 30)"),
+            _matrix("u_hi", "tightened upper input limits (2,) [-, rad] (eq. 30)"),
+            _matrix("Dx", "state scales (n,)"),
+            _matrix("Du", "input scales (2,)"),
             Field("level_max", "float", "governor bound on x_n' Q^-1 x_n", lo=0.0, hi=1.0,
                   lo_open=True),
             _matrix("x0", "initial measured state (n,) in design-model order"),
@@ -241,7 +248,8 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         x0_meas[4] = 0.0  # the filter starts in steady state at q = 0 (trim)
     if n == 11:
         x0_meas = np.concatenate([x0_meas, np.zeros(2)])
-    tau = float(c["tube"]["tau"]) if law.reference == "governor" else 1.0
+    tau = float(c["tube"]["tau"]) if law.reference != "command" else 1.0
+    mpc = c.get("mpc") or {f.name: f.default for f in MPC_SECTION.entries}
     fault = {"kind": f["kind"], "t_onset": float(f["t_onset"])}
     fault.update({p.name: f[p.name] for p in FAULTS[f["kind"]].parameters})
     controller = {**common, "law": law.name, "tau": tau, **mat("F"), **mat("N")}
@@ -262,6 +270,11 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
             **{f"command.{k}": (val if k == "kind" else float(val)) for k, val in cmd.items()},
             "mode": law.reference,
             "level_max": float(c["nominal"]["level_max"]),
+            **{f"mpc.{k}": _plain(v) for k, v in mpc.items()},
+            **mat("u_lo"),
+            **mat("u_hi"),
+            **mat("Dx"),
+            **mat("Du"),
             **mat("x0", x0_meas),
             **{
                 k: val
@@ -272,6 +285,13 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         },
         law.node: controller,
     }
+
+
+def _plain(v):
+    """A case value as a ROS parameter value (tuples as lists, ints kept)."""
+    if isinstance(v, tuple | list):
+        return [float(x) for x in v]
+    return v
 
 
 def controller_node(params: dict) -> str:

@@ -6,7 +6,7 @@ One step k (t_k = k Ts), the order of the node graph (docs/architecture.md), eac
 
     state_k   = plant.state()                               (plant, + /clock)
     q'_k      = notch.on_state(state_k)                     (notch_filter)
-    ref_k     = nominal.on_state(state_k)                   (nominal_trajectory)
+    ref_k     = nominal.on_state(state_k, u_k-1)            (nominal_trajectory)
     u_k, Z_k  = controller.on_inputs(state_k, q'_k, ref_k)  (tube_mpc / rmpc)
     u_f,k, f_k = fault.on_command(u_k)                      (fault_injector)
     plant.advance(u_f,k): integrate [t_k, t_k+1], saturated u_f,k held (ZOH).
@@ -188,10 +188,11 @@ def simulate(
     records = {t: [] for t in TOPICS}  # the graph order of one step
     n_steps = n_steps_of(p["plant"])
     steps = range(n_steps) if progress is None else progress(range(n_steps))
+    cmd = None
     for k in steps:
         state = plant.state()
         qf = notch.on_state(state)
-        nom = nominal.on_state(state)
+        nom = nominal.on_state(state, cmd)
         cmd, tube = ctrl.on_inputs(state, qf, nom)
         act, fs = fault.on_command(cmd)
         plant.advance(act)

@@ -41,7 +41,15 @@ from std_msgs.msg import String
 from fahv.config import Field
 from fahv.config.spec import validate_flat
 from fahv.errors import ParameterError
-from fahv.loop.graph import DEFAULT_GRAPH, GRAPH, QOS_DEPTH, TOPICS, n_steps_of, producer_of
+from fahv.loop.graph import (
+    DEFAULT_GRAPH,
+    GRAPH,
+    PREVIOUS,
+    QOS_DEPTH,
+    TOPICS,
+    n_steps_of,
+    producer_of,
+)
 from fahv.loop.params import specs, validate
 
 LOOP_QOS = QoSProfile(
@@ -246,6 +254,7 @@ class LockstepNode(Node):
         self.n_steps = n_steps_of(self.p)
         self.watchdog_s = self.p["watchdog_s"]
         self.inputs, self.outputs = GRAPH[self.ROLE]
+        self.previous = PREVIOUS.get(self.ROLE, ())
         self.make_core(self.p)
         self.k = 0
         self.buf = {t: {} for t in self.inputs}
@@ -282,7 +291,7 @@ class LockstepNode(Node):
 
     # -- machinery ------------------------------------------------------------------
     def _receive(self, topic: str, msg) -> None:
-        k = msg.k
+        k = msg.k + 1 if topic in self.previous else msg.k  # the step that uses it
         if k < self.k:
             self.stale += 1
             self.get_logger().warning(f"stale {topic} of step {k} at step {self.k}: ignored")
@@ -295,8 +304,13 @@ class LockstepNode(Node):
         self._advance()
 
     def _advance(self) -> None:
-        while not self.done and all(self.k in b for b in self.buf.values()):
-            inputs = {t: to_dict(self.buf[t].pop(self.k)) for t in self.inputs}
+        while not self.done and all(
+            self.k in b or (self.k == 0 and t in self.previous) for t, b in self.buf.items()
+        ):
+            inputs = {
+                t: to_dict(self.buf[t].pop(self.k)) if self.k in self.buf[t] else None
+                for t in self.inputs
+            }
             for topic, fields in self.on_step(self.k, inputs):
                 self.pubs[topic].publish(to_msg(topic, fields))
             self.k += 1
@@ -356,7 +370,10 @@ class LockstepNode(Node):
         """
         if self.done or time.monotonic() - self.last_progress <= self.watchdog_s:
             return
-        missing = [t for t in self.inputs if self.k not in self.buf[t]] or list(self.inputs)
+        missing = [
+            t for t in self.inputs if self.k not in self.buf[t] and not (
+                self.k == 0 and t in self.previous)
+        ] or list(self.inputs)
         peers = ", ".join(f"{t} from {self.producer_of(t)}" for t in missing)
         raise WatchdogError(
             f"{self.get_name()}: no {peers} for step {self.k} within {self.watchdog_s:g} s "

@@ -1,7 +1,9 @@
 """``nominal_trajectory`` node: reference x_r, u_r and nominal x_n, u_n of each step.
 
-Mode ``governor``: nominal system under u_n = K x_n (eq. 20/46) with the reference
-governor; mode ``command``: trim of the raw command (the RMPC baseline).
+Mode ``mpc``: online tracking MPC with an input-disturbance estimate (it takes the
+controller's command of the previous step); mode ``governor``: nominal system under
+u_n = K x_n (eq. 20/46) with the reference governor; mode ``command``: trim of the raw
+command (the RMPC baseline).
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ class NominalTrajectoryNode(LockstepNode):
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""
-        return [("/hsv/nominal", self.core.on_state(inputs["/hsv/state"]))]
+        nominal = self.core.on_state(inputs["/hsv/state"], inputs["/hsv/control_command"])
+        return [("/hsv/nominal", nominal)]
 
 
 def run(args=None) -> None:
