@@ -76,7 +76,7 @@ def test_dummy_law_and_fault_run_through_simulate(registered, raw, design):
     assert "gain" in [f.name for f in specs()["tube_mpc"]]
     d = copy.deepcopy(raw)
     d["disturbance"]["samples"] = 40
-    d["variants"] = ["tube_mpc", "half_feedback"]
+    d["variants"] = ["tube_mpc_paper", "half_feedback"]
     d["half_feedback"] = {"gain": 0.5}
     d["fault"] = {"kind": "elevator_scale", "t_onset": 1.0, "factor": 0.95}
     case = case_from_mapping(d, "dummy.yaml")
@@ -86,7 +86,7 @@ def test_dummy_law_and_fault_run_through_simulate(registered, raw, design):
     assert p["tube_mpc"]["law"] == "half_feedback" and p["tube_mpc"]["gain"] == 0.5
     assert p["fault_injector"] == {**p["fault_injector"], "kind": "elevator_scale", "factor": 0.95}
     run = simulate(dummy, "half_feedback", duration=2.0)
-    ref = simulate(dummy, "tube_mpc", duration=2.0)
+    ref = simulate(dummy, "tube_mpc_paper", duration=2.0)  # same governor nominal
     after = run.t >= 1.0
     # the fault scales the applied elevator by exactly 0.95 from its onset
     np.testing.assert_allclose(run.u_applied[after, 1], 0.95 * run.u[after, 1], rtol=1e-15)
