@@ -1,0 +1,123 @@
+"""Nominal tracking MPC: QP solution checks, fallbacks, terminal certificate, estimator."""
+
+import numpy as np
+import pytest
+
+from fahv.control.nominal_mpc import (
+    InputDisturbanceEstimator,
+    MPCSettings,
+    TrackingMPC,
+    TrackingNominal,
+    check_kkt,
+    verify_terminal,
+)
+from fahv.control.reference import Command
+from fahv.errors import DesignError
+from fahv.loop.simulate import simulate
+from fahv.model.lpv import PolytopicLPV
+from fahv.model.trim import TrimMap
+
+
+def _mpc(design, **changes):
+    a = design.arrays
+    lpv = PolytopicLPV(a["A"], a["B"], a["h_grid"], a["V_grid"], a["W_h"], a["W_V"])
+    tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+    s = dict(
+        M=25, N=30, q_w=np.array([1, 1, 0.1, 0.1, 0.01, 0, 0, 0, 0.0]), r_w=np.ones(2),
+        t_w=np.array([1e4, 1e4]), dtheta_max=np.array([300.0, 150.0]),
+        reschedule=np.array([100.0, 50.0]), att_max=np.radians(0.3),
+    )  # fmt: skip
+    s.update(changes)
+    return TrackingMPC(
+        lpv, tm, a["K"], a["Q"], a["u_lo"], a["u_hi"], a["Dx"], a["Du"], MPCSettings(**s)
+    )
+
+
+def test_qp_solution_meets_tightened_limits_and_kkt(design):
+    """First QP of the Case 1 step: inputs of the plan inside the tightened limits."""
+    mpc = _mpc(design)
+    c = design.case["command"]
+    mpc.schedule(c["h0"], c["V0"])
+    u_base = mpc.u_r_s
+    y, why = mpc.solve(np.zeros(mpc.n), u_base, np.array([c["h_c"], c["V_c"]]))
+    assert why == "ok"
+    N, m = mpc.s.N, mpc.m
+    u = (mpc.U_y @ y + np.tile(u_base, N)).reshape(N, m)
+    tol = 1e-6 * np.abs(mpc.u_hi)
+    assert np.all(u >= mpc.u_lo - tol) and np.all(u <= mpc.u_hi + tol)
+    # the set point moves to the trust-region bound toward the command (+300 ft, +150 ft/s)
+    np.testing.assert_allclose(y[N * m : N * m + 2] * mpc.theta_scale, [300.0, 150.0], atol=1e-3)
+    # the climb uses the asymmetric room: Phi above the symmetric bound u_r + 0.069
+    assert u[:, 0].max() > u_base[0] + 0.1
+
+
+def test_kkt_check_rejects_a_perturbed_solution():
+    H, f = np.eye(2), np.array([-2.0, 0.0])
+    A = np.array([[1.0, 1.0]])
+    bl, bu = np.array([-1e30, -1e30, -1e30]), np.array([1e30, 1e30, 1.0])
+    # min 0.5 |y|^2 - 2 y_1 s.t. y_1 + y_2 <= 1: y = (1.5, -0.5), multiplier 0.5
+    y, lam = np.array([1.5, -0.5]), np.array([0.0, 0.0, 0.5])
+    assert check_kkt(H, f, A, bl, bu, y, lam) == ""
+    assert "stationarity" in check_kkt(H, f, A, bl, bu, np.array([1.4, -0.4]), lam)
+    assert "primal" in check_kkt(H, f, A, bl, bu, np.array([1.6, -0.5]), lam)
+
+
+def test_infeasible_qp_takes_the_fallback_and_is_counted(design):
+    """Limits no plan can meet: shifted plan first, then the terminal law, both counted."""
+    mpc = _mpc(design)
+    cmd = design.case["command"]
+    nom = TrackingNominal(
+        mpc, Command(cmd["h0"], cmd["V0"], cmd["h_c"], cmd["V_c"]), design.case["Ts"]
+    )
+    nom.reset(design.arrays["trim_x"][0, 0] * 0 + mpc.x_r_s)
+    for _ in range(25):
+        nom.step()
+    assert mpc.stats.solves == 1 and mpc.stats.fallback == 0
+    mpc.u_hi = mpc.u_lo - 1.0  # empty input set from now on
+    for _ in range(25 * 31):
+        out = nom.step()
+    assert np.all(np.isfinite(out.u_n))
+    assert mpc.stats.fallback == 29 and mpc.stats.terminal == 2
+    assert nom.status.startswith("terminal law")
+
+
+def test_terminal_set_not_invariant_is_rejected(design):
+    a = design.arrays
+    path = a["trim_u"][0, :2]
+    cert = verify_terminal(a["A"], a["B"], a["K"], a["Q"], a["u_lo"], a["u_hi"], path)
+    assert cert["invariance"] < 1.0
+    with pytest.raises(DesignError, match="not invariant under K at vertex"):
+        verify_terminal(a["A"], a["B"], 5 * a["K"], a["Q"], a["u_lo"], a["u_hi"], path)
+    with pytest.raises(DesignError, match="outside the tightened"):
+        verify_terminal(a["A"], a["B"], a["K"], a["Q"], a["u_lo"], a["u_lo"] + 1e-3, path)
+
+
+def test_estimate_converges_to_the_elevator_loss(design):
+    """Known 30 % loss on the linear model: d -> (rho_f - 1) delta_e within 1 % in 15 s."""
+    mpc = _mpc(design)
+    mpc.schedule(85500.0, 7900.0)
+    A, B = mpc.A[:9, :9], mpc.B[:9]
+    Ts = design.case["Ts"]
+    est = InputDisturbanceEstimator(design.arrays["Dx"][:9], Ts / 2.0)
+    est.schedule(A, B)
+    rho, de = 0.7, np.radians(12.4)
+    x, u = np.zeros(9), np.array([0.0, de])  # deviations; the loss acts on the whole de
+    for _ in range(int(15.0 / Ts)):
+        x_next = A @ x + B @ np.array([0.0, rho * de])
+        est.update(x, u, x_next)
+        x = x_next
+    np.testing.assert_allclose(est.d[1], (rho - 1.0) * de, rtol=1e-2)
+    assert abs(est.d[0]) < 1e-3
+
+
+def test_case1_tracks_the_step_within_the_requirements(design):
+    """Quick Case 1 (small W sample), 90 s: settled on the step, attitude and tube held."""
+    run = simulate(design, "tube_mpc", duration=90.0)
+    h_err = run.x[:, 0] - run.h_c
+    V_err = run.x[:, 1] - run.V_c
+    late = run.t >= 60.0
+    assert np.max(np.abs(h_err[late])) <= 10.0
+    assert np.max(np.abs(V_err[late])) <= 2.0
+    att = np.degrees(np.abs(run.x[:, 2:4] - run.x_r[:, 2:4]))
+    assert att.max() <= 0.5
+    assert np.nanmax(run.tube_level) <= 1.0
