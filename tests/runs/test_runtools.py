@@ -198,7 +198,9 @@ def test_run_of_another_program_lists_its_topics(tmp_path, limits, capsys):
 def test_run_recorded_with_an_older_definition_still_decodes(tmp_path):
     """A TubeStatus recorded before it had the RMPC counters: decoded with its own schema."""
     old = "\n".join(
-        ln for ln in (MSG_DIR / "TubeStatus.msg").read_text().splitlines() if "lmi_" not in ln and "qp_" not in ln
+        ln
+        for ln in (MSG_DIR / "TubeStatus.msg").read_text().splitlines()
+        if "lmi_" not in ln and "qp_" not in ln
     )
     name = TOPICS["/hsv/tube_status"]
     ts = get_typestore(Stores.ROS2_JAZZY)
