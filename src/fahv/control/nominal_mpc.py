@@ -78,7 +78,8 @@ class MPCSettings:
     dtheta_max : (2,) ndarray
         Largest move of the artificial set point per nominal step [ft, ft/s].
     reschedule : (2,) ndarray
-        Distance of theta from the scheduling point that triggers a rebuild [ft, ft/s].
+        Distance of the nominal (h, V) from the scheduling point that triggers a
+        rebuild [ft, ft/s].
     att_max : float
         Bound on the nominal |alpha - alpha_s| and |theta - theta_s| at each move start
         [rad] (the attitude requirement minus the tube's extent in alpha, theta).
@@ -486,8 +487,10 @@ class TrackingNominal:
     def _plan(self) -> None:
         mpc, N, m = self.mpc, self.mpc.s.N, self.mpc.m
         cmd = np.array(self.command(self.k * self.Ts), float)
-        if np.any(np.abs(self.theta - mpc.theta_s) > mpc.s.reschedule):
-            self._schedule(self.theta)
+        # schedule at the nominal operating point (h, V of X_n), not at the set point:
+        # the set point may sit a steady offset away from the state it holds
+        if np.any(np.abs(self.X_n[:2] - mpc.theta_s) > mpc.s.reschedule):
+            self._schedule(self.X_n[:2])
         y, why = mpc.solve(self.X_n - mpc.x_r_s, mpc.u_r_s - self.d, cmd)
         if y is not None:
             mpc.stats.solves += 1
