@@ -35,3 +35,22 @@ class ParameterError(ConfigError):
 
 class RunError(FahvError, RuntimeError):
     """A closed-loop run or a recorded run file cannot be used."""
+
+
+class RunInterrupted(FahvError):
+    """A run was stopped by SIGINT / SIGTERM; its recording (if any) is finalised.
+
+    Parameters
+    ----------
+    step : int
+        Steps completed (and recorded) when the run stopped.
+    n_steps : int
+        Steps the run would have had.
+    run : path or None
+        Run folder written, None when the run was not recorded.
+    """
+
+    def __init__(self, step: int, n_steps: int, run=None) -> None:
+        self.step, self.n_steps, self.run = int(step), int(n_steps), run
+        where = f"run written to {run}" if run is not None else "nothing recorded"
+        super().__init__(f"interrupted at step {self.step} of {self.n_steps}; {where}")

@@ -17,7 +17,9 @@ Subcommands::
     fahv replay    republish a run over DDS, e.g. into a fresh tube_mpc node
 
 Every command that uses the vehicle takes ``--vehicle FILE``. Errors name the
-input at fault and exit with status 2 (bad input) or 1 (failure).
+input at fault and exit with status 2 (bad input) or 1 (failure). Ctrl-C or SIGTERM
+stops a command cleanly: a run in progress is finalised (status ``interrupted``), the
+command prints ``interrupted at step k of n; run written to DIR`` and exits with 130.
 """
 
 from __future__ import annotations
@@ -26,7 +28,11 @@ import argparse
 import sys
 
 from fahv.cli import design, inspect, modelling, run
-from fahv.errors import FahvError
+from fahv.cli.common import stop_signals
+from fahv.errors import FahvError, RunInterrupted
+
+#: Exit status after SIGINT / SIGTERM (128 + SIGINT, as a shell reports it).
+EXIT_INTERRUPTED = 130
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,11 +48,18 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``fahv``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    try:
-        return args.func(args)
-    except (FahvError, ValueError, OSError) as exc:
-        print(f"fahv {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+    with stop_signals():
+        try:
+            return args.func(args)
+        except RunInterrupted as exc:
+            print(f"fahv {args.command}: {exc}", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except KeyboardInterrupt:
+            print(f"fahv {args.command}: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except (FahvError, ValueError, OSError) as exc:
+            print(f"fahv {args.command}: error: {exc}", file=sys.stderr)
+            return 2
 
 
 if __name__ == "__main__":

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import signal
 import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -69,3 +72,32 @@ def to_json(obj) -> str:
         return v
 
     return json.dumps(clean(obj), indent=2)
+
+
+@contextlib.contextmanager
+def stop_signals():
+    """SIGINT and SIGTERM as one clean stop while a command runs.
+
+    The first SIGINT or SIGTERM raises ``KeyboardInterrupt`` in the main thread, so
+    a command finalises its run (the run writer closes with status ``interrupted``,
+    ``fahv sil`` forwards the stop to its graph); every further one only prints a note,
+    so that a second Ctrl-C cannot cut the finalisation short. Outside the main thread
+    (where handlers cannot be set) it does nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    seen = []
+
+    def handler(signum, frame):
+        seen.append(signum)
+        if len(seen) == 1:
+            raise KeyboardInterrupt
+        print("fahv: already stopping; finishing the run, please wait", file=sys.stderr)
+
+    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)

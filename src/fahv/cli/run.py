@@ -10,9 +10,10 @@ from tqdm import tqdm
 
 from fahv.cli.common import add_vehicle_option, read_run_warned, to_json
 from fahv.cli.design import load_or_design
-from fahv.errors import FahvError
+from fahv.errors import FahvError, RunInterrupted
+from fahv.loop.graph import TOPICS
 from fahv.loop.simulate import simulate
-from fahv.runs.bag import RunWriter, read_run, run_result_of
+from fahv.runs.bag import RunWriter, read_run, run_result_of, stored_metadata
 from fahv.runs.metrics import metrics
 from fahv.runs.plots import paper_figures
 from fahv.runs.replay import run_replay
@@ -21,25 +22,80 @@ from fahv.runs.tools import format_metrics
 from fahv.runs.workspace import ROOT
 
 
+class StepProgress:
+    """Progress of an in-process run: a tqdm bar of steps with rate and ETA.
+
+    Passed to :func:`fahv.loop.simulate.simulate` as its ``writer``: it sees every
+    message of every step, forwards it to the run writer (if any), advances the bar
+    once per step and shows the RMPC's LMI solves so far. On a terminal the bar
+    updates in place; in a log it writes a line every 10 s.
+
+    Parameters
+    ----------
+    desc : str
+        Label of the bar.
+    n_steps : int
+        Steps of the run.
+    writer : fahv.runs.bag.RunWriter, optional
+        Receives every message.
+    """
+
+    #: The last topic of a step (:data:`fahv.loop.graph.TOPICS` order).
+    LAST_TOPIC = list(TOPICS)[-1]
+
+    def __init__(self, desc: str, n_steps: int, writer=None) -> None:
+        tty = sys.stderr.isatty()
+        self.bar = tqdm(
+            total=n_steps, desc=desc, unit="step", leave=False, mininterval=0.5 if tty else 10.0
+        )
+        self.writer = writer
+        self.k = 0
+        self.solves = 0
+
+    def write(self, topic: str, k: int, fields: dict) -> None:
+        """Forward one message of step k; count the step after its last topic."""
+        if self.writer is not None:
+            self.writer.write(topic, k, fields)
+        if topic == "/hsv/tube_status" and fields.get("lmi_solves", 0) != self.solves:
+            self.solves = int(fields["lmi_solves"])
+            self.bar.set_postfix(lmi_solves=self.solves, refresh=False)
+        elif topic == self.LAST_TOPIC:
+            self.k = k + 1
+            self.bar.update(1)
+
+    def close(self) -> None:
+        """Remove the bar."""
+        self.bar.close()
+
+
 def _simulate_recorded(design, variant: str, duration, out_dir):
     """simulate() with a progress bar, recorded to ``out_dir/<run>/`` unless it is None.
 
     The run folder also gets the run's ROS parameter file (``params.yaml``, the same
     a SIL run gets), so ``fahv replay --node ...`` can start nodes against it.
+
+    Raises
+    ------
+    RunInterrupted
+        On Ctrl-C / SIGTERM, after the run file was finalised (status interrupted).
     """
     case = design.case
     desc = f"{case['name']} {variant}"
-
-    def bar(it):
-        return tqdm(it, desc=desc, leave=False, disable=None)
-
-    if out_dir is None:
-        return simulate(design, variant, duration, progress=bar)
     d = case["duration"] if duration is None else duration
-    bag = Path(out_dir) / run_name(case["name"], variant, "sim")
-    with RunWriter(bag, run_metadata(design, variant, "simulate", d), case["Ts"]) as writer:
-        write_run_params(design, variant, bag, bag / "params.yaml", duration, 10.0)
-        run = simulate(design, variant, duration, progress=bar, writer=writer)
+    n_steps = int(round(d / case["Ts"]))
+    bag = None if out_dir is None else Path(out_dir) / run_name(case["name"], variant, "sim")
+    progress = StepProgress(desc, n_steps)
+    try:
+        if bag is None:
+            return simulate(design, variant, duration, writer=progress)
+        with RunWriter(bag, run_metadata(design, variant, "simulate", d), case["Ts"]) as writer:
+            write_run_params(design, variant, bag, bag / "params.yaml", duration, 10.0)
+            progress.writer = writer
+            run = simulate(design, variant, duration, writer=progress)
+    except KeyboardInterrupt:
+        raise RunInterrupted(progress.k, n_steps, bag) from None
+    finally:
+        progress.close()
     print(f"{desc}: run written to {bag}")
     return run
 
@@ -73,14 +129,20 @@ def cmd_sil(args) -> int:
         Path(args.out or ROOT / "bags"),
         args.watchdog,
         quiet=args.quiet,
+        domain_id=args.domain_id,
     )
+    n_steps = int(round(res.simulated_s / case["Ts"]))
     if not res.bag.is_dir():
+        if res.interrupted:
+            raise RunInterrupted(0, n_steps, None)
         print(f"error: the run produced no recording ({res.bag})", file=sys.stderr)
         return 1
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         rec = read_run(res.bag)
     run = run_result_of(rec)
+    if res.interrupted:
+        raise RunInterrupted(int(rec.metadata.get("steps_recorded", run.t.size)), n_steps, res.bag)
     print(f"run written to {res.bag}")
     print(
         f"status {rec.metadata.get('status', '?')}, {run.t.size} steps, wall time "
@@ -112,6 +174,11 @@ def cmd_replay(args) -> int:
         watchdog_s=args.watchdog,
         quiet=args.quiet,
     )
+    if res.interrupted:
+        done = stored_metadata(res.out) if res.out is not None else {}
+        src = stored_metadata(args.run)
+        n = args.steps or int(round(float(src.get("duration", 0)) / float(src.get("Ts", 1))))
+        raise RunInterrupted(int(done.get("steps_recorded", 0)), n, res.out)
     if res.returncode != 0:
         print(f"fahv replay: failed (logs in {res.log_dir})", file=sys.stderr)
         return 1
@@ -162,7 +229,14 @@ def add_parsers(sub) -> None:
     p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
     p.add_argument("--out", default=None, help="folder of the recorded runs (default bags/)")
     p.add_argument("--watchdog", type=float, default=10.0, help="node watchdog [s wall time]")
-    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument(
+        "--domain-id",
+        type=int,
+        default=None,
+        help="ROS_DOMAIN_ID of the graph (default: a free one from domain_coordinator; "
+        "an exported ROS_DOMAIN_ID is not used)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="metrics as JSON")
     add_vehicle_option(p)
     p.set_defaults(func=cmd_sil)

@@ -175,7 +175,12 @@ class RunWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb):
-        self.close("complete" if exc_type is None else f"failed: {exc_type.__name__}: {exc}")
+        if exc_type is None:
+            self.close("complete")
+        elif issubclass(exc_type, KeyboardInterrupt):  # Ctrl-C or SIGTERM (fahv.cli)
+            self.close("interrupted")
+        else:
+            self.close(f"failed: {exc_type.__name__}: {exc}")
 
 
 def _to_ros(ts, msgtype: str, fields: dict):

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import random
-import subprocess
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,7 +10,7 @@ from pathlib import Path
 import yaml
 
 from fahv.errors import RunError
-from fahv.runs.sil import _runner
+from fahv.runs.sil import _runner, run_runner
 from fahv.runs.workspace import WS, ensure_built, ros_env
 
 
@@ -30,12 +28,15 @@ class ReplayRun:
         Wall time of the whole replay, start-up included [s].
     log_dir : Path
         Folder with the parameter file and the node logs.
+    interrupted : bool
+        Stopped by SIGINT / SIGTERM (the output run, if any, is finalised).
     """
 
     out: Path | None
     returncode: int
     wall_s: float
     log_dir: Path
+    interrupted: bool = False
 
 
 def _ros_list(values) -> list[str]:
@@ -137,13 +138,13 @@ def run_replay(
     }
     ensure_built(log=log)
     env = ros_env()
-    env.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100)))
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     work = WS / "log" / "replay" / time.strftime("%Y%m%d-%H%M%S")
     work.mkdir(parents=True, exist_ok=True)
     (work / "params.yaml").write_text(yaml.safe_dump(content, sort_keys=False, width=120))
     cmd = _runner(work, ["--nodes", "replay", *nodes], quiet)
     log(f"replay of {folder.name} into {list(nodes) or 'the graph'}: logs in {work}")
     t0 = time.monotonic()
-    rc = subprocess.run(cmd, env=env).returncode
-    return ReplayRun(None if out is None else Path(out), rc, time.monotonic() - t0, work)
+    rc, interrupted = run_runner(cmd, env)
+    return ReplayRun(
+        None if out is None else Path(out), rc, time.monotonic() - t0, work, interrupted
+    )

@@ -4,14 +4,21 @@ This module imports no ROS code: it builds the colcon workspace when needed
 (``scripts/build_ros.sh``), writes the run's parameter file (the design's node
 parameters for the variant, the recorder's section, and ``graph_nodes`` /
 ``use_sim_time`` for every node), starts the ``sil`` runner of ``hsv_bringup`` in the
-workspace's environment with an isolated ``ROS_DOMAIN_ID`` and
-``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, and reads the recorded run back.
+workspace's environment, and reads the recorded run back. The runner isolates the
+graph: a free ``ROS_DOMAIN_ID`` from ``domain_coordinator`` (whatever the shell
+exports) and ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``; the recorder stores the
+domain in the run metadata (``ros_domain_id``).
+
+Interruption: a ``KeyboardInterrupt`` while the runner works (Ctrl-C, or SIGTERM turned
+into one by ``fahv.cli``) is forwarded to the runner as SIGINT; the runner stops every
+node, the recorder finalises the run (status ``interrupted``), and the result says
+``interrupted``. Further interrupts while the graph stops are ignored.
 """
 
 from __future__ import annotations
 
 import json
-import random
+import signal
 import subprocess
 import time
 from dataclasses import dataclass
@@ -33,6 +40,7 @@ class SilRun:
     returncode: int
     wall_s: float
     simulated_s: float
+    interrupted: bool = False
 
     @property
     def real_time_factor(self) -> float:
@@ -113,11 +121,46 @@ def write_run_params(
     return content
 
 
-def _runner(work: Path, args: list[str], quiet: bool) -> list[str]:
+def _runner(work: Path, args: list[str], quiet: bool, domain_id: int | None = None) -> list[str]:
     """Command line of the hsv_bringup ``sil`` runner for a run folder ``work``."""
     exe = WS / "install" / "hsv_bringup" / "lib" / "hsv_bringup" / "sil"
     cmd = [str(exe), "--params-file", str(work / "params.yaml"), "--log-dir", str(work / "logs")]
+    if domain_id is not None:
+        cmd += ["--domain-id", str(int(domain_id))]
     return cmd + args + (["--quiet"] if quiet else [])
+
+
+#: Exit status of the runner after SIGINT / SIGTERM.
+EXIT_INTERRUPTED = 130
+
+
+def run_runner(cmd: list[str], env: dict) -> tuple[int, bool]:
+    """Run the ``sil`` runner to its end; forward an interrupt to it.
+
+    Parameters
+    ----------
+    cmd : list of str
+        Command line (:func:`_runner`).
+    env : dict
+        Environment of the sourced workspace.
+
+    Returns
+    -------
+    (int, bool)
+        The runner's exit status and whether the run was interrupted (a
+        ``KeyboardInterrupt`` here, or the runner's own status 130).
+    """
+    proc = subprocess.Popen(cmd, env=env)
+    try:
+        rc = proc.wait()
+    except KeyboardInterrupt:
+        proc.send_signal(signal.SIGINT)  # the terminal may have sent it already: harmless
+        while True:  # a second Ctrl-C must not leave the runner orphaned mid-shutdown
+            try:
+                return proc.wait(), True
+            except KeyboardInterrupt:
+                continue
+    return rc, rc == EXIT_INTERRUPTED
 
 
 def run_sil(
@@ -129,6 +172,7 @@ def run_sil(
     overrides: dict | None = None,
     quiet: bool = False,
     log=print,
+    domain_id: int | None = None,
 ) -> SilRun:
     """Run one variant of a designed case through the node graph, recorded to MCAP.
 
@@ -145,11 +189,19 @@ def run_sil(
         Wall-clock watchdog of every node [s].
     overrides : dict, optional
         Parameter overrides {node: {name: value}}.
+    quiet : bool
+        No progress bar.
+    log : callable
+        Receives the lines about the build and the run folder.
+    domain_id : int, optional
+        ROS_DOMAIN_ID of the graph; by default the runner takes a free one from
+        ``domain_coordinator`` (an exported ``ROS_DOMAIN_ID`` is not used).
 
     Returns
     -------
     SilRun
-        ``returncode`` 0 when every node finished; the bag is readable in any case.
+        ``returncode`` 0 when every node finished (130 when interrupted); the bag is
+        readable in any case.
 
     Raises
     ------
@@ -159,8 +211,6 @@ def run_sil(
     variant = design.case["variants"][0] if variant is None else variant
     ensure_built(log=log)
     env = ros_env()
-    env.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100)))
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     name = run_name(design.case["name"], variant, "sil")
     bag = Path(out_dir).resolve() / name
     work = WS / "log" / "sil" / name
@@ -169,10 +219,10 @@ def run_sil(
     )
     sim_s = params["plant"]["ros__parameters"]["duration"]
     controller = controller_node(params)
-    cmd = _runner(work, ["--controller", controller], quiet)
-    log(f"SIL run {name}: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}, logs in {work}")
+    cmd = _runner(work, ["--controller", controller], quiet, domain_id)
+    log(f"SIL run {name}: logs in {work}")
     t0 = time.monotonic()
-    rc = subprocess.run(cmd, env=env).returncode
+    rc, interrupted = run_runner(cmd, env)
     wall = time.monotonic() - t0
     if bag.is_dir():  # keep the parameters and node logs with the run
         for src in [work / "params.yaml", *sorted((work / "logs").glob("*.log"))]:
@@ -180,4 +230,4 @@ def run_sil(
                 dst = bag / ("params.yaml" if src.name == "params.yaml" else f"logs/{src.name}")
                 dst.parent.mkdir(exist_ok=True)
                 dst.write_bytes(src.read_bytes())
-    return SilRun(bag, rc, wall, sim_s)
+    return SilRun(bag, rc, wall, sim_s, interrupted)

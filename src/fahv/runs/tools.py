@@ -23,6 +23,7 @@ from fahv.errors import RunError
 from fahv.loop.graph import MSG_DIR, TOPICS
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import Recording, run_result_of, step_anomalies
+from fahv.runs.latency import format_latencies, run_latencies
 from fahv.runs.metrics import metrics
 
 #: Rows of the metrics table: (key of :func:`fahv.runs.metrics.metrics`, label, format).
@@ -290,7 +291,9 @@ def summarize(rec: Recording, limits) -> dict:
         ``loop`` whether it is one of ours), ``sim_time_s`` [first, last],
         ``recorder_anomalies`` (out-of-order arrivals counted by the SIL recorder),
         ``step_anomalies`` (duplicate / out-of-order / missing step indices per
-        loop topic, from the messages), ``metrics`` (or None) and ``metrics_note``.
+        loop topic, from the messages), ``metrics`` (or None) and ``metrics_note``,
+        ``latency`` (per-hop wall-clock latency of a SIL run,
+        :func:`fahv.runs.latency.hop_latencies`; None without recorded timestamps).
     """
     topics = {}
     for name, t in rec.topics.items():
@@ -323,6 +326,7 @@ def summarize(rec: Recording, limits) -> dict:
         "step_anomalies": {t: v for t, v in step_anomalies(rec).items() if rec.topics.get(t)},
         "metrics": m,
         "metrics_note": note,
+        "latency": run_latencies(rec.path.parent),
     }
 
 
@@ -380,6 +384,8 @@ def format_summary(s: dict, column: str | None = None) -> str:
     else:
         lines.append(f"metrics ({s['metrics_note']}):")
         lines.append(format_metrics({column or md.get("variant", "run"): s["metrics"]}))
+    if s.get("latency"):
+        lines += ["", format_latencies(s["latency"])]
     return "\n".join(lines)
 
 

@@ -4,9 +4,13 @@ Raw subscriptions hand over the CDR bytes as received; the recorder reads only t
 step index k at the head of each message (or the /clock stamp) to set the log time to
 simulated time t_k = k Ts, and writes through :class:`fahv.runs.bag.RunWriter` (ros2
 profile, full message definitions, offered QoS, summary with statistics and indexes,
-run metadata). It stops by itself once every topic holds ``duration / Ts`` steps; on
-SIGINT/SIGTERM, a lost graph (watchdog) or an error it still closes the file, with the
-reason in the run metadata (``status``).
+run metadata, the ROS domain of the graph as ``ros_domain_id``). With every message it
+keeps the DDS source timestamp (wall clock when the producing node published it) and
+its own receive time, written at the end to ``timestamps.npz`` in the run folder
+(:func:`fahv.runs.latency.save_timestamps`): the per-hop latency breakdown of
+``fahv inspect`` comes from them. It stops by itself once every topic holds
+``duration / Ts`` steps; on SIGINT/SIGTERM, a lost graph (watchdog) or an error it
+still closes the file, with the reason in the run metadata (``status``).
 
 Parameters: ``bag`` (folder to create), ``Ts``, ``duration``, ``watchdog_s``,
 ``metadata_json`` (JSON object of run metadata: case, design_hash, variant, ...).
@@ -17,6 +21,7 @@ from __future__ import annotations
 import struct
 import sys
 import time
+from array import array
 
 from hsv_common.lockstep import (
     LOOP_QOS,
@@ -34,6 +39,7 @@ from std_msgs.msg import String
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
 from fahv.runs.bag import RunWriter
+from fahv.runs.latency import save_timestamps
 from fahv.runs.nodes import RECORDER
 
 
@@ -53,12 +59,15 @@ class Recorder(Node):
     """Raw recorder of the loop topics."""
 
     ROLE = "recorder"
+    #: Subscription callbacks get the message info (DDS timestamps), see make_executor.
+    MESSAGE_INFO = True
 
     def __init__(self) -> None:
         super().__init__("recorder")
         get = declare_validated(self, RECORDER)
         meta = run_metadata_param("recorder", get["metadata_json"])
         meta.setdefault("source", "sil")
+        meta["ros_domain_id"] = self.context.get_domain_id()
         self.Ts_ns = int(round(get["Ts"] * 1e9))
         self.n_steps = int(round(get["duration"] / get["Ts"]))
         self.watchdog_s = get["watchdog_s"]
@@ -68,9 +77,15 @@ class Recorder(Node):
             raise ParameterError(f"recorder: parameter 'bag': {exc}") from None
         self.next_k = dict.fromkeys(TOPICS, 0)
         self.anomalies = dict.fromkeys(TOPICS, 0)
+        # per topic: k, DDS source timestamp [ns], receive time [ns] of every message
+        self.stamps = {t: array("q") for t in TOPICS}
         self.subs = [
             self.create_subscription(
-                msg_type_of(t), t, lambda data, t=t: self._record(t, data), LOOP_QOS, raw=True
+                msg_type_of(t),
+                t,
+                lambda data, info, t=t: self._record(t, data, info),
+                LOOP_QOS,
+                raw=True,
             )
             for t in TOPICS
         ]
@@ -82,8 +97,9 @@ class Recorder(Node):
         self.started = False
         self.t0 = time.monotonic()
 
-    def _record(self, topic: str, data: bytes) -> None:
+    def _record(self, topic: str, data: bytes, info: dict) -> None:
         k = step_of(topic, data, self.Ts_ns)
+        self.stamps[topic].extend((k, info["source_timestamp"], info["received_timestamp"]))
         if k != self.next_k[topic]:
             self.anomalies[topic] += 1
             self.get_logger().warning(
@@ -124,6 +140,10 @@ class Recorder(Node):
         self.writer.set_metadata("wall_time_s", f"{time.monotonic() - self.t0:.3f}")
         reason = end_reason(self.done, status)
         self.writer.close(reason)
+        try:
+            save_timestamps(self.writer.path, self.stamps)
+        except OSError as exc:  # the run itself is complete; only the timing is lost
+            print(f"recorder: timestamps not written: {exc}", file=sys.stderr)
         print(f"closed {self.writer.path} ({reason}, {self.k} steps)", flush=True)
 
 

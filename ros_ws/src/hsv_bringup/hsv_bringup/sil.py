@@ -9,6 +9,18 @@ every node exits 0 after the last step; the first node that exits non-zero or is
 fails the run, the others get SIGINT (the recorder closes its file), then SIGKILL after
 a grace period, and the runner exits 1 naming that node and showing the end of its log.
 
+Isolation: every graph runs in a DDS domain of its own. Unless ``--domain-id`` is
+given, the runner takes a free ``ROS_DOMAIN_ID`` from ROS 2's ``domain_coordinator``
+(unique among the processes of this host that use it, held until the runner exits),
+whatever ``ROS_DOMAIN_ID`` the shell exports, and restricts discovery to this host
+(``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``). Every loop node also refuses to run
+next to a foreign graph in its domain (more publishers on a loop topic than its graph
+has, exit status 5).
+
+Interruption: SIGINT (Ctrl-C) or SIGTERM stops every node with SIGINT (the recorder
+closes its file with status ``interrupted``) and the runner exits 130; a second signal
+while the graph stops only prints a note.
+
 Usually started by ``fahv sil CASE`` (or ``fahv replay``), which writes the parameter
 file; by hand::
 
@@ -20,17 +32,22 @@ from __future__ import annotations
 
 import argparse
 import os
-import random
 import signal
 import subprocess
 import sys
 import threading
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
+import domain_coordinator
 import yaml
+from tqdm import tqdm
 
 from fahv.loop.graph import CONTROLLER_NODES, NODES, graph_nodes
+
+#: Exit status of the runner (and of ``fahv sil``) after SIGINT / SIGTERM (128 + SIGINT).
+EXIT_INTERRUPTED = 130
 
 
 def executable(name: str) -> Path:
@@ -69,6 +86,7 @@ class Graph:
         self.procs: dict[str, subprocess.Popen] = {}
         self.logs: dict[str, Path] = {}
         self.progress = (0, 0)
+        self.stop_signal: int | None = None
 
     def start(self) -> None:
         """Start every node (own process group, output to <log_dir>/<node>.log)."""
@@ -117,9 +135,28 @@ class Graph:
                 os.killpg(p.pid, signal.SIGKILL)
                 p.wait()
 
+    def on_signal(self, signum: int, frame) -> None:
+        """Handler of SIGINT / SIGTERM: the first one ends :meth:`supervise`.
+
+        Later ones only print a note (the nodes are already stopping, the run stays intact).
+        """
+        if self.stop_signal is None:
+            self.stop_signal = signum
+        else:
+            print("sil: already stopping every node, please wait", file=sys.stderr, flush=True)
+
     def supervise(self, on_progress=None) -> tuple[str | None, int]:
-        """Wait for the end of the run; returns (failed node or None, its exit status)."""
+        """Wait for the end of the run, a failed node, or a stop signal.
+
+        Returns
+        -------
+        (str or None, int)
+            The first node that failed and its exit status; (None, 0) when every node
+            finished; (None, 130) after :meth:`on_signal`.
+        """
         while True:
+            if self.stop_signal is not None:
+                return None, EXIT_INTERRUPTED
             running = 0
             for name in self.names:
                 rc = self.procs[name].poll()
@@ -138,9 +175,71 @@ def describe(rc: int) -> str:
     """Human form of a process exit status."""
     if rc < 0:
         return f"killed by signal {signal.Signals(-rc).name}"
-    return {2: "bad parameter", 3: "watchdog", 4: "stopped by a signal"}.get(
-        rc, f"exit status {rc}"
-    )
+    return {
+        2: "bad parameter",
+        3: "watchdog",
+        4: "stopped by a signal",
+        5: "foreign graph in its ROS domain",
+    }.get(rc, f"exit status {rc}")
+
+
+def _progress_bar(quiet: bool):
+    """Progress callback (k, n): a tqdm bar of steps with rate and ETA on stderr.
+
+    On a terminal the bar updates in place; in a log file it writes a line every 10 s.
+    """
+    if quiet:
+        return None, lambda: None
+    state: dict = {"bar": None}
+
+    def show(k: int, n: int) -> None:
+        if not n:
+            return
+        bar = state["bar"]
+        if bar is None:
+            tty = sys.stderr.isatty()
+            bar = state["bar"] = tqdm(
+                total=n,
+                desc="sil",
+                unit="step",
+                mininterval=0.5 if tty else 10.0,
+                dynamic_ncols=True,
+            )
+        bar.update(k - bar.n)
+
+    def close() -> None:
+        if state["bar"] is not None:
+            state["bar"].close()
+
+    return show, close
+
+
+def run_graph(graph: Graph, bag, quiet: bool) -> int:
+    """Start, supervise and stop one graph; returns the runner's exit status."""
+    show, close_bar = _progress_bar(quiet)
+    try:
+        graph.start()
+        failed, rc = graph.supervise(show)
+    except OSError as exc:  # an executable not found, a log folder not writable
+        close_bar()
+        print(f"sil: {exc}", file=sys.stderr)
+        graph.stop()
+        return 2
+    close_bar()
+    if rc == EXIT_INTERRUPTED:
+        name = signal.Signals(graph.stop_signal).name
+        print(f"sil: {name} received: stopping every node", file=sys.stderr, flush=True)
+        graph.stop()
+        print(f"sil: run (interrupted) written to {bag or '(not recorded)'}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    if failed is not None:
+        print(f"sil: node '{failed}' failed ({describe(rc)}); stopping the graph", file=sys.stderr)
+        graph.stop()
+        print(f"--- end of {graph.logs[failed]}\n{_tail(graph.logs[failed])}", file=sys.stderr)
+        print(f"sil: run (incomplete) written to {bag}", file=sys.stderr)
+        return 1
+    print(f"sil: run written to {bag or '(not recorded)'}", file=sys.stderr)
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -156,7 +255,14 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="nodes to start (default: recorder and the loop nodes with --controller)",
     )
-    ap.add_argument("--quiet", action="store_true", help="no progress line")
+    ap.add_argument(
+        "--domain-id",
+        type=int,
+        default=None,
+        help="ROS_DOMAIN_ID of the graph (default: a free one from domain_coordinator; "
+        "an exported ROS_DOMAIN_ID is not used)",
+    )
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
     try:
         params = yaml.safe_load(args.params_file.read_text())
@@ -170,45 +276,26 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sil: parameter file {args.params_file} unusable: {exc}", file=sys.stderr)
         return 2
     env = dict(os.environ)
-    env.setdefault("ROS_DOMAIN_ID", str(random.Random(os.getpid()).randint(1, 100)))
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env["PYTHONUNBUFFERED"] = "1"
     graph = Graph(args.params_file, args.log_dir, names, env)
-    stop = {"sig": None}
-
-    def on_signal(signum, frame):
-        stop["sig"] = signum
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, on_signal)
-    last = [0.0]
-
-    def show(k, n):
-        if args.quiet or not n or time.monotonic() - last[0] < 2.0:
-            return
-        last[0] = time.monotonic()
-        print(f"sil: step {k}/{n} ({100.0 * k / n:.0f} %)", file=sys.stderr, flush=True)
-
-    try:
-        graph.start()
-        failed, rc = graph.supervise(show)
-    except KeyboardInterrupt:
-        print("sil: interrupted; stopping every node", file=sys.stderr)
-        graph.stop()
-        print(f"sil: run (interrupted) written to {bag}", file=sys.stderr)
-        return 130
-    except FileNotFoundError as exc:
-        print(f"sil: {exc}", file=sys.stderr)
-        graph.stop()
-        return 2
-    if failed is not None:
-        print(f"sil: node '{failed}' failed ({describe(rc)}); stopping the graph", file=sys.stderr)
-        graph.stop()
-        print(f"--- end of {graph.logs[failed]}\n{_tail(graph.logs[failed])}", file=sys.stderr)
-        print(f"sil: run (incomplete) written to {bag}", file=sys.stderr)
-        return 1
-    print(f"sil: run written to {bag or '(not recorded)'}", file=sys.stderr)
-    return 0
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, graph.on_signal)
+    with ExitStack() as held:
+        if args.domain_id is None:  # reserved for this host until the runner exits
+            domain = held.enter_context(domain_coordinator.domain_id())
+        else:
+            domain = args.domain_id
+        env["ROS_DOMAIN_ID"] = str(domain)
+        inherited = os.environ.get("ROS_DOMAIN_ID")
+        note = (
+            f" (exported ROS_DOMAIN_ID={inherited} not used)"
+            if inherited not in (None, str(domain))
+            else ""
+        )
+        print(f"sil: ROS_DOMAIN_ID={domain}{note}", file=sys.stderr, flush=True)
+        status = run_graph(graph, bag, args.quiet)
+    return status
 
 
 def run() -> None:

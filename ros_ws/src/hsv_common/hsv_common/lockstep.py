@@ -15,9 +15,12 @@ library object it adapts, and then only moves messages:
   graph has announced itself.
 - A wall-clock watchdog (parameter ``watchdog_s``) turns a silent or dead peer into
   an error naming the topic and the node that should have sent it (exit status 3).
+- Isolation check: a loop topic with more publishers than the graph has producers of
+  it means another graph runs in the same ROS domain; the node stops with an error
+  naming the domain and the topic (exit status 5) instead of mixing the two runs.
 
 Exit status of :func:`main`: 0 done, 2 bad parameter, 3 watchdog, 4 stopped by a
-signal before the end, 1 any other error.
+signal before the end, 5 foreign graph in the domain, 1 any other error.
 """
 
 from __future__ import annotations
@@ -66,11 +69,49 @@ READY_QOS = QoSProfile(
 )
 #: Parameter services cost every spin of every node (more entities in the wait set).
 START_PARAMETER_SERVICES = os.environ.get("HSV_PARAM_SERVICES", "0") == "1"
-EXIT_OK, EXIT_ERROR, EXIT_PARAM, EXIT_WATCHDOG, EXIT_SIGNAL = 0, 1, 2, 3, 4
+EXIT_OK, EXIT_ERROR, EXIT_PARAM, EXIT_WATCHDOG, EXIT_SIGNAL, EXIT_FOREIGN = 0, 1, 2, 3, 4, 5
+#: Wall time between two isolation checks of a running node [s].
+FOREIGN_CHECK_S = 1.0
 
 
 class WatchdogError(RuntimeError):
     """A peer went silent for longer than the watchdog time."""
+
+
+class ForeignGraphError(RuntimeError):
+    """Another graph publishes loop topics in this node's ROS domain."""
+
+
+def foreign_publishers(node: Node, graph_nodes, topics) -> str | None:
+    """Check that no loop topic has more publishers than the running graph has.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node that checks (its context gives the domain).
+    graph_nodes : sequence of str
+        Nodes of the running graph (parameter ``graph_nodes``).
+    topics : iterable of str
+        Loop topics to check (the node's inputs).
+
+    Returns
+    -------
+    str or None
+        A message naming the topic, both counts, the expected publishers and the
+        ROS domain, or None when every count is within the graph's.
+    """
+    for topic in topics:
+        producers = [n for n in graph_nodes if n in GRAPH and topic in GRAPH[n][1]]
+        found = node.count_publishers(topic)
+        if found > len(producers):
+            domain = node.context.get_domain_id()
+            return (
+                f"{node.get_name()}: {found} publishers on {topic}, but its graph has "
+                f"{len(producers)} ({', '.join(producers) or 'none'}): another graph is "
+                f"running in ROS domain {domain} (ROS_DOMAIN_ID={domain}); give each graph "
+                "its own domain (fahv sil takes a free one from domain_coordinator)"
+            )
+    return None
 
 
 def msg_type(topic: str):
@@ -222,10 +263,16 @@ def run_metadata_param(node_name: str, text: str) -> dict:
 
 
 def end_reason(done: bool, status: int) -> str:
-    """Run status for a recorded run: complete, interrupted, or with the exit status."""
+    """Run status for a recorded run: complete, interrupted, or with the exit status.
+
+    ``interrupted`` when the run stopped early on a signal (or with status 0), else
+    ``interrupted (exit status N)`` (N: the node's exit status, e.g. 3 watchdog).
+    """
     if done:
         return "complete"
-    return "interrupted" if status == EXIT_OK else f"interrupted (exit status {status})"
+    if status in (EXIT_OK, EXIT_SIGNAL):
+        return "interrupted"
+    return f"interrupted (exit status {status})"
 
 
 class LockstepNode(Node):
@@ -272,6 +319,7 @@ class LockstepNode(Node):
         self.done = False
         self.last_progress = time.monotonic()
         self.t_ready = time.monotonic()
+        self.next_foreign_check = 0.0
 
     # -- to implement -------------------------------------------------------------
     def spec_name(self) -> str:
@@ -345,10 +393,32 @@ class LockstepNode(Node):
         ]
         return missing
 
+    def check_foreign(self, now: float | None = None) -> None:
+        """Isolation check, at most every :data:`FOREIGN_CHECK_S` seconds.
+
+        Parameters
+        ----------
+        now : float, optional
+            ``time.monotonic()`` of the caller; None checks at once.
+
+        Raises
+        ------
+        ForeignGraphError
+            If an input topic has more publishers than the graph has producers of it.
+        """
+        if now is not None:
+            if now < self.next_foreign_check:
+                return
+            self.next_foreign_check = now + FOREIGN_CHECK_S
+        problem = foreign_publishers(self, self.graph_nodes, self.inputs)
+        if problem:
+            raise ForeignGraphError(problem)
+
     def poll(self) -> None:
         """Called between spins: readiness announcement and the watchdog."""
         if not self.ready:
             if not self.matched():
+                self.check_foreign()
                 self.ready = True
                 self.ready_pub.publish(String(data=self.get_name()))
                 self.get_logger().info("all peers matched: ready")
@@ -368,7 +438,9 @@ class LockstepNode(Node):
         WatchdogError
             If no step was completed for ``watchdog_s`` seconds of wall time.
         """
-        if self.done or time.monotonic() - self.last_progress <= self.watchdog_s:
+        now = time.monotonic()
+        self.check_foreign(now)
+        if self.done or now - self.last_progress <= self.watchdog_s:
             return
         missing = [
             t for t in self.inputs if self.k not in self.buf[t] and not (
@@ -390,8 +462,12 @@ def msg_type_of(topic: str):
     return msg_type(topic)
 
 
-def make_executor():
+def make_executor(message_info: bool = False):
     """Executor of every node: rclpy's EventsExecutor unless ``HSV_EXECUTOR=single``.
+
+    ``message_info=True`` (the recorder: it keeps the DDS source timestamps) selects
+    the SingleThreadedExecutor, since the EventsExecutor of Jazzy cannot call a
+    subscription callback with its message info (SystemError, measured).
 
     The events executor (rclpy.experimental, C++ event queue) runs the Case 1 graph
     about 1.4x faster than the SingleThreadedExecutor on this 2-core machine
@@ -399,7 +475,7 @@ def make_executor():
     so the SIL integration tests (lockstep, kill, SIGINT, watchdog) run with it, and
     ``HSV_EXECUTOR=single`` selects the classic executor.
     """
-    if os.environ.get("HSV_EXECUTOR", "events") == "single":
+    if message_info or os.environ.get("HSV_EXECUTOR", "events") == "single":
         return SingleThreadedExecutor()
     from rclpy.experimental.events_executor import EventsExecutor
 
@@ -430,7 +506,7 @@ def main(node_cls, args=None, linger_s: float = 1.0) -> int:
     try:
         node = node_cls()
         name = node.get_name()
-        ex = make_executor()
+        ex = make_executor(getattr(node, "MESSAGE_INFO", False))
         ex.add_node(node)
         while not node.done and stop.signal is None:
             ex.spin_once(timeout_sec=0.05)
@@ -448,6 +524,9 @@ def main(node_cls, args=None, linger_s: float = 1.0) -> int:
     except WatchdogError as exc:
         print(f"[{name}] watchdog: {exc}", file=sys.stderr)
         status = EXIT_WATCHDOG
+    except ForeignGraphError as exc:
+        print(f"[{name}] error: {exc}", file=sys.stderr)
+        status = EXIT_FOREIGN
     except Exception as exc:  # report any failure with the node's name, then the traceback
         import traceback
 

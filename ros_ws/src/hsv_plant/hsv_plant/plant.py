@@ -36,8 +36,17 @@ class PlantNode(LockstepNode):
         return [("/clock", clock_msg(k, self.Ts)), ("/hsv/state", self.core.state())]
 
     def poll(self) -> None:
-        """Start step 0 once every peer is ready; afterwards the watchdog."""
+        """Start step 0 once every peer is ready; afterwards the watchdog.
+
+        Raises
+        ------
+        ForeignGraphError
+            If another graph publishes in the domain (checked before step 0).
+        WatchdogError
+            If the graph is not ready within max(60 s, watchdog_s).
+        """
         if not self.ready:
+            self.check_foreign(time.monotonic())
             waiting = [n for n in self.graph_nodes if n != "plant" and n not in self.peers_ready]
             if self.matched() or waiting:
                 if time.monotonic() - self.last_progress > max(60.0, self.watchdog_s):
@@ -46,6 +55,7 @@ class PlantNode(LockstepNode):
                         f"waiting for {waiting or self.matched()}"
                     )
                 return
+            self.check_foreign()
             self.ready = True
             self.get_logger().info(f"graph ready ({len(self.peers_ready)} peers): step 0")
             self.last_progress = self.t_ready = time.monotonic()

@@ -1,0 +1,181 @@
+"""Where the wall time of a SIL step goes: per-hop latency from recorded DDS timestamps.
+
+The SIL recorder keeps, for every message it records, the DDS source timestamp (wall
+clock when the producing node published it) and its own receive time, and writes them
+to ``<run>/timestamps.npz`` when it closes the run (:func:`save_timestamps`). From
+them, :func:`hop_latencies` gives for every loop node of the step
+
+    latency(node, k) = source time of its output of step k
+                       - latest source time of its inputs of step k
+
+i.e. the DDS transport of its last input, the executor's wake-up, the node's own
+computation and the publication, as seen on the wall clock (the plant's output of
+step k + 1 follows its input of step k). The nodes of one step run one after the
+other along the critical path (plant -> notch_filter | nominal_trajectory -> controller
+-> fault_injector -> plant), so these latencies add up to the step period. The
+recorder's own receive delay (receive - source) estimates one DDS hop without any
+computation.
+
+Runs of ``fahv simulate`` have no such file: their timing is not a graph's.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from fahv.loop.graph import CONTROLLER_NODES, GRAPH, TOPICS, graph_nodes
+
+#: File of the recorded timestamps in a run folder.
+TIMESTAMPS_FILE = "timestamps.npz"
+#: The lockstep master: its output of step k + 1 answers its input of step k.
+MASTER = "plant"
+
+
+def _key(topic: str) -> str:
+    return topic.strip("/").replace("/", ".")
+
+
+def save_timestamps(folder: str | Path, stamps: dict) -> Path:
+    """Write the recorder's timestamps of a run to ``<folder>/timestamps.npz``.
+
+    Parameters
+    ----------
+    folder : path
+        Run folder (exists).
+    stamps : dict
+        Topic -> flat int64 sequence ``k, source_ns, received_ns`` per message
+        (array of 3 N values, or an (N, 3) array); wall-clock nanoseconds.
+
+    Returns
+    -------
+    Path
+        The file written.
+
+    Raises
+    ------
+    OSError
+        If the file cannot be written.
+    """
+    arrays = {_key(t): np.asarray(v, dtype=np.int64).reshape(-1, 3) for t, v in stamps.items()}
+    path = Path(folder) / TIMESTAMPS_FILE
+    np.savez_compressed(path, **arrays)
+    return path
+
+
+def load_timestamps(folder: str | Path) -> dict[str, np.ndarray] | None:
+    """Timestamps of a run: topic -> (N, 3) int64 [k, source_ns, received_ns].
+
+    Returns None when the run has no (readable) timestamps file.
+    """
+    path = Path(folder) / TIMESTAMPS_FILE
+    try:
+        with np.load(path) as z:
+            return {t: z[_key(t)] for t in TOPICS if _key(t) in z.files}
+    except (OSError, ValueError, KeyError):
+        return None
+
+
+def run_controller(folder: str | Path) -> str:
+    """Controller node of a run from its ``params.yaml`` (``tube_mpc`` if unknown)."""
+    try:
+        params = yaml.safe_load((Path(folder) / "params.yaml").read_text()) or {}
+    except (OSError, yaml.YAMLError):
+        params = {}
+    return next((n for n in CONTROLLER_NODES if n in params), CONTROLLER_NODES[0])
+
+
+def _source_by_step(rows: np.ndarray) -> dict[int, int]:
+    return {int(k): int(src) for k, src, _ in rows}
+
+
+def _stats(values_ns: np.ndarray) -> dict:
+    v = np.asarray(values_ns, dtype=float) * 1e-6
+    if v.size == 0:
+        return {"n": 0, "median_ms": None, "p90_ms": None, "max_ms": None}
+    return {
+        "n": int(v.size),
+        "median_ms": float(np.median(v)),
+        "p90_ms": float(np.percentile(v, 90)),
+        "max_ms": float(v.max()),
+    }
+
+
+def hop_latencies(stamps: dict[str, np.ndarray], controller: str = "tube_mpc") -> dict:
+    """Per-hop latency breakdown of a SIL run (see the module docstring).
+
+    Parameters
+    ----------
+    stamps : dict
+        :func:`load_timestamps` of the run.
+    controller : str
+        Controller node of the run (one of :data:`fahv.loop.graph.CONTROLLER_NODES`).
+
+    Returns
+    -------
+    dict
+        ``hops``: one entry per loop node in graph order, with ``node``, ``inputs``,
+        ``output`` (the output the next node waits for) and the statistics over the
+        steps: ``n``, ``median_ms``, ``p90_ms``, ``max_ms`` [ms of wall time];
+        ``step``: the same statistics of the step period (state k -> state k + 1);
+        ``dds_hop``: the recorder's receive delay over every loop topic (one DDS hop
+        without computation).
+    """
+    nodes = [n for n in graph_nodes(controller, record=False) if n in GRAPH]
+    consumed = {t for n in nodes for t in GRAPH[n][0]}
+    src = {t: _source_by_step(rows) for t, rows in stamps.items()}
+    hops = []
+    for n in nodes:
+        inputs, outputs = GRAPH[n]
+        out = next((t for t in outputs if t in consumed), outputs[0])
+        lag = 1 if n == MASTER else 0
+        lat = []
+        for k, t_out in src.get(out, {}).items():
+            k_in = k - lag
+            if k_in >= 0 and all(k_in in src.get(t, {}) for t in inputs):
+                lat.append(t_out - max(src[t][k_in] for t in inputs))
+        hops.append({"node": n, "inputs": list(inputs), "output": out, **_stats(lat)})
+    state = src.get("/hsv/state", {})
+    period = [state[k + 1] - state[k] for k in state if k + 1 in state]
+    delay = [rows[:, 2] - rows[:, 1] for rows in stamps.values() if len(rows)]
+    return {
+        "hops": hops,
+        "step": _stats(period),
+        "dds_hop": _stats(np.concatenate(delay) if delay else np.zeros(0)),
+    }
+
+
+def run_latencies(folder: str | Path) -> dict | None:
+    """:func:`hop_latencies` of a run folder, or None if it has no timestamps."""
+    stamps = load_timestamps(folder)
+    if not stamps:
+        return None
+    return hop_latencies(stamps, run_controller(folder))
+
+
+def format_latencies(lat: dict) -> str:
+    """Text table of :func:`hop_latencies`: median, 90th percentile and max per hop [ms]."""
+
+    def row(label: str, s: dict) -> str:
+        f = [("-" if s[k] is None else f"{s[k]:.3f}") for k in ("median_ms", "p90_ms", "max_ms")]
+        share = (
+            f"{100 * s['median_ms'] / lat['step']['median_ms']:.0f} %"
+            if s["median_ms"] is not None and lat["step"]["median_ms"]
+            else "-"
+        )
+        return f"{label:<52} {f[0]:>8} {f[1]:>8} {f[2]:>9} {share:>7}"
+
+    lines = [
+        f"{'wall-clock latency per hop (DDS source timestamps)':<52} {'median':>8} {'p90':>8} "
+        f"{'max [ms]':>9} {'of step':>7}"
+    ]
+    for h in lat["hops"]:
+        label = f"{h['node']}: {' + '.join(h['inputs'])} -> {h['output']}"
+        if len(label) > 52:
+            label = f"{h['node']} -> {h['output']}"
+        lines.append(row(label, h))
+    lines.append(row("step period: /hsv/state k -> k + 1", lat["step"]))
+    lines.append(row("one DDS hop (recorder receive - source)", lat["dds_hop"]))
+    return "\n".join(lines)
