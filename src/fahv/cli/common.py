@@ -81,8 +81,10 @@ def stop_signals():
     The first SIGINT or SIGTERM raises ``KeyboardInterrupt`` in the main thread, so
     a command finalises its run (the run writer closes with status ``interrupted``,
     ``fahv sil`` forwards the stop to its graph); every further one only prints a note,
-    so that a second Ctrl-C cannot cut the finalisation short. Outside the main thread
-    (where handlers cannot be set) it does nothing.
+    so that a second Ctrl-C cannot cut the finalisation short. After a stop the
+    signals stay ignored (the command is ending; a late Ctrl-C must not turn exit
+    status 130 into a death by signal); otherwise the previous handlers are restored.
+    Outside the main thread (where handlers cannot be set) it does nothing.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -99,5 +101,5 @@ def stop_signals():
     try:
         yield
     finally:
-        for s, h in old.items():
-            signal.signal(s, h)
+        for s, h in old.items():  # after a stop, the process is ending: ignore the rest
+            signal.signal(s, signal.SIG_IGN if seen else h)

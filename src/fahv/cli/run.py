@@ -11,7 +11,8 @@ from tqdm import tqdm
 from fahv.cli.common import add_vehicle_option, read_run_warned, to_json
 from fahv.cli.design import load_or_design
 from fahv.errors import FahvError, RunInterrupted
-from fahv.loop.graph import TOPICS
+from fahv.loop.graph import NODES, TOPICS, graph_nodes
+from fahv.loop.params import controller_node
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import RunWriter, read_run, run_result_of, stored_metadata
 from fahv.runs.metrics import metrics
@@ -122,6 +123,8 @@ def cmd_sil(args) -> int:
     """Run a case through the ROS 2 node graph, recorded to MCAP; metrics of the run."""
     case, design, vehicle = load_or_design(args.case, args.design, args.vehicle)
     variant = args.variant or case["variants"][0]
+    if args.write_params:
+        return _write_params_only(args, design, variant)
     res = run_sil(
         design,
         variant,
@@ -159,6 +162,21 @@ def cmd_sil(args) -> int:
             print(f"case {case.name}, design {design.summary['design_hash']}")
             print(format_metrics(table))
     return 0 if res.returncode == 0 else 1
+
+
+def _write_params_only(args, design, variant: str) -> int:
+    """``fahv sil --write-params FILE``: the run's parameter file and how to start the nodes."""
+    out = Path(args.out or ROOT / "bags").resolve()
+    bag = out / run_name(design.case["name"], variant, "sil")
+    path = Path(args.write_params)
+    content = write_run_params(design, variant, bag, path, args.duration, args.watchdog)
+    print(f"parameter file {path} written; the recorder will write {bag}")
+    print("start the graph node by node (any order; the plant starts step 0 once all are up):")
+    print("  source ros_ws/install/setup.bash")
+    for name in graph_nodes(controller_node(content)):
+        amp = "" if name == "plant" else " &"
+        print(f"  ros2 run {NODES[name].package} {name} --ros-args --params-file {path}{amp}")
+    return 0
 
 
 def cmd_replay(args) -> int:
@@ -235,6 +253,13 @@ def add_parsers(sub) -> None:
         default=None,
         help="ROS_DOMAIN_ID of the graph (default: a free one from domain_coordinator; "
         "an exported ROS_DOMAIN_ID is not used)",
+    )
+    p.add_argument(
+        "--write-params",
+        metavar="FILE",
+        default=None,
+        help="only write the run's ROS parameter file (every node, the recorder's run folder) "
+        "and print the `ros2 run` commands that start the graph by hand",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="metrics as JSON")
