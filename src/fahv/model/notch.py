@@ -7,16 +7,22 @@ Continuous transfer function (eq. 38)::
 Transfer function, state space (eq. 39), discretisation and frequency responses
 come from python-control; the only code here is the parameter handling and the
 per-sample state update used by the simulator and the notch_filter node.
+
+python-control (which imports matplotlib) is imported where it is used, not with
+this module: every node of the SIL graph imports this module, and only the filter
+construction needs it (start-up time of the graph, docs/sil.md).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-import control
+if TYPE_CHECKING:
+    import control
 
 
 @dataclass(frozen=True)
@@ -60,6 +66,8 @@ class NotchFilter:
 
     def tf(self) -> control.TransferFunction:
         """Continuous transfer function H(s) of eq. (38) (python-control)."""
+        import control
+
         num = [1.0 / self.omega_z**2, 2.0 * self.eps_z / self.omega_z, 1.0]
         den = [1.0 / self.omega_p**2, 2.0 * self.eps_p / self.omega_p, 1.0]
         return control.tf(num, den)
@@ -70,6 +78,8 @@ class NotchFilter:
         Controllable canonical realisation from ``control.tf2ss``; with
         ``omega_z = omega_p`` D_q = 1.
         """
+        import control
+
         sys = control.tf2ss(self.tf())
         return (
             np.asarray(sys.A, dtype=float),
@@ -104,12 +114,16 @@ class NotchFilter:
                 f"notch frequency omega_z = {self.omega_z} rad/s is not below the Nyquist "
                 f"frequency pi/Ts = {math.pi / Ts:.3f} rad/s"
             )
+        import control
+
         return control.c2d(
             control.ss(self.tf()), Ts, method="tustin", prewarp_frequency=self.omega_z
         )
 
     def magnitude(self, omega) -> np.ndarray:
         """|H(j omega)| for frequencies ``omega`` [rad/s] (array_like) -> ndarray."""
+        import control
+
         resp = control.frequency_response(self.tf(), np.atleast_1d(np.asarray(omega, float)))
         return np.abs(np.asarray(resp.complex)).ravel()
 

@@ -24,6 +24,10 @@ that the SVD weighs every entry by its effect in typical units.
 
 Between samples the weighting functions are interpolated linearly, which keeps them
 non-negative and summing to 1 everywhere in the envelope.
+
+scipy.signal and scipy.optimize are imported by the design-time functions that use
+them, not with this module, which every node of the SIL graph imports (the online
+LPV weights need neither; start-up time of the graph, docs/sil.md).
 """
 
 from __future__ import annotations
@@ -31,7 +35,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import optimize, signal
 
 from fahv.errors import DesignError
 
@@ -149,12 +152,14 @@ class TPModel:
 
         Uses ``scipy.signal.cont2discrete``. Raises ValueError if Ts <= 0.
         """
+        from scipy.signal import cont2discrete  # design time only (node start-up)
+
         if not (np.isfinite(Ts) and Ts > 0.0):
             raise ValueError(f"sampling period Ts must be > 0, got {Ts}")
         n, m = self.B_vertices.shape[1:]
         Ad, Bd = [], []
         for A, B in zip(self.A_vertices, self.B_vertices, strict=True):
-            a, b, *_ = signal.cont2discrete((A, B, np.eye(n), np.zeros((n, m))), Ts, method="zoh")
+            a, b, *_ = cont2discrete((A, B, np.eye(n), np.zeros((n, m))), Ts, method="zoh")
             Ad.append(a)
             Bd.append(b)
         return DiscretePolytope(np.array(Ad), np.array(Bd), Ts)
@@ -209,6 +214,8 @@ def _min_volume_simplex(Y: np.ndarray) -> np.ndarray:
     def grad(z):
         G = to_G(z)
         return -np.linalg.inv(G).T.ravel()
+
+    from scipy import optimize  # design time only (node start-up)
 
     res = optimize.minimize(
         obj,

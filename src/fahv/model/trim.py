@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import interpolate, optimize
+from scipy import interpolate
 
 from fahv.errors import TrimError
 from fahv.model.dynamics import dm_rhs, forces, make_model
@@ -123,6 +123,8 @@ def trim(
 
     def jac(z):
         return jacobian_complex_step(fun, z)
+
+    from scipy import optimize  # trim solves only (node start-up)
 
     sol = optimize.root(fun, z0, jac=jac, method="hybr", options={"xtol": 1e-14})
     z = sol.x

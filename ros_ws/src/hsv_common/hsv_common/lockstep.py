@@ -35,6 +35,7 @@ import time
 import numpy as np
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -490,9 +491,17 @@ class _Stop:
         self.signal = signum
 
 
-def main(node_cls, args=None, linger_s: float = 1.0) -> int:
+def all_acked(node: Node) -> bool:
+    """True when every subscriber acknowledged every message of the node's publishers."""
+    return all(p.wait_for_all_acked(Duration(seconds=0)) for p in node.publishers)
+
+
+def main(node_cls, args=None, linger_s: float = 10.0) -> int:
     """Run one node until its last step, a signal, or an error; returns the exit status.
 
+    After the last step the node stays until every subscriber (the recorder too, which
+    may lag behind the loop) acknowledged its messages, at most ``linger_s`` seconds:
+    a reliable writer that goes away earlier loses what is still unacknowledged.
     SIGINT and SIGTERM stop the spin loop cleanly (the node's :meth:`close` runs, so
     the recorder finishes its file).
     """
@@ -516,8 +525,8 @@ def main(node_cls, args=None, linger_s: float = 1.0) -> int:
             status = EXIT_SIGNAL
         else:  # let reliable QoS deliver the last messages before the writers go away
             t_end = time.monotonic() + linger_s
-            while time.monotonic() < t_end and stop.signal is None:
-                ex.spin_once(timeout_sec=0.05)
+            while time.monotonic() < t_end and stop.signal is None and not all_acked(node):
+                ex.spin_once(timeout_sec=0.01)
     except ParameterError as exc:
         print(f"[{name}] parameter error: {exc}", file=sys.stderr)
         status = EXIT_PARAM
