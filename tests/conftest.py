@@ -2,6 +2,7 @@ import copy
 import warnings
 
 import pytest
+import yaml
 
 from fahv.config.yamlio import load_yaml
 from fahv.design.case import case_from_mapping
@@ -48,3 +49,20 @@ def design(raw):
     """Case 1 designed with a small W sample (shared by the design, SIL and log tests)."""
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     return run_design(quick(raw), log=lambda *_: None)
+
+
+@pytest.fixture(scope="session")
+def quick_case(design, raw, tmp_path_factory):
+    """The test design as a case file plus its saved artefacts, for the `fahv` command:
+    (case file, artefact folder) to pass as ``fahv simulate|sil CASE --design DIR``."""
+    from fahv.design.artefacts import save_design
+    from fahv.loop.params import node_parameters, parameter_file
+
+    folder = tmp_path_factory.mktemp("case")
+    d = copy.deepcopy(raw)
+    d["disturbance"]["samples"] = 40
+    case_file = folder / "quick.yaml"
+    case_file.write_text(yaml.safe_dump(d, sort_keys=False))
+    params = yaml.safe_dump(parameter_file(node_parameters(design)), sort_keys=False)
+    save_design(design, folder / "artefacts", {"params.yaml": params})
+    return case_file, folder / "artefacts"

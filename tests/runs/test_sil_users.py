@@ -12,11 +12,8 @@ import time
 import domain_coordinator
 import numpy as np
 import pytest
-import yaml
 
-from fahv.design.artefacts import save_design
 from fahv.loop.graph import NODES, TOPICS
-from fahv.loop.params import node_parameters, parameter_file
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import read_run, run_result_of
 from fahv.runs.latency import run_latencies
@@ -108,19 +105,6 @@ def test_a_foreign_graph_in_the_domain_is_named(design, tmp_path, capfd):
         f"another graph is running in ROS domain {domain}" in err
     )
     assert read_run(res.bag).metadata["status"].startswith("interrupted")
-
-
-@pytest.fixture(scope="module")
-def quick_case(design, raw, tmp_path_factory):
-    """The test design as a case file with its saved artefacts (for the `fahv` command)."""
-    folder = tmp_path_factory.mktemp("case")
-    d = dict(raw)
-    d["disturbance"] = {**raw["disturbance"], "samples": 40}
-    case_file = folder / "quick.yaml"
-    case_file.write_text(yaml.safe_dump(d, sort_keys=False))
-    params = yaml.safe_dump(parameter_file(node_parameters(design)), sort_keys=False)
-    save_design(design, folder / "artefacts", {"params.yaml": params})
-    return case_file, folder / "artefacts"
 
 
 def test_ctrl_c_on_fahv_sil_finalises_the_run_and_exits_130(quick_case, tmp_path):

@@ -12,6 +12,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import read_run
@@ -103,3 +104,14 @@ def stop_signals():
     finally:
         for s, h in old.items():  # after a stop, the process is ending: ignore the rest
             signal.signal(s, signal.SIG_IGN if seen else h)
+
+
+def progress(iterable=None, **kwargs) -> tqdm:
+    """A tqdm progress bar on stderr that also shows in logs (count, rate, ETA).
+
+    On a terminal it updates in place (every 0.5 s at most); when stderr is not a
+    terminal (CI, ``> log``) it writes a line every 10 s instead of staying silent.
+    ``kwargs`` go to ``tqdm`` (``desc``, ``total``, ``unit``, ``leave`` ...).
+    """
+    kwargs.setdefault("mininterval", 0.5 if sys.stderr.isatty() else 10.0)
+    return tqdm(iterable, **kwargs)

@@ -7,9 +7,8 @@ import warnings
 from pathlib import Path
 
 import yaml
-from tqdm import tqdm
 
-from fahv.cli.common import add_vehicle_option, artefact_dir, vehicle_of
+from fahv.cli.common import add_vehicle_option, artefact_dir, progress, vehicle_of
 from fahv.design.artefacts import load_design, save_design, stale_reason
 from fahv.design.case import load_case
 from fahv.design.pipeline import run_design
@@ -33,7 +32,7 @@ def design_case(case, vehicle, out_dir: Path, log=print):
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
 
     def bar(it):
-        return tqdm(it, desc="sample W", leave=False, disable=None)
+        return progress(it, desc="sample W", leave=False)
 
     design = run_design(case, vehicle, progress=bar, log=log)
     params = yaml.safe_dump(parameter_file(node_parameters(design)), sort_keys=False, width=120)

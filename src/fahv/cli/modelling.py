@@ -8,9 +8,8 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
-from fahv.cli.common import add_vehicle_option, shape_arg, vehicle_of
+from fahv.cli.common import add_vehicle_option, progress, shape_arg, vehicle_of
 from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX
 from fahv.design.feasibility import tube_feasibility
 from fahv.errors import FahvError
@@ -81,7 +80,7 @@ def _notch_arg(s: str):
 def _tp(args, veh, kind, shape, notch=None):
 
     def bar(it):
-        return tqdm(it, desc=f"linearise {kind.upper()}", unit="pt", leave=False, disable=None)
+        return progress(it, desc=f"linearise {kind.upper()}", unit="pt", leave=False)
 
     return build_tp_model(
         veh, kind, shape[0], shape[1], args.samples[0], args.samples[1], notch, bar
@@ -183,7 +182,7 @@ def cmd_tube(args) -> int:
     for treatment in args.treatment:
 
         def bar(it, treatment=treatment):
-            return tqdm(it, desc=f"sample W ({treatment})", leave=False, disable=None)
+            return progress(it, desc=f"sample W ({treatment})", leave=False)
 
         res = tube_feasibility(
             veh,

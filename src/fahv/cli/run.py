@@ -6,9 +6,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from tqdm import tqdm
-
-from fahv.cli.common import add_vehicle_option, read_run_warned, to_json
+from fahv.cli.common import add_vehicle_option, progress, read_run_warned, to_json
 from fahv.cli.design import load_or_design
 from fahv.errors import FahvError, RunInterrupted
 from fahv.loop.graph import NODES, TOPICS, graph_nodes
@@ -45,10 +43,7 @@ class StepProgress:
     LAST_TOPIC = list(TOPICS)[-1]
 
     def __init__(self, desc: str, n_steps: int, writer=None) -> None:
-        tty = sys.stderr.isatty()
-        self.bar = tqdm(
-            total=n_steps, desc=desc, unit="step", leave=False, mininterval=0.5 if tty else 10.0
-        )
+        self.bar = progress(total=n_steps, desc=desc, unit="step", leave=False)
         self.writer = writer
         self.k = 0
         self.solves = 0
