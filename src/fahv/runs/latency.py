@@ -7,6 +7,7 @@ them, :func:`hop_latencies` gives for every loop node of the step
 
     latency(node, k) = source time of its output of step k
                        - latest source time of its inputs of step k
+                         (of step k - 1 for an input it takes from the previous step)
 
 i.e. the DDS transport of its last input, the executor's wake-up, the node's own
 computation and the publication, as seen on the wall clock (the plant's output of
@@ -26,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from fahv.loop.graph import CONTROLLER_NODES, GRAPH, TOPICS, graph_nodes
+from fahv.loop.graph import CONTROLLER_NODES, GRAPH, PREVIOUS, TOPICS, graph_nodes
 
 #: File of the recorded timestamps in a run folder.
 TIMESTAMPS_FILE = "timestamps.npz"
@@ -131,11 +132,14 @@ def hop_latencies(stamps: dict[str, np.ndarray], controller: str = "tube_mpc") -
         inputs, outputs = GRAPH[n]
         out = next((t for t in outputs if t in consumed), outputs[0])
         lag = 1 if n == MASTER else 0
+        # input steps: k (k - 1 for the topics taken from the previous step)
+        shift = {t: 1 if t in PREVIOUS.get(n, ()) else 0 for t in inputs}
         lat = []
         for k, t_out in src.get(out, {}).items():
             k_in = k - lag
-            if k_in >= 0 and all(k_in in src.get(t, {}) for t in inputs):
-                lat.append(t_out - max(src[t][k_in] for t in inputs))
+            steps = {t: k_in - shift[t] for t in inputs if k_in - shift[t] >= 0}
+            if k_in >= 0 and steps and all(j in src.get(t, {}) for t, j in steps.items()):
+                lat.append(t_out - max(src[t][j] for t, j in steps.items()))
         hops.append({"node": n, "inputs": list(inputs), "output": out, **_stats(lat)})
     state = src.get("/hsv/state", {})
     period = [state[k + 1] - state[k] for k in state if k + 1 in state]
