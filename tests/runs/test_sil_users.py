@@ -83,8 +83,14 @@ def test_a_foreign_graph_in_the_domain_is_named(design, tmp_path, capfd):
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )
-        try:
-            time.sleep(3.0)  # the foreign node is up before the graph
+        try:  # the foreign node is up before the graph: `ros2 topic list` (stand-in) sees it
+            t0 = time.monotonic()
+            seen = ""
+            while "/hsv/actuator_command" not in seen and time.monotonic() - t0 < 60:
+                seen = subprocess.run(
+                    ["bash", "-c", "ros2 topic list"], env=env, capture_output=True, text=True
+                ).stdout
+            assert "/hsv/actuator_command" in seen
             res = run_sil(
                 design,
                 "tube_mpc",

@@ -18,6 +18,8 @@ library object it adapts, and then only moves messages:
 - Isolation check: a loop topic with more publishers than the graph has producers of
   it means another graph runs in the same ROS domain; the node stops with an error
   naming the domain and the topic (exit status 5) instead of mixing the two runs.
+  Checked before step 0, once a second, and at once on any stale or duplicate
+  message (discovery may complete only after step 0 has started).
 
 Exit status of :func:`main`: 0 done, 2 bad parameter, 3 watchdog, 4 stopped by a
 signal before the end, 5 foreign graph in the domain, 1 any other error.
@@ -341,13 +343,16 @@ class LockstepNode(Node):
     # -- machinery ------------------------------------------------------------------
     def _receive(self, topic: str, msg) -> None:
         k = msg.k + 1 if topic in self.previous else msg.k  # the step that uses it
-        if k < self.k:
-            self.stale += 1
-            self.get_logger().warning(f"stale {topic} of step {k} at step {self.k}: ignored")
-            return
-        if k in self.buf[topic]:
-            self.duplicate += 1
-            self.get_logger().warning(f"duplicate {topic} of step {k}: ignored")
+        if k < self.k or k in self.buf[topic]:
+            # a second sender of this step: first of all another graph in the domain
+            # (it has surely been discovered by now, whatever the timing at start-up)
+            self.check_foreign()
+            if k < self.k:
+                self.stale += 1
+                self.get_logger().warning(f"stale {topic} of step {k} at step {self.k}: ignored")
+            else:
+                self.duplicate += 1
+                self.get_logger().warning(f"duplicate {topic} of step {k}: ignored")
             return
         self.buf[topic][k] = msg
         self._advance()
