@@ -35,3 +35,7 @@ class ParameterError(ConfigError):
 
 class RunError(FahvError, RuntimeError):
     """A closed-loop run or a recorded run file cannot be used."""
+
+
+class CampaignError(ConfigError):
+    """A campaign file or a campaign folder is missing, malformed or inconsistent."""
