@@ -1,0 +1,92 @@
+"""The batched simulator gives every run the bits of simulate(), whatever its batch."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fahv.errors import ParameterError, RunError
+from fahv.loop.batch import not_batchable, simulate_batch
+from fahv.loop.simulate import simulate
+
+FIELDS = ("t", "x", "q_f", "x_r", "x_n", "u", "u_applied", "h_c", "V_c", "h_g", "V_g",
+          "tube_level", "fault_active", "lmi_counts")  # fmt: skip
+DURATION = 3.0
+
+
+def _overrides(design):
+    """Runs with every fault kind, perturbed parameters, other commands and starts."""
+    base = design.summary["plant_params"]
+    rng = np.random.default_rng(5)
+    kinds = [("loss_of_effectiveness", {"rho_f": 0.75}), ("bias", {"bias_deg": -2.5}),
+             ("stuck", {}), ("dropout", {}), ("none", {})]  # fmt: skip
+    out = []
+    for i, (kind, extra) in enumerate(kinds):
+        ov = {
+            "plant": {f"params.{k}": v * (1 + 0.08 * rng.uniform(-1, 1)) for k, v in base.items()},
+            "fault_injector": {"kind": kind, "t_onset": 0.4 + 0.5 * i, **extra},
+        }
+        if i == 1:
+            ov["nominal_trajectory"] = {"command.h_c": 85200.0, "command.V_c": 7800.0}
+        out.append(ov)
+    return out
+
+
+def _assert_same(a, b):
+    for f in FIELDS:
+        x, y = getattr(a, f), getattr(b, f)
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), f
+    assert a.info == b.info
+
+
+def test_batch_equals_simulate_bit_for_bit(design):
+    ovs = _overrides(design)
+    batch = simulate_batch(design, "tube_mpc", ovs, DURATION)
+    for ov, res in zip(ovs, batch, strict=True):
+        _assert_same(simulate(design, "tube_mpc", DURATION, overrides=ov), res)
+    # the faults did act: the elevator loss scaled delta_e by 0.75 once active
+    r = batch[0]
+    on = r.fault_active
+    assert on.any() and not on.all()
+    np.testing.assert_allclose(r.u_applied[on, 1], 0.75 * r.u[on, 1], rtol=1e-15)
+
+
+def test_result_does_not_depend_on_the_batch(design):
+    ovs = _overrides(design)
+    alone = simulate_batch(design, "tube_mpc", ovs[2:3], DURATION)[0]
+    together = simulate_batch(design, "tube_mpc", ovs[::-1], DURATION)[2]
+    _assert_same(alone, together)
+
+
+@pytest.mark.parametrize("variant", ["tube_mpc_no_notch", "tube_mpc_notch2"])
+def test_notch_variants_batched_and_equal(design, variant):
+    ovs = _overrides(design)[:2]
+    for ov, res in zip(ovs, simulate_batch(design, variant, ovs, 1.0), strict=True):
+        _assert_same(simulate(design, variant, 1.0, overrides=ov), res)
+
+
+def test_failing_runs_are_reported_and_the_others_complete(design):
+    ovs = [None, {"plant": {"params.m": math.nan}}, {"plant": {"params.I_yy": 1e-3}}, None]
+    res = simulate_batch(design, "tube_mpc", ovs, 4.0)
+    assert isinstance(res[1], ParameterError)
+    assert "params.m" in str(res[1]) and "finite" in str(res[1])
+    assert isinstance(res[2], RunError)
+    with pytest.raises(RunError) as exc:  # the same failure, at the same step, as simulate
+        simulate(design, "tube_mpc", 4.0, overrides=ovs[2])
+    assert str(res[2]) == str(exc.value)
+    t_fail = float(str(res[2]).split("at t = ")[1].split(" s")[0])
+    assert 1.0 < t_fail < 4.0  # the inertia 1e-3 of the nominal diverges in about 2 s
+    _assert_same(simulate(design, "tube_mpc", 4.0), res[0])
+    _assert_same(res[0], res[3])
+
+
+def test_rmpc_runs_through_the_per_run_fallback(design):
+    from fahv.loop.batch import _cores, run_parameters
+
+    cores = _cores(run_parameters(design, "rmpc", 0.1, None), {})
+    assert "has no batched kernel" in not_batchable(cores)
+    ov = {"fault_injector": {"kind": "bias", "t_onset": 0.0, "bias_deg": 1.0}}
+    res = simulate_batch(design, "rmpc", [ov], 0.1)[0]
+    _assert_same(simulate(design, "rmpc", 0.1, overrides=ov), res)
+    refused = simulate_batch(design, "rmpc", [ov], 0.1, fallback=False)[0]
+    assert isinstance(refused, RunError) and "cannot be batched" in str(refused)
