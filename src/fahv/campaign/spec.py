@@ -97,15 +97,15 @@ def campaign_spec() -> Section:
     requirements = Section(
         "requirements",
         (
-            Field("attitude_deg", "float", "bound on |alpha - alpha_r| and |theta - theta_r|",
-                  unit="deg", lo=0.0, lo_open=True, default=0.5),
-            Field("settling_s", "float", "settling (|h - h_c| <= 10 ft and |V - V_c| <= 2 "
-                  "ft/s held to the end) within this time after the command stops moving",
+            Field("attitude_deg", "float", "bound on the attitude errors alpha - alpha_r and "
+                  "theta - theta_r (absolute)", unit="deg", lo=0.0, lo_open=True, default=0.5),
+            Field("settling_s", "float", "settling (h within 10 ft of h_c and V within 2 ft/s "
+                  "of V_c, held to the end) within this time after the command stops moving",
                   unit="s", lo=0.0, lo_open=True, default=60.0),
-            Field("h_final_ft", "float", "bound on the final |h - h_c|", unit="ft", lo=0.0,
-                  lo_open=True, default=10.0),
-            Field("V_final_fps", "float", "bound on the final |V - V_c|", unit="ft/s", lo=0.0,
-                  lo_open=True, default=2.0),
+            Field("h_final_ft", "float", "bound on the final altitude error h - h_c (absolute)",
+                  unit="ft", lo=0.0, lo_open=True, default=10.0),
+            Field("V_final_fps", "float", "bound on the final velocity error V - V_c (absolute)",
+                  unit="ft/s", lo=0.0, lo_open=True, default=2.0),
             Field("confidence", "float", "confidence C of the failure-probability bounds",
                   lo=0.0, hi=1.0, lo_open=True, hi_open=True, default=0.95),
         ),
