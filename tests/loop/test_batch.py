@@ -6,7 +6,16 @@ import numpy as np
 import pytest
 
 from fahv.errors import ParameterError, RunError
-from fahv.loop.batch import not_batchable, simulate_batch
+from fahv.loop import batch as batch_mod
+from fahv.loop.batch import (
+    MPC_SOURCE_HASH,
+    _cores,
+    mpc_source_hash,
+    nominal_mode,
+    not_batchable,
+    run_parameters,
+    simulate_batch,
+)
 from fahv.loop.simulate import simulate
 
 FIELDS = ("t", "x", "q_f", "x_r", "x_n", "u", "u_applied", "h_c", "V_c", "h_g", "V_g",
@@ -39,11 +48,24 @@ def _assert_same(a, b):
     assert a.info == b.info
 
 
-def test_batch_equals_simulate_bit_for_bit(design):
+def test_the_mirrored_nominal_mpc_is_the_current_one():
+    assert mpc_source_hash() == MPC_SOURCE_HASH, (
+        "fahv.control.nominal_mpc.TrackingNominal changed: check loop.batch._MPCLanes against "
+        "it (this file's tests) and set MPC_SOURCE_HASH to the new hash"
+    )
+
+
+@pytest.mark.parametrize(("variant", "mode"), [("tube_mpc", "mpc"), ("tube_mpc_paper", "governor")])
+def test_nominal_modes(design, variant, mode):
+    assert nominal_mode(_cores(run_parameters(design, variant, 0.1, None), {})) == mode
+
+
+@pytest.mark.parametrize("variant", ["tube_mpc", "tube_mpc_paper"])
+def test_batch_equals_simulate_bit_for_bit(design, variant):
     ovs = _overrides(design)
-    batch = simulate_batch(design, "tube_mpc", ovs, DURATION)
+    batch = simulate_batch(design, variant, ovs, DURATION)
     for ov, res in zip(ovs, batch, strict=True):
-        _assert_same(simulate(design, "tube_mpc", DURATION, overrides=ov), res)
+        _assert_same(simulate(design, variant, DURATION, overrides=ov), res)
     # the faults did act: the elevator loss scaled delta_e by 0.75 once active
     r = batch[0]
     on = r.fault_active
@@ -56,6 +78,14 @@ def test_result_does_not_depend_on_the_batch(design):
     alone = simulate_batch(design, "tube_mpc", ovs[2:3], DURATION)[0]
     together = simulate_batch(design, "tube_mpc", ovs[::-1], DURATION)[2]
     _assert_same(alone, together)
+
+
+def test_generic_per_run_nominal_path_equals_simulate(design, monkeypatch):
+    monkeypatch.setattr(batch_mod, "MPC_SOURCE_HASH", "changed")
+    assert nominal_mode(_cores(run_parameters(design, "tube_mpc", 0.1, None), {})) == "per_run"
+    ovs = _overrides(design)[:3]
+    for ov, res in zip(ovs, simulate_batch(design, "tube_mpc", ovs, 2.0), strict=True):
+        _assert_same(simulate(design, "tube_mpc", 2.0, overrides=ov), res)
 
 
 @pytest.mark.parametrize("variant", ["tube_mpc_no_notch", "tube_mpc_notch2"])
@@ -81,8 +111,6 @@ def test_failing_runs_are_reported_and_the_others_complete(design):
 
 
 def test_rmpc_runs_through_the_per_run_fallback(design):
-    from fahv.loop.batch import _cores, run_parameters
-
     cores = _cores(run_parameters(design, "rmpc", 0.1, None), {})
     assert "has no batched kernel" in not_batchable(cores)
     ov = {"fault_injector": {"kind": "bias", "t_onset": 0.0, "bias_deg": 1.0}}

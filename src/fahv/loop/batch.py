@@ -20,15 +20,26 @@ Same numbers as :func:`~fahv.loop.simulate.simulate`, bit for bit
     compare the two simulators with ``array_equal``.
 
 What is batched, what is not
-    Batched: the plant (RK4 of the CM), the notch filter, the nominal trajectory of
-    the paper's law (nominal LPV model, reference governor with its bisection, trim
-    map), the Tube-MPC law of eq. (36)/(54) (``tube_mpc`` and its notch variants)
-    and the built-in fault kinds. Not batched, run one by one through ``simulate``
-    (the per-run fallback): any other control law -- the RMPC baseline solves its
-    Kothare LMIs online with cvxpy, one SDP per run and re-solve, which cannot share
-    a numpy call -- and any nominal source other than
-    :class:`fahv.control.reference.NominalTrajectory`. A batch whose runs do not
-    share the design matrices is split into groups that do.
+    Batched: the plant (RK4 of the CM), the notch filter, the ancillary law of the
+    Tube-MPC laws, eq. (36)/(54) (``tube_mpc``, ``tube_mpc_paper`` and their notch
+    variants; the 11-state ECM law of Case 2 included) and the built-in fault kinds.
+    The nominal part, by mode of the nominal_trajectory node:
+
+    - ``governor`` (the paper's law): batched whole (nominal LPV model, reference
+      governor with its bisection, trim map);
+    - ``mpc`` (the online nominal MPC of :mod:`fahv.control.nominal_mpc`): the fast
+      steps (disturbance estimate, plan interpolation, nominal model, trim map) are
+      batched; every M steps each run's own :class:`~fahv.control.nominal_mpc.TrackingNominal`
+      re-plans (``_plan``: scheduling of the condensed QP and one DAQP solve), one run
+      after the other -- a QP per run cannot share a numpy call. This mirror is used
+      only while the source of ``TrackingNominal`` is the one it was checked against
+      (:data:`MPC_SOURCE_HASH`); otherwise the generic path below;
+    - anything else: each run's own nominal core, called per run inside the batch.
+
+    Not batched at all, run one by one through ``simulate`` (the per-run fallback):
+    any other control law -- the RMPC baseline solves its Kothare LMIs online with
+    cvxpy, one SDP per run and re-solve. A batch whose runs do not share the design
+    matrices is split into groups that do.
 
 Divergence
     A run whose plant state becomes non-finite fails with the message ``simulate``
@@ -39,15 +50,19 @@ Divergence
 from __future__ import annotations
 
 import dataclasses
+import functools
+import hashlib
+import inspect
 from collections.abc import Sequence
 
 import numpy as np
 
+from fahv.control.nominal_mpc import TrackingNominal
 from fahv.control.reference import NominalTrajectory
-from fahv.control.tube_mpc import TubeMPCLaw
+from fahv.control.tube_mpc import PaperTubeMPCLaw
 from fahv.errors import RunError
 from fahv.loop.cores import build_core
-from fahv.loop.graph import n_steps_of
+from fahv.loop.graph import STATE_FIELDS, n_steps_of
 from fahv.loop.params import controller_node, node_parameters, validate
 from fahv.loop.simulate import RunResult, simulate
 from fahv.model.dynamics import cm_rhs
@@ -137,20 +152,47 @@ def _cores(p: dict, vehicles: dict) -> dict:
     return out
 
 
+def _source_hash(*objs) -> str:
+    """sha256 (16 hex) of the source code of classes or functions."""
+    return hashlib.sha256("".join(inspect.getsource(o) for o in objs).encode()).hexdigest()[:16]
+
+
+#: Source hash of :class:`~fahv.control.nominal_mpc.TrackingNominal` and its estimator
+#: that :class:`_MPCLanes` mirrors. When the class changes, the mirror is not used
+#: (the generic per-run nominal path is, same numbers, slower) until its fast-step
+#: computation has been checked again against the class and this hash updated
+#: (``tests/loop/test_batch.py`` fails meanwhile).
+MPC_SOURCE_HASH = "c799a79f85157fff"
+
+
+@functools.cache
+def mpc_source_hash() -> str:
+    """Current source hash of the nominal MPC classes the batched mirror depends on."""
+    from fahv.control.nominal_mpc import InputDisturbanceEstimator
+
+    return _source_hash(TrackingNominal, InputDisturbanceEstimator)
+
+
+def nominal_mode(cores: dict) -> str:
+    """How the batched kernel runs a run's nominal part: governor, mpc or per_run."""
+    src = cores["nominal_trajectory"].source
+    if type(src) is NominalTrajectory:
+        return "governor"
+    if type(src) is TrackingNominal and mpc_source_hash() == MPC_SOURCE_HASH:
+        return "mpc"
+    return "per_run"
+
+
 def not_batchable(cores: dict) -> str | None:
     """Why one run's cores cannot go through the batched kernel (None: they can).
 
-    The kernel reproduces exactly the Tube-MPC law of eq. (36)/(54)
-    (:class:`fahv.control.tube_mpc.TubeMPCLaw`) fed by the governed nominal
-    trajectory (:class:`fahv.control.reference.NominalTrajectory`); any other law or
-    nominal source runs through the per-run fallback.
+    The kernel reproduces exactly the ancillary law of eq. (36)/(54)
+    (:meth:`fahv.control.tube_mpc.PaperTubeMPCLaw.step`, also the step of
+    ``tube_mpc``); any other law runs through the per-run fallback.
     """
     law = cores["controller"].law
-    if type(law) is not TubeMPCLaw:
+    if not isinstance(law, PaperTubeMPCLaw) or type(law).step is not PaperTubeMPCLaw.step:
         return f"control law '{law.name}' ({type(law).__name__}) has no batched kernel"
-    src = cores["nominal_trajectory"].source
-    if type(src) is not NominalTrajectory:
-        return f"nominal source {type(src).__name__} has no batched kernel"
     return None
 
 
@@ -158,15 +200,23 @@ def _signature(c: dict) -> bytes:
     """Bytes of everything the batched kernel shares between the runs of a batch."""
     pl, nt, no, ct = c["plant"], c["notch_filter"], c["nominal_trajectory"], c["controller"]
     src, law = no.source, ct.law
+    mode = nominal_mode(c)
     parts = [
-        repr(
-            (pl.Ts, pl.n_steps, pl.plant.n_sub, pl.limits, nt.enabled, src.level_max, law.tube.tau)
-        ),
+        repr((pl.Ts, pl.n_steps, pl.plant.n_sub, pl.limits, nt.enabled, law.tube.tau, mode)),
         repr(type(law).__name__),
     ]
-    arrays = [law.tube.F, law.tube.N_inv, src.K, src.P, src.lpv.A, src.lpv.B, src.lpv.h_grid]
-    arrays += [src.lpv.V_grid, src.lpv.W_h, src.lpv.W_V, src.trim_map.h_grid, src.trim_map.V_grid]
-    arrays += [src.trim_map.x_r, src.trim_map.u_r]
+    arrays = [law.tube.F, law.tube.N_inv]
+    if mode == "governor":
+        parts.append(repr(src.level_max))
+        arrays += [src.K, src.P, src.lpv.A, src.lpv.B, src.lpv.h_grid, src.lpv.V_grid]
+        arrays += [src.lpv.W_h, src.lpv.W_V, src.trim_map.h_grid, src.trim_map.V_grid]
+        arrays += [src.trim_map.x_r, src.trim_map.u_r]
+    elif mode == "mpc":
+        mpc = src.mpc
+        parts.append(repr((mpc.s.M, src.est is None, src.n_plant, src.Ts)))
+        parts.append(repr(None if src.est is None else src.est.gamma))
+        arrays += [mpc.K, mpc.L, mpc.Du, mpc.theta_scale, mpc.trim_map.h_grid]
+        arrays += [mpc.trim_map.V_grid, mpc.trim_map.x_r, mpc.trim_map.u_r]
     if nt.enabled:
         f = nt.filter
         arrays += [f._Ad, f._Bd, f.C_q, np.array([f.D_q])]
@@ -301,23 +351,216 @@ def _govern(gov, G0, G1, dh, dV, XR, UR, x_pred):
     return s_best, xr_b, ur_b, xn_b
 
 
+class _GovernorLanes:
+    """Nominal part of the paper's law for B runs: :class:`NominalTrajectory`, batched."""
+
+    def __init__(self, cores: list[dict], command) -> None:
+        srcs = [c["nominal_trajectory"].source for c in cores]
+        s0 = srcs[0]
+        self.command, self.Ts = command, s0.Ts
+        self.lpv, self.K, n = s0.lpv, s0.K, s0.lpv.A.shape[1]
+        R = s0.lpv.A.shape[0]
+        self.A2 = np.ascontiguousarray(s0.lpv.A.reshape(R, -1))
+        self.B2 = np.ascontiguousarray(s0.lpv.B.reshape(R, -1))
+        self.shape = (R, n, s0.lpv.B.shape[2])
+        self.gov = (s0.trim_map, s0.P, s0.level_max, n)
+        self.G0 = np.array([s.g[0] for s in srcs], dtype=float)
+        self.G1 = np.array([s.g[1] for s in srcs], dtype=float)
+        self.XN = np.stack([s.x_n for s in srcs])
+        self.XR = np.stack([s.x_r for s in srcs])
+        self.UR = np.stack([s.u_r for s in srcs])
+
+    def step(self, k: int, XT, U_prev, alive):
+        """Outputs of step k (h_g, V_g, x_r, u_r, x_n, u_n), then advance; no failures."""
+        G0, G1, XN, XR, UR = self.G0, self.G1, self.XN, self.XR, self.UR
+        out = (G0, G1, XR, UR, XN, _mv(self.K, XN))
+        lpv, (R, n, m), B = self.lpv, self.shape, G0.size
+        wh = np.stack(
+            [np.interp(G0, lpv.h_grid, lpv.W_h[:, a]) for a in range(lpv.W_h.shape[1])], 1
+        )
+        wv = np.stack(
+            [np.interp(G1, lpv.V_grid, lpv.W_V[:, b]) for b in range(lpv.W_V.shape[1])], 1
+        )
+        w = (wh[:, :, None] * wv[:, None, :]).reshape(B, R)
+        A = np.matmul(w[:, None, :], self.A2)[:, 0, :].reshape(B, n, n)
+        Bm = np.matmul(w[:, None, :], self.B2)[:, 0, :].reshape(B, n, m)
+        x_pred = (
+            np.matmul(A, XN[:, :, None])[..., 0]
+            + np.matmul(Bm, _mv(self.K, XN)[:, :, None])[..., 0]
+        )
+        ch, cV = self.command((k + 1) * self.Ts)
+        dh, dV = ch - G0, cV - G1
+        s_best, self.XR, self.UR, self.XN = _govern(self.gov, G0, G1, dh, dV, XR, UR, x_pred)
+        self.G0, self.G1 = G0 + s_best * dh, G1 + s_best * dV
+        return out, []
+
+
+class _PerRunLanes:
+    """Any nominal source: each run's own nominal core, called per run (exact by construction)."""
+
+    def __init__(self, cores: list[dict], Ts: float) -> None:
+        self.cores = [c["nominal_trajectory"] for c in cores]
+        self.Ts = Ts
+        self.last = None
+
+    def step(self, k: int, XT, U_prev, alive):
+        """Outputs of step k from each run's ``NominalCore.on_state``; failures per run."""
+        t = k * self.Ts
+        rows, failed = [], []
+        for b, core in enumerate(self.cores):
+            if not alive[b]:
+                rows.append(None)
+                continue
+            state = {"k": k, "t": t, **dict(zip(STATE_FIELDS, map(float, XT[b]), strict=True))}
+            prev = None
+            if k > 0:
+                prev = {"k": k - 1, "t": (k - 1) * self.Ts, "phi": float(U_prev[b, 0]),
+                        "delta_e": float(U_prev[b, 1])}  # fmt: skip
+            try:
+                rows.append(core.on_state(state, prev))
+            except Exception as exc:  # noqa: BLE001 - the run fails as in simulate
+                failed.append((b, exc))
+                rows.append(None)
+        fill = next((r for r in rows if r is not None), None)
+        if fill is None:
+            fill = self.last
+        self.last = fill
+        rows = [fill if r is None else r for r in rows]
+        out = (
+            np.array([r["h_g"] for r in rows], dtype=float),
+            np.array([r["v_g"] for r in rows], dtype=float),
+            np.stack([np.asarray(r["x_r"], float) for r in rows]),
+            np.stack([np.asarray(r["u_r"], float) for r in rows]),
+            np.stack([np.asarray(r["x_n"], float) for r in rows]),
+            np.stack([np.asarray(r["u_n"], float) for r in rows]),
+        )
+        return out, failed
+
+
+class _MPCLanes:
+    """Nominal MPC of ``tube_mpc`` for B runs: fast steps batched, re-plans per run.
+
+    Mirrors :meth:`fahv.control.nominal_mpc.TrackingNominal.step` operation by
+    operation (estimator update, plan interpolation, output, nominal model) over the
+    batch axis; every M steps each run's own object re-plans (``_plan``) with its
+    state written back first, and the scheduled matrices are read again after.
+    """
+
+    def __init__(self, cores: list[dict]) -> None:
+        self.srcs = [c["nominal_trajectory"].source for c in cores]
+        s0 = self.srcs[0]
+        mpc = s0.mpc
+        self.M, self.p, self.Ts = mpc.s.M, s0.n_plant, s0.Ts
+        self.K, self.L, self.Du, self.scale = mpc.K, mpc.L, mpc.Du, mpc.theta_scale
+        self.tm = mpc.trim_map
+        self.n = mpc.n
+        self.has_est = s0.est is not None
+        self.gamma = s0.est.gamma if self.has_est else 0.0
+        B = len(self.srcs)
+        self.XN = np.stack([s.X_n for s in self.srcs])
+        self.D = np.stack([s.d for s in self.srcs])
+        self.prev = np.zeros((B, self.p))
+        self.has_prev = np.array([s.prev is not None for s in self.srcs])
+        for b, s in enumerate(self.srcs):
+            if s.prev is not None:
+                self.prev[b] = s.prev
+        self.k = s0.k
+        self._read()
+
+    def _read(self, rows=None) -> None:
+        """Scheduled matrices, set point and plan of the runs ``rows`` (all by default)."""
+        srcs = self.srcs
+        if rows is None:
+            rows = range(len(srcs))
+            m0 = srcs[0].mpc
+            B = len(srcs)
+            self.XRS = np.empty((B, m0.x_r_s.size))
+            self.URS = np.empty((B, 2))
+            self.THS = np.empty((B, 2))
+            self.GX = np.empty((B,) + m0.Gx.shape)
+            self.GU = np.empty((B,) + m0.Gu.shape)
+            self.A = np.empty((B,) + m0.A.shape)
+            self.Bm = np.empty((B,) + m0.B.shape)
+            self.TH = np.empty((B, 2))
+            self.PLAN0 = np.empty((B, 2))
+            if self.has_est:
+                self.EA = np.empty((B, self.p, self.p))
+                self.EB = np.empty((B, self.p, 2))
+                self.PROJ = np.empty((B, 2, self.p))
+        for b in rows:
+            s = srcs[b]
+            mpc = s.mpc
+            self.XRS[b], self.URS[b], self.THS[b] = mpc.x_r_s, mpc.u_r_s, mpc.theta_s
+            self.GX[b], self.GU[b], self.A[b], self.Bm[b] = mpc.Gx, mpc.Gu, mpc.A, mpc.B
+            self.TH[b], self.PLAN0[b] = s.theta, s.plan[0]
+            if self.has_est:
+                EA, EB = s.est._AB
+                self.EA[b], self.EB[b], self.PROJ[b] = EA, EB, s.est._proj
+
+    def step(self, k: int, XT, U_prev, alive):
+        """Outputs of step k (TrackingNominal.step of every run), then advance."""
+        p = self.p
+        failed = []
+        if self.has_est:  # _estimate (x_meas and, from step 1 on, u_prev given)
+            dx = XT[:, :p] - self.XRS[:, :p]
+            if k > 0:
+                upd = self.has_prev
+                dx_prev = np.ascontiguousarray(self.prev - self.XRS[:, :p])
+                du_prev = np.ascontiguousarray(U_prev - self.URS)
+                r = (dx - np.matmul(self.EA, dx_prev[:, :, None])[..., 0]) - np.matmul(
+                    self.EB, du_prev[:, :, None]
+                )[..., 0]
+                r = np.ascontiguousarray(r)
+                d_new = self.D + self.gamma * (np.matmul(self.PROJ, r[:, :, None])[..., 0] - self.D)
+                self.D = np.where(upd[:, None], d_new, self.D)
+            self.prev = XT[:, :p].copy()
+            self.has_prev[:] = True
+        if self.k % self.M == 0:  # re-plan: each run's own object, its state written back
+            for b, s in enumerate(self.srcs):
+                if not alive[b]:
+                    continue
+                s.X_n = self.XN[b].copy()
+                s.k = self.k
+                if self.has_est:
+                    s.est.d = self.D[b].copy()
+                try:
+                    s._plan()
+                except Exception as exc:  # noqa: BLE001 - the run fails as in simulate
+                    failed.append((b, exc))
+                    continue
+                self._read([b])
+        dth = (self.TH - self.THS) / self.scale
+        x_s = np.matmul(self.GX, dth[:, :, None])[..., 0]
+        u_s = np.matmul(self.GU, dth[:, :, None])[..., 0]
+        z = self.XN - self.XRS
+        zx = np.ascontiguousarray(z - x_s)
+        u_dev = (u_s + _mv(self.K, zx)) + self.PLAN0 * self.Du
+        d = self.D if self.has_est else np.zeros_like(self.D)
+        u_nom = (self.URS - d) + u_dev
+        tm = self.tm
+        hh = np.minimum(np.maximum(self.TH[:, 0], tm.h_grid[0]), tm.h_grid[-1])
+        vv = np.minimum(np.maximum(self.TH[:, 1], tm.V_grid[0]), tm.V_grid[-1])
+        v = tm._spline(np.stack([hh, vv], axis=1))
+        x_r, u_r = v[:, : self.n], v[:, self.n :] - d
+        out = (self.TH[:, 0].copy(), self.TH[:, 1].copy(), x_r, u_r, self.XN - x_r, u_nom - u_r)
+        zc = np.ascontiguousarray(z)
+        self.XN = (self.XRS + np.matmul(self.A, zc[:, :, None])[..., 0]) + np.matmul(
+            self.Bm, np.ascontiguousarray(u_dev)[:, :, None]
+        )[..., 0]
+        self.k += 1
+        return out, failed
+
+
 def _run_kernel(cores: list[dict], info: dict) -> list[RunResult | Exception]:
     """The batched loop over runs that share their design matrices (see the module notes)."""
     B = len(cores)
     c0 = cores[0]
     pl0, nt0, ct0 = c0["plant"], c0["notch_filter"], c0["controller"]
-    src0 = c0["nominal_trajectory"].source
     Ts, n_steps, n_sub, limits = pl0.Ts, pl0.n_steps, pl0.plant.n_sub, pl0.limits
     vp = _stack_params(cores)
-    n = src0.lpv.A.shape[1]
-    R = src0.lpv.A.shape[0]
-    A2 = np.ascontiguousarray(src0.lpv.A.reshape(R, -1))
-    B2 = np.ascontiguousarray(src0.lpv.B.reshape(R, -1))
-    m = src0.lpv.B.shape[2]
-    lpv, tm, K, P, level_max = src0.lpv, src0.trim_map, src0.K, src0.P, src0.level_max
-    gov = (tm, P, level_max, n)
     tube = ct0.law.tube
     tauF, N_inv, tau2 = tube.tau * tube.F, tube.N_inv, tube.tau**2
+    n = tube.F.shape[1]
 
     def rf(name):
         return np.array([getattr(c["nominal_trajectory"].command, name) for c in cores])
@@ -333,15 +576,17 @@ def _run_kernel(cores: list[dict], info: dict) -> list[RunResult | Exception]:
             )
         return cmd_h0 + f * (cmd_hc - cmd_h0), cmd_V0 + f * (cmd_Vc - cmd_V0)
 
+    mode = nominal_mode(c0)
+    if mode == "governor":
+        nominal = _GovernorLanes(cores, command)
+    elif mode == "mpc":
+        nominal = _MPCLanes(cores)
+    else:
+        nominal = _PerRunLanes(cores, Ts)
+
     # states, from the cores as built (initial values exactly those of simulate)
     X = np.stack([c["plant"].plant.x for c in cores], axis=1)  # (9, B)
     X0 = X.copy()
-    srcs = [c["nominal_trajectory"].source for c in cores]
-    G0 = np.array([s.g[0] for s in srcs], dtype=float)
-    G1 = np.array([s.g[1] for s in srcs], dtype=float)
-    XN = np.stack([s.x_n for s in srcs])
-    XR = np.stack([s.x_r for s in srcs])
-    UR = np.stack([s.u_r for s in srcs])
     enabled = nt0.enabled
     if enabled:
         filt = nt0.filter
@@ -357,6 +602,7 @@ def _run_kernel(cores: list[dict], info: dict) -> list[RunResult | Exception]:
     stuck = np.full(B, np.nan)
     stuck_set = np.zeros(B, dtype=bool)
     held = np.zeros((B, 2))
+    u = np.zeros((B, 2))
 
     N = n_steps
     H = {
@@ -383,8 +629,8 @@ def _run_kernel(cores: list[dict], info: dict) -> list[RunResult | Exception]:
         alive[mask] = False
         X[:, mask] = X0[:, mask]
 
-    def f_batch(x, u):
-        return cm_rhs(x, u, vp)
+    def f_batch(x, uu):
+        return cm_rhs(x, uu, vp)
 
     with np.errstate(all="ignore"):
         for k in range(N):
@@ -403,38 +649,24 @@ def _run_kernel(cores: list[dict], info: dict) -> list[RunResult | Exception]:
             else:
                 qf = q
             H["q_f"][k] = qf
-            # nominal_trajectory: output of step k, then advance (NominalTrajectory.step)
+            # nominal_trajectory (step k's output; the command u of step k - 1)
             H["h_c"][k], H["V_c"][k] = command(t)
-            H["h_g"][k], H["V_g"][k] = G0, G1
-            H["x_r"][k] = XR[:, :9]
-            H["x_n"][k] = XN
-            UN = _mv(K, XN)
-            xr_k, ur_k, xn_k = XR, UR, XN
-            # advance (NominalTrajectory.advance, every run of the batch at once)
-            wh = np.stack(
-                [np.interp(G0, lpv.h_grid, lpv.W_h[:, a]) for a in range(lpv.W_h.shape[1])], 1
-            )
-            wv = np.stack(
-                [np.interp(G1, lpv.V_grid, lpv.W_V[:, b]) for b in range(lpv.W_V.shape[1])], 1
-            )
-            w = (wh[:, :, None] * wv[:, None, :]).reshape(B, R)
-            A = np.matmul(w[:, None, :], A2)[:, 0, :].reshape(B, n, n)
-            Bm = np.matmul(w[:, None, :], B2)[:, 0, :].reshape(B, n, m)
-            x_pred = (
-                np.matmul(A, XN[:, :, None])[..., 0] + np.matmul(Bm, _mv(K, XN)[:, :, None])[..., 0]
-            )
-            ch, cV = command((k + 1) * Ts)
-            dh, dV = ch - G0, cV - G1
-            s_best, XR, UR, XN = _govern(gov, G0, G1, dh, dV, XR, UR, x_pred)
-            G0, G1 = G0 + s_best * dh, G1 + s_best * dV
-            # controller (Tube-MPC, eq. 36 / 54)
+            (hg, vg, xr_k, ur_k, xn_k, un_k), failed = nominal.step(k, XT, u, alive)
+            for b, exc in failed:
+                mask = np.zeros(B, dtype=bool)
+                mask[b] = True
+                kill(mask, lambda _b, exc=exc: exc)
+            H["h_g"][k], H["V_g"][k] = hg, vg
+            H["x_r"][k] = xr_k[:, :9]
+            H["x_n"][k] = xn_k
+            # controller (ancillary law, eq. 36 / 54)
             xm = XT.copy()
             if enabled:
                 xm[:, Q] = qf
             if n == 11:
                 xm = np.concatenate([xm, XQ], axis=1)
             e = np.ascontiguousarray(xm - xr_k - xn_k)
-            u = (ur_k + UN) + _mv(tauF, e)
+            u = (ur_k + un_k) + _mv(tauF, e)
             H["u"][k] = u
             H["tube_level"][k] = _quad(e, N_inv) / tau2
             # fault_injector
@@ -445,12 +677,8 @@ def _run_kernel(cores: list[dict], info: dict) -> list[RunResult | Exception]:
             sel = act & (code == 2)
             ua[sel, DELTA_E] += bias[sel]
             sel = act & (code == 3)
-            if k > 0:
-                new = sel & ~stuck_set
-                stuck[new] = held[new, DELTA_E]
-            else:
-                new = sel & ~stuck_set
-                stuck[new] = ua[new, DELTA_E]
+            new = sel & ~stuck_set
+            stuck[new] = held[new, DELTA_E] if k > 0 else ua[new, DELTA_E]
             stuck_set |= sel
             ua[sel, DELTA_E] = stuck[sel]
             if k > 0:
@@ -497,7 +725,7 @@ def _run_kernel(cores: list[dict], info: dict) -> list[RunResult | Exception]:
                     "case": info["case"],
                     "Ts": Ts,
                     "fault": info["fault"],
-                },
+                },  # fmt: skip
             )
         )
     return out
