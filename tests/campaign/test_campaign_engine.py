@@ -203,3 +203,15 @@ def test_failure_bound_is_clopper_pearson(k, n):
         assert p == pytest.approx(1 - 0.05 ** (1 / n), rel=1e-12)
     assert failure_bound(0, 59, 0.95) == pytest.approx(0.0495, abs=1e-4)  # the "59 runs" rule
     assert np.isnan(failure_bound(0, 0, 0.95)) and failure_bound(5, 5, 0.95) == 1.0
+
+
+def test_existing_cluster_by_scheduler_address(reference, tmp_path):
+    from dask.distributed import LocalCluster
+
+    c, out = reference
+    with LocalCluster(n_workers=1, threads_per_worker=1, dashboard_address=None) as cluster:
+        res = run_campaign(c, tmp_path / "ext", scheduler=cluster.scheduler_address,
+                           progress=False, log=lambda *_: None)  # fmt: skip
+        assert res.missing == 0
+        assert len(cluster.scheduler_info["workers"]) == 1  # the cluster outlives the call
+    _same_tables(_table(out), _table(tmp_path / "ext"))

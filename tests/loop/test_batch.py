@@ -118,3 +118,32 @@ def test_rmpc_runs_through_the_per_run_fallback(design):
     _assert_same(simulate(design, "rmpc", 0.1, overrides=ov), res)
     refused = simulate_batch(design, "rmpc", [ov], 0.1, fallback=False)[0]
     assert isinstance(refused, RunError) and "cannot be batched" in str(refused)
+
+
+@pytest.fixture(scope="module")
+def design_case2():
+    """Case 2 (11-state ECM, tau = 0.8) designed with a small W sample."""
+    import copy
+    import warnings
+
+    from fahv.config.yamlio import load_yaml
+    from fahv.design.case import case_from_mapping
+    from fahv.design.pipeline import run_design
+
+    with open("offline_design/case2.yaml") as fh:
+        raw = load_yaml(fh.read())
+    d = copy.deepcopy(raw)
+    d["disturbance"]["samples"] = 40
+    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+    return run_design(case_from_mapping(d, "quick2.yaml"), log=lambda *_: None)
+
+
+def test_case2_eleven_state_law_batched_and_equal(design_case2):
+    d = design_case2
+    assert d.n_x == 11
+    ovs = [{"fault_injector": {"kind": k, "t_onset": 0.5, "rho_f": 0.8, "bias_deg": 1.0}}
+           for k in ("loss_of_effectiveness", "bias")]  # fmt: skip
+    assert nominal_mode(_cores(run_parameters(d, "tube_mpc", 0.1, ovs[0]), {})) == "mpc"
+    for ov, res in zip(ovs, simulate_batch(d, "tube_mpc", ovs, 1.5), strict=True):
+        _assert_same(simulate(d, "tube_mpc", 1.5, overrides=ov), res)
+        assert res.x_n.shape == (75, 11)
