@@ -215,3 +215,42 @@ def test_existing_cluster_by_scheduler_address(reference, tmp_path):
         assert res.missing == 0
         assert len(cluster.scheduler_info["workers"]) == 1  # the cluster outlives the call
     _same_tables(_table(out), _table(tmp_path / "ext"))
+
+
+def test_lost_scheduler_keeps_finished_runs_and_resume_completes(reference, tmp_path):
+    import socket
+
+    c, out = reference
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    addr = f"tcp://127.0.0.1:{port}"
+    dask = str(Path(sys.executable).parent / "dask")
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    sched = subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                              "--no-dashboard"], **quiet)  # fmt: skip
+    worker = subprocess.Popen([dask, "worker", addr, "--nthreads", "1", "--no-dashboard"], **quiet)
+    try:
+        lost = []
+
+        def kill_scheduler(client, written):
+            if not lost:
+                sched.kill()
+                lost.append(written)
+
+        dst = tmp_path / "lost"
+        res = run_campaign(c, dst, scheduler=addr, progress=False, on_batch=kill_scheduler,
+                           log=lambda *_: None)  # fmt: skip
+    finally:
+        sched.kill()
+        worker.kill()
+        sched.wait(timeout=30)
+        worker.wait(timeout=30)
+    assert lost and res.missing > 0 and res.errors
+    assert any("scheduler-connection-lost" in e for e in res.errors)
+    kept = len(store.read_rows(dst))
+    assert kept == res.new >= 2
+    res = run_campaign(c, dst, workers=2, resume=True, progress=False, log=lambda *_: None)
+    assert res.before == kept and res.missing == 0
+    _each_index_once(dst, c["runs"])
+    _same_tables(_table(out), _table(dst))

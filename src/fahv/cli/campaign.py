@@ -48,8 +48,12 @@ def cmd_run(args) -> int:
         f"{res.before} before, {res.missing} missing; wall time {res.wall_s:.1f} s; "
         f"results in {out}/results"
     )
-    for e in res.errors:
-        _err(f"task failed (its runs stay missing): {e}")
+    if res.errors:
+        lost = sum("scheduler-connection-lost" in e for e in res.errors)
+        if lost:
+            _err(f"lost the Dask scheduler: {lost} batches did not finish")
+        _err(f"{len(res.errors)} tasks failed, their runs stay missing; first: {res.errors[0]}")
+        _err(f"complete it later with\n  fahv campaign {args.target} --out {out} --resume")
     if res.interrupted:
         _err(f"interrupted: every finished batch is kept; complete it with\n"
              f"  fahv campaign {args.target} --out {out} --resume")  # fmt: skip
