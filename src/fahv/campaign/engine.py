@@ -119,8 +119,16 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
     t0 = time.perf_counter()
     case, seed = design.case, data["seed"]
     values = [draw(data, case, i) for i in indices]
-    ovs = [overrides(v, design, variant) for v in values]
-    results = simulate_batch(design, variant, ovs, duration)
+    results: list = [None] * len(indices)
+    ovs, where = [], []
+    for j, v in enumerate(values):
+        try:
+            ovs.append(overrides(v, design, variant))
+            where.append(j)
+        except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
+            results[j] = exc
+    for j, res in zip(where, simulate_batch(design, variant, ovs, duration), strict=True):
+        results[j] = res
     veh = _vehicle(design.summary.get("provenance", {}).get("vehicle_file", ""))
     rows, trajs = [], []
     for i, vals, res in zip(indices, values, results, strict=True):
