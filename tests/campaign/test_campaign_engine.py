@@ -254,3 +254,21 @@ def test_lost_scheduler_keeps_finished_runs_and_resume_completes(reference, tmp_
     assert res.before == kept and res.missing == 0
     _each_index_once(dst, c["runs"])
     _same_tables(_table(out), _table(dst))
+
+
+@pytest.mark.parametrize(
+    ("h", "V", "expected"), [(5.0, math.nan, math.nan), (math.nan, 5.0, math.nan), (3.0, 7.0, 6.0)]
+)
+def test_settling_after_command(h, V, expected):
+    got = engine.settling_after({"settling_time_h_s": h, "settling_time_V_s": V}, 1.0)
+    assert got == expected or (math.isnan(got) and math.isnan(expected))
+
+
+def test_settling_needs_both_h_and_V(reference):
+    c, out = reference
+    for r in store.read_rows(out):
+        ts = (r["settling_time_h_s"], r["settling_time_V_s"])
+        if any(math.isnan(x) for x in ts):
+            assert math.isnan(r["settling_after_command_s"])
+        else:
+            assert r["settling_after_command_s"] == max(ts) - r["t_command_end_s"]

@@ -25,6 +25,7 @@ the interruptions (only ``wall_s`` and ``session`` differ).
 from __future__ import annotations
 
 import logging
+import math
 import os
 import socket
 import time
@@ -54,6 +55,16 @@ def command_end(run: RunResult) -> float:
     """Time the command stops moving [s] (as :func:`fahv.runs.metrics.metrics` takes it)."""
     moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
     return float(run.t[moving[-1]]) if moving.size else 0.0
+
+
+def settling_after(m: dict, t_end: float) -> float:
+    """Settling time of h and V together after the command stopped moving [s].
+
+    NaN unless both settle (``settling_time_h_s`` and ``settling_time_V_s`` of the
+    metrics, absolute times); ``t_end`` from :func:`command_end`.
+    """
+    ts = (m["settling_time_h_s"], m["settling_time_V_s"])
+    return math.nan if any(map(math.isnan, ts)) else max(ts) - t_end
 
 
 def envelope_exit(run: RunResult, envelope) -> str | None:
@@ -144,7 +155,7 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
             else:
                 exit_reason = envelope_exit(res, veh.envelope)
                 t_end = command_end(res)
-                settle = max(m["settling_time_h_s"], m["settling_time_V_s"]) - t_end
+                settle = settling_after(m, t_end)
                 row.update(
                     status="ok" if exit_reason is None else "failed",
                     reason=exit_reason or "",
