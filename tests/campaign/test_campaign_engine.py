@@ -272,3 +272,11 @@ def test_settling_needs_both_h_and_V(reference):
             assert math.isnan(r["settling_after_command_s"])
         else:
             assert r["settling_after_command_s"] == max(ts) - r["t_command_end_s"]
+
+
+def test_sessions_are_recorded_in_the_manifest(reference):
+    c, out = reference
+    sessions = store.read_manifest(out)["sessions"]
+    assert [(s["session"], s["new"], s["failed"]) for s in sessions] == [(1, 12, 0)]
+    assert sessions[0]["engine"] == "LocalCluster(2)" and sessions[0]["wall_s"] > 0
+    assert "Session 1 (LocalCluster(2)): 12 runs (0 failed) in" in make_report(out, False).text

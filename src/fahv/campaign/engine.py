@@ -407,4 +407,11 @@ def run_campaign(
                 cluster.close()
         except Exception:  # noqa: BLE001 - shutting down after an interruption
             pass
+        man = store.read_manifest(out) or {}
+        engine = scheduler or f"LocalCluster({workers or os.cpu_count()})"
+        man.setdefault("sessions", []).append(
+            {"session": session, "engine": engine, "wall_s": res.wall_s, "new": res.new,
+             "failed": res.failed, "interrupted": res.interrupted, "errors": len(res.errors)}
+        )  # fmt: skip
+        store.write_manifest(out, man)
     return res

@@ -163,6 +163,15 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
         f"{man['design_hash']}. Wall time summed over the runs (worker time): "
         f"{sum(_num(r, 'wall_s') for r in rows):.0f} s.",
         "",
+        *[
+            f"Session {x['session']} ({x['engine']}): {x['new']} runs ({x['failed']} failed) "
+            f"in {x['wall_s']:.0f} s wall time"
+            + (", interrupted" if x["interrupted"] else "")
+            + (f", {x['errors']} tasks lost" if x["errors"] else "")
+            + "."
+            for x in man.get("sessions", [])
+        ],
+        "",
         f"## Pass rate per requirement (failure-probability bound at C = {conf:g})",
         "",
     ]
