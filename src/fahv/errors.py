@@ -54,3 +54,7 @@ class RunInterrupted(FahvError):
         self.step, self.n_steps, self.run = int(step), int(n_steps), run
         where = f"run written to {run}" if run is not None else "nothing recorded"
         super().__init__(f"interrupted at step {self.step} of {self.n_steps}; {where}")
+
+
+class CampaignError(ConfigError):
+    """A campaign file or a campaign folder is missing, malformed or inconsistent."""

@@ -15,6 +15,7 @@ Subcommands::
     fahv export    one CSV / Parquet table per topic, with units
     fahv compare   metrics of two runs side by side
     fahv replay    republish a run over DDS, e.g. into a fresh tube_mpc node
+    fahv campaign  Monte Carlo campaign on Dask; campaign report DIR; campaign rerun DIR INDEX
 
 Every command that uses the vehicle takes ``--vehicle FILE``. Errors name the
 input at fault and exit with status 2 (bad input) or 1 (failure). Ctrl-C or SIGTERM
@@ -27,7 +28,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fahv.cli import design, inspect, modelling, run
+from fahv.cli import campaign, design, inspect, modelling, run
 from fahv.cli.common import stop_signals
 from fahv.errors import FahvError, RunInterrupted
 
@@ -40,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="fahv", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="command", required=True)
 
-    for group in (modelling, design, run, inspect):
+    for group in (modelling, design, run, inspect, campaign):
         group.add_parsers(sub)
     return ap
 

@@ -1,0 +1,74 @@
+"""Campaign throughput: runs per second for one run, one batch, and 1 vs 2 Dask workers.
+
+Case 1 (Tube-MPC, notch), runs dispersed as in offline_design/campaign_case1.yaml
+(uncertainty box, loss of effectiveness 0-30 %), shortened to DURATION seconds of
+simulated time; every figure is also given per 300 s run, the length of the
+1000-run campaign, with the time that campaign would take.
+
+The machine is shared: the figures move with its load (run twice and compare).
+
+Usage: .venv/bin/python benchmarks/bench_campaign.py [DURATION] [BATCH] [RUNS]
+       (defaults 30 s, 50 runs per batch, 200 runs per campaign)
+"""
+
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+from fahv.campaign.draws import draw, overrides
+from fahv.campaign.engine import run_campaign
+from fahv.campaign.spec import campaign_from_mapping, load_campaign
+from fahv.design.artefacts import load_design
+from fahv.loop.batch import simulate_batch
+from fahv.loop.simulate import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+FULL = 300.0
+
+
+def line(what, runs, seconds, duration):
+    rate = runs / seconds
+    per300 = seconds / runs * FULL / duration
+    print(
+        f"  {what:<34} {rate:8.2f} runs/s  ({per300:6.2f} s per 300 s run; 1000 runs: "
+        f"{1000 * per300 / 60:6.1f} min of this engine)"
+    )
+
+
+def main():
+    duration = float(sys.argv[1]) if len(sys.argv) > 1 else 30.0
+    batch = int(sys.argv[2]) if len(sys.argv) > 2 else 50
+    runs = int(sys.argv[3]) if len(sys.argv) > 3 else 200
+    c = load_campaign(ROOT / "offline_design" / "campaign_case1.yaml")
+    design = load_design(ROOT / "offline_design" / "artefacts" / "case1")
+    ovs = [overrides(draw(c.data, design.case, i), design, "tube_mpc") for i in range(batch)]
+    print(f"Case 1 tube_mpc, {duration:g} s per run (Ts 0.02 s: {duration / 0.02:.0f} steps)")
+    t0 = time.perf_counter()
+    simulate(design, "tube_mpc", duration, overrides=ovs[0])
+    line("one run, simulate()", 1, time.perf_counter() - t0, duration)
+    t0 = time.perf_counter()
+    simulate_batch(design, "tube_mpc", ovs[:1], duration)
+    line("one run, simulate_batch (B = 1)", 1, time.perf_counter() - t0, duration)
+    t0 = time.perf_counter()
+    simulate_batch(design, "tube_mpc", ovs, duration)
+    line(f"one batch, simulate_batch (B = {batch})", batch, time.perf_counter() - t0, duration)
+    data = yaml.safe_load((ROOT / "offline_design" / "campaign_case1.yaml").read_text())
+    data.update(runs=runs, duration=duration, batch_size=batch, name="bench")
+    for workers in (1, 2):
+        camp = campaign_from_mapping(data, "bench", base=ROOT / "offline_design")
+        with tempfile.TemporaryDirectory() as tmp:
+            t0 = time.perf_counter()
+            res = run_campaign(
+                camp, Path(tmp) / "out", workers=workers, progress=False, log=lambda *_: None
+            )
+            wall = time.perf_counter() - t0
+        assert res.missing == 0, res
+        line(f"campaign, LocalCluster {workers} worker(s)", runs, wall, duration)
+    print("(campaign lines include cluster start, design copy and Parquet writes)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,417 @@
+"""Campaign engine: batches of runs as Dask tasks, results written as they finish.
+
+The engine is Dask distributed: by default an embedded ``LocalCluster`` (one
+single-threaded worker process per core, started and stopped here); with a scheduler
+address, an existing cluster (``dask scheduler`` and ``dask worker ADDRESS`` started
+elsewhere, docs/campaigns.md). There is no pool, queue or retry logic of our own:
+tasks go to ``Client.submit`` and come back through ``as_completed``; a worker that
+dies takes its task with it and the scheduler runs it again elsewhere; an exception
+inside a task is retried by Dask (``retries``).
+
+One task = one batch (:func:`run_batch`): up to ``batch_size`` run indices of one
+variant, simulated together by :func:`fahv.loop.batch.simulate_batch`. A run that
+raises, diverges (non-finite state) or leaves the flight envelope is a row with
+status ``failed`` and its reason; it never fails the task. The client writes each
+finished batch as one Parquet file (:mod:`fahv.campaign.store`), so an interrupted
+campaign (Ctrl-C, a killed worker, a lost scheduler) keeps every finished batch, and
+``resume`` runs exactly the (index, variant) pairs that are missing.
+
+Every value of a run depends on (campaign seed, run index, variant) only, and the
+batched simulator gives a run the same bits whatever batch it is in, so tables of
+the same campaign are identical whatever the number of workers, the batching, or
+the interruptions (only ``wall_s`` and ``session`` differ).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fahv.campaign import store
+from fahv.campaign.draws import _vehicle, draw, overrides, run_seed
+from fahv.campaign.spec import Campaign
+from fahv.design.artefacts import load_design, save_design, stale_reason
+from fahv.design.pipeline import run_design
+from fahv.errors import CampaignError, DesignError
+from fahv.loop.batch import simulate_batch
+from fahv.loop.simulate import RunResult
+from fahv.model.vehicle import ALPHA, THETA, H, V, load_vehicle
+from fahv.runs.metrics import metrics
+from fahv.version import __version__
+
+#: Decimation of the stored trajectories [s between samples].
+TRAJECTORY_DT = 0.5
+
+
+def command_end(run: RunResult) -> float:
+    """Time the command stops moving [s] (as :func:`fahv.runs.metrics.metrics` takes it)."""
+    moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
+    return float(run.t[moving[-1]]) if moving.size else 0.0
+
+
+def settling_after(m: dict, t_end: float) -> float:
+    """Settling time of h and V together after the command stopped moving [s].
+
+    NaN unless both settle (``settling_time_h_s`` and ``settling_time_V_s`` of the
+    metrics, absolute times); ``t_end`` from :func:`command_end`.
+    """
+    ts = (m["settling_time_h_s"], m["settling_time_V_s"])
+    return math.nan if any(map(math.isnan, ts)) else max(ts) - t_end
+
+
+def envelope_exit(run: RunResult, envelope) -> str | None:
+    """Why a run left the flight envelope (first step outside), None if it stayed in."""
+    h, Vel = run.x[:, H], run.x[:, V]
+    out = (h < envelope.h_min) | (h > envelope.h_max) | (Vel < envelope.V_min)
+    out |= Vel > envelope.V_max
+    if not out.any():
+        return None
+    k = int(np.argmax(out))
+    return (
+        f"left the flight envelope at t = {run.t[k]:.2f} s (h = {h[k]:.1f} ft, V = "
+        f"{Vel[k]:.1f} ft/s; envelope h in [{envelope.h_min:g}, {envelope.h_max:g}] ft, "
+        f"V in [{envelope.V_min:g}, {envelope.V_max:g}] ft/s)"
+    )
+
+
+def trajectory(run: RunResult, dt: float = TRAJECTORY_DT) -> dict:
+    """Decimated histories of a run for the report's figures (lists of float32 values).
+
+    Keys: ``t`` [s], ``h_err`` [ft], ``V_err`` [ft/s], ``alpha_err_deg``,
+    ``theta_err_deg``, ``Phi``, ``delta_e_deg``, ``tube_level``.
+    """
+    Ts = float(run.t[1] - run.t[0]) if run.t.size > 1 else dt
+    s = slice(None, None, max(1, round(dt / Ts)))
+    x, xr = run.x[s], run.x_r[s]
+    cols = {
+        "t": run.t[s],
+        "h_err": x[:, H] - run.h_c[s],
+        "V_err": x[:, V] - run.V_c[s],
+        "alpha_err_deg": np.degrees(x[:, ALPHA] - xr[:, ALPHA]),
+        "theta_err_deg": np.degrees(x[:, THETA] - xr[:, THETA]),
+        "Phi": run.u[s, 0],
+        "delta_e_deg": np.degrees(run.u[s, 1]),
+        "tube_level": run.tube_level[s],
+    }
+    return {k: np.asarray(v, np.float32).tolist() for k, v in cols.items()}
+
+
+def run_batch(design, data: dict, variant: str, indices: list[int], duration: float) -> dict:
+    """One Dask task: the runs ``indices`` of ``variant``, their rows and trajectories.
+
+    Parameters
+    ----------
+    design : fahv.design.Design
+        The campaign's design (scattered to the workers once).
+    data : dict
+        Validated campaign data.
+    variant : str
+    indices : list of int
+        Run indices of the batch.
+    duration : float
+        Simulated time of each run [s].
+
+    Returns
+    -------
+    dict
+        ``rows`` (one dict per run: index, variant, seeds, dispersed values, status,
+        reason, every metric of :func:`fahv.runs.metrics.metrics`, ``t_command_end_s``,
+        ``settling_after_command_s``, ``wall_s``), ``trajectories`` (per completed
+        run), ``wall_s`` of the batch, ``host``.
+    """
+    t0 = time.perf_counter()
+    case, seed = design.case, data["seed"]
+    values = [draw(data, case, i) for i in indices]
+    results: list = [None] * len(indices)
+    ovs, where = [], []
+    for j, v in enumerate(values):
+        try:
+            ovs.append(overrides(v, design, variant))
+            where.append(j)
+        except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
+            results[j] = exc
+    for j, res in zip(where, simulate_batch(design, variant, ovs, duration), strict=True):
+        results[j] = res
+    veh = _vehicle(design.summary.get("provenance", {}).get("vehicle_file", ""))
+    rows, trajs = [], []
+    for i, vals, res in zip(indices, values, results, strict=True):
+        row = {"index": int(i), "variant": variant, "campaign_seed": seed,
+               "run_seed": run_seed(seed, i), **vals}  # fmt: skip
+        if isinstance(res, BaseException):
+            row.update(status="failed", reason=f"{type(res).__name__}: {res}")
+        else:
+            try:
+                m = metrics(res, veh.limits)
+            except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
+                row.update(status="failed", reason=f"metrics: {type(exc).__name__}: {exc}")
+            else:
+                exit_reason = envelope_exit(res, veh.envelope)
+                t_end = command_end(res)
+                settle = settling_after(m, t_end)
+                row.update(
+                    status="ok" if exit_reason is None else "failed",
+                    reason=exit_reason or "",
+                    t_command_end_s=t_end,
+                    settling_after_command_s=settle,
+                    **m,
+                )
+                trajs.append({"index": int(i), "variant": variant, **trajectory(res)})
+        rows.append(row)
+    wall = time.perf_counter() - t0
+    for row in rows:
+        row["wall_s"] = wall / len(rows)
+    return {"rows": rows, "trajectories": trajs, "wall_s": wall, "host": socket.gethostname()}
+
+
+@dataclass
+class Outcome:
+    """What one call of :func:`run_campaign` did.
+
+    Attributes
+    ----------
+    out_dir : Path
+    total : int
+        Runs of the campaign (samples x variants).
+    before : int
+        Runs already in the dataset when the call started.
+    new : int
+        Runs finished and written by this call.
+    failed : int
+        Of those, runs with status ``failed``.
+    wall_s : float
+        Wall time of the call [s] (cluster start to last write).
+    interrupted : bool
+        Stopped by Ctrl-C (KeyboardInterrupt).
+    errors : list of str
+        Tasks that failed as a whole (their runs stay missing for ``resume``).
+    """
+
+    out_dir: Path
+    total: int
+    before: int = 0
+    new: int = 0
+    failed: int = 0
+    wall_s: float = 0.0
+    interrupted: bool = False
+    errors: list[str] = field(default_factory=list)
+
+    @property
+    def missing(self) -> int:
+        """Runs still missing from the dataset."""
+        return self.total - self.before - self.new
+
+
+def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=print):
+    """Create or check the campaign folder and return its design.
+
+    The design is the one saved in ``out_dir/design`` (a resumed campaign must keep
+    it), else a valid saved design of the case (``offline_design/artefacts/<case>``
+    next to the case file), else a new one (:func:`fahv.design.pipeline.run_design`).
+
+    Raises
+    ------
+    CampaignError
+        If the folder holds results and ``resume`` is False, if it belongs to another
+        campaign or case content, or if its design no longer matches the code.
+    """
+    out = Path(out_dir)
+    veh = load_vehicle() if vehicle is None else vehicle
+    man = store.read_manifest(out)
+    done = len(store.done_keys(out))
+    if done and not resume:
+        raise CampaignError(
+            f"{out} already holds {done} runs of a campaign: use --resume to complete it, "
+            "or another --out"
+        )
+    if man is not None and man["hash"] != campaign.content_hash():
+        raise CampaignError(
+            f"{out} holds the campaign {man['name']} with other content (hash {man['hash']}, "
+            f"now {campaign.content_hash()}): the campaign or case file changed; use another "
+            "--out"
+        )
+    out.mkdir(parents=True, exist_ok=True)
+    design = None
+    for cand in (out / "design", campaign.case.path.parent / "artefacts" / campaign.case.name):
+        try:
+            d = load_design(cand)
+        except DesignError:
+            continue
+        reason = stale_reason(d, campaign.case, veh)
+        if reason is None:
+            design = d
+            if cand != out / "design":
+                save_design(d, out / "design")
+            break
+        if cand == out / "design" and done:
+            raise CampaignError(f"{out}: {reason}; its runs cannot be completed, use another --out")
+    if design is None:
+        log(f"designing {campaign.case.name} for the campaign")
+        design = run_design(campaign.case, veh, log=lambda *_: None)
+        save_design(design, out / "design")
+    if man is None:
+        store.write_manifest(
+            out,
+            {
+                "name": campaign.name,
+                "hash": campaign.content_hash(),
+                "campaign": campaign.data,
+                "campaign_file": str(campaign.path),
+                "case": campaign.case.data,
+                "duration": campaign.duration,
+                "design_hash": design.summary["design_hash"],
+                "code_version": __version__,
+                "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+            },
+        )
+    return design
+
+
+def batches(campaign: Campaign, done: set) -> list[tuple[str, list[int]]]:
+    """(variant, indices) of every batch still to run, in index order per variant."""
+    out = []
+    size = campaign["batch_size"]
+    for v in campaign["variants"]:
+        todo = [i for i in range(campaign["runs"]) if (i, v) not in done]
+        out += [(v, todo[j : j + size]) for j in range(0, len(todo), size)]
+    return out
+
+
+def _client(scheduler: str | None, workers: int | None):
+    """A Dask client: of the cluster at ``scheduler``, or of a new LocalCluster."""
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        return Client(scheduler), None
+    cluster = LocalCluster(
+        n_workers=workers or os.cpu_count() or 1,
+        threads_per_worker=1,
+        processes=True,
+        silence_logs=logging.ERROR,
+        dashboard_address=None,
+    )
+    return Client(cluster), cluster
+
+
+def run_campaign(
+    campaign: Campaign,
+    out_dir: str | Path,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    resume: bool = False,
+    progress: bool = True,
+    on_batch: Callable | None = None,
+    vehicle=None,
+    log=print,
+) -> Outcome:
+    """Run (or complete) a campaign on Dask, writing each finished batch to ``out_dir``.
+
+    Parameters
+    ----------
+    campaign : Campaign
+    out_dir : path
+        Campaign folder (created; see :mod:`fahv.campaign.store`).
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:8786``); default: a
+        LocalCluster started and stopped here.
+    workers : int, optional
+        Worker processes of the LocalCluster (default: the machine's cores).
+    resume : bool
+        Complete a folder that holds results (only the missing runs are run).
+    progress : bool
+        Progress bar (runs done, failures, rate, ETA) on stderr.
+    on_batch : callable, optional
+        ``on_batch(client, runs_written)`` after each written batch (tests use it to
+        kill a worker).
+    vehicle : fahv.model.vehicle.Vehicle, optional
+    log : callable
+        Receives progress lines.
+
+    Returns
+    -------
+    Outcome
+
+    Raises
+    ------
+    CampaignError
+        From :func:`prepare`.
+    """
+    from dask.distributed import as_completed
+    from tqdm import tqdm
+
+    out = Path(out_dir)
+    design = prepare(campaign, out, resume, vehicle, log)
+    done = store.done_keys(out)
+    total = campaign["runs"] * len(campaign["variants"])
+    res = Outcome(out, total, before=len(done))
+    todo = batches(campaign, done)
+    if not todo:
+        return res
+    session = store.next_session(out)
+    t0 = time.perf_counter()
+    client, cluster = _client(scheduler, workers)
+    bar = tqdm(total=total, initial=len(done), unit="run", desc=campaign.name,
+               disable=not progress, smoothing=0.05)  # fmt: skip
+    futures = []
+    try:
+        design_f = client.scatter(design, broadcast=True)
+        tag = f"{campaign.content_hash()}-{session}"
+        for b, (variant, idx) in enumerate(todo):
+            futures.append(
+                client.submit(
+                    run_batch,
+                    design_f,
+                    campaign.data,
+                    variant,
+                    idx,
+                    campaign.duration,
+                    key=f"fahv-batch-{tag}-{b}",
+                    retries=2,
+                    pure=False,
+                )  # fmt: skip
+            )
+        names = {f.key: f"part-{session:03d}-{b:05d}" for b, f in enumerate(futures)}
+        for fut in as_completed(futures):
+            try:
+                batch = fut.result()
+            except Exception as exc:  # noqa: BLE001 - the batch stays missing for --resume
+                res.errors.append(f"{fut.key}: {type(exc).__name__}: {exc}")
+                continue
+            rows = batch["rows"]
+            for row in rows:
+                row["session"] = session
+            store.write_part(out, store.TRAJECTORIES, names[fut.key], batch["trajectories"])
+            store.write_part(out, store.RESULTS, names[fut.key], rows)
+            res.new += len(rows)
+            res.failed += sum(r["status"] != "ok" for r in rows)
+            bar.set_postfix(failed=res.failed, refresh=False)
+            bar.update(len(rows))
+            if on_batch is not None:
+                on_batch(client, res.new)
+    except KeyboardInterrupt:
+        res.interrupted = True
+    finally:
+        bar.close()
+        res.wall_s = time.perf_counter() - t0
+        try:
+            client.cancel(futures)
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        except Exception:  # noqa: BLE001 - shutting down after an interruption
+            pass
+        man = store.read_manifest(out) or {}
+        engine = scheduler or f"LocalCluster({workers or os.cpu_count()})"
+        man.setdefault("sessions", []).append(
+            {"session": session, "engine": engine, "wall_s": res.wall_s, "new": res.new,
+             "failed": res.failed, "interrupted": res.interrupted, "errors": len(res.errors)}
+        )  # fmt: skip
+        store.write_manifest(out, man)
+    return res

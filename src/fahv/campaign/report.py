@@ -1,0 +1,341 @@
+"""Campaign report: pass rate per requirement, failure-probability bounds, worst runs, figures.
+
+Requirements (bounds from the campaign file's ``requirements``), per variant, on
+every run of the dataset:
+
+==============  ===============================================================
+completes       the run ends without exception, with a finite state, inside the
+                flight envelope (status ``ok``)
+attitude        max |alpha - alpha_r| and max |theta - theta_r| <= attitude_deg
+input_limits    no step with a command beyond the actuator limits (sec. 5.1)
+tube            tube error inside Z (tau Z) at every step (n/a for laws without tube)
+settling        |h - h_c| <= 10 ft and |V - V_c| <= 2 ft/s reached within
+                settling_s after the command stops moving, and held to the end
+final_h         |h - h_c| at the end <= h_final_ft
+final_V         |V - V_c| at the end <= V_final_fps
+==============  ===============================================================
+
+A run without metrics (it raised) fails every requirement. Failure-probability
+bound: with k failures in n runs, the one-sided Clopper-Pearson upper bound at
+confidence C, ``beta.ppf(C, k + 1, n - k)``; for k = 0 it is the zero-failure bound
+1 - (1 - C)^(1/n) (n runs without a failure show p < that bound at confidence C).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import beta
+
+from fahv.campaign import store
+from fahv.campaign.draws import scatter_columns
+
+#: Requirements in report order: (key, description).
+REQUIREMENTS = (
+    ("completes", "run completes (no exception, finite state, inside the envelope)"),
+    ("attitude", "attitude error within +/- {attitude_deg:g} deg"),
+    ("input_limits", "commands within the input limits"),
+    ("tube", "tube error inside Z at every step"),
+    ("settling", "settled within {settling_s:g} s of the command"),
+    ("final_h", "final |h - h_c| <= {h_final_ft:g} ft"),
+    ("final_V", "final |V - V_c| <= {V_final_fps:g} ft/s"),
+)
+
+#: Metrics of the worst-run tables and histograms: (column, label, how it is made
+#: "worse = larger", requirement key of the histogram line).
+WORST_METRICS = (
+    ("alpha_err_max_deg", "max |alpha - alpha_r| [deg]", abs, "attitude_deg"),
+    ("theta_err_max_deg", "max |theta - theta_r| [deg]", abs, "attitude_deg"),
+    ("h_err_final_ft", "|h - h_c| at the end [ft]", abs, "h_final_ft"),
+    ("V_err_final_fps", "|V - V_c| at the end [ft/s]", abs, "V_final_fps"),
+    ("settling_after_command_s", "settling after the command [s]", abs, "settling_s"),
+    ("tube_level_max", "max tube level e' N^-1 e", abs, None),
+    ("eta_1_dot_rms_after_fault", "RMS eta_1_dot after the fault [1/s]", abs, None),
+    ("delta_e_max_deg", "max delta_e [deg]", abs, None),
+)
+
+
+def failure_bound(k: int, n: int, confidence: float) -> float:
+    """One-sided upper bound on the failure probability, k failures in n runs.
+
+    Clopper-Pearson at ``confidence`` C: ``beta.ppf(C, k + 1, n - k)``, 1 when k = n,
+    NaN when n = 0. For k = 0 this is 1 - (1 - C)^(1/n).
+    """
+    if n == 0:
+        return math.nan
+    if k == 0:
+        return 1.0 - (1.0 - confidence) ** (1.0 / n)
+    if k >= n:
+        return 1.0
+    return float(beta.ppf(confidence, k + 1, n - k))
+
+
+def _num(row: dict, key: str) -> float:
+    v = row.get(key)
+    return math.nan if v is None else float(v)
+
+
+def verdicts(row: dict, req: dict) -> dict[str, bool | None]:
+    """Pass (True), fail (False) or not applicable (None) of each requirement for one run."""
+    has = row.get("alpha_err_max_deg") is not None
+    if not has:
+        return {k: (False if k != "tube" else None) for k, _ in REQUIREMENTS}
+    att = max(_num(row, "alpha_err_max_deg"), _num(row, "theta_err_max_deg"))
+    tube = _num(row, "tube_fraction_inside")
+    settle = _num(row, "settling_after_command_s")
+    return {
+        "completes": row["status"] == "ok",
+        "attitude": bool(att <= req["attitude_deg"]),
+        "input_limits": _num(row, "input_limit_violations") == 0,
+        "tube": None if math.isnan(tube) else bool(tube == 1.0),
+        "settling": bool(settle <= req["settling_s"]),
+        "final_h": bool(abs(_num(row, "h_err_final_ft")) <= req["h_final_ft"]),
+        "final_V": bool(abs(_num(row, "V_err_final_fps")) <= req["V_final_fps"]),
+    }
+
+
+@dataclass
+class Report:
+    """A campaign report.
+
+    Attributes
+    ----------
+    text : str
+        Markdown (also written to ``DIR/report/report.md``).
+    table : dict
+        ``{variant: {requirement: (passed, applicable, bound)}}``.
+    figures : list of Path
+    n_runs : int
+        Rows in the dataset.
+    """
+
+    text: str
+    table: dict
+    figures: list
+    n_runs: int
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return "nan" if math.isnan(v) else f"{v:.4g}"
+    return str(v)
+
+
+def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Report:
+    """Read a campaign folder's dataset and write its report (``DIR/report/``).
+
+    Parameters
+    ----------
+    out_dir : path
+        Campaign folder.
+    figures : bool
+        Draw the PNG figures (histograms, scatter plots, worst trajectories).
+    worst : int
+        Worst runs listed per metric.
+
+    Raises
+    ------
+    CampaignError
+        If the folder is not a campaign folder.
+    """
+    from fahv.errors import CampaignError
+
+    out = Path(out_dir)
+    man = store.read_manifest(out)
+    if man is None:
+        raise CampaignError(f"{out} is not a campaign folder (no {store.MANIFEST})")
+    data = man["campaign"]
+    req = data["requirements"]
+    rows = store.read_rows(out)
+    cols = scatter_columns(data)
+    shown = cols + (["fault.kind"] if "fault.kind" in (rows[0] if rows else {}) else [])
+    conf = req["confidence"]
+    lines = [
+        f"# Campaign {man['name']}",
+        "",
+        f"{len(rows)} of {data['runs'] * len(data['variants'])} runs in the dataset "
+        f"({data['runs']} samples x variants {', '.join(data['variants'])}); seed "
+        f"{data['seed']}, case {man['case']['name']}, {man['duration']:g} s per run, design "
+        f"{man['design_hash']}. Wall time summed over the runs (worker time): "
+        f"{sum(_num(r, 'wall_s') for r in rows):.0f} s.",
+        "",
+        *[
+            f"Session {x['session']} ({x['engine']}): {x['new']} runs ({x['failed']} failed) "
+            f"in {x['wall_s']:.0f} s wall time"
+            + (", interrupted" if x["interrupted"] else "")
+            + (f", {x['errors']} tasks lost" if x["errors"] else "")
+            + "."
+            for x in man.get("sessions", [])
+        ],
+        "",
+        f"## Pass rate per requirement (failure-probability bound at C = {conf:g})",
+        "",
+    ]
+    table: dict = {}
+    head = "| requirement | " + " | ".join(data["variants"]) + " |"
+    lines += [head, "|---|" + "---|" * len(data["variants"])]
+    per_variant = {v: [r for r in rows if r["variant"] == v] for v in data["variants"]}
+    verd = {v: [verdicts(r, req) for r in rs] for v, rs in per_variant.items()}
+    for key, desc in REQUIREMENTS:
+        cells = []
+        for v in data["variants"]:
+            vals = [x[key] for x in verd[v] if x[key] is not None]
+            n, ok = len(vals), sum(vals)
+            bound = failure_bound(n - ok, n, conf)
+            table.setdefault(v, {})[key] = (ok, n, bound)
+            cells.append(
+                "n/a" if n == 0 else f"{ok}/{n} ({100.0 * ok / n:.1f} %), p_fail < {bound:.3g}"
+            )
+        lines.append(f"| {desc.format(**req)} | " + " | ".join(cells) + " |")
+    reasons = Counter(r["reason"].split(" at t =")[0] for r in rows if r["status"] != "ok")
+    if reasons:
+        lines += ["", "Failed runs by reason:", ""]
+        lines += [f"- {n} x {reason}" for reason, n in reasons.most_common()]
+    lines += ["", f"## Worst {worst} runs per metric", ""]
+    for key, label, worse, _ in WORST_METRICS:
+        for v in data["variants"]:
+            rs = [r for r in per_variant[v] if r.get(key) is not None]
+            if not rs:
+                continue
+
+            def score(r, key=key, worse=worse):
+                x = _num(r, key)
+                return math.inf if math.isnan(x) else worse(x)
+
+            top = sorted(rs, key=score, reverse=True)[:worst]
+            lines += [f"{label}, {v}:", ""]
+            lines.append("| index | value | " + " | ".join(shown) + " |")
+            lines.append("|---|---|" + "---|" * len(shown))
+            for r in top:
+                vals = " | ".join(_fmt(r.get(c)) for c in shown)
+                lines.append(f"| {r['index']} | {_fmt(_num(r, key))} | {vals} |")
+            lines.append("")
+    figs: list[Path] = []
+    if figures and rows:
+        figs = draw_figures(out, data, per_variant, cols)
+        lines += ["## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figs]
+    text = "\n".join(lines) + "\n"
+    rep = out / "report"
+    rep.mkdir(exist_ok=True)
+    (rep / "report.md").write_text(text)
+    return Report(text, table, figs, len(rows))
+
+
+def draw_figures(out: Path, data: dict, per_variant: dict, cols: list[str]) -> list[Path]:
+    """PNG figures of a campaign: histograms, metric vs parameter, worst trajectories."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    req = data["requirements"]
+    rep = out / "report"
+    rep.mkdir(exist_ok=True)
+    paths = []
+    for key, label, worse, req_key in WORST_METRICS:
+        fig, ax = plt.subplots(figsize=(6, 3.6))
+        for v, rs in per_variant.items():
+            x = np.array([worse(_num(r, key)) for r in rs if r.get(key) is not None])
+            x = x[np.isfinite(x)]
+            if x.size:
+                ax.hist(x, bins=30, alpha=0.6, label=f"{v} (n = {x.size})")
+        if req_key is not None:
+            ax.axvline(req[req_key], color="r", ls="--", label=f"requirement {req[req_key]:g}")
+        ax.set_xlabel(label)
+        ax.set_ylabel("runs")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        p = rep / f"hist_{key}.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        paths.append(p)
+        if not cols:
+            continue
+        nc = min(4, len(cols))
+        nr = math.ceil(len(cols) / nc)
+        fig, axes = plt.subplots(nr, nc, figsize=(3.2 * nc, 2.6 * nr), squeeze=False)
+        for ax, c in zip(axes.ravel(), cols, strict=False):
+            for v, rs in per_variant.items():
+                pts = [(_num(r, c), worse(_num(r, key))) for r in rs if r.get(key) is not None]
+                if pts:
+                    a = np.array(pts)
+                    ax.plot(a[:, 0], a[:, 1], ".", ms=3, label=v)
+            if req_key is not None:
+                ax.axhline(req[req_key], color="r", ls="--", lw=0.8)
+            ax.set_xlabel(c, fontsize=8)
+            ax.tick_params(labelsize=7)
+        for ax in axes.ravel()[len(cols) :]:
+            ax.axis("off")
+        axes[0, 0].set_ylabel(label, fontsize=8)
+        fig.suptitle(f"{label} against the dispersed values", fontsize=9)
+        fig.tight_layout()
+        p = rep / f"scatter_{key}.png"
+        fig.savefig(p, dpi=100)
+        plt.close(fig)
+        paths.append(p)
+    p = _worst_trajectories(out, data, per_variant, plt)
+    if p is not None:
+        paths.append(p)
+    return paths
+
+
+def worst_indices(per_variant: dict, n: int = 5) -> list[tuple[int, str]]:
+    """(index, variant) of up to ``n`` worst runs: the worst of each metric in turn."""
+    ranked = []
+    for key, _, worse, _ in WORST_METRICS[:5]:
+        for v, rs in per_variant.items():
+            rs = [r for r in rs if r.get(key) is not None]
+
+            def score(r, key=key, worse=worse):
+                x = _num(r, key)
+                return math.inf if math.isnan(x) else worse(x)
+
+            ranked.append([(r["index"], v) for r in sorted(rs, key=score, reverse=True)])
+    out: list = []
+    for depth in range(max((len(r) for r in ranked), default=0)):
+        for r in ranked:
+            if depth < len(r) and r[depth] not in out:
+                out.append(r[depth])
+            if len(out) >= n:
+                return out
+    return out
+
+
+def _worst_trajectories(out: Path, data: dict, per_variant: dict, plt) -> Path | None:
+    """Overlay of the worst runs' decimated histories (from ``trajectories/``)."""
+    keys = worst_indices(per_variant)
+    trajs = {(r["index"], r["variant"]): r for r in store.read_rows(out, store.TRAJECTORIES)}
+    keys = [k for k in keys if k in trajs]
+    if not keys:
+        return None
+    panels = (
+        ("h_err", "h - h_c [ft]"),
+        ("V_err", "V - V_c [ft/s]"),
+        ("alpha_err_deg", "alpha - alpha_r [deg]"),
+        ("theta_err_deg", "theta - theta_r [deg]"),
+        ("delta_e_deg", "delta_e [deg]"),
+        ("tube_level", "tube level"),
+    )
+    fig, axes = plt.subplots(3, 2, figsize=(10, 7.5), sharex=True)
+    for (col, label), ax in zip(panels, axes.ravel(), strict=True):
+        for idx, v in keys:
+            tr = trajs[(idx, v)]
+            ax.plot(tr["t"], tr[col], lw=0.8, label=f"run {idx} ({v})")
+        ax.set_ylabel(label, fontsize=8)
+        if col.endswith("_err_deg"):
+            att = data["requirements"]["attitude_deg"]
+            for s in (-att, att):
+                ax.axhline(s, color="r", ls="--", lw=0.7)
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("worst runs (the worst of each metric in turn)", fontsize=10)
+    fig.tight_layout()
+    p = out / "report" / "worst_trajectories.png"
+    fig.savefig(p, dpi=100)
+    plt.close(fig)
+    return p

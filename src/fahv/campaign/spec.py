@@ -1,0 +1,273 @@
+"""Campaign files: a case file, its dispersions, the variants, the requirements.
+
+Declared once in the configuration language (:mod:`fahv.config`), validated once by
+:func:`load_campaign`; every error names the file and the dotted key, e.g.
+``mc.yaml: key 'dispersions.fault.loss' must be in [0, 1), got 1.2``. A range is a
+list ``[low, high]`` (uniform draw, ``low == high`` fixes the value); an absent range
+leaves the case's value. The generated key table is in docs/campaigns.md.
+
+Checks beyond the field ranges (made here, with the case and the vehicle at hand):
+``low <= high``; the variants are among the case's; every fault kind drawn has its
+size and onset (from the campaign or the case); initial trims and commanded points
+stay inside the vehicle's flight envelope for every value of their ranges.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from fahv.config import Check, Field, Section, validate
+from fahv.config.yamlio import load_yaml
+from fahv.control import VARIANTS
+from fahv.design.case import Case, load_case
+from fahv.errors import CampaignError, CaseError
+from fahv.model.vehicle import load_vehicle
+from fahv.plant.faults import FAULTS
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+
+#: Ways to draw the uncertain parameters of sec. 5.1.
+METHODS = ("uniform", "corners", "lhs", "none")
+
+
+def _range(name: str, description: str, unit: str = "", **kw) -> Field:
+    return Field(name, "floats", description, unit=unit, length=2, default=(), **kw)
+
+
+def _ordered(section: str, key: str) -> Check:
+    def ok(root) -> bool:
+        v = root["dispersions"][section][key]
+        return not v or v[0] <= v[1]
+
+    return Check(key, ok, "must be [low, high] with low <= high")
+
+
+def campaign_spec() -> Section:
+    """The campaign-file declaration (fault kinds and variants from their registries)."""
+    uncertainty = Section(
+        "uncertainty",
+        (
+            Field("method", "str", "uniform in the box, its corners (index bits), a Latin "
+                  "hypercube over the campaign (scipy.stats.qmc), or none (the case's draw)",
+                  choices=METHODS, default="uniform"),
+            Field("scale", "float", "fraction of the sec. 5.1 uncertainty box", lo=0.0, hi=1.0,
+                  default=1.0),
+            Field("parameters", "strs", "uncertain parameters drawn (the others nominal)",
+                  choices=tuple(PAPER_UNCERTAINTY), default=tuple(PAPER_UNCERTAINTY)),
+        ),
+        "plant parameters p (1 + s_p scale rel_p), s_p in [-1, 1] (sec. 5.1)",
+    )  # fmt: skip
+    fault = Section(
+        "fault",
+        (
+            Field("kinds", "strs", "fault kinds drawn with equal probability (empty: the "
+                  "case's kind)", choices=FAULTS.names, default=()),
+            _range("onset", "fault onset time range", "s", lo=0.0),
+            _range("loss", "elevator loss of effectiveness 1 - rho_f range", lo=0.0, hi=1.0,
+                   hi_open=True, equation="eq. (15)"),
+            _range("bias_deg", "elevator bias range", "deg", lo=-30.0, hi=30.0),
+        ),
+        "actuator fault of the plant (the design keeps the case's fault)",
+        checks=(_ordered("fault", "onset"), _ordered("fault", "loss"),
+                _ordered("fault", "bias_deg")),
+    )  # fmt: skip
+    command = Section(
+        "command",
+        (
+            _range("dh", "altitude step h_c - h0 range (negative: descent)", "ft",
+                   lo=-2e5, hi=2e5),
+            _range("dV", "velocity step V_c - V0 range (negative: slow down)", "ft/s",
+                   lo=-2e4, hi=2e4),
+        ),
+        "command step sizes and directions (kept inside the envelope)",
+        checks=(_ordered("command", "dh"), _ordered("command", "dV")),
+    )  # fmt: skip
+    initial = Section(
+        "initial",
+        (
+            _range("h0", "initial trim altitude range", "ft", lo=0.0, hi=2e5),
+            _range("V0", "initial trim velocity range", "ft/s", lo=0.0, hi=2e4),
+        ),
+        "initial trim point (the plant starts at the trim there)",
+        checks=(_ordered("initial", "h0"), _ordered("initial", "V0")),
+    )  # fmt: skip
+    requirements = Section(
+        "requirements",
+        (
+            Field("attitude_deg", "float", "bound on the attitude errors alpha - alpha_r and "
+                  "theta - theta_r (absolute)", unit="deg", lo=0.0, lo_open=True, default=0.5),
+            Field("settling_s", "float", "settling (h within 10 ft of h_c and V within 2 ft/s "
+                  "of V_c, held to the end) within this time after the command stops moving",
+                  unit="s", lo=0.0, lo_open=True, default=60.0),
+            Field("h_final_ft", "float", "bound on the final altitude error h - h_c (absolute)",
+                  unit="ft", lo=0.0, lo_open=True, default=10.0),
+            Field("V_final_fps", "float", "bound on the final velocity error V - V_c (absolute)",
+                  unit="ft/s", lo=0.0, lo_open=True, default=2.0),
+            Field("confidence", "float", "confidence C of the failure-probability bounds",
+                  lo=0.0, hi=1.0, lo_open=True, hi_open=True, default=0.95),
+        ),
+        "requirement verdicts of the report",
+    )  # fmt: skip
+    return Section(
+        "",
+        (
+            Field("name", "str", "campaign name (default folder campaigns/<name>)"),
+            Field("description", "str", "what the campaign is", default=""),
+            Field("case", "str", "case file, relative to the campaign file"),
+            Field("seed", "int", "campaign seed: run i draws from SeedSequence(seed, "
+                  "spawn_key=(i, stream))", lo=0),
+            Field("runs", "int", "number of dispersed samples (each run with every variant)",
+                  lo=1, hi=1_000_000),
+            Field("variants", "strs", "variants run on every sample (among the case's)",
+                  choices=VARIANTS.names),
+            Field("duration", "float", "simulated time of each run (0: the case's)", unit="s",
+                  lo=0.0, default=0.0),
+            Field("batch_size", "int", "runs per Dask task (simulated together)", lo=1,
+                  hi=10_000, default=50),
+            Section("dispersions", (uncertainty, fault, command, initial),
+                    "what varies from run to run"),
+            requirements,
+        ),
+        "campaign file",
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A validated campaign file.
+
+    Attributes
+    ----------
+    path : Path
+        File it was read from.
+    data : dict
+        Validated content, defaults filled in (see :func:`campaign_spec`).
+    case : fahv.design.case.Case
+        The case file it names, validated.
+    """
+
+    path: Path
+    data: dict
+    case: Case
+
+    def __getitem__(self, key: str):
+        """Top-level entry of the campaign."""
+        return self.data[key]
+
+    @property
+    def name(self) -> str:
+        """Campaign name."""
+        return self.data["name"]
+
+    @property
+    def duration(self) -> float:
+        """Simulated time of each run [s] (the case's when the file says 0)."""
+        return float(self.data["duration"] or self.case["duration"])
+
+    def content_hash(self) -> str:
+        """sha256 of the campaign and case content (defaults included), 16 hex characters."""
+        text = json.dumps({"campaign": self.data, "case": self.case.data}, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _fail(source: str, key: str, message: str) -> CampaignError:
+    return CampaignError(f"{source}: key '{key}' {message}")
+
+
+def check_campaign(data: dict, case: Case, source: str, vehicle=None) -> None:
+    """Cross-checks of a validated campaign against its case and the vehicle.
+
+    Raises
+    ------
+    CampaignError
+        Naming the key: a variant the case does not run, a fault kind without size or
+        onset, an initial trim or commanded point outside the flight envelope.
+    """
+    veh = load_vehicle() if vehicle is None else vehicle
+    for v in data["variants"]:
+        if v not in case["variants"]:
+            raise _fail(source, "variants", f"names '{v}', which the case {case.name} does "
+                        f"not run (its variants: {case['variants']})")  # fmt: skip
+    f, cf = data["dispersions"]["fault"], case["fault"]
+    kinds = f["kinds"] or [cf["kind"]]
+    if any(k != "none" for k in kinds) and not f["onset"] and not math.isfinite(cf["t_onset"]):
+        raise _fail(source, "dispersions.fault.onset", "is needed: the case's fault has no onset")
+    for kind, key in (("loss_of_effectiveness", "loss"), ("bias", "bias_deg")):
+        if kind in kinds and not f[key] and cf["kind"] != kind:
+            msg = f"is needed for fault kind '{kind}' (the case's fault is '{cf['kind']}')"
+            raise _fail(source, f"dispersions.fault.{key}", msg)
+    env, cmd = veh.envelope, case["command"]
+    init, dc = data["dispersions"]["initial"], data["dispersions"]["command"]
+    h0s = init["h0"] or [cmd["h0"]]
+    V0s = init["V0"] or [cmd["V0"]]
+    for key, vals, lo, hi in (("initial.h0", h0s, env.h_min, env.h_max),
+                              ("initial.V0", V0s, env.V_min, env.V_max)):  # fmt: skip
+        if min(vals) < lo or max(vals) > hi:
+            raise _fail(source, f"dispersions.{key}", f"must stay inside the flight envelope "
+                        f"[{lo}, {hi}], got {vals}")  # fmt: skip
+    for key, starts, steps, case_end, lo, hi in (
+        ("dh", h0s, dc["dh"], cmd["h_c"], env.h_min, env.h_max),
+        ("dV", V0s, dc["dV"], cmd["V_c"], env.V_min, env.V_max),
+    ):
+        ends = [s + d for s in starts for d in steps] if steps else [case_end]
+        if min(ends) < lo or max(ends) > hi:
+            raise _fail(source, f"dispersions.command.{key}", f"takes the command outside the "
+                        f"flight envelope [{lo}, {hi}]: commanded values {min(ends)} to "
+                        f"{max(ends)}")  # fmt: skip
+
+
+def campaign_from_mapping(data, source: str = "<mapping>", case: Case | None = None,
+                          base: Path | None = None, vehicle=None) -> Campaign:  # fmt: skip
+    """Validate a campaign mapping and load (or take) its case.
+
+    Parameters
+    ----------
+    data : Mapping
+        Parsed campaign file.
+    source : str
+        Name used in messages.
+    case : Case, optional
+        The case, when already loaded (otherwise read from ``data['case']`` relative
+        to ``base``).
+    base : Path, optional
+        Folder the case path is relative to (the campaign file's folder).
+    vehicle : fahv.model.vehicle.Vehicle, optional
+        For the envelope checks (the packaged vehicle by default).
+
+    Raises
+    ------
+    CampaignError
+        Naming the source and the dotted key (unknown key, out of range, wrong
+        type, missing, cross-check); a case file that does not load is reported under
+        the key ``case``.
+    """
+    v = validate(campaign_spec(), data, source, CampaignError)
+    if case is None:
+        path = Path(base or ".") / v.values["case"]
+        try:
+            case = load_case(path)
+        except CaseError as exc:
+            raise _fail(source, "case", f"names a case that does not load: {exc}") from None
+    check_campaign(v.values, case, source, vehicle)
+    return Campaign(Path(source), v.values, case)
+
+
+def load_campaign(path: str | Path, vehicle=None) -> Campaign:
+    """Read and validate a campaign file (and its case file).
+
+    Raises
+    ------
+    CampaignError
+        If the file is missing, not YAML, or does not validate (naming the key).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise CampaignError(f"campaign file not found: {p}")
+    try:
+        data = load_yaml(p.read_text())
+    except Exception as exc:  # yaml errors carry the line number
+        raise CampaignError(f"{p}: not a valid YAML file: {exc}") from None
+    return campaign_from_mapping(data, str(p), base=p.parent, vehicle=vehicle)

@@ -1,0 +1,152 @@
+"""``fahv campaign``: Monte Carlo campaigns on Dask, their report, and reruns of one run.
+
+::
+
+    fahv campaign CAMPAIGN.yaml [--out DIR] [--scheduler ADDRESS] [--workers N] [--resume]
+    fahv campaign report DIR [--no-figures]
+    fahv campaign rerun DIR INDEX [--variant V] [--sil] [--out BAGS]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+
+from fahv.campaign.engine import run_campaign
+from fahv.campaign.report import make_report
+from fahv.campaign.rerun import rerun
+from fahv.campaign.spec import load_campaign
+from fahv.errors import CampaignError
+from fahv.runs.workspace import ROOT
+
+#: Exit status of an interrupted campaign (as a shell reports SIGINT).
+INTERRUPTED = 130
+
+
+def _err(line: str) -> None:
+    print(line, file=sys.stderr)
+
+
+def cmd_run(args) -> int:
+    """Run (or ``--resume``) a campaign file; print the report at the end."""
+    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+    campaign = load_campaign(args.target)
+    out = Path(args.out) if args.out else ROOT / "campaigns" / campaign.name
+    res = run_campaign(
+        campaign,
+        out,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        resume=args.resume,
+        progress=not args.quiet,
+        log=_err,
+    )
+    _err(
+        f"campaign {campaign.name}: {res.new} runs this session ({res.failed} failed), "
+        f"{res.before} before, {res.missing} missing; wall time {res.wall_s:.1f} s; "
+        f"results in {out}/results"
+    )
+    if res.errors:
+        lost = sum("scheduler-connection-lost" in e for e in res.errors)
+        if lost:
+            _err(f"lost the Dask scheduler: {lost} batches did not finish")
+        _err(f"{len(res.errors)} tasks failed, their runs stay missing; first: {res.errors[0]}")
+        _err(f"complete it later with\n  fahv campaign {args.target} --out {out} --resume")
+    if res.interrupted:
+        _err(f"interrupted: every finished batch is kept; complete it with\n"
+             f"  fahv campaign {args.target} --out {out} --resume")  # fmt: skip
+        return INTERRUPTED
+    if not args.no_report:
+        rep = make_report(out, figures=True)
+        print(rep.text)
+        _err(f"report written to {out}/report/")
+    return 0 if res.missing == 0 else 1
+
+
+def cmd_report(args) -> int:
+    """Report of a campaign folder (tables printed, figures written)."""
+    rep = make_report(args.dir, figures=not args.no_figures)
+    print(rep.text)
+    _err(f"report written to {Path(args.dir) / 'report'}/")
+    return 0
+
+
+def cmd_rerun(args) -> int:
+    """One run of a campaign again, recorded (MCAP); compares its metrics with the row."""
+    r = rerun(
+        args.dir,
+        args.index,
+        args.variant,
+        sil=args.sil,
+        bags=args.out or ROOT / "bags",
+        quiet=args.quiet,
+    )
+    if r.bag is not None:
+        print(f"run written to {r.bag}")
+    if r.error:
+        print(f"the run failed: {r.error}")
+    if r.recorded is None:
+        print("the campaign's dataset does not hold this run (yet): nothing to compare")
+        return 0
+    if r.identical:
+        print(f"metrics identical to the campaign's row ({len(r.metrics)} metrics)")
+        return 0
+    print("metrics differ from the campaign's row:")
+    for k, (a, b) in r.differences.items():
+        print(f"  {k}: campaign {a!r}, rerun {b!r}")
+    return 1
+
+
+def _dispatch(args) -> int:
+    """``campaign FILE`` / ``campaign report DIR`` / ``campaign rerun DIR INDEX``."""
+    rest = args.rest
+    if args.target == "report":
+        if len(rest) != 1:
+            raise CampaignError("usage: fahv campaign report DIR")
+        args.dir = rest[0]
+        return cmd_report(args)
+    if args.target == "rerun":
+        if len(rest) != 2 or not rest[1].isdigit():
+            raise CampaignError("usage: fahv campaign rerun DIR INDEX (a run index)")
+        args.dir, args.index = rest[0], int(rest[1])
+        return cmd_rerun(args)
+    if rest:
+        raise CampaignError(f"unexpected arguments {rest} after the campaign file")
+    return cmd_run(args)
+
+
+def add_parsers(sub) -> None:
+    """Add the ``campaign`` parser."""
+    p = sub.add_parser(
+        "campaign",
+        help="Monte Carlo campaign on Dask (campaign FILE | report DIR | rerun DIR INDEX)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=__doc__,
+    )
+    p.add_argument("target", help="campaign file, or 'report' / 'rerun'")
+    p.add_argument("rest", nargs="*", help="DIR (report), DIR INDEX (rerun)")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="campaign folder (default campaigns/NAME); for rerun: bags folder",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        help="address of an existing Dask scheduler (default: a LocalCluster)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="LocalCluster worker processes (default: the cores)",
+    )
+    p.add_argument("--resume", action="store_true", help="complete the missing runs of DIR")
+    p.add_argument("--no-report", action="store_true", help="no report at the end")
+    p.add_argument("--no-figures", action="store_true", help="report: tables only")
+    p.add_argument("--variant", default=None, help="rerun: variant (default the first)")
+    p.add_argument("--sil", action="store_true", help="rerun through the ROS 2 node graph")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_dispatch)  # fmt: skip

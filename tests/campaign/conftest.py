@@ -1,0 +1,58 @@
+import copy
+
+import pytest
+import yaml
+
+from fahv.design.artefacts import save_design
+
+
+@pytest.fixture(scope="session")
+def mc_dir(tmp_path_factory, raw, design):
+    """A folder with the quick Case 1 (small W sample) and its saved design next to it."""
+    d = tmp_path_factory.mktemp("mc")
+    data = copy.deepcopy(raw)
+    data["disturbance"]["samples"] = 40  # as the session design (conftest.quick)
+    (d / "case1.yaml").write_text(yaml.safe_dump(data))
+    save_design(design, d / "artefacts" / design.case["name"])
+    return d
+
+
+BASE = {
+    "name": "t",
+    "case": "case1.yaml",
+    "seed": 11,
+    "runs": 12,
+    "variants": ["tube_mpc"],
+    "duration": 6.0,
+    "batch_size": 2,
+    "dispersions": {
+        "uncertainty": {"method": "uniform"},
+        "fault": {
+            "kinds": ["loss_of_effectiveness", "bias", "dropout"],
+            "loss": [0.0, 0.3],
+            "bias_deg": [-2.0, 2.0],
+            "onset": [1.0, 4.0],
+        },
+        "command": {"dh": [-300.0, 600.0], "dV": [-100.0, 250.0]},
+        "initial": {"h0": [85300.0, 85700.0], "V0": [7850.0, 7950.0]},
+    },
+}
+
+
+@pytest.fixture(scope="session")
+def write_campaign(mc_dir):
+    """``write_campaign(name, **changes)`` -> path of a campaign file next to the case."""
+
+    def make(name, **changes):
+        data = copy.deepcopy(BASE)
+        data["name"] = name
+        for key, value in changes.items():
+            if key in data["dispersions"]:
+                data["dispersions"][key] = value
+            else:
+                data[key] = value
+        path = mc_dir / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(data))
+        return path
+
+    return make

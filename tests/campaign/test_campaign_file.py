@@ -1,0 +1,93 @@
+from pathlib import Path
+
+import pytest
+import yaml
+
+from fahv.campaign.spec import campaign_spec, load_campaign
+from fahv.cli import main
+from fahv.config.spec import markdown
+from fahv.errors import CampaignError
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.parametrize("name", ["campaign_case1.yaml", "campaign_case2.yaml"])
+def test_example_campaign_files_validate(name):
+    c = load_campaign(ROOT / "offline_design" / name)
+    assert c.case.name == name.split("_")[1].split(".")[0]
+    assert c.duration == 300.0
+    assert set(c["variants"]) <= set(c.case["variants"])
+
+
+def test_the_case1_example_is_the_issue_campaign():
+    c = load_campaign(ROOT / "offline_design" / "campaign_case1.yaml")
+    assert c["runs"] == 1000
+    f = c["dispersions"]["fault"]
+    assert f["kinds"] == ["loss_of_effectiveness"] and f["loss"] == [0.0, 0.3]
+    assert f["onset"] == [30.0, 200.0]
+    assert c["dispersions"]["uncertainty"] == {
+        "method": "uniform", "scale": 1.0,
+        "parameters": ["m", "I_yy", "S", "z_T", "c_bar", "c_e", "beta_1", "beta_3", "beta_5",
+                       "beta_7"],
+    }  # fmt: skip
+
+
+def _edit(write_campaign, tmp_name, edit):
+    path = write_campaign(tmp_name)
+    data = yaml.safe_load(path.read_text())
+    edit(data)
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("edit", "key", "words"),
+    [
+        (lambda d: d["dispersions"]["fault"].update(lost=[0, 1]), "dispersions.fault.lost",
+         "unknown key"),
+        (lambda d: d.update(sed=3), "sed", "unknown key"),
+        (lambda d: d["dispersions"]["fault"].update(loss=[0.0, 1.2]), "dispersions.fault.loss",
+         "must be in [0, 1)"),
+        (lambda d: d["dispersions"]["fault"].update(onset=[5.0, 1.0]), "dispersions.fault.onset",
+         "low <= high"),
+        (lambda d: d["dispersions"]["uncertainty"].update(scale=1.5),
+         "dispersions.uncertainty.scale", "must be in [0, 1]"),
+        (lambda d: d["dispersions"]["uncertainty"].update(method="sobol"),
+         "dispersions.uncertainty.method", "must be one of"),
+        (lambda d: d["dispersions"]["command"].update(dh=[0.0, 2000.0]),
+         "dispersions.command.dh", "flight envelope"),
+        (lambda d: d["dispersions"]["initial"].update(V0=[7000.0, 7900.0]),
+         "dispersions.initial.V0", "flight envelope"),
+        (lambda d: d.update(variants=["tube_mpc", "nope"]), "variants", "must be one of"),
+        (lambda d: d.update(runs=0), "runs", "must be in [1, 1e+06]"),
+        (lambda d: d.pop("seed"), "seed", "missing key"),
+        (lambda d: d.update(case="nope.yaml"), "case", "does not load"),
+    ],
+)  # fmt: skip
+def test_bad_campaign_files_fail_naming_the_key(write_campaign, edit, key, words):
+    path = _edit(write_campaign, "bad", edit)
+    with pytest.raises(CampaignError) as exc:
+        load_campaign(path)
+    msg = str(exc.value)
+    assert f"'{key}'" in msg and words in msg and str(path) in msg
+
+
+def test_fault_kind_without_size_fails_naming_the_key(write_campaign):
+    path = _edit(write_campaign, "nobias",
+                 lambda d: d["dispersions"]["fault"].pop("bias_deg"))  # fmt: skip
+    with pytest.raises(CampaignError, match=r"'dispersions.fault.bias_deg' is needed"):
+        load_campaign(path)
+
+
+def test_cli_names_the_key_and_exits_2(write_campaign, capsys):
+    path = _edit(write_campaign, "cli", lambda d: d["dispersions"]["fault"].update(loss=[0, 2]))
+    assert main(["campaign", str(path), "--out", str(path.parent / "never")]) == 2
+    err = capsys.readouterr().err
+    assert "'dispersions.fault.loss'" in err and "must be in [0, 1)" in err
+    assert not (path.parent / "never").exists()
+
+
+def test_docs_key_table_is_the_declaration():
+    text = (ROOT / "docs" / "campaigns.md").read_text()
+    table = text.split("<!-- campaign-keys -->\n")[1].split("\n<!-- /campaign-keys -->")[0]
+    assert table == markdown(campaign_spec())

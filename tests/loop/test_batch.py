@@ -1,0 +1,149 @@
+"""The batched simulator gives every run the bits of simulate(), whatever its batch."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fahv.errors import ParameterError, RunError
+from fahv.loop import batch as batch_mod
+from fahv.loop.batch import (
+    MPC_SOURCE_HASH,
+    _cores,
+    mpc_source_hash,
+    nominal_mode,
+    not_batchable,
+    run_parameters,
+    simulate_batch,
+)
+from fahv.loop.simulate import simulate
+
+FIELDS = ("t", "x", "q_f", "x_r", "x_n", "u", "u_applied", "h_c", "V_c", "h_g", "V_g",
+          "tube_level", "fault_active", "lmi_counts")  # fmt: skip
+DURATION = 3.0
+
+
+def _overrides(design):
+    """Runs with every fault kind, perturbed parameters, other commands and starts."""
+    base = design.summary["plant_params"]
+    rng = np.random.default_rng(5)
+    kinds = [("loss_of_effectiveness", {"rho_f": 0.75}), ("bias", {"bias_deg": -2.5}),
+             ("stuck", {}), ("dropout", {}), ("none", {})]  # fmt: skip
+    out = []
+    for i, (kind, extra) in enumerate(kinds):
+        ov = {
+            "plant": {f"params.{k}": v * (1 + 0.08 * rng.uniform(-1, 1)) for k, v in base.items()},
+            "fault_injector": {"kind": kind, "t_onset": 0.4 + 0.5 * i, **extra},
+        }
+        if i == 1:
+            ov["nominal_trajectory"] = {"command.h_c": 85200.0, "command.V_c": 7800.0}
+        out.append(ov)
+    return out
+
+
+def _assert_same(a, b):
+    for f in FIELDS:
+        x, y = getattr(a, f), getattr(b, f)
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), f
+    assert a.info == b.info
+
+
+def test_the_mirrored_nominal_mpc_is_the_current_one():
+    assert mpc_source_hash() == MPC_SOURCE_HASH, (
+        "fahv.control.nominal_mpc.TrackingNominal changed: check loop.batch._MPCLanes against "
+        "it (this file's tests) and set MPC_SOURCE_HASH to the new hash"
+    )
+
+
+@pytest.mark.parametrize(("variant", "mode"), [("tube_mpc", "mpc"), ("tube_mpc_paper", "governor")])
+def test_nominal_modes(design, variant, mode):
+    assert nominal_mode(_cores(run_parameters(design, variant, 0.1, None), {})) == mode
+
+
+@pytest.mark.parametrize("variant", ["tube_mpc", "tube_mpc_paper"])
+def test_batch_equals_simulate_bit_for_bit(design, variant):
+    ovs = _overrides(design)
+    batch = simulate_batch(design, variant, ovs, DURATION)
+    for ov, res in zip(ovs, batch, strict=True):
+        _assert_same(simulate(design, variant, DURATION, overrides=ov), res)
+    # the faults did act: the elevator loss scaled delta_e by 0.75 once active
+    r = batch[0]
+    on = r.fault_active
+    assert on.any() and not on.all()
+    np.testing.assert_allclose(r.u_applied[on, 1], 0.75 * r.u[on, 1], rtol=1e-15)
+
+
+def test_result_does_not_depend_on_the_batch(design):
+    ovs = _overrides(design)
+    alone = simulate_batch(design, "tube_mpc", ovs[2:3], DURATION)[0]
+    together = simulate_batch(design, "tube_mpc", ovs[::-1], DURATION)[2]
+    _assert_same(alone, together)
+
+
+def test_generic_per_run_nominal_path_equals_simulate(design, monkeypatch):
+    monkeypatch.setattr(batch_mod, "MPC_SOURCE_HASH", "changed")
+    assert nominal_mode(_cores(run_parameters(design, "tube_mpc", 0.1, None), {})) == "per_run"
+    ovs = _overrides(design)[:3]
+    for ov, res in zip(ovs, simulate_batch(design, "tube_mpc", ovs, 2.0), strict=True):
+        _assert_same(simulate(design, "tube_mpc", 2.0, overrides=ov), res)
+
+
+@pytest.mark.parametrize("variant", ["tube_mpc_no_notch", "tube_mpc_notch2"])
+def test_notch_variants_batched_and_equal(design, variant):
+    ovs = _overrides(design)[:2]
+    for ov, res in zip(ovs, simulate_batch(design, variant, ovs, 1.0), strict=True):
+        _assert_same(simulate(design, variant, 1.0, overrides=ov), res)
+
+
+def test_failing_runs_are_reported_and_the_others_complete(design):
+    ovs = [None, {"plant": {"params.m": math.nan}}, {"plant": {"params.I_yy": 1e-3}}, None]
+    res = simulate_batch(design, "tube_mpc", ovs, 4.0)
+    assert isinstance(res[1], ParameterError)
+    assert "params.m" in str(res[1]) and "finite" in str(res[1])
+    assert isinstance(res[2], RunError)
+    with pytest.raises(RunError) as exc:  # the same failure, at the same step, as simulate
+        simulate(design, "tube_mpc", 4.0, overrides=ovs[2])
+    assert str(res[2]) == str(exc.value)
+    t_fail = float(str(res[2]).split("at t = ")[1].split(" s")[0])
+    assert 1.0 < t_fail < 4.0  # the inertia 1e-3 of the nominal diverges in about 2 s
+    _assert_same(simulate(design, "tube_mpc", 4.0), res[0])
+    _assert_same(res[0], res[3])
+
+
+def test_rmpc_runs_through_the_per_run_fallback(design):
+    cores = _cores(run_parameters(design, "rmpc", 0.1, None), {})
+    assert "has no batched kernel" in not_batchable(cores)
+    ov = {"fault_injector": {"kind": "bias", "t_onset": 0.0, "bias_deg": 1.0}}
+    res = simulate_batch(design, "rmpc", [ov], 0.1)[0]
+    _assert_same(simulate(design, "rmpc", 0.1, overrides=ov), res)
+    refused = simulate_batch(design, "rmpc", [ov], 0.1, fallback=False)[0]
+    assert isinstance(refused, RunError) and "cannot be batched" in str(refused)
+
+
+@pytest.fixture(scope="module")
+def design_case2():
+    """Case 2 (11-state ECM, tau = 0.8) designed with a small W sample."""
+    import copy
+    import warnings
+
+    from fahv.config.yamlio import load_yaml
+    from fahv.design.case import case_from_mapping
+    from fahv.design.pipeline import run_design
+
+    with open("offline_design/case2.yaml") as fh:
+        raw = load_yaml(fh.read())
+    d = copy.deepcopy(raw)
+    d["disturbance"]["samples"] = 40
+    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+    return run_design(case_from_mapping(d, "quick2.yaml"), log=lambda *_: None)
+
+
+def test_case2_eleven_state_law_batched_and_equal(design_case2):
+    d = design_case2
+    assert d.n_x == 11
+    ovs = [{"fault_injector": {"kind": k, "t_onset": 0.5, "rho_f": 0.8, "bias_deg": 1.0}}
+           for k in ("loss_of_effectiveness", "bias")]  # fmt: skip
+    assert nominal_mode(_cores(run_parameters(d, "tube_mpc", 0.1, ovs[0]), {})) == "mpc"
+    for ov, res in zip(ovs, simulate_batch(d, "tube_mpc", ovs, 1.5), strict=True):
+        _assert_same(simulate(d, "tube_mpc", 1.5, overrides=ov), res)
+        assert res.x_n.shape == (75, 11)
