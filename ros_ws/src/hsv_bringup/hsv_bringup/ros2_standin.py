@@ -105,13 +105,15 @@ def cmd_bag_info(args) -> int:
     return fahv_main(["inspect", args.bag_path])
 
 
-def _discover(node, wait_s: float) -> dict[str, list[str]]:
-    """Topic names and types seen after ``wait_s`` seconds of discovery."""
+def _discover(node, wait_s: float, want: str | None = None) -> dict[str, list[str]]:
+    """Topic names and types after ``wait_s`` seconds of discovery (or once ``want`` is seen)."""
     import rclpy
 
     end = time.monotonic() + wait_s
     while time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
+        if want is not None and want in dict(node.get_topic_names_and_types()):
+            break
     return dict(node.get_topic_names_and_types())
 
 
@@ -150,7 +152,7 @@ def cmd_topic(args) -> int:
     rclpy.init()
     node = rclpy.create_node(f"ros2_standin_{os.getpid()}", start_parameter_services=False)
     try:
-        topics = _discover(node, args.wait)
+        topics = _discover(node, args.wait, None if args.verb == "list" else args.topic)
         if args.verb == "list":
             for name, types in sorted(topics.items()):
                 print(f"{name} [{', '.join(types)}]" if args.show_types else name)
@@ -207,12 +209,12 @@ def build_parser() -> argparse.ArgumentParser:
     topic.required = True
     p = topic.add_parser("list", help="topics seen in ROS_DOMAIN_ID")
     p.add_argument("-t", "--show-types", action="store_true")
-    p.add_argument("--wait", type=float, default=1.0, help="discovery time [s]")
+    p.add_argument("--wait", type=float, default=2.0, help="discovery time [s]")
     p.set_defaults(func=cmd_topic)
     p = topic.add_parser("echo", help="print the messages of a topic as YAML")
     p.add_argument("topic")
     p.add_argument("--once", action="store_true", help="print one message and exit")
-    p.add_argument("--wait", type=float, default=1.0, help="discovery time [s]")
+    p.add_argument("--wait", type=float, default=10.0, help="longest wait for the topic [s]")
     p.set_defaults(func=cmd_topic)
     return ap
 
