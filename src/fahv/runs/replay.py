@@ -10,7 +10,7 @@ from pathlib import Path
 import yaml
 
 from fahv.errors import RunError
-from fahv.runs.sil import _runner, run_runner
+from fahv.runs.sil import _runner, reserve_run, run_runner
 from fahv.runs.workspace import WS, ensure_built, ros_env
 
 
@@ -138,8 +138,7 @@ def run_replay(
     }
     ensure_built(log=log)
     env = ros_env()
-    work = WS / "log" / "replay" / time.strftime("%Y%m%d-%H%M%S")
-    work.mkdir(parents=True, exist_ok=True)
+    _, work = reserve_run(time.strftime("%Y%m%d-%H%M%S"), WS / "log" / "replay")
     (work / "params.yaml").write_text(yaml.safe_dump(content, sort_keys=False, width=120))
     cmd = _runner(work, ["--nodes", "replay", *nodes], quiet)
     log(f"replay of {folder.name} into {list(nodes) or 'the graph'}: logs in {work}")

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import yaml
 
+from fahv.errors import RunError
 from fahv.loop.graph import graph_nodes
 from fahv.loop.params import controller_node, node_parameters, parameter_file
 from fahv.runs.workspace import ROOT, WS, ensure_built, ros_env
@@ -86,6 +87,33 @@ def run_metadata(design, variant: str, source: str, duration: float) -> dict:
         },
         **{f"fault_{k}": v for k, v in f.items()},
     }
+
+
+def reserve_run(name: str, work_root: Path, out_dir=None) -> tuple[str, Path]:
+    """A run name no other run uses, with its work folder created atomically.
+
+    Two runs started in the same second with the same case and variant (e.g. two
+    ``fahv sil`` at once) would otherwise share the name, the work folder (parameter
+    file, logs) and the run folder. The work folder ``work_root/<name>`` is created
+    with an exclusive ``mkdir``; if it, or ``out_dir/<name>``, exists, ``-2``, ``-3``
+    ... is appended.
+
+    Returns
+    -------
+    (str, Path)
+        The name and its work folder (created).
+    """
+    work_root.mkdir(parents=True, exist_ok=True)
+    for i in range(1, 10_000):
+        cand = name if i == 1 else f"{name}-{i}"
+        if out_dir is not None and (Path(out_dir) / cand).exists():
+            continue
+        try:
+            (work_root / cand).mkdir()
+        except FileExistsError:
+            continue
+        return cand, work_root / cand
+    raise RunError(f"no free run name {name}-N in {work_root}")
 
 
 def write_run_params(
@@ -219,9 +247,10 @@ def run_sil(
     variant = design.case["variants"][0] if variant is None else variant
     ensure_built(log=log)
     env = ros_env()
-    name = run_name(design.case["name"], variant, "sil")
+    name, work = reserve_run(
+        run_name(design.case["name"], variant, "sil"), WS / "log" / "sil", out_dir
+    )
     bag = Path(out_dir).resolve() / name
-    work = WS / "log" / "sil" / name
     params = write_run_params(
         design, variant, bag, work / "params.yaml", duration, watchdog_s, overrides
     )
