@@ -69,7 +69,7 @@ def test_infeasible_qp_takes_the_fallback_and_is_counted(design):
     nom = TrackingNominal(
         mpc, Command(cmd["h0"], cmd["V0"], cmd["h_c"], cmd["V_c"]), design.case["Ts"]
     )
-    nom.reset(design.arrays["trim_x"][0, 0] * 0 + mpc.x_r_s)
+    nom.reset(mpc.x_r_s)  # start on the initial trim
     for _ in range(25):
         nom.step()
     assert mpc.stats.solves == 1 and mpc.stats.fallback == 0
@@ -77,6 +77,7 @@ def test_infeasible_qp_takes_the_fallback_and_is_counted(design):
     for _ in range(25 * 31):
         out = nom.step()
     assert np.all(np.isfinite(out.u_n))
+    # N = 30 moves: 29 shifted plans, then the terminal law for the last 2 of 31 moves
     assert mpc.stats.fallback == 29 and mpc.stats.terminal == 2
     assert nom.status.startswith("terminal law")
 

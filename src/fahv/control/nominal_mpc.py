@@ -132,7 +132,20 @@ class InputDisturbanceEstimator:
         self._proj = np.linalg.pinv(B / self.Dx[:, None]) / self.Dx[None, :]
 
     def update(self, dx_prev: np.ndarray, du_prev: np.ndarray, dx: np.ndarray) -> np.ndarray:
-        """Filtered estimate d (m,) after one measured step (deviation coordinates)."""
+        """Filtered estimate d (m,) [Phi, delta_e rad] after one measured step.
+
+        Parameters
+        ----------
+        dx_prev, dx : (p,) ndarray
+            Measured plant state of steps k - 1 and k minus the scheduling trim.
+        du_prev : (m,) ndarray
+            Command of step k - 1 minus the scheduling trim input.
+
+        Raises
+        ------
+        TypeError
+            If :meth:`schedule` was not called first.
+        """
         A, B = self._AB
         r = dx - A @ dx_prev - B @ du_prev
         self.d = self.d + self.gamma * (self._proj @ r - self.d)
@@ -210,7 +223,6 @@ class TrackingMPC:
         self.theta_scale = np.array([100.0, 100.0])
         self.stats = QPStats()
         self.theta_s = None
-        self.plan = None
         self.last_y = None
 
     # -- scheduling ----------------------------------------------------------------
@@ -270,7 +282,6 @@ class TrackingMPC:
         P_s = scipy.linalg.solve_discrete_lyapunov(Phi_s.T, np.diag(s.q_w) * s.M, "bilinear")
         P = (0.5 * (P_s + P_s.T)) / np.outer(self.Dx, self.Dx)
         H = np.zeros((ny, ny))
-        self._Hz = []  # z0-linear parts: f = 2 * sum C'W S z0
         Fz = np.zeros((ny, n))
         for j in range(N + 1):
             Wj = P if j == N else Wq
@@ -299,7 +310,6 @@ class TrackingMPC:
         self.Att_y = np.concatenate([C[j][2:4] for j in range(1, N + 1)])
         self.Att_z = np.concatenate([S[j][2:4] for j in range(1, N + 1)])
         self.Tb_y = self.L_inv @ C[N]  # terminal box rows, (n, ny)
-        self.Tb_y[:, -1] -= 0.0
         self.Tb_z = self.L_inv @ S[N]
         self.stats.reschedules += 1
 
@@ -321,7 +331,8 @@ class TrackingMPC:
         y : (ny,) ndarray or None
             Solution (None if rejected).
         info : str
-            "ok" or why it was rejected.
+            "ok" or why it was rejected (solver flag, or the failed check of
+            :func:`check_kkt`); a rejected QP raises nothing, the caller falls back.
         """
         s, N, m, n = self.s, self.s.N, self.m, self.n
         e_theta = (self.theta_s - cmd) / self.theta_scale
@@ -387,7 +398,21 @@ class TrackingMPC:
 
 
 def check_kkt(H, f, A_c, bl, bu, y, lam, primal_tol=PRIMAL_TOL, kkt_tol=KKT_TOL) -> str:
-    """Check a QP solution numerically; '' if it passes, else why not.
+    """Check a QP solution numerically; '' if it passes, else why not (no exception).
+
+    Parameters
+    ----------
+    H : (ny, ny) ndarray
+    f : (ny,) ndarray
+    A_c : (nc, ny) ndarray
+    bl, bu : (ny + nc,) ndarray
+        Bounds on [y; A_c y]; |b| >= 1e29 means none.
+    y : (ny,) ndarray
+        Primal solution.
+    lam : (ny + nc,) ndarray
+        Multipliers (positive on an active upper bound, negative on a lower one).
+    primal_tol, kkt_tol : float
+        Tolerances relative to the size of the terms.
 
     QP: min 0.5 y'Hy + f'y  s.t. bl <= [y; A_c y] <= bu (the first ny bounds are simple
     bounds on y, DAQP's convention). Checks primal feasibility (<= primal_tol),
@@ -518,6 +543,12 @@ class TrackingNominal:
             Measured plant state of step k (for the estimator).
         u_prev : (2,) ndarray, optional
             Command of step k - 1 [Phi, delta_e rad] (for the estimator).
+
+        Returns
+        -------
+        NominalOutput
+            Set point (h_g, V_g) = theta, x_r (n,), u_r (2,) = trim input minus d,
+            x_n (n,), u_n (2,), level = (z - x_s)' Q^-1 (z - x_s).
         """
         mpc = self.mpc
         self._estimate(x_meas, u_prev)

@@ -63,8 +63,8 @@ from fahv.control.tube_mpc import PaperTubeMPCLaw
 from fahv.errors import RunError
 from fahv.loop.cores import build_core
 from fahv.loop.graph import STATE_FIELDS, n_steps_of
-from fahv.loop.params import controller_node, node_parameters, validate
-from fahv.loop.simulate import RunResult, simulate
+from fahv.loop.params import controller_node, validate
+from fahv.loop.simulate import RunResult, run_parameters, simulate
 from fahv.model.dynamics import cm_rhs
 from fahv.model.vehicle import DELTA_E, Q, load_vehicle
 from fahv.plant.faults import Bias, Dropout, LossOfEffectiveness, NoFault, Stuck
@@ -74,45 +74,6 @@ from fahv.plant.integrator import Plant, rk4_step
 _NODES = ("plant", "notch_filter", "nominal_trajectory", "fault_injector")  # plant first
 #: Fault kinds applied over the batch axis (others: per run, through their injector).
 _FAULT_CODES = {NoFault: 0, LossOfEffectiveness: 1, Bias: 2, Stuck: 3, Dropout: 4}
-
-
-def run_parameters(design, variant: str | None, duration, overrides: dict | None) -> dict:
-    """Node parameters of one run, built as :func:`~fahv.loop.simulate.simulate` builds them.
-
-    Parameters
-    ----------
-    design : fahv.design.Design
-    variant : str or None
-        A variant of the case (its first by default).
-    duration : float or None
-        Simulated time [s] (the case's by default).
-    overrides : dict or None
-        ``{node: {name: value}}`` applied last.
-
-    Returns
-    -------
-    dict
-        ``{node: {name: value}}`` (flat, unvalidated: :func:`fahv.loop.cores.build_core`
-        validates them).
-
-    Raises
-    ------
-    RunError
-        On an override for a node that is not in the run, or an unknown variant.
-    """
-    case = design.case
-    variant = case["variants"][0] if variant is None else variant
-    if variant not in case["variants"]:
-        raise RunError(f"variant '{variant}' is not in the case's variants {case['variants']}")
-    p = node_parameters(design, variant)
-    if duration is not None:
-        for node in p.values():
-            node["duration"] = float(duration)
-    for node, values in (overrides or {}).items():
-        if node not in p:
-            raise RunError(f"override for node '{node}', which is not in the run: {sorted(p)}")
-        p[node].update(values)
-    return p
 
 
 @dataclasses.dataclass
@@ -162,7 +123,7 @@ def _source_hash(*objs) -> str:
 #: (the generic per-run nominal path is, same numbers, slower) until its fast-step
 #: computation has been checked again against the class and this hash updated
 #: (``tests/loop/test_batch.py`` fails meanwhile).
-MPC_SOURCE_HASH = "742c0265a9838b37"
+MPC_SOURCE_HASH = "67c083747d1c2e08"
 
 
 @functools.cache

@@ -130,6 +130,45 @@ def run_result(records: dict, info: dict | None = None) -> RunResult:
     )
 
 
+def run_parameters(design, variant: str | None, duration, overrides: dict | None) -> dict:
+    """Node parameters of one run: the design's, the duration, then the overrides.
+
+    Parameters
+    ----------
+    design : fahv.design.Design
+    variant : str or None
+        A variant of the case (its first by default).
+    duration : float or None
+        Simulated time [s] (the case's by default).
+    overrides : dict or None
+        ``{node: {name: value}}`` applied last.
+
+    Returns
+    -------
+    dict
+        ``{node: {name: value}}`` (flat, unvalidated: :func:`fahv.loop.cores.build_core`
+        validates them).
+
+    Raises
+    ------
+    RunError
+        On an override for a node that is not in the run, or an unknown variant.
+    """
+    case = design.case
+    variant = case["variants"][0] if variant is None else variant
+    if variant not in case["variants"]:
+        raise RunError(f"variant '{variant}' is not in the case's variants {case['variants']}")
+    p = node_parameters(design, variant)
+    if duration is not None:
+        for node in p.values():
+            node["duration"] = float(duration)
+    for node, values in (overrides or {}).items():
+        if node not in p:
+            raise RunError(f"override for node '{node}', which is not in the run: {sorted(p)}")
+        p[node].update(values)
+    return p
+
+
 def simulate(
     design,
     variant: str | None = None,
@@ -169,16 +208,7 @@ def simulate(
     """
     case = design.case
     variant = case["variants"][0] if variant is None else variant
-    if variant not in case["variants"]:
-        raise RunError(f"variant '{variant}' is not in the case's variants {case['variants']}")
-    p = node_parameters(design, variant)
-    if duration is not None:
-        for node in p.values():
-            node["duration"] = float(duration)
-    for node, values in (overrides or {}).items():
-        if node not in p:
-            raise RunError(f"override for node '{node}', which is not in the run: {sorted(p)}")
-        p[node].update(values)
+    p = run_parameters(design, variant, duration, overrides)
     ctrl_node = controller_node(p)
     plant, notch, nominal, fault, ctrl = (
         build_core(n, p[n])
