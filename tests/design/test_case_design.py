@@ -70,7 +70,7 @@ def test_infeasible_design_writes_nothing(make_case, tmp_path, monkeypatch):
     """No tube fits (input room shrunk to nothing): error names eq. (30), no artefact."""
     import fahv.design.pipeline as dmod
 
-    monkeypatch.setattr(dmod, "input_room", lambda veh: np.array([1e-3, 1e-4]))
+    monkeypatch.setattr(dmod, "input_room", lambda veh, **_: np.array([1e-3, 1e-4]))
     out = tmp_path / "art"
     with pytest.raises(DesignError, match=r"eq\. 30|U minus F Z|infeasible|certificate failed"):
         save_design(run_design(make_case(), log=lambda *_: None), out)

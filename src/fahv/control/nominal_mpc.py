@@ -29,10 +29,13 @@ nominal LPV model of eq. (12) scheduled at the current operating point:
   stays in the invariant E(Q)); when none is left, the terminal law c = 0. Each is
   counted.
 
-The input disturbance estimate d (:class:`InputDisturbanceEstimator`) makes the
-tracking offset-free: the applied input is modelled as u + d, so the steady input
-the nominal problem uses is u_r(theta) - d. A loss of elevator effectiveness rho_f
-appears as d_e = (rho_f - 1) delta_e; parameter uncertainty as a constant d too.
+The state disturbance estimate d (:class:`DisturbanceEstimator`, p states) makes the
+tracking offset-free and takes the constant part out of the tube's W: the nominal
+model is z+ = A z + B u + d, and its steady state at the set point moves by
+(x_d, u_d) = (H_x d, H_u d), the solution of (A - I) x_d + B u_d + d = 0 with
+h_d = V_d = 0 (n equations, n unknowns; :meth:`TrackingMPC.schedule`). A loss of
+elevator effectiveness rho_f gives u_d = -(rho_f - 1) delta_e,r (exactly, since its
+d lies along the elevator column of B); parameter uncertainty shifts the trim.
 """
 
 from __future__ import annotations
@@ -95,14 +98,17 @@ class MPCSettings:
     att_max: float = math.inf
 
 
-class InputDisturbanceEstimator:
-    """Constant input disturbance d (m,): applied input = commanded input + d.
+class DisturbanceEstimator:
+    """Constant additive state disturbance d (p,) of the scheduled model.
 
     Each step, the one-step residual of the scheduled model,
     r = dx_k - A dx_{k-1} - B du_{k-1} (deviations from the trim at the scheduling
-    point), is projected on the input directions by least squares in scaled
-    coordinates, d_k = (B/Dx)^+ (r/Dx), and filtered: d <- d + gamma (d_k - d) with
-    gamma = Ts / tau_est (first-order, time constant tau_est).
+    point), is filtered: d <- d + gamma (r - d) with gamma = Ts / tau_est (first
+    order, time constant tau_est). d collects what the nominal model misses at the
+    current operating point and that varies slowly: the constant part of the parameter
+    uncertainty (sec. 5.1), the trim part (rho_f - 1) delta_e,r of a loss of
+    effectiveness (eq. 16), the mean of the modelling error. The nominal model then
+    predicts with d, so the tube only has to hold what is left (docs/control_design.md).
 
     Parameters
     ----------
@@ -122,17 +128,15 @@ class InputDisturbanceEstimator:
             raise ValueError(f"estimator gain gamma must be in (0, 1], got {gamma}")
         self.Dx = np.asarray(Dx, float)
         self.gamma = float(gamma)
-        self.d = np.zeros(2)
-        self._proj = None
+        self.d = np.zeros(self.Dx.size)
         self._AB = None
 
     def schedule(self, A: np.ndarray, B: np.ndarray) -> None:
         """Model (A (p, p), B (p, m)) at the fast rate for the next updates."""
         self._AB = (A, B)
-        self._proj = np.linalg.pinv(B / self.Dx[:, None]) / self.Dx[None, :]
 
     def update(self, dx_prev: np.ndarray, du_prev: np.ndarray, dx: np.ndarray) -> np.ndarray:
-        """Filtered estimate d (m,) [Phi, delta_e rad] after one measured step.
+        """Filtered estimate d (p,) [state units per step Ts] after one measured step.
 
         Parameters
         ----------
@@ -148,7 +152,7 @@ class InputDisturbanceEstimator:
         """
         A, B = self._AB
         r = dx - A @ dx_prev - B @ du_prev
-        self.d = self.d + self.gamma * (self._proj @ r - self.d)
+        self.d = self.d + self.gamma * (r - self.d)
         return self.d
 
 
@@ -311,6 +315,20 @@ class TrackingMPC:
         self.Att_z = np.concatenate([S[j][2:4] for j in range(1, N + 1)])
         self.Tb_y = self.L_inv @ C[N]  # terminal box rows, (n, ny)
         self.Tb_z = self.L_inv @ S[N]
+        # steady-state shift of a constant disturbance d: (A - I) x_d + B u_d + d = 0,
+        # h_d = V_d = 0; unknowns (x_d[2:], u_d), solved in scaled coordinates
+        Dv = np.concatenate([self.Dx[2:], self.Du])
+        M_ss = np.hstack([(A - np.eye(n))[:, 2:], B]) * Dv[None, :] / self.Dx[:, None]
+        try:
+            H_ss = -np.linalg.solve(M_ss, np.diag(1.0 / self.Dx)) * Dv[:, None]
+        except np.linalg.LinAlgError:
+            raise DesignError(
+                f"nominal MPC: no steady state holds (h, V) = ({h}, {V}) against a constant "
+                "disturbance (singular steady-state equations)"
+            ) from None
+        self.Hx = np.zeros((n, n))
+        self.Hx[2:] = H_ss[: n - 2]
+        self.Hu = H_ss[n - 2 :]
         self.stats.reschedules += 1
 
     # -- solve -----------------------------------------------------------------------
@@ -322,7 +340,7 @@ class TrackingMPC:
         z0 : (n,) ndarray
             Nominal state minus x_r at the scheduling point.
         u_base : (2,) ndarray
-            Steady input at the scheduling point, u_r - d (absolute).
+            Steady input at the scheduling point, u_r + u_d (absolute).
         cmd : (2,) ndarray
             Command (h_c, V_c) [ft, ft/s].
 
@@ -446,10 +464,12 @@ class TrackingNominal:
     """The nominal_trajectory node's object in ``mpc`` mode: MPC plan and estimator.
 
     Fast step k: the nominal state z (deviation from the scheduling trim) moves by
-    z+ = A z + B (u_n - u_base) with u_n = u_base + Gu delta + K (z - Gx delta) + c_j;
+    z+ = A z + B (u_d + u_dev) + d with u_dev = Gu delta + K (z - Gx delta - x_d) + c_j
+    (the nominal input is u_r,s + u_d + u_dev);
     every M steps the QP chooses the moves and the set-point step delta. The output
-    reference is x_r = trim_x(theta), u_r = trim_u(theta) - d at the artificial set
-    point theta, x_n = X_n - x_r, u_n = u_nominal - u_r, so that the ancillary law
+    reference is x_r = trim_x(theta), u_r = trim_u(theta) + u_d at the artificial set
+    point theta (u_d the steady input shift of the estimated disturbance, module
+    docstring), x_n = X_n - x_r, u_n = u_nominal - u_r, so that the ancillary law
     u = u_r + u_n + tau F (x - x_r - x_n) (eq. 36/54) is unchanged.
 
     Parameters
@@ -458,7 +478,7 @@ class TrackingNominal:
     command : Command
     Ts : float
         Fast sampling period [s].
-    estimator : InputDisturbanceEstimator or None
+    estimator : DisturbanceEstimator or None
         None: no disturbance estimate (d = 0).
     n_plant : int
         Measured plant states used by the estimator (the first n_plant of the model).
@@ -485,14 +505,26 @@ class TrackingNominal:
 
     def _schedule(self, theta) -> None:
         self.mpc.schedule(float(theta[0]), float(theta[1]))
+        p = self.n_plant
+        self.Hx_p = np.ascontiguousarray(self.mpc.Hx[:, :p])
+        self.Hu_p = np.ascontiguousarray(self.mpc.Hu[:, :p])
         if self.est is not None:
-            p = self.n_plant
             self.est.schedule(self.mpc.A[:p, :p], self.mpc.B[:p])
 
     @property
     def d(self) -> np.ndarray:
-        """Input disturbance estimate (2,) [Phi, delta_e rad]."""
-        return np.zeros(2) if self.est is None else self.est.d.copy()
+        """Input-equivalent disturbance estimate -u_d (2,) [Phi, delta_e rad].
+
+        The steady input correction of the estimate with its sign flipped: for a loss
+        of elevator effectiveness alone, (0, (rho_f - 1) delta_e,r).
+        """
+        return -self._offset()[1]
+
+    def _offset(self):
+        """Steady-state shift (x_d (n,), u_d (2,)) of the estimated disturbance."""
+        if self.est is None:
+            return np.zeros(self.mpc.n), np.zeros(self.mpc.m)
+        return self.Hx_p @ self.est.d, self.Hu_p @ self.est.d
 
     def reset(self, x0: np.ndarray) -> None:
         """Nominal state on the measured state x0 (n,) at step 0."""
@@ -516,7 +548,8 @@ class TrackingNominal:
         # the set point may sit a steady offset away from the state it holds
         if np.any(np.abs(self.X_n[:2] - mpc.theta_s) > mpc.s.reschedule):
             self._schedule(self.X_n[:2])
-        y, why = mpc.solve(self.X_n - mpc.x_r_s, mpc.u_r_s - self.d, cmd)
+        x_d, u_d = self._offset()
+        y, why = mpc.solve(self.X_n - mpc.x_r_s - x_d, mpc.u_r_s + u_d, cmd)
         if y is not None:
             mpc.stats.solves += 1
             self.plan = y[: N * m].reshape(N, m)
@@ -547,22 +580,23 @@ class TrackingNominal:
         Returns
         -------
         NominalOutput
-            Set point (h_g, V_g) = theta, x_r (n,), u_r (2,) = trim input minus d,
+            Set point (h_g, V_g) = theta, x_r (n,), u_r (2,) = trim input plus u_d,
             x_n (n,), u_n (2,), level = (z - x_s)' Q^-1 (z - x_s).
         """
         mpc = self.mpc
         self._estimate(x_meas, u_prev)
         if self.k % mpc.s.M == 0:
             self._plan()
+        x_d, u_d = self._offset()
         # set point and steady state of the current plan (linear in delta from theta_s)
         dth = (self.theta - mpc.theta_s) / mpc.theta_scale
-        x_s = mpc.Gx @ dth
+        x_s = mpc.Gx @ dth + x_d
         u_s = mpc.Gu @ dth
         z = self.X_n - mpc.x_r_s
         u_dev = u_s + mpc.K @ (z - x_s) + self.plan[0] * mpc.Du
-        self.u_nom = mpc.u_r_s - self.d + u_dev
+        self.u_nom = mpc.u_r_s + u_d + u_dev
         x_r, u_r = mpc.trim_map(*self.theta)
-        u_r = u_r - self.d
+        u_r = u_r + u_d
         Q_inv_z = np.linalg.solve(mpc.L, z - x_s)
         out = NominalOutput(
             float(self.theta[0]),
@@ -573,8 +607,11 @@ class TrackingNominal:
             self.u_nom - u_r,
             float(Q_inv_z @ Q_inv_z),
         )
-        # advance the nominal model at the fast rate: applied = u_nom + d
-        self.X_n = mpc.x_r_s + mpc.A @ z + mpc.B @ u_dev
+        # advance the nominal model at the fast rate, with the estimated disturbance
+        d_n = np.zeros(mpc.n)
+        if self.est is not None:
+            d_n[: self.n_plant] = self.est.d
+        self.X_n = mpc.x_r_s + mpc.A @ z + mpc.B @ (u_d + u_dev) + d_n
         self.k += 1
         return out
 

@@ -66,9 +66,7 @@ class TubeMPC:
 
 
 def _uses_mpc(root) -> bool:
-    return any(
-        VARIANTS[v].law in LAWS_WITH_MPC for v in root.get("variants", ()) if v in VARIANTS
-    )
+    return any(VARIANTS[v].law in LAWS_WITH_MPC for v in root.get("variants", ()) if v in VARIANTS)
 
 
 #: Laws whose nominal part is the online tracking MPC.

@@ -106,6 +106,10 @@ def case_spec() -> Section:
                       equation="eq. (13-19)"),
                 Field("seed", "int", "seed of the W samples", lo=0, default=0),
                 Field("margin", "float", "factor on the sampled W", lo=1.0, default=1.2),
+                Field("constant", "str", "constant part of the parameter error: in W "
+                      "(bounded, the paper) or left to the online estimate of tube_mpc "
+                      "(estimated)", choices=("bounded", "estimated"), default="estimated",
+                      equation="eq. (13)"),
             ), "disturbance set W by sampling"),
             Section("tube", (
                 Field("lam", "floats", "contraction factors tried in the tube LMI", lo=0.0,
@@ -113,6 +117,9 @@ def case_spec() -> Section:
                       equation="LMI (24)"),
                 Field("tau", "float", "adjustable factor tau (1: eq. 36)", lo=0.0, hi=1.0,
                       lo_open=True, default=1.0, equation="eq. (53-54)"),
+                Field("rho_min", "float", "smallest elevator effectiveness the tube covers "
+                      "(fault vertices, with the case fault's if smaller)", lo=0.0, hi=1.0,
+                      lo_open=True, default=1.0, equation="eq. (15)"),
             ), "tube: F and Z"),
             Section("nominal", (
                 Field("lam", "float", "decay factor of (34')", lo=0.0, hi=1.0, lo_open=True,

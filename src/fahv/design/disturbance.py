@@ -12,6 +12,14 @@ discrete polytopic model (deviation coordinates around the commanded trim):
 W is the box of the largest |Delta_j| over a seeded random sample of flight
 conditions, deviations, inputs, parameter corners and fault states, times a stated
 margin. Each source is also bounded alone, to show which dominates.
+
+Constant part. For a law that estimates a constant state disturbance online
+(:class:`fahv.control.nominal_mpc.DisturbanceEstimator`, law ``tube_mpc``), the part of
+the parameter error that does not depend on the deviation -- its value at the sample's
+trim point, Delta_0 = f_p(x_r, u_r) - f(x_r, u_r) over one step -- is taken out of the
+nominal model's error by the estimate, so W (``constant="estimated"``) bounds
+Delta - Delta_0: the deviation part, the modelling error and the mean-free rest. The
+paper's W (``constant="bounded"``) keeps it.
 """
 
 from __future__ import annotations
@@ -78,6 +86,7 @@ def sample_disturbance(
     n_sub: int = 10,
     progress=None,
     notch=None,
+    constant: str = "bounded",
 ) -> DisturbanceSet:
     """Bound W by sampling, eq. (13)-(19).
 
@@ -109,13 +118,24 @@ def sample_disturbance(
     notch : fahv.model.notch.NotchFilter, optional
         Required when ``tp.kind == "ecm"``: the one-step predictions then use the
         ECM (eq. 40) and the trim x_r' of eq. (41).
+    constant : {"bounded", "estimated"}
+        Whether W keeps the constant part Delta_0 of the parameter error (module
+        docstring) or leaves it to an online estimate.
 
     Returns
     -------
     DisturbanceSet
+        ``parts`` also holds "constant": the largest |Delta_0_j| (no margin).
+
+    Raises
+    ------
+    ValueError
+        If margin < 1, dev_box has the wrong length or ``constant`` is unknown.
     """
     if margin < 1.0:
         raise ValueError(f"disturbance margin must be >= 1, got {margin}")
+    if constant not in ("bounded", "estimated"):
+        raise ValueError(f"disturbance constant must be 'bounded' or 'estimated', got {constant!r}")
     kind = "ecm" if tp.kind == "ecm" else "cm"
     n = tp.A_vertices.shape[1]
     dev_box = np.asarray(dev_box, float)
@@ -126,7 +146,7 @@ def sample_disturbance(
     disc = tp.discretize(Ts)
     vp = vehicle.params
     names = list(uncertainty)
-    parts = {k: np.zeros(n) for k in ("model", "parameters", "fault", "total")}
+    parts = {k: np.zeros(n) for k in ("model", "parameters", "fault", "total", "constant")}
     rng_iter = range(n_samples) if progress is None else progress(range(n_samples))
 
     nom = make_model(kind, vp, notch).f
@@ -157,6 +177,12 @@ def sample_disturbance(
         x_par = rk4_step(per, xs, us, Ts, n_sub) - x_r
         x_flt = rk4_step(nom, xs, uf, Ts, n_sub) - x_r
         x_all = rk4_step(per, xs, uf, Ts, n_sub) - x_r
+        # constant part: the parameter error of one step from the trim point itself
+        c0 = rk4_step(per, x_r, tr.u_r, Ts, n_sub) - rk4_step(nom, x_r, tr.u_r, Ts, n_sub)
+        parts["constant"] = np.maximum(parts["constant"], np.abs(c0))
+        if constant == "estimated":
+            x_par = x_par - c0
+            x_all = x_all - c0
         for key, val in (
             ("model", x_nom - x_lpv),
             ("parameters", x_par - x_nom),

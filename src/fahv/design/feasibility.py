@@ -22,17 +22,27 @@ from fahv.model.vehicle import DELTA_E
 from fahv.synthesis.feedback import BoxTubeResult, TubeDesign, box_tube, design_tube
 
 
-def input_room(vehicle, n: int = 5) -> np.ndarray:
+def input_room(vehicle, n: int = 5, rho_f: float = 1.0) -> np.ndarray:
     """Smallest distance (2,) from the trim input to the input limits over the envelope.
 
-    The symmetric deviation bound |u_j - u_r,j| <= room_j used by eq. (29)-(30) and (35),
-    on an n x n trim grid.
+    The deviation bound |u_j - u_r,j| <= room_j used by eq. (29)-(30) and (35), on an
+    n x n trim grid. With rho_f < 1 the elevator trim is the one of the faulty vehicle,
+    delta_e,r / rho_f (eq. 15): the room the binding side of each row of the
+    asymmetric input set keeps after the fault.
+
+    Raises
+    ------
+    ValueError
+        If rho_f is not in (0, 1].
     """
+    if not 0.0 < rho_f <= 1.0:
+        raise ValueError(f"elevator effectiveness rho_f must be in (0, 1], got {rho_f}")
     env, lim = vehicle.envelope, vehicle.limits
     rows = trim_grid(
         vehicle, np.linspace(env.h_min, env.h_max, n), np.linspace(env.V_min, env.V_max, n)
     )
     u_r = np.array([tp.u_r for row in rows for tp in row])
+    u_r[:, DELTA_E] /= rho_f
     return np.minimum((u_r - lim.u_min).min(axis=0), (lim.u_max - u_r).min(axis=0))
 
 

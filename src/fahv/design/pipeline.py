@@ -62,6 +62,40 @@ class DesignContext:
     log: Callable[[str], None]
 
 
+def loss_coverage(tm, u_path: np.ndarray, u_lo: np.ndarray, u_hi: np.ndarray) -> dict:
+    """Largest loss of elevator effectiveness 1 - rho_f whose trim fits [u_lo, u_hi].
+
+    The faulty vehicle holds its trim with delta_e,r / rho_f (eq. 15); that input must
+    lie in the tightened set for the nominal problem to hold a set point.
+
+    Parameters
+    ----------
+    tm : fahv.model.trim.TrimMap
+        Trim map; its grid is the envelope.
+    u_path : (P, 2) ndarray
+        Trim inputs along the case's path [Phi, delta_e rad].
+    u_lo, u_hi : (2,) ndarray
+        Tightened absolute input limits.
+
+    Returns
+    -------
+    dict
+        ``path`` and ``envelope``: the largest loss in [0, 1] (0 if even the healthy trim
+        does not fit).
+    """
+
+    def largest(de: np.ndarray) -> float:
+        de = np.asarray(de, float)
+        # rho_f >= de / u_hi for de > 0, >= de / u_lo for de < 0
+        need = np.where(de >= 0.0, de / u_hi[1], de / u_lo[1])
+        return float(np.clip(1.0 - np.max(need), 0.0, 1.0))
+
+    return {
+        "path": largest(np.asarray(u_path)[:, 1]),
+        "envelope": largest(np.asarray(tm.u_r)[..., 1].ravel()),
+    }
+
+
 def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     """Compute and verify every artefact of ``case``.
 
@@ -124,16 +158,25 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         d["margin"],
         progress=progress,
         notch=notch if kind == "ecm" else None,
+        constant=d["constant"],
     )
     log(
-        f"W: {d['samples']} samples, margin {d['margin']}; dominant source per state: "
-        + ", ".join(W.dominant())
+        f"W: {d['samples']} samples, margin {d['margin']}, constant part of the parameter "
+        f"error {d['constant']}; dominant source per state: " + ", ".join(W.dominant())
     )
     fault = make_fault(c["fault"]["kind"], c["fault"]["t_onset"], c["fault"])
-    rho_f = fault.design_effectiveness()
+    rho_f = min(fault.design_effectiveness(), c["tube"]["rho_min"])
     Af, Bf = fault_vertices(disc.A, disc.B, rho_f)
     room = input_room(veh)
-    tube = design_tube(Af, Bf, W.w_max, Dx, Du, room, tuple(c["tube"]["lam"]))
+    # row weights of the tube objective: the room of each row's binding side of the
+    # asymmetric input set, with the elevator trim of the faulty vehicle (docs)
+    room_f = input_room(veh, rho_f=rho_f)
+    if np.any(room_f <= 0.0):
+        raise DesignError(
+            f"tube.rho_min / fault: with rho_f = {rho_f} the trim input of the faulty vehicle "
+            f"leaves the input limits somewhere in the envelope (room {room_f})"
+        )
+    tube = design_tube(Af, Bf, W.w_max, Dx, Du, room_f, tuple(c["tube"]["lam"]))
     eigs = verify_tube(Af, Bf, tube, Dx, Du)
     log(
         f"certificate F, Z (LMI 24 + S-procedure, {Af.shape[0]} vertices incl. rho_f = "
@@ -156,8 +199,24 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     veh.envelope.check(cmd["h_c"], cmd["V_c"])
     tg = c["trim_grid"]
     tm = trim_map(veh, tg[0], tg[1], kind, notch if kind == "ecm" else None)
-    x_start, _ = tm(cmd["h0"], cmd["V0"])
-    x_end, _ = tm(cmd["h_c"], cmd["V_c"])
+    x_start, u_start = tm(cmd["h0"], cmd["V0"])
+    x_end, u_end = tm(cmd["h_c"], cmd["V_c"])
+    u_lo = veh.limits.u_min + tau * tube.tightening
+    u_hi = veh.limits.u_max - tau * tube.tightening
+    coverage = loss_coverage(tm, np.stack([u_start, u_end]), u_lo, u_hi)
+    log(
+        f"largest elevator loss whose trim fits the tightened inputs: "
+        f"{100 * coverage['path']:.1f} % on the case's path, "
+        f"{100 * coverage['envelope']:.1f} % over the whole envelope (design rho_f = {rho_f})"
+    )
+    if d["constant"] == "estimated":
+        for v in c["variants"]:
+            if LAWS[VARIANTS[v].law].reference == "governor":
+                log(
+                    f"note: variant {v} has no disturbance estimate; W leaves the constant "
+                    "part of the parameter error to one, so its tube certificate does not "
+                    "cover it"
+                )
     dvec = x_start - x_end
     Dn = Dx * np.maximum(1.0, np.abs(dvec) / Dx)  # command-sized scaling of the nominal LMI
     nominal = design_nominal(disc.A, disc.B, dvec, u_n_max, Dn, u_n_max, c["nominal"]["lam"])
@@ -184,8 +243,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         "u_room": room,
         "u_n_max": u_n_max,
         # tightened absolute limits of the nominal input (eq. 30, asymmetric)
-        "u_lo": veh.limits.u_min + tau * tube.tightening,
-        "u_hi": veh.limits.u_max - tau * tube.tightening,
+        "u_lo": u_lo,
+        "u_hi": u_hi,
         "trim_h": tm.h_grid,
         "trim_V": tm.V_grid,
         "trim_x": tm.x_r,
@@ -210,6 +269,9 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             "min_eig": float(eigs.min()),
             "tightening": (tau * tube.tightening).tolist(),
             "z_box": tube.z_box.tolist(),
+            "rho_f": rho_f,
+            "row_room": room_f.tolist(),
+            "loss_covered": coverage,
         },
         "nominal": {**cert, "s": nominal.s, "lam": nominal.lam},
         "plant_params": perturbed_params(veh, c["uncertainty"]["seed"], c["uncertainty"]["scale"]),

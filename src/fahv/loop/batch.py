@@ -123,15 +123,15 @@ def _source_hash(*objs) -> str:
 #: (the generic per-run nominal path is, same numbers, slower) until its fast-step
 #: computation has been checked again against the class and this hash updated
 #: (``tests/loop/test_batch.py`` fails meanwhile).
-MPC_SOURCE_HASH = "67c083747d1c2e08"
+MPC_SOURCE_HASH = "0a6d24daadd6d037"
 
 
 @functools.cache
 def mpc_source_hash() -> str:
     """Current source hash of the nominal MPC classes the batched mirror depends on."""
-    from fahv.control.nominal_mpc import InputDisturbanceEstimator
+    from fahv.control.nominal_mpc import DisturbanceEstimator
 
-    return _source_hash(TrackingNominal, InputDisturbanceEstimator)
+    return _source_hash(TrackingNominal, DisturbanceEstimator)
 
 
 def nominal_mode(cores: dict) -> str:
@@ -419,7 +419,7 @@ class _MPCLanes:
         self.gamma = s0.est.gamma if self.has_est else 0.0
         B = len(self.srcs)
         self.XN = np.stack([s.X_n for s in self.srcs])
-        self.D = np.stack([s.d for s in self.srcs])
+        self.D = np.stack([s.est.d if self.has_est else np.zeros(self.p) for s in self.srcs])
         self.prev = np.zeros((B, self.p))
         self.has_prev = np.array([s.prev is not None for s in self.srcs])
         for b, s in enumerate(self.srcs):
@@ -444,19 +444,21 @@ class _MPCLanes:
             self.Bm = np.empty((B,) + m0.B.shape)
             self.TH = np.empty((B, 2))
             self.PLAN0 = np.empty((B, 2))
+            self.HX = np.empty((B, self.n, self.p))
+            self.HU = np.empty((B, 2, self.p))
             if self.has_est:
                 self.EA = np.empty((B, self.p, self.p))
                 self.EB = np.empty((B, self.p, 2))
-                self.PROJ = np.empty((B, 2, self.p))
         for b in rows:
             s = srcs[b]
             mpc = s.mpc
             self.XRS[b], self.URS[b], self.THS[b] = mpc.x_r_s, mpc.u_r_s, mpc.theta_s
             self.GX[b], self.GU[b], self.A[b], self.Bm[b] = mpc.Gx, mpc.Gu, mpc.A, mpc.B
             self.TH[b], self.PLAN0[b] = s.theta, s.plan[0]
+            self.HX[b], self.HU[b] = s.Hx_p, s.Hu_p
             if self.has_est:
                 EA, EB = s.est._AB
-                self.EA[b], self.EB[b], self.PROJ[b] = EA, EB, s.est._proj
+                self.EA[b], self.EB[b] = EA, EB
 
     def step(self, k: int, XT, U_prev, alive):
         """Outputs of step k (TrackingNominal.step of every run), then advance."""
@@ -471,8 +473,7 @@ class _MPCLanes:
                 r = (dx - np.matmul(self.EA, dx_prev[:, :, None])[..., 0]) - np.matmul(
                     self.EB, du_prev[:, :, None]
                 )[..., 0]
-                r = np.ascontiguousarray(r)
-                d_new = self.D + self.gamma * (np.matmul(self.PROJ, r[:, :, None])[..., 0] - self.D)
+                d_new = self.D + self.gamma * (r - self.D)
                 self.D = np.where(upd[:, None], d_new, self.D)
             self.prev = XT[:, :p].copy()
             self.has_prev[:] = True
@@ -490,24 +491,33 @@ class _MPCLanes:
                     failed.append((b, exc))
                     continue
                 self._read([b])
+        if self.has_est:
+            Dc = np.ascontiguousarray(self.D)
+            x_d = np.matmul(self.HX, Dc[:, :, None])[..., 0]
+            u_d = np.matmul(self.HU, Dc[:, :, None])[..., 0]
+        else:
+            x_d, u_d = np.zeros((len(self.srcs), self.n)), np.zeros((len(self.srcs), 2))
         dth = (self.TH - self.THS) / self.scale
-        x_s = np.matmul(self.GX, dth[:, :, None])[..., 0]
+        x_s = np.matmul(self.GX, dth[:, :, None])[..., 0] + x_d
         u_s = np.matmul(self.GU, dth[:, :, None])[..., 0]
         z = self.XN - self.XRS
         zx = np.ascontiguousarray(z - x_s)
         u_dev = (u_s + _mv(self.K, zx)) + self.PLAN0 * self.Du
-        d = self.D if self.has_est else np.zeros_like(self.D)
-        u_nom = (self.URS - d) + u_dev
+        u_nom = (self.URS + u_d) + u_dev
         tm = self.tm
         hh = np.minimum(np.maximum(self.TH[:, 0], tm.h_grid[0]), tm.h_grid[-1])
         vv = np.minimum(np.maximum(self.TH[:, 1], tm.V_grid[0]), tm.V_grid[-1])
         v = tm._spline(np.stack([hh, vv], axis=1))
-        x_r, u_r = v[:, : self.n], v[:, self.n :] - d
+        x_r, u_r = v[:, : self.n], v[:, self.n :] + u_d
         out = (self.TH[:, 0].copy(), self.TH[:, 1].copy(), x_r, u_r, self.XN - x_r, u_nom - u_r)
         zc = np.ascontiguousarray(z)
-        self.XN = (self.XRS + np.matmul(self.A, zc[:, :, None])[..., 0]) + np.matmul(
-            self.Bm, np.ascontiguousarray(u_dev)[:, :, None]
-        )[..., 0]
+        d_n = np.zeros_like(z)
+        if self.has_est:
+            d_n[:, : self.p] = self.D
+        self.XN = (
+            (self.XRS + np.matmul(self.A, zc[:, :, None])[..., 0])
+            + np.matmul(self.Bm, np.ascontiguousarray(u_d + u_dev)[:, :, None])[..., 0]
+        ) + d_n
         self.k += 1
         return out, failed
 

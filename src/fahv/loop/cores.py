@@ -21,7 +21,7 @@ import numpy as np
 
 from fahv.control import LAWS
 from fahv.control.nominal_mpc import (
-    InputDisturbanceEstimator,
+    DisturbanceEstimator,
     MPCSettings,
     TrackingMPC,
     TrackingNominal,
@@ -167,7 +167,7 @@ class NominalCore:
             )
             est = None
             if m["est_tau"] > 0.0:
-                est = InputDisturbanceEstimator(p["Dx"][:9], min(1.0, p["Ts"] / m["est_tau"]))
+                est = DisturbanceEstimator(p["Dx"][:9], min(1.0, p["Ts"] / m["est_tau"]))
             self.source = TrackingNominal(self.mpc, self.command, p["Ts"], est)
             self.source.reset(p["x0"])
         elif p["mode"] == "governor":

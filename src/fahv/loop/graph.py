@@ -162,8 +162,10 @@ def markdown_table() -> str:
     """The node table as Markdown (the table of ``docs/architecture.md``)."""
     rows = ["| node | package | consumes | produces | does |", "|---|---|---|---|---|"]
     for n in NODES.values():
-        cons = "every loop topic" if n.inputs == tuple(TOPICS) else ", ".join(
-            n.inputs + tuple(f"{t} (step k-1)" for t in n.previous)
+        cons = (
+            "every loop topic"
+            if n.inputs == tuple(TOPICS)
+            else ", ".join(n.inputs + tuple(f"{t} (step k-1)" for t in n.previous))
         )
         prod = "every loop topic" if n.outputs == tuple(TOPICS) else ", ".join(n.outputs)
         rows.append(f"| `{n.name}` | {n.package} | {cons} | {prod or '-'} | {n.description} |")

@@ -139,8 +139,10 @@ def design_tube(
     Du : (m,) ndarray
         State and input scaling.
     u_room : (m,) array_like
-        Input room around trim (unscaled); the objective is the tightening
-        sum_j (max_Z |F_j e| / u_room_j)^2, i.e. eq. (30) kept as small as possible.
+        Room of each input row (unscaled): the distance from the trim input to the
+        binding side of the asymmetric input set (:func:`fahv.design.feasibility.input_room`).
+        The objective is sum_j (max_Z |F_j e| / u_room_j)^2: the tightening of eq. (30),
+        row by row, relative to the room that row has.
     lam_grid : sequence of float
         Contraction factors tried (the LMI is linear for fixed lam).
     state_weight : (n,) array_like, optional
