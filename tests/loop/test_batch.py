@@ -143,7 +143,9 @@ def test_case2_eleven_state_law_batched_and_equal(design_case2):
     assert d.n_x == 11
     ovs = [{"fault_injector": {"kind": k, "t_onset": 0.5, "rho_f": 0.8, "bias_deg": 1.0}}
            for k in ("loss_of_effectiveness", "bias")]  # fmt: skip
-    assert nominal_mode(_cores(run_parameters(d, "tube_mpc", 0.1, ovs[0]), {})) == "mpc"
+    # the ECM's estimator measures in ECM coordinates (a replica of the notch filter),
+    # which the batched mirror does not reproduce: each run's own nominal object is used
+    assert nominal_mode(_cores(run_parameters(d, "tube_mpc", 0.1, ovs[0]), {})) == "per_run"
     for ov, res in zip(ovs, simulate_batch(d, "tube_mpc", ovs, 1.5), strict=True):
         _assert_same(simulate(d, "tube_mpc", 1.5, overrides=ov), res)
         assert res.x_n.shape == (75, 11)

@@ -481,7 +481,11 @@ class TrackingNominal:
     estimator : DisturbanceEstimator or None
         None: no disturbance estimate (d = 0).
     n_plant : int
-        Measured plant states used by the estimator (the first n_plant of the model).
+        States the estimator uses (the first n_plant of the model): 9 for a CM design,
+        11 for the ECM (with ``measure``).
+    measure : callable, optional
+        Plant state (9,) -> the design model's coordinates (n_plant,), called once per
+        step; for the ECM, the notch filter replayed on q gives q' and x_q (eq. 43).
 
     Raises
     ------
@@ -490,9 +494,10 @@ class TrackingNominal:
     """
 
     def __init__(self, mpc: TrackingMPC, command: Command, Ts: float, estimator=None,
-                 n_plant: int = 9) -> None:  # fmt: skip
+                 n_plant: int = 9, measure=None) -> None:  # fmt: skip
         self.mpc, self.command, self.Ts, self.est, self.n_plant = (
             mpc, command, Ts, estimator, n_plant)  # fmt: skip
+        self.measure = measure
         self.k = 0
         self.theta = np.array([command.h0, command.V0], float)
         self._schedule(self.theta)
@@ -534,12 +539,14 @@ class TrackingNominal:
         if self.est is None or x_meas is None:
             return
         p = self.n_plant
-        dx = np.asarray(x_meas, float)[:p] - self.mpc.x_r_s[:p]
+        x = np.asarray(x_meas, float)
+        x = x[:p] if self.measure is None else self.measure(x)
+        dx = x - self.mpc.x_r_s[:p]
         if self.prev is not None and u_prev is not None:
             dx_prev = self.prev - self.mpc.x_r_s[:p]
             du_prev = np.asarray(u_prev, float) - self.mpc.u_r_s
             self.est.update(dx_prev, du_prev, dx)
-        self.prev = np.asarray(x_meas, float)[:p].copy()
+        self.prev = x.copy()
 
     def _plan(self) -> None:
         mpc, N, m = self.mpc, self.mpc.s.N, self.mpc.m

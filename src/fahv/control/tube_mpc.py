@@ -92,8 +92,8 @@ MPC_SECTION = Section(
               lo=0.0, lo_open=True, length=2, default=(100.0, 50.0)),
         Field("att_max", "float", "bound on the nominal |alpha - alpha_s|, |theta - theta_s| "
               "at each move", unit="deg", lo=0.0, lo_open=True, hi=10.0, default=0.3),
-        Field("est_tau", "float", "time constant of the input-disturbance estimate (0: none)",
-              unit="s", lo=0.0, hi=1e3, default=2.0),
+        Field("est_tau", "float", "time constant of the state-disturbance estimate (0: none)",
+              unit="s", lo=0.0, hi=1e3, default=0.5),
     ),
     "online nominal tracking MPC of the tube_mpc law",
     when=_uses_mpc,

@@ -165,10 +165,12 @@ class NominalCore:
             self.mpc = TrackingMPC(
                 lpv, tm, p["K"], p["Q"], p["u_lo"], p["u_hi"], p["Dx"], p["Du"], st
             )
-            est = None
+            est, measure, n_est = None, None, 9
+            if n == 11:  # ECM: the estimator works in its coordinates (q', x_q, eq. 43)
+                measure, n_est = self._ecm_measure(p), 11
             if m["est_tau"] > 0.0:
-                est = DisturbanceEstimator(p["Dx"][:9], min(1.0, p["Ts"] / m["est_tau"]))
-            self.source = TrackingNominal(self.mpc, self.command, p["Ts"], est)
+                est = DisturbanceEstimator(p["Dx"][:n_est], min(1.0, p["Ts"] / m["est_tau"]))
+            self.source = TrackingNominal(self.mpc, self.command, p["Ts"], est, n_est, measure)
             self.source.reset(p["x0"])
         elif p["mode"] == "governor":
             lpv = PolytopicLPV(p["A"], p["B"], p["h_grid"], p["V_grid"], p["W_h"], p["W_V"])
@@ -179,6 +181,29 @@ class NominalCore:
         else:
             self.source = CommandReference(tm, self.command, n, p["Ts"])
         self.k = 0
+
+    @staticmethod
+    def _ecm_measure(p: dict):
+        """Plant state (9,) -> ECM state (11,) with a replica of the notch node's filter.
+
+        The replica is the same :class:`~fahv.model.notch.DiscreteNotch` on the same q
+        samples as the notch_filter node, so q' and x_q are those the controller sees.
+
+        Raises
+        ------
+        RunError
+            If the notch filter is off (the ECM needs its states).
+        """
+        if not p["notch.enabled"]:
+            raise RunError("nominal_trajectory: the 11-state (ECM) design needs the notch on")
+        nf = NotchFilter(*(p[f"notch.{k}"] for k in ("omega_z", "eps_z", "omega_p", "eps_p")))
+        filt = DiscreteNotch(nf, p["Ts"])
+
+        def measure(x: np.ndarray) -> np.ndarray:
+            q_f = filt.step(float(x[Q]))
+            return np.concatenate([x[:Q], [q_f], x[Q + 1 : 9], filt.x_q])
+
+        return measure
 
     def on_state(self, state: dict, previous: dict | None = None) -> dict:
         """NominalTrajectory of step k from VehicleState k and ControlCommand k - 1.
