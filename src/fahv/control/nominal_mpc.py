@@ -298,7 +298,9 @@ class TrackingMPC:
         T[N * m : N * m + 2, N * m : N * m + 2] = np.diag(s.t_w)
         H += T
         H[-1, -1] += 1e-6  # alpha: tiny weight keeps H positive definite
-        self.H = 0.5 * (H + H.T)
+        # the cost is y' H y + 2 (Fz z0 + ...)' y; DAQP minimises 1/2 y' H_qp y + f' y,
+        # so H_qp = 2 H (symmetrised) and f = 2 (Fz z0 + ...)
+        self.H = H + H.T
         self.Fz = Fz
         # constraints: rows as A_c y in [lo + a z0 ..., hi ...] built at solve time
         rows = []  # (matrix (k, ny), z0 matrix (k, n))

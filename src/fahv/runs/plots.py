@@ -111,17 +111,27 @@ PAPER_FIGURES = {
     9: (
         "case1",
         "trajectory",
-        ("tube_mpc", "tube_mpc_no_notch", "rmpc"),
+        ("tube_mpc", "tube_mpc_no_notch", "tube_mpc_paper", "rmpc"),
         "Fig. 9: trajectory, Case 1",
     ),
-    10: ("case1", "attitude", ("tube_mpc", "tube_mpc_no_notch", "rmpc"), "Fig. 10: states, Case 1"),
+    10: (
+        "case1",
+        "attitude",
+        ("tube_mpc", "tube_mpc_no_notch", "tube_mpc_paper", "rmpc"),
+        "Fig. 10: states, Case 1",
+    ),
     11: (
         "case1",
         "flexible",
         ("tube_mpc", "tube_mpc_no_notch", "rmpc"),
         "Fig. 11: flexible coordinates, Case 1",
     ),
-    12: ("case1", "inputs", ("tube_mpc", "tube_mpc_no_notch", "rmpc"), "Fig. 12: inputs, Case 1"),
+    12: (
+        "case1",
+        "inputs",
+        ("tube_mpc", "tube_mpc_no_notch", "tube_mpc_paper", "rmpc"),
+        "Fig. 12: inputs, Case 1",
+    ),
     13: (
         "case1",
         "flexible_rates",
@@ -139,6 +149,7 @@ LABELS = {
     "tube_mpc": "Tube-MPC + notch",
     "tube_mpc_no_notch": "Tube-MPC, no notch",
     "tube_mpc_notch2": "Tube-MPC + notch on mode 2",
+    "tube_mpc_paper": "paper's law (eq. 36, offline K, governor)",
     "rmpc": "RMPC (Kothare)",
 }
 
