@@ -16,6 +16,8 @@ from fahv.errors import DesignError
 from fahv.loop.simulate import simulate
 from fahv.model.lpv import PolytopicLPV
 from fahv.model.trim import TrimMap
+from fahv.model.vehicle import load_vehicle
+from fahv.runs.metrics import metrics
 
 
 def _mpc(design, **changes):
@@ -130,3 +132,9 @@ def test_case1_tracks_the_step_within_the_requirements(design):
     att = np.degrees(np.abs(run.x[:, 2:4] - run.x_r[:, 2:4]))
     assert att.max() <= 0.5
     assert np.nanmax(run.tube_level) <= 1.0
+    # the QP counters reach the run and its metrics (fahv inspect): one QP per move of
+    # 25 steps, 4500 steps, none rejected
+    m = metrics(run, load_vehicle().limits)
+    assert run.qp_counts.tolist() == [180, 0, 0]
+    assert (m["nominal_qp_solves"], m["nominal_qp_fallback"], m["nominal_qp_terminal"]) == (
+        180, 0, 0)  # fmt: skip

@@ -19,7 +19,7 @@ from fahv.loop.batch import (
 from fahv.loop.simulate import simulate
 
 FIELDS = ("t", "x", "q_f", "x_r", "x_n", "u", "u_applied", "h_c", "V_c", "h_g", "V_g",
-          "tube_level", "fault_active", "lmi_counts")  # fmt: skip
+          "tube_level", "fault_active", "lmi_counts", "qp_counts")  # fmt: skip
 DURATION = 3.0
 
 

@@ -523,6 +523,14 @@ class _MPCLanes:
         return out, failed
 
 
+def _qp_counts(cores: dict) -> np.ndarray:
+    """The nominal MPC's counters of one run (:data:`fahv.loop.simulate.QP_COUNTS`)."""
+    mpc = getattr(cores["nominal_trajectory"], "mpc", None)
+    if mpc is None:
+        return np.zeros(3, dtype=int)
+    return np.array([mpc.stats.solves, mpc.stats.fallback, mpc.stats.terminal], dtype=int)
+
+
 def _run_kernel(cores: list[dict], info: dict) -> list[RunResult | Exception]:
     """The batched loop over runs that share their design matrices (see the module notes)."""
     B = len(cores)
@@ -692,6 +700,7 @@ def _run_kernel(cores: list[dict], info: dict) -> list[RunResult | Exception]:
                 tube_level=H["tube_level"][:, b].copy(),
                 fault_active=H["fault_active"][:, b].copy(),
                 lmi_counts=np.zeros(3, dtype=int),
+                qp_counts=_qp_counts(cores[b]),
                 info={
                     "variant": info["variant"],
                     "case": info["case"],

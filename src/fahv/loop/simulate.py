@@ -29,6 +29,8 @@ from fahv.loop.params import controller_node, node_parameters
 
 #: Counters of the RMPC's LMI solves in /hsv/tube_status (``lmi_<name>``).
 LMI_COUNTS = ("solves", "fallback", "failed")
+#: Counters of the nominal MPC's QP in /hsv/nominal (``qp_<name>``).
+QP_COUNTS = ("solves", "fallback", "terminal")
 
 
 @dataclass
@@ -62,6 +64,9 @@ class RunResult:
         (zeros for the tube laws).
     info : dict
         Variant, case name, metadata.
+    qp_counts : (3,) int ndarray
+        Nominal MPC QPs accepted, nominal steps on the shifted plan and on the
+        terminal law over the run (zeros without the online MPC).
     """
 
     t: np.ndarray
@@ -79,6 +84,7 @@ class RunResult:
     fault_active: np.ndarray
     lmi_counts: np.ndarray
     info: dict = field(default_factory=dict)
+    qp_counts: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=int))
 
 
 def run_result(records: dict, info: dict | None = None) -> RunResult:
@@ -127,6 +133,7 @@ def run_result(records: dict, info: dict | None = None) -> RunResult:
         np.array([bool(m["active"]) for m in fs], dtype=bool),
         np.array([tube[-1].get(f"lmi_{c}", 0) if tube else 0 for c in LMI_COUNTS], dtype=int),
         dict(info or {}),
+        np.array([nom[-1].get(f"qp_{c}", 0) if nom else 0 for c in QP_COUNTS], dtype=int),
     )
 
 

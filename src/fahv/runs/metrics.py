@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from fahv.errors import RunError
-from fahv.loop.simulate import LMI_COUNTS, RunResult
+from fahv.loop.simulate import LMI_COUNTS, QP_COUNTS, RunResult
 from fahv.model.vehicle import ALPHA, ETA1, ETA1_DOT, ETA2, ETA2_DOT, THETA, H, V
 
 #: Tracking counts as settled when |h - h_c| <= 10 ft and |V - V_c| <= 2 ft/s.
@@ -70,6 +70,7 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     viol = np.maximum(np.maximum(lo - u, u - hi), 0.0)
     lvl = run.tube_level
     lmi = {f"rmpc_lmi_{c}": int(v) for c, v in zip(LMI_COUNTS, run.lmi_counts, strict=True)}
+    qp = {f"nominal_qp_{c}": int(v) for c, v in zip(QP_COUNTS, run.qp_counts, strict=True)}
     return {
         "settling_time_h_s": ts_h,
         "settling_time_V_s": ts_V,
@@ -96,4 +97,5 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
         else math.nan,
         "tube_level_max": float(np.nanmax(lvl)) if np.any(np.isfinite(lvl)) else math.nan,
         **(lmi if run.lmi_counts.any() else {}),
+        **(qp if run.qp_counts.any() else {}),
     }

@@ -51,6 +51,9 @@ METRIC_ROWS = (
     ("rmpc_lmi_solves", "RMPC LMI solves", "{}"),
     ("rmpc_lmi_fallback", "RMPC solves via max-margin fallback", "{}"),
     ("rmpc_lmi_failed", "RMPC solves rejected (gain kept)", "{}"),
+    ("nominal_qp_solves", "nominal MPC QPs accepted", "{}"),
+    ("nominal_qp_fallback", "nominal steps on the shifted plan (QP rejected)", "{}"),
+    ("nominal_qp_terminal", "nominal steps on the terminal law", "{}"),
 )
 
 #: Component names and units of the state vectors (design-model order, ECM last).
