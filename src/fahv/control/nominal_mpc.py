@@ -334,7 +334,7 @@ class TrackingMPC:
         self.stats.reschedules += 1
 
     # -- solve -----------------------------------------------------------------------
-    def solve(self, z0: np.ndarray, u_base: np.ndarray, cmd: np.ndarray):
+    def solve(self, z0: np.ndarray, u_base: np.ndarray, cmd: np.ndarray, x_off=None):
         """QP at nominal deviation z0 (n,) from the scheduling trim.
 
         Parameters
@@ -345,6 +345,11 @@ class TrackingMPC:
             Steady input at the scheduling point, u_r + u_d (absolute).
         cmd : (2,) ndarray
             Command (h_c, V_c) [ft, ft/s].
+        x_off : (n,) ndarray, optional
+            Steady-state shift x_d of the disturbance estimate. The attitude rows
+            bound zeta + x_d, the deviation from the set point's nominal trim (what the
+            requirement measures), widened to contain zeta = 0 when the shift alone
+            exceeds the bound (the plant must sit at its own trim).
 
         Returns
         -------
@@ -393,13 +398,17 @@ class TrackingMPC:
         A_s2 = (G - kcol) / self.Du[:, None]
         att = self.Att_z @ z0
         a_max = min(s.att_max, 1e3)
+        att_lo, att_hi = np.full(att.size, -a_max), np.full(att.size, a_max)
+        if x_off is not None:
+            off = np.tile(np.asarray(x_off, float)[2:4], N)
+            att_lo, att_hi = np.minimum(att_lo - off, 0.0), np.maximum(att_hi - off, 0.0)
         A_c = np.vstack([A_u, A_t1, A_t2, A_s1, A_s2, self.Att_y])
         hi_c = np.concatenate(
-            [hi_u, -tz, tz, (self.u_hi - u_base) / self.Du, np.full(m, 1e30), a_max - att]
+            [hi_u, -tz, tz, (self.u_hi - u_base) / self.Du, np.full(m, 1e30), att_hi - att]
         )
         lo_c = np.concatenate(
             [lo_u, np.full(2 * n, -1e30), np.full(m, -1e30), (self.u_lo - u_base) / self.Du,
-             -a_max - att]
+             att_lo - att]
         )  # fmt: skip
         bu = np.concatenate([hi_b, hi_c])
         bl = np.concatenate([lo_b, lo_c])
@@ -558,7 +567,7 @@ class TrackingNominal:
         if np.any(np.abs(self.X_n[:2] - mpc.theta_s) > mpc.s.reschedule):
             self._schedule(self.X_n[:2])
         x_d, u_d = self._offset()
-        y, why = mpc.solve(self.X_n - mpc.x_r_s - x_d, mpc.u_r_s + u_d, cmd)
+        y, why = mpc.solve(self.X_n - mpc.x_r_s - x_d, mpc.u_r_s + u_d, cmd, x_d)
         if y is not None:
             mpc.stats.solves += 1
             self.plan = y[: N * m].reshape(N, m)

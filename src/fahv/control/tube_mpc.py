@@ -90,8 +90,9 @@ MPC_SECTION = Section(
               lo=0.0, lo_open=True, length=2, default=(300.0, 150.0)),
         Field("reschedule", "floats", "set-point distance that rebuilds the QP", unit="ft, ft/s",
               lo=0.0, lo_open=True, length=2, default=(100.0, 50.0)),
-        Field("att_max", "float", "bound on the nominal |alpha - alpha_s|, |theta - theta_s| "
-              "at each move", unit="deg", lo=0.0, lo_open=True, hi=10.0, default=0.3),
+        Field("att_max", "float", "bound on the nominal |alpha - alpha_r|, |theta - theta_r| "
+              "(from the nominal trim) at each move", unit="deg", lo=0.0, lo_open=True,
+              hi=10.0, default=0.35),
         Field("est_tau", "float", "time constant of the state-disturbance estimate (0: none)",
               unit="s", lo=0.0, hi=1e3, default=0.5),
     ),
