@@ -58,6 +58,8 @@ def _split(H, A, bu, bl):
 
 
 class DAQP:
+    """DAQP (dual active set): the project's solver, warm-started with the previous y."""
+
     name = "DAQP (dual active set, warm)"
 
     def __init__(self):
@@ -72,6 +74,8 @@ class DAQP:
 
 
 class OSQP:
+    """OSQP (ADMM): set up per scheduling, vectors updated and warm-started after."""
+
     name = "OSQP (ADMM, warm)"
 
     def __init__(self):
@@ -93,6 +97,8 @@ class OSQP:
 
 
 class Clarabel:
+    """Clarabel (interior point): the bounds as a nonnegative cone, no warm start."""
+
     name = "Clarabel (interior point)"
 
     def __init__(self):
@@ -115,6 +121,8 @@ class Clarabel:
 
 
 class PIQP:
+    """PIQP (proximal interior point, dense): set up per scheduling, vectors updated."""
+
     name = "PIQP (proximal interior point)"
 
     def __init__(self):
@@ -137,6 +145,8 @@ class PIQP:
 
 
 class ProxQP:
+    """ProxSuite ProxQP (dense, box constraints): warm start from the previous result."""
+
     name = "ProxSuite ProxQP (dense, warm)"
 
     def __init__(self):
@@ -162,7 +172,12 @@ class ProxQP:
 
 
 def run(cls, qps):
-    """Times [s], solutions (None: not solved) of one pass over the sequence."""
+    """Times [s], solutions (None: not solved) of one pass over the sequence.
+
+    Every candidate class has ``solve(H (ny, ny), f (ny,), A (nc, ny), bu, bl (ny + nc,),
+    same)`` -> y (ny,) or None, with DAQP's conventions (the first ny bounds are simple
+    bounds on y, |bound| >= 1e29 none); ``same``: H and A are those of the previous QP.
+    """
     solver = cls()
     times, ys, prev = [], [], None
     for H, f, A, bu, bl in qps:

@@ -19,6 +19,7 @@ from fahv.design.case import case_from_mapping
 from fahv.design.pipeline import run_design
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
+from fahv.runs.metrics import metrics
 
 H_TOL, V_TOL, ATT_DEG, WINDOW = 10.0, 2.0, 0.5, 60.0
 
@@ -34,20 +35,24 @@ def _entered(t, inside, t0, t1):
 
 
 def requirements(run, case) -> dict:
-    """Measured figures of one run against the requirements above."""
+    """Measured figures of one run against the requirements above.
+
+    The settling windows are specific to these requirements; attitude, input limits and
+    the tube level come from :func:`fahv.runs.metrics.metrics` (the level is already
+    e' (tau^2 N)^-1 e, <= 1 inside tau Z).
+    """
     c = case.data
     t = run.t
     t_cmd = c["command"]["t_start"] + c["command"]["t_ramp"]
     t_f = c["fault"]["t_onset"]
     inside = (np.abs(run.x[:, 0] - run.h_c) <= H_TOL) & (np.abs(run.x[:, 1] - run.V_c) <= V_TOL)
-    lim = load_vehicle().limits
-    tau = c["tube"]["tau"]
+    m = metrics(run, load_vehicle().limits)
     return {
         "settle_after_command_s": _entered(t, inside, t_cmd, t_f) - t_cmd,
         "settle_after_fault_s": _entered(t, inside, t_f, t[-1] + 1.0) - t_f,
-        "attitude_deg": float(np.degrees(np.abs(run.x[:, 2:4] - run.x_r[:, 2:4])).max()),
-        "beyond_limits": int(np.sum(np.any((run.u < lim.u_min) | (run.u > lim.u_max), axis=1))),
-        "tube_level_over_tau2": float(np.nanmax(run.tube_level)) / tau**2,
+        "attitude_deg": max(m["alpha_err_max_deg"], m["theta_err_max_deg"]),
+        "beyond_limits": m["input_limit_violations"],
+        "tube_level": m["tube_level_max"],
     }
 
 
@@ -92,4 +97,4 @@ def test_tube_mpc_meets_the_requirements(name):
     assert r["settle_after_fault_s"] <= WINDOW, r
     assert r["attitude_deg"] <= ATT_DEG, r
     assert r["beyond_limits"] == 0, r
-    assert r["tube_level_over_tau2"] <= 1.0, r
+    assert r["tube_level"] <= 1.0, r

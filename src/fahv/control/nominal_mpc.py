@@ -248,7 +248,15 @@ class TrackingMPC:
     def schedule(self, h: float, V: float) -> None:
         """Build the condensed QP at the scheduling point (h, V) [ft, ft/s].
 
-        Decision y = [c_0..c_{N-1} (scaled by Du), delta (per 100 ft, 100 ft/s), alpha].
+        Decision y = [c_0..c_{N-1} (scaled by Du), delta (per 100 ft, 100 ft/s), alpha]
+        (ny = N m + 3). Also the steady-state shift of a constant disturbance,
+        Hx (n, n) and Hu (m, n) (module docstring).
+
+        Raises
+        ------
+        DesignError
+            If no steady state holds (h, V) against a constant disturbance (the
+            steady-state equations are singular at this point).
         """
         s, n, m = self.s, self.n, self.m
         A, B = self.lpv.system(h, V)
@@ -512,6 +520,8 @@ class TrackingNominal:
         self.k = 0
         self.theta = np.array([command.h0, command.V0], float)
         self._schedule(self.theta)
+        #: trim (x_r (n,), u_r (2,)) at the set point theta, evaluated when theta moves
+        self.trim_theta = self.mpc.trim_map(*self.theta)
         self.X_n = self.mpc.x_r_s.copy()
         self.plan = np.zeros((mpc.s.N, mpc.m))
         self.moves_left = 0
@@ -572,6 +582,7 @@ class TrackingNominal:
             mpc.stats.solves += 1
             self.plan = y[: N * m].reshape(N, m)
             self.theta = mpc.theta_s + y[N * m : N * m + 2] * mpc.theta_scale
+            self.trim_theta = mpc.trim_map(*self.theta)
             self.moves_left = N
             self.status = "ok"
         elif self.moves_left > 1:  # the set point stays where it is
@@ -613,8 +624,7 @@ class TrackingNominal:
         z = self.X_n - mpc.x_r_s
         u_dev = u_s + mpc.K @ (z - x_s) + self.plan[0] * mpc.Du
         self.u_nom = mpc.u_r_s + u_d + u_dev
-        x_r, u_r = mpc.trim_map(*self.theta)
-        u_r = u_r + u_d
+        x_r, u_r = self.trim_theta[0].copy(), self.trim_theta[1] + u_d
         Q_inv_z = np.linalg.solve(mpc.L, z - x_s)
         out = NominalOutput(
             float(self.theta[0]),

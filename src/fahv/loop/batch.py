@@ -123,7 +123,7 @@ def _source_hash(*objs) -> str:
 #: (the generic per-run nominal path is, same numbers, slower) until its fast-step
 #: computation has been checked again against the class and this hash updated
 #: (``tests/loop/test_batch.py`` fails meanwhile).
-MPC_SOURCE_HASH = "cb37191e36bf6c9e"
+MPC_SOURCE_HASH = "14dab426dfb2350a"
 
 
 @functools.cache
@@ -414,7 +414,6 @@ class _MPCLanes:
         mpc = s0.mpc
         self.M, self.p, self.Ts = mpc.s.M, s0.n_plant, s0.Ts
         self.K, self.L, self.Du, self.scale = mpc.K, mpc.L, mpc.Du, mpc.theta_scale
-        self.tm = mpc.trim_map
         self.n = mpc.n
         self.has_est = s0.est is not None
         self.gamma = s0.est.gamma if self.has_est else 0.0
@@ -445,6 +444,8 @@ class _MPCLanes:
             self.Bm = np.empty((B,) + m0.B.shape)
             self.TH = np.empty((B, 2))
             self.PLAN0 = np.empty((B, 2))
+            self.TRX = np.empty((B, self.n))
+            self.TRU = np.empty((B, 2))
             self.HX = np.empty((B, self.n, self.p))
             self.HU = np.empty((B, 2, self.p))
             if self.has_est:
@@ -457,6 +458,7 @@ class _MPCLanes:
             self.GX[b], self.GU[b], self.A[b], self.Bm[b] = mpc.Gx, mpc.Gu, mpc.A, mpc.B
             self.TH[b], self.PLAN0[b] = s.theta, s.plan[0]
             self.HX[b], self.HU[b] = s.Hx_p, s.Hu_p
+            self.TRX[b], self.TRU[b] = s.trim_theta
             if self.has_est:
                 EA, EB = s.est._AB
                 self.EA[b], self.EB[b] = EA, EB
@@ -505,11 +507,7 @@ class _MPCLanes:
         zx = np.ascontiguousarray(z - x_s)
         u_dev = (u_s + _mv(self.K, zx)) + self.PLAN0 * self.Du
         u_nom = (self.URS + u_d) + u_dev
-        tm = self.tm
-        hh = np.minimum(np.maximum(self.TH[:, 0], tm.h_grid[0]), tm.h_grid[-1])
-        vv = np.minimum(np.maximum(self.TH[:, 1], tm.V_grid[0]), tm.V_grid[-1])
-        v = tm._spline(np.stack([hh, vv], axis=1))
-        x_r, u_r = v[:, : self.n], v[:, self.n :] + u_d
+        x_r, u_r = self.TRX.copy(), self.TRU + u_d
         out = (self.TH[:, 0].copy(), self.TH[:, 1].copy(), x_r, u_r, self.XN - x_r, u_nom - u_r)
         zc = np.ascontiguousarray(z)
         d_n = np.zeros_like(z)
