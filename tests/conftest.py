@@ -66,3 +66,51 @@ def quick_case(design, raw, tmp_path_factory):
     params = yaml.safe_dump(parameter_file(node_parameters(design)), sort_keys=False)
     save_design(design, folder / "artefacts", {"params.yaml": params})
     return case_file, folder / "artefacts"
+
+
+@pytest.fixture(scope="session")
+def interrupt_fahv():
+    """Run a `fahv` command, signal it once its run folder exists, check the interruption.
+
+    ``interrupt_fahv(args, out, signals, wait_s, timeout_s)``: starts ``.venv/bin/fahv
+    *args`` in a new process group (as a terminal's foreground job), waits until
+    ``out/*/run.json`` exists, sleeps ``wait_s``, sends ``signals`` to the group 0.2 s
+    apart, and asserts exit 130, no traceback, the "interrupted at step K of 15000; run
+    written to RUN" message, and a run whose status is interrupted, not truncated, with
+    K steps recorded. Returns (K, the Recording, the output).
+    """
+    import os
+    import re
+    import subprocess
+    import time
+
+    from fahv.runs.bag import read_run
+    from fahv.runs.workspace import ROOT
+
+    def run(args, out, signals, wait_s, timeout_s):
+        p = subprocess.Popen(
+            [str(ROOT / ".venv" / "bin" / "fahv"), *map(str, args)],
+            cwd=ROOT, start_new_session=True, stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, text=True,
+        )  # fmt: skip
+        t0 = time.monotonic()
+        while not list(out.glob("*/run.json")) and time.monotonic() - t0 < timeout_s:
+            time.sleep(0.1)
+        time.sleep(wait_s)
+        for i, sig in enumerate(signals):
+            if i:
+                time.sleep(0.2)
+            os.killpg(p.pid, sig)
+        text, _ = p.communicate(timeout=timeout_s)
+        assert p.returncode == 130, text
+        assert "Traceback" not in text
+        m = re.search(r"interrupted at step (\d+) of 15000; run written to (\S+)", text)
+        assert m, text
+        rec = read_run(m.group(2))
+        assert rec.metadata["status"] == "interrupted"
+        assert not rec.truncated
+        steps = int(m.group(1))
+        assert int(rec.metadata["steps_recorded"]) == steps
+        return steps, rec, text
+
+    return run

@@ -7,7 +7,6 @@ import re
 import signal
 import subprocess
 import threading
-import time
 
 import domain_coordinator
 import numpy as np
@@ -101,37 +100,15 @@ def test_a_foreign_graph_in_the_domain_is_named(design, tmp_path, capfd):
             assert read_run(r.bag).metadata["status"].startswith("interrupted")
 
 
-def test_ctrl_c_on_fahv_sil_finalises_the_run_and_exits_130(quick_case, tmp_path):
+def test_ctrl_c_on_fahv_sil_finalises_the_run_and_exits_130(quick_case, tmp_path, interrupt_fahv):
     """Ctrl-C (SIGINT to the foreground process group, as a terminal sends it), then a
     second Ctrl-C while the graph stops."""
     case_file, art = quick_case
     out = tmp_path / "bags"
-    cmd = [str(ROOT / ".venv" / "bin" / "fahv"), "sil", str(case_file), "--design", str(art)]
-    p = subprocess.Popen(
-        [*cmd, "--duration", "300", "--out", str(out)],
-        cwd=ROOT,
-        start_new_session=True,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    t0 = time.monotonic()
-    while not list(out.glob("*/run.json")) and time.monotonic() - t0 < 90:
-        time.sleep(0.2)
-    time.sleep(3.0)  # steps are running
-    os.killpg(p.pid, signal.SIGINT)
-    time.sleep(0.3)
-    os.killpg(p.pid, signal.SIGINT)
-    text, _ = p.communicate(timeout=90)
-    assert p.returncode == 130, text
-    assert "Traceback" not in text
-    m = re.search(r"interrupted at step (\d+) of 15000; run written to (\S+)", text)
-    assert m, text
-    rec = read_run(m.group(2))
-    assert not rec.truncated
-    assert rec.metadata["status"] == "interrupted"
-    steps = int(m.group(1))
-    assert int(rec.metadata["steps_recorded"]) == steps
+    steps, rec, _ = interrupt_fahv(
+        ["sil", case_file, "--design", art, "--duration", "300", "--out", out], out,
+        [signal.SIGINT, signal.SIGINT], 3.0, 90,  # 3 s: steps are running
+    )  # fmt: skip
     assert 10 < steps < 15000
     assert rec.topics["/hsv/state"]["count"] >= steps
 
