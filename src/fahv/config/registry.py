@@ -62,6 +62,10 @@ class Registry(Generic[T]):
                 f"unknown {self.what} {name!r}; registered: {', '.join(self._entries)}"
             ) from None
 
+    def get(self, name: str, default: T | None = None) -> T | None:
+        """The entry of ``name``, or ``default`` when it is not registered."""
+        return self._entries.get(name, default)
+
     def __contains__(self, name: object) -> bool:
         return name in self._entries
 

@@ -1,16 +1,24 @@
-"""The one interface of every control law, and the registries of laws and variants.
+"""The interfaces of the control layer and their registries: laws, nominal parts, variants.
 
 A control law is one module: a subclass of :class:`ControlLaw` registered with
 :func:`register_law`. It declares
 
+- its nominal part, a registered :class:`NominalSource` class (:attr:`ControlLaw.nominal`),
+  which runs in the nominal_trajectory node and gives the reference (x_r, u_r) and the
+  nominal trajectory (x_n, u_n) of every step,
 - the case-file section it needs (:attr:`ControlLaw.section`, required only when a
   variant of the case uses the law),
 - the parameters its controller node takes beyond the common ones
   (:attr:`ControlLaw.parameters`, generated into ROS descriptors),
 - its offline part (:meth:`ControlLaw.design`: extra certified arrays) and how the
   design fills its parameters (:meth:`ControlLaw.node_values`),
-- its online part: ``step(k, x, ref) -> (u, status)``, the one call the in-process
-  simulator, the controller node and the benchmarks make.
+- its online part: ``step(k, x, ref, lanes) -> LawStep`` over a batch of B runs, the
+  one call the in-process simulator (B = 1), the campaign batches and the controller
+  node (B = 1) make.
+
+A nominal part has the same shape (section, parameters, offline design and checks,
+node values, a batched ``step``) and its own registry, so a new law that brings a
+new nominal part is its module(s) plus two registry entries.
 
 A *variant* is what a case lists and a run is made of: a law plus a notch setting
 (``tube_mpc_no_notch`` is the law ``tube_mpc`` with the notch off).
@@ -18,41 +26,139 @@ A *variant* is what a case lists and a run is made of: a law plus a notch settin
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 
 from fahv.config import Field, Registry, Section
-from fahv.control.reference import NominalOutput
+from fahv.errors import ConfigError
+from fahv.lanes import Lanes
+from fahv.msg import NominalTrajectory
 
 
-class ControlLaw:
-    """Base of every control law.
+class NominalSource:
+    """Base of the nominal part of a control law, for B runs at once.
 
     Parameters
     ----------
     p : dict
-        Validated parameters of the controller node: the common ones (``Ts``,
-        ``law``, ``tau``, ``F`` (2, n), ``N`` (n, n)) and the law's own
-        :attr:`parameters`.
+        Validated parameters of the nominal_trajectory node of the first run; the
+        values every run of a batch shares (design arrays, settings).
+    runs : sequence of dict
+        Validated parameters of each of the B runs: their own command (``command.*``)
+        and initial measured state ``x0``.
+    lanes : fahv.lanes.Lanes
+        Where a run's failure goes.
+    """
+
+    #: Registry name (node parameter ``nominal``).
+    name: ClassVar[str] = ""
+    #: Case-file section of the nominal part (required when a variant's law uses it).
+    section: ClassVar[Section | None] = None
+    #: Parameters of the nominal_trajectory node it adds (used only with it).
+    parameters: ClassVar[tuple[Field, ...]] = ()
+    #: True when the nominal part estimates the constant disturbance (so W may leave
+    #: the constant part of the parameter error out, ``disturbance.constant: estimated``).
+    estimates_disturbance: ClassVar[bool] = False
+
+    def __init__(self, p: dict, runs: Sequence[dict], lanes: Lanes) -> None:
+        self.p, self.lanes = p, lanes
+
+    @classmethod
+    def design(cls, ctx: Any) -> dict[str, np.ndarray]:
+        """Offline part and certificate checks: extra arrays of the design (default none).
+
+        Parameters
+        ----------
+        ctx : fahv.design.pipeline.DesignContext
+            ``case`` data, ``vehicle``, the ``arrays`` designed so far, ``log``.
+
+        Raises
+        ------
+        DesignError
+            If a certificate of the nominal part does not hold.
+        """
+        return {}
+
+    @classmethod
+    def node_values(cls, arrays: dict, case: dict) -> dict[str, Any]:
+        """Values of :attr:`parameters` from the design arrays and the case data."""
+        return {}
+
+    def step(self, k: int, t: float, x: np.ndarray, u_prev: np.ndarray | None) -> NominalTrajectory:
+        """Reference and nominal trajectory of step k for the B runs, then advance.
+
+        Parameters
+        ----------
+        k : int
+            Step index (t = k Ts).
+        t : float
+            Simulated time [s].
+        x : (B, 9) ndarray
+            Measured plant states of step k.
+        u_prev : (B, 2) ndarray or None
+            Commands of step k - 1 (None at k = 0).
+
+        Returns
+        -------
+        fahv.msg.NominalTrajectory
+        """
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class LawStep:
+    """What a law computes at one step for B runs.
+
+    Attributes
+    ----------
+    u : (B, 2) ndarray
+        Commands [Phi, delta_e rad].
+    e : (B, n) ndarray
+        Tube error x - x_r - x_n (or x - x_r without a tube).
+    level : (B,) ndarray
+        e' (tau^2 N)^-1 e (<= 1 inside the tube; NaN without a tube).
+    lmi : (B, 3) int ndarray
+        Online LMI solves, certified fallbacks and rejected solves so far (zeros
+        for laws without online LMIs).
+    """
+
+    u: np.ndarray
+    e: np.ndarray
+    level: np.ndarray
+    lmi: np.ndarray
+
+
+class ControlLaw:
+    """Base of every control law (B runs at once).
+
+    Parameters
+    ----------
+    p : dict
+        Validated parameters of the controller node (shared by the runs of a batch):
+        the common ones (``Ts``, ``law``, ``tau``, ``F`` (2, n), ``N`` (n, n)) and the
+        law's own :attr:`parameters`.
+    n_runs : int
+        Number of runs B the law steps together.
     """
 
     #: Registry name (node parameter ``law``).
     name: ClassVar[str] = ""
     #: Controller node (executable) that runs the law.
     node: ClassVar[str] = "tube_mpc"
-    #: Mode of the nominal_trajectory node: ``mpc`` (online tracking MPC,
-    #: :mod:`fahv.control.nominal_mpc`), ``governor`` (nominal system with the
-    #: reference governor, eq. 20/46) or ``command`` (trim of the raw command).
-    reference: ClassVar[str] = "governor"
+    #: The nominal part: a registered NominalSource class.
+    nominal: ClassVar[type[NominalSource]]
+    #: False for a law without a tube (its tau is 1 and its tube level NaN).
+    has_tube: ClassVar[bool] = True
     #: Case-file section the law needs (required only when a variant uses the law).
     section: ClassVar[Section | None] = None
     #: Parameters of the controller node the law adds (each used only with the law).
     parameters: ClassVar[tuple[Field, ...]] = ()
 
-    def __init__(self, p: dict) -> None:
-        self.p = p
+    def __init__(self, p: dict, n_runs: int = 1) -> None:
+        self.p, self.n_runs = p, n_runs
 
     @classmethod
     def design(cls, ctx: Any) -> dict[str, np.ndarray]:
@@ -77,27 +183,24 @@ class ControlLaw:
         """Values of :attr:`parameters` from the design arrays and the case data."""
         return {}
 
-    def step(self, k: int, x: np.ndarray, ref: NominalOutput) -> tuple[np.ndarray, dict]:
-        """Command of step k.
+    def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
+        """Commands of step k for B runs.
 
         Parameters
         ----------
         k : int
             Step index (t_k = k Ts).
-        x : (n,) ndarray
-            Measured controller state (q' for q with the notch; plus the notch states
+        x : (B, n) ndarray
+            Measured controller states (q' for q with the notch; plus the notch states
             x_q for the 11-state ECM design).
-        ref : NominalOutput
-            Reference and nominal trajectory of step k.
+        ref : fahv.msg.NominalTrajectory
+            Reference and nominal trajectory of step k (x_r, u_r, x_n, u_n).
+        lanes : fahv.lanes.Lanes
+            Where a run's failure goes.
 
         Returns
         -------
-        u : (2,) ndarray
-            [Phi, delta_e rad].
-        status : dict
-            ``e`` (n,) tube error (or x - x_r), ``level`` (<= 1 inside the tube; NaN
-            when the law has no tube), optionally ``lmi_solves``, ``lmi_fallback``,
-            ``lmi_failed`` counters and ``label`` (the law name reported).
+        LawStep
         """
         raise NotImplementedError
 
@@ -124,6 +227,21 @@ class Variant:
 
 #: Control laws by name.
 LAWS: Registry[type[ControlLaw]] = Registry("control law")
+#: Nominal parts by name.
+NOMINAL_SOURCES: Registry[type[NominalSource]] = Registry("nominal source")
+
+
+def register_nominal(cls: type[NominalSource]) -> type[NominalSource]:
+    """Register a nominal part under its ``name``; returns ``cls``.
+
+    Raises
+    ------
+    ConfigError
+        If the name is taken by another class.
+    """
+    if NOMINAL_SOURCES.get(cls.name) is not cls:
+        NOMINAL_SOURCES.register(cls.name, cls)
+    return cls
 #: Variants by name.
 VARIANTS: Registry[Variant] = Registry("variant")
 
@@ -134,8 +252,16 @@ def register_law(cls: type[ControlLaw], variants: tuple[Variant, ...] = ()) -> t
     Raises
     ------
     ConfigError
-        If a name is taken.
+        If a name is taken, or the law's nominal part is not a registered NominalSource.
     """
+    nominal = getattr(cls, "nominal", None)
+    if not (isinstance(nominal, type) and issubclass(nominal, NominalSource)):
+        raise ConfigError(f"control law '{cls.name}' must name its nominal part (a NominalSource)")
+    if NOMINAL_SOURCES.get(nominal.name) is not nominal:
+        raise ConfigError(
+            f"control law '{cls.name}': nominal part '{nominal.name}' is not registered "
+            "(register_nominal)"
+        )
     LAWS.register(cls.name, cls)
     for v in (Variant(cls.name, cls.name, "case", cls.__doc__.splitlines()[0]), *variants):
         VARIANTS.register(v.name, v)

@@ -1,4 +1,4 @@
-"""Online nominal MPC for tracking (a QP), with an input-disturbance estimate.
+"""Online nominal MPC for tracking (a QP) with a state-disturbance estimate, over B runs.
 
 The nominal part of the tube-based MPC of Mayne, Seron and Rakovic (2005), in the
 tracking form of Limon et al. (2010, "Robust tube-based MPC for tracking"), on the
@@ -11,18 +11,18 @@ nominal LPV model of eq. (12) scheduled at the current operating point:
   large step is fed in as fast as the constraints allow; no reference governor.
 * **Pre-stabilised, move-blocked predictions.** u = u_s + K (z - x_s) + c_j with the
   certified nominal gain K of LMIs (33)-(35) at the fast rate Ts, and a move c_j held
-  for M steps (nominal rate Ts_n = M Ts), j = 0..N-1: zeta = z - x_s obeys
+  for M steps (nominal rate Ts_n = M Ts), j = 0..N_p-1: zeta = z - x_s obeys
   zeta+ = (A + B K) zeta + B c_j + E delta (E = (A - I) G_x + B G_u, zero on the exact
   linear steady-state manifold). The condensed QP is well conditioned although the
   open-loop model is unstable.
 * **Constraints.** The nominal input at each move start lies in the tightened
   *asymmetric* set [u_min + t, u_max - t] (t the support of tau F Z, eq. 30), written
   in absolute inputs: 0 <= Phi <= 1.5 and |delta_e| <= 30 deg minus t. Terminal set:
-  zeta_N in alpha E(Q), with E(Q) the invariant ellipsoid of LMIs (33)-(35) (terminal
-  law K), entered as its inscribed box |L^-1 zeta_N|_inf <= alpha / sqrt(n) (Q = L L'),
+  zeta_{N_p} in alpha E(Q), with E(Q) the invariant ellipsoid of LMIs (33)-(35) (terminal
+  law K), entered as its inscribed box |L^-1 zeta_{N_p}|_inf <= alpha / sqrt(n) (Q = L L'),
   and the steady input u_s with a margin alpha * sqrt(K_j Q K_j') from the tightened
   limits, 0 <= alpha <= 1 (the lambda-scaled terminal set of Limon et al.).
-* **Terminal cost.** zeta_N' P zeta_N with P the tail cost of the blocked model under K
+* **Terminal cost.** zeta_{N_p}' P zeta_{N_p} with P the tail cost of the blocked model under K
   (discrete Lyapunov equation), i.e. the exact infinite-horizon cost once c = 0.
 * **Fallback.** If the solver does not return a solution that passes the numerical
   check (constraints and KKT conditions), the shifted previous plan is used (its tail
@@ -36,30 +36,68 @@ model is z+ = A z + B u + d, and its steady state at the set point moves by
 h_d = V_d = 0 (n equations, n unknowns; :meth:`TrackingMPC.schedule`). A loss of
 elevator effectiveness rho_f gives u_d = -(rho_f - 1) delta_e,r (exactly, since its
 d lies along the elevator column of B); parameter uncertainty shifts the trim.
+
+Batch
+    :class:`TrackingMPCNominal` runs B runs at once: the fast step (estimator,
+    plan interpolation, nominal model, output) is one numpy computation over the
+    batch, whose per-run items are the BLAS calls of one run's computation, so a
+    run's numbers do not depend on its batch; the re-plans (one QP per run every M
+    steps) are a loop over the runs, each with its own :class:`TrackingMPC`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 
-from fahv.control.reference import Command, NominalOutput
-from fahv.errors import DesignError
+from fahv.config import Field, Section
+from fahv.control.base import NominalSource, register_nominal
+from fahv.control.command import Command, CommandSchedule
+from fahv.control.reference import lpv_of, mv, trim_map_of
+from fahv.errors import DesignError, RunError
+from fahv.lanes import Lanes
+from fahv.model.notch import DiscreteNotch, NotchFilter
+from fahv.msg import NominalTrajectory
+from fahv.synthesis.qp import NO_BOUND, check_kkt
 
 #: Solver status of a successful DAQP solve.
 _DAQP_OPTIMAL = (1, 2)
-#: Primal feasibility and KKT tolerances of the solution check (scaled units).
-PRIMAL_TOL = 1e-6
-KKT_TOL = 1e-5
 
 
 def _daqp():
     import daqp
 
     return daqp
+
+
+#: Case-file section of the nominal tracking MPC (all keys defaulted; docs/control_design.md).
+MPC_SECTION_FIELDS = (
+    Field("M", "int", "fast steps per nominal move: nominal rate Ts_n = M Ts", lo=1,
+          hi=1000, default=25),
+    Field("N_p", "int", "moves in the prediction horizon (horizon N_p M Ts)", lo=2, hi=200,
+          default=30),
+    Field("q_w", "floats", "state weights (h, V, alpha, theta, q, eta_1, eta_1_dot, eta_2, "
+          "eta_2_dot) per scale unit", lo=0.0, length=9,
+          default=(1.0, 1.0, 0.1, 0.1, 0.01, 0.0, 0.0, 0.0, 0.0)),
+    Field("r_w", "floats", "move weights (Phi, delta_e) per scale unit", lo=0.0,
+          lo_open=True, length=2, default=(1.0, 1.0)),
+    Field("t_w", "floats", "offset-cost weights on (h_s - h_c, V_s - V_c) per "
+          "(100 ft, 100 ft/s)", lo=0.0, lo_open=True, length=2, default=(1e4, 1e4)),
+    Field("dtheta_max", "floats", "largest set-point move per nominal step", unit="ft, ft/s",
+          lo=0.0, lo_open=True, length=2, default=(300.0, 150.0)),
+    Field("reschedule", "floats", "set-point distance that rebuilds the QP", unit="ft, ft/s",
+          lo=0.0, lo_open=True, length=2, default=(100.0, 50.0)),
+    Field("att_max", "float", "bound on the nominal |alpha - alpha_r|, |theta - theta_r| "
+          "(from the nominal trim) at each move", unit="deg", lo=0.0, lo_open=True,
+          hi=10.0, default=0.35),
+    Field("est_tau", "float", "time constant of the state-disturbance estimate (0: none)",
+          unit="s", lo=0.0, hi=1e3, default=0.5),
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -70,8 +108,8 @@ class MPCSettings:
     ----------
     M : int
         Fast steps per nominal move (nominal rate Ts_n = M Ts).
-    N : int
-        Moves in the horizon (horizon N M Ts seconds).
+    N_p : int
+        Moves in the prediction horizon (horizon N_p M Ts seconds).
     q_w : (n,) ndarray
         State weights, per scale unit of the design scaling Dx.
     r_w : (m,) ndarray
@@ -89,7 +127,7 @@ class MPCSettings:
     """
 
     M: int
-    N: int
+    N_p: int
     q_w: np.ndarray
     r_w: np.ndarray
     t_w: np.ndarray
@@ -97,63 +135,56 @@ class MPCSettings:
     reschedule: np.ndarray
     att_max: float = math.inf
 
+    @classmethod
+    def of_parameters(cls, p: dict, n: int) -> MPCSettings:
+        """Settings of a nominal_trajectory node's ``mpc.*`` parameters (n design states)."""
+        m = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith("mpc.")}
+        q_w = np.concatenate([np.asarray(m["q_w"], float), np.zeros(n - 9)])
+        return cls(
+            int(m["M"]), int(m["N_p"]), q_w, np.asarray(m["r_w"], float),
+            np.asarray(m["t_w"], float), np.asarray(m["dtheta_max"], float),
+            np.asarray(m["reschedule"], float), float(np.radians(m["att_max"])),
+        )  # fmt: skip
 
-class DisturbanceEstimator:
-    """Constant additive state disturbance d (p,) of the scheduled model.
 
-    Each step, the one-step residual of the scheduled model,
-    r = dx_k - A dx_{k-1} - B du_{k-1} (deviations from the trim at the scheduling
-    point), is filtered: d <- d + gamma (r - d) with gamma = Ts / tau_est (first
-    order, time constant tau_est). d collects what the nominal model misses at the
-    current operating point and that varies slowly: the constant part of the parameter
-    uncertainty (sec. 5.1), the trim part (rho_f - 1) delta_e,r of a loss of
-    effectiveness (eq. 16), the mean of the modelling error. The nominal model then
-    predicts with d, so the tube only has to hold what is left (docs/control_design.md).
+@dataclass(frozen=True)
+class QPLayout:
+    """Named parts of the QP's decision vector y (ny,) = [c_0 .. c_{N_p-1}, delta, alpha].
 
-    Parameters
+    Attributes
     ----------
-    Dx : (p,) ndarray
-        State scaling of the measured plant state (p = 9).
-    gamma : float
-        Filter gain in (0, 1].
-
-    Raises
-    ------
-    ValueError
-        If gamma is not in (0, 1].
+    N_p : int
+        Moves in the horizon.
+    m : int
+        Inputs per move.
     """
 
-    def __init__(self, Dx: np.ndarray, gamma: float) -> None:
-        if not 0.0 < gamma <= 1.0:
-            raise ValueError(f"estimator gain gamma must be in (0, 1], got {gamma}")
-        self.Dx = np.asarray(Dx, float)
-        self.gamma = float(gamma)
-        self.d = np.zeros(self.Dx.size)
-        self._AB = None
+    N_p: int
+    m: int
 
-    def schedule(self, A: np.ndarray, B: np.ndarray) -> None:
-        """Model (A (p, p), B (p, m)) at the fast rate for the next updates."""
-        self._AB = (A, B)
+    @property
+    def moves(self) -> slice:
+        """The moves c_0..c_{N_p-1} (scaled by Du), N_p m entries."""
+        return slice(0, self.N_p * self.m)
 
-    def update(self, dx_prev: np.ndarray, du_prev: np.ndarray, dx: np.ndarray) -> np.ndarray:
-        """Filtered estimate d (p,) [state units per step Ts] after one measured step.
+    def move(self, j: int) -> slice:
+        """Move c_j (m entries)."""
+        return slice(j * self.m, (j + 1) * self.m)
 
-        Parameters
-        ----------
-        dx_prev, dx : (p,) ndarray
-            Measured plant state of steps k - 1 and k minus the scheduling trim.
-        du_prev : (m,) ndarray
-            Command of step k - 1 minus the scheduling trim input.
+    @property
+    def delta(self) -> slice:
+        """Set-point step delta = (dh_s, dV_s) per (100 ft, 100 ft/s), 2 entries."""
+        return slice(self.N_p * self.m, self.N_p * self.m + 2)
 
-        Raises
-        ------
-        TypeError
-            If :meth:`schedule` was not called first.
-        """
-        A, B = self._AB
-        r = dx - A @ dx_prev - B @ du_prev
-        self.d = self.d + self.gamma * (r - self.d)
-        return self.d
+    @property
+    def alpha(self) -> int:
+        """Index of the terminal-set scaling alpha in [0, 1]."""
+        return self.N_p * self.m + 2
+
+    @property
+    def ny(self) -> int:
+        """Length of y."""
+        return self.N_p * self.m + 3
 
 
 @dataclass
@@ -179,7 +210,7 @@ class QPStats:
 
 
 class TrackingMPC:
-    """Nominal tracking MPC on the scheduled LPV model (module docstring).
+    """One run's nominal tracking QP on the scheduled LPV model (module docstring).
 
     Parameters
     ----------
@@ -209,6 +240,7 @@ class TrackingMPC:
         self.K, self.Q = np.asarray(K, float), np.asarray(Q, float)
         n = self.K.shape[1]
         self.n, self.m = n, self.K.shape[0]
+        self.layout = QPLayout(settings.N_p, self.m)
         if self.Q.shape != (n, n):
             raise ValueError(f"nominal MPC: Q {self.Q.shape} does not match K {self.K.shape}")
         self.u_lo, self.u_hi = np.asarray(u_lo, float), np.asarray(u_hi, float)
@@ -248,9 +280,9 @@ class TrackingMPC:
     def schedule(self, h: float, V: float) -> None:
         """Build the condensed QP at the scheduling point (h, V) [ft, ft/s].
 
-        Decision y = [c_0..c_{N-1} (scaled by Du), delta (per 100 ft, 100 ft/s), alpha]
-        (ny = N m + 3). Also the steady-state shift of a constant disturbance,
-        Hx (n, n) and Hu (m, n) (module docstring).
+        Decision y of :class:`QPLayout`. Also the steady-state shift of a constant
+        disturbance, Hx (n, n) and Hu (m, n) (module docstring), and the constraint
+        matrix of :meth:`solve` (it does not depend on the state).
 
         Raises
         ------
@@ -258,7 +290,7 @@ class TrackingMPC:
             If no steady state holds (h, V) against a constant disturbance (the
             steady-state equations are singular at this point).
         """
-        s, n, m = self.s, self.n, self.m
+        s, n, m, ly = self.s, self.n, self.m, self.layout
         A, B = self.lpv.system(h, V)
         self.A, self.B = A, B
         self.theta_s = np.array([h, V], float)
@@ -274,19 +306,18 @@ class TrackingMPC:
             Psi = AK @ Psi + E
             Phi = AK @ Phi
         Gam = Gam * self.Du[None, :]  # per scaled move
-        N = s.N
-        ny = N * m + 2 + 1
-        self.ny = ny
-        # zeta_j = S[j] zeta_0 + C[j] y, zeta_0 = z0 - Gx delta  (j = 0..N)
-        S = np.zeros((N + 1, n, n))
-        C = np.zeros((N + 1, n, ny))
+        N_p = s.N_p
+        ny = ly.ny
+        # zeta_j = S[j] zeta_0 + C[j] y, zeta_0 = z0 - Gx delta  (j = 0..N_p)
+        S = np.zeros((N_p + 1, n, n))
+        C = np.zeros((N_p + 1, n, ny))
         S[0] = np.eye(n)
-        C[0, :, N * m : N * m + 2] = -Gx
-        for j in range(N):
+        C[0, :, ly.delta] = -Gx
+        for j in range(N_p):
             S[j + 1] = Phi @ S[j]
             C[j + 1] = Phi @ C[j]
-            C[j + 1, :, j * m : (j + 1) * m] += Gam
-            C[j + 1, :, N * m : N * m + 2] += Psi
+            C[j + 1, :, ly.move(j)] += Gam
+            C[j + 1, :, ly.delta] += Psi
         self.S, self.C = S, C
         # cost (scaled): sum_j |zeta_j/Dx|^2_qw M + |c_j|^2_rw + |zeta_N/Dx|^2_P + offset
         Wq = np.diag(s.q_w / self.Dx**2) * s.M
@@ -295,36 +326,36 @@ class TrackingMPC:
         P = (0.5 * (P_s + P_s.T)) / np.outer(self.Dx, self.Dx)
         H = np.zeros((ny, ny))
         Fz = np.zeros((ny, n))
-        for j in range(N + 1):
-            Wj = P if j == N else Wq
+        for j in range(N_p + 1):
+            Wj = P if j == N_p else Wq
             H += C[j].T @ Wj @ C[j]
             Fz += C[j].T @ Wj @ S[j]
         R = np.zeros(ny)
-        R[: N * m] = np.tile(s.r_w, N)
+        R[ly.moves] = np.tile(s.r_w, N_p)
         H += np.diag(R)
         T = np.zeros((ny, ny))
-        T[N * m : N * m + 2, N * m : N * m + 2] = np.diag(s.t_w)
+        T[ly.delta, ly.delta] = np.diag(s.t_w)
         H += T
-        H[-1, -1] += 1e-6  # alpha: tiny weight keeps H positive definite
+        H[ly.alpha, ly.alpha] += 1e-6  # alpha: tiny weight keeps H positive definite
         # the cost is y' H y + 2 (Fz z0 + ...)' y; DAQP minimises 1/2 y' H_qp y + f' y,
         # so H_qp = 2 H (symmetrised) and f = 2 (Fz z0 + ...)
         self.H = H + H.T
         self.Fz = Fz
-        # constraints: rows as A_c y in [lo + a z0 ..., hi ...] built at solve time
-        rows = []  # (matrix (k, ny), z0 matrix (k, n))
-        for j in range(N):
+        rows = []  # input rows: (matrix (m, ny), z0 matrix (m, n)) per move
+        for j in range(N_p):
             # u_j = u_base + Gu delta + K zeta_j + c_j  (absolute)
             Uy = self.K @ C[j]
-            Uy[:, N * m : N * m + 2] += Gu
-            Uy[:, j * m : (j + 1) * m] += np.diag(self.Du)
+            Uy[:, ly.delta] += Gu
+            Uy[:, ly.move(j)] += np.diag(self.Du)
             rows.append((Uy, self.K @ S[j]))
-        self.U_y = np.concatenate([r[0] for r in rows])  # (N m, ny)
-        self.U_z = np.concatenate([r[1] for r in rows])  # (N m, n)
-        # attitude rows: alpha (2) and theta (3) of zeta_j, j = 1..N
-        self.Att_y = np.concatenate([C[j][2:4] for j in range(1, N + 1)])
-        self.Att_z = np.concatenate([S[j][2:4] for j in range(1, N + 1)])
-        self.Tb_y = self.L_inv @ C[N]  # terminal box rows, (n, ny)
-        self.Tb_z = self.L_inv @ S[N]
+        self.U_y = np.concatenate([r[0] for r in rows])  # (N_p m, ny)
+        self.U_z = np.concatenate([r[1] for r in rows])  # (N_p m, n)
+        # attitude rows: alpha (2) and theta (3) of zeta_j, j = 1..N_p
+        self.Att_y = np.concatenate([C[j][2:4] for j in range(1, N_p + 1)])
+        self.Att_z = np.concatenate([S[j][2:4] for j in range(1, N_p + 1)])
+        self.Tb_y = self.L_inv @ C[N_p]  # terminal box rows, (n, ny)
+        self.Tb_z = self.L_inv @ S[N_p]
+        self._constraint_matrix()
         # steady-state shift of a constant disturbance d: (A - I) x_d + B u_d + d = 0,
         # h_d = V_d = 0; unknowns (x_d[2:], u_d), solved in scaled coordinates
         Dv = np.concatenate([self.Dx[2:], self.Du])
@@ -340,6 +371,29 @@ class TrackingMPC:
         self.Hx[2:] = H_ss[: n - 2]
         self.Hu = H_ss[n - 2 :]
         self.stats.reschedules += 1
+
+    def _constraint_matrix(self) -> None:
+        """Rows of the QP (state independent): inputs, terminal box, steady input, attitude.
+
+        Input limits (N_p m), terminal box |L^-1 zeta_N| <= alpha / sqrt(n) (two one-sided
+        sets of n rows), steady input u_base + Gu delta +/- alpha k_max within the
+        tightened limits (2 m), attitude rows (2 N_p).
+        """
+        ly, n, m, N_p = self.layout, self.n, self.m, self.s.N_p
+        nb = ly.ny
+        sc = np.tile(self.Du, N_p)
+        A_u = self.U_y / sc[:, None]
+        a_coef = np.zeros((n, nb))
+        a_coef[:, ly.alpha] = 1.0 / math.sqrt(n)
+        A_t1 = self.Tb_y - a_coef  # L^-1 zeta - alpha/sqrt(n) <= 0
+        A_t2 = -self.Tb_y - a_coef  # -L^-1 zeta - alpha/sqrt(n) <= 0
+        G = np.zeros((m, nb))
+        G[:, ly.delta] = self.Gu
+        kcol = np.zeros((m, nb))
+        kcol[:, ly.alpha] = self.k_max
+        A_s1 = (G + kcol) / self.Du[:, None]
+        A_s2 = (G - kcol) / self.Du[:, None]
+        self.A_c = np.vstack([A_u, A_t1, A_t2, A_s1, A_s2, self.Att_y])
 
     # -- solve -----------------------------------------------------------------------
     def solve(self, z0: np.ndarray, u_base: np.ndarray, cmd: np.ndarray, x_off=None):
@@ -365,15 +419,16 @@ class TrackingMPC:
             Solution (None if rejected).
         info : str
             "ok" or why it was rejected (solver flag, or the failed check of
-            :func:`check_kkt`); a rejected QP raises nothing, the caller falls back.
+            :func:`fahv.synthesis.qp.check_kkt`); a rejected QP raises nothing, the
+            caller falls back.
         """
-        s, N, m, n = self.s, self.s.N, self.m, self.n
+        s, ly, m, n = self.s, self.layout, self.m, self.n
+        N_p = s.N_p
         e_theta = (self.theta_s - cmd) / self.theta_scale
         f = 2.0 * (self.Fz @ z0)
-        f[N * m : N * m + 2] += 2.0 * s.t_w * e_theta
-        # rows: input limits (N m), terminal box (n, two-sided), steady input (2 m, alpha),
-        # set point trust region and map bounds (as bounds on delta), alpha in [0, 1]
-        nb = self.ny
+        f[ly.delta] += 2.0 * s.t_w * e_theta
+        # bounds on y: set point trust region and map bounds (delta), alpha in [0, 1]
+        nb = ly.ny
         lo_b = np.full(nb, -1e30)
         hi_b = np.full(nb, 1e30)
         dmax = s.dtheta_max / self.theta_scale
@@ -382,35 +437,21 @@ class TrackingMPC:
         h_hi = (tm.h_grid[-1] - self.theta_s[0]) / self.theta_scale[0]
         V_lo = (tm.V_grid[0] - self.theta_s[1]) / self.theta_scale[1]
         V_hi = (tm.V_grid[-1] - self.theta_s[1]) / self.theta_scale[1]
-        lo_b[N * m], hi_b[N * m] = max(-dmax[0], h_lo), min(dmax[0], h_hi)
-        lo_b[N * m + 1], hi_b[N * m + 1] = max(-dmax[1], V_lo), min(dmax[1], V_hi)
-        lo_b[-1], hi_b[-1] = 0.0, 1.0
-        u_off = self.U_z @ z0 + np.tile(u_base, N)
-        sc = np.tile(self.Du, N)
-        A_u = self.U_y / sc[:, None]
-        lo_u = (np.tile(self.u_lo, N) - u_off) / sc
-        hi_u = (np.tile(self.u_hi, N) - u_off) / sc
-        # terminal box: |L^-1 zeta_N| <= alpha / sqrt(n)  ->  two one-sided rows
-        tb = self.Tb_y.copy()
+        d0, d1 = ly.delta.start, ly.delta.start + 1
+        lo_b[d0], hi_b[d0] = max(-dmax[0], h_lo), min(dmax[0], h_hi)
+        lo_b[d1], hi_b[d1] = max(-dmax[1], V_lo), min(dmax[1], V_hi)
+        lo_b[ly.alpha], hi_b[ly.alpha] = 0.0, 1.0
+        u_off = self.U_z @ z0 + np.tile(u_base, N_p)
+        sc = np.tile(self.Du, N_p)
+        lo_u = (np.tile(self.u_lo, N_p) - u_off) / sc
+        hi_u = (np.tile(self.u_hi, N_p) - u_off) / sc
         tz = self.Tb_z @ z0
-        a_coef = np.zeros((n, nb))
-        a_coef[:, -1] = 1.0 / math.sqrt(n)
-        A_t1 = tb - a_coef  # L^-1 zeta - alpha/sqrt(n) <= 0
-        A_t2 = -tb - a_coef  # -L^-1 zeta - alpha/sqrt(n) <= 0
-        # steady input: u_base + Gu delta +/- alpha k_max within the tightened limits
-        G = np.zeros((m, nb))
-        G[:, N * m : N * m + 2] = self.Gu
-        kcol = np.zeros((m, nb))
-        kcol[:, -1] = self.k_max
-        A_s1 = (G + kcol) / self.Du[:, None]
-        A_s2 = (G - kcol) / self.Du[:, None]
         att = self.Att_z @ z0
         a_max = min(s.att_max, 1e3)
         att_lo, att_hi = np.full(att.size, -a_max), np.full(att.size, a_max)
         if x_off is not None:
-            off = np.tile(np.asarray(x_off, float)[2:4], N)
+            off = np.tile(np.asarray(x_off, float)[2:4], N_p)
             att_lo, att_hi = np.minimum(att_lo - off, 0.0), np.maximum(att_hi - off, 0.0)
-        A_c = np.vstack([A_u, A_t1, A_t2, A_s1, A_s2, self.Att_y])
         hi_c = np.concatenate(
             [hi_u, -tz, tz, (self.u_hi - u_base) / self.Du, np.full(m, 1e30), att_hi - att]
         )
@@ -421,279 +462,269 @@ class TrackingMPC:
         bu = np.concatenate([hi_b, hi_c])
         bl = np.concatenate([lo_b, lo_c])
         daqp = _daqp()
-        start = self.last_y
-        y, _, flag, info = daqp.solve(self.H, f, A_c, bu, bl, primal_start=start, iter_limit=2000)
+        y, _, flag, info = daqp.solve(
+            self.H, f, self.A_c, bu, bl, primal_start=self.last_y, iter_limit=2000
+        )
         if flag not in _DAQP_OPTIMAL:
             return None, f"solver exit flag {flag}"
         y = np.asarray(y, float)
         lam = np.asarray(info["lam"], float)
-        why = check_kkt(self.H, f, A_c, bl, bu, y, lam)
+        why = check_kkt(self.H, f, self.A_c, bl, bu, y, lam)
         if why:
             return None, why
         self.last_y = y
         return y, "ok"
 
 
-def check_kkt(H, f, A_c, bl, bu, y, lam, primal_tol=PRIMAL_TOL, kkt_tol=KKT_TOL) -> str:
-    """Check a QP solution numerically; '' if it passes, else why not (no exception).
+assert NO_BOUND < 1e30  # the QP's "no bound" (1e30) must read as none in check_kkt
+
+
+def _mpc_uses(root) -> bool:
+    from fahv.control.base import LAWS, VARIANTS
+
+    return any(
+        LAWS[VARIANTS[v].law].nominal is TrackingMPCNominal
+        for v in root.get("variants", ())
+        if v in VARIANTS and VARIANTS[v].law in LAWS
+    )
+
+
+@register_nominal
+class TrackingMPCNominal(NominalSource):
+    """Online nominal tracking MPC with a state-disturbance estimate, for B runs.
+
+    Fast step k of each run: the estimate d (p,) is updated from the measured step
+    (d <- d + gamma (r - d), r the one-step residual of the scheduled model,
+    gamma = Ts / est_tau), the nominal state z (deviation from the scheduling trim)
+    moves by z+ = A z + B (u_d + u_dev) + d with u_dev = Gu delta + K (z - Gx delta -
+    x_d) + c_j (the nominal input is u_r,s + u_d + u_dev); every M steps each run's
+    QP (:class:`TrackingMPC`) chooses the moves and the set-point step delta. The
+    output reference is x_r = trim_x(theta), u_r = trim_u(theta) + u_d at the
+    artificial set point theta, x_n = X_n - x_r, u_n = u_nominal - u_r, so that the
+    ancillary law u = u_r + u_n + tau F (x - x_r - x_n) (eq. 36/54) is unchanged.
+
+    For an 11-state (ECM) design the estimate works in ECM coordinates: a replica of
+    the notch_filter node's filter on the same q samples gives q' and x_q (eq. 43).
 
     Parameters
     ----------
-    H : (ny, ny) ndarray
-    f : (ny,) ndarray
-    A_c : (nc, ny) ndarray
-    bl, bu : (ny + nc,) ndarray
-        Bounds on [y; A_c y]; |b| >= 1e29 means none.
-    y : (ny,) ndarray
-        Primal solution.
-    lam : (ny + nc,) ndarray
-        Multipliers (positive on an active upper bound, negative on a lower one).
-    primal_tol, kkt_tol : float
-        Tolerances relative to the size of the terms.
-
-    QP: min 0.5 y'Hy + f'y  s.t. bl <= [y; A_c y] <= bu (the first ny bounds are simple
-    bounds on y, DAQP's convention). Checks primal feasibility (<= primal_tol),
-    stationarity H y + f + [I; A_c]' lam = 0 (relative to the size of the terms,
-    <= kkt_tol), dual sign (lam >= 0 on upper, <= 0 on lower active bounds) and
-    complementarity.
-    """
-    ny = y.size
-    Ay = np.concatenate([y, A_c @ y])
-    big = 1e29
-    viol = np.maximum(np.where(bl > -big, bl - Ay, 0.0), np.where(bu < big, Ay - bu, 0.0))
-    if np.max(viol) > primal_tol * (1.0 + np.max(np.abs(Ay))):
-        return f"primal infeasible by {np.max(viol):.2e}"
-    G = np.vstack([np.eye(ny), A_c])
-    grad = H @ y + f
-    res = grad + G.T @ lam
-    scale = 1.0 + np.max(np.abs(grad)) + np.max(np.abs(G.T @ lam))
-    if np.max(np.abs(res)) > kkt_tol * scale:
-        return f"stationarity residual {np.max(np.abs(res)):.2e}"
-    slack_hi = np.where(bu < big, bu - Ay, np.inf)
-    slack_lo = np.where(bl > -big, Ay - bl, np.inf)
-    tol = kkt_tol * scale
-    if np.any((lam > tol) & (slack_hi > primal_tol * (1 + np.abs(Ay)) * 10)):
-        return "complementarity (upper bounds)"
-    if np.any((lam < -tol) & (slack_lo > primal_tol * (1 + np.abs(Ay)) * 10)):
-        return "complementarity (lower bounds)"
-    return ""
-
-
-class TrackingNominal:
-    """The nominal_trajectory node's object in ``mpc`` mode: MPC plan and estimator.
-
-    Fast step k: the nominal state z (deviation from the scheduling trim) moves by
-    z+ = A z + B (u_d + u_dev) + d with u_dev = Gu delta + K (z - Gx delta - x_d) + c_j
-    (the nominal input is u_r,s + u_d + u_dev);
-    every M steps the QP chooses the moves and the set-point step delta. The output
-    reference is x_r = trim_x(theta), u_r = trim_u(theta) + u_d at the artificial set
-    point theta (u_d the steady input shift of the estimated disturbance, module
-    docstring), x_n = X_n - x_r, u_n = u_nominal - u_r, so that the ancillary law
-    u = u_r + u_n + tau F (x - x_r - x_n) (eq. 36/54) is unchanged.
-
-    Parameters
-    ----------
-    mpc : TrackingMPC
-    command : Command
-    Ts : float
-        Fast sampling period [s].
-    estimator : DisturbanceEstimator or None
-        None: no disturbance estimate (d = 0).
-    n_plant : int
-        States the estimator uses (the first n_plant of the model): 9 for a CM design,
-        11 for the ECM (with ``measure``).
-    measure : callable, optional
-        Plant state (9,) -> the design model's coordinates (n_plant,), called once per
-        step; for the ECM, the notch filter replayed on q gives q' and x_q (eq. 43).
+    p, runs, lanes
+        As :class:`~fahv.control.base.NominalSource`.
 
     Raises
     ------
+    RunError
+        For an 11-state design with the notch off (the ECM needs its states).
     DesignError
-        If the initial QP is infeasible (the case starts outside the tightened set).
+        If no steady state holds the initial point against a constant disturbance.
     """
 
-    def __init__(self, mpc: TrackingMPC, command: Command, Ts: float, estimator=None,
-                 n_plant: int = 9, measure=None) -> None:  # fmt: skip
-        self.mpc, self.command, self.Ts, self.est, self.n_plant = (
-            mpc, command, Ts, estimator, n_plant)  # fmt: skip
-        self.measure = measure
+    name = "mpc"
+    estimates_disturbance = True
+    section = Section(
+        "mpc",
+        MPC_SECTION_FIELDS,
+        "online nominal tracking MPC (the nominal part of tube_mpc)",
+        when=_mpc_uses,
+        when_text="a variant's law uses the nominal MPC",
+    )
+
+    def __init__(self, p: dict, runs: Sequence[dict], lanes: Lanes) -> None:
+        super().__init__(p, runs, lanes)
+        B = len(runs)
+        n = p["A"].shape[1]
+        self.n, self.Ts = n, p["Ts"]
+        st = MPCSettings.of_parameters(p, n)
+        lpv, tm = lpv_of(p), trim_map_of(p)
+        self.mpcs = [
+            TrackingMPC(lpv, tm, p["K"], p["Q"], p["u_lo"], p["u_hi"], p["Dx"], p["Du"], st)
+            for _ in range(B)
+        ]
+        m0 = self.mpcs[0]
+        self.M, self.K, self.Du, self.scale, self.L = st.M, m0.K, m0.Du, m0.theta_scale, m0.L
+        self.filter = None
+        self.p_est = 9
+        if n == 11:  # ECM: the estimator works in its coordinates (q', x_q, eq. 43)
+            if not p["notch.enabled"]:
+                raise RunError("nominal_trajectory: the 11-state (ECM) design needs the notch on")
+            nf = NotchFilter(*(p[f"notch.{k}"] for k in ("omega_z", "eps_z", "omega_p", "eps_p")))
+            self.filter = DiscreteNotch(nf, p["Ts"], np.zeros(B))
+            self.p_est = 11
+        est_tau = p["mpc.est_tau"]
+        self.gamma = min(1.0, p["Ts"] / est_tau) if est_tau > 0.0 else 0.0
+        if est_tau > 0.0 and not 0.0 < self.gamma <= 1.0:
+            raise ValueError(f"estimator gain gamma must be in (0, 1], got {self.gamma}")
+        self.has_est = est_tau > 0.0
+        pe = self.p_est
+        self.command = CommandSchedule([Command.of_parameters(r) for r in runs])
+        # per-run state of the fast step (stacked) and of the scheduled models
+        self.XRS, self.URS, self.THS = np.empty((B, n)), np.empty((B, 2)), np.empty((B, 2))
+        self.GX, self.GU = np.empty((B, n, 2)), np.empty((B, 2, 2))
+        self.A, self.Bm = np.empty((B, n, n)), np.empty((B, n, 2))
+        self.HX, self.HU = np.empty((B, n, pe)), np.empty((B, 2, pe))
+        self.EA, self.EB = np.empty((B, pe, pe)), np.empty((B, pe, 2))
+        self.TH = np.stack([self.command.h0, self.command.V0], axis=1)
+        self.TRX, self.TRU = np.empty((B, n)), np.empty((B, 2))
+        self.PLAN = np.zeros((B, st.N_p, 2))
+        self.moves_left = np.zeros(B, dtype=int)
+        self.D = np.zeros((B, pe))
+        self.prev = np.zeros((B, pe))
+        self.has_prev = False
+        self.status = ["not started"] * B
+        for b in range(B):
+            try:
+                self._schedule(b, self.TH[b])
+            except DesignError as exc:
+                lanes.fail(b, exc)
+                continue
+            self.TRX[b], self.TRU[b] = tm(*self.TH[b])
+        self.XN = np.stack([np.asarray(r["x0"], float) for r in runs])
         self.k = 0
-        self.theta = np.array([command.h0, command.V0], float)
-        self._schedule(self.theta)
-        #: trim (x_r (n,), u_r (2,)) at the set point theta, evaluated when theta moves
-        self.trim_theta = self.mpc.trim_map(*self.theta)
-        self.X_n = self.mpc.x_r_s.copy()
-        self.plan = np.zeros((mpc.s.N, mpc.m))
-        self.moves_left = 0
-        self.status = "not started"
-        self.u_nom = self.mpc.u_r_s.copy()
-        self.prev = None
 
-    def _schedule(self, theta) -> None:
-        self.mpc.schedule(float(theta[0]), float(theta[1]))
-        p = self.n_plant
-        self.Hx_p = np.ascontiguousarray(self.mpc.Hx[:, :p])
-        self.Hu_p = np.ascontiguousarray(self.mpc.Hu[:, :p])
-        if self.est is not None:
-            self.est.schedule(self.mpc.A[:p, :p], self.mpc.B[:p])
+    # -- per run: scheduling and the QP ------------------------------------------------
+    def _schedule(self, b: int, theta) -> None:
+        mpc = self.mpcs[b]
+        mpc.schedule(float(theta[0]), float(theta[1]))
+        pe = self.p_est
+        self.XRS[b], self.URS[b], self.THS[b] = mpc.x_r_s, mpc.u_r_s, mpc.theta_s
+        self.GX[b], self.GU[b], self.A[b], self.Bm[b] = mpc.Gx, mpc.Gu, mpc.A, mpc.B
+        self.HX[b], self.HU[b] = mpc.Hx[:, :pe], mpc.Hu[:, :pe]
+        self.EA[b], self.EB[b] = mpc.A[:pe, :pe], mpc.B[:pe]
 
-    @property
-    def d(self) -> np.ndarray:
-        """Input-equivalent disturbance estimate -u_d (2,) [Phi, delta_e rad].
-
-        The steady input correction of the estimate with its sign flipped: for a loss
-        of elevator effectiveness alone, (0, (rho_f - 1) delta_e,r).
-        """
-        return -self._offset()[1]
-
-    def _offset(self):
-        """Steady-state shift (x_d (n,), u_d (2,)) of the estimated disturbance."""
-        if self.est is None:
-            return np.zeros(self.mpc.n), np.zeros(self.mpc.m)
-        return self.Hx_p @ self.est.d, self.Hu_p @ self.est.d
-
-    def reset(self, x0: np.ndarray) -> None:
-        """Nominal state on the measured state x0 (n,) at step 0."""
-        self.X_n = np.asarray(x0, float).copy()
-
-    def _estimate(self, x_meas, u_prev) -> None:
-        if self.est is None or x_meas is None:
-            return
-        p = self.n_plant
-        x = np.asarray(x_meas, float)
-        x = x[:p] if self.measure is None else self.measure(x)
-        dx = x - self.mpc.x_r_s[:p]
-        if self.prev is not None and u_prev is not None:
-            dx_prev = self.prev - self.mpc.x_r_s[:p]
-            du_prev = np.asarray(u_prev, float) - self.mpc.u_r_s
-            self.est.update(dx_prev, du_prev, dx)
-        self.prev = x.copy()
-
-    def _plan(self) -> None:
-        mpc, N, m = self.mpc, self.mpc.s.N, self.mpc.m
-        cmd = np.array(self.command(self.k * self.Ts), float)
+    def _plan(self, b: int, cmd: np.ndarray) -> None:
+        """Re-plan run b: reschedule if needed, solve its QP, or fall back (counted)."""
+        mpc, ly = self.mpcs[b], self.mpcs[b].layout
         # schedule at the nominal operating point (h, V of X_n), not at the set point:
         # the set point may sit a steady offset away from the state it holds
-        if np.any(np.abs(self.X_n[:2] - mpc.theta_s) > mpc.s.reschedule):
-            self._schedule(self.X_n[:2])
-        x_d, u_d = self._offset()
-        y, why = mpc.solve(self.X_n - mpc.x_r_s - x_d, mpc.u_r_s + u_d, cmd, x_d)
+        if np.any(np.abs(self.XN[b, :2] - mpc.theta_s) > mpc.s.reschedule):
+            self._schedule(b, self.XN[b, :2])
+        if self.has_est:
+            d = self.D[b]
+            x_d, u_d = self.HX[b] @ d, self.HU[b] @ d
+        else:
+            x_d, u_d = np.zeros(self.n), np.zeros(2)
+        y, why = mpc.solve(self.XN[b] - mpc.x_r_s - x_d, mpc.u_r_s + u_d, cmd, x_d)
         if y is not None:
             mpc.stats.solves += 1
-            self.plan = y[: N * m].reshape(N, m)
-            self.theta = mpc.theta_s + y[N * m : N * m + 2] * mpc.theta_scale
-            self.trim_theta = mpc.trim_map(*self.theta)
-            self.moves_left = N
-            self.status = "ok"
-        elif self.moves_left > 1:  # the set point stays where it is
+            self.PLAN[b] = y[ly.moves].reshape(ly.N_p, ly.m)
+            self.TH[b] = mpc.theta_s + y[ly.delta] * mpc.theta_scale
+            self.TRX[b], self.TRU[b] = mpc.trim_map(*self.TH[b])
+            self.moves_left[b] = ly.N_p
+            self.status[b] = "ok"
+        elif self.moves_left[b] > 1:  # the set point stays where it is
             mpc.stats.fallback += 1
-            self.plan = np.vstack([self.plan[1:], np.zeros((1, m))])
-            self.moves_left -= 1
-            self.status = f"shifted plan ({why})"
+            self.PLAN[b] = np.vstack([self.PLAN[b, 1:], np.zeros((1, ly.m))])
+            self.moves_left[b] -= 1
+            self.status[b] = f"shifted plan ({why})"
         else:
             mpc.stats.terminal += 1
-            self.plan = np.zeros((N, m))
-            self.moves_left = 0
-            self.status = f"terminal law ({why})"
+            self.PLAN[b] = 0.0
+            self.moves_left[b] = 0
+            self.status[b] = f"terminal law ({why})"
 
-    def step(self, x_meas=None, u_prev=None) -> NominalOutput:
-        """Output of step k, then advance one fast step.
+    # -- the batched fast step ----------------------------------------------------------
+    def _measure(self, x: np.ndarray) -> np.ndarray:
+        """Measured states in the design model's coordinates (B, p)."""
+        if self.filter is None:
+            return x[:, : self.p_est]
+        q_f = self.filter.step(x[:, 4])
+        return np.concatenate([x[:, :4], q_f[:, None], x[:, 5:9], self.filter.x_q], axis=1)
 
-        Parameters
-        ----------
-        x_meas : (p,) ndarray, optional
-            Measured plant state of step k (for the estimator).
-        u_prev : (2,) ndarray, optional
-            Command of step k - 1 [Phi, delta_e rad] (for the estimator).
+    def step(self, k, t, x, u_prev) -> NominalTrajectory:
+        """Output of step k for the B runs (class docstring), then advance one fast step.
 
-        Returns
-        -------
-        NominalOutput
-            Set point (h_g, V_g) = theta, x_r (n,), u_r (2,) = trim input plus u_d,
-            x_n (n,), u_n (2,), level = (z - x_s)' Q^-1 (z - x_s).
+        QP counters and the input-equivalent estimate d_hat = -u_d (for a loss of
+        elevator effectiveness alone, (0, (rho_f - 1) delta_e,r)) are in the message.
         """
-        mpc = self.mpc
-        self._estimate(x_meas, u_prev)
-        if self.k % mpc.s.M == 0:
-            self._plan()
-        x_d, u_d = self._offset()
-        # set point and steady state of the current plan (linear in delta from theta_s)
-        dth = (self.theta - mpc.theta_s) / mpc.theta_scale
-        x_s = mpc.Gx @ dth + x_d
-        u_s = mpc.Gu @ dth
-        z = self.X_n - mpc.x_r_s
-        u_dev = u_s + mpc.K @ (z - x_s) + self.plan[0] * mpc.Du
-        self.u_nom = mpc.u_r_s + u_d + u_dev
-        x_r, u_r = self.trim_theta[0].copy(), self.trim_theta[1] + u_d
-        Q_inv_z = np.linalg.solve(mpc.L, z - x_s)
-        out = NominalOutput(
-            float(self.theta[0]),
-            float(self.theta[1]),
-            x_r,
-            u_r,
-            self.X_n - x_r,
-            self.u_nom - u_r,
-            float(Q_inv_z @ Q_inv_z),
-        )
-        # advance the nominal model at the fast rate, with the estimated disturbance
-        d_n = np.zeros(mpc.n)
-        if self.est is not None:
-            d_n[: self.n_plant] = self.est.d
-        self.X_n = mpc.x_r_s + mpc.A @ z + mpc.B @ (u_d + u_dev) + d_n
+        B = x.shape[0]
+        if self.has_est:
+            xm = self._measure(np.asarray(x, float))
+            dx = xm - self.XRS[:, : self.p_est]
+            if self.has_prev and u_prev is not None:
+                dx_prev = np.ascontiguousarray(self.prev - self.XRS[:, : self.p_est])
+                du_prev = np.ascontiguousarray(np.asarray(u_prev, float) - self.URS)
+                r = (dx - mv(self.EA, dx_prev)) - mv(self.EB, du_prev)
+                self.D = self.D + self.gamma * (r - self.D)
+            self.prev = xm.copy()
+            self.has_prev = True
+        h_c, V_c = self.command(t)
+        if self.k % self.M == 0:  # re-plan: each run's own QP
+            for b in np.flatnonzero(self.lanes.alive):
+                try:
+                    self._plan(int(b), np.array([h_c[b], V_c[b]]))
+                except Exception as exc:  # noqa: BLE001 - the run fails alone
+                    self.lanes.fail(int(b), exc)
+        if self.has_est:
+            Dc = np.ascontiguousarray(self.D)
+            x_d, u_d = mv(self.HX, Dc), mv(self.HU, Dc)
+        else:  # exact zeros (a product with d = 0 could give -0.0)
+            x_d, u_d = np.zeros((B, self.n)), np.zeros((B, 2))
+        dth = (self.TH - self.THS) / self.scale
+        x_s = mv(self.GX, dth) + x_d
+        u_s = mv(self.GU, dth)
+        z = self.XN - self.XRS
+        zx = np.ascontiguousarray(z - x_s)
+        u_dev = (u_s + mv(self.K, zx)) + self.PLAN[:, 0] * self.Du
+        u_nom = (self.URS + u_d) + u_dev
+        x_r, u_r = self.TRX.copy(), self.TRU + u_d
+        w = np.linalg.solve(self.L, zx[:, :, None])[..., 0]
+        st = [m.stats for m in self.mpcs]
+        out = NominalTrajectory(
+            k, t, h_c, V_c, self.TH[:, 0].copy(), self.TH[:, 1].copy(), x_r, u_r,
+            self.XN - x_r, u_nom - u_r, (w[:, None, :] @ w[:, :, None])[:, 0, 0],
+            np.array([s.solves for s in st], dtype=np.int64),
+            np.array([s.fallback for s in st], dtype=np.int64),
+            np.array([s.terminal for s in st], dtype=np.int64), -u_d,
+        )  # fmt: skip
+        zc = np.ascontiguousarray(z)
+        d_n = np.zeros_like(z)
+        if self.has_est:
+            d_n[:, : self.p_est] = self.D
+        self.XN = (
+            (self.XRS + mv(self.A, zc)) + mv(self.Bm, np.ascontiguousarray(u_d + u_dev))
+        ) + d_n
         self.k += 1
         return out
 
+    # -- offline ------------------------------------------------------------------------
+    @classmethod
+    def design(cls, ctx) -> dict[str, np.ndarray]:
+        """Re-check the terminal ingredients against the tightened limits (no new arrays).
 
-def verify_terminal(A, B, K, Q, u_lo, u_hi, u_r_path, lam: float = 1.0) -> dict:
-    """Re-check the terminal ingredients of the nominal MPC numerically.
+        Raises
+        ------
+        DesignError
+            If the terminal set is not invariant or a trim input of the case's path
+            is outside the tightened set.
+        """
+        from fahv.model.trim import TrimMap
+        from fahv.synthesis.nominal import verify_terminal
 
-    E(Q) invariant under u = K x for every vertex: Q^-1/2 (A_i + B_i K) Q^1/2 has
-    spectral norm <= lam (<= 1); the inscribed box of the QP lies inside E(Q); and at
-    every trim input of ``u_r_path`` the steady input with the full set
-    (u_r +/- sqrt(K_j Q K_j')) fits the tightened limits, or at least the trim does
-    (alpha = 0).
-
-    Parameters
-    ----------
-    A : (R, n, n) ndarray
-    B : (R, n, m) ndarray
-    K : (m, n) ndarray
-    Q : (n, n) ndarray
-    u_lo, u_hi : (m,) ndarray
-        Tightened absolute limits.
-    u_r_path : (P, m) ndarray
-        Trim inputs along the case's path (start, end, ...).
-    lam : float
-        Required contraction bound.
-
-    Returns
-    -------
-    dict
-        ``invariance`` (largest norm over vertices), ``alpha_max`` (largest alpha
-        admissible at every path point, in [0, 1]).
-
-    Raises
-    ------
-    DesignError
-        If E(Q) is not invariant for a vertex, or a trim input of the path lies
-        outside the tightened limits (the set point cannot be held).
-    """
-    L = np.linalg.cholesky(Q)
-    L_inv = np.linalg.inv(L)
-    norms = np.array([np.linalg.norm(L_inv @ (A[i] + B[i] @ K) @ L, 2) for i in range(len(A))])
-    if np.any(norms > lam * (1 + 1e-9)):
-        i = int(np.argmax(norms))
-        raise DesignError(
-            f"certificate failed: terminal set E(Q) is not invariant under K at vertex {i} "
-            f"(||Q^-1/2 (A_i + B_i K) Q^1/2|| = {norms[i]:.6f} > {lam})"
+        a = ctx.arrays
+        u_lo, u_hi = a["u_lo"], a["u_hi"]
+        cmd = ctx.case["command"]
+        tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+        path = np.array([tm(cmd["h0"], cmd["V0"])[1], tm(cmd["h_c"], cmd["V_c"])[1]])
+        cert = verify_terminal(a["A"], a["B"], a["K"], a["Q"], u_lo, u_hi, path)
+        ctx.log(
+            f"nominal MPC: tightened inputs Phi in [{u_lo[0]:.4f}, {u_hi[0]:.4f}], delta_e in "
+            f"[{np.degrees(u_lo[1]):.2f}, {np.degrees(u_hi[1]):.2f}] deg; terminal set E(Q) "
+            f"invariant under K at every vertex (norm {cert['invariance']:.6f} <= 1), "
+            f"alpha = 1 admissible along the path: {cert['alpha_max'] >= 1.0}  OK"
         )
-    k_max = np.sqrt(np.einsum("ij,jk,ik->i", K, Q, K))
-    u = np.atleast_2d(u_r_path)
-    if np.any(u < u_lo) or np.any(u > u_hi):
-        raise DesignError(
-            "certificate failed: a trim input of the case's path lies outside the tightened "
-            f"input set [{u_lo}, {u_hi}]: {u.tolist()}"
-        )
-    room = np.minimum(u - u_lo, u_hi - u).min(axis=0)
-    alpha_max = float(np.clip(np.min(room / k_max), 0.0, 1.0))
-    return {"invariance": float(norms.max()), "alpha_max": alpha_max}
+        return {}
+
+    @classmethod
+    def node_values(cls, arrays: dict, case: dict) -> dict:
+        """``mpc.*`` node parameters from the case's ``mpc`` section (defaults if absent)."""
+        mpc = case.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
+        return {
+            f"mpc.{k}": ([float(x) for x in v] if isinstance(v, tuple | list) else v)
+            for k, v in mpc.items()
+        }
+
+
+#: Node parameters of the nominal MPC: its case section's keys under ``mpc.``.
+TrackingMPCNominal.parameters = tuple(
+    dataclasses.replace(f, name=f"mpc.{f.name}") for f in MPC_SECTION_FIELDS
+)

@@ -7,8 +7,10 @@ import math
 import numpy as np
 
 from fahv.config import Field, Section
-from fahv.control.base import VARIANTS, ControlLaw, register_law
-from fahv.control.reference import NominalOutput
+from fahv.control.base import VARIANTS, ControlLaw, LawStep, register_law
+from fahv.control.reference import CommandReference
+from fahv.lanes import Lanes
+from fahv.msg import NominalTrajectory
 from fahv.errors import DesignError, ParameterError
 from fahv.model.tp_model import build_tp_model
 from fahv.synthesis.lmi import SDP_SOLVER, scale_vertices
@@ -140,15 +142,15 @@ class RobustMPC:
         self.K = Ks * self.Du[:, None] / self.Dx[None, :]
         return True
 
-    def step(self, k: int, x: np.ndarray, ref: NominalOutput) -> np.ndarray:
-        """Command u (2,) at step k for the measured state x (n,) and reference ref.
+    def step(self, k: int, x: np.ndarray, x_r: np.ndarray, u_r: np.ndarray) -> np.ndarray:
+        """Command u (2,) at step k for the measured state x (n,) and the trim x_r, u_r.
 
         Raises
         ------
         DesignError
             If the very first solve fails (there is no gain to fall back on).
         """
-        dx = np.asarray(x, float) - ref.x_r
+        dx = np.asarray(x, float) - x_r
         if k % self.resolve_every == 0:
             if self._solve(dx):
                 self.have_gain = True
@@ -159,7 +161,7 @@ class RobustMPC:
                         "RMPC: the first LMI solve (33)-(35) failed: no invariant "
                         "ellipsoid contains the initial state within the input room"
                     )
-        return ref.u_r + self.K @ dx
+        return u_r + self.K @ dx
 
 
 def _uses_rmpc(root) -> bool:
@@ -186,7 +188,8 @@ class RMPCLaw(ControlLaw):
 
     name = "rmpc"
     node = "rmpc"
-    reference = "command"
+    nominal = CommandReference
+    has_tube = False
     section = Section(
         "rmpc",
         (
@@ -214,8 +217,8 @@ class RMPCLaw(ControlLaw):
               when=lambda p: p.get("law") == "rmpc", when_text="law is rmpc"),
     )  # fmt: skip
 
-    def __init__(self, p: dict) -> None:
-        super().__init__(p)
+    def __init__(self, p: dict, n_runs: int = 1) -> None:
+        super().__init__(p, n_runs)
         R = p["rmpc_A"].shape[0] if p["rmpc_A"].ndim == 3 else -1
         for name, shape in (
             ("rmpc_A", (R, 9, 9)),
@@ -231,10 +234,14 @@ class RMPCLaw(ControlLaw):
                 )
         if p["Dx"].ndim != 1 or p["Dx"].size < 9:
             raise ParameterError("rmpc: parameter 'Dx' needs at least 9 scales")
-        self.rmpc = RobustMPC(
-            p["rmpc_A"], p["rmpc_B"], p["u_room"], p["psi"], p["sigma"], p["Dx"][:9], p["Du"],
-            p["resolve_every"],
-        )  # fmt: skip
+        #: one online problem per run (each run re-solves at its own state)
+        self.rmpc = [
+            RobustMPC(
+                p["rmpc_A"], p["rmpc_B"], p["u_room"], p["psi"], p["sigma"], p["Dx"][:9],
+                p["Du"], p["resolve_every"],
+            )
+            for _ in range(n_runs)
+        ]  # fmt: skip
 
     @classmethod
     def design(cls, ctx) -> dict[str, np.ndarray]:
@@ -259,17 +266,24 @@ class RMPCLaw(ControlLaw):
             "resolve_every": int(r["resolve_every"]),
         }
 
-    def step(self, k: int, x: np.ndarray, ref: NominalOutput) -> tuple[np.ndarray, dict]:
-        """Command u (2,) of step k and a status with the LMI counters (no tube: level NaN)."""
-        u = self.rmpc.step(k, x[:9], ref)
-        r = self.rmpc
-        return u, {
-            "e": x - ref.x_r,
-            "level": math.nan,
-            "lmi_solves": r.n_solves,
-            "lmi_fallback": r.n_fallback,
-            "lmi_failed": r.n_failed,
-        }
+    def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
+        """Commands of step k for B runs, each with its own online LMI problem (no tube).
+
+        A run whose first solve fails fails alone (:class:`~fahv.errors.DesignError`).
+        """
+        B = x.shape[0]
+        u = np.zeros((B, 2))
+        lmi = np.zeros((B, 3), dtype=np.int64)
+        for b in range(B):
+            if not lanes.alive[b]:
+                continue
+            r = self.rmpc[b]
+            try:
+                u[b] = r.step(k, x[b, :9], ref.x_r[b, :9], ref.u_r[b])
+            except DesignError as exc:
+                lanes.fail(b, exc)
+            lmi[b] = (r.n_solves, r.n_fallback, r.n_failed)
+        return LawStep(u, np.asarray(x, float) - ref.x_r, np.full(B, math.nan), lmi)
 
 
 register_law(RMPCLaw)

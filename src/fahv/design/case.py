@@ -25,7 +25,7 @@ from typing import Any
 from fahv.config import Check, Field, Section, validate
 from fahv.config.spec import lookup
 from fahv.config.yamlio import load_yaml
-from fahv.control import LAWS, VARIANTS
+from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
 from fahv.errors import CaseError
 from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
 
@@ -72,7 +72,11 @@ def fault_section() -> Section:
 
 def case_spec() -> Section:
     """The whole case-file declaration, with the registered fault kinds and laws."""
-    law_sections = tuple(cls.section for _, cls in LAWS.items() if cls.section is not None)
+    law_sections = tuple(
+        cls.section
+        for _, cls in (*NOMINAL_SOURCES.items(), *LAWS.items())
+        if cls.section is not None
+    )
     return Section(
         "",
         (

@@ -211,7 +211,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     )
     if d["constant"] == "estimated":
         for v in c["variants"]:
-            if LAWS[VARIANTS[v].law].reference == "governor":
+            if not LAWS[VARIANTS[v].law].nominal.estimates_disturbance:
                 log(
                     f"note: variant {v} has no disturbance estimate; W leaves the constant "
                     "part of the parameter error to one, so its tube certificate does not "
@@ -253,8 +253,9 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     }
     arrays["x0"] = np.asarray(x_start[:9], float)  # plant initial state: trim at (h0, V0)
     ctx = DesignContext(c, veh, arrays, log)
-    for name in dict.fromkeys(VARIANTS[v].law for v in c["variants"]):
-        arrays.update(LAWS[name].design(ctx))
+    laws = [LAWS[name] for name in dict.fromkeys(VARIANTS[v].law for v in c["variants"])]
+    for part in (*dict.fromkeys(law.nominal for law in laws), *laws):  # nominal parts first
+        arrays.update(part.design(ctx))
     summary = {
         "code_version": __version__,
         "provenance": provenance(case, veh),

@@ -14,16 +14,9 @@ table (:func:`markdown_table`, checked by a test).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
-
-import numpy as np
 
 from fahv.errors import RunError
-
-#: Message definitions (``*.msg``), also the sources of the hsv_interfaces package.
-MSG_DIR = Path(__file__).resolve().parents[1] / "msg"
-#: ROS 2 package of the loop messages.
-PKG = "hsv_interfaces"
+from fahv.msg import PKG, VehicleState
 
 #: Loop topics -> ROS 2 message type, in the order of one control step.
 TOPICS = {
@@ -173,7 +166,7 @@ def markdown_table() -> str:
 
 
 #: Field names of VehicleState after k, t, in plant state order (eq. 1-3).
-STATE_FIELDS = ("h", "v", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
+STATE_FIELDS = VehicleState.STATE
 
 
 def n_steps_of(p: dict) -> int:
@@ -187,6 +180,3 @@ def clock_msg(k: int, Ts: float) -> dict:
     return {"clock": {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}}
 
 
-def state_vector(msg: dict) -> np.ndarray:
-    """Plant state x (9,) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s] from a VehicleState dict."""
-    return np.array([msg[f] for f in STATE_FIELDS], dtype=float)

@@ -22,8 +22,7 @@ import numpy as np
 
 from fahv.config import Field
 from fahv.config.spec import validate_flat
-from fahv.control import LAWS, VARIANTS
-from fahv.control.tube_mpc import MPC_SECTION
+from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
 from fahv.design.case import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, TS
 from fahv.errors import ParameterError
 from fahv.loop.graph import CONTROLLER_NODES
@@ -86,10 +85,9 @@ def specs() -> dict[str, tuple[Field, ...]]:
         "nominal_trajectory": (
             *COMMON,
             *_prefixed(COMMAND, "command."),
-            Field("mode", "str", "mpc: online tracking MPC (QP); governor: nominal system with "
-                  "reference governor (eq. 20/46); command: trim of the raw command, x_n = 0",
-                  choices=("mpc", "governor", "command")),
-            *_prefixed(MPC_SECTION.entries, "mpc."),
+            Field("nominal", "str", "nominal part of the law (registered nominal source)",
+                  choices=NOMINAL_SOURCES.names),
+            *(f for _, cls in NOMINAL_SOURCES.items() for f in cls.parameters),
             *_prefixed(NOTCH, "notch."),
             _matrix("u_lo", "tightened lower input limits (2,) [-, rad] (eq. 30)"),
             _matrix("u_hi", "tightened upper input limits (2,) [-, rad] (eq. 30)"),
@@ -249,8 +247,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         x0_meas[4] = 0.0  # the filter starts in steady state at q = 0 (trim)
     if n == 11:
         x0_meas = np.concatenate([x0_meas, np.zeros(2)])
-    tau = float(c["tube"]["tau"]) if law.reference != "command" else 1.0
-    mpc = c.get("mpc") or {f.name: f.default for f in MPC_SECTION.entries}
+    tau = float(c["tube"]["tau"]) if law.has_tube else 1.0
     fault = {"kind": f["kind"], "t_onset": float(f["t_onset"])}
     fault.update({p.name: f[p.name] for p in FAULTS[f["kind"]].parameters})
     controller = {**common, "law": law.name, "tau": tau, **mat("F"), **mat("N")}
@@ -269,9 +266,9 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         "nominal_trajectory": {
             **common,
             **{f"command.{k}": (val if k == "kind" else float(val)) for k, val in cmd.items()},
-            "mode": law.reference,
+            "nominal": law.nominal.name,
             "level_max": float(c["nominal"]["level_max"]),
-            **{f"mpc.{k}": _plain(v) for k, v in mpc.items()},
+            **{k: _plain(v) for k, v in law.nominal.node_values(a, c).items()},
             **{f"notch.{k}": val for k, val in {"enabled": enabled, **notch}.items()},
             **mat("u_lo"),
             **mat("u_hi"),

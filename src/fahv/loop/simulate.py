@@ -2,7 +2,7 @@
 
 One step k (t_k = k Ts), the order of the node graph (docs/architecture.md), each line one
 ``*Core`` of :mod:`fahv.loop.cores` built from that node's parameters
-(:func:`fahv.loop.params.node_parameters`)::
+(:func:`fahv.loop.params.node_parameters`), for B runs at once::
 
     state_k   = plant.state()                               (plant, + /clock)
     q'_k      = notch.on_state(state_k)                     (notch_filter)
@@ -11,9 +11,11 @@ One step k (t_k = k Ts), the order of the node graph (docs/architecture.md), eac
     u_f,k, f_k = fault.on_command(u_k)                      (fault_injector)
     plant.advance(u_f,k): integrate [t_k, t_k+1], saturated u_f,k held (ZOH).
 
-The messages of every step can be written to a run file (:class:`fahv.runs.bag.RunWriter`)
-with the same topics and types as the SIL recorder, and :func:`run_result` turns the
-messages of either kind of run into arrays.
+:func:`simulate` runs one run (B = 1) and can write every message to a run file
+(:class:`fahv.runs.bag.RunWriter`) with the topics and types of the SIL recorder; the
+campaign engine runs batches of runs through the same :class:`Loop`
+(:func:`fahv.loop.batch.simulate_batch`). :class:`History` turns the messages of
+either kind of run, simulated or recorded, into :class:`RunResult` arrays.
 """
 
 from __future__ import annotations
@@ -23,14 +25,25 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fahv.errors import RunError
+from fahv.lanes import Lanes
 from fahv.loop.cores import build_core
-from fahv.loop.graph import STATE_FIELDS, TOPICS, clock_msg, n_steps_of
+from fahv.loop.graph import TOPICS, clock_msg
 from fahv.loop.params import controller_node, node_parameters
+from fahv.msg import (
+    ControlCommand,
+    FaultStatus,
+    FilteredPitchRate,
+    NominalTrajectory,
+    TubeStatus,
+    VehicleState,
+)
 
 #: Counters of the RMPC's LMI solves in /hsv/tube_status (``lmi_<name>``).
 LMI_COUNTS = ("solves", "fallback", "failed")
 #: Counters of the nominal MPC's QP in /hsv/nominal (``qp_<name>``).
 QP_COUNTS = ("solves", "fallback", "terminal")
+#: Loop nodes in the order of one step (the controller node is added per run).
+LOOP_NODES = ("plant", "notch_filter", "nominal_trajectory", "fault_injector")
 
 
 @dataclass
@@ -87,14 +100,95 @@ class RunResult:
     qp_counts: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=int))
 
 
+class History:
+    """The arrays of :class:`RunResult` for B runs, filled one step at a time.
+
+    Parameters
+    ----------
+    n_steps : int
+        Steps N to hold.
+    n_runs : int
+        Runs B.
+    n : int
+        Design-model state dimension (length of x_n).
+    """
+
+    def __init__(self, n_steps: int, n_runs: int, n: int) -> None:
+        N, B = n_steps, n_runs
+        self.N, self.B, self.count = N, B, 0
+        self.t = np.empty(N)
+        self.a = {
+            "x": np.empty((N, B, 9)),
+            "q_f": np.empty((N, B)),
+            "x_r": np.empty((N, B, 9)),
+            "x_n": np.empty((N, B, n)),
+            "u": np.empty((N, B, 2)),
+            "u_applied": np.empty((N, B, 2)),
+            "h_c": np.empty((N, B)),
+            "V_c": np.empty((N, B)),
+            "h_g": np.empty((N, B)),
+            "V_g": np.empty((N, B)),
+            "tube_level": np.empty((N, B)),
+            "fault_active": np.empty((N, B), dtype=bool),
+        }
+        self.lmi = np.zeros((B, 3), dtype=int)
+        self.qp = np.zeros((B, 3), dtype=int)
+
+    def add(
+        self,
+        state: VehicleState,
+        qf: FilteredPitchRate,
+        nom: NominalTrajectory,
+        cmd: ControlCommand,
+        tube: TubeStatus,
+        act: ControlCommand,
+        fs: FaultStatus,
+    ) -> None:
+        """Store the messages of the next step (in step order).
+
+        Raises
+        ------
+        RunError
+            If more steps arrive than the history holds.
+        """
+        k = self.count
+        if k >= self.N:
+            raise RunError(f"run history holds {self.N} steps; step {k} is one too many")
+        a = self.a
+        self.t[k] = state.t
+        a["x"][k] = state.x()
+        a["q_f"][k] = qf.q_f
+        a["x_r"][k] = nom.x_r[:, :9]
+        a["x_n"][k] = nom.x_n
+        a["u"][k] = cmd.u()
+        a["u_applied"][k] = act.u()
+        a["h_c"][k], a["V_c"][k] = nom.h_c, nom.v_c
+        a["h_g"][k], a["V_g"][k] = nom.h_g, nom.v_g
+        a["tube_level"][k] = tube.level
+        a["fault_active"][k] = fs.active
+        self.lmi = np.stack([tube.lmi_solves, tube.lmi_fallback, tube.lmi_failed], axis=1)
+        self.qp = np.stack([nom.qp_solves, nom.qp_fallback, nom.qp_terminal], axis=1)
+        self.count += 1
+
+    def result(self, b: int, info: dict) -> RunResult:
+        """:class:`RunResult` of run ``b`` over the steps stored so far."""
+        n = self.count
+        col = {k: np.ascontiguousarray(v[:n, b]) for k, v in self.a.items()}
+        return RunResult(
+            t=self.t[:n].copy(), **col, lmi_counts=self.lmi[b].astype(int),
+            info=dict(info), qp_counts=self.qp[b].astype(int),
+        )  # fmt: skip
+
+
 def run_result(records: dict, info: dict | None = None) -> RunResult:
-    """Arrays of a run from its step-aligned messages.
+    """:class:`RunResult` of one recorded run from its step-aligned messages.
 
     Parameters
     ----------
     records : dict[str, list[dict]]
-        Per loop topic (:data:`fahv.loop.graph.TOPICS`), the message dicts of steps
-        0..N-1 in order (e.g. from :func:`fahv.runs.bag.step_arrays`).
+        Per loop topic (:data:`fahv.loop.graph.TOPICS`), the message fields (lane form,
+        :meth:`fahv.msg.LoopMessage.lane`) of steps 0..N-1 in order (e.g. from
+        :func:`fahv.runs.bag.step_arrays`).
     info : dict, optional
         Stored as ``RunResult.info``.
 
@@ -103,38 +197,20 @@ def run_result(records: dict, info: dict | None = None) -> RunResult:
     RunError
         If the topics do not hold the same number of steps.
     """
-    st, qf, nom = records["/hsv/state"], records["/hsv/q_filtered"], records["/hsv/nominal"]
-    cmd, act = records["/hsv/control_command"], records["/hsv/actuator_command"]
-    tube, fs = records["/hsv/tube_status"], records["/hsv/fault_status"]
-    lens = {len(v) for v in (st, qf, nom, cmd, act, tube, fs)}
+    classes = (VehicleState, FilteredPitchRate, NominalTrajectory, ControlCommand, TubeStatus,
+               ControlCommand, FaultStatus)  # fmt: skip
+    topics = ("/hsv/state", "/hsv/q_filtered", "/hsv/nominal", "/hsv/control_command",
+              "/hsv/tube_status", "/hsv/actuator_command", "/hsv/fault_status")  # fmt: skip
+    lens = {len(records[t]) for t in topics}
     if len(lens) != 1:
         raise RunError(f"run topics hold different numbers of steps: {sorted(lens)}")
-
-    def col(msgs, name):
-        return np.array([m[name] for m in msgs], dtype=float)
-
-    def mat(msgs, name, width=None):
-        rows = [np.asarray(m[name], float)[:width] for m in msgs]
-        return np.array(rows) if rows else np.zeros((0, width or 0))
-
-    return RunResult(
-        col(st, "t"),
-        np.stack([col(st, f) for f in STATE_FIELDS], axis=1) if st else np.zeros((0, 9)),
-        col(qf, "q_f"),
-        mat(nom, "x_r", 9),
-        mat(nom, "x_n"),
-        np.stack([col(cmd, "phi"), col(cmd, "delta_e")], axis=1) if cmd else np.zeros((0, 2)),
-        np.stack([col(act, "phi"), col(act, "delta_e")], axis=1) if act else np.zeros((0, 2)),
-        col(nom, "h_c"),
-        col(nom, "v_c"),
-        col(nom, "h_g"),
-        col(nom, "v_g"),
-        col(tube, "level"),
-        np.array([bool(m["active"]) for m in fs], dtype=bool),
-        np.array([tube[-1].get(f"lmi_{c}", 0) if tube else 0 for c in LMI_COUNTS], dtype=int),
-        dict(info or {}),
-        np.array([nom[-1].get(f"qp_{c}", 0) if nom else 0 for c in QP_COUNTS], dtype=int),
-    )
+    N = lens.pop()
+    nom = records["/hsv/nominal"]
+    n = len(nom[0]["x_n"]) if N else 9
+    hist = History(N, 1, n)
+    for k in range(N):
+        hist.add(*(cls.from_lanes([records[t][k]]) for cls, t in zip(classes, topics, strict=True)))
+    return hist.result(0, info or {})
 
 
 def run_parameters(design, variant: str | None, duration, overrides: dict | None) -> dict:
@@ -176,6 +252,53 @@ def run_parameters(design, variant: str | None, duration, overrides: dict | None
     return p
 
 
+class Loop:
+    """The closed loop of B runs: the five node cores called in the graph's order.
+
+    Parameters
+    ----------
+    runs : sequence of dict
+        Per run, its raw node parameters ``{node: {name: value}}`` (:func:`run_parameters`);
+        the runs share every design value and the controller node.
+    lanes : fahv.lanes.Lanes
+        The runs' alive flags (strict: a single run that raises).
+
+    Raises
+    ------
+    ParameterError
+        On a bad parameter of a run (names the node and the key).
+    """
+
+    def __init__(self, runs, lanes: Lanes) -> None:
+        ctrl = controller_node(runs[0])
+        self.lanes = lanes
+        self.plant, self.notch, self.nominal, self.fault, self.controller = (
+            build_core(node, [r[node] for r in runs], lanes)
+            for node in (*LOOP_NODES, ctrl)
+        )  # fmt: skip
+        self.Ts = runs[0]["plant"]["Ts"]
+        self.n_steps = self.plant.n_steps
+        self.n = self.controller.n
+        self.cmd: ControlCommand | None = None
+
+    def step(self, k: int) -> tuple:
+        """Messages of step k in topic order (:data:`fahv.loop.graph.TOPICS`)."""
+        state = self.plant.state()
+        qf = self.notch.on_state(state)
+        nom = self.nominal.on_state(state, self.cmd)
+        cmd, tube = self.controller.on_inputs(state, qf, nom)
+        act, fs = self.fault.on_command(cmd)
+        self.plant.advance(act)
+        self.cmd = cmd
+        return clock_msg(k, self.Ts), state, qf, nom, cmd, tube, act, fs
+
+
+def run_info(design, variant: str, Ts: float) -> dict:
+    """``RunResult.info`` of a run: variant, case name, Ts and the case's fault."""
+    case = design.case
+    return {"variant": variant, "case": case["name"], "Ts": Ts, "fault": case["fault"]}
+
+
 def simulate(
     design,
     variant: str | None = None,
@@ -184,7 +307,7 @@ def simulate(
     writer=None,
     overrides: dict | None = None,
 ) -> RunResult:
-    """Run one variant of a designed case in process.
+    """Run one variant of a designed case in process (one run, B = 1).
 
     Parameters
     ----------
@@ -196,7 +319,8 @@ def simulate(
     progress : callable, optional
         Iterable wrapper (tqdm).
     writer : fahv.runs.bag.RunWriter, optional
-        Receives every message of every step (the SIL graph's topics).
+        Receives every message of every step (the SIL graph's topics): ``write(topic,
+        k, msg)`` with a :class:`fahv.msg.LoopMessage` of one run (the Clock as fields).
     overrides : dict, optional
         Node parameter overrides ``{node: {name: value}}`` applied last (e.g.
         ``{"rmpc": {"resolve_every": 50}}``); validated like every parameter.
@@ -213,30 +337,16 @@ def simulate(
     ParameterError
         If the design gives a node an invalid parameter.
     """
-    case = design.case
-    variant = case["variants"][0] if variant is None else variant
+    variant = design.case["variants"][0] if variant is None else variant
     p = run_parameters(design, variant, duration, overrides)
-    ctrl_node = controller_node(p)
-    plant, notch, nominal, fault, ctrl = (
-        build_core(n, p[n])
-        for n in ("plant", "notch_filter", "nominal_trajectory", "fault_injector", ctrl_node)
-    )
-    Ts = p["plant"]["Ts"]
-    records = {t: [] for t in TOPICS}  # the graph order of one step
-    n_steps = n_steps_of(p["plant"])
-    steps = range(n_steps) if progress is None else progress(range(n_steps))
-    cmd = None
+    loop = Loop([p], Lanes(1, strict=True))
+    hist = History(loop.n_steps, 1, loop.n)
+    steps = range(loop.n_steps) if progress is None else progress(range(loop.n_steps))
     for k in steps:
-        state = plant.state()
-        qf = notch.on_state(state)
-        nom = nominal.on_state(state, cmd)
-        cmd, tube = ctrl.on_inputs(state, qf, nom)
-        act, fs = fault.on_command(cmd)
-        plant.advance(act)
-        msgs = (clock_msg(k, Ts), state, qf, nom, cmd, tube, act, fs)
-        for topic, msg in zip(records, msgs, strict=True):
-            records[topic].append(msg)
-            if writer is not None:
+        msgs = loop.step(k)
+        hist.add(*msgs[1:])
+        if writer is not None:
+            for topic, msg in zip(TOPICS, msgs, strict=True):
                 writer.write(topic, k, msg)
-    info = {"variant": variant, "case": case["name"], "Ts": Ts, "fault": case["fault"]}
-    return run_result(records, info)
+    return hist.result(0, run_info(design, variant, loop.Ts))
+

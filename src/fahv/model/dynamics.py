@@ -219,6 +219,10 @@ def ecm_rhs(x, u, vp: VehicleParams, A_q, B_q, C_q, D_q) -> np.ndarray:
     return np.concatenate([f[:4], [qp_dot], f[5:9], xq_dot])
 
 
+#: The functions of the CM right-hand side, in call order: compiled for the plant's batch
+#: kernel (:mod:`fahv.plant.rk4`), so keep them free of Python-only constructs.
+JITABLE = (density, forces, _rigid_kinematics, _flexible_accelerations, cm_rhs)
+
 MODEL_KINDS = ("dm", "cm", "ecm")
 
 

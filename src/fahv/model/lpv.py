@@ -6,7 +6,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fahv.model.tp_model import tp_weights
 
 
 @dataclass(frozen=True)
@@ -40,7 +39,32 @@ class PolytopicLPV:
                 f"vertices, but there are {R} vertex systems"
             )
 
+    def systems(self, h, V) -> tuple[np.ndarray, np.ndarray]:
+        """(A(p) (B, n, n), B(p) (B, n, m)) = sum_i tau_i(p) [A_i, B_i] at B points p.
+
+        Parameters
+        ----------
+        h, V : (B,) array_like
+            Scheduling variables [ft, ft/s], clipped to the weight grids.
+
+        Notes
+        -----
+        The weights are those of :func:`fahv.model.tp_model.tp_weights` (eq. 11); each
+        point's sum is one (1, R) @ (R, n n) product, so a point's matrices do not
+        depend on the other points.
+        """
+        h = np.atleast_1d(np.asarray(h, dtype=float))
+        V = np.atleast_1d(np.asarray(V, dtype=float))
+        R, n, _ = self.A.shape
+        m = self.B.shape[2]
+        wh = np.stack([np.interp(h, self.h_grid, self.W_h[:, a]) for a in range(self.W_h.shape[1])], 1)
+        wv = np.stack([np.interp(V, self.V_grid, self.W_V[:, b]) for b in range(self.W_V.shape[1])], 1)
+        w = (wh[:, :, None] * wv[:, None, :]).reshape(h.size, R)
+        A = np.matmul(w[:, None, :], self.A.reshape(R, -1))[:, 0, :].reshape(h.size, n, n)
+        B = np.matmul(w[:, None, :], self.B.reshape(R, -1))[:, 0, :].reshape(h.size, n, m)
+        return A, B
+
     def system(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
-        """(A(p) (n, n), B(p) (n, m)) = sum_i tau_i(p) [A_i, B_i] at p = (h, V)."""
-        w = tp_weights(h, V, self.h_grid, self.V_grid, self.W_h, self.W_V)
-        return np.tensordot(w, self.A, axes=1), np.tensordot(w, self.B, axes=1)
+        """(A(p) (n, n), B(p) (n, m)) at one point p = (h, V): :meth:`systems` of one point."""
+        A, B = self.systems([h], [V])
+        return A[0], B[0]

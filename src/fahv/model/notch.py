@@ -129,15 +129,21 @@ class NotchFilter:
 
 
 class DiscreteNotch:
-    """Per-sample notch filter q -> q' used by the simulator and the notch_filter node.
+    """Per-sample notch filter q -> q' of B runs at once (simulator, batch and node).
 
     Parameters
     ----------
     notch : NotchFilter
     Ts : float
         Sampling period [s].
-    q0 : float
-        Pitch rate [rad/s] at which the filter starts in steady state (0 at trim).
+    q0 : float or (B,) array_like
+        Pitch rate [rad/s] at which each filter starts in steady state (0 at trim);
+        its length gives the number of runs B (a float: B = 1).
+
+    Raises
+    ------
+    ValueError
+        If Ts is invalid for the notch frequency or q0 is not finite.
 
     Notes
     -----
@@ -149,34 +155,41 @@ class DiscreteNotch:
 
     Its transfer function is that of ``NotchFilter.discretize`` (python-control's
     ``c2d(..., "tustin", prewarp_frequency=omega_z)``, checked in the tests), and its
-    state ``x_q`` is in the coordinates of the continuous filter, i.e. the x_q1, x_q2
-    of the ECM state (eq. 43) that the adjustable Tube-MPC feeds back.
+    state ``x_q`` (B, 2) is in the coordinates of the continuous filter, i.e. the
+    x_q1, x_q2 of the ECM state (eq. 43) that the adjustable Tube-MPC feeds back.
+    Each run's products are the BLAS calls of one (2, 2) @ (2,) product, so a run's
+    output does not depend on B.
     """
 
-    def __init__(self, notch: NotchFilter, Ts: float, q0: float = 0.0) -> None:
+    def __init__(self, notch: NotchFilter, Ts: float, q0=0.0) -> None:
         notch.discretize(Ts)  # validates Ts against the notch frequency
         A, B, C, D = notch.ss()
         A, B, C = np.asarray(A, float), np.asarray(B, float).ravel(), np.asarray(C, float)
         alpha = math.tan(notch.omega_z * Ts / 2.0) / notch.omega_z
         M = np.linalg.inv(np.eye(2) - alpha * A)
-        self._Ad = M @ (np.eye(2) + alpha * A)
-        self._Bd = alpha * M @ B
+        self.A_d = M @ (np.eye(2) + alpha * A)
+        self.B_d = alpha * M @ B
         self.C_q, self.D_q, self.Ts = C.ravel(), float(D), Ts
-        if not math.isfinite(q0):
+        q0 = np.atleast_1d(np.asarray(q0, dtype=float))
+        if not np.all(np.isfinite(q0)):
             raise ValueError(f"notch filter initial pitch rate q0 must be finite, got {q0}")
-        self.x_q = -np.linalg.solve(A, B * q0)  # steady state of eq. (39) for q = q0
-        self._q_prev = float(q0)
+        # steady state of eq. (39) for q = q0, per run
+        self.x_q = np.stack([-np.linalg.solve(A, B * q) for q in q0])
+        self.q_prev = q0.copy()
 
-    def step(self, q: float) -> float:
-        """Filter one sample of the pitch rate q [rad/s]; returns q' [rad/s].
+    def step(self, q) -> np.ndarray:
+        """Filter one sample of the pitch rates q (B,) [rad/s]; returns q' (B,) [rad/s].
 
         Raises
         ------
         ValueError
-            If q is not finite (the filter state is left unchanged).
+            If a q is not finite (the filter state is left unchanged).
         """
-        if not math.isfinite(q):
+        q = np.asarray(q, dtype=float).reshape(-1)
+        if not np.all(np.isfinite(q)):
             raise ValueError(f"notch filter input q must be finite, got {q}")
-        self.x_q = self._Ad @ self.x_q + self._Bd * (self._q_prev + q)
-        self._q_prev = float(q)
-        return float(self.C_q @ self.x_q + self.D_q * q)
+        self.x_q = np.matmul(self.A_d, self.x_q[:, :, None])[..., 0] + self.B_d[None, :] * (
+            self.q_prev + q
+        )[:, None]
+        self.q_prev = q.copy()
+        return np.matmul(self.x_q[:, None, :], self.C_q)[:, 0] + self.D_q * q

@@ -234,13 +234,18 @@ class TrimMap:
         """State dimension of the map."""
         return self.x_r.shape[2]
 
-    def __call__(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
-        """(x_r (n,), u_r (2,)) at (h [ft], V [ft/s]), clipped to the grid."""
-        h = min(max(float(h), self.h_grid[0]), self.h_grid[-1])
-        V = min(max(float(V), self.V_grid[0]), self.V_grid[-1])
-        v = self._spline(np.array([h, V]))
+    def at(self, h, V) -> tuple[np.ndarray, np.ndarray]:
+        """(x_r (B, n), u_r (B, 2)) at B points (h [ft], V [ft/s]) (B,), clipped to the grid."""
+        h = np.minimum(np.maximum(np.atleast_1d(np.asarray(h, float)), self.h_grid[0]), self.h_grid[-1])
+        V = np.minimum(np.maximum(np.atleast_1d(np.asarray(V, float)), self.V_grid[0]), self.V_grid[-1])
+        v = self._spline(np.stack([h, V], axis=1))
         n = self.n_x
-        return v[:n], v[n:]
+        return v[:, :n], v[:, n:]
+
+    def __call__(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
+        """(x_r (n,), u_r (2,)) at one point (h [ft], V [ft/s]): :meth:`at` of one point."""
+        x, u = self.at(h, V)
+        return x[0], u[0]
 
 
 def trim_map(vehicle: Vehicle, n_h: int = 13, n_V: int = 13, model: str = "cm", notch=None):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from typing import ClassVar
 
 import numpy as np
@@ -23,21 +24,26 @@ from fahv.model.vehicle import DELTA_E
 
 
 class FaultKind:
-    """A fault of the actuators, active from ``t_onset`` on.
+    """An actuator fault of one or more runs (lanes), active from ``t_onset`` on.
 
-    Subclasses set :attr:`name` and :attr:`parameters` and implement :meth:`apply`.
+    A fault kind is a subclass that sets :attr:`name` and :attr:`parameters` and
+    implements :meth:`apply` over lanes. An instance describes the fault of n >= 1
+    runs of that kind: ``t_onset`` and every parameter are (n,) arrays (a scalar
+    makes n = 1); :meth:`stack` joins the faults of several runs into one instance.
+    The fault injector of a single run (B = 1) and of a campaign batch call the same
+    :meth:`apply`, so the two paths agree by construction.
 
     Parameters
     ----------
-    t_onset : float
+    t_onset : float or (n,) array_like
         Onset time [s].
     **params
-        Values of :attr:`parameters` (validated by the caller).
+        Values of :attr:`parameters` (float or (n,) array_like; validated by the caller).
 
     Raises
     ------
     ConfigError
-        If a parameter of the kind is missing.
+        If a parameter of the kind is missing, or the parameters have different lengths.
     """
 
     #: Registry name (``fault.kind`` of a case file).
@@ -45,49 +51,71 @@ class FaultKind:
     #: Parameters the kind takes, beyond ``kind`` and ``t_onset``.
     parameters: ClassVar[tuple[Field, ...]] = ()
 
-    def __init__(self, t_onset: float = math.inf, **params) -> None:
-        self.t_onset = float(t_onset)
+    def __init__(self, t_onset=math.inf, **params) -> None:
+        self.t_onset = np.atleast_1d(np.asarray(t_onset, dtype=float))
         missing = [f.name for f in self.parameters if f.name not in params]
         if missing:
             raise ConfigError(f"fault kind '{self.name}' needs parameter(s) {missing}")
-        self.params = {f.name: params[f.name] for f in self.parameters}
+        self.params = {
+            f.name: np.atleast_1d(np.asarray(params[f.name], dtype=float)) for f in self.parameters
+        }
+        n = self.t_onset.size
+        bad = [k for k, v in self.params.items() if v.size != n]
+        if bad:
+            raise ConfigError(f"fault kind '{self.name}': parameters {bad} do not have {n} lanes")
+
+    @property
+    def lanes(self) -> int:
+        """Number of runs n the instance describes."""
+        return self.t_onset.size
+
+    @classmethod
+    def stack(cls, faults: Sequence[FaultKind]) -> FaultKind:
+        """One instance of the runs of ``faults`` (all of this kind), in order."""
+        t_onset = np.concatenate([f.t_onset for f in faults])
+        params = {p.name: np.concatenate([f.params[p.name] for f in faults]) for p in cls.parameters}
+        return cls(t_onset, **params)
 
     @property
     def kind(self) -> str:
         """Registry name of the fault."""
         return self.name
 
-    def active(self, t: float) -> bool:
-        """True once t >= t_onset [s] (never for ``none``)."""
-        return self.name != "none" and t >= self.t_onset - 1e-12
+    def active(self, t: float) -> np.ndarray:
+        """(n,) bool: True once t >= t_onset [s] (never for ``none``)."""
+        if self.name == "none":
+            return np.zeros(self.lanes, dtype=bool)
+        return t >= self.t_onset - 1e-12
 
     def design_effectiveness(self) -> float:
         """Elevator effectiveness rho_f the tube design covers (eq. 15-16); 1 if none."""
         return 1.0
 
     @property
-    def rho_f(self) -> float:
-        """Elevator effectiveness reported on /hsv/fault_status (1 unless a loss)."""
-        return 1.0
+    def rho_f(self) -> np.ndarray:
+        """(n,) elevator effectiveness reported on /hsv/fault_status (1 unless a loss)."""
+        return np.ones(self.lanes)
 
     @property
-    def bias(self) -> float:
-        """Elevator bias reported on /hsv/fault_status [rad] (0 unless a bias)."""
-        return 0.0
+    def bias(self) -> np.ndarray:
+        """(n,) elevator bias reported on /hsv/fault_status [rad] (0 unless a bias)."""
+        return np.zeros(self.lanes)
 
-    def apply(self, u: np.ndarray, held: np.ndarray | None) -> np.ndarray:
-        """Input at the actuators while active.
+    def apply(self, u: np.ndarray, held: np.ndarray | None, lanes: np.ndarray) -> np.ndarray:
+        """Inputs at the actuators of the active runs ``lanes``.
 
         Parameters
         ----------
-        u : (2,) ndarray
-            Commanded [Phi, delta_e rad] (a copy the method may change).
-        held : (2,) ndarray or None
-            Input applied at the previous step (None at step 0).
+        u : (m, 2) ndarray
+            Commanded [Phi, delta_e rad] of those runs (a copy the method may change).
+        held : (m, 2) ndarray or None
+            Inputs applied at the previous step (None at step 0).
+        lanes : (m,) int ndarray
+            Which of this instance's runs the rows are (for parameters and memory).
 
         Returns
         -------
-        (2,) ndarray
+        (m, 2) ndarray
         """
         return u
 
@@ -128,17 +156,17 @@ class LossOfEffectiveness(FaultKind):
     parameters = (RHO_F,)
 
     def design_effectiveness(self) -> float:
-        """rho_f: the tube's fault vertices are B_i with the elevator column times rho_f."""
-        return float(self.params["rho_f"])
+        """rho_f of the first run: the tube's fault vertices scale the elevator column."""
+        return float(self.params["rho_f"][0])
 
     @property
-    def rho_f(self) -> float:
-        """The effectiveness rho_f."""
-        return float(self.params["rho_f"])
+    def rho_f(self) -> np.ndarray:
+        """The effectiveness rho_f (n,)."""
+        return self.params["rho_f"]
 
-    def apply(self, u, held):
+    def apply(self, u, held, lanes):
         """Scale the elevator deflection by rho_f."""
-        u[DELTA_E] = self.params["rho_f"] * u[DELTA_E]
+        u[:, DELTA_E] = self.params["rho_f"][lanes] * u[:, DELTA_E]
         return u
 
 
@@ -150,13 +178,13 @@ class Bias(FaultKind):
     parameters = (Field("bias_deg", "float", "elevator bias", unit="deg", lo=-30.0, hi=30.0),)
 
     @property
-    def bias(self) -> float:
-        """The bias [rad]."""
-        return math.radians(self.params["bias_deg"])
+    def bias(self) -> np.ndarray:
+        """The bias (n,) [rad]."""
+        return np.array([math.radians(b) for b in self.params["bias_deg"]])
 
-    def apply(self, u, held):
+    def apply(self, u, held, lanes):
         """Add the bias to the elevator deflection."""
-        u[DELTA_E] += self.bias
+        u[:, DELTA_E] += self.bias[lanes]
         return u
 
 
@@ -166,15 +194,19 @@ class Stuck(FaultKind):
 
     name = "stuck"
 
-    def __init__(self, t_onset: float = math.inf, **params) -> None:
+    def __init__(self, t_onset=math.inf, **params) -> None:
         super().__init__(t_onset, **params)
-        self._stuck: float | None = None
+        self._stuck = np.full(self.lanes, np.nan)
+        self._set = np.zeros(self.lanes, dtype=bool)
 
-    def apply(self, u, held):
+    def apply(self, u, held, lanes):
         """Hold the elevator at its value at onset."""
-        if self._stuck is None:
-            self._stuck = u[DELTA_E] if held is None else held[DELTA_E]
-        u[DELTA_E] = self._stuck
+        new = ~self._set[lanes]
+        if new.any():
+            src = u if held is None else held
+            self._stuck[lanes[new]] = src[new, DELTA_E]
+            self._set[lanes[new]] = True
+        u[:, DELTA_E] = self._stuck[lanes]
         return u
 
 
@@ -184,7 +216,7 @@ class Dropout(FaultKind):
 
     name = "dropout"
 
-    def apply(self, u, held):
+    def apply(self, u, held, lanes):
         """The previous applied input (the command itself at step 0)."""
         return u if held is None else held.copy()
 
@@ -215,7 +247,9 @@ def fault_fields() -> list[Field]:
 
 
 def make_fault(kind: str, t_onset: float, params: dict) -> FaultKind:
-    """The fault of a registered kind with the parameters it takes (others ignored).
+    """The fault of one run, of a registered kind, with the parameters it takes.
+
+    Other entries of ``params`` are ignored.
 
     Raises
     ------
@@ -227,16 +261,70 @@ def make_fault(kind: str, t_onset: float, params: dict) -> FaultKind:
 
 
 class FaultInjector:
-    """Stateful application of a :class:`FaultKind` to commands u (2,)."""
+    """Stateful application of the faults of B runs to their commands u (B, 2).
 
-    def __init__(self, fault: FaultKind) -> None:
-        self.fault = fault
+    Parameters
+    ----------
+    faults : FaultKind or sequence of FaultKind
+        The fault of each run (one-lane instances, any kinds), in run order.
+    """
+
+    def __init__(self, faults) -> None:
+        faults = [faults] if isinstance(faults, FaultKind) else list(faults)
+        self.n = sum(f.lanes for f in faults)
+        kinds: dict[type, list] = {}
+        lane = 0
+        for f in faults:
+            kinds.setdefault(type(f), []).append((f, np.arange(lane, lane + f.lanes)))
+            lane += f.lanes
+        #: (runs (n,) int, fault of those runs) per kind
+        self.groups = [
+            (np.concatenate([ix for _, ix in fl]), cls.stack([f for f, _ in fl]))
+            for cls, fl in kinds.items()
+        ]
+        self.kind = [""] * self.n
+        for ix, f in self.groups:
+            for i in ix:
+                self.kind[i] = f.kind
         self._held: np.ndarray | None = None
 
+    def _per_run(self, attr: str) -> np.ndarray:
+        out = np.empty(self.n)
+        for ix, f in self.groups:
+            out[ix] = getattr(f, attr)
+        return out
+
+    @property
+    def t_onset(self) -> np.ndarray:
+        """Onset time of each run (B,) [s]."""
+        return self._per_run("t_onset")
+
+    @property
+    def rho_f(self) -> np.ndarray:
+        """Elevator effectiveness of each run (B,)."""
+        return self._per_run("rho_f")
+
+    @property
+    def bias(self) -> np.ndarray:
+        """Elevator bias of each run (B,) [rad]."""
+        return self._per_run("bias")
+
+    def active(self, t: float) -> np.ndarray:
+        """(B,) bool: the fault of each run is active at time t [s]."""
+        out = np.zeros(self.n, dtype=bool)
+        for ix, f in self.groups:
+            out[ix] = f.active(t)
+        return out
+
     def apply(self, t: float, u: np.ndarray) -> np.ndarray:
-        """Input reaching the actuators at time t [s] for the command u [Phi, delta_e rad]."""
-        out = np.array(u, dtype=float)
-        if self.fault.active(t):
-            out = self.fault.apply(out, self._held)
+        """Inputs (B, 2) reaching the actuators at time t [s] for the commands u (B, 2)."""
+        out = np.array(u, dtype=float).reshape(self.n, 2)
+        for ix, f in self.groups:
+            act = f.active(t)
+            if act.any():
+                lanes = np.flatnonzero(act)
+                rows = ix[lanes]
+                held = None if self._held is None else self._held[rows]
+                out[rows] = f.apply(out[rows], held, lanes)
         self._held = out.copy()
         return out

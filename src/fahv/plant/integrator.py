@@ -1,26 +1,32 @@
-"""Plant: fixed-step integration of the nonlinear CM, actuator saturation, fault models.
+"""Plant: the nonlinear CM (eq. 1-3) of B vehicles, ZOH input, saturation, fixed-step RK4.
 
-The same classes are used by the in-process simulator and the plant / fault_injector
-nodes, so both produce the same numbers.
+One class serves every path: the plant node (B = 1), ``fahv simulate`` (B = 1) and a
+campaign batch (B runs with their own parameters); the integration is the compiled
+kernel :func:`fahv.plant.rk4.rk4_cm` (imported when the first plant is built, so that
+the other nodes of the graph start without numba).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
-from fahv.model.dynamics import cm_rhs
 from fahv.model.vehicle import InputLimits, VehicleParams
 
 
 def rk4_step(f, x: np.ndarray, u: np.ndarray, Ts: float, n_sub: int) -> np.ndarray:
     """Integrate x_dot = f(x, u) over Ts with n_sub classical RK4 steps, u held (ZOH).
 
+    The generic numpy integrator of the offline design (any model function); the
+    closed loop uses the compiled :func:`fahv.plant.rk4.rk4_cm`.
+
     Parameters
     ----------
     f : callable
         f(x, u) -> x_dot.
-    x : (n,) ndarray
-    u : (m,) ndarray
+    x : (n,) or (n, B) ndarray
+    u : (m,) or (m, B) ndarray
     Ts : float
         Interval [s].
     n_sub : int
@@ -28,7 +34,8 @@ def rk4_step(f, x: np.ndarray, u: np.ndarray, Ts: float, n_sub: int) -> np.ndarr
 
     Returns
     -------
-    (n,) ndarray
+    ndarray
+        Shape of x.
     """
     dt = Ts / n_sub
     for _ in range(n_sub):
@@ -41,42 +48,59 @@ def rk4_step(f, x: np.ndarray, u: np.ndarray, Ts: float, n_sub: int) -> np.ndarr
 
 
 def saturate(u: np.ndarray, limits: InputLimits) -> np.ndarray:
-    """Clip [Phi, delta_e] to the actuator limits of sec. 5.1."""
+    """Clip [Phi, delta_e] ((2,) or (B, 2)) to the actuator limits of sec. 5.1."""
     return np.clip(u, limits.u_min, limits.u_max)
 
 
 class Plant:
-    """Nonlinear CM (eq. 1-3) with ZOH input, saturation and fixed-step RK4.
+    """B vehicles of the nonlinear CM (eq. 1-3) with ZOH input, saturation and RK4.
 
     Parameters
     ----------
-    params : VehicleParams
-        True (possibly perturbed) parameters.
+    params : VehicleParams or sequence of B VehicleParams
+        True (possibly perturbed) parameters of each vehicle.
     limits : InputLimits
-    x0 : (9,) array_like
-        Initial state.
+        Actuator limits (shared).
+    x0 : (9,) or (B, 9) array_like
+        Initial states.
     Ts : float
         Control period [s].
     n_sub : int
         RK4 steps per period; dt = Ts / n_sub must resolve the flexible modes
         (omega_2 dt well below 1).
+
+    Raises
+    ------
+    ValueError
+        If x0 does not have 9 finite values per vehicle, or the counts differ.
     """
 
-    def __init__(
-        self, params: VehicleParams, limits: InputLimits, x0, Ts: float, n_sub: int
-    ) -> None:
-        self.params, self.limits, self.Ts, self.n_sub = params, limits, Ts, n_sub
-        self.x = np.asarray(x0, float).copy()
-        if self.x.shape != (9,) or not np.all(np.isfinite(self.x)):
-            raise ValueError(f"plant initial state must be 9 finite values, got {x0!r}")
+    def __init__(self, params, limits: InputLimits, x0, Ts: float, n_sub: int) -> None:
+        from fahv.plant import rk4
 
-    def _f(self, x, u):
-        return cm_rhs(x, u, self.params)
+        plist = [params] if isinstance(params, VehicleParams) else list(params)
+        x = np.array(x0, dtype=float, ndmin=2)
+        if x.shape != (len(plist), 9) or not np.all(np.isfinite(x)):
+            raise ValueError(
+                f"plant initial state must be 9 finite values per vehicle ({len(plist)}), "
+                f"got shape {np.shape(x0)}"
+            )
+        self._kernel = rk4.rk4_cm
+        self.records = rk4.params_records(plist)
+        self.params: Sequence[VehicleParams] = plist
+        self.limits, self.Ts, self.n_sub = limits, float(Ts), int(n_sub)
+        self.x = x
 
     def step(self, u_applied: np.ndarray) -> np.ndarray:
-        """Advance one period with the saturated input; returns the new state (9,)."""
-        u = saturate(np.asarray(u_applied, float), self.limits)
+        """Advance one period with the saturated inputs u_applied (B, 2); returns x (B, 9).
+
+        Raises
+        ------
+        ValueError
+            If an input is not finite (the state is left unchanged).
+        """
+        u = saturate(np.asarray(u_applied, float).reshape(-1, 2), self.limits)
         if not np.all(np.isfinite(u)):
-            raise ValueError(f"plant input must be finite, got {u_applied!r}")
-        self.x = rk4_step(self._f, self.x, u, self.Ts, self.n_sub)
+            raise ValueError(f"plant input must be finite, got {np.asarray(u_applied)!r}")
+        self.x = self._kernel(self.x, np.ascontiguousarray(u), self.records, self.Ts, self.n_sub)
         return self.x

@@ -42,7 +42,8 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from fahv.errors import RunError
-from fahv.loop.graph import MSG_DIR, PKG, QOS_DEPTH, TOPICS
+from fahv.loop.graph import QOS_DEPTH, TOPICS
+from fahv.msg import MSG_DIR, PKG, LoopMessage
 from fahv.loop.simulate import RunResult, run_result
 
 _INF = QosTime(2147483647, 4294967295)
@@ -200,14 +201,23 @@ def _to_ros(ts, msgtype: str, fields: dict):
     return cls(**kwargs)
 
 
-def encode(topic: str, fields: dict) -> bytes:
-    """CDR bytes of a loop-topic message given as a dict.
+def encode(topic: str, msg) -> bytes:
+    """CDR bytes of a loop-topic message: the one conversion to the wire format.
+
+    Parameters
+    ----------
+    topic : str
+        A loop topic (:data:`fahv.loop.graph.TOPICS`).
+    msg : fahv.msg.LoopMessage or dict
+        A message of one run (its lane 0 is written), or the fields as a dict (the
+        lane form of :meth:`fahv.msg.LoopMessage.lane`, or the Clock).
 
     Raises
     ------
     KeyError
         If a field is missing.
     """
+    fields = msg.lane(0) if isinstance(msg, LoopMessage) else msg
     ts = typestore()
     msgtype = TOPICS[topic]
     return bytes(ts.serialize_cdr(_to_ros(ts, msgtype, fields), msgtype))

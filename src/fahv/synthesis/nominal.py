@@ -280,3 +280,58 @@ def design_nominal(A, B, d, u_max, Dx, Du, lam: float = DEFAULT_LAM) -> NominalD
     )
     verify_nominal(A, B, nd, Dx, Du)
     return nd
+
+
+def verify_terminal(A, B, K, Q, u_lo, u_hi, u_r_path, lam: float = 1.0) -> dict:
+    """Re-check the terminal ingredients of the online nominal MPC numerically.
+
+    E(Q) invariant under u = K x for every vertex: Q^-1/2 (A_i + B_i K) Q^1/2 has
+    spectral norm <= lam (<= 1); the inscribed box of the QP lies inside E(Q); and at
+    every trim input of ``u_r_path`` the steady input with the full set
+    (u_r +/- sqrt(K_j Q K_j')) fits the tightened limits, or at least the trim does
+    (alpha = 0).
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+    K : (m, n) ndarray
+    Q : (n, n) ndarray
+    u_lo, u_hi : (m,) ndarray
+        Tightened absolute limits.
+    u_r_path : (P, m) ndarray
+        Trim inputs along the case's path (start, end, ...).
+    lam : float
+        Required contraction bound.
+
+    Returns
+    -------
+    dict
+        ``invariance`` (largest norm over vertices), ``alpha_max`` (largest alpha
+        admissible at every path point, in [0, 1]).
+
+    Raises
+    ------
+    DesignError
+        If E(Q) is not invariant for a vertex, or a trim input of the path lies
+        outside the tightened limits (the set point cannot be held).
+    """
+    L = np.linalg.cholesky(Q)
+    L_inv = np.linalg.inv(L)
+    norms = np.array([np.linalg.norm(L_inv @ (A[i] + B[i] @ K) @ L, 2) for i in range(len(A))])
+    if np.any(norms > lam * (1 + 1e-9)):
+        i = int(np.argmax(norms))
+        raise DesignError(
+            f"certificate failed: terminal set E(Q) is not invariant under K at vertex {i} "
+            f"(||Q^-1/2 (A_i + B_i K) Q^1/2|| = {norms[i]:.6f} > {lam})"
+        )
+    k_max = np.sqrt(np.einsum("ij,jk,ik->i", K, Q, K))
+    u = np.atleast_2d(u_r_path)
+    if np.any(u < u_lo) or np.any(u > u_hi):
+        raise DesignError(
+            "certificate failed: a trim input of the case's path lies outside the tightened "
+            f"input set [{u_lo}, {u_hi}]: {u.tolist()}"
+        )
+    room = np.minimum(u - u_lo, u_hi - u).min(axis=0)
+    alpha_max = float(np.clip(np.min(room / k_max), 0.0, 1.0))
+    return {"invariance": float(norms.max()), "alpha_max": alpha_max}
