@@ -6,17 +6,8 @@ import numpy as np
 import pytest
 
 from fahv.errors import ParameterError, RunError
-from fahv.loop import batch as batch_mod
-from fahv.loop.batch import (
-    MPC_SOURCE_HASH,
-    _cores,
-    mpc_source_hash,
-    nominal_mode,
-    not_batchable,
-    run_parameters,
-    simulate_batch,
-)
-from fahv.loop.simulate import simulate
+from fahv.loop.batch import shared_signature, simulate_batch
+from fahv.loop.simulate import run_parameters, simulate
 
 FIELDS = ("t", "x", "q_f", "x_r", "x_n", "u", "u_applied", "h_c", "V_c", "h_g", "V_g",
           "tube_level", "fault_active", "lmi_counts", "qp_counts")  # fmt: skip
@@ -48,16 +39,12 @@ def _assert_same(a, b):
     assert a.info == b.info
 
 
-def test_the_mirrored_nominal_mpc_is_the_current_one():
-    assert mpc_source_hash() == MPC_SOURCE_HASH, (
-        "fahv.control.nominal_mpc.TrackingNominal changed: check loop.batch._MPCLanes against "
-        "it (this file's tests) and set MPC_SOURCE_HASH to the new hash"
-    )
-
-
-@pytest.mark.parametrize(("variant", "mode"), [("tube_mpc", "mpc"), ("tube_mpc_paper", "governor")])
-def test_nominal_modes(design, variant, mode):
-    assert nominal_mode(_cores(run_parameters(design, variant, 0.1, None), {})) == mode
+def test_runs_share_a_batch_only_when_only_their_own_values_differ(design):
+    base = run_parameters(design, "tube_mpc", 1.0, None)
+    own = run_parameters(design, "tube_mpc", 1.0, _overrides(design)[1])
+    assert shared_signature(base) == shared_signature(own)  # parameters, fault, command
+    other = run_parameters(design, "tube_mpc", 1.0, {"tube_mpc": {"tau": 0.9}})
+    assert shared_signature(base) != shared_signature(other)
 
 
 @pytest.mark.parametrize("variant", ["tube_mpc", "tube_mpc_paper"])
@@ -78,14 +65,6 @@ def test_result_does_not_depend_on_the_batch(design):
     alone = simulate_batch(design, "tube_mpc", ovs[2:3], DURATION)[0]
     together = simulate_batch(design, "tube_mpc", ovs[::-1], DURATION)[2]
     _assert_same(alone, together)
-
-
-def test_generic_per_run_nominal_path_equals_simulate(design, monkeypatch):
-    monkeypatch.setattr(batch_mod, "MPC_SOURCE_HASH", "changed")
-    assert nominal_mode(_cores(run_parameters(design, "tube_mpc", 0.1, None), {})) == "per_run"
-    ovs = _overrides(design)[:3]
-    for ov, res in zip(ovs, simulate_batch(design, "tube_mpc", ovs, 2.0), strict=True):
-        _assert_same(simulate(design, "tube_mpc", 2.0, overrides=ov), res)
 
 
 @pytest.mark.parametrize("variant", ["tube_mpc_no_notch", "tube_mpc_notch2"])
@@ -110,14 +89,12 @@ def test_failing_runs_are_reported_and_the_others_complete(design):
     _assert_same(res[0], res[3])
 
 
-def test_rmpc_runs_through_the_per_run_fallback(design):
-    cores = _cores(run_parameters(design, "rmpc", 0.1, None), {})
-    assert "has no batched kernel" in not_batchable(cores)
-    ov = {"fault_injector": {"kind": "bias", "t_onset": 0.0, "bias_deg": 1.0}}
-    res = simulate_batch(design, "rmpc", [ov], 0.1)[0]
-    _assert_same(simulate(design, "rmpc", 0.1, overrides=ov), res)
-    refused = simulate_batch(design, "rmpc", [ov], 0.1, fallback=False)[0]
-    assert isinstance(refused, RunError) and "cannot be batched" in str(refused)
+def test_rmpc_runs_batched_and_equal(design):
+    ovs = [{"fault_injector": {"kind": "bias", "t_onset": 0.0, "bias_deg": 1.0}}, None]
+    res = simulate_batch(design, "rmpc", ovs, 0.1)
+    for ov, r in zip(ovs, res, strict=True):
+        _assert_same(simulate(design, "rmpc", 0.1, overrides=ov), r)
+    assert res[0].lmi_counts[0] == 1  # one online LMI solve per run at step 0
 
 
 @pytest.fixture(scope="module")
@@ -143,9 +120,7 @@ def test_case2_eleven_state_law_batched_and_equal(design_case2):
     assert d.n_x == 11
     ovs = [{"fault_injector": {"kind": k, "t_onset": 0.5, "rho_f": 0.8, "bias_deg": 1.0}}
            for k in ("loss_of_effectiveness", "bias")]  # fmt: skip
-    # the ECM's estimator measures in ECM coordinates (a replica of the notch filter),
-    # which the batched mirror does not reproduce: each run's own nominal object is used
-    assert nominal_mode(_cores(run_parameters(d, "tube_mpc", 0.1, ovs[0]), {})) == "per_run"
+    # the ECM's estimator measures in ECM coordinates (a replica of the notch filter)
     for ov, res in zip(ovs, simulate_batch(d, "tube_mpc", ovs, 1.5), strict=True):
         _assert_same(simulate(d, "tube_mpc", 1.5, overrides=ov), res)
         assert res.x_n.shape == (75, 11)

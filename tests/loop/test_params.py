@@ -9,6 +9,7 @@ import pytest
 from fahv.errors import ParameterError
 from fahv.loop.cores import build_core
 from fahv.loop.params import node_parameters, validate
+from fahv.msg import VehicleState
 
 
 @pytest.fixture(scope="module")
@@ -53,17 +54,13 @@ def test_nan_in_a_matrix_is_rejected(params):
 def test_variants(design):
     no_notch = node_parameters(design, "tube_mpc_no_notch")
     assert no_notch["notch_filter"]["enabled"] is False
-    assert (
-        build_core("notch_filter", no_notch["notch_filter"]).on_state(
-            {"k": 0, "t": 0.0, "q": 0.25}
-        )["q_f"]
-        == 0.25
-    )
+    state = VehicleState.of(0, 0.0, np.array([[85500.0, 7900.0, 0.02, 0.02, 0.25, 0, 0, 0, 0]]))
+    assert build_core("notch_filter", no_notch["notch_filter"]).on_state(state).q_f[0] == 0.25
     notch2 = node_parameters(design, "tube_mpc_notch2")["notch_filter"]
     assert notch2["omega_z"] == pytest.approx(design.arrays["omega_flex"][1], rel=1e-12)
     rmpc = node_parameters(design, "rmpc")
     assert "rmpc" in rmpc and "tube_mpc" not in rmpc
-    assert rmpc["nominal_trajectory"]["mode"] == "command"
+    assert rmpc["nominal_trajectory"]["nominal"] == "command"
     assert np.asarray(rmpc["rmpc"]["rmpc_A"]).size == 20 * 81
     with pytest.raises(ParameterError, match="variant 'pid'"):
         node_parameters(design, "pid")

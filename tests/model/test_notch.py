@@ -54,7 +54,20 @@ def test_discrete_notch_matches_python_control_tustin():
     ref = nf.discretize(Ts)
     f = DiscreteNotch(nf, Ts)
     # impulse response of both, 200 samples
-    y = [f.step(1.0 if k == 0 else 0.0) for k in range(200)]
+    y = [f.step(1.0 if k == 0 else 0.0)[0] for k in range(200)]
     _, y_ref = control.impulse_response(ref, T=np.arange(200) * Ts)
     # python-control scales a discrete impulse response by 1/Ts (unit-area impulse)
     np.testing.assert_allclose(y, np.ravel(y_ref) * Ts, atol=1e-9)
+
+
+def test_a_batch_of_filters_gives_each_run_the_bits_of_a_single_filter():
+    nf = NotchFilter(19.05, 0.02, 19.05, 0.5)
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(50, 3))
+    batch = DiscreteNotch(nf, 0.02, [0.0, 0.01, -0.02])
+    singles = [DiscreteNotch(nf, 0.02, q0) for q0 in (0.0, 0.01, -0.02)]
+    for row in q:
+        yb = batch.step(row)
+        ys = [f.step(v)[0] for f, v in zip(singles, row, strict=True)]
+        np.testing.assert_array_equal(yb, ys)
+    np.testing.assert_array_equal(batch.x_q[1], singles[1].x_q[0])

@@ -66,19 +66,38 @@ def test_perturb_box(vehicle):
 
 
 def test_fault_models():
-    u = np.array([0.3, 0.2])
+    u = np.array([[0.3, 0.2]])
     loe = FaultInjector(make_fault("loss_of_effectiveness", 100.0, {"rho_f": 0.9}))
     np.testing.assert_allclose(loe.apply(99.98, u), u)
-    np.testing.assert_allclose(loe.apply(100.0, u), [0.3, 0.18])  # whole deflection scaled
+    np.testing.assert_allclose(loe.apply(100.0, u), [[0.3, 0.18]])  # whole deflection scaled
     stuck = FaultInjector(make_fault("stuck", 1.0, {}))
-    stuck.apply(0.5, np.array([0.3, 0.1]))
-    assert stuck.apply(1.0, np.array([0.3, 0.25]))[1] == pytest.approx(0.1)
-    assert stuck.apply(2.0, np.array([0.3, -0.2]))[1] == pytest.approx(0.1)
+    stuck.apply(0.5, np.array([[0.3, 0.1]]))
+    assert stuck.apply(1.0, np.array([[0.3, 0.25]]))[0, 1] == pytest.approx(0.1)
+    assert stuck.apply(2.0, np.array([[0.3, -0.2]]))[0, 1] == pytest.approx(0.1)
     bias = FaultInjector(make_fault("bias", 0.0, {"bias_deg": math.degrees(0.01)}))
-    assert bias.apply(0.0, u)[1] == pytest.approx(0.21)
+    assert bias.apply(0.0, u)[0, 1] == pytest.approx(0.21)
     drop = FaultInjector(make_fault("dropout", 1.0, {}))
-    drop.apply(0.9, np.array([0.3, 0.1]))
-    np.testing.assert_allclose(drop.apply(1.0, np.array([0.5, 0.3])), [0.3, 0.1])
+    drop.apply(0.9, np.array([[0.3, 0.1]]))
+    np.testing.assert_allclose(drop.apply(1.0, np.array([[0.5, 0.3]])), [[0.3, 0.1]])
+
+
+def test_fault_injector_of_mixed_kinds_acts_per_run():
+    faults = [
+        make_fault("stuck", 1.0, {}),
+        make_fault("loss_of_effectiveness", 0.0, {"rho_f": 0.5}),
+        make_fault("none", 0.0, {}),
+        make_fault("stuck", 2.0, {}),
+    ]
+    inj = FaultInjector(faults)
+    assert inj.kind == ["stuck", "loss_of_effectiveness", "none", "stuck"]
+    u = np.tile([0.3, 0.1], (4, 1))
+    np.testing.assert_array_equal(inj.apply(0.5, u)[:, 1], [0.1, 0.05, 0.1, 0.1])
+    u[:, 1] = 0.2
+    np.testing.assert_array_equal(inj.apply(1.0, u)[:, 1], [0.1, 0.1, 0.2, 0.2])  # run 0 held
+    u[:, 1] = 0.3
+    np.testing.assert_array_equal(inj.apply(2.0, u)[:, 1], [0.1, 0.15, 0.3, 0.2])  # run 3 too
+    np.testing.assert_array_equal(inj.active(1.5), [True, True, False, False])
+    np.testing.assert_array_equal(inj.rho_f, [1.0, 0.5, 1.0, 1.0])
     with pytest.raises(ConfigError, match="needs parameter"):
         LossOfEffectiveness(0.0)
     with pytest.raises(ConfigError, match="unknown fault kind 'melted'"):

@@ -48,12 +48,12 @@ class StepProgress:
         self.k = 0
         self.solves = 0
 
-    def write(self, topic: str, k: int, fields: dict) -> None:
+    def write(self, topic: str, k: int, msg) -> None:
         """Forward one message of step k; count the step after its last topic."""
         if self.writer is not None:
-            self.writer.write(topic, k, fields)
-        if topic == "/hsv/tube_status" and fields.get("lmi_solves", 0) != self.solves:
-            self.solves = int(fields["lmi_solves"])
+            self.writer.write(topic, k, msg)
+        if topic == "/hsv/tube_status" and int(msg.lmi_solves[0]) != self.solves:
+            self.solves = int(msg.lmi_solves[0])
             self.bar.set_postfix(lmi_solves=self.solves, refresh=False)
         elif topic == self.LAST_TOPIC:
             self.k = k + 1

@@ -57,6 +57,7 @@ from fahv.loop.graph import (
     producer_of,
 )
 from fahv.loop.params import specs, validate
+from fahv.msg import MESSAGES, LoopMessage
 
 LOOP_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
@@ -137,11 +138,16 @@ def to_dict(msg) -> dict:
     return out
 
 
-def to_msg(topic: str, fields: dict):
-    """Dict of fields (:mod:`fahv.loop.cores`) -> message of a loop topic."""
-    msg = msg_type(topic)()
-    _fill(msg, fields)
+def to_msg(topic: str, message):
+    """Loop message of one run (:mod:`fahv.msg`, or the Clock's fields) -> ROS message."""
+    msg = msg_type_of(topic)()
+    _fill(msg, message.lane(0) if isinstance(message, LoopMessage) else message)
     return msg
+
+
+def from_msg(topic: str, msg):
+    """ROS message of a loop topic -> :mod:`fahv.msg` message of one run (B = 1)."""
+    return MESSAGES[TOPICS[topic]].from_lanes([to_dict(msg)])
 
 
 def _fill(msg, fields: dict) -> None:
@@ -333,8 +339,11 @@ class LockstepNode(Node):
         """Build the library object(s) from the validated parameters ``p``."""
         raise NotImplementedError
 
-    def on_step(self, k: int, inputs: dict) -> list[tuple[str, dict]]:
-        """Outputs (topic, fields) of step k given {topic: fields} of its inputs."""
+    def on_step(self, k: int, inputs: dict) -> list[tuple[str, object]]:
+        """Outputs (topic, message) of step k given {topic: message} of its inputs.
+
+        Messages are :mod:`fahv.msg` messages of one run (the Clock as its fields).
+        """
         raise NotImplementedError
 
     def close(self, status: int) -> None:
@@ -362,11 +371,11 @@ class LockstepNode(Node):
             self.k in b or (self.k == 0 and t in self.previous) for t, b in self.buf.items()
         ):
             inputs = {
-                t: to_dict(self.buf[t].pop(self.k)) if self.k in self.buf[t] else None
+                t: from_msg(t, self.buf[t].pop(self.k)) if self.k in self.buf[t] else None
                 for t in self.inputs
             }
-            for topic, fields in self.on_step(self.k, inputs):
-                self.pubs[topic].publish(to_msg(topic, fields))
+            for topic, message in self.on_step(self.k, inputs):
+                self.pubs[topic].publish(to_msg(topic, message))
             self.k += 1
             self.last_progress = time.monotonic()
             if self.k >= self.n_steps:

@@ -1,9 +1,10 @@
 """``nominal_trajectory`` node: reference x_r, u_r and nominal x_n, u_n of each step.
 
-Mode ``mpc``: online tracking MPC with an input-disturbance estimate (it takes the
-controller's command of the previous step); mode ``governor``: nominal system under
-u_n = K x_n (eq. 20/46) with the reference governor; mode ``command``: trim of the raw
-command (the RMPC baseline).
+Runs the nominal part of the run's law (parameter ``nominal``, a registered
+``fahv.control.NominalSource``: ``mpc`` the online tracking MPC with its disturbance
+estimate, ``governor`` the paper's nominal system with the reference governor,
+``command`` the trim of the raw command for the RMPC baseline). It takes the
+controller's command of the previous step as well as the state.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import sys
 
 from hsv_common.lockstep import LockstepNode, main
 
+from fahv.lanes import Lanes
 from fahv.loop.cores import NominalCore
 
 
@@ -22,7 +24,7 @@ class NominalTrajectoryNode(LockstepNode):
 
     def make_core(self, p: dict) -> None:
         """Build the library object from the raw node parameters."""
-        self.core = NominalCore(p)
+        self.core = NominalCore([p], Lanes(1))
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""

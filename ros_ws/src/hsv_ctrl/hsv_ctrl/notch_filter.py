@@ -6,6 +6,7 @@ import sys
 
 from hsv_common.lockstep import LockstepNode, main
 
+from fahv.lanes import Lanes
 from fahv.loop.cores import NotchCore
 
 
@@ -16,7 +17,7 @@ class NotchFilterNode(LockstepNode):
 
     def make_core(self, p: dict) -> None:
         """Build the library object from the raw node parameters."""
-        self.core = NotchCore(p)
+        self.core = NotchCore([p], Lanes(1))
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""

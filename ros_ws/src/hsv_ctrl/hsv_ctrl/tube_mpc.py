@@ -1,7 +1,8 @@
-"""``tube_mpc`` node: u = u_r + u_n + tau F (x - x_r - x_n) (eq. 36; eq. 54 for tau < 1).
+"""``tube_mpc`` node: the control law of the run (parameter ``law``), one step at a time.
 
-Parameter ``law``: ``tube_mpc`` (eq. 36), ``adjustable`` (eq. 54 on the 11-state ECM
-design, factor ``tau``) or ``rmpc`` (the Kothare baseline; also started as the
+Any registered ``fahv.control.ControlLaw``: ``tube_mpc`` and ``tube_mpc_paper``,
+u = u_r + u_n + tau F (x - x_r - x_n) (eq. 36; the adjustable eq. 54 when ``tau`` < 1
+on the 11-state ECM design), or ``rmpc`` (the Kothare baseline; also started as the
 ``rmpc`` executable). Publishes the command and the tube status of each step.
 """
 
@@ -11,6 +12,7 @@ import sys
 
 from hsv_common.lockstep import LockstepNode, main
 
+from fahv.lanes import Lanes
 from fahv.loop.cores import ControllerCore
 
 
@@ -21,7 +23,7 @@ class TubeMPCNode(LockstepNode):
 
     def make_core(self, p: dict) -> None:
         """Build the library object from the raw node parameters."""
-        self.core = ControllerCore(p)
+        self.core = ControllerCore([p], Lanes(1))
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""

@@ -11,6 +11,7 @@ import sys
 
 from hsv_common.lockstep import LockstepNode, main
 
+from fahv.lanes import Lanes
 from fahv.loop.cores import FaultCore
 
 
@@ -21,15 +22,15 @@ class FaultInjectorNode(LockstepNode):
 
     def make_core(self, p: dict) -> None:
         """Build the library object from the raw node parameters."""
-        self.core = FaultCore(p)
+        self.core = FaultCore([p], Lanes(1))
         self.announced = False
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""
         act, status = self.core.on_command(inputs["/hsv/control_command"])
-        if status["active"] and not self.announced:
+        if status.active[0] and not self.announced:
             self.announced = True
-            self.get_logger().warning(f"fault {status['kind']} active from t = {status['t']:.2f} s")
+            self.get_logger().warning(f"fault {status.kind[0]} active from t = {status.t:.2f} s")
         return [("/hsv/fault_status", status), ("/hsv/actuator_command", act)]
 
 

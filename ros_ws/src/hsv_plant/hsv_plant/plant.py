@@ -13,6 +13,7 @@ import time
 from hsv_common.lockstep import READY_QOS, LockstepNode, WatchdogError, main, to_msg
 from std_msgs.msg import String
 
+from fahv.lanes import Lanes
 from fahv.loop.cores import PlantCore
 from fahv.loop.graph import clock_msg
 
@@ -24,7 +25,7 @@ class PlantNode(LockstepNode):
 
     def make_core(self, p: dict) -> None:
         """Build the library object from the raw node parameters."""
-        self.core = PlantCore(p)
+        self.core = PlantCore([p], Lanes(1))
         self.peers_ready: set[str] = set()
         self.create_subscription(String, "/hsv/ready", self._peer_ready, READY_QOS)
 
