@@ -6,18 +6,19 @@ import pytest
 from fahv.control.nominal_mpc import (
     DisturbanceEstimator,
     MPCSettings,
+    QPLayout,
     TrackingMPC,
-    TrackingNominal,
-    check_kkt,
-    verify_terminal,
 )
-from fahv.control.reference import Command
 from fahv.errors import DesignError
+from fahv.loop.cores import build_core
+from fahv.loop.params import node_parameters
 from fahv.loop.simulate import simulate
 from fahv.model.lpv import PolytopicLPV
 from fahv.model.trim import TrimMap
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.metrics import metrics
+from fahv.synthesis.nominal import verify_terminal
+from fahv.synthesis.qp import check_kkt
 
 
 def _mpc(design, **changes):
@@ -25,7 +26,7 @@ def _mpc(design, **changes):
     lpv = PolytopicLPV(a["A"], a["B"], a["h_grid"], a["V_grid"], a["W_h"], a["W_V"])
     tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
     s = dict(
-        M=25, N=30, q_w=np.array([1, 1, 0.1, 0.1, 0.01, 0, 0, 0, 0.0]), r_w=np.ones(2),
+        M=25, N_p=30, q_w=np.array([1, 1, 0.1, 0.1, 0.01, 0, 0, 0, 0.0]), r_w=np.ones(2),
         t_w=np.array([1e4, 1e4]), dtheta_max=np.array([300.0, 150.0]),
         reschedule=np.array([100.0, 50.0]), att_max=np.radians(0.3),
     )  # fmt: skip
@@ -43,13 +44,13 @@ def test_qp_solution_meets_tightened_limits_and_kkt(design):
     u_base = mpc.u_r_s
     y, why = mpc.solve(np.zeros(mpc.n), u_base, np.array([c["h_c"], c["V_c"]]))
     assert why == "ok"
-    N, m = mpc.s.N, mpc.m
+    N, m = mpc.s.N_p, mpc.m
     u = (mpc.U_y @ y + np.tile(u_base, N)).reshape(N, m)
     tol = 1e-6 * np.abs(mpc.u_hi)
     assert np.all(u >= mpc.u_lo - tol) and np.all(u <= mpc.u_hi + tol)
     # the set point moves toward the command: h to the trust-region bound (+300 ft), V
     # part of the way (the offset cost against the tracking cost; 102 ft/s measured)
-    dth = y[N * m : N * m + 2] * mpc.theta_scale
+    dth = y[mpc.layout.delta] * mpc.theta_scale
     assert dth[0] == pytest.approx(300.0, abs=1e-3)
     assert 50.0 < dth[1] <= 150.0 + 1e-3
     # the climb uses the asymmetric room: Phi above the symmetric bound u_r + 0.069
@@ -67,24 +68,31 @@ def test_kkt_check_rejects_a_perturbed_solution():
     assert "primal" in check_kkt(H, f, A, bl, bu, np.array([1.6, -0.5]), lam)
 
 
+def test_qp_layout_names_the_parts_of_the_decision_vector():
+    ly = QPLayout(N_p=30, m=2)
+    assert ly.ny == 63 and ly.moves == slice(0, 60) and ly.move(3) == slice(6, 8)
+    assert ly.delta == slice(60, 62) and ly.alpha == 62
+
+
 def test_infeasible_qp_takes_the_fallback_and_is_counted(design):
     """Limits no plan can meet: shifted plan first, then the terminal law, both counted."""
-    mpc = _mpc(design)
-    cmd = design.case["command"]
-    nom = TrackingNominal(
-        mpc, Command(cmd["h0"], cmd["V0"], cmd["h_c"], cmd["V_c"]), design.case["Ts"]
-    )
-    nom.reset(mpc.x_r_s)  # start on the initial trim
-    for _ in range(25):
-        nom.step()
+    p = node_parameters(design, "tube_mpc")["nominal_trajectory"]
+    p["mpc.est_tau"] = 0.0  # the plan alone
+    core = build_core("nominal_trajectory", p)
+    src = core.source
+    mpc = src.mpcs[0]
+    x = np.zeros((1, 9))
+    for k in range(25):
+        src.step(k, k * 0.02, x, None)
     assert mpc.stats.solves == 1 and mpc.stats.fallback == 0
     mpc.u_hi = mpc.u_lo - 1.0  # empty input set from now on
-    for _ in range(25 * 31):
-        out = nom.step()
+    for k in range(25, 25 * 32):
+        out = src.step(k, k * 0.02, x, None)
     assert np.all(np.isfinite(out.u_n))
-    # N = 30 moves: 29 shifted plans, then the terminal law for the last 2 of 31 moves
+    # N_p = 30 moves: 29 shifted plans, then the terminal law for the last 2 of 31 moves
     assert mpc.stats.fallback == 29 and mpc.stats.terminal == 2
-    assert nom.status.startswith("terminal law")
+    assert (out.qp_solves[0], out.qp_fallback[0], out.qp_terminal[0]) == (1, 29, 2)
+    assert src.status[0].startswith("terminal law")
 
 
 def test_terminal_set_not_invariant_is_rejected(design):
@@ -104,21 +112,20 @@ def test_estimate_converges_to_the_elevator_loss(design):
     mpc.schedule(85500.0, 7900.0)
     A, B = mpc.A[:9, :9], mpc.B[:9]
     Ts = design.case["Ts"]
-    est = DisturbanceEstimator(design.arrays["Dx"][:9], Ts / 2.0)
-    est.schedule(A, B)
+    est = DisturbanceEstimator(1, 9, Ts / 2.0)
     rho, de = 0.7, np.radians(12.4)
     x, u = np.zeros(9), np.array([0.0, de])  # deviations; the loss acts on the whole de
     for _ in range(int(15.0 / Ts)):
         x_next = A @ x + B @ np.array([0.0, rho * de])
-        est.update(x, u, x_next)
+        est.update(A[None], B[None], x[None], u[None], x_next[None])
         x = x_next
     # the state disturbance lies along the elevator column of B; its steady input
     # correction is the loss: -u_d = (0, (rho_f - 1) delta_e) within 1 %
-    d_u = -mpc.Hu[:, :9] @ est.d
+    d_u = -mpc.Hu[:, :9] @ est.d[0]
     np.testing.assert_allclose(d_u[1], (rho - 1.0) * de, rtol=1e-2)
     assert abs(d_u[0]) < 1e-3  # Phi (fuel-to-air ratio): no throttle correction
     # no steady state shift beyond 0.01 scale units (0.01 deg in alpha, theta)
-    np.testing.assert_allclose(mpc.Hx[:, :9] @ est.d / design.arrays["Dx"], 0.0, atol=1e-2)
+    np.testing.assert_allclose(mpc.Hx[:, :9] @ est.d[0] / design.arrays["Dx"], 0.0, atol=1e-2)
 
 
 def test_case1_tracks_the_step_within_the_requirements(design):

@@ -187,6 +187,57 @@ class QPLayout:
         return self.N_p * self.m + 3
 
 
+class DisturbanceEstimator:
+    """Constant additive state disturbance d (B, p) of the scheduled model, for B runs.
+
+    Each step, the one-step residual of each run's scheduled model,
+    r = dx_k - A dx_{k-1} - B du_{k-1} (deviations from the trim at the scheduling
+    point), is filtered: d <- d + gamma (r - d) with gamma = Ts / tau_est (first
+    order, time constant tau_est). d collects what the nominal model misses at the
+    current operating point and that varies slowly: the constant part of the parameter
+    uncertainty (sec. 5.1), the trim part (rho_f - 1) delta_e,r of a loss of
+    effectiveness (eq. 16), the mean of the modelling error. The nominal model then
+    predicts with d, so the tube only has to hold what is left (docs/control_design.md).
+
+    Parameters
+    ----------
+    n_runs : int
+        Runs B.
+    p : int
+        Measured states (9 for a CM design, 11 for the ECM).
+    gamma : float
+        Filter gain in (0, 1].
+
+    Raises
+    ------
+    ValueError
+        If gamma is not in (0, 1].
+    """
+
+    def __init__(self, n_runs: int, p: int, gamma: float) -> None:
+        if not 0.0 < gamma <= 1.0:
+            raise ValueError(f"estimator gain gamma must be in (0, 1], got {gamma}")
+        self.gamma = float(gamma)
+        self.d = np.zeros((n_runs, p))
+
+    def update(self, A, B, dx_prev, du_prev, dx) -> np.ndarray:
+        """Estimates d (B, p) [state units per step Ts] after one measured step.
+
+        Parameters
+        ----------
+        A : (B, p, p) ndarray
+        B : (B, p, m) ndarray
+            Each run's scheduled model at the fast rate.
+        dx_prev, dx : (B, p) ndarray
+            Measured states of steps k - 1 and k minus each run's scheduling trim.
+        du_prev : (B, m) ndarray
+            Commands of step k - 1 minus the scheduling trim input.
+        """
+        r = (dx - mv(A, np.ascontiguousarray(dx_prev))) - mv(B, np.ascontiguousarray(du_prev))
+        self.d = self.d + self.gamma * (r - self.d)
+        return self.d
+
+
 @dataclass
 class QPStats:
     """Counters of the nominal QP over a run.
@@ -551,11 +602,9 @@ class TrackingMPCNominal(NominalSource):
             self.filter = DiscreteNotch(nf, p["Ts"], np.zeros(B))
             self.p_est = 11
         est_tau = p["mpc.est_tau"]
-        self.gamma = min(1.0, p["Ts"] / est_tau) if est_tau > 0.0 else 0.0
-        if est_tau > 0.0 and not 0.0 < self.gamma <= 1.0:
-            raise ValueError(f"estimator gain gamma must be in (0, 1], got {self.gamma}")
-        self.has_est = est_tau > 0.0
         pe = self.p_est
+        self.has_est = est_tau > 0.0
+        self.est = DisturbanceEstimator(B, pe, min(1.0, p["Ts"] / est_tau) if self.has_est else 1.0)
         self.command = CommandSchedule([Command.of_parameters(r) for r in runs])
         # per-run state of the fast step (stacked) and of the scheduled models
         self.XRS, self.URS, self.THS = np.empty((B, n)), np.empty((B, 2)), np.empty((B, 2))
@@ -567,7 +616,6 @@ class TrackingMPCNominal(NominalSource):
         self.TRX, self.TRU = np.empty((B, n)), np.empty((B, 2))
         self.PLAN = np.zeros((B, st.N_p, 2))
         self.moves_left = np.zeros(B, dtype=int)
-        self.D = np.zeros((B, pe))
         self.prev = np.zeros((B, pe))
         self.has_prev = False
         self.status = ["not started"] * B
@@ -599,7 +647,7 @@ class TrackingMPCNominal(NominalSource):
         if np.any(np.abs(self.XN[b, :2] - mpc.theta_s) > mpc.s.reschedule):
             self._schedule(b, self.XN[b, :2])
         if self.has_est:
-            d = self.D[b]
+            d = self.est.d[b]
             x_d, u_d = self.HX[b] @ d, self.HU[b] @ d
         else:
             x_d, u_d = np.zeros(self.n), np.zeros(2)
@@ -639,12 +687,11 @@ class TrackingMPCNominal(NominalSource):
         B = x.shape[0]
         if self.has_est:
             xm = self._measure(np.asarray(x, float))
-            dx = xm - self.XRS[:, : self.p_est]
             if self.has_prev and u_prev is not None:
-                dx_prev = np.ascontiguousarray(self.prev - self.XRS[:, : self.p_est])
-                du_prev = np.ascontiguousarray(np.asarray(u_prev, float) - self.URS)
-                r = (dx - mv(self.EA, dx_prev)) - mv(self.EB, du_prev)
-                self.D = self.D + self.gamma * (r - self.D)
+                self.est.update(
+                    self.EA, self.EB, self.prev - self.XRS[:, : self.p_est],
+                    np.asarray(u_prev, float) - self.URS, xm - self.XRS[:, : self.p_est],
+                )  # fmt: skip
             self.prev = xm.copy()
             self.has_prev = True
         h_c, V_c = self.command(t)
@@ -655,7 +702,7 @@ class TrackingMPCNominal(NominalSource):
                 except Exception as exc:  # noqa: BLE001 - the run fails alone
                     self.lanes.fail(int(b), exc)
         if self.has_est:
-            Dc = np.ascontiguousarray(self.D)
+            Dc = np.ascontiguousarray(self.est.d)
             x_d, u_d = mv(self.HX, Dc), mv(self.HU, Dc)
         else:  # exact zeros (a product with d = 0 could give -0.0)
             x_d, u_d = np.zeros((B, self.n)), np.zeros((B, 2))
@@ -679,7 +726,7 @@ class TrackingMPCNominal(NominalSource):
         zc = np.ascontiguousarray(z)
         d_n = np.zeros_like(z)
         if self.has_est:
-            d_n[:, : self.p_est] = self.D
+            d_n[:, : self.p_est] = self.est.d
         self.XN = (
             (self.XRS + mv(self.A, zc)) + mv(self.Bm, np.ascontiguousarray(u_d + u_dev))
         ) + d_n
