@@ -37,3 +37,11 @@ def test_graph_nodes_follow_the_table():
         ["/hsv/state", "/hsv/q_filtered", "/hsv/nominal"],
         ["/hsv/control_command", "/hsv/tube_status"],
     )
+
+
+def test_docs_show_the_registry_tables():
+    from fahv.loop.graph import registry_tables
+
+    text = DOCS.read_text()
+    table = text.split("<!-- registry-tables -->")[1].split("<!-- /registry-tables -->")[0]
+    assert table.strip() == registry_tables().strip()

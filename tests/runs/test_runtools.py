@@ -13,9 +13,9 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from fahv.cli import main
 from fahv.errors import RunError
 from fahv.loop.graph import STATE_FIELDS, TOPICS
-from fahv.msg import MSG_DIR
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import ALPHA, load_vehicle
+from fahv.msg import MSG_DIR
 from fahv.runs.bag import RunWriter, bag_paths, read_run
 from fahv.runs.metrics import metrics
 from fahv.runs.sil import run_metadata, write_run_params

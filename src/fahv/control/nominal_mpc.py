@@ -294,7 +294,7 @@ class TrackingMPC:
         self.layout = QPLayout(settings.N_p, self.m)
         if self.Q.shape != (n, n):
             raise ValueError(f"nominal MPC: Q {self.Q.shape} does not match K {self.K.shape}")
-        self.u_lo, self.u_hi = np.asarray(u_lo, float), np.asarray(u_hi, float)
+        self._u_lo, self._u_hi = np.asarray(u_lo, float), np.asarray(u_hi, float)
         if np.any(self.u_lo >= self.u_hi):
             raise ValueError(
                 f"nominal MPC: tightened input set is empty: lo {self.u_lo}, hi {self.u_hi}"
@@ -308,9 +308,28 @@ class TrackingMPC:
         #: support of K E(Q) per input: max over E(Q) of |K_j x|
         self.k_max = np.sqrt(np.einsum("ij,jk,ik->i", self.K, self.Q, self.K))
         self.theta_scale = np.array([100.0, 100.0])
+        self._sc = np.tile(self.Du, settings.N_p)
         self.stats = QPStats()
         self.theta_s = None
         self.last_y = None
+
+    @property
+    def u_lo(self) -> np.ndarray:
+        """Tightened lower input limits (2,) [Phi, delta_e rad]."""
+        return self._u_lo
+
+    @u_lo.setter
+    def u_lo(self, value) -> None:
+        self._u_lo = np.asarray(value, float)
+
+    @property
+    def u_hi(self) -> np.ndarray:
+        """Tightened upper input limits (2,) [Phi, delta_e rad]."""
+        return self._u_hi
+
+    @u_hi.setter
+    def u_hi(self, value) -> None:
+        self._u_hi = np.asarray(value, float)
 
     # -- scheduling ----------------------------------------------------------------
     def _trim_jacobian(self, h: float, V: float):
@@ -445,6 +464,21 @@ class TrackingMPC:
         A_s1 = (G + kcol) / self.Du[:, None]
         A_s2 = (G - kcol) / self.Du[:, None]
         self.A_c = np.vstack([A_u, A_t1, A_t2, A_s1, A_s2, self.Att_y])
+        # simple bounds on y: set point trust region and map bounds (delta), alpha in [0, 1]
+        s = self.s
+        lo_b = np.full(nb, -1e30)
+        hi_b = np.full(nb, 1e30)
+        dmax = s.dtheta_max / self.theta_scale
+        tm = self.trim_map
+        h_lo = (tm.h_grid[0] - self.theta_s[0]) / self.theta_scale[0]
+        h_hi = (tm.h_grid[-1] - self.theta_s[0]) / self.theta_scale[0]
+        V_lo = (tm.V_grid[0] - self.theta_s[1]) / self.theta_scale[1]
+        V_hi = (tm.V_grid[-1] - self.theta_s[1]) / self.theta_scale[1]
+        d0, d1 = ly.delta.start, ly.delta.start + 1
+        lo_b[d0], hi_b[d0] = max(-dmax[0], h_lo), min(dmax[0], h_hi)
+        lo_b[d1], hi_b[d1] = max(-dmax[1], V_lo), min(dmax[1], V_hi)
+        lo_b[ly.alpha], hi_b[ly.alpha] = 0.0, 1.0
+        self._lo_b, self._hi_b = lo_b, hi_b
 
     # -- solve -----------------------------------------------------------------------
     def solve(self, z0: np.ndarray, u_base: np.ndarray, cmd: np.ndarray, x_off=None):
@@ -478,24 +512,11 @@ class TrackingMPC:
         e_theta = (self.theta_s - cmd) / self.theta_scale
         f = 2.0 * (self.Fz @ z0)
         f[ly.delta] += 2.0 * s.t_w * e_theta
-        # bounds on y: set point trust region and map bounds (delta), alpha in [0, 1]
-        nb = ly.ny
-        lo_b = np.full(nb, -1e30)
-        hi_b = np.full(nb, 1e30)
-        dmax = s.dtheta_max / self.theta_scale
-        tm = self.trim_map
-        h_lo = (tm.h_grid[0] - self.theta_s[0]) / self.theta_scale[0]
-        h_hi = (tm.h_grid[-1] - self.theta_s[0]) / self.theta_scale[0]
-        V_lo = (tm.V_grid[0] - self.theta_s[1]) / self.theta_scale[1]
-        V_hi = (tm.V_grid[-1] - self.theta_s[1]) / self.theta_scale[1]
-        d0, d1 = ly.delta.start, ly.delta.start + 1
-        lo_b[d0], hi_b[d0] = max(-dmax[0], h_lo), min(dmax[0], h_hi)
-        lo_b[d1], hi_b[d1] = max(-dmax[1], V_lo), min(dmax[1], V_hi)
-        lo_b[ly.alpha], hi_b[ly.alpha] = 0.0, 1.0
+        lo_b, hi_b = self._lo_b, self._hi_b
         u_off = self.U_z @ z0 + np.tile(u_base, N_p)
-        sc = np.tile(self.Du, N_p)
-        lo_u = (np.tile(self.u_lo, N_p) - u_off) / sc
-        hi_u = (np.tile(self.u_hi, N_p) - u_off) / sc
+        sc = self._sc
+        lo_u = (np.tile(self._u_lo, N_p) - u_off) / sc
+        hi_u = (np.tile(self._u_hi, N_p) - u_off) / sc
         tz = self.Tb_z @ z0
         att = self.Att_z @ z0
         a_max = min(s.att_max, 1e3)

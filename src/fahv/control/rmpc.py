@@ -9,10 +9,10 @@ import numpy as np
 from fahv.config import Field, Section
 from fahv.control.base import VARIANTS, ControlLaw, LawStep, register_law
 from fahv.control.reference import CommandReference
-from fahv.lanes import Lanes
-from fahv.msg import NominalTrajectory
 from fahv.errors import DesignError, ParameterError
+from fahv.lanes import Lanes
 from fahv.model.tp_model import build_tp_model
+from fahv.msg import NominalTrajectory
 from fahv.synthesis.lmi import SDP_SOLVER, scale_vertices
 
 

@@ -103,7 +103,9 @@ class PlantCore:
         t = self.k * self.Ts
         bad = ~np.all(np.isfinite(self.plant.x), axis=1)
         if bad.any():
-            self.lanes.fail_mask(bad, lambda b: RunError(f"plant: state not finite at t = {t:.2f} s"))
+            self.lanes.fail_mask(
+                bad, lambda b: RunError(f"plant: state not finite at t = {t:.2f} s")
+            )
             self._reset(bad)
         return VehicleState.of(self.k, t, self.plant.x)
 

@@ -80,7 +80,8 @@ NODES: dict[str, NodeSpec] = {
         NodeSpec("notch_filter", "hsv_ctrl", ("/hsv/state",), ("/hsv/q_filtered",), "loop",
                  "notch filter on q (eq. 37-39): q -> q'"),
         NodeSpec("nominal_trajectory", "hsv_ctrl", ("/hsv/state",), ("/hsv/nominal",), "loop",
-                 "nominal MPC (QP) with disturbance estimate, or governor (eq. 20/46)",
+                 "the law's nominal part: nominal MPC (QP) with disturbance estimate, reference "
+                 "governor (eq. 20/46) or the command's trim",
                  previous=("/hsv/control_command",)),
         NodeSpec("tube_mpc", "hsv_ctrl", _CONTROLLER_IN, _CONTROLLER_OUT, "controller",
                  "control law of the run (eq. 36 / 54), tube status"),
@@ -180,3 +181,43 @@ def clock_msg(k: int, Ts: float) -> dict:
     return {"clock": {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}}
 
 
+
+
+def registry_tables() -> str:
+    """The registries of laws, nominal parts, variants and fault kinds as Markdown.
+
+    The tables of ``docs/architecture.md`` (checked by a test), generated from
+    :data:`fahv.control.LAWS`, :data:`fahv.control.NOMINAL_SOURCES`,
+    :data:`fahv.control.VARIANTS` and :data:`fahv.plant.faults.FAULTS`.
+    """
+    from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
+    from fahv.plant.faults import FAULTS
+
+    def first_line(cls) -> str:
+        return (cls.__doc__ or "").strip().splitlines()[0]
+
+    def where(cls) -> str:
+        return f"`{cls.__module__}.{cls.__name__}`"
+
+    out = ["| law | class | node | nominal part | tube | case section | what |",
+           "|---|---|---|---|---|---|---|"]  # fmt: skip
+    for name, cls in LAWS.items():
+        sec = f"`{cls.section.name}`" if cls.section is not None else "-"
+        out.append(
+            f"| `{name}` | {where(cls)} | `{cls.node}` | `{cls.nominal.name}` | "
+            f"{'yes' if cls.has_tube else 'no'} | {sec} | {first_line(cls)} |"
+        )
+    out += ["", "| nominal part | class | estimates d | case section | what |",
+            "|---|---|---|---|---|"]  # fmt: skip
+    for name, cls in NOMINAL_SOURCES.items():
+        sec = f"`{cls.section.name}`" if cls.section is not None else "-"
+        est = "yes" if cls.estimates_disturbance else "no"
+        out.append(f"| `{name}` | {where(cls)} | {est} | {sec} | {first_line(cls)} |")
+    out += ["", "| variant | law | notch | what |", "|---|---|---|---|"]
+    for name, v in VARIANTS.items():
+        out.append(f"| `{name}` | `{v.law}` | {v.notch} | {v.description} |")
+    out += ["", "| fault kind | class | parameters | what |", "|---|---|---|---|"]
+    for name, cls in FAULTS.items():
+        params = ", ".join(f"`{f.name}`" for f in cls.parameters) or "-"
+        out.append(f"| `{name}` | {where(cls)} | {params} | {first_line(cls)} |")
+    return "\n".join(out)

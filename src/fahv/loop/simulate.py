@@ -349,4 +349,3 @@ def simulate(
             for topic, msg in zip(TOPICS, msgs, strict=True):
                 writer.write(topic, k, msg)
     return hist.result(0, run_info(design, variant, loop.Ts))
-

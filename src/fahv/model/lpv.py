@@ -7,7 +7,6 @@ from dataclasses import dataclass
 import numpy as np
 
 
-
 @dataclass(frozen=True)
 class PolytopicLPV:
     """Discrete polytopic LPV model, eq. (12), with its TP weighting functions.
@@ -57,8 +56,12 @@ class PolytopicLPV:
         V = np.atleast_1d(np.asarray(V, dtype=float))
         R, n, _ = self.A.shape
         m = self.B.shape[2]
-        wh = np.stack([np.interp(h, self.h_grid, self.W_h[:, a]) for a in range(self.W_h.shape[1])], 1)
-        wv = np.stack([np.interp(V, self.V_grid, self.W_V[:, b]) for b in range(self.W_V.shape[1])], 1)
+        wh = np.stack(
+            [np.interp(h, self.h_grid, self.W_h[:, a]) for a in range(self.W_h.shape[1])], 1
+        )
+        wv = np.stack(
+            [np.interp(V, self.V_grid, self.W_V[:, b]) for b in range(self.W_V.shape[1])], 1
+        )
         w = (wh[:, :, None] * wv[:, None, :]).reshape(h.size, R)
         A = np.matmul(w[:, None, :], self.A.reshape(R, -1))[:, 0, :].reshape(h.size, n, n)
         B = np.matmul(w[:, None, :], self.B.reshape(R, -1))[:, 0, :].reshape(h.size, n, m)

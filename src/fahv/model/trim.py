@@ -236,8 +236,12 @@ class TrimMap:
 
     def at(self, h, V) -> tuple[np.ndarray, np.ndarray]:
         """(x_r (B, n), u_r (B, 2)) at B points (h [ft], V [ft/s]) (B,), clipped to the grid."""
-        h = np.minimum(np.maximum(np.atleast_1d(np.asarray(h, float)), self.h_grid[0]), self.h_grid[-1])
-        V = np.minimum(np.maximum(np.atleast_1d(np.asarray(V, float)), self.V_grid[0]), self.V_grid[-1])
+        h = np.minimum(
+            np.maximum(np.atleast_1d(np.asarray(h, float)), self.h_grid[0]), self.h_grid[-1]
+        )
+        V = np.minimum(
+            np.maximum(np.atleast_1d(np.asarray(V, float)), self.V_grid[0]), self.V_grid[-1]
+        )
         v = self._spline(np.stack([h, V], axis=1))
         n = self.n_x
         return v[:, :n], v[:, n:]

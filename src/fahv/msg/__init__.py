@@ -68,7 +68,7 @@ class LoopMessage:
     @property
     def lanes(self) -> int:
         """Number of runs B the message holds."""
-        for name, ros, _ in self.ros_fields():
+        for name, _, _ in self.ros_fields():
             if name not in STEP_FIELDS:
                 return len(getattr(self, name))
         return 1
@@ -175,7 +175,9 @@ class VehicleState(LoopMessage):
 class FilteredPitchRate(LoopMessage):
     """Pitch rate through the notch filter (eq. 38-39) of step k."""
 
-    HEADER: ClassVar[tuple[str, ...]] = ("Pitch rate through the notch filter (eq. 38-39) at step k.",)
+    HEADER: ClassVar[tuple[str, ...]] = (
+        "Pitch rate through the notch filter (eq. 38-39) at step k.",
+    )
     k: int = _f("int64", _STEP_K)
     t: float = _f("float64", _STEP_T)
     q: np.ndarray = _f("float64", "pitch rate at the filter input [rad/s]")
@@ -201,15 +203,21 @@ class NominalTrajectory(LoopMessage):
     h_c: np.ndarray = _f("float64", "commanded altitude [ft]")
     v_c: np.ndarray = _f("float64", "commanded velocity [ft/s]")
     h_g: np.ndarray = _f("float64", "governed reference (MPC: artificial set point) altitude [ft]")
-    v_g: np.ndarray = _f("float64", "governed reference (MPC: artificial set point) velocity [ft/s]")
-    x_r: np.ndarray = _f("float64[]", "trim state at (h_g, v_g), 9 or 11 values (design-model order)")
+    v_g: np.ndarray = _f(
+        "float64", "governed reference (MPC: artificial set point) velocity [ft/s]"
+    )
+    x_r: np.ndarray = _f(
+        "float64[]", "trim state at (h_g, v_g), 9 or 11 values (design-model order)"
+    )
     u_r: np.ndarray = _f("float64[]", "trim input [Phi, delta_e rad]")
     x_n: np.ndarray = _f("float64[]", "nominal state deviation, same length as x_r")
     u_n: np.ndarray = _f("float64[]", "nominal input K x_n [Phi, delta_e rad]")
     level: np.ndarray = _f(
         "float64", "x_n' Q^-1 x_n (<= 1 inside the certified ellipsoid; NaN without governor)"
     )
-    qp_solves: np.ndarray = _f("int64", "nominal MPC: QPs solved and accepted so far (0 without MPC)")
+    qp_solves: np.ndarray = _f(
+        "int64", "nominal MPC: QPs solved and accepted so far (0 without MPC)"
+    )
     qp_fallback: np.ndarray = _f(
         "int64", "nominal MPC: nominal steps on the shifted previous plan (QP rejected)"
     )
@@ -251,8 +259,7 @@ class TubeStatus(LoopMessage):
     """Tube error e = x - x_r - x_n of step k against the invariant set tau Z."""
 
     HEADER: ClassVar[tuple[str, ...]] = (
-        "Tube of step k: error e = x - x_r - x_n against the invariant set tau Z "
-        "(eq. 25-28, 53).",
+        "Tube of step k: error e = x - x_r - x_n against the invariant set tau Z (eq. 25-28, 53).",
     )
     k: int = _f("int64", _STEP_K)
     t: float = _f("float64", _STEP_T)
@@ -266,7 +273,9 @@ class TubeStatus(LoopMessage):
         "int64", "rmpc: solves that used the certified max-margin fallback"
     )
     lmi_failed: np.ndarray = _f("int64", "rmpc: solves rejected; the previous gain was kept")
-    qp_solves: np.ndarray = _f("int64", "nominal MPC QPs accepted so far (copied from /hsv/nominal)")
+    qp_solves: np.ndarray = _f(
+        "int64", "nominal MPC QPs accepted so far (copied from /hsv/nominal)"
+    )
     qp_fallback: np.ndarray = _f("int64", "nominal MPC steps on the shifted plan (QP rejected)")
     qp_terminal: np.ndarray = _f("int64", "nominal MPC steps on the terminal law")
 

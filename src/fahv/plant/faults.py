@@ -73,7 +73,9 @@ class FaultKind:
     def stack(cls, faults: Sequence[FaultKind]) -> FaultKind:
         """One instance of the runs of ``faults`` (all of this kind), in order."""
         t_onset = np.concatenate([f.t_onset for f in faults])
-        params = {p.name: np.concatenate([f.params[p.name] for f in faults]) for p in cls.parameters}
+        params = {
+            p.name: np.concatenate([f.params[p.name] for f in faults]) for p in cls.parameters
+        }
         return cls(t_onset, **params)
 
     @property

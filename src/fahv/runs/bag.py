@@ -43,8 +43,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from fahv.errors import RunError
 from fahv.loop.graph import QOS_DEPTH, TOPICS
-from fahv.msg import MSG_DIR, PKG, LoopMessage
 from fahv.loop.simulate import RunResult, run_result
+from fahv.msg import MSG_DIR, PKG, LoopMessage
 
 _INF = QosTime(2147483647, 4294967295)
 LOOP_QOS = Qos(

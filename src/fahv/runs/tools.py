@@ -21,8 +21,8 @@ import numpy as np
 
 from fahv.errors import RunError
 from fahv.loop.graph import TOPICS
-from fahv.msg import MSG_DIR
 from fahv.model.vehicle import load_vehicle
+from fahv.msg import MSG_DIR
 from fahv.runs.bag import Recording, run_result_of, step_anomalies
 from fahv.runs.latency import format_latencies, run_latencies
 from fahv.runs.metrics import metrics
