@@ -162,3 +162,14 @@ def test_tightening_is_smaller_than_the_symmetric_paper_design(design, raw, make
     # one: 0.163 / 11.6 deg -> 0.150 / 9.6 deg
     assert np.all(t_new < t_old), (t_old, t_new)
     assert t_new[1] < 0.9 * t_old[1], (t_old, t_new)
+
+
+def test_docs_key_table_is_the_declaration():
+    from pathlib import Path
+
+    from fahv.config.spec import markdown
+    from fahv.design.case import case_spec
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "configuration.md").read_text()
+    table = text.split("<!-- case-keys -->\n")[1].split("\n<!-- /case-keys -->")[0]
+    assert table == markdown(case_spec())

@@ -5,9 +5,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from fahv.control.reference import Command, NominalTrajectory
+from fahv.control.reference import ReferenceGovernor
 from fahv.errors import DesignError
-from fahv.model.lpv import PolytopicLPV
+from fahv.lanes import Lanes
 from fahv.synthesis.nominal import contraction, design_nominal, verify_nominal
 
 A = np.array([[[1.05, 0.1], [0.0, 0.98]], [[1.02, 0.12], [0.02, 0.95]]])
@@ -75,27 +75,28 @@ def test_governor_keeps_nominal_state_in_ellipsoid(nd):
     """Reference governor on a toy trim map x_r(h) = [h, 0]: the command moves far
     beyond E(Q), the nominal state never leaves it and the reference reaches the
     command."""
-    lpv = PolytopicLPV(
-        A,
-        B,
-        np.array([0.0, 10.0]),
-        np.array([0.0, 1.0]),
-        np.array([[1.0, 0.0], [0.0, 1.0]]),
-        np.array([[1.0], [1.0]]),
-    )
-
-    def trim_map(h, V):
-        return np.array([h, 0.0]), np.zeros(1)
-
-    cmd = Command(0.0, 0.0, 5.0, 0.0, 0.0, "step")
-    nom = NominalTrajectory(lpv, trim_map, nd.K, nd.Q, cmd, 0.1, level_max=0.999)
-    nom.reset(np.zeros(2))
+    # the governor's nominal part with two inputs (the second one unused) on a toy
+    # trim map x_r(h) = [h, 0] (bicubic spline of linear data: exact)
+    hg, vg = np.linspace(0.0, 10.0, 5), np.linspace(0.0, 1.0, 4)
+    trim_x = np.zeros((5, 4, 2))
+    trim_x[:, :, 0] = hg[:, None]
+    p = {
+        "A": A, "B": np.concatenate([B, np.zeros_like(B)], axis=2),
+        "h_grid": np.array([0.0, 10.0]), "V_grid": np.array([0.0, 1.0]),
+        "W_h": np.array([[1.0, 0.0], [0.0, 1.0]]), "W_V": np.array([[1.0], [1.0]]),
+        "K": np.vstack([nd.K, np.zeros((1, 2))]), "Q": nd.Q, "level_max": 0.999, "Ts": 0.1,
+        "trim_h": hg, "trim_V": vg, "trim_x": trim_x, "trim_u": np.zeros((5, 4, 2)),
+    }  # fmt: skip
+    run = {"command.h0": 0.0, "command.V0": 0.0, "command.h_c": 5.0, "command.V_c": 0.0,
+           "command.t_start": 0.0, "command.kind": "step", "command.t_ramp": 0.0,
+           "x0": np.zeros(2)}  # fmt: skip
+    nom = ReferenceGovernor(p, [run], Lanes(1))
     levels, u = [], []
-    for _ in range(3000):
-        out = nom.step()
-        levels.append(out.level)
-        u.append(out.u_n[0])
+    for k in range(3000):
+        out = nom.step(k, k * 0.1, np.zeros((1, 9)), None)
+        levels.append(out.level[0])
+        u.append(out.u_n[0, 0])
     assert max(levels) <= 0.999 + 1e-12
     assert np.max(np.abs(u)) <= 0.5
-    assert abs(out.h_g - 5.0) < 1e-9
+    assert abs(out.h_g[0] - 5.0) < 1e-9
     assert np.linalg.norm(out.x_n) < 1e-3
