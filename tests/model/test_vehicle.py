@@ -9,7 +9,7 @@ from fahv.errors import VehicleDataError
 from fahv.model.dynamics import cm_rhs, ecm_rhs, make_model
 from fahv.model.notch import NotchFilter
 from fahv.model.trim import trim
-from fahv.model.vehicle import Q, load_vehicle
+from fahv.model.vehicle import IQ, load_vehicle
 
 DATA = (
     load_vehicle.__globals__["resources"]
@@ -110,7 +110,7 @@ def test_cm_flexible_coupling_solved_exactly(vehicle):
     ) / k2
     assert e1 == pytest.approx(r1, rel=1e-12)
     assert e2 == pytest.approx(r2, rel=1e-12)
-    assert f[Q] == pytest.approx((M + vp.psi_1 * e1 + vp.psi_2 * e2) / vp.I_yy, rel=1e-12)
+    assert f[IQ] == pytest.approx((M + vp.psi_1 * e1 + vp.psi_2 * e2) / vp.I_yy, rel=1e-12)
 
 
 def test_ecm_is_cm_in_series_with_notch(vehicle):
@@ -119,16 +119,16 @@ def test_ecm_is_cm_in_series_with_notch(vehicle):
     A_q, B_q, C_q, D_q = notch.ss()
     x_cm = np.array([85500.0, 7900.0, 0.03, 0.02, 0.01, 1.5, 0.3, 0.7, -0.2])
     x_q = np.array([0.002, -0.0001])
-    qp = C_q @ x_q + D_q * x_cm[Q]
+    qp = C_q @ x_q + D_q * x_cm[IQ]
     x_e = np.concatenate([x_cm[:4], [qp], x_cm[5:], x_q])
     u = np.array([0.3, 0.2])
     fe = ecm_rhs(x_e, u, vehicle.params, A_q, B_q, C_q, D_q)
     fc = cm_rhs(x_cm, u, vehicle.params)
     rows = [0, 1, 2, 3, 5, 6, 7, 8]
     np.testing.assert_allclose(fe[rows], fc[rows], rtol=1e-13)
-    xq_dot = A_q @ x_q + B_q * x_cm[Q]
+    xq_dot = A_q @ x_q + B_q * x_cm[IQ]
     np.testing.assert_allclose(fe[9:], xq_dot, rtol=1e-13)
-    assert fe[Q] == pytest.approx(C_q @ xq_dot + D_q * fc[Q], rel=1e-13)
+    assert fe[IQ] == pytest.approx(C_q @ xq_dot + D_q * fc[IQ], rel=1e-13)
 
 
 def test_ecm_trim_has_zero_filter_states(vehicle):

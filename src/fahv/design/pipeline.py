@@ -28,7 +28,7 @@ from fahv.model.linearize import classify_modes, linearize
 from fahv.model.notch import NotchFilter
 from fahv.model.tp_model import build_tp_model
 from fahv.model.trim import trim_map
-from fahv.model.vehicle import Q, Vehicle, load_vehicle
+from fahv.model.vehicle import IQ, Vehicle, load_vehicle
 from fahv.plant.faults import make_fault
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturbed_params
 from fahv.synthesis.feedback import design_tube, verify_tube
@@ -142,7 +142,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     omega_flex = np.array([modes["flexible 1"], modes["flexible 2"]])
     dev_box = DEFAULT_DEV_BOX
     if kind == "ecm":
-        dev_box = np.concatenate([DEFAULT_DEV_BOX, 2.0 * notch.state_scale(Dx[Q])])
+        dev_box = np.concatenate([DEFAULT_DEV_BOX, 2.0 * notch.state_scale(Dx[IQ])])
     d = c["disturbance"]
     unc = {k: v * c["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
     W = sample_disturbance(

@@ -29,7 +29,7 @@ from fahv.lanes import Lanes
 from fahv.loop.graph import CONTROLLER_NODES, n_steps_of
 from fahv.loop.params import validate
 from fahv.model.notch import DiscreteNotch, NotchFilter
-from fahv.model.vehicle import DELTA_E, Q, load_vehicle
+from fahv.model.vehicle import DELTA_E, IQ, load_vehicle
 from fahv.msg import (
     ControlCommand,
     FaultStatus,
@@ -209,7 +209,7 @@ class ControllerCore:
         """
         x = state.x()
         on = np.asarray(qf.enabled, bool)
-        x[on, Q] = qf.q_f[on]
+        x[on, IQ] = qf.q_f[on]
         if self.n == 11:
             if qf.x_q.shape[1:] != (2,):
                 raise RunError("tube_mpc: the 11-state (ECM) controller needs the notch states")

@@ -14,11 +14,11 @@ from fahv.model.vehicle import (
     ETA1_DOT,
     ETA2,
     ETA2_DOT,
+    IQ,
     PHI,
     STATE_NAMES,
     THETA,
     H,
-    Q,
     V,
     Vehicle,
     VehicleParams,
@@ -120,7 +120,7 @@ def cm_rhs(x, u, vp: VehicleParams) -> np.ndarray:
     psi_2 eta_2_ddot) / I_yy.
     """
     L, D, T, M, N1, N2 = forces(x, u, vp)
-    h_dot, V_dot, alpha_dot, theta_dot = _rigid_kinematics(x, x[Q], T, D, L, vp)
+    h_dot, V_dot, alpha_dot, theta_dot = _rigid_kinematics(x, x[IQ], T, D, L, vp)
     eta_dd1, eta_dd2 = _flexible_accelerations(x, M, N1, N2, vp)
     q_dot = (M + vp.psi_1 * eta_dd1 + vp.psi_2 * eta_dd2) / vp.I_yy
     return np.array(
@@ -156,7 +156,7 @@ def dm_rhs(x, u, vp: VehicleParams) -> np.ndarray:
     eta_i_ddot = -2 zeta_i omega_i eta_i_dot - omega_i^2 eta_i + N_i.
     """
     L, D, T, M, N1, N2 = forces(x, u, vp)
-    h_dot, V_dot, alpha_dot, theta_dot = _rigid_kinematics(x, x[Q], T, D, L, vp)
+    h_dot, V_dot, alpha_dot, theta_dot = _rigid_kinematics(x, x[IQ], T, D, L, vp)
     eta_dd1 = -2.0 * vp.zeta_1 * vp.omega_1 * x[ETA1_DOT] - vp.omega_1**2 * x[ETA1] + N1
     eta_dd2 = -2.0 * vp.zeta_2 * vp.omega_2 * x[ETA2_DOT] - vp.omega_2**2 * x[ETA2] + N2
     return np.array(
@@ -206,7 +206,7 @@ def ecm_rhs(x, u, vp: VehicleParams, A_q, B_q, C_q, D_q) -> np.ndarray:
     derivative of q' is eq. (40): q'_dot = C_q x_q_dot + D_q q_dot.
     """
     x_q = x[9:11]
-    q = (x[Q] - (C_q[0] * x_q[0] + C_q[1] * x_q[1])) / D_q
+    q = (x[IQ] - (C_q[0] * x_q[0] + C_q[1] * x_q[1])) / D_q
     x_cm = np.concatenate([x[:4], [q], x[5:9]])
     f = cm_rhs(x_cm, u, vp)
     xq_dot = np.array(
@@ -215,7 +215,7 @@ def ecm_rhs(x, u, vp: VehicleParams, A_q, B_q, C_q, D_q) -> np.ndarray:
             A_q[1][0] * x_q[0] + A_q[1][1] * x_q[1] + B_q[1] * q,
         ]
     )
-    qp_dot = C_q[0] * xq_dot[0] + C_q[1] * xq_dot[1] + D_q * f[Q]
+    qp_dot = C_q[0] * xq_dot[0] + C_q[1] * xq_dot[1] + D_q * f[IQ]
     return np.concatenate([f[:4], [qp_dot], f[5:9], xq_dot])
 
 
@@ -282,7 +282,7 @@ class Model:
             return vehicle.state_scale.copy()
         if notch is None:
             raise ValueError("ECM state scaling needs the NotchFilter")
-        return np.concatenate([vehicle.state_scale, notch.state_scale(vehicle.state_scale[Q])])
+        return np.concatenate([vehicle.state_scale, notch.state_scale(vehicle.state_scale[IQ])])
 
 
 def make_model(kind: str, vehicle: Vehicle | VehicleParams, notch=None) -> Model:

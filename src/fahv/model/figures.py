@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 
 from fahv.model.linearize import classify_modes, linearize  # noqa: E402
 from fahv.model.notch import NotchFilter  # noqa: E402
-from fahv.model.vehicle import ALPHA, DELTA_E, PHI, Q, Vehicle  # noqa: E402
+from fahv.model.vehicle import ALPHA, DELTA_E, IQ, PHI, Vehicle  # noqa: E402
 from fahv.model.vehicle import V as IV  # noqa: E402
 
 _W = np.logspace(-2, 2.5, 1500)
@@ -109,7 +109,7 @@ def bode_model_vs_lpv(
         f"h = {h:.0f} ft, V = {V:.0f} ft/s"
     )
     for out, inp, name, c in (
-        (Q, DELTA_E, q_name, "tab:red"),
+        (IQ, DELTA_E, q_name, "tab:red"),
         (ALPHA, DELTA_E, "alpha / delta_e", "tab:blue"),
         (IV, PHI, "V / Phi", "tab:green"),
     ):
@@ -127,7 +127,7 @@ def bode_model_vs_lpv(
 def _with_notch(A, B, notch: NotchFilter, w=_W):
     """Q / delta_e of the CM followed by the notch (series connection, python-control)."""
     C = np.zeros((1, A.shape[0]))
-    C[0, Q] = 1.0
+    C[0, IQ] = 1.0
     plant = control.ss(A, B[:, [DELTA_E]], C, 0.0)
     return np.asarray(
         control.frequency_response(control.series(plant, notch.tf()), w).complex
@@ -143,7 +143,7 @@ def notch_effect(
     """
     lm = linearize(vehicle, h, V, "cm")
     fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
-    base = _freq(lm.A, lm.B, Q, DELTA_E)
+    base = _freq(lm.A, lm.B, IQ, DELTA_E)
     panels = (
         (
             "(a) omega_p varied, eps_p = 0.5",
@@ -188,7 +188,7 @@ def notch_modes(
     fig, am, ph = _bode_axes(
         f"Notch filter on the flexible modes, CM at h = {h:.0f} ft, V = {V:.0f} ft/s (paper Fig. 5)"
     )
-    _bode_line(am, ph, _W, _freq(lm.A, lm.B, Q, DELTA_E), color="k", lw=2, label="CM, no notch")
+    _bode_line(am, ph, _W, _freq(lm.A, lm.B, IQ, DELTA_E), color="k", lw=2, label="CM, no notch")
     for label, nf in notches.items():
         _bode_line(am, ph, _W, _with_notch(lm.A, lm.B, nf), lw=1.3, label=label)
     am.set_xlim(1, 200)

@@ -17,7 +17,7 @@ from scipy import interpolate
 from fahv.errors import TrimError
 from fahv.model.dynamics import dm_rhs, forces, make_model
 from fahv.model.jacobian import jacobian_complex_step
-from fahv.model.vehicle import ALPHA, Q, Vehicle, VehicleParams
+from fahv.model.vehicle import ALPHA, IQ, Vehicle, VehicleParams
 from fahv.model.vehicle import V as IV
 
 #: Residual tolerance of a trim, in scaled units (state derivative / state scale).
@@ -74,7 +74,7 @@ def _rigid_residual(z, h, V, vp: VehicleParams, zs):
     x = np.array([h, V, alpha, alpha, 0.0, 0.0, 0.0, 0.0, 0.0], dtype=np.result_type(z, float))
     f = dm_rhs(x, np.array([Phi, de]), vp)
     # rows V_dot [ft/s^2], alpha_dot [rad/s], q_dot [rad/s^2] scaled to ~1 for 1 deg
-    return np.array([f[IV] / 10.0, f[ALPHA] / 0.0174533, f[Q] / 0.0174533])
+    return np.array([f[IV] / 10.0, f[ALPHA] / 0.0174533, f[IQ] / 0.0174533])
 
 
 def trim(

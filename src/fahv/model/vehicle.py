@@ -36,8 +36,9 @@ from fahv.config.yamlio import load_yaml
 from fahv.errors import EnvelopeError, VehicleDataError
 
 # Named indices: CM / DM state (eq. 7).
-H, V, ALPHA, THETA, Q, ETA1, ETA1_DOT, ETA2, ETA2_DOT = range(9)
-# ECM adds the notch states (eq. 43); index Q holds q' in ECM.
+H, V, ALPHA, THETA, IQ, ETA1, ETA1_DOT, ETA2, ETA2_DOT = range(9)
+# ECM adds the notch states (eq. 43); index IQ holds q' in ECM. (IQ, not Q: Q is the
+# terminal ellipsoid's matrix of LMI 32-35.)
 X_Q1, X_Q2 = 9, 10
 # Inputs.
 PHI, DELTA_E = 0, 1

@@ -16,7 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from fahv.model.vehicle import ALPHA, ETA1, ETA1_DOT, ETA2, ETA2_DOT, THETA, H, Q, V  # noqa: E402
+from fahv.model.vehicle import ALPHA, ETA1, ETA1_DOT, ETA2, ETA2_DOT, IQ, THETA, H, V  # noqa: E402
 
 #: Figure groups: name -> (title, [(ylabel, function of a run -> values)]).
 GROUPS = {
@@ -29,7 +29,7 @@ GROUPS = {
         [
             ("alpha [deg]", lambda r: np.degrees(r.x[:, ALPHA])),
             ("theta [deg]", lambda r: np.degrees(r.x[:, THETA])),
-            ("q [deg/s]", lambda r: np.degrees(r.x[:, Q])),
+            ("q [deg/s]", lambda r: np.degrees(r.x[:, IQ])),
         ],
     ),
     "flexible": (
