@@ -312,6 +312,7 @@ class TrackingMPC:
         self.stats = QPStats()
         self.theta_s = None
         self.last_y = None
+        self._qp = None  # DAQP workspace (daqp.Model) of the current scheduling
 
     @property
     def u_lo(self) -> np.ndarray:
@@ -426,6 +427,7 @@ class TrackingMPC:
         self.Tb_y = self.L_inv @ C[N_p]  # terminal box rows, (n, ny)
         self.Tb_z = self.L_inv @ S[N_p]
         self._constraint_matrix()
+        self._qp = None
         # steady-state shift of a constant disturbance d: (A - I) x_d + B u_d + d = 0,
         # h_d = V_d = 0; unknowns (x_d[2:], u_d), solved in scaled coordinates
         Dv = np.concatenate([self.Dx[2:], self.Du])
@@ -533,11 +535,18 @@ class TrackingMPC:
         )  # fmt: skip
         bu = np.concatenate([hi_b, hi_c])
         bl = np.concatenate([lo_b, lo_c])
-        daqp = _daqp()
-        y, _, flag, info = daqp.solve(
-            self.H, f, self.A_c, bu, bl, primal_start=self.last_y, iter_limit=2000
-        )
+        if self._qp is None:  # a new workspace per scheduling: H and A_c fixed until then
+            self._qp = _daqp().Model()
+            self._qp.settings = {"iter_limit": 2000}
+            flag = self._qp.setup(self.H, f, self.A_c, bu, bl, primal_start=self.last_y)[0]
+            if flag < 0:
+                self._qp = None
+                return None, f"solver set-up exit flag {flag}"
+        else:  # only f and the bounds move between re-plans; warm start from the last one
+            self._qp.update(f=f, bupper=bu, blower=bl)
+        y, _, flag, info = self._qp.solve()
         if flag not in _DAQP_OPTIMAL:
+            self._qp = None  # start the next solve from a fresh workspace
             return None, f"solver exit flag {flag}"
         y = np.asarray(y, float)
         lam = np.asarray(info["lam"], float)
