@@ -34,6 +34,7 @@ def quick(raw, **changes):
     """Case 1 with a small W sample (CI) and the given top-level changes."""
     d = copy.deepcopy(raw)
     d["disturbance"]["samples"] = 40
+    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_certificate.py
     d.update(changes)
     return case_from_mapping(d, "quick.yaml")
 
@@ -61,6 +62,7 @@ def quick_case(design, raw, tmp_path_factory):
     folder = tmp_path_factory.mktemp("case")
     d = copy.deepcopy(raw)
     d["disturbance"]["samples"] = 40
+    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_certificate.py
     case_file = folder / "quick.yaml"
     case_file.write_text(yaml.safe_dump(d, sort_keys=False))
     params = yaml.safe_dump(parameter_file(node_parameters(design)), sort_keys=False)

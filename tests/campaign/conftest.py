@@ -12,6 +12,7 @@ def mc_dir(tmp_path_factory, raw, design):
     d = tmp_path_factory.mktemp("mc")
     data = copy.deepcopy(raw)
     data["disturbance"]["samples"] = 40  # as the session design (conftest.quick)
+    data["certificate"] = {"schedules": 0}  # checked in tests/design/test_certificate.py
     (d / "case1.yaml").write_text(yaml.safe_dump(data))
     save_design(design, d / "artefacts" / design.case["name"])
     return d

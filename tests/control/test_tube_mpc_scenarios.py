@@ -61,6 +61,7 @@ def _case(path, **changes):
         d = load_yaml(fh.read())
     d = copy.deepcopy(d)
     d["disturbance"]["samples"] = 40
+    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_certificate.py
     for key, value in changes.items():
         section, name = key.split(".")
         d[section][name] = value

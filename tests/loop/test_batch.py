@@ -111,6 +111,7 @@ def design_case2():
         raw = load_yaml(fh.read())
     d = copy.deepcopy(raw)
     d["disturbance"]["samples"] = 40
+    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_certificate.py
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     return run_design(case_from_mapping(d, "quick2.yaml"), log=lambda *_: None)
 

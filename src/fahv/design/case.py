@@ -125,6 +125,11 @@ def case_spec() -> Section:
                       "(fault vertices, with the case fault's if smaller)", lo=0.0, hi=1.0,
                       lo_open=True, default=1.0, equation="eq. (15)"),
             ), "tube: F and Z"),
+            Section("certificate", (
+                Field("schedules", "int", "scheduling points of the domain check of W: 0 "
+                      "skips it, 1 the envelope centre, 3 centre and two opposite corners, "
+                      "9 a 3 x 3 grid", choices=(0, 1, 3, 9), default=3),
+            ), "the tube certificate checked over its own domain (docs/control_design.md)"),
             Section("nominal", (
                 Field("lam", "float", "decay factor of (34')", lo=0.0, hi=1.0, lo_open=True,
                       hi_open=True, default=0.9995, equation="LMI (34)"),

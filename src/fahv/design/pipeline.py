@@ -21,6 +21,7 @@ from fahv.config.spec import defaults_text
 from fahv.control import LAWS, VARIANTS
 from fahv.design.artefacts import Design, provenance
 from fahv.design.case import Case
+from fahv.design.certificate import certify_tube
 from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
 from fahv.design.feasibility import fault_vertices, input_room
 from fahv.errors import DesignError
@@ -209,6 +210,9 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         f"{100 * coverage['path']:.1f} % on the case's path, "
         f"{100 * coverage['envelope']:.1f} % over the whole envelope (design rho_f = {rho_f})"
     )
+    certificate = certify_tube(
+        c, veh, tp, tm, Af, Bf, tube, tau, u_lo, u_hi, rho_f, Dx, DEFAULT_DEV_BOX, log, progress
+    )
     if d["constant"] == "estimated":
         for v in c["variants"]:
             if not LAWS[VARIANTS[v].law].nominal.estimates_disturbance:
@@ -274,6 +278,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             "row_room": room_f.tolist(),
             "loss_covered": coverage,
         },
+        "certificate": certificate,
         "nominal": {**cert, "s": nominal.s, "lam": nominal.lam},
         "plant_params": perturbed_params(veh, c["uncertainty"]["seed"], c["uncertainty"]["scale"]),
     }

@@ -1,0 +1,644 @@
+"""The tube certificate checked against its own assumptions (issue: a certificate that is true).
+
+The tube Z = {e : e' N^-1 e <= 1} of LMI (24) is robust positively invariant (RPI) for
+e+ = (A_i + B_i F) e + w, w in the box W, at every vertex i. That statement is only
+as true as W: W must bound the one-step disturbance of the perturbed, faulty nonlinear
+plant over every state and input the closed loop can reach. This module
+
+* states that domain explicitly (:class:`CertificateDomain`): scheduling points over
+  the envelope, the nominal deviations the nominal MPC allows plus the box of Z, the
+  inputs the tightened set plus F Z allows, every corner of the sec. 5.1 parameter
+  box, rho_f at the ends of [rho_min, 1];
+* bounds the one-step disturbance over it (:func:`bound_disturbance`) by a
+  deterministic second-order Taylor model with an absolute-value (interval) bound over
+  the box, plus a third-order remainder measured at every corner of the box
+  (no random sampling: the result does not depend on a seed);
+* computes the exact worst one-step level of the tube over the vertices, the corners
+  of W and the whole of Z (:func:`worst_level`, a trust-region subproblem per vertex
+  and corner), i.e. the RPI property itself, with its margin;
+* certifies the onset of a fault and the start of a run, where the disturbance
+  estimate has not converged yet, by the level recursion of the S-procedure
+  certificate (:func:`onset_levels`).
+
+The disturbance (in deviation coordinates around the scheduling trim (x_rs, u_rs) of
+the nominal MPC, A_s, B_s the scheduled discrete model, P = diag(1, rho_f))::
+
+    Delta(z, p, rho_f) = Phi_p(x_rs + z_x, P (u_rs + z_u)) - x_rs - A_s z_x - B_s P z_u
+                         - [Phi_p(x_rs, P u_rs) - x_rs]
+
+is the one-step error of the vertex model with the constant part at the trim (which
+the online estimate removes, ``disturbance.constant: estimated``) taken out;
+Phi_p is one control period of the plant (RK4, the plant's own sub-steps).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fahv.errors import DesignError
+from fahv.model.vehicle import DELTA_E
+from fahv.plant.rk4 import params_records, rk4_cm
+from fahv.plant.uncertainty import perturb
+
+#: Safety factor on the third-order remainder measured at the corners of the box.
+REMAINDER_FACTOR = 2.0
+
+
+@dataclass(frozen=True)
+class CertificateDomain:
+    """The set of states, inputs, vehicles and faults the tube certificate assumes.
+
+    Attributes
+    ----------
+    schedules : (S, 2) ndarray
+        Scheduling points (h, V) [ft, ft/s] of the nominal model: the corners and the
+        centre of the envelope grid.
+    x_half : (9,) ndarray
+        Half-widths of x - x_rs: the nominal deviation the nominal MPC allows from its
+        scheduling trim plus the box of Z [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s].
+    nominal_half : (9,) ndarray
+        The nominal part of ``x_half`` (without Z), for the report.
+    u_lo, u_hi : (2,) ndarray
+        Absolute input range [Phi, delta_e rad]: the tightened nominal set plus the
+        support of tau F Z (the actuator limits when the design is consistent).
+    uncertainty : dict[str, float]
+        Relative bounds of the sec. 5.1 box; every corner is evaluated.
+    rho : tuple of float
+        Elevator effectiveness values evaluated (the ends of [rho_min, 1]).
+    Ts : float
+        Control period [s].
+    n_sub : int
+        RK4 sub-steps per period (the plant's).
+    notes : tuple of str
+        Assumptions stated with the domain (what is assumed, not derived).
+    """
+
+    schedules: np.ndarray
+    x_half: np.ndarray
+    nominal_half: np.ndarray
+    u_lo: np.ndarray
+    u_hi: np.ndarray
+    uncertainty: dict
+    rho: tuple
+    Ts: float
+    n_sub: int
+    notes: tuple = field(default=())
+
+    def corners(self) -> np.ndarray:
+        """Every corner of the parameter box, (2^P, P) signs in {-1, +1}."""
+        return np.array(list(itertools.product((-1.0, 1.0), repeat=len(self.uncertainty))))
+
+
+def nominal_half_widths(mpc: dict, x_default: np.ndarray) -> tuple[np.ndarray, tuple]:
+    """Nominal deviation from the scheduling trim that the nominal MPC allows (9,).
+
+    h and V: the rescheduling threshold plus half a set-point move (the nominal model
+    is re-scheduled at a plan when its h, V left the threshold; between plans it moves
+    on); alpha, theta: the attitude rows of the QP (``mpc.att_max``, from the nominal
+    trim) plus the same margin as h, V of the trim map's slope; q and the flexible
+    states: ``x_default`` (no QP row bounds them: stated as an assumption).
+
+    Returns
+    -------
+    (9,) ndarray, tuple of str
+        Half-widths and the assumptions made.
+    """
+    half = np.array(x_default, float).copy()
+    resched = np.asarray(mpc["reschedule"], float)
+    dmove = np.asarray(mpc["dtheta_max"], float)
+    half[0] = resched[0] + 0.5 * dmove[0]
+    half[1] = resched[1] + 0.5 * dmove[1]
+    att = np.radians(mpc["att_max"]) + np.radians(0.05)
+    half[2] = half[3] = att
+    notes = (
+        "h, V: rescheduling threshold + half a set-point move",
+        "alpha, theta: attitude rows of the QP + 0.05 deg of trim-map slope",
+        "q, eta_i, eta_i_dot: nominal deviations assumed within "
+        + ", ".join(f"{v:.3g}" for v in half[4:])
+        + " (no QP row bounds them)",
+    )
+    return half, notes
+
+
+def _one_step(X, U, P, Ts, n_sub):
+    return rk4_cm(np.ascontiguousarray(X), np.ascontiguousarray(U), P, Ts, n_sub)
+
+
+def _disturbance(Z, x_rs, u_rs, A_s, B_s, rho, recs, Ts, n_sub):
+    """Delta (module docstring) for L points Z (L, 11) and parameter records (L,)."""
+    L = Z.shape[0]
+    P = np.array([1.0, rho])
+    X = x_rs[None, :] + Z[:, :9]
+    U = (u_rs[None, :] + Z[:, 9:]) * P[None, :]
+    x1 = _one_step(X, U, recs, Ts, n_sub)
+    x0 = _one_step(np.tile(x_rs, (L, 1)), np.tile(u_rs * P, (L, 1)), recs, Ts, n_sub)
+    return x1 - x0 - Z[:, :9] @ A_s.T - (Z[:, 9:] * P[None, :]) @ B_s.T
+
+
+def _stencil(a: np.ndarray):
+    """Central-difference stencil (K, d) with steps a/2 for value, gradient, Hessian."""
+    d = a.size
+    h = 0.5 * a
+    pts = [np.zeros(d)]
+    for i in range(d):
+        for s in (1.0, -1.0):
+            p = np.zeros(d)
+            p[i] = s * h[i]
+            pts.append(p)
+    for i, k in itertools.combinations(range(d), 2):
+        for si, sk in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            p = np.zeros(d)
+            p[i], p[k] = si * h[i], sk * h[k]
+            pts.append(p)
+    return np.array(pts), h
+
+
+def _taylor(G, h, d):
+    """Value g0 (n,), gradient J (n, d), Hessian H (n, d, d) from stencil values G (K, n)."""
+    g0 = G[0]
+    n = g0.size
+    J = np.empty((n, d))
+    H = np.zeros((n, d, d))
+    for i in range(d):
+        gp, gm = G[1 + 2 * i], G[2 + 2 * i]
+        J[:, i] = (gp - gm) / (2 * h[i])
+        H[:, i, i] = (gp + gm - 2 * g0) / h[i] ** 2
+    base = 1 + 2 * d
+    for c, (i, k) in enumerate(itertools.combinations(range(d), 2)):
+        pp, pm, mp, mm = G[base + 4 * c : base + 4 * c + 4]
+        H[:, i, k] = H[:, k, i] = (pp - pm - mp + mm) / (4 * h[i] * h[k])
+    return g0, J, H
+
+
+@dataclass(frozen=True)
+class DisturbanceBound:
+    """Bound of the one-step disturbance over a :class:`CertificateDomain`.
+
+    Attributes
+    ----------
+    w_bound : (9,) ndarray
+        max |Delta_j| over the domain (Taylor bound + remainder), deviation units.
+    quadratic : (9,) ndarray
+        The second-order part of the bound alone.
+    remainder : (9,) ndarray
+        REMAINDER_FACTOR times the largest corner mismatch of the quadratic model.
+    corner_max : (9,) ndarray
+        Largest |Delta_j| evaluated exactly at the corners of the box (a lower bound).
+    worst : list of dict
+        Per row: the scheduling point, parameter corner and rho_f of the largest bound.
+    n_evaluations : int
+        One-step evaluations of the plant made.
+    """
+
+    w_bound: np.ndarray
+    quadratic: np.ndarray
+    remainder: np.ndarray
+    corner_max: np.ndarray
+    worst: list
+    n_evaluations: int
+
+
+def bound_disturbance(domain: CertificateDomain, vehicle, tp, trim_map, progress=None):
+    """Bound max |Delta_j| over the whole domain (module docstring), deterministic.
+
+    For every scheduling point, parameter corner (all 2^P) and rho_f of the domain,
+    Delta is expanded about the centre c of the (state, input) box B = c + [-a, a]
+    (11 dimensions) with central differences of step a/2 (243 plant steps), and
+    bounded over the box by |g0| + |J| a + 1/2 a' |H| a (elementwise absolute values:
+    an interval bound of the quadratic model). The third-order remainder is measured
+    as the largest mismatch between the exact Delta and the quadratic model at all
+    2^11 corners of the box, for the parameter corner and rho_f that give the largest
+    quadratic bound of each row, and added times :data:`REMAINDER_FACTOR`.
+
+    Parameters
+    ----------
+    domain : CertificateDomain
+    vehicle : fahv.model.vehicle.Vehicle
+        Nominal vehicle (parameters perturbed here).
+    tp : fahv.model.tp_model.TPModel
+        The continuous TP model (discretised at ``domain.Ts``), CM (9 states).
+    trim_map : fahv.model.trim.TrimMap
+        Scheduling trims (x_rs, u_rs).
+    progress : callable, optional
+        Iterable wrapper (tqdm).
+
+    Returns
+    -------
+    DisturbanceBound
+
+    Raises
+    ------
+    DesignError
+        If the design model is not the 9-state CM/DM, or an evaluation is not finite.
+    """
+    disc = tp.discretize(domain.Ts)
+    n = disc.A.shape[1]
+    if n != 9:
+        raise DesignError(
+            f"certificate domain: bound implemented for the 9-state CM/DM design model, got {n}"
+        )
+    names = list(domain.uncertainty)
+    corners = domain.corners()
+    recs_all = params_records(
+        [perturb(vehicle.params, domain.uncertainty, dict(zip(names, s, strict=True)))
+         for s in corners]
+    )  # fmt: skip
+    quad = np.zeros(n)
+    best = [None] * n  # (quadratic bound, schedule index, corner index, rho)
+    n_eval = 0
+    items = list(itertools.product(range(len(domain.schedules)), domain.rho))
+    it = items if progress is None else progress(items)
+    cache = {}
+    for si, rho in it:
+        h_s, V_s = domain.schedules[si]
+        x_rs, u_rs = trim_map(h_s, V_s)
+        x_rs = np.asarray(x_rs[:9], float)
+        A_s, B_s = _scheduled(disc, tp, h_s, V_s)
+        u_c = 0.5 * (domain.u_lo + domain.u_hi) - u_rs
+        a_u = 0.5 * (domain.u_hi - domain.u_lo)
+        center = np.concatenate([np.zeros(9), u_c])
+        a = np.concatenate([domain.x_half, a_u])
+        S, hstep = _stencil(a)
+        K, C = S.shape[0], corners.shape[0]
+        Zs = np.tile(center + S, (C, 1))
+        recs = np.repeat(recs_all, K)
+        G = _disturbance(Zs, x_rs, u_rs, A_s, B_s, rho, recs, domain.Ts, domain.n_sub)
+        n_eval += 2 * G.shape[0]
+        if not np.all(np.isfinite(G)):
+            raise DesignError(
+                f"certificate domain: non-finite plant step at schedule ({h_s}, {V_s}); the "
+                "domain leaves the model's validity"
+            )
+        G = G.reshape(C, K, n)
+        for c in range(C):
+            g0, J, H = _taylor(G[c], hstep, a.size)
+            qb = np.abs(g0) + np.abs(J) @ a + 0.5 * np.einsum("jik,i,k->j", np.abs(H), a, a)
+            cache[(si, rho, c)] = (g0, J, H)
+            for j in range(n):
+                if qb[j] > quad[j]:
+                    quad[j] = qb[j]
+                    best[j] = (si, c, rho, center, a, x_rs, u_rs, A_s, B_s)
+    # third-order remainder at the 2^11 corners of the box, for each row's worst case
+    rem = np.zeros(n)
+    cmax = np.zeros(n)
+    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=11)))
+    done = {}
+    for j in range(n):
+        si, c, rho, center, a, x_rs, u_rs, A_s, B_s = best[j]
+        key = (si, rho, c)
+        if key not in done:
+            Zc = center + signs * a
+            exact = _disturbance(
+                Zc, x_rs, u_rs, A_s, B_s, rho, np.repeat(recs_all[c : c + 1], len(Zc)),
+                domain.Ts, domain.n_sub,
+            )  # fmt: skip
+            n_eval += 2 * len(Zc)
+            g0, J, H = cache[key]
+            dz = signs * a
+            model = g0 + dz @ J.T + 0.5 * np.einsum("li,jik,lk->lj", dz, H, dz)
+            done[key] = (np.max(np.abs(exact - model), axis=0), np.max(np.abs(exact), axis=0))
+        mis, ex = done[key]
+        rem = np.maximum(rem, REMAINDER_FACTOR * mis)
+        cmax = np.maximum(cmax, ex)
+    worst = [
+        {
+            "schedule": domain.schedules[b[0]].tolist(),
+            "corner": dict(zip(names, corners[b[1]].tolist(), strict=True)),
+            "rho_f": b[2],
+        }
+        for b in best
+    ]
+    return DisturbanceBound(quad + rem, quad, rem, cmax, worst, n_eval)
+
+
+def _scheduled(disc, tp, h, V):
+    w = tp.weights(h, V)
+    return np.tensordot(w, disc.A, 1), np.tensordot(w, disc.B, 1)
+
+
+def disturbance_at(domain: CertificateDomain, vehicle, tp, trim_map, schedule, Z, signs, rho):
+    """Delta (L, 9) at explicit points: an independent evaluation for tests.
+
+    Parameters
+    ----------
+    domain : CertificateDomain
+    vehicle, tp, trim_map
+        As :func:`bound_disturbance`.
+    schedule : (2,) array_like
+        Scheduling point (h, V).
+    Z : (L, 11) ndarray
+        Deviations (x - x_rs, u - u_rs).
+    signs : (L, P) ndarray
+        Parameter values as fractions in [-1, 1] of the box, one row per point.
+    rho : float
+        Elevator effectiveness.
+    """
+    disc = tp.discretize(domain.Ts)
+    names = list(domain.uncertainty)
+    x_rs, u_rs = trim_map(*schedule)
+    A_s, B_s = _scheduled(disc, tp, *schedule)
+    recs = params_records(
+        [perturb(vehicle.params, domain.uncertainty, dict(zip(names, s, strict=True)))
+         for s in signs]
+    )  # fmt: skip
+    return _disturbance(
+        np.asarray(Z, float), np.asarray(x_rs[:9], float), u_rs, A_s, B_s, rho, recs,
+        domain.Ts, domain.n_sub,
+    )  # fmt: skip
+
+
+# -- the RPI property itself -------------------------------------------------------------
+def _max_on_ball(M: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Max over |u| <= 1 of |M u + c_l|^2 for each row c_l of c (L, n): exact.
+
+    A convex function attains its maximum over the ball on the sphere; the
+    maximiser solves (lam I - M'M) u = M'c with lam >= sigma_max^2 and |u| = 1 (the
+    trust-region subproblem; Moré and Sorensen 1983), found by bisection on the
+    secular equation; the hard case (M'c orthogonal to the top eigenvector) is
+    covered by the limit lam = sigma_max^2 plus the top eigenvector.
+    """
+    s, V = np.linalg.eigh(M.T @ M)
+    b = (c @ M) @ V  # (L, n): components of M'c in the eigenbasis
+    smax = s[-1]
+    cc = np.einsum("li,li->l", c, c)
+
+    def norm2(lam):
+        return np.sum(b**2 / (lam[:, None] - s[None, :]) ** 2, axis=1)
+
+    lo = np.full(len(c), smax)
+    hi = smax + np.sqrt(np.sum(b**2, axis=1)) + 1.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        big = norm2(mid) > 1.0
+        lo = np.where(big, mid, lo)
+        hi = np.where(big, hi, mid)
+    lam = hi
+    y = b / (lam[:, None] - s[None, :])
+    ny2 = np.sum(y**2, axis=1)
+    # hard case: |y| < 1 at lam -> sigma_max^2; fill along the top eigenvector
+    y[:, -1] += np.sign(y[:, -1] + (y[:, -1] == 0)) * np.sqrt(np.maximum(0.0, 1.0 - ny2))
+    u = y @ V.T
+    return cc + 2 * np.einsum("li,li->l", c, u @ M.T) + np.einsum("li,li->l", u @ M.T, u @ M.T)
+
+
+def worst_level(A, B, F, N, w_max, tau: float = 1.0):
+    """Exact max of (A_cl,i e + w)' (tau^2 N)^-1 (A_cl,i e + w) over e in tau Z, w in W.
+
+    The level is convex in (e, w), so over the box W its maximum lies at a corner; over
+    the ellipsoid the trust-region subproblem of :func:`_max_on_ball` is solved
+    exactly. The tube is RPI for W iff the result is at most 1.
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+        Vertices (the fault vertices included).
+    F : (m, n) ndarray
+    N : (n, n) ndarray
+        Tube shape, Z = {e' N^-1 e <= 1}.
+    w_max : (n,) ndarray
+        Half-widths of W.
+    tau : float
+        Adjustable factor (eq. 54): the tube is tau Z, the gain tau F.
+
+    Returns
+    -------
+    level : float
+        The worst one-step level (1: the boundary of the tube).
+    where : tuple
+        (vertex index, corner of W as signs (n,)).
+    """
+    Ns = tau**2 * np.asarray(N, float)
+    L = np.linalg.cholesky(Ns)
+    Linv = np.linalg.inv(L)
+    n = Ns.shape[0]
+    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=n)))
+    C = (signs * np.asarray(w_max, float)[None, :]) @ Linv.T
+    best, where = -1.0, None
+    for i in range(A.shape[0]):
+        Acl = A[i] + B[i] @ (tau * F)
+        M = Linv @ Acl @ L
+        lev = _max_on_ball(M, C)
+        k = int(np.argmax(lev))
+        if lev[k] > best:
+            best, where = float(lev[k]), (i, signs[k])
+    return best, where
+
+
+def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, lo: float = 0.5, hi: float = 4.0) -> float:
+    """Largest factor g such that the tube stays RPI for g W (bisection on worst_level)."""
+    if worst_level(A, B, F, N, w_max, tau)[0] > 1.0:
+        hi = 1.0
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        if worst_level(A, B, F, N, mid * np.asarray(w_max), tau)[0] <= 1.0:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+# -- onset of a fault and start of a run ----------------------------------------------
+def onset_levels(lam, mu, w_base, pulse, gamma, n_steps, level0=1.0) -> np.ndarray:
+    """Tube levels after a pulse in the estimate's error, from the S-procedure certificate.
+
+    The certificate of LMI (24) gives, at every vertex and for every e and w,
+    (A_cl e + w)' N^-1 (A_cl e + w) <= lam e' N^-1 e + sum_j mu_j w_j^2. With the
+    disturbance estimate d <- d + gamma (r - d), the error of the estimate obeys
+    eps_k = (1 - gamma) eps_k-1 + (r_k - r_k-1): a jump J of the residual (a fault
+    onset, the constant part at the first step) decays as (1 - gamma)^k J on top of
+    the steady bound w_base. Hence the level bound
+
+        L_k+1 = lam L_k + sum_j mu_j (w_base,j + (1 - gamma)^k J_j)^2.
+
+    Parameters
+    ----------
+    lam : float
+    mu : (n,) ndarray
+        Certificate of the tube (scaled coordinates).
+    w_base, pulse : (n,) ndarray
+        Steady bound and jump, scaled like ``mu``.
+    gamma : float
+        Estimator gain Ts / est_tau (1: no estimate memory).
+    n_steps : int
+    level0 : float
+        Level at the jump (1: the error on the boundary of Z).
+
+    Returns
+    -------
+    (n_steps + 1,) ndarray
+        Level bounds L_0 .. L_n.
+    """
+    L = np.empty(n_steps + 1)
+    L[0] = level0
+    decay = 1.0
+    for k in range(n_steps):
+        w = np.asarray(w_base) + decay * np.asarray(pulse)
+        L[k + 1] = lam * L[k] + float(np.asarray(mu) @ w**2)
+        decay *= 1.0 - gamma
+    return L
+
+
+def fault_jump(vehicle, trim_map, u_hi_abs: float, rho: float, Ts, n_sub) -> np.ndarray:
+    """Jump of the one-step residual at the onset of a loss, per state (9,).
+
+    The worst over the trim grid of |Phi(x_r, (Phi_r, rho d)) - Phi(x_r, (Phi_r, d))|
+    at d = u_hi_abs (the largest elevator the domain allows), nominal parameters.
+    """
+    hs, Vs = trim_map.h_grid, trim_map.V_grid
+    X, U = [], []
+    for h in hs:
+        for V in Vs:
+            x, u = trim_map(h, V)
+            X.append(np.asarray(x[:9], float))
+            U.append(np.array([u[0], u_hi_abs]))
+    X, U = np.array(X), np.array(U)
+    Uf = U.copy()
+    Uf[:, DELTA_E] *= rho
+    recs = params_records([vehicle.params] * len(X))
+    return np.max(np.abs(_one_step(X, Uf, recs, Ts, n_sub) - _one_step(X, U, recs, Ts, n_sub)),
+                  axis=0)  # fmt: skip
+
+
+def schedule_points(envelope, count: int) -> np.ndarray:
+    """Scheduling points of the domain (count, 2) [ft, ft/s].
+
+    1: the envelope centre; 3: the centre and two opposite corners; 9: the 3 x 3 grid
+    of corners, edge midpoints and centre.
+
+    Raises
+    ------
+    ValueError
+        For another count.
+    """
+    hs = (envelope.h_min, 0.5 * (envelope.h_min + envelope.h_max), envelope.h_max)
+    Vs = (envelope.V_min, 0.5 * (envelope.V_min + envelope.V_max), envelope.V_max)
+    grid = np.array([[h, V] for h in hs for V in Vs])
+    picks = {1: [4], 3: [0, 4, 8], 9: list(range(9))}
+    if count not in picks:
+        raise ValueError(f"certificate.schedules must be 1, 3 or 9, got {count}")
+    return grid[picks[count]]
+
+
+def certify_tube(case: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi, rho_min,
+                 Dx, x_default, log, progress=None) -> dict:  # fmt: skip
+    """Check the tube certificate against its own assumptions and report (no exception).
+
+    Prints, with margins: the stated domain; the bound of the one-step disturbance over
+    it per row, as a multiple of W (:func:`bound_disturbance`); the exact worst
+    one-step level over the vertices and the corners of W and the factor by which W
+    may grow (:func:`worst_level`, :func:`rpi_margin`); whether the certificate is
+    closed (the bound inside W); the onset of a loss of 1 - rho_min at the largest
+    elevator of the domain (:func:`onset_levels`).
+
+    Parameters
+    ----------
+    case : dict
+        Validated case data (``mpc``, ``certificate``, ``Ts``, ``plant_substeps``).
+    vehicle, tp, trim_map
+        As :func:`bound_disturbance`.
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+        Vertices of the tube certificate (fault vertices included).
+    tube : fahv.synthesis.feedback.TubeDesign
+    tau : float
+    u_lo, u_hi : (2,) ndarray
+        Tightened nominal input limits (absolute).
+    rho_min : float
+    Dx : (n,) ndarray
+        State scaling of the tube certificate (mu is in these units).
+    x_default : (n,) ndarray
+        Assumed nominal deviations of the states no QP row bounds.
+    log : callable
+
+    Returns
+    -------
+    dict
+        Summary (JSON-able): ``certified`` (bool), per-row ``w_ratio`` and ``slack``,
+        ``rpi_level``, ``rpi_growth``, ``onset_level_max``, the domain.
+    """
+    from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+
+    w = tube.w_max
+    level, (vi, corner) = worst_level(A, B, tube.F, tube.N, w, tau)
+    growth = rpi_margin(A, B, tube.F, tube.N, w, tau)
+    log(
+        f"RPI check (exact): worst one-step level over {A.shape[0]} vertices x "
+        f"{2**w.size} corners of W and all of Z = {level:.5f} (<= 1 required; margin "
+        f"{1 - level:.2e}); the tube stays RPI for W grown by up to {growth:.3f}x"
+    )
+    out = {"rpi_level": level, "rpi_growth": growth, "certified": False}
+    n_s = case["certificate"]["schedules"]
+    if n_s == 0 or A.shape[1] != 9:
+        why = (
+            "skipped (certificate.schedules: 0)"
+            if n_s == 0
+            else (f"not evaluated for the {A.shape[1]}-state design model (9-state CM/DM only)")
+        )
+        log(f"certificate domain: {why}; the tube certificate is NOT checked over its domain")
+        out["domain"] = why
+        return out
+    mpc = case.get("mpc") or {}
+    if not mpc:
+        from fahv.control.nominal_mpc import MPC_SECTION_FIELDS
+
+        mpc = {f.name: f.default for f in MPC_SECTION_FIELDS}
+    nominal, notes = nominal_half_widths(mpc, x_default)
+    z_box = tau * tube.z_box
+    t = tau * tube.tightening
+    unc = {k: v * case["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
+    dom = CertificateDomain(
+        schedule_points(vehicle.envelope, n_s), nominal + z_box, nominal, u_lo - t, u_hi + t,
+        unc, tuple(sorted({rho_min, 1.0})), case["Ts"], case["plant_substeps"], notes,
+    )  # fmt: skip
+    log(
+        f"certificate domain: {n_s} scheduling point(s) over the envelope; x - x_rs within "
+        f"nominal + Z = +/-[{', '.join(f'{v:.3g}' for v in dom.x_half)}]; inputs Phi in "
+        f"[{dom.u_lo[0]:.3f}, {dom.u_hi[0]:.3f}], delta_e in [{np.degrees(dom.u_lo[1]):.1f}, "
+        f"{np.degrees(dom.u_hi[1]):.1f}] deg (tightened set + tau F Z); all "
+        f"{2 ** len(unc)} corners of the sec. 5.1 box; rho_f in {list(dom.rho)}. Assumed: "
+        + "; ".join(notes)
+    )
+    bnd = bound_disturbance(dom, vehicle, tp, trim_map, progress)
+    ratio = bnd.w_bound / w
+    slack = (w - bnd.w_bound) / w
+    log(
+        "W over the domain (Taylor bound + corner remainder, "
+        f"{bnd.n_evaluations} plant steps): bound / W per row = "
+        + ", ".join(f"{r:.2f}" for r in ratio)
+        + "; slack (W - bound) / W = "
+        + ", ".join(f"{s:+.2f}" for s in slack)
+    )
+    closed = bool(np.all(bnd.w_bound <= w))
+    worst_row = int(np.argmax(ratio))
+    log(
+        "certificate closed: the disturbance over the domain lies inside W  OK" if closed else
+         f"certificate NOT closed: the disturbance over the domain exceeds W by up to "
+         f"{ratio[worst_row]:.1f}x (row {worst_row}); the tube is RPI only up to "
+         f"{growth:.3f} W, so e in Z is NOT guaranteed for this plant (measured, "
+         "docs/control_design.md)"
+    )  # fmt: skip
+    # onset of the design loss at the largest elevator of the domain, estimate's pulse
+    gamma = min(1.0, case["Ts"] / mpc["est_tau"]) if mpc.get("est_tau", 0) > 0 else 1.0
+    J = fault_jump(
+        vehicle, trim_map, float(dom.u_hi[1]), rho_min, case["Ts"], case["plant_substeps"]
+    )
+    Ls = onset_levels(tube.lam, tube.mu, np.minimum(bnd.w_bound, w) / Dx, J / Dx, gamma, 2000)
+    log(
+        f"onset of a {100 * (1 - rho_min):.0f} % loss at delta_e = "
+        f"{np.degrees(dom.u_hi[1]):.1f} deg (estimate time constant {mpc.get('est_tau')} s): "
+        f"level bound from the certificate up to {Ls.max():.3g} "
+        + ("<= 1  OK" if Ls.max() <= 1 else "> 1: the onset is NOT certified")
+    )
+    out.update(
+        certified=closed and Ls.max() <= 1.0 and level <= 1.0,
+        w_bound=bnd.w_bound.tolist(), w_ratio=ratio.tolist(), slack=slack.tolist(),
+        corner_max=bnd.corner_max.tolist(), worst=bnd.worst, onset_level_max=float(Ls.max()),
+        domain={"schedules": dom.schedules.tolist(), "x_half": dom.x_half.tolist(),
+                "nominal_half": nominal.tolist(), "u_lo": dom.u_lo.tolist(),
+                "u_hi": dom.u_hi.tolist(), "rho": list(dom.rho), "assumptions": list(notes)},
+    )  # fmt: skip
+    return out

@@ -1,0 +1,150 @@
+"""The tube certificate against its own assumptions (fahv.design.certificate)."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from fahv.design.certificate import (
+    CertificateDomain,
+    bound_disturbance,
+    disturbance_at,
+    nominal_half_widths,
+    onset_levels,
+    worst_level,
+)
+from fahv.design.disturbance import DEFAULT_DEV_BOX
+from fahv.design.feasibility import fault_vertices
+from fahv.model.tp_model import build_tp_model
+from fahv.model.trim import TrimMap
+from fahv.model.vehicle import load_vehicle
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+
+
+def test_worst_level_is_exact_on_a_small_system():
+    """The trust-region maximum equals a dense brute force (from below, to 1e-3)."""
+    rng = np.random.default_rng(3)
+    n, m, R = 3, 1, 2
+    A = rng.normal(0, 0.4, (R, n, n))
+    B = rng.normal(0, 1, (R, n, m))
+    F = rng.normal(0, 0.2, (m, n))
+    G = rng.normal(0, 1, (n, n))
+    N = G @ G.T + np.eye(n)
+    w = np.array([0.1, 0.3, 0.2])
+    level, _ = worst_level(A, B, F, N, w)
+    L = np.linalg.cholesky(N)
+    u = rng.normal(size=(200_000, n))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    E = u @ L.T  # boundary of Z
+    brute = 0.0
+    Ninv = np.linalg.inv(N)
+    for i, s in itertools.product(range(R), itertools.product((-1, 1), repeat=n)):
+        Y = E @ (A[i] + B[i] @ F).T + np.array(s) * w
+        brute = max(brute, np.max(np.einsum("ki,ij,kj->k", Y, Ninv, Y)))
+    assert brute <= level * (1 + 1e-12)
+    assert level <= brute * (1 + 1e-3)
+
+
+def test_onset_levels_follow_the_certificate_recursion():
+    """Without a pulse and with the budget sum mu w^2 = 1 - lam the level stays at 1; a
+    pulse raises it by exactly the recursion's terms."""
+    lam, mu, w = 0.99, np.array([2.0, 3.0]), np.array([0.04, 0.03])
+    budget = float(mu @ w**2)
+    w_full = w * np.sqrt((1 - lam) / budget)
+    L = onset_levels(lam, mu, w_full, np.zeros(2), 0.04, 500)
+    assert np.allclose(L, 1.0, atol=1e-12)
+    L = onset_levels(lam, mu, w, np.array([0.1, 0.0]), 0.5, 3, level0=0.0)
+    assert L[1] == pytest.approx(mu @ (w + [0.1, 0]) ** 2, rel=1e-14)
+    assert L[2] == pytest.approx(lam * L[1] + mu @ (w + [0.05, 0]) ** 2, rel=1e-14)
+
+
+@pytest.fixture(scope="module")
+def model(design):
+    a = design.arrays
+    veh = load_vehicle()
+    tp = build_tp_model(veh, "cm", 4, 5, 21, 21)
+    tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+    return veh, tp, tm
+
+
+def _samples(dom, n, seed):
+    """n points of the domain: the first 2 x 1024 at every parameter corner (rho_f at
+    both ends, box corners of x and u cycled), the rest uniform in the boxes with the
+    parameters at random corners or inside."""
+    rng = np.random.default_rng(seed)
+    corners = dom.corners()
+    P = len(dom.uncertainty)
+    a = np.concatenate([dom.x_half, 0.5 * (dom.u_hi - dom.u_lo)])
+    signs = np.empty((n, P))
+    signs[: len(corners)] = corners
+    signs[len(corners) : 2 * len(corners)] = corners
+    k = 2 * len(corners)
+    signs[k:] = np.where(rng.random((n - k, P)) < 0.5, rng.choice([-1.0, 1.0], (n - k, P)),
+                         rng.uniform(-1, 1, (n - k, P)))  # fmt: skip
+    unit = rng.uniform(-1, 1, (n, a.size))
+    unit[:k] = np.sign(unit[:k])  # box corners for the parameter corners
+    return unit, a, signs
+
+
+def test_disturbance_bound_holds_on_100000_independent_samples(model):
+    """The deterministic bound of W over a domain contains the true one-step disturbance
+    of the perturbed nonlinear CM at 100 000 points of that domain, every corner of the
+    sec. 5.1 box and rho_f at both ends included (issue: an independent test)."""
+    veh, tp, tm = model
+    h, V = 85500.0, 7900.0
+    x_r, u_r = tm(h, V)
+    nominal, notes = nominal_half_widths(
+        {"reschedule": [100.0, 50.0], "dtheta_max": [300.0, 150.0], "att_max": 0.35},
+        DEFAULT_DEV_BOX,
+    )
+    dom = CertificateDomain(
+        np.array([[h, V]]), 0.25 * nominal, 0.25 * nominal, u_r - [0.05, np.radians(2.0)],
+        u_r + [0.05, np.radians(2.0)], dict(PAPER_UNCERTAINTY), (0.7, 1.0), 0.02, 5, notes,
+    )  # fmt: skip
+    bnd = bound_disturbance(dom, veh, tp, tm)
+    assert np.all(bnd.corner_max <= bnd.w_bound)
+    n = 100_000
+    unit, a, signs = _samples(dom, n, seed=12)
+    center = np.concatenate([np.zeros(9), 0.5 * (dom.u_lo + dom.u_hi) - u_r])
+    worst = np.zeros(9)
+    for rho, sl in ((0.7, slice(0, n, 2)), (1.0, slice(1, n, 2))):
+        D = disturbance_at(dom, veh, tp, tm, (h, V), center + unit[sl] * a, signs[sl], rho)
+        worst = np.maximum(worst, np.max(np.abs(D), axis=0))
+    ratio = worst / bnd.w_bound
+    print("sampled max / bound per row:", np.round(ratio, 3))
+    assert np.all(ratio <= 1.0), ratio
+    # and the bound is not vacuous: the samples reach a good part of it
+    assert np.all(ratio >= 0.3), ratio
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="certificate not closed (measured: the disturbance over the design's own domain "
+    "exceeds W by 12-176x per row, docs/control_design.md); strict: passes once it is",
+)
+def test_design_W_bounds_the_disturbance_over_its_own_domain(design, model):
+    """The true one-step disturbance sampled over the design's own domain lies inside W."""
+    veh, tp, tm = model
+    a = design.arrays
+    h, V = 85500.0, 7900.0
+    x_r, u_r = tm(h, V)
+    nominal, notes = nominal_half_widths(design.case["mpc"], DEFAULT_DEV_BOX)
+    t = veh.limits.u_max - a["u_hi"]
+    dom = CertificateDomain(
+        np.array([[h, V]]), nominal + np.sqrt(np.diag(a["N"])), nominal, a["u_lo"] - t,
+        a["u_hi"] + t, dict(PAPER_UNCERTAINTY), (0.7, 1.0), 0.02, 5, notes,
+    )  # fmt: skip
+    unit, half, signs = _samples(dom, 20_000, seed=5)
+    center = np.concatenate([np.zeros(9), 0.5 * (dom.u_lo + dom.u_hi) - u_r])
+    D = disturbance_at(dom, veh, tp, tm, (h, V), center + unit * half, signs, 0.7)
+    assert np.all(np.max(np.abs(D), axis=0) <= a["w_max"])
+
+
+def test_design_tube_is_rpi_for_its_W_exactly(design):
+    """The exact worst one-step level of the design's tube over its 40 vertices, the
+    corners of W and all of Z is at most 1 (printed with its margin)."""
+    a = design.arrays
+    Af, Bf = fault_vertices(a["A"], a["B"], design.case["tube"]["rho_min"])
+    level, _ = worst_level(Af, Bf, a["F"], a["N"], a["w_max"])
+    print(f"worst one-step level {level:.6f}, margin {1 - level:.2e}")
+    assert level <= 1.0
