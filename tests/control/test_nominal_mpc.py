@@ -142,6 +142,74 @@ def test_case1_tracks_the_step_within_the_requirements(design):
     # the QP counters reach the run and its metrics (fahv inspect): one QP per move of
     # 25 steps, 4500 steps, none rejected
     m = metrics(run, load_vehicle().limits)
-    assert run.qp_counts.tolist() == [180, 0, 0]
+    assert run.qp_counts.tolist() == [180, 0, 0, 0]
     assert (m["nominal_qp_solves"], m["nominal_qp_fallback"], m["nominal_qp_terminal"]) == (
         180, 0, 0)  # fmt: skip
+
+
+def test_attitude_rows_hold_at_every_fast_step_of_the_applied_moves(design):
+    """Issue 20, item 5: the plan's nominal alpha, theta deviation, propagated fast step by
+    fast step on the scheduled model under u = u_s + K (z - x_s) + c_j, stays within the
+    attitude bound through the first two moves (the one applied before the next re-plan and
+    the one a shifted plan applies), not only at the move starts."""
+    a_max = np.radians(0.3)
+    mpc = _mpc(design, att_max=np.full(2, a_max))
+    c = design.case["command"]
+    mpc.schedule(c["h0"], c["V0"])
+    s, ly, n = mpc.s, mpc.layout, mpc.n
+    assert mpc.Att_y.shape[0] == 2 * (s.fine_moves * (s.M - 1) + s.N_p)
+    y, why = mpc.solve(np.zeros(n), mpc.u_r_s, np.array([c["h_c"], c["V_c"]]))
+    assert why == "ok"
+    delta = y[ly.delta]
+    AK = mpc.A + mpc.B @ mpc.K
+    E = (mpc.A - np.eye(n)) @ mpc.Gx + mpc.B @ mpc.Gu
+    zeta = -mpc.Gx @ delta  # zeta_0 = z0 - Gx delta with z0 = 0
+    att = []
+    for j in range(s.N_p):
+        cj = y[ly.move(j)] * mpc.Du
+        for _ in range(s.M):
+            zeta = AK @ zeta + mpc.B @ cj + E @ delta
+            att.append(zeta[2:4].copy())
+    att = np.array(att).reshape(s.N_p, s.M, 2)
+    # every fast step of moves 0 and 1, and every move start, within the bound
+    assert np.abs(att[:2]).max() <= a_max * (1 + 1e-6)
+    assert np.abs(att[:, -1]).max() <= a_max * (1 + 1e-6)
+    # the rows are active: the climb uses the attitude budget
+    assert np.abs(att[:2]).max() > 0.9 * a_max
+
+
+def test_attitude_bounds_follow_from_the_tube_support():
+    from fahv.control.nominal_mpc import attitude_bounds
+
+    N = np.diag(np.r_[1.0, 1.0, np.radians([0.1, 0.2]) ** 2, np.ones(5)])
+    att = attitude_bounds(N, 1.0)
+    np.testing.assert_allclose(np.degrees(att.support), [0.1, 0.2])
+    np.testing.assert_allclose(np.degrees(att.used), [0.4, 0.3])
+    assert att.is_certified and not att.given
+    att = attitude_bounds(N, 0.5)  # the tube tau Z of the adjustable law
+    np.testing.assert_allclose(np.degrees(att.used), [0.45, 0.4])
+    att = attitude_bounds(N, 1.0, 0.35)  # a given bound beyond the certified one
+    assert att.given and not att.is_certified and "NOT certified" in att.report()
+    with pytest.raises(DesignError, match="leaves no nominal bound"):
+        attitude_bounds(np.diag(np.r_[1.0, 1.0, np.radians([0.6, 0.2]) ** 2, np.ones(5)]), 1.0)
+
+
+def test_infeasible_replan_recovers_by_moving_the_set_point(design):
+    """Issue 20, item 6: a steady input beyond the tightened limit near the set point (a
+    large loss estimate) makes the QP with the trust region infeasible; the recovery QP moves
+    the set point to where the faulty trim fits, and is counted."""
+    mpc = _mpc(design)
+    mpc.schedule(85500.0, 8000.0)
+    u_base = mpc.u_r_s.copy()
+    # the steady elevator just above the tightened limit: no set point within 300 ft /
+    # 150 ft/s holds it, one at a higher speed does (less elevator per unit lift there)
+    u_base[1] = mpc.u_hi[1] + np.radians(0.05)
+    cmd = np.array([85500.0, 8000.0])
+    y, why = mpc.solve(np.zeros(mpc.n), u_base, cmd)
+    assert y is None and why != "ok"
+    y, why = mpc.solve(np.zeros(mpc.n), u_base, cmd, recover=True)
+    assert why == "ok"
+    dth = y[mpc.layout.delta] * mpc.theta_scale
+    assert np.hypot(dth[0] / 300.0, dth[1] / 150.0) > 1.0  # beyond the trust region
+    u_s = u_base + mpc.Gu @ y[mpc.layout.delta]
+    assert u_s[1] <= mpc.u_hi[1] + 1e-9

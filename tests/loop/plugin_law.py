@@ -46,7 +46,7 @@ class HoldStart(NominalSource):
         return NominalTrajectory(
             k, t, self.h0.copy(), self.V0.copy(), self.h0.copy(), self.V0.copy(),
             self.x_r.copy(), self.u_r.copy(), np.zeros((B, n)), np.zeros((B, 2)),
-            np.zeros(B), z, z, z, np.zeros((B, 2)),
+            np.zeros(B), z, z, z, np.zeros((B, 2)), z,
         )  # fmt: skip
 
 

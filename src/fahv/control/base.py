@@ -37,6 +37,9 @@ from fahv.errors import ConfigError
 from fahv.lanes import Lanes
 from fahv.msg import NominalTrajectory
 
+#: Largest attitude error |alpha - alpha_r|, |theta - theta_r| the paper requires (sec. 5.1) [deg].
+ATTITUDE_BOUND_DEG = 0.5
+
 
 class NominalSource:
     """Base of the nominal part of a control law, for B runs at once.
@@ -242,6 +245,8 @@ def register_nominal(cls: type[NominalSource]) -> type[NominalSource]:
     if NOMINAL_SOURCES.get(cls.name) is not cls:
         NOMINAL_SOURCES.register(cls.name, cls)
     return cls
+
+
 #: Variants by name.
 VARIANTS: Registry[Variant] = Registry("variant")
 

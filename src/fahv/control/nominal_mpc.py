@@ -24,10 +24,13 @@ nominal LPV model of eq. (12) scheduled at the current operating point:
   limits, 0 <= alpha <= 1 (the lambda-scaled terminal set of Limon et al.).
 * **Terminal cost.** zeta_{N_p}' P zeta_{N_p} with P the tail cost of the blocked model under K
   (discrete Lyapunov equation), i.e. the exact infinite-horizon cost once c = 0.
-* **Fallback.** If the solver does not return a solution that passes the numerical
-  check (constraints and KKT conditions), the shifted previous plan is used (its tail
-  stays in the invariant E(Q)); when none is left, the terminal law c = 0. Each is
-  counted.
+* **Recovery and fallback.** If the solver does not return a solution that passes
+  the numerical check (constraints and KKT conditions), the recovery QP is solved: the
+  same rows without the trust region on the set-point step, so the artificial set
+  point may move in one re-plan to wherever on the trim map its steady input fits the
+  tightened limits (the trust region only keeps the map's linearisation local). If that
+  fails too, the shifted previous plan is used (its tail stays in the invariant E(Q));
+  when none is left, the terminal law c = 0. Each is counted.
 
 The state disturbance estimate d (:class:`DisturbanceEstimator`, p states) makes the
 tracking offset-free and takes the constant part out of the tube's W: the nominal
@@ -56,7 +59,7 @@ import numpy as np
 import scipy.linalg
 
 from fahv.config import Field, Section
-from fahv.control.base import NominalSource, register_nominal
+from fahv.control.base import ATTITUDE_BOUND_DEG, NominalSource, register_nominal
 from fahv.control.command import Command, CommandSchedule
 from fahv.control.reference import lpv_of, mv, trim_map_of
 from fahv.errors import DesignError, RunError
@@ -93,8 +96,10 @@ MPC_SECTION_FIELDS = (
     Field("reschedule", "floats", "set-point distance that rebuilds the QP", unit="ft, ft/s",
           lo=0.0, lo_open=True, length=2, default=(100.0, 50.0)),
     Field("att_max", "float", "bound on the nominal |alpha - alpha_r|, |theta - theta_r| "
-          "(from the nominal trim) at each move", unit="deg", lo=0.0, lo_open=True,
-          hi=10.0, default=0.35),
+          "(from the nominal trim) at every fast step of the next two moves and at each later "
+          "move; 0: the certified bound, the attitude requirement (0.5 deg) minus the "
+          "support of tau Z in alpha and theta (docs/control_design.md); a value above it is "
+          "used but reported as not certified", unit="deg", lo=0.0, hi=10.0, default=0.0),
     Field("est_tau", "float", "time constant of the state-disturbance estimate (0: none)",
           unit="s", lo=0.0, hi=1e3, default=0.5),
 )  # fmt: skip
@@ -121,9 +126,13 @@ class MPCSettings:
     reschedule : (2,) ndarray
         Distance of the nominal (h, V) from the scheduling point that triggers a
         rebuild [ft, ft/s].
-    att_max : float
-        Bound on the nominal |alpha - alpha_s| and |theta - theta_s| at each move start
-        [rad] (the attitude requirement minus the tube's extent in alpha, theta).
+    att_max : (2,) ndarray
+        Bounds on the nominal |alpha - alpha_s| and |theta - theta_s| [rad] (the
+        attitude requirement minus the support of the tube in alpha, theta), at every
+        fast step of the first ``fine_moves`` moves and at the start of every later one.
+    fine_moves : int
+        Moves whose attitude is bounded at every fast step (the move the plan applies
+        before the next re-plan, and the one a shifted plan applies).
     """
 
     M: int
@@ -133,7 +142,8 @@ class MPCSettings:
     t_w: np.ndarray
     dtheta_max: np.ndarray
     reschedule: np.ndarray
-    att_max: float = math.inf
+    att_max: np.ndarray = dataclasses.field(default_factory=lambda: np.full(2, math.inf))
+    fine_moves: int = 2
 
     @classmethod
     def of_parameters(cls, p: dict, n: int) -> MPCSettings:
@@ -143,8 +153,106 @@ class MPCSettings:
         return cls(
             int(m["M"]), int(m["N_p"]), q_w, np.asarray(m["r_w"], float),
             np.asarray(m["t_w"], float), np.asarray(m["dtheta_max"], float),
-            np.asarray(m["reschedule"], float), float(np.radians(m["att_max"])),
+            np.asarray(m["reschedule"], float),
+            np.radians(np.broadcast_to(np.asarray(m["att_max"], float), (2,))).copy(),
         )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class AttitudeBounds:
+    """Attitude rows of the nominal QP against the requirement (:func:`attitude_bounds`).
+
+    Attributes
+    ----------
+    support : (2,) ndarray
+        Support of the tube tau Z along alpha and theta, tau sqrt(N_jj) [rad].
+    certified : (2,) ndarray
+        Requirement minus support [rad]: the largest nominal deviation for which
+        nominal + tube stays within the requirement (may be negative).
+    used : (2,) ndarray
+        Bounds the QP uses [rad]: ``certified`` by default, or the case's value.
+    given : bool
+        Whether the case gave the bound (``mpc.att_max`` > 0).
+    """
+
+    support: np.ndarray
+    certified: np.ndarray
+    used: np.ndarray
+    given: bool
+
+    @property
+    def is_certified(self) -> bool:
+        """True if the bounds used leave the tube's support inside the requirement."""
+        return bool(np.all(self.used <= self.certified + 1e-12))
+
+    def report(self, trim_offset: float = 0.0) -> str:
+        """One line for the design log: support, certified and used bounds, what is left.
+
+        ``trim_offset`` [rad] is the largest trim attitude offset of a box corner from
+        the nominal trim (the nominal MPC must hold it at steady state).
+        """
+        sup, cer, use = (np.degrees(v) for v in (self.support, self.certified, self.used))
+        left = use - np.degrees(trim_offset)
+        head = (
+            f"attitude (requirement {ATTITUDE_BOUND_DEG} deg): support of tau Z "
+            f"{sup[0]:.3f} / {sup[1]:.3f} deg (alpha / theta), certified nominal bound "
+            f"{cer[0]:.3f} / {cer[1]:.3f} deg; QP rows at {use[0]:.3f} / {use[1]:.3f} deg"
+        )
+        if trim_offset > 0.0:
+            head += (
+                f", of which the parameter box's trim offset takes up to "
+                f"{np.degrees(trim_offset):.3f} deg (left for manoeuvres {left[0]:.3f} / "
+                f"{left[1]:.3f} deg)"
+            )
+        if self.is_certified:
+            return head + ": attitude requirement follows from the certificate  OK"
+        return (
+            head + f": NOT certified (the case's mpc.att_max exceeds the certified bound; "
+            f"nominal + support reaches {use[0] + sup[0]:.3f} / {use[1] + sup[1]:.3f} deg)"
+        )
+
+
+def attitude_bounds(N, tau: float, att_max_deg: float = 0.0) -> AttitudeBounds:
+    """Bounds of the nominal QP's attitude rows from the tube and the requirement.
+
+    The plant's attitude deviation from the set point's trim is the nominal one plus
+    the tube error: |alpha - alpha_r| <= |alpha_n - alpha_r| + max_{e in tau Z} |e_alpha|,
+    and max_{tau Z} |e_j| = tau sqrt(N_jj) (Z = {e' N^-1 e <= 1}). With the nominal rows
+    at ATTITUDE_BOUND_DEG - tau sqrt(N_jj) the requirement of sec. 5.1 follows from
+    e in tau Z.
+
+    Parameters
+    ----------
+    N : (n, n) array_like
+        Tube shape (state order h, V, alpha, theta, ...; rad).
+    tau : float
+        Adjustable factor (tube tau Z).
+    att_max_deg : float
+        The case's ``mpc.att_max`` [deg]; 0 uses the certified bound.
+
+    Returns
+    -------
+    AttitudeBounds
+
+    Raises
+    ------
+    DesignError
+        If the bounds used are not positive (the tube's support alone exceeds the
+        requirement and the case gives no bound).
+    """
+    N = np.asarray(N, float)
+    support = tau * np.sqrt(np.diag(N)[2:4])
+    certified = np.radians(ATTITUDE_BOUND_DEG) - support
+    given = att_max_deg > 0.0
+    used = np.full(2, np.radians(att_max_deg)) if given else certified.copy()
+    if np.any(used <= 0.0):
+        raise DesignError(
+            f"attitude: the support of tau Z in alpha / theta, "
+            f"{np.degrees(support[0]):.3f} / {np.degrees(support[1]):.3f} deg, leaves no "
+            f"nominal bound within the requirement {ATTITUDE_BOUND_DEG} deg; give "
+            "mpc.att_max (then reported as not certified) or shrink the tube"
+        )
+    return AttitudeBounds(support, certified, used, given)
 
 
 @dataclass(frozen=True)
@@ -250,6 +358,9 @@ class QPStats:
         Nominal steps that used the shifted previous plan (QP rejected).
     terminal : int
         Nominal steps that used the terminal law (no plan left).
+    recovered : int
+        Re-plans whose QP was infeasible and that the recovery QP (set point free on
+        the trim map, :meth:`TrackingMPC.solve`) planned.
     reschedules : int
         Rebuilds of the QP matrices (scheduling changes).
     """
@@ -257,6 +368,7 @@ class QPStats:
     solves: int = 0
     fallback: int = 0
     terminal: int = 0
+    recovered: int = 0
     reschedules: int = 0
 
 
@@ -372,10 +484,13 @@ class TrackingMPC:
         E = (A - np.eye(n)) @ Gx + B @ Gu
         # one move held for M fast steps
         Phi, Gam, Psi = np.eye(n), np.zeros((n, m)), np.zeros((n, 2))
-        for _ in range(s.M):
+        within = []  # (Phi_i, Gam_i, Psi_i) after i = 1..M-1 fast steps of a move
+        for i in range(s.M):
             Gam = AK @ Gam + B
             Psi = AK @ Psi + E
             Phi = AK @ Phi
+            if i < s.M - 1:
+                within.append((Phi, Gam * self.Du[None, :], Psi))
         Gam = Gam * self.Du[None, :]  # per scaled move
         N_p = s.N_p
         ny = ly.ny
@@ -421,9 +536,21 @@ class TrackingMPC:
             rows.append((Uy, self.K @ S[j]))
         self.U_y = np.concatenate([r[0] for r in rows])  # (N_p m, ny)
         self.U_z = np.concatenate([r[1] for r in rows])  # (N_p m, n)
-        # attitude rows: alpha (2) and theta (3) of zeta_j, j = 1..N_p
-        self.Att_y = np.concatenate([C[j][2:4] for j in range(1, N_p + 1)])
-        self.Att_z = np.concatenate([S[j][2:4] for j in range(1, N_p + 1)])
+        # attitude rows: alpha (2) and theta (3) of zeta at every fast step inside the
+        # first fine_moves moves (closed form: zeta = Phi_i zeta_j + Gam_i c_j + Psi_i delta)
+        # and at the move starts j = 1..N_p
+        att_y, att_z = [], []
+        for j in range(min(s.fine_moves, N_p)):
+            for Phi_i, Gam_i, Psi_i in within:
+                Ci = Phi_i @ C[j]
+                Ci[:, ly.move(j)] += Gam_i
+                Ci[:, ly.delta] += Psi_i
+                att_y.append(Ci[2:4])
+                att_z.append((Phi_i @ S[j])[2:4])
+        att_y += [C[j][2:4] for j in range(1, N_p + 1)]
+        att_z += [S[j][2:4] for j in range(1, N_p + 1)]
+        self.Att_y = np.concatenate(att_y)
+        self.Att_z = np.concatenate(att_z)
         self.Tb_y = self.L_inv @ C[N_p]  # terminal box rows, (n, ny)
         self.Tb_z = self.L_inv @ S[N_p]
         self._constraint_matrix()
@@ -477,13 +604,17 @@ class TrackingMPC:
         V_lo = (tm.V_grid[0] - self.theta_s[1]) / self.theta_scale[1]
         V_hi = (tm.V_grid[-1] - self.theta_s[1]) / self.theta_scale[1]
         d0, d1 = ly.delta.start, ly.delta.start + 1
+        lo_b[ly.alpha], hi_b[ly.alpha] = 0.0, 1.0
+        # recovery (solve(recover=True)): the set point anywhere on the trim map
+        self._lo_b_rec, self._hi_b_rec = lo_b.copy(), hi_b.copy()
+        self._lo_b_rec[d0], self._hi_b_rec[d0] = h_lo, h_hi
+        self._lo_b_rec[d1], self._hi_b_rec[d1] = V_lo, V_hi
         lo_b[d0], hi_b[d0] = max(-dmax[0], h_lo), min(dmax[0], h_hi)
         lo_b[d1], hi_b[d1] = max(-dmax[1], V_lo), min(dmax[1], V_hi)
-        lo_b[ly.alpha], hi_b[ly.alpha] = 0.0, 1.0
         self._lo_b, self._hi_b = lo_b, hi_b
 
     # -- solve -----------------------------------------------------------------------
-    def solve(self, z0: np.ndarray, u_base: np.ndarray, cmd: np.ndarray, x_off=None):
+    def solve(self, z0: np.ndarray, u_base: np.ndarray, cmd: np.ndarray, x_off=None, recover=False):
         """QP at nominal deviation z0 (n,) from the scheduling trim.
 
         Parameters
@@ -499,6 +630,12 @@ class TrackingMPC:
             bound zeta + x_d, the deviation from the set point's nominal trim (what the
             requirement measures), widened to contain zeta = 0 when the shift alone
             exceeds the bound (the plant must sit at its own trim).
+        recover : bool
+            The recovery QP: the same problem without the trust region on the
+            set-point step (the set point may move anywhere on the trim map in one
+            re-plan). The trust region only keeps the trim map's linearisation local;
+            no certificate needs it, while every row the certificate needs (inputs,
+            attitude, terminal set, steady input) stays.
 
         Returns
         -------
@@ -514,17 +651,18 @@ class TrackingMPC:
         e_theta = (self.theta_s - cmd) / self.theta_scale
         f = 2.0 * (self.Fz @ z0)
         f[ly.delta] += 2.0 * s.t_w * e_theta
-        lo_b, hi_b = self._lo_b, self._hi_b
+        lo_b, hi_b = (self._lo_b_rec, self._hi_b_rec) if recover else (self._lo_b, self._hi_b)
         u_off = self.U_z @ z0 + np.tile(u_base, N_p)
         sc = self._sc
         lo_u = (np.tile(self._u_lo, N_p) - u_off) / sc
         hi_u = (np.tile(self._u_hi, N_p) - u_off) / sc
         tz = self.Tb_z @ z0
         att = self.Att_z @ z0
-        a_max = min(s.att_max, 1e3)
-        att_lo, att_hi = np.full(att.size, -a_max), np.full(att.size, a_max)
+        n_att = att.size // 2
+        a_max = np.tile(np.minimum(np.broadcast_to(s.att_max, (2,)), 1e3), n_att)
+        att_lo, att_hi = -a_max, a_max
         if x_off is not None:
-            off = np.tile(np.asarray(x_off, float)[2:4], N_p)
+            off = np.tile(np.asarray(x_off, float)[2:4], n_att)
             att_lo, att_hi = np.minimum(att_lo - off, 0.0), np.maximum(att_hi - off, 0.0)
         hi_c = np.concatenate(
             [hi_u, -tz, tz, (self.u_hi - u_base) / self.Du, np.full(m, 1e30), att_hi - att]
@@ -681,14 +819,23 @@ class TrackingMPCNominal(NominalSource):
             x_d, u_d = self.HX[b] @ d, self.HU[b] @ d
         else:
             x_d, u_d = np.zeros(self.n), np.zeros(2)
-        y, why = mpc.solve(self.XN[b] - mpc.x_r_s - x_d, mpc.u_r_s + u_d, cmd, x_d)
+        args = (self.XN[b] - mpc.x_r_s - x_d, mpc.u_r_s + u_d, cmd, x_d)
+        y, why = mpc.solve(*args)
+        recovered = False
+        if y is None:  # recovery: the set point free on the trim map (no trust region)
+            y, why_rec = mpc.solve(*args, recover=True)
+            recovered = y is not None
+            why = why if y is not None else f"{why}; recovery: {why_rec}"
         if y is not None:
-            mpc.stats.solves += 1
+            if recovered:
+                mpc.stats.recovered += 1
+            else:
+                mpc.stats.solves += 1
             self.PLAN[b] = y[ly.moves].reshape(ly.N_p, ly.m)
             self.TH[b] = mpc.theta_s + y[ly.delta] * mpc.theta_scale
             self.TRX[b], self.TRU[b] = mpc.trim_map(*self.TH[b])
             self.moves_left[b] = ly.N_p
-            self.status[b] = "ok"
+            self.status[b] = f"recovered ({why})" if recovered else "ok"
         elif self.moves_left[b] > 1:  # the set point stays where it is
             mpc.stats.fallback += 1
             self.PLAN[b] = np.vstack([self.PLAN[b, 1:], np.zeros((1, ly.m))])
@@ -752,6 +899,7 @@ class TrackingMPCNominal(NominalSource):
             np.array([s.solves for s in st], dtype=np.int64),
             np.array([s.fallback for s in st], dtype=np.int64),
             np.array([s.terminal for s in st], dtype=np.int64), -u_d,
+            np.array([s.recovered for s in st], dtype=np.int64),
         )  # fmt: skip
         zc = np.ascontiguousarray(z)
         d_n = np.zeros_like(z)
@@ -766,7 +914,11 @@ class TrackingMPCNominal(NominalSource):
     # -- offline ------------------------------------------------------------------------
     @classmethod
     def design(cls, ctx) -> dict[str, np.ndarray]:
-        """Re-check the terminal ingredients against the tightened limits (no new arrays).
+        """Re-check the terminal ingredients; the attitude bounds of the QP.
+
+        Returns ``att_max`` (2,) [rad], the bounds of the QP's attitude rows, and
+        ``att_support`` (2,) [rad], the support of tau Z in alpha and theta
+        (:func:`attitude_bounds`).
 
         Raises
         ------
@@ -780,6 +932,10 @@ class TrackingMPCNominal(NominalSource):
         a = ctx.arrays
         u_lo, u_hi = a["u_lo"], a["u_hi"]
         cmd = ctx.case["command"]
+        mpc = ctx.case.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
+        att = attitude_bounds(a["N"], ctx.case["tube"]["tau"], mpc["att_max"])
+        offset = float(a["att_trim_offset"]) if "att_trim_offset" in a else 0.0
+        ctx.log(att.report(offset))
         tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
         path = np.array([tm(cmd["h0"], cmd["V0"])[1], tm(cmd["h_c"], cmd["V_c"])[1]])
         cert = verify_terminal(a["A"], a["B"], a["K"], a["Q"], u_lo, u_hi, path)
@@ -789,19 +945,33 @@ class TrackingMPCNominal(NominalSource):
             f"invariant under K at every vertex (norm {cert['invariance']:.6f} <= 1), "
             f"alpha = 1 admissible along the path: {cert['alpha_max'] >= 1.0}  OK"
         )
-        return {}
+        return {"att_max": att.used, "att_support": att.support}
 
     @classmethod
     def node_values(cls, arrays: dict, case: dict) -> dict:
-        """``mpc.*`` node parameters from the case's ``mpc`` section (defaults if absent)."""
+        """``mpc.*`` node parameters from the case's ``mpc`` section (defaults if absent).
+
+        ``mpc.att_max`` is the design's attitude bounds (:func:`attitude_bounds`).
+        """
         mpc = case.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
-        return {
+        out = {
             f"mpc.{k}": ([float(x) for x in v] if isinstance(v, tuple | list) else v)
             for k, v in mpc.items()
         }
+        out["mpc.att_max"] = [float(v) for v in np.degrees(arrays["att_max"])]
+        return out
 
 
-#: Node parameters of the nominal MPC: its case section's keys under ``mpc.``.
+#: Node parameter ``mpc.att_max``: the bounds the design chose (alpha, theta).
+ATT_MAX_PARAMETER = Field(
+    "mpc.att_max", "floats", "bounds on the nominal |alpha - alpha_r| and |theta - theta_r| "
+    "(from the nominal trim) of the QP's attitude rows, from the design", unit="deg", lo=0.0,
+    lo_open=True, hi=10.0, length=2,
+)  # fmt: skip
+
+#: Node parameters of the nominal MPC: its case section's keys under ``mpc.`` (``att_max``
+#: as the design's bounds).
 TrackingMPCNominal.parameters = tuple(
-    dataclasses.replace(f, name=f"mpc.{f.name}") for f in MPC_SECTION_FIELDS
+    ATT_MAX_PARAMETER if f.name == "att_max" else dataclasses.replace(f, name=f"mpc.{f.name}")
+    for f in MPC_SECTION_FIELDS
 )

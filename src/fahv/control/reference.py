@@ -135,7 +135,7 @@ class ReferenceGovernor(NominalSource):
         out = NominalTrajectory(
             k, t, h_c, V_c, self.g[:, 0].copy(), self.g[:, 1].copy(), self.x_r.copy(),
             self.u_r.copy(), self.x_n.copy(), u_n, quad(self.x_n, self.P), counters(B),
-            counters(B), counters(B), np.zeros((B, 2)),
+            counters(B), counters(B), np.zeros((B, 2)), counters(B),
         )  # fmt: skip
         A, Bm = self.lpv.systems(self.g[:, 0], self.g[:, 1])
         x_pred = (
@@ -176,4 +176,5 @@ class CommandReference(NominalSource):
         return NominalTrajectory(
             k, t, h, V, h.copy(), V.copy(), x_r, u_r, np.zeros((B, self.n)), np.zeros((B, 2)),
             np.full(B, math.nan), counters(B), counters(B), counters(B), np.zeros((B, 2)),
+            counters(B),
         )  # fmt: skip

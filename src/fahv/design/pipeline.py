@@ -19,11 +19,12 @@ import numpy as np
 
 from fahv.config.spec import defaults_text
 from fahv.control import LAWS, VARIANTS
+from fahv.control.nominal_mpc import attitude_bounds
 from fahv.design.artefacts import Design, provenance
 from fahv.design.case import Case
 from fahv.design.certificate import certify_tube
 from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
-from fahv.design.feasibility import fault_vertices, input_room
+from fahv.design.feasibility import box_coverage, fault_vertices, input_room
 from fahv.errors import DesignError
 from fahv.model.linearize import classify_modes, linearize
 from fahv.model.notch import NotchFilter
@@ -61,40 +62,6 @@ class DesignContext:
     vehicle: Vehicle
     arrays: dict
     log: Callable[[str], None]
-
-
-def loss_coverage(tm, u_path: np.ndarray, u_lo: np.ndarray, u_hi: np.ndarray) -> dict:
-    """Largest loss of elevator effectiveness 1 - rho_f whose trim fits [u_lo, u_hi].
-
-    The faulty vehicle holds its trim with delta_e,r / rho_f (eq. 15); that input must
-    lie in the tightened set for the nominal problem to hold a set point.
-
-    Parameters
-    ----------
-    tm : fahv.model.trim.TrimMap
-        Trim map; its grid is the envelope.
-    u_path : (P, 2) ndarray
-        Trim inputs along the case's path [Phi, delta_e rad].
-    u_lo, u_hi : (2,) ndarray
-        Tightened absolute input limits.
-
-    Returns
-    -------
-    dict
-        ``path`` and ``envelope``: the largest loss in [0, 1] (0 if even the healthy trim
-        does not fit).
-    """
-
-    def largest(de: np.ndarray) -> float:
-        de = np.asarray(de, float)
-        # rho_f >= de / u_hi for de > 0, >= de / u_lo for de < 0
-        need = np.where(de >= 0.0, de / u_hi[1], de / u_lo[1])
-        return float(np.clip(1.0 - np.max(need), 0.0, 1.0))
-
-    return {
-        "path": largest(np.asarray(u_path)[:, 1]),
-        "envelope": largest(np.asarray(tm.u_r)[..., 1].ravel()),
-    }
 
 
 def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
@@ -200,18 +167,46 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     veh.envelope.check(cmd["h_c"], cmd["V_c"])
     tg = c["trim_grid"]
     tm = trim_map(veh, tg[0], tg[1], kind, notch if kind == "ecm" else None)
-    x_start, u_start = tm(cmd["h0"], cmd["V0"])
-    x_end, u_end = tm(cmd["h_c"], cmd["V_c"])
+    x_start, _ = tm(cmd["h0"], cmd["V0"])
+    x_end, _ = tm(cmd["h_c"], cmd["V_c"])
     u_lo = veh.limits.u_min + tau * tube.tightening
     u_hi = veh.limits.u_max - tau * tube.tightening
-    coverage = loss_coverage(tm, np.stack([u_start, u_end]), u_lo, u_hi)
-    log(
-        f"largest elevator loss whose trim fits the tightened inputs: "
-        f"{100 * coverage['path']:.1f} % on the case's path, "
-        f"{100 * coverage['envelope']:.1f} % over the whole envelope (design rho_f = {rho_f})"
+    coverage = box_coverage(
+        veh, unc, tm, u_lo, u_hi, path=[(cmd["h0"], cmd["V0"]), (cmd["h_c"], cmd["V_c"])]
     )
+    log(
+        f"largest elevator loss whose faulty trim fits the tightened inputs for every one of "
+        f"the {coverage.corners} distinct corners of the parameter box (1024 corners; I_yy does "
+        f"not enter a trim): {100 * coverage.loss_path:.1f} % on the case's path, "
+        f"{100 * coverage.loss:.1f} % over the whole envelope ({coverage.points} grid points, "
+        f"+{np.degrees(coverage.remainder):.4f} deg of elevator between them; trim elevator "
+        f"monotone in h, V: {coverage.monotone[0]}, {coverage.monotone[1]}); worst: "
+        f"{np.degrees(coverage.delta_e_max):.3f} deg at h = {coverage.worst_point[0]:.0f} ft, "
+        f"V = {coverage.worst_point[1]:.1f} ft/s; design rho_f = {rho_f}"
+    )
+    why = coverage.failing(rho_f, u_hi[1])
+    if why:
+        raise DesignError(f"tube.rho_min = {c['tube']['rho_min']} / fault: {why}")
+    cert_case = c
+    if "mpc" in c:  # the domain of the certificate: the attitude rows the QP will use
+        att = attitude_bounds(tube.N, tau, c["mpc"]["att_max"])
+        cert_case = {**c, "mpc": {**c["mpc"], "att_max": float(np.degrees(att.used.max()))}}
     certificate = certify_tube(
-        c, veh, tp, tm, Af, Bf, tube, tau, u_lo, u_hi, rho_f, Dx, DEFAULT_DEV_BOX, log, progress
+        cert_case,
+        veh,
+        tp,
+        tm,
+        Af,
+        Bf,
+        tube,
+        tau,
+        u_lo,
+        u_hi,
+        rho_f,
+        Dx,
+        DEFAULT_DEV_BOX,
+        log,
+        progress,
     )
     if d["constant"] == "estimated":
         for v in c["variants"]:
@@ -255,6 +250,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         "trim_u": tm.u_r,
         "omega_flex": omega_flex,
     }
+    # largest trim attitude offset of a parameter-box corner from the nominal trim
+    arrays["att_trim_offset"] = np.array(coverage.alpha_offset_max)
     arrays["x0"] = np.asarray(x_start[:9], float)  # plant initial state: trim at (h0, V0)
     ctx = DesignContext(c, veh, arrays, log)
     laws = [LAWS[name] for name in dict.fromkeys(VARIANTS[v].law for v in c["variants"])]
@@ -276,7 +273,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             "z_box": tube.z_box.tolist(),
             "rho_f": rho_f,
             "row_room": room_f.tolist(),
-            "loss_covered": coverage,
+            "loss_covered": coverage.summary(),
         },
         "certificate": certificate,
         "nominal": {**cert, "s": nominal.s, "lam": nominal.lam},

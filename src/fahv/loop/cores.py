@@ -229,7 +229,7 @@ class ControllerCore:
         tube = TubeStatus(
             k, t, (self.law.name,) * B, np.full(B, float(self.tau)), ls.level, ls.level <= 1.0,
             ls.e, ls.lmi[:, 0], ls.lmi[:, 1], ls.lmi[:, 2], nominal.qp_solves,
-            nominal.qp_fallback, nominal.qp_terminal,
+            nominal.qp_fallback, nominal.qp_terminal, nominal.qp_recovered,
         )  # fmt: skip
         return ControlCommand.of(k, t, ls.u), tube
 

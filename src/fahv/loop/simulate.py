@@ -41,7 +41,7 @@ from fahv.msg import (
 #: Counters of the RMPC's LMI solves in /hsv/tube_status (``lmi_<name>``).
 LMI_COUNTS = ("solves", "fallback", "failed")
 #: Counters of the nominal MPC's QP in /hsv/nominal (``qp_<name>``).
-QP_COUNTS = ("solves", "fallback", "terminal")
+QP_COUNTS = ("solves", "fallback", "terminal", "recovered")
 #: Loop nodes in the order of one step (the controller node is added per run).
 LOOP_NODES = ("plant", "notch_filter", "nominal_trajectory", "fault_injector")
 
@@ -77,9 +77,10 @@ class RunResult:
         (zeros for the tube laws).
     info : dict
         Variant, case name, metadata.
-    qp_counts : (3,) int ndarray
+    qp_counts : (4,) int ndarray
         Nominal MPC QPs accepted, nominal steps on the shifted plan and on the
-        terminal law over the run (zeros without the online MPC).
+        terminal law, re-plans by the recovery QP over the run (zeros without the
+        online MPC; :data:`QP_COUNTS`).
     """
 
     t: np.ndarray
@@ -97,7 +98,7 @@ class RunResult:
     fault_active: np.ndarray
     lmi_counts: np.ndarray
     info: dict = field(default_factory=dict)
-    qp_counts: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=int))
+    qp_counts: np.ndarray = field(default_factory=lambda: np.zeros(4, dtype=int))
 
 
 class History:
@@ -132,7 +133,7 @@ class History:
             "fault_active": np.empty((N, B), dtype=bool),
         }
         self.lmi = np.zeros((B, 3), dtype=int)
-        self.qp = np.zeros((B, 3), dtype=int)
+        self.qp = np.zeros((B, 4), dtype=int)
 
     def add(
         self,
@@ -167,7 +168,9 @@ class History:
         a["tube_level"][k] = tube.level
         a["fault_active"][k] = fs.active
         self.lmi = np.stack([tube.lmi_solves, tube.lmi_fallback, tube.lmi_failed], axis=1)
-        self.qp = np.stack([nom.qp_solves, nom.qp_fallback, nom.qp_terminal], axis=1)
+        self.qp = np.stack(
+            [nom.qp_solves, nom.qp_fallback, nom.qp_terminal, nom.qp_recovered], axis=1
+        )
         self.count += 1
 
     def result(self, b: int, info: dict) -> RunResult:

@@ -162,6 +162,72 @@ def trim(
     return tp
 
 
+def _level_residual(z, h, V, vp, zs):
+    """Scaled rigid residual of level flight at (h, V) for L points: (3, L), as :func:`trim`."""
+    alpha, de, Phi = z[0] * zs[0], z[1] * zs[1], z[2] * zs[2]
+    L, D, T, M, _, _ = forces((h, V, alpha), (Phi, de), vp)
+    V_dot = (T * np.cos(alpha) - D) / vp.m
+    alpha_dot = (-T * np.sin(alpha) - L) / (vp.m * V) + vp.g / V
+    q_dot = M / vp.I_yy
+    return np.stack([V_dot / 10.0, alpha_dot / 0.0174533, q_dot / 0.0174533])
+
+
+def trim_batch(
+    params: VehicleParams, h, V, guess: np.ndarray, iterations: int = 30
+) -> tuple[np.ndarray, np.ndarray]:
+    """Level-flight trims of L vehicles at L points at once (vectorised Newton, eq. 5).
+
+    The rigid equations of :func:`trim` (V_dot = alpha_dot = q_dot = 0 at theta = alpha,
+    q = 0) solved by Newton's method with the exact complex-step Jacobian, every point
+    at once. For trims of many perturbed vehicles (the corners of the sec. 5.1 box)
+    over a grid: about 1e5 trims per second.
+
+    Parameters
+    ----------
+    params : VehicleParams
+        Parameters whose fields are floats or (L,) arrays (one vehicle per point,
+        e.g. ``dataclasses.replace(vp, m=m_array)``).
+    h, V : (L,) array_like
+        Altitude [ft] and speed [ft/s] of each point.
+    guess : (3, L) array_like
+        Starting points (alpha rad, delta_e rad, Phi), e.g. the nominal trims.
+    iterations : int
+        Largest number of Newton steps.
+
+    Returns
+    -------
+    z : (3, L) ndarray
+        (alpha rad, delta_e rad, Phi) of each trim.
+    residual : (L,) ndarray
+        Scaled rigid residual of each, max |(V_dot / 10 ft/s^2, alpha_dot / 1 deg/s,
+        q_dot / 1 deg/s^2)| (the rows :func:`trim` solves).
+
+    Raises
+    ------
+    ValueError
+        If the shapes do not agree.
+    """
+    h, V = np.asarray(h, float), np.asarray(V, float)
+    zs = np.array([0.0174533, 0.0174533, 0.05])
+    z = np.array(guess, float) / zs[:, None]
+    if z.ndim != 2 or z.shape[0] != 3 or h.shape != (z.shape[1],) or V.shape != h.shape:
+        raise ValueError(f"trim_batch: guess {z.shape}, h {h.shape}, V {V.shape} do not agree")
+    step = 1e-30
+    for _ in range(iterations):
+        f = _level_residual(z, h, V, params, zs)
+        J = np.empty((z.shape[1], 3, 3))
+        for j in range(3):
+            zc = z.astype(complex)
+            zc[j] += 1j * step
+            J[:, :, j] = (_level_residual(zc, h, V, params, zs).imag / step).T
+        dz = np.linalg.solve(J, f.T[:, :, None])[..., 0].T
+        z = z - dz
+        if np.max(np.abs(dz)) < 1e-12:
+            break
+    f = _level_residual(z, h, V, params, zs)
+    return z * zs[:, None], np.max(np.abs(f), axis=0)
+
+
 def trim_grid(vehicle: Vehicle, h_grid, V_grid, model: str = "dm", notch=None):
     """Trim over a grid; returns a list of lists ``[[TrimPoint for V in V_grid] for h]``.
 

@@ -227,6 +227,9 @@ class NominalTrajectory(LoopMessage):
     d_hat: np.ndarray = _f(
         "float64[]", "input disturbance estimate [Phi, delta_e rad] (zeros without MPC)"
     )
+    qp_recovered: np.ndarray = _f(
+        "int64", "nominal MPC: re-plans by the recovery QP (set point free; QP infeasible)"
+    )
 
 
 @dataclass(frozen=True)
@@ -278,6 +281,9 @@ class TubeStatus(LoopMessage):
     )
     qp_fallback: np.ndarray = _f("int64", "nominal MPC steps on the shifted plan (QP rejected)")
     qp_terminal: np.ndarray = _f("int64", "nominal MPC steps on the terminal law")
+    qp_recovered: np.ndarray = _f(
+        "int64", "nominal MPC re-plans by the recovery QP (copied from /hsv/nominal)"
+    )
 
 
 @dataclass(frozen=True)

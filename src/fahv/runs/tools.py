@@ -55,6 +55,7 @@ METRIC_ROWS = (
     ("nominal_qp_solves", "nominal MPC QPs accepted", "{}"),
     ("nominal_qp_fallback", "nominal steps on the shifted plan (QP rejected)", "{}"),
     ("nominal_qp_terminal", "nominal steps on the terminal law", "{}"),
+    ("nominal_qp_recovered", "nominal re-plans by the recovery QP", "{}"),
 )
 
 #: Component names and units of the state vectors (design-model order, ECM last).

@@ -124,7 +124,15 @@ def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
 
 
 def design_tube(
-    A, B, w_max, Dx, Du, u_room, lam_grid=(0.9, 0.95, 0.97, 0.98, 0.99, 0.995), state_weight=None
+    A,
+    B,
+    w_max,
+    Dx,
+    Du,
+    u_room,
+    lam_grid=(0.9, 0.95, 0.97, 0.98, 0.99, 0.995),
+    state_weight=None,
+    state_max=None,
 ) -> TubeDesign:
     """Design F and the ellipsoidal RPI tube Z for the box W = {|w| <= w_max}.
 
@@ -147,6 +155,11 @@ def design_tube(
         Contraction factors tried (the LMI is linear for fixed lam).
     state_weight : (n,) array_like, optional
         Weight of diag(N) (scaled) in the objective: smaller attitude tubes.
+    state_max : (n,) array_like, optional
+        Largest support of Z along each state axis, max_Z |e_j| = sqrt(N_jj) <= state_max_j
+        (unscaled; inf: no bound), entered as N_jj <= state_max_j^2 (linear in N). Used
+        for the attitude rows: the support of Z in alpha and theta is what the
+        nominal MPC's attitude rows are tightened by.
 
     Returns
     -------
@@ -171,6 +184,10 @@ def design_tube(
         t = cp.Variable(m)
         eps = 1e-5  # strict margin, so the solver's tolerance cannot break the check
         cons = [N >> eps * np.eye(n), mu @ (ws**2) <= (1.0 - lam) * (1.0 - 1e-6)]
+        if state_max is not None:
+            zs_max = np.asarray(state_max, float) / Dx
+            cons += [N[j, j] <= (1.0 - 1e-6) * zs_max[j] ** 2
+                     for j in range(n) if np.isfinite(zs_max[j])]  # fmt: skip
         for i in range(R):
             AN = As[i] @ N + Bs[i] @ M
             blk = cp.bmat(
@@ -197,9 +214,10 @@ def design_tube(
         if best is None or prob.value < best[0]:
             best = (prob.value, lam, N.value, M.value, mu.value)
     if best is None:
+        bound = "" if state_max is None else f" with the state supports {list(state_max)}"
         raise DesignError(
             "tube LMI (24) with RPI condition is infeasible for every lam in "
-            f"{list(lam_grid)}: W is too large for any common ellipsoidal tube"
+            f"{list(lam_grid)}{bound}: W is too large for any common ellipsoidal tube"
         )
     _, lam, Ns, Ms, mus = best
     Ns = 0.5 * (Ns + Ns.T)
@@ -218,6 +236,14 @@ def design_tube(
         min_eigs=np.zeros(R),
     )
     eigs = verify_tube(A, B, tube, Dx, Du)
+    if state_max is not None:
+        over = tube.z_box > np.asarray(state_max, float)
+        if over.any():
+            j = int(np.flatnonzero(over)[0])
+            raise DesignError(
+                f"certificate failed: support of Z along state {j} is {tube.z_box[j]:.6g} > "
+                f"the bound {state_max[j]:.6g}"
+            )
     return dataclasses.replace(tube, min_eigs=eigs)
 
 
