@@ -358,7 +358,7 @@ def markdown(spec: Section, prefix: str = "") -> str:
         for e in sec.entries:
             if isinstance(e, Section):
                 continue
-            rng = e.range_text() or ", ".join(e.allowed())
+            rng = e.range_text() or ", ".join(str(a) for a in e.allowed())
             default = "required" if e.required else f"`{e.default!r}`"
             if e.when_text:
                 default += f" (when {e.when_text})"

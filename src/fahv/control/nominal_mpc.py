@@ -522,7 +522,10 @@ class TrackingMPC:
         T = np.zeros((ny, ny))
         T[ly.delta, ly.delta] = np.diag(s.t_w)
         H += T
-        H[ly.alpha, ly.alpha] += 1e-6  # alpha: tiny weight keeps H positive definite
+        # alpha: a small weight keeps H positive definite and its condition number near
+        # 1e7; with 1e-6 it was 2e11 and DAQP declared feasible QPs infeasible (measured:
+        # the equilibrium y = 0 feasible, DAQP exit flag -1; Clarabel solves them)
+        H[ly.alpha, ly.alpha] += 1e-2
         # the cost is y' H y + 2 (Fz z0 + ...)' y; DAQP minimises 1/2 y' H_qp y + f' y,
         # so H_qp = 2 H (symmetrised) and f = 2 (Fz z0 + ...)
         self.H = H + H.T

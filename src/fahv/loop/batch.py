@@ -121,8 +121,9 @@ def _run_group(runs: list[dict], design, variant: str) -> list[RunResult | Excep
     with np.errstate(all="ignore"):
         for k in range(loop.n_steps):
             hist.add(*loop.step(k)[1:])
-    info = run_info(design, variant, loop.Ts)
     return [
-        lanes.errors[b] if lanes.errors[b] is not None else hist.result(b, info)
+        lanes.errors[b]
+        if lanes.errors[b] is not None
+        else hist.result(b, run_info(design, variant, loop.Ts, runs[b]["plant"]))
         for b in range(len(runs))
     ]

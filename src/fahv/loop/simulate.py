@@ -296,10 +296,21 @@ class Loop:
         return clock_msg(k, self.Ts), state, qf, nom, cmd, tube, act, fs
 
 
-def run_info(design, variant: str, Ts: float) -> dict:
-    """``RunResult.info`` of a run: variant, case name, Ts and the case's fault."""
+def run_info(design, variant: str, Ts: float, plant: dict | None = None) -> dict:
+    """``RunResult.info`` of a run: variant, case name, Ts and the case's fault.
+
+    With the run's ``plant`` node parameters also ``plant_params`` ({name: value} of
+    its perturbed parameters) and ``vehicle_file``: what the metric of the attitude
+    from the dispersed vehicle's own trim needs (:func:`fahv.runs.metrics.metrics`).
+    """
     case = design.case
-    return {"variant": variant, "case": case["name"], "Ts": Ts, "fault": case["fault"]}
+    info = {"variant": variant, "case": case["name"], "Ts": Ts, "fault": case["fault"]}
+    if plant is not None:
+        info["plant_params"] = {
+            k.split(".", 1)[1]: float(v) for k, v in plant.items() if k.startswith("params.")
+        }
+        info["vehicle_file"] = plant.get("vehicle_file", "") or ""
+    return info
 
 
 def simulate(
@@ -351,4 +362,4 @@ def simulate(
         if writer is not None:
             for topic, msg in zip(TOPICS, msgs, strict=True):
                 writer.write(topic, k, msg)
-    return hist.result(0, run_info(design, variant, loop.Ts))
+    return hist.result(0, run_info(design, variant, loop.Ts, p["plant"]))

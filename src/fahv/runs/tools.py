@@ -38,6 +38,16 @@ METRIC_ROWS = (
     ("alpha_err_max_deg", "max |alpha - alpha_r| [deg]", "{:.3f}"),
     ("theta_err_max_deg", "max |theta - theta_r| [deg]", "{:.3f}"),
     ("attitude_within_0.5deg", "attitude within +/-0.5 deg", "{}"),
+    (
+        "alpha_err_own_trim_max_deg",
+        "max |alpha - alpha_r| of the vehicle's own trim [deg]",
+        "{:.3f}",
+    ),
+    (
+        "theta_err_own_trim_max_deg",
+        "max |theta - theta_r| of the vehicle's own trim [deg]",
+        "{:.3f}",
+    ),
     ("eta_1_dev_peak", "peak |eta_1 - eta_1,r|", "{:.4f}"),
     ("eta_2_dev_peak", "peak |eta_2 - eta_2,r|", "{:.4f}"),
     ("eta_1_dot_rms_after_fault", "RMS eta_1_dot after fault [1/s]", "{:.5f}"),
