@@ -40,12 +40,12 @@ METRIC_ROWS = (
     ("attitude_within_0.5deg", "attitude within +/-0.5 deg", "{}"),
     (
         "alpha_err_own_trim_max_deg",
-        "max |alpha - alpha_r| of the vehicle's own trim [deg]",
+        "max |alpha - own trim alpha_r,p| [deg]",
         "{:.3f}",
     ),
     (
         "theta_err_own_trim_max_deg",
-        "max |theta - theta_r| of the vehicle's own trim [deg]",
+        "max |theta - own trim theta_r,p| [deg]",
         "{:.3f}",
     ),
     ("eta_1_dev_peak", "peak |eta_1 - eta_1,r|", "{:.4f}"),
