@@ -968,8 +968,9 @@ class TrackingMPCNominal(NominalSource):
 #: Node parameter ``mpc.att_max``: the bounds the design chose (alpha, theta).
 ATT_MAX_PARAMETER = Field(
     "mpc.att_max", "floats", "bounds on the nominal |alpha - alpha_r| and |theta - theta_r| "
-    "(from the nominal trim) of the QP's attitude rows, from the design", unit="deg", lo=0.0,
-    lo_open=True, hi=10.0, length=2,
+    "(from the nominal trim) of the QP's attitude rows, from the design (the default only "
+    "fills the parameter of runs without the nominal MPC)", unit="deg", lo=0.0,
+    lo_open=True, hi=10.0, length=2, default=(0.35, 0.35),
 )  # fmt: skip
 
 #: Node parameters of the nominal MPC: its case section's keys under ``mpc.`` (``att_max``
