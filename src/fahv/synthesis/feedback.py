@@ -214,7 +214,10 @@ def design_tube(
         if best is None or prob.value < best[0]:
             best = (prob.value, lam, N.value, M.value, mu.value)
     if best is None:
-        bound = "" if state_max is None else f" with the state supports {list(state_max)}"
+        bound = ""
+        if state_max is not None:
+            sm = np.array2string(np.asarray(state_max, float), precision=4)
+            bound = f" with the state supports <= {sm}"
         raise DesignError(
             "tube LMI (24) with RPI condition is infeasible for every lam in "
             f"{list(lam_grid)}{bound}: W is too large for any common ellipsoidal tube"
