@@ -123,7 +123,7 @@ def rerun(
         else:
             stamp = time.strftime("%Y%m%d-%H%M%S")
             bag = Path(bags) / f"{man['name']}_{index}_{variant}_rerun_{stamp}"
-            meta = run_metadata(design, variant, "campaign-rerun", duration)
+            meta = run_metadata(design, variant, "campaign-rerun", duration, ov)
             meta.update(campaign=man["name"], campaign_hash=man["hash"], run_index=index)
             with RunWriter(bag, meta, design.case["Ts"]) as writer:
                 write_run_params(design, variant, bag, bag / "params.yaml", duration, 10.0, ov)

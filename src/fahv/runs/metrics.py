@@ -43,15 +43,20 @@ def own_trim_attitude(run: RunResult) -> np.ndarray | None:
     The trim (eq. 5) of the vehicle with the run's perturbed parameters
     (``run.info["plant_params"]``) at each step's governed reference / artificial set
     point (h_g, V_g), clipped to the envelope; one trim per distinct set point
-    (vectorised, :func:`fahv.model.trim.trim_batch`). None if the run does not carry
-    its parameters (a recorded run).
+    (vectorised, :func:`fahv.model.trim.trim_batch`). The parameters come from
+    ``run.info["plant_params"]`` (a simulated run) or the ``plant_params.<p>`` entries of a
+    recorded run's metadata; None if the run carries neither (a run recorded before).
 
     Raises
     ------
     RunError
         If a trim does not converge.
     """
-    pp = run.info.get("plant_params")
+    pp = run.info.get("plant_params") or {
+        k.split(".", 1)[1]: float(v)
+        for k, v in run.info.items()
+        if k.startswith("plant_params.")  # a recorded run's metadata
+    }
     if not pp or run.t.size == 0:
         return None
     veh = _vehicle(run.info.get("vehicle_file", ""))

@@ -62,13 +62,21 @@ def run_name(case: str, variant: str, source: str) -> str:
     return f"{case}_{variant}_{source}_{time.strftime('%Y%m%d-%H%M%S')}"
 
 
-def run_metadata(design, variant: str, source: str, duration: float) -> dict:
+def run_metadata(
+    design, variant: str, source: str, duration: float, overrides: dict | None = None
+) -> dict:
     """Metadata recorded with every run: case, variant, design hash and provenance, fault.
 
     The provenance (case hash, vehicle file and hash, design code hash) lets
     ``fahv inspect`` say exactly what a run was made from, and the metrics use the
-    recorded vehicle's limits.
+    recorded vehicle's limits. ``plant_params.<p>`` are the run's perturbed parameters
+    (the design's draw, or the ``plant`` node's ``params.<p>`` of ``overrides``), from
+    which the metrics compute the attitude from the vehicle's own trim.
     """
+    params = dict(design.summary.get("plant_params", {}))
+    for k, v in ((overrides or {}).get("plant") or {}).items():
+        if k.startswith("params."):
+            params[k.split(".", 1)[1]] = float(v)
     c = design.case
     f = c["fault"]
     prov = design.summary.get("provenance", {})
@@ -86,6 +94,7 @@ def run_metadata(design, variant: str, source: str, duration: float) -> dict:
             if k in prov
         },
         **{f"fault_{k}": v for k, v in f.items()},
+        **{f"plant_params.{k}": float(v) for k, v in params.items()},
     }
 
 
@@ -141,7 +150,9 @@ def write_run_params(
         "Ts": plant["Ts"],
         "duration": plant["duration"],
         "watchdog_s": float(watchdog_s),
-        "metadata_json": json.dumps(run_metadata(design, variant, "sil", plant["duration"])),
+        "metadata_json": json.dumps(
+            run_metadata(design, variant, "sil", plant["duration"], overrides)
+        ),
     }
     content = parameter_file(nodes)
     content["/**"] = {
