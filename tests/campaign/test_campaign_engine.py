@@ -179,6 +179,31 @@ def test_rerun_reproduces_the_metrics_exactly(reference, tmp_path):
     assert read_run(r.bag).metadata["run_index"] == "7"
 
 
+@pytest.mark.parametrize("index", [2, 5])
+def test_rerun_metadata_and_topics_agree_on_the_run_s_own_fault(reference, tmp_path, index):
+    """Issue 22: the metadata said the case file's fault (rho_f 0.9 at 100 s) while the
+    fault topic showed the run's own; now both are the run's, with its dispersed values."""
+    c, out = reference
+    r = rerun(out, index, bags=tmp_path)
+    assert r.identical
+    assert r.bag.name.startswith(f"ref_{index}_tube_mpc_rerun_")
+    rec = read_run(r.bag)
+    md, fs = rec.metadata, rec.records["/hsv/fault_status"][-1]
+    row = next(x for x in store.read_rows(out) if x["index"] == index)
+    assert md["fault_kind"] == fs["kind"] == row["fault.kind"]
+    assert float(md["fault_t_onset"]) == fs["t_onset"] == row["fault.t_onset"]
+    assert md["fault_t_onset"] != "100.0"  # not the case file's
+    if fs["kind"] == "loss_of_effectiveness":
+        assert float(md["fault_rho_f"]) == fs["rho_f"] == row["fault.rho_f"]
+    if fs["kind"] == "bias":
+        assert float(md["fault_bias_deg"]) == pytest.approx(np.degrees(fs["bias"]), rel=1e-12)
+    # the campaign run's identity and every dispersed value travel with the file
+    assert md["campaign"] == "ref" and md["run_index"] == str(index)
+    assert md["campaign_seed"] == str(c["seed"])
+    for col in ("fault.t_onset", "s.m", "command.h_c", "initial.V0"):
+        assert md[f"dispersed.{col}"] == str(row[col]), col
+
+
 def test_report_numbers(reference):
     c, out = reference
     rep = make_report(out, figures=True)
