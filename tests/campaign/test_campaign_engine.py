@@ -1,6 +1,7 @@
 """Campaigns on a LocalCluster: nothing lost, nothing twice, the same table every way."""
 
 import math
+import re
 import os
 import signal
 import subprocess
@@ -218,6 +219,30 @@ def test_report_numbers(reference):
             "worst_trajectories.png"} <= names  # fmt: skip
     assert all(p.stat().st_size > 5000 for p in rep.figures)
     assert "| attitude error within +/- 0.5 deg |" in rep.text
+
+
+def test_report_command_prints_a_summary_and_the_path(reference, capsys):
+    """Issue 22: the whole report went to stdout; now a short summary and the file."""
+    from fahv.cli import main
+
+    c, out = reference
+    assert main(["campaign", "report", str(out), "--no-figures"]) == 0
+    text = capsys.readouterr().out
+    assert f"report: {out / 'report' / 'report.md'}" in text
+    assert "## Worst" not in text and len(text.splitlines()) <= 12
+    rep = (out / "report" / "report.md").read_text()
+    assert "## Worst 3 runs per metric" in rep
+    att = sum(verdicts(r, c["requirements"])["attitude"] for r in store.read_rows(out))
+    assert re.search(rf"attitude\s+{att}/12 ", text), text
+    # the worst-run tables print what their label says: |h - h_c|, |V - V_c| (absolute)
+    rows = {r["index"]: r for r in store.read_rows(out)}
+    for label, key in (("|h - h_c| at the end [ft]", "h_err_final_ft"),
+                       ("|V - V_c| at the end [ft/s]", "V_err_final_fps")):  # fmt: skip
+        block = rep.split(f"{label}, tube_mpc:")[1].split("\n\n")[1]
+        for line in block.splitlines()[2:]:
+            idx, value = (x.strip() for x in line.split("|")[1:3])
+            assert float(value) == pytest.approx(abs(rows[int(idx)][key]), rel=1e-3)
+    assert any(rows[i]["h_err_final_ft"] < 0 for i in rows)  # signed in the dataset
 
 
 @pytest.mark.parametrize(("k", "n"), [(0, 59), (0, 1000), (3, 100), (10, 20)])
