@@ -1,8 +1,8 @@
 """Campaigns on a LocalCluster: nothing lost, nothing twice, the same table every way."""
 
 import math
-import re
 import os
+import re
 import signal
 import subprocess
 import sys

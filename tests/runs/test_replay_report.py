@@ -119,3 +119,10 @@ def test_renamed_and_bare_hand_started_runs_replay_and_rerun(hand_run, tmp_path,
     # rerun from the bare file alone: in process, equal to the graph (SIL equals simulate)
     rc, text, err = _cli(capsys, "campaign", "rerun", bare, "--out", tmp_path / "re")
     assert rc == 0 and "metrics identical to the recorded run's" in text, text + err
+    # and through the graph again, from the file alone
+    rc, text, err = _cli(capsys, "campaign", "rerun", renamed, "--sil", "--quiet",
+                         "--out", tmp_path / "re_sil")  # fmt: skip
+    assert rc == 0 and "metrics identical to the recorded run's" in text, text + err
+    [new] = (tmp_path / "re_sil").iterdir()
+    assert new.name.startswith(f"{bag_paths(bag)[1].stem}_rerun_sil_")
+    assert read_run(new).metadata["source"] == "sil"

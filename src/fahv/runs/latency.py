@@ -189,23 +189,34 @@ def hop_latencies(stamps: dict[str, np.ndarray], controller: str = "tube_mpc") -
     }
 
 
-def run_latencies(timestamps: bytes | str | Path | None, params=None) -> dict | None:
+def run_latencies(run: bytes | str | Path | None, params=None) -> dict | None:
     """:func:`hop_latencies` of a run, or None if it has no timestamps.
 
     Parameters
     ----------
-    timestamps : bytes, path or None
-        The run file's attachment, or a run folder of an earlier version
-        (:func:`load_timestamps`).
-    params : dict or path, optional
-        The run's parameter file (:func:`run_controller`); by default the folder
-        ``timestamps`` names, if it is one.
+    run : bytes, path or None
+        The timestamps attachment itself, or a run (folder or .mcap: its attachment;
+        a run folder of an earlier version: its ``timestamps.npz``).
+    params : dict, optional
+        The run's parameter file (:func:`run_controller`); by default the run's.
     """
-    stamps = load_timestamps(timestamps)
+    if run is None or isinstance(run, bytes):
+        stamps = load_timestamps(run)
+    else:
+        from fahv.errors import RunError
+        from fahv.runs.bag import bag_paths, run_attachments, run_params
+
+        try:
+            data = run_attachments(run).get(TIMESTAMPS_FILE)
+            if params is None:
+                params = run_params(run)
+        except RunError:
+            data = None
+        stamps = load_timestamps(data if data is not None else bag_paths(run)[0])
+        if params is None:
+            params = bag_paths(run)[0]
     if not stamps:
         return None
-    if params is None and not isinstance(timestamps, bytes):
-        params = timestamps
     return hop_latencies(stamps, run_controller(params))
 
 
