@@ -88,7 +88,7 @@ def cmd_rerun(args) -> int:
     else:
         r = rerun(args.dir, args.index, args.variant, sil=args.sil, bags=bags, quiet=args.quiet)
         what = "the campaign's row"
-    if r.bag is not None:
+    if r.bag is not None and not args.sil:  # the SIL runner says where it wrote the run
         print(f"run written to {r.bag}")
     if r.error:
         print(f"the run failed: {r.error}")

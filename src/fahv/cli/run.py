@@ -203,9 +203,7 @@ def cmd_replay(args) -> int:
     if res.returncode != 0:
         print(f"fahv replay: failed (logs in {res.log_dir})", file=sys.stderr)
         return 1
-    if res.out is not None:
-        print(f"replayed run written to {res.out}")
-    if res.outputs is not None:
+    if res.outputs is not None:  # the runner said where the replayed run was written
         print(res.outputs.summary())
         return 0 if res.outputs.identical else 1
     return 0
