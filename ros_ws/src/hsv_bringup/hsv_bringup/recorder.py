@@ -77,7 +77,7 @@ class Recorder(Node):
         try:
             self.writer = RunWriter(get["bag"], meta, get["Ts"], params=get["params_file"] or None)
         except RunError as exc:
-            raise ParameterError(f"recorder: parameter 'bag': {exc}") from None
+            raise ParameterError(f"recorder: parameter 'bag' or 'params_file': {exc}") from None
         self.next_k = dict.fromkeys(TOPICS, 0)
         self.anomalies = dict.fromkeys(TOPICS, 0)
         # per topic: k, DDS source timestamp [ns], receive time [ns] of every message
