@@ -16,7 +16,13 @@ from fahv.runs.bag import RunWriter, read_run, run_result_of, stored_metadata
 from fahv.runs.metrics import metrics
 from fahv.runs.plots import paper_figures
 from fahv.runs.replay import run_replay
-from fahv.runs.sil import run_metadata, run_name, run_sil, write_run_params
+from fahv.runs.sil import (
+    recorder_metadata,
+    run_name,
+    run_parameter_file,
+    run_sil,
+    write_run_params,
+)
 from fahv.runs.tools import format_metrics
 from fahv.runs.workspace import ROOT
 
@@ -67,8 +73,8 @@ class StepProgress:
 def _simulate_recorded(design, variant: str, duration, out_dir):
     """simulate() with a progress bar, recorded to ``out_dir/<run>/`` unless it is None.
 
-    The run folder also gets the run's ROS parameter file (``params.yaml``, the same
-    a SIL run gets), so ``fahv replay --node ...`` can start nodes against it.
+    The run file also holds the run's ROS parameter file (the one a SIL run's nodes
+    get), so ``fahv replay --node ...`` can start nodes against it.
 
     Raises
     ------
@@ -84,8 +90,9 @@ def _simulate_recorded(design, variant: str, duration, out_dir):
     try:
         if bag is None:
             return simulate(design, variant, duration, writer=progress)
-        with RunWriter(bag, run_metadata(design, variant, "simulate", d), case["Ts"]) as writer:
-            write_run_params(design, variant, bag, bag / "params.yaml", duration, 10.0)
+        content = run_parameter_file(design, variant, bag, duration, 10.0, source="simulate")
+        meta = recorder_metadata(content)
+        with RunWriter(bag, meta, case["Ts"], params=content) as writer:
             progress.writer = writer
             run = simulate(design, variant, duration, writer=progress)
     except KeyboardInterrupt:
@@ -141,9 +148,9 @@ def cmd_sil(args) -> int:
     run = run_result_of(rec)
     if res.interrupted:
         raise RunInterrupted(int(rec.metadata.get("steps_recorded", run.t.size)), n_steps, res.bag)
-    print(f"run written to {res.bag}")
     print(
-        f"status {rec.metadata.get('status', '?')}, {run.t.size} steps, wall time "
+        f"run {res.bag.name}: status {rec.metadata.get('status', '?')}, {run.t.size} steps, "
+        "wall time "
         f"{res.wall_s:.1f} s, real-time factor {res.real_time_factor:.2f} "
         f"(simulated {res.simulated_s:g} s)"
     )
@@ -186,6 +193,7 @@ def cmd_replay(args) -> int:
         steps=args.steps,
         watchdog_s=args.watchdog,
         quiet=args.quiet,
+        params=args.params,
     )
     if res.interrupted:
         done = stored_metadata(res.out) if res.out is not None else {}
@@ -195,8 +203,9 @@ def cmd_replay(args) -> int:
     if res.returncode != 0:
         print(f"fahv replay: failed (logs in {res.log_dir})", file=sys.stderr)
         return 1
-    if res.out is not None:
-        print(f"replayed run written to {res.out}")
+    if res.outputs is not None:  # the runner said where the replayed run was written
+        print(res.outputs.summary())
+        return 0 if res.outputs.identical else 1
     return 0
 
 
@@ -280,6 +289,13 @@ def add_parsers(sub) -> None:
     p.add_argument("--fast", action="store_true", help="as fast as possible (lockstep on captures)")
     p.add_argument("--steps", type=int, default=0, help="steps to replay (0: all)")
     p.add_argument("--watchdog", type=float, default=10.0, help="node watchdog [s wall time]")
+    p.add_argument(
+        "--params",
+        metavar="FILE",
+        default=None,
+        help="parameter file of the nodes under test (default: the one in the run file; "
+        "needed only for runs of earlier versions started by hand)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_replay)
     p = sub.add_parser(

@@ -21,7 +21,9 @@ RECORDER = (
     DURATION,
     _WATCHDOG,
     _METADATA,
-)
+    Field("params_file", "str", "the run's parameter file, attached to the run file "
+          "(empty: none)", default=""),
+)  # fmt: skip
 
 #: Parameters of the ``replay`` node.
 REPLAY = (

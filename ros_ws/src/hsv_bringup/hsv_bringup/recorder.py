@@ -6,14 +6,17 @@ simulated time t_k = k Ts, and writes through :class:`fahv.runs.bag.RunWriter` (
 profile, full message definitions, offered QoS, summary with statistics and indexes,
 run metadata, the ROS domain of the graph as ``ros_domain_id``). With every message it
 keeps the DDS source timestamp (wall clock when the producing node published it) and
-its own receive time, written at the end to ``timestamps.npz`` in the run folder
-(:func:`fahv.runs.latency.save_timestamps`): the per-hop latency breakdown of
-``fahv inspect`` comes from them. It stops by itself once every topic holds
-``duration / Ts`` steps; on SIGINT/SIGTERM, a lost graph (watchdog) or an error it
-still closes the file, with the reason in the run metadata (``status``).
+its own receive time, attached to the run file when it closes (``timestamps.npz``,
+:func:`fahv.runs.latency.timestamps_npz`): the per-hop latency breakdown of
+``fahv inspect`` comes from them. The parameter file the graph was started with
+(``params_file``) is attached when the run starts, so the run file alone can be
+replayed and rerun. It stops by itself once every topic holds ``duration / Ts``
+steps; on SIGINT/SIGTERM, a lost graph (watchdog) or an error it still closes the
+file, with the reason in the run metadata (``status``).
 
 Parameters: ``bag`` (folder to create), ``Ts``, ``duration``, ``watchdog_s``,
-``metadata_json`` (JSON object of run metadata: case, design_hash, variant, ...).
+``metadata_json`` (JSON object of run metadata: case, design_hash, variant, ...),
+``params_file`` (the run's parameter file, attached to the run).
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ from std_msgs.msg import String
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
 from fahv.runs.bag import RunWriter
-from fahv.runs.latency import save_timestamps
+from fahv.runs.latency import TIMESTAMPS_FILE, timestamps_npz
 from fahv.runs.nodes import RECORDER
 
 
@@ -72,9 +75,9 @@ class Recorder(Node):
         self.n_steps = int(round(get["duration"] / get["Ts"]))
         self.watchdog_s = get["watchdog_s"]
         try:
-            self.writer = RunWriter(get["bag"], meta, get["Ts"])
+            self.writer = RunWriter(get["bag"], meta, get["Ts"], params=get["params_file"] or None)
         except RunError as exc:
-            raise ParameterError(f"recorder: parameter 'bag': {exc}") from None
+            raise ParameterError(f"recorder: parameter 'bag' or 'params_file': {exc}") from None
         self.next_k = dict.fromkeys(TOPICS, 0)
         self.anomalies = dict.fromkeys(TOPICS, 0)
         # per topic: k, DDS source timestamp [ns], receive time [ns] of every message
@@ -139,11 +142,7 @@ class Recorder(Node):
             self.writer.set_metadata(f"anomalies{t.replace('/', '.')}", n)
         self.writer.set_metadata("wall_time_s", f"{time.monotonic() - self.t0:.3f}")
         reason = end_reason(self.done, status)
-        self.writer.close(reason)
-        try:
-            save_timestamps(self.writer.path, self.stamps)
-        except OSError as exc:  # the run itself is complete; only the timing is lost
-            print(f"recorder: timestamps not written: {exc}", file=sys.stderr)
+        self.writer.close(reason, {TIMESTAMPS_FILE: timestamps_npz(self.stamps)})
         print(f"closed {self.writer.path} ({reason}, {self.k} steps)", flush=True)
 
 

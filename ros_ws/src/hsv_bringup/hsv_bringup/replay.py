@@ -8,8 +8,9 @@ time in wall time, r > 0 is r times faster, 0 is as fast as possible.
 Regression use: with ``capture`` topics (the outputs of the node(s) under test),
 the replay runs in lockstep: step k + 1 is published only after every captured topic
 that has a publisher delivered step k, so nothing is dropped however slow the node
-is. With ``out`` the replayed and the captured messages are written to a new run
-(same format as the recorder's), to compare with the original.
+is. With ``out`` the captured messages and the recorded ones of every other loop
+topic are written to a new run (same format as the recorder's, with the replayed
+run's parameter file), a complete run to compare with the original.
 
 Parameters: ``run`` (file to replay), ``topics`` (default every loop topic of the
 run), ``rate``, ``capture``, ``out``, ``wait_for`` (nodes that must announce
@@ -40,6 +41,7 @@ from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
 from fahv.runs.bag import RunWriter, iter_raw
 from fahv.runs.nodes import REPLAY
+from fahv.runs.replay import output_attachments
 from hsv_bringup.recorder import step_of
 
 
@@ -57,7 +59,9 @@ def load_steps(run: str, topics: list[str] | None, steps: int) -> tuple[list, fl
 
     Returns
     -------
-    ([(log_ns, [(topic, data), ...]), ...], Ts [s], topics loaded)
+    ([(log_ns, [(topic, data), ...]), ...], Ts [s], topics selected)
+        The steps hold every loop topic of the run (the output run copies the ones
+        that are neither published nor captured).
 
     Raises
     ------
@@ -69,7 +73,7 @@ def load_steps(run: str, topics: list[str] | None, steps: int) -> tuple[list, fl
             warnings.simplefilter("always")
             groups: dict[int, list] = {}
             seen = set()
-            for topic, _, log_ns, data in iter_raw(run, topics or list(TOPICS)):
+            for topic, _, log_ns, data in iter_raw(run, list(TOPICS)):
                 groups.setdefault(log_ns, []).append((topic, data))
                 seen.add(topic)
         for w in caught:
@@ -125,7 +129,9 @@ class Replay(Node):
                 captured_topics=",".join(self.capture),
             )
             try:
-                self.writer = RunWriter(get["out"], meta, Ts)
+                self.writer = RunWriter(
+                    get["out"], meta, Ts, attachments=output_attachments(get["run"])
+                )
             except RunError as exc:
                 raise ParameterError(f"replay: parameter 'out': {exc}") from None
         self.lockstep: list[str] = []
@@ -174,8 +180,9 @@ class Replay(Node):
             if self.rate > 0 and time.monotonic() < self.t0 + (log_ns - log0) * 1e-9 / self.rate:
                 break
             for topic, data in msgs:
-                self.pubs[topic].publish(data)
-                if self.writer is not None:
+                if topic in self.pubs:
+                    self.pubs[topic].publish(data)
+                if self.writer is not None and topic not in self.got:
                     self.writer.write_raw(topic, step_of(topic, data, self.Ts_ns), data)
             self.k += 1
             self.last_progress = time.monotonic()
