@@ -21,7 +21,9 @@ RECORDER = (
     DURATION,
     _WATCHDOG,
     _METADATA,
-)
+    Field("live_port", "int", "port of the live view (Foxglove WebSocket server on 127.0.0.1; "
+          "0: any free port, -1: no live view)", lo=-1, hi=65535, default=-1),
+)  # fmt: skip
 
 #: Parameters of the ``replay`` node.
 REPLAY = (

@@ -124,11 +124,15 @@ def write_run_params(
     duration: float | None,
     watchdog_s: float,
     overrides: dict | None = None,
+    live_port: int | None = None,
 ) -> dict:
     """Write the parameter file of one SIL run and return its content.
 
     ``overrides``: {node: {name: value}} applied last (tests use it to inject faults
-    or bad values).
+    or bad values). ``live_port``: the recorder serves the live view on this port
+    (0: any free port; None: no live view, :mod:`fahv.runs.live`). Every node gets
+    ``graph_nodes`` and ``run_id`` (the run folder's name: it tells this graph's nodes
+    from another graph's in the same ROS domain).
     """
     nodes = node_parameters(design, variant, watchdog_s=watchdog_s)
     if duration is not None:
@@ -142,12 +146,14 @@ def write_run_params(
         "duration": plant["duration"],
         "watchdog_s": float(watchdog_s),
         "metadata_json": json.dumps(run_metadata(design, variant, "sil", plant["duration"])),
+        "live_port": -1 if live_port is None else int(live_port),
     }
     content = parameter_file(nodes)
     content["/**"] = {
         "ros__parameters": {
             "use_sim_time": USE_SIM_TIME,
             "graph_nodes": graph_nodes(controller),
+            "run_id": Path(bag).name,
         }
     }
     for node, values in (overrides or {}).items():
@@ -209,6 +215,7 @@ def run_sil(
     quiet: bool = False,
     log=print,
     domain_id: int | None = None,
+    live_port: int | None = None,
 ) -> SilRun:
     """Run one variant of a designed case through the node graph, recorded to MCAP.
 
@@ -232,6 +239,8 @@ def run_sil(
     domain_id : int, optional
         ROS_DOMAIN_ID of the graph; by default the runner takes a free one from
         ``domain_coordinator`` (an exported ``ROS_DOMAIN_ID`` is not used).
+    live_port : int, optional
+        Serve the live view on this port (0: any free one); None: no live view.
 
     Returns
     -------
@@ -252,7 +261,7 @@ def run_sil(
     )
     bag = Path(out_dir).resolve() / name
     params = write_run_params(
-        design, variant, bag, work / "params.yaml", duration, watchdog_s, overrides
+        design, variant, bag, work / "params.yaml", duration, watchdog_s, overrides, live_port
     )
     sim_s = params["plant"]["ros__parameters"]["duration"]
     controller = controller_node(params)

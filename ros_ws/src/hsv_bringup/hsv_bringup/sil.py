@@ -48,6 +48,9 @@ from fahv.loop.graph import CONTROLLER_NODES, NODES, graph_nodes
 
 #: Exit status of the runner (and of ``fahv sil``) after SIGINT / SIGTERM (128 + SIGINT).
 EXIT_INTERRUPTED = 130
+#: Exit status of a node whose watchdog fired (hsv_common.runtime.EXIT_WATCHDOG); a node
+#: that stops because a peer failed exits so too, so the runner names another first.
+EXIT_WATCHDOG_NODE = 3
 
 
 def executable(name: str) -> Path:
@@ -118,6 +121,8 @@ class Graph:
                 if line.startswith("progress "):
                     _, k, n = line.split()
                     self.progress = (int(k), int(n))
+                elif line.startswith("live view "):  # the recorder's Foxglove server
+                    print(f"sil: {line.strip()}", file=sys.stderr, flush=True)
 
     def stop(self, grace_s: float = 15.0) -> None:
         """SIGINT to every running node, SIGKILL after the grace period."""
@@ -158,12 +163,15 @@ class Graph:
             if self.stop_signal is not None:
                 return None, EXIT_INTERRUPTED
             running = 0
+            failed = []
             for name in self.names:
                 rc = self.procs[name].poll()
                 if rc is None:
                     running += 1
                 elif rc != 0:
-                    return name, rc
+                    failed.append((name, rc))
+            if failed:  # the cause first: a node that stopped because a peer failed says 3
+                return min(failed, key=lambda f: f[1] == EXIT_WATCHDOG_NODE)
             if on_progress is not None:
                 on_progress(*self.progress)
             if running == 0:
@@ -181,6 +189,16 @@ def describe(rc: int) -> str:
         4: "stopped by a signal",
         5: "foreign graph in its ROS domain",
     }.get(rc, f"exit status {rc}")
+
+
+def watch_line(domain: int) -> str:
+    """The line to type in another shell to list the topics of a graph in ``domain``."""
+    prefix = os.environ.get("COLCON_PREFIX_PATH", "").split(os.pathsep)[0]
+    setup = Path(prefix) / "setup.bash" if prefix else Path("ros_ws/install/setup.bash")
+    return (
+        f"export ROS_DOMAIN_ID={domain} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; "
+        f"source {setup}; ros2 topic list"
+    )
 
 
 def _progress_bar(quiet: bool):
@@ -293,7 +311,9 @@ def main(argv: list[str] | None = None) -> int:
             if inherited not in (None, str(domain))
             else ""
         )
-        print(f"sil: ROS_DOMAIN_ID={domain}{note}", file=sys.stderr, flush=True)
+        print(f"sil: graph in ROS domain {domain}{note}", file=sys.stderr)
+        print(f"sil: to see it from another shell: {watch_line(domain)}", file=sys.stderr)
+        sys.stderr.flush()
         status = run_graph(graph, bag, args.quiet)
     return status
 
