@@ -1,20 +1,27 @@
 // A Foxglove WebSocket client (the protocol's reference TypeScript implementation,
 // @foxglove/ws-protocol, over the `ws` package) for tests/runs/test_live.py.
 //
-//   node client.mjs ws://127.0.0.1:PORT SECONDS
+//   node client.cjs ws://127.0.0.1:PORT SECONDS OUT.jsonl
 //
-// Connects, subscribes to every advertised channel, and prints one JSON line per
-// event on stdout: {"op": "advertise", "channels": [...]}, {"op": "message", "topic",
+// Connects, subscribes to every advertised channel, and writes one JSON line per
+// event to OUT.jsonl (a file: a full pipe would stall the client and the server
+// would drop it): {"op": "advertise", "channels": [...]}, {"op": "message", "topic",
 // "encoding", "schemaName", "timestamp", "data": base64} and {"op": "time", "timestamp"}.
 // Ends when the server closes the connection, or after SECONDS.
-import { FoxgloveClient } from "@foxglove/ws-protocol";
-import { WebSocket } from "ws";
+const { FoxgloveClient } = require("@foxglove/ws-protocol");
+const { WebSocket } = require("ws");
 
-const [url, seconds] = process.argv.slice(2);
-const out = (obj) => process.stdout.write(JSON.stringify(obj) + "\n");
+const fs = require("fs");
+
+const [url, seconds, outPath] = process.argv.slice(2);
+const file = fs.createWriteStream(outPath);
+const out = (obj) => file.write(JSON.stringify(obj) + "\n");
 const channels = new Map(); // subscription id -> channel
+// The foxglove-sdk server speaks protocol v1 under the subprotocol name
+// "foxglove.sdk.v1" (and refuses the handshake otherwise); the Foxglove app offers
+// both names, and so does this client.
 const client = new FoxgloveClient({
-  ws: new WebSocket(url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL]),
+  ws: new WebSocket(url, ["foxglove.sdk.v1", FoxgloveClient.SUPPORTED_SUBPROTOCOL]),
 });
 const timer = setTimeout(() => client.close(), Number(seconds) * 1000);
 
@@ -43,5 +50,5 @@ client.on("error", (err) => {
 client.on("close", () => {
   clearTimeout(timer);
   out({ op: "close" });
-  process.exit(0);
+  file.end(() => process.exit(0));
 });
