@@ -111,3 +111,42 @@ def test_live_view_serves_every_loop_topic_to_a_foxglove_client(quick_case, tmp_
     assert max(counts.values()) == N  # subscribed before step 0: every step arrived
     times = [int(e["timestamp"]) for e in events if e["op"] == "time"]
     assert times and times == sorted(times) and times[-1] == (N - 1) * 20_000_000
+
+
+def test_simulate_live_serves_the_in_process_run(design, tmp_path):
+    """`fahv simulate --live`: the in-process run's messages, serialised once for the
+    file and the server, reach a Foxglove client that subscribed before the run."""
+    import time
+
+    from fahv.cli.run import StepProgress
+    from fahv.loop.simulate import simulate
+    from fahv.runs.bag import RunWriter
+    from fahv.runs.live import LiveView
+
+    view = LiveView(0, 0.02)
+    out = tmp_path / "client.jsonl"
+    client = subprocess.Popen(
+        [shutil.which("node"), str(CLIENT), view.url, "60", str(out)], cwd=CLIENT.parent,
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    t0 = time.monotonic()  # subscribed once the advertisement arrived (then wait a little)
+    while '"op":"advertise"' not in (out.read_text() if out.exists() else ""):
+        assert time.monotonic() - t0 < 30 and client.poll() is None, client.stderr.read()
+        time.sleep(0.05)
+    time.sleep(0.5)
+    with RunWriter(tmp_path / "sim", {"source": "simulate"}, 0.02) as writer:
+        progress = StepProgress("live", 50, writer=writer, live=view)
+        simulate(design, "tube_mpc", duration=1.0, writer=progress)
+        progress.close()
+    time.sleep(0.5)
+    view.close()
+    client.wait(timeout=30)
+    events = [json.loads(ln) for ln in out.read_text().splitlines()]
+    recorded = {(t, log_ns): data for t, _, log_ns, data in iter_raw(tmp_path / "sim")}
+    messages = [e for e in events if e["op"] == "message"]
+    assert len(messages) == 50 * len(TOPICS) == len(recorded)
+    for e in messages:
+        data = base64.b64decode(e["data"])
+        decode(e["topic"], data)
+        assert recorded[(e["topic"], int(e["timestamp"]))] == data
+    assert [int(e["timestamp"]) for e in events if e["op"] == "time"][-1] == 49 * 20_000_000

@@ -80,7 +80,8 @@ def test_a_foreign_graph_stops_only_the_graph_that_joined_second(
     design, quick_case, tmp_path, capfd
 ):
     """Two graphs forced into one domain (`--domain-id`, as a user might), the second
-    started once the first one's recorder is up: the second stops naming the first and
+    (`fahv sil`, about 10 s to start) started once the first one's recorder is up (the
+    first runs 100 s of simulated time, 20-40 s): the second stops naming the first and
     the domain, reports the real-time factor of the steps it ran, and the first one
     completes and equals `fahv simulate`."""
     case_file, art = quick_case
@@ -89,7 +90,7 @@ def test_a_foreign_graph_stops_only_the_graph_that_joined_second(
 
         def first():
             result["a"] = run_sil(
-                design, "tube_mpc", duration=20.0, out_dir=tmp_path / "a", watchdog_s=10.0,
+                design, "tube_mpc", duration=100.0, out_dir=tmp_path / "a", watchdog_s=10.0,
                 quiet=True, log=lambda _: None, domain_id=domain,
             )  # fmt: skip
 
@@ -127,8 +128,8 @@ def test_a_foreign_graph_stops_only_the_graph_that_joined_second(
     rec = read_run(res.bag)
     assert rec.metadata["status"] == "complete" and not rec.truncated
     run = run_result_of(rec)
-    ref = simulate(design, "tube_mpc", duration=20.0)
-    assert run.x.shape == ref.x.shape == (1000, 9)
+    ref = simulate(design, "tube_mpc", duration=100.0)
+    assert run.x.shape == ref.x.shape == (5000, 9)
     np.testing.assert_allclose(run.x, ref.x, rtol=1e-9, atol=0)
     np.testing.assert_allclose(run.u, ref.u, rtol=1e-9, atol=0)
 
