@@ -35,7 +35,7 @@ REPLAY = (
     Field("capture", "strs", "topics to capture from the graph (lockstep on them)",
           choices=tuple(TOPICS), default=()),
     Field("out", "str", "run folder to write (replayed + captured); empty: none", default=""),
-    Field("wait_for", "strs", "nodes to wait for on /hsv/ready before step 0",
+    Field("wait_for", "strs", "nodes that must be ready (/hsv/node_status) before step 0",
           choices=tuple(NODES), default=()),
     Field("steps", "int", "steps to replay (0: all)", lo=0, default=0),
     _WATCHDOG,

@@ -12,8 +12,8 @@ is. With ``out`` the replayed and the captured messages are written to a new run
 (same format as the recorder's), to compare with the original.
 
 Parameters: ``run`` (file to replay), ``topics`` (default every loop topic of the
-run), ``rate``, ``capture``, ``out``, ``wait_for`` (nodes that must announce
-themselves on /hsv/ready before step 0), ``steps`` (0: all), ``watchdog_s``.
+run), ``rate``, ``capture``, ``out``, ``wait_for`` (nodes that must say they are
+ready on /hsv/node_status before step 0), ``steps`` (0: all), ``watchdog_s``.
 """
 
 from __future__ import annotations

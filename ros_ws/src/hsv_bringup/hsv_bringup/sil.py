@@ -6,16 +6,20 @@ node table (:data:`fahv.loop.graph.NODES`: recorder, notch_filter, nominal_traje
 controller, fault_injector, plant; the plant waits until every other node has announced
 itself, so the order only saves time). It watches the processes: the run succeeds when
 every node exits 0 after the last step; the first node that exits non-zero or is killed
-fails the run, the others get SIGINT (the recorder closes its file), then SIGKILL after
-a grace period, and the runner exits 1 naming that node and showing the end of its log.
+(a node whose status is not 3 first: the cause rather than the peers that stopped
+because of it) fails the run, the others get SIGINT (the recorder closes its file),
+then SIGKILL after a grace period, and the runner exits 1 naming that node and showing
+the end of its log.
 
 Isolation: every graph runs in a DDS domain of its own. Unless ``--domain-id`` is
 given, the runner takes a free ``ROS_DOMAIN_ID`` from ROS 2's ``domain_coordinator``
 (unique among the processes of this host that use it, held until the runner exits),
 whatever ``ROS_DOMAIN_ID`` the shell exports, and restricts discovery to this host
-(``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``). Every loop node also refuses to run
-next to a foreign graph in its domain (more publishers on a loop topic than its graph
-has, exit status 5).
+(``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), and prints the domain with the line to
+type in another shell to see the graph (:func:`watch_line`). Should another graph join
+the domain anyway, the one that joined second stops (exit status 5, see
+``hsv_common.graph_status``). The recorder's live-view address (``--live``) is passed
+on to stderr.
 
 Interruption: SIGINT (Ctrl-C) or SIGTERM stops every node with SIGINT (the recorder
 closes its file with status ``interrupted``) and the runner exits 130; a second signal

@@ -134,7 +134,8 @@ def main(node_cls, args=None, linger_s: float = 10.0) -> int:
         ex.add_node(node)
         while not node.done and stop.signal is None:
             ex.spin_once(timeout_sec=0.05)
-            node.poll()
+            if stop.signal is None:  # a signal first: peers stopping by it are no failure
+                node.poll()
         if stop.signal is not None and not node.done:
             reason = f"stopped by signal {signal.Signals(stop.signal).name} at step {node.k}"
             print(f"[{name}] {reason}", file=sys.stderr)
