@@ -213,18 +213,17 @@ def test_ros2_standin_bag_info_is_fahv_inspect(design, tmp_path):
     assert expected in r.stderr
 
 
-def test_graph_started_by_hand_without_a_node_names_it_and_every_process_ends(
-    quick_case, tmp_path
-):
-    """The README's commands without `fault_injector`: every node (the recorder too)
-    names fault_injector, not its neighbour, and exits by itself within its watchdog;
-    the plant says whom it waits for; the run is readable with status and reason."""
+def _by_hand(quick_case, tmp_path, duration, watchdog, without=()):
+    """The README's commands, each node's output in ``tmp_path/logs/<node>.log``.
+
+    Returns the running shell (``wait`` ends it once every node has exited), the nodes
+    started and the parameter file.
+    """
     case_file, art = quick_case
     params = tmp_path / "run.yaml"
     fahv = str(ROOT / ".venv" / "bin" / "fahv")
-    watchdog = 5.0
     r = subprocess.run(
-        [fahv, "sil", str(case_file), "--design", str(art), "--duration", "2",
+        [fahv, "sil", str(case_file), "--design", str(art), "--duration", str(duration),
          "--out", str(tmp_path / "bags"), "--watchdog", str(watchdog),
          "--write-params", str(params)],
         cwd=ROOT, capture_output=True, text=True, check=True,
@@ -235,25 +234,44 @@ def test_graph_started_by_hand_without_a_node_names_it_and_every_process_ends(
     lines, started = ["source ros_ws/install/setup.bash"], []
     for c in commands:  # each node in the background, its output in a log of its own
         name = c.split()[3]
-        if name != "fault_injector":
+        if name not in without:
             started.append(name)
             lines.append(f"{c.removesuffix(' &')} > {logs / name}.log 2>&1 &")
-    script = "\n".join([*lines, "wait"])
-    with domain_coordinator.domain_id() as domain:
-        env = {k: v for k, v in os.environ.items() if not k.startswith(("AMENT", "COLCON"))}
-        env["ROS_DOMAIN_ID"] = str(domain)
-        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-        t0 = time.monotonic()
-        done = subprocess.run(
-            ["bash", "-c", script], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120
-        )
-        elapsed = time.monotonic() - t0
-    assert done.returncode == 0  # `wait` returned: every node process has ended
-    assert started == ["recorder", "notch_filter", "nominal_trajectory", "tube_mpc", "plant"]
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("AMENT", "COLCON"))}
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    return lines + ["wait"], started, env, params
+
+
+def _watchdog_lines(logs, started):
     text = {n: (logs / f"{n}.log").read_text() for n in started}
     for n, log in text.items():
         assert "watchdog: " in log, f"{n}:\n{log[-2000:]}"
-        verdict = log[log.index("watchdog: "):].splitlines()[0]
+    return {n: log[log.index("watchdog: "):].splitlines()[0] for n, log in text.items()}, text
+
+
+def test_graph_started_by_hand_without_a_node_names_it_and_every_process_ends(
+    quick_case, tmp_path
+):
+    """The README's commands without `fault_injector`: every node (the recorder too)
+    names fault_injector, not its neighbour, and exits by itself within its watchdog;
+    the plant says whom it waits for; the run is readable with status and reason."""
+    watchdog = 5.0
+    lines, started, env, _ = _by_hand(quick_case, tmp_path, 2, watchdog, ["fault_injector"])
+    with domain_coordinator.domain_id() as domain:
+        env["ROS_DOMAIN_ID"] = str(domain)
+        t0 = time.monotonic()
+        done = subprocess.run(
+            ["bash", "-c", "\n".join(lines)], cwd=ROOT, env=env, capture_output=True,
+            text=True, timeout=120,
+        )  # fmt: skip
+        elapsed = time.monotonic() - t0
+    assert done.returncode == 0  # `wait` returned: every node process has ended
+    assert started == ["recorder", "notch_filter", "nominal_trajectory", "tube_mpc", "plant"]
+    verdicts, text = _watchdog_lines(tmp_path / "logs", started)
+    for n, verdict in verdicts.items():
+        assert verdict.startswith(f"watchdog: {n}: "), verdict
+        head = verdict.removeprefix(f"watchdog: {n}: ")
+        assert head.startswith(("graph not ready", "missing fault_injector")), f"{n}: {verdict}"
         assert "fault_injector (never started)" in verdict, f"{n}: {verdict}"
         assert "from plant" not in verdict and "plant (" not in verdict, f"{n}: {verdict}"
     assert "waiting for /hsv/actuator_command (from fault_injector)" in text["plant"]
@@ -265,3 +283,43 @@ def test_graph_started_by_hand_without_a_node_names_it_and_every_process_ends(
     assert rec.metadata["status"] == "interrupted (exit status 3)"
     assert "fault_injector (never started)" in rec.metadata["reason"]
     assert rec.topics["/hsv/state"]["count"] == 0
+
+
+def test_graph_started_by_hand_names_a_node_killed_mid_run(quick_case, tmp_path):
+    """A node of a hand-started graph killed (SIGKILL) mid-run: every other node, the
+    recorder included, names it as lost and exits within its watchdog; the run keeps
+    every step recorded so far."""
+    watchdog = 5.0
+    lines, started, env, params = _by_hand(quick_case, tmp_path, 300, watchdog)
+    with domain_coordinator.domain_id() as domain:
+        env["ROS_DOMAIN_ID"] = str(domain)
+        shell = subprocess.Popen(
+            ["bash", "-c", "\n".join(lines)], cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        t0 = time.monotonic()
+        while "progress 500" not in _read(tmp_path / "logs" / "recorder.log"):
+            assert time.monotonic() - t0 < 90 and shell.poll() is None, "the graph did not run"
+            time.sleep(0.1)
+        pids = subprocess.run(
+            ["pgrep", "-f", f"lib/hsv_ctrl/tube_mpc .*{params}"], capture_output=True, text=True
+        ).stdout.split()
+        assert len(pids) == 1
+        t_kill = time.monotonic()
+        os.kill(int(pids[0]), signal.SIGKILL)
+        shell.wait(timeout=120)
+        elapsed = time.monotonic() - t_kill
+    verdicts, _ = _watchdog_lines(tmp_path / "logs", [n for n in started if n != "tube_mpc"])
+    for n, verdict in verdicts.items():  # the lost node first, not the neighbour
+        assert verdict.startswith(f"watchdog: {n}: missing tube_mpc (lost: no status for"), (
+            f"{n}: {verdict}"
+        )
+    assert elapsed < watchdog + 15.0, elapsed
+    rec = read_run(next((tmp_path / "bags").iterdir()))
+    assert not rec.truncated and rec.metadata["status"] == "interrupted (exit status 3)"
+    assert "tube_mpc (lost" in rec.metadata["reason"]
+    assert 500 <= rec.topics["/hsv/state"]["count"] < 15000
+
+
+def _read(path):
+    return path.read_text() if path.exists() else ""

@@ -190,6 +190,9 @@ def cmd_sil(args) -> int:
 
 def _write_params_only(args, design, variant: str) -> int:
     """``fahv sil --write-params FILE``: the run's parameter file and how to start the nodes."""
+    from fahv.runs.workspace import ensure_built
+
+    ensure_built()  # the nodes started by hand are those of the current sources
     out = Path(args.out or ROOT / "bags").resolve()
     bag = out / run_name(design.case["name"], variant, "sil")
     path = Path(args.write_params)

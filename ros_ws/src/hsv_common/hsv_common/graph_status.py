@@ -163,10 +163,17 @@ class GraphStatus:
         return "; ".join(self.peers.missing())
 
     def check_failed_peer(self) -> None:
-        """Raise :class:`WatchdogError` if a peer of the graph exited with an error."""
+        """Raise :class:`WatchdogError` if a peer of the graph exited with an error.
+
+        The message names first the peers that never started or were lost (the
+        failed peer may have stopped because of them), then the failed peer with its
+        own reason.
+        """
         failed = self.peers.failed()
-        if failed:
-            raise WatchdogError(f"{self.name}: peer {failed[0]}")
+        if failed:  # the root cause first: a peer that never started or was lost
+            gone = [d for d in self.peers.missing() if d not in failed and "(exited" not in d]
+            head = f"missing {'; '.join(gone)}; " if gone else ""
+            raise WatchdogError(f"{self.name}: {head}peer {failed[0]}")
 
     # -- readiness ------------------------------------------------------------------------
     def poll_ready(self) -> bool:
