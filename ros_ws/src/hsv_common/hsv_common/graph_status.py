@@ -27,6 +27,7 @@ import os
 import threading
 import time
 
+from rclpy.duration import Duration
 from rclpy.node import Node
 from std_msgs.msg import String
 
@@ -117,8 +118,9 @@ class GraphStatus:
         self._stop.set()
         self._beat.join(timeout=2.0)
         self.state = "exited"
-        try:
+        try:  # delivered before the writer goes away (peers name this node's reason)
             self.publish(exit_status, reason)
+            self._pub.wait_for_all_acked(Duration(seconds=0.5))
         except Exception:  # the context may be gone already
             pass
 
