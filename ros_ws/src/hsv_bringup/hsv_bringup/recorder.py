@@ -171,10 +171,14 @@ class Recorder(Node):
         if idle > self.watchdog_s:
             behind = min(self.writer.counts, key=self.writer.counts.get)
             missing = self.status.missing_text()
+            if missing:  # the missing peer first, as every node says it
+                raise WatchdogError(
+                    f"recorder: missing {missing}; no message for {self.watchdog_s:g} s at "
+                    f"step {self.k}"
+                )
             raise WatchdogError(
-                f"recorder: no message for {self.watchdog_s:g} s at step {self.k} ("
-                + (f"missing {missing}" if missing else f"{behind} is behind")
-                + ")"
+                f"recorder: no message for {self.watchdog_s:g} s at step {self.k} ({behind} "
+                "is behind; every peer alive)"
             )
 
     def close(self, status: int, reason: str = "") -> None:
