@@ -12,7 +12,7 @@ from fahv.errors import FahvError, RunInterrupted
 from fahv.loop.graph import NODES, TOPICS, graph_nodes
 from fahv.loop.params import controller_node
 from fahv.loop.simulate import simulate
-from fahv.runs.bag import RunWriter, read_run, run_result_of, stored_metadata
+from fahv.runs.bag import RunWriter, encode, read_run, run_result_of, stored_metadata
 from fahv.runs.metrics import metrics
 from fahv.runs.plots import paper_figures
 from fahv.runs.replay import run_replay
@@ -43,20 +43,28 @@ class StepProgress:
         Steps of the run.
     writer : fahv.runs.bag.RunWriter, optional
         Receives every message.
+    live : fahv.runs.live.LiveView, optional
+        Serves every message (the same CDR bytes) to Foxglove.
     """
 
     #: The last topic of a step (:data:`fahv.loop.graph.TOPICS` order).
     LAST_TOPIC = list(TOPICS)[-1]
 
-    def __init__(self, desc: str, n_steps: int, writer=None) -> None:
+    def __init__(self, desc: str, n_steps: int, writer=None, live=None) -> None:
         self.bar = progress(total=n_steps, desc=desc, unit="step", leave=False)
         self.writer = writer
+        self.live = live
         self.k = 0
         self.solves = 0
 
     def write(self, topic: str, k: int, msg) -> None:
         """Forward one message of step k; count the step after its last topic."""
-        if self.writer is not None:
+        if self.live is not None:  # serialised once, the same bytes to both
+            data = encode(topic, msg)
+            self.live.log(topic, k, data)
+            if self.writer is not None:
+                self.writer.write_raw(topic, k, data)
+        elif self.writer is not None:
             self.writer.write(topic, k, msg)
         if topic == "/hsv/tube_status" and int(msg.lmi_solves[0]) != self.solves:
             self.solves = int(msg.lmi_solves[0])
@@ -70,7 +78,7 @@ class StepProgress:
         self.bar.close()
 
 
-def _simulate_recorded(design, variant: str, duration, out_dir):
+def _simulate_recorded(design, variant: str, duration, out_dir, live=None):
     """simulate() with a progress bar, recorded to ``out_dir/<run>/`` unless it is None.
 
     The run file also holds the run's ROS parameter file (the one a SIL run's nodes
@@ -86,7 +94,7 @@ def _simulate_recorded(design, variant: str, duration, out_dir):
     d = case["duration"] if duration is None else duration
     n_steps = int(round(d / case["Ts"]))
     bag = None if out_dir is None else Path(out_dir) / run_name(case["name"], variant, "sim")
-    progress = StepProgress(desc, n_steps)
+    progress = StepProgress(desc, n_steps, live=live)
     try:
         if bag is None:
             return simulate(design, variant, duration, writer=progress)
@@ -109,16 +117,32 @@ def cmd_simulate(args) -> int:
     variants = args.variant or case["variants"]
     limits = vehicle.limits
     table = {}
-    for v in variants:
-        out = None if args.no_record else Path(args.out or ROOT / "bags")
-        run = _simulate_recorded(design, v, args.duration, out)
-        table[v] = metrics(run, limits)
+    live = _live_view(args.live, case["Ts"])
+    try:
+        for v in variants:
+            out = None if args.no_record else Path(args.out or ROOT / "bags")
+            run = _simulate_recorded(design, v, args.duration, out, live)
+            table[v] = metrics(run, limits)
+    finally:
+        if live is not None:
+            live.close()
     if args.json:
         print(to_json(table))
     else:
         print(f"case {case.name}, design {design.summary['design_hash']}")
         print(format_metrics(table))
     return 0
+
+
+def _live_view(port: int | None, Ts: float):
+    """The in-process live view of ``fahv simulate --live`` (None without ``--live``)."""
+    if port is None:
+        return None
+    from fahv.runs.live import LiveView, live_hint
+
+    live = LiveView(port, Ts)
+    print(f"live view on {live.url} ({live_hint()})", flush=True)
+    return live
 
 
 def cmd_sil(args) -> int:
@@ -135,6 +159,7 @@ def cmd_sil(args) -> int:
         args.watchdog,
         quiet=args.quiet,
         domain_id=args.domain_id,
+        live_port=args.live,
     )
     n_steps = int(round(res.simulated_s / case["Ts"]))
     if not res.bag.is_dir():
@@ -148,12 +173,15 @@ def cmd_sil(args) -> int:
     run = run_result_of(rec)
     if res.interrupted:
         raise RunInterrupted(int(rec.metadata.get("steps_recorded", run.t.size)), n_steps, res.bag)
+    ran_s = run.t.size * case["Ts"]  # what the graph simulated, not what was asked for
+    rtf = f"{ran_s / res.wall_s:.2f}" if run.t.size and res.wall_s > 0 else "- (no step)"
     print(
-        f"run {res.bag.name}: status {rec.metadata.get('status', '?')}, {run.t.size} steps, "
-        "wall time "
-        f"{res.wall_s:.1f} s, real-time factor {res.real_time_factor:.2f} "
-        f"(simulated {res.simulated_s:g} s)"
+        f"run {res.bag.name}: status {rec.metadata.get('status', '?')}, {run.t.size} of "
+        f"{n_steps} steps, wall time {res.wall_s:.1f} s, real-time factor {rtf} (simulated "
+        f"{ran_s:g} of {res.simulated_s:g} s)"
     )
+    if rec.metadata.get("reason"):
+        print(f"reason: {rec.metadata['reason']}")
     if run.t.size:
         table = {variant: metrics(run, vehicle.limits)}
         if args.json:
@@ -168,6 +196,9 @@ def cmd_sil(args) -> int:
 
 def _write_params_only(args, design, variant: str) -> int:
     """``fahv sil --write-params FILE``: the run's parameter file and how to start the nodes."""
+    from fahv.runs.workspace import ensure_built
+
+    ensure_built()  # the nodes started by hand are those of the current sources
     out = Path(args.out or ROOT / "bags").resolve()
     bag = out / run_name(design.case["name"], variant, "sil")
     path = Path(args.write_params)
@@ -175,10 +206,30 @@ def _write_params_only(args, design, variant: str) -> int:
     print(f"parameter file {path} written; the recorder will write {bag}")
     print("start the graph node by node (any order; the plant starts step 0 once all are up):")
     print("  source ros_ws/install/setup.bash")
+    print(f"  {export_line(free_domain())}   # a domain no other graph uses now")
     for name in graph_nodes(controller_node(content)):
         amp = "" if name == "plant" else " &"
         print(f"  ros2 run {NODES[name].package} {name} --ros-args --params-file {path}{amp}")
     return 0
+
+
+def free_domain() -> int:
+    """A ROS domain ID no other graph of this host holds now (ROS 2's domain_coordinator).
+
+    The ID is released again at once: it is a suggestion for a graph started by hand.
+    Without the ROS wheels (no ``domain_coordinator``) 42 is suggested.
+    """
+    try:
+        import domain_coordinator
+    except ImportError:
+        return 42
+    with domain_coordinator.domain_id() as domain:
+        return int(domain)
+
+
+def export_line(domain: int) -> str:
+    """The shell line that puts a shell into the graph's ROS domain (this host only)."""
+    return f"export ROS_DOMAIN_ID={domain} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 
 
 def cmd_replay(args) -> int:
@@ -228,6 +279,21 @@ def cmd_paper_figures(args) -> int:
     return 0
 
 
+def _add_live_option(p) -> None:
+    from fahv.runs.live import DEFAULT_PORT
+
+    p.add_argument(
+        "--live",
+        type=int,
+        nargs="?",
+        const=DEFAULT_PORT,
+        default=None,
+        metavar="PORT",
+        help=f"serve the loop topics live to Foxglove on ws://localhost:PORT (default "
+        f"{DEFAULT_PORT}; 0: any free port)",
+    )
+
+
 def add_parsers(sub) -> None:
     """Add the parsers of this command group."""
     p = sub.add_parser("simulate", help="in-process closed loop of a case, metrics table")
@@ -237,6 +303,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
     p.add_argument("--out", default=None, help="folder of the recorded runs (default bags/)")
     p.add_argument("--no-record", action="store_true", help="do not write the runs to MCAP")
+    _add_live_option(p)
     p.add_argument("--json", action="store_true")
     add_vehicle_option(p)
     p.set_defaults(func=cmd_simulate)
@@ -266,6 +333,7 @@ def add_parsers(sub) -> None:
         "and print the `ros2 run` commands that start the graph by hand",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_live_option(p)
     p.add_argument("--json", action="store_true", help="metrics as JSON")
     add_vehicle_option(p)
     p.set_defaults(func=cmd_sil)

@@ -46,23 +46,32 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from fahv.errors import RunError
-from fahv.loop.graph import QOS_DEPTH, TOPICS
+from fahv.loop import graph
+from fahv.loop.graph import TOPICS
 from fahv.loop.simulate import RunResult, run_result
 from fahv.msg import MSG_DIR, PKG, LoopMessage
 from fahv.version import code_version
 
 _INF = QosTime(2147483647, 4294967295)
-LOOP_QOS = Qos(
-    QosHistory.KEEP_LAST,
-    QOS_DEPTH,
-    QosReliability.RELIABLE,
-    QosDurability.VOLATILE,
-    _INF,
-    _INF,
-    QosLiveliness.AUTOMATIC,
-    _INF,
-    False,
-)
+
+
+def offered_qos(q: graph.QoS) -> Qos:
+    """rosbag2 ``offered_qos_profiles`` entry of a :class:`fahv.loop.graph.QoS`."""
+    return Qos(
+        QosHistory.KEEP_LAST,
+        q.depth,
+        QosReliability.RELIABLE if q.reliable else QosReliability.BEST_EFFORT,
+        QosDurability.TRANSIENT_LOCAL if q.transient_local else QosDurability.VOLATILE,
+        _INF,
+        _INF,
+        QosLiveliness.AUTOMATIC,
+        _INF,
+        False,
+    )
+
+
+#: The loop topics' QoS (:data:`fahv.loop.graph.LOOP_QOS`) as the channels offer it.
+LOOP_QOS = offered_qos(graph.LOOP_QOS)
 
 
 @functools.cache

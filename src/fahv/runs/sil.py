@@ -158,6 +158,7 @@ def run_parameter_file(
     source: str = "sil",
     metadata: dict | None = None,
     params_file: Path | None = None,
+    live_port: int | None = None,
 ) -> dict:
     """The ROS 2 parameter file of one run (every node, the recorder's section, ``/**``).
 
@@ -180,6 +181,12 @@ def run_parameter_file(
         Further run metadata (a campaign run: campaign, index, dispersed values).
     params_file : Path, optional
         Where this content is written: the recorder attaches that file to the run.
+    live_port : int, optional
+        The recorder serves the live view on this port (0: any free port; None: no
+        live view, :mod:`fahv.runs.live`).
+
+    Every node gets ``graph_nodes`` and ``run_id`` (the run folder's name: it tells
+    this graph's nodes from another graph's in the same ROS domain).
 
     Returns
     -------
@@ -214,12 +221,14 @@ def run_parameter_file(
         "watchdog_s": float(watchdog_s),
         "metadata_json": json.dumps(meta),
         "params_file": "" if params_file is None else str(Path(params_file).resolve()),
+        "live_port": -1 if live_port is None else int(live_port),
     }
     content = parameter_file(nodes)
     content["/**"] = {
         "ros__parameters": {
             "use_sim_time": USE_SIM_TIME,
             "graph_nodes": graph_nodes(controller),
+            "run_id": Path(bag).name,
         }
     }
     for node, values in later.items():
@@ -309,6 +318,7 @@ def run_sil(
     domain_id: int | None = None,
     name: str | None = None,
     metadata: dict | None = None,
+    live_port: int | None = None,
 ) -> SilRun:
     """Run one variant of a designed case through the node graph, recorded to MCAP.
 
@@ -337,6 +347,8 @@ def run_sil(
         folder is ``<name>_<time>``.
     metadata : dict, optional
         Further run metadata (:func:`run_parameter_file`).
+    live_port : int, optional
+        Serve the live view on this port (0: any free one); None: no live view.
 
     Returns
     -------
@@ -352,7 +364,8 @@ def run_sil(
     """
     variant = design.case["variants"][0] if variant is None else variant
     content = run_parameter_file(
-        design, variant, Path("."), duration, watchdog_s, overrides, "sil", metadata
+        design, variant, Path("."), duration, watchdog_s, overrides, "sil", metadata,
+        live_port=live_port,
     )
     base = name or f"{design.case['name']}_{variant}_sil"
     stem = f"{base}_{time.strftime('%Y%m%d-%H%M%S')}"
@@ -395,6 +408,7 @@ def run_graph(
     path = work / "params.yaml"
     rec = content["recorder"]["ros__parameters"]
     rec.update(bag=str(bag), params_file=str(path.resolve()))
+    content.setdefault("/**", {"ros__parameters": {}})["ros__parameters"]["run_id"] = name
     path.write_text(yaml.safe_dump(content, sort_keys=False, width=120))
     sim_s = content["plant"]["ros__parameters"]["duration"]
     controller = controller_node(content)

@@ -13,8 +13,8 @@ topic are written to a new run (same format as the recorder's, with the replayed
 run's parameter file), a complete run to compare with the original.
 
 Parameters: ``run`` (file to replay), ``topics`` (default every loop topic of the
-run), ``rate``, ``capture``, ``out``, ``wait_for`` (nodes that must announce
-themselves on /hsv/ready before step 0), ``steps`` (0: all), ``watchdog_s``.
+run), ``rate``, ``capture``, ``out``, ``wait_for`` (nodes that must say they are
+ready on /hsv/node_status before step 0), ``steps`` (0: all), ``watchdog_s``.
 """
 
 from __future__ import annotations
@@ -24,18 +24,11 @@ import time
 import warnings
 from pathlib import Path
 
-from hsv_common.lockstep import (
-    LOOP_QOS,
-    READY_QOS,
-    WatchdogError,
-    declare_validated,
-    end_reason,
-    main,
-    msg_type_of,
-    run_metadata_param,
-)
+from hsv_common.codec import msg_type_of
+from hsv_common.graph_status import GraphStatus
+from hsv_common.parameters import declare_graph, declare_validated, run_metadata_param
+from hsv_common.runtime import LOOP_QOS, WatchdogError, end_reason, main
 from rclpy.node import Node
-from std_msgs.msg import String
 
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
@@ -100,6 +93,7 @@ class Replay(Node):
 
     def __init__(self) -> None:
         super().__init__("replay")
+        graph_nodes, run_id = declare_graph(self)
         get = declare_validated(self, REPLAY)
         self.steps, Ts, self.topics = load_steps(get["run"], get["topics"] or None, get["steps"])
         self.Ts_ns = int(round(Ts * 1e9))
@@ -115,10 +109,9 @@ class Replay(Node):
             )
             for t in self.capture
         }
-        self.ready_names: set[str] = set()
-        self.create_subscription(
-            String, "/hsv/ready", lambda m: self.ready_names.add(m.data), READY_QOS
-        )
+        self.status = GraphStatus(self, graph_nodes, run_id, self.watchdog_s, self.wait_for)
+        self.status.attach(self.subs, self.pubs if self.wait_for else {})
+        self.status.waiting = []
         self.writer = None
         if get["out"]:
             meta = run_metadata_param("replay", get["metadata_json"])
@@ -148,20 +141,10 @@ class Replay(Node):
             self.writer.write_raw(topic, k, data)
         self.last_progress = time.monotonic()
 
-    def _matched(self) -> bool:
-        if not self.wait_for <= self.ready_names:
-            return False
-        if self.wait_for and any(p.get_subscription_count() < 1 for p in self.pubs.values()):
-            return False
-        return True
-
     def poll(self) -> None:
         """Start when the peers are ready; publish what the lockstep and timing allow."""
         if not self.started:
-            if not self._matched():
-                if time.monotonic() - self.last_progress > max(60.0, self.watchdog_s):
-                    missing = sorted(self.wait_for - self.ready_names)
-                    raise WatchdogError(f"replay: nodes {missing} never announced themselves")
+            if not self.status.poll_ready():
                 return
             self.lockstep = [t for t, s in self.subs.items() if s.get_publisher_count() >= 1]
             self.get_logger().info(
@@ -199,8 +182,9 @@ class Replay(Node):
                 "(node under test dead or silent)"
             )
 
-    def close(self, status: int) -> None:
+    def close(self, status: int, reason: str = "") -> None:
         """Finish the output run with its status."""
+        self.status.close(status, reason)
         if self.writer is None:
             return
         reason = end_reason(self.done, status)
