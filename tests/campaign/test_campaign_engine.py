@@ -2,6 +2,7 @@
 
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -179,6 +180,31 @@ def test_rerun_reproduces_the_metrics_exactly(reference, tmp_path):
     assert read_run(r.bag).metadata["run_index"] == "7"
 
 
+def test_rerun_metadata_and_topics_agree_on_the_run_s_own_fault(reference, tmp_path):
+    """Issue 22: the metadata said the case file's fault (rho_f 0.9 at 100 s) while the
+    fault topic showed the run's own; now both are the run's, with its dispersed values."""
+    c, out = reference
+    index = 2
+    r = rerun(out, index, bags=tmp_path)
+    assert r.identical
+    assert r.bag.name.startswith(f"ref_{index}_tube_mpc_rerun_")
+    rec = read_run(r.bag)
+    md, fs = rec.metadata, rec.records["/hsv/fault_status"][-1]
+    row = next(x for x in store.read_rows(out) if x["index"] == index)
+    assert md["fault_kind"] == fs["kind"] == row["fault.kind"]
+    assert float(md["fault_t_onset"]) == fs["t_onset"] == row["fault.t_onset"]
+    assert md["fault_t_onset"] != "100.0"  # not the case file's
+    if fs["kind"] == "loss_of_effectiveness":
+        assert float(md["fault_rho_f"]) == fs["rho_f"] == row["fault.rho_f"]
+    if fs["kind"] == "bias":
+        assert float(md["fault_bias_deg"]) == pytest.approx(np.degrees(fs["bias"]), rel=1e-12)
+    # the campaign run's identity and every dispersed value travel with the file
+    assert md["campaign"] == "ref" and md["run_index"] == str(index)
+    assert md["campaign_seed"] == str(c["seed"])
+    for col in ("fault.t_onset", "s.m", "command.h_c", "initial.V0"):
+        assert md[f"dispersed.{col}"] == str(row[col]), col
+
+
 def test_report_numbers(reference):
     c, out = reference
     rep = make_report(out, figures=True)
@@ -193,6 +219,30 @@ def test_report_numbers(reference):
             "worst_trajectories.png"} <= names  # fmt: skip
     assert all(p.stat().st_size > 5000 for p in rep.figures)
     assert "| attitude error within +/- 0.5 deg |" in rep.text
+
+
+def test_report_command_prints_a_summary_and_the_path(reference, capsys):
+    """Issue 22: the whole report went to stdout; now a short summary and the file."""
+    from fahv.cli import main
+
+    c, out = reference
+    assert main(["campaign", "report", str(out), "--no-figures"]) == 0
+    text = capsys.readouterr().out
+    assert f"report: {out / 'report' / 'report.md'}" in text
+    assert "## Worst" not in text and len(text.splitlines()) <= 12
+    rep = (out / "report" / "report.md").read_text()
+    assert "## Worst 3 runs per metric" in rep
+    att = sum(verdicts(r, c["requirements"])["attitude"] for r in store.read_rows(out))
+    assert re.search(rf"attitude\s+{att}/12 ", text), text
+    # the worst-run tables print what their label says: |h - h_c|, |V - V_c| (absolute)
+    rows = {r["index"]: r for r in store.read_rows(out)}
+    for label, key in (("|h - h_c| at the end [ft]", "h_err_final_ft"),
+                       ("|V - V_c| at the end [ft/s]", "V_err_final_fps")):  # fmt: skip
+        block = rep.split(f"{label}, tube_mpc:")[1].split("\n\n")[1]
+        for line in block.splitlines()[2:]:
+            idx, value = (x.strip() for x in line.split("|")[1:3])
+            assert float(value) == pytest.approx(abs(rows[int(idx)][key]), rel=1e-3)
+    assert any(rows[i]["h_err_final_ft"] < 0 for i in rows)  # signed in the dataset
 
 
 @pytest.mark.parametrize(("k", "n"), [(0, 59), (0, 1000), (3, 100), (10, 20)])

@@ -91,3 +91,27 @@ def test_docs_key_table_is_the_declaration():
     text = (ROOT / "docs" / "campaigns.md").read_text()
     table = text.split("<!-- campaign-keys -->\n")[1].split("\n<!-- /campaign-keys -->")[0]
     assert table == markdown(campaign_spec())
+
+
+def test_fault_onsets_beyond_the_run_are_warned(write_campaign, capsys, monkeypatch):
+    """Issue 22: onsets drawn after the run's end used to pass silently (no fault then)."""
+    assert load_campaign(write_campaign("onset_ok")).warnings == []  # onset [1, 4], 6 s runs
+    c = load_campaign(write_campaign("onset_late", duration=6.0, fault={
+        "kinds": ["loss_of_effectiveness"], "loss": [0.0, 0.3], "onset": [2.0, 10.0]}))
+    [w] = c.warnings
+    assert "dispersions.fault.onset [2, 10] s reaches beyond the run's duration 6 s" in w
+    assert "50 % of the runs end before their fault" in w  # (10 - 6) / (10 - 2)
+    # the case's own onset (100 s) with 6 s runs and no dispersed onset
+    c = load_campaign(write_campaign("case_onset", fault={"kinds": ["loss_of_effectiveness"]}))
+    assert c.warnings and "the case's fault onset 100 s" in c.warnings[0]
+    assert "100 % of the runs" in c.warnings[0]
+    # the command prints it before it starts
+    import fahv.cli.campaign as cli
+
+    def stop(*args, **kwargs):
+        raise CampaignError("stopped by the test")
+
+    monkeypatch.setattr(cli, "run_campaign", stop)
+    assert main(["campaign", str(c.path), "--out", str(c.path.parent / "w")]) == 2
+    err = capsys.readouterr().err
+    assert err.index("warning: ") < err.index("stopped by the test")

@@ -23,6 +23,13 @@ def test_sil_rerun_reproduces_the_campaign_row(write_campaign, tmp_path):
     assert rec.metadata["source"] == "sil" and rec.metadata["status"] == "complete"
     row = store.read_rows(out)[1]
     assert row["index"] == 1
+    # named after the campaign run; its metadata says the run's own fault (issue 22)
+    assert r.bag.name.startswith("sil_1_tube_mpc_rerun_sil_")
+    fs = rec.records["/hsv/fault_status"][-1]
+    assert rec.metadata["fault_kind"] == fs["kind"] == row["fault.kind"]
+    assert float(rec.metadata["fault_t_onset"]) == fs["t_onset"] == row["fault.t_onset"]
+    assert rec.metadata["run_index"] == "1" and rec.metadata["campaign"] == "sil"
+    assert rec.metadata["dispersed.fault.t_onset"] == str(row["fault.t_onset"])
     for k, v in r.metrics.items():  # SIL equals simulate (the SIL tests: 1e-9)
         x = row[k]
         if isinstance(v, float) and math.isnan(v):

@@ -30,7 +30,7 @@ def test_sigterm_on_simulate_finalises_the_run_and_exits_130(quick_case, tmp_pat
     out = tmp_path / "bags"
     steps, _, text = interrupt_fahv(
         ["simulate", case_file, "--design", art, "--out", out], out,
-        [signal.SIGTERM, signal.SIGINT], 1.0, 60,
+        [signal.SIGTERM, signal.SIGINT], 3.0, 60,  # 3 s: stepping, even under load
     )  # fmt: skip
     assert "fahv simulate: interrupted at step" in text
     assert 0 < steps < 15000

@@ -17,6 +17,7 @@ from fahv.runs.bag import iter_raw, read_run, run_result_of
 from fahv.runs.metrics import metrics
 from fahv.runs.replay import run_replay
 from fahv.runs.sil import run_sil
+from fahv.runs.workspace import WS
 
 pytestmark = pytest.mark.ros  # every test here runs the built node graph
 
@@ -94,7 +95,11 @@ def test_killed_node_is_named_and_the_recording_stays_readable(design, tmp_path,
         time.sleep(0.2)
     pattern = f"lib/hsv_ctrl/tube_mpc .*{bag.name if bag else 'none'}/params.yaml"
     assert bag is not None, "the graph did not start"
-    time.sleep(4.0)
+    log = WS / "log" / "sil" / bag.name / "logs" / "recorder.log"
+    while time.monotonic() - t0 < 120:  # stepping (a fixed wait was too short under load)
+        if log.is_file() and "progress 500" in log.read_text():
+            break
+        time.sleep(0.2)
     pids = _pids(pattern)
     assert pids
     t_kill = time.monotonic()

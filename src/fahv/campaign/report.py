@@ -118,6 +118,23 @@ class Report:
     figures: list
     n_runs: int
 
+    def summary(self) -> str:
+        """A few lines for the terminal: runs, then each requirement's pass count per variant.
+
+        The whole report (worst runs, figures) is the file ``DIR/report/report.md``.
+        """
+        variants = list(self.table)
+        width = max(len(k) for k, _ in REQUIREMENTS)
+        lines = [f"{self.n_runs} runs; requirement: runs passing / applicable per variant"]
+        lines.append(f"  {'':<{width}}  " + "  ".join(f"{v:>18}" for v in variants))
+        for key, _ in REQUIREMENTS:
+            cells = []
+            for v in variants:
+                ok, n, _bound = self.table[v][key]
+                cells.append(f"{'n/a' if n == 0 else f'{ok}/{n} ({100.0 * ok / n:.1f} %)':>18}")
+            lines.append(f"  {key:<{width}}  " + "  ".join(cells))
+        return "\n".join(lines)
+
 
 def _fmt(v) -> str:
     if isinstance(v, float):
@@ -212,7 +229,7 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
             lines.append("|---|---|" + "---|" * len(shown))
             for r in top:
                 vals = " | ".join(_fmt(r.get(c)) for c in shown)
-                lines.append(f"| {r['index']} | {_fmt(_num(r, key))} | {vals} |")
+                lines.append(f"| {r['index']} | {_fmt(worse(_num(r, key)))} | {vals} |")
             lines.append("")
     figs: list[Path] = []
     if figures and rows:

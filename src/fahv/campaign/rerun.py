@@ -6,11 +6,18 @@ a function of (seed, i)), ``design/`` the design it ran with. In process it goes
 through :func:`fahv.loop.simulate.simulate` with the run's overrides, recorded by
 :class:`fahv.runs.bag.RunWriter`; the batched simulator of the campaign gives the same
 bits, so the metrics equal the recorded row exactly. With ``sil=True`` the same
-parameters go through the ROS 2 node graph (:func:`fahv.runs.sil.run_sil`).
+parameters go through the ROS 2 node graph (:func:`fahv.runs.sil.run_sil`). The run
+file records the run's own values: its fault in the run metadata (``fault_*``), the
+campaign, its hash and seed, the run index and every dispersed value
+(``dispersed.<column>``), and the parameter file of every node.
+
+:func:`rerun_file` reruns any run from its file alone (the parameter file it holds),
+whoever wrote it, and compares the metrics with the recorded run's.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -19,11 +26,12 @@ from pathlib import Path
 from fahv.campaign import store
 from fahv.campaign.draws import _vehicle, draw, overrides
 from fahv.design.artefacts import load_design
-from fahv.errors import CampaignError
-from fahv.loop.simulate import simulate
-from fahv.runs.bag import RunWriter, read_run, run_result_of
+from fahv.errors import CampaignError, RunError
+from fahv.loop.simulate import simulate, simulate_parameters
+from fahv.runs.bag import PARAMS, RunWriter, read_run, run_result_of, start_metadata
 from fahv.runs.metrics import metrics
-from fahv.runs.sil import run_metadata, run_sil, write_run_params
+from fahv.runs.sil import recorder_metadata, run_graph, run_parameter_file, run_sil
+from fahv.runs.tools import run_vehicle
 
 
 @dataclass
@@ -84,8 +92,8 @@ def rerun(
     sil : bool
         Through the ROS 2 node graph instead of in process.
     bags : path
-        Folder of the run folder (``<campaign>_<index>_<variant>_rerun_<time>/``;
-        the SIL runner names its own ``<case>_<variant>_sil_<time>/``).
+        Folder of the run folder (``<campaign>_<index>_<variant>_rerun_<time>/``, with
+        ``_sil`` before the time for a SIL rerun).
     watchdog_s : float
         Node watchdog of a SIL run [s].
     quiet : bool
@@ -108,25 +116,37 @@ def rerun(
     if not 0 <= index < data["runs"]:
         raise CampaignError(f"run index must be in [0, {data['runs']}), got {index}")
     design = load_design(out / "design")
-    ov = overrides(draw(data, design.case, index), design, variant)
+    values = draw(data, design.case, index)
+    ov = overrides(values, design, variant)
     duration = float(man["duration"])
     recorded = next(
         (r for r in store.read_rows(out) if r["index"] == index and r["variant"] == variant),
         None,
     )
+    extra = {
+        "campaign": man["name"],
+        "campaign_hash": man["hash"],
+        "campaign_seed": data["seed"],
+        "run_index": index,
+        **{f"dispersed.{k}": v for k, v in values.items()},
+    }
+    name = f"{man['name']}_{index}_{variant}_rerun"
     bag, run, error = None, None, ""
     try:
         if sil:
-            res = run_sil(design, variant, duration, Path(bags), watchdog_s, ov, quiet=quiet)
+            res = run_sil(
+                design, variant, duration, Path(bags), watchdog_s, ov, quiet=quiet,
+                name=f"{name}_sil", metadata=extra,
+            )  # fmt: skip
             bag = res.bag
             run = run_result_of(read_run(bag))
         else:
-            stamp = time.strftime("%Y%m%d-%H%M%S")
-            bag = Path(bags) / f"{man['name']}_{index}_{variant}_rerun_{stamp}"
-            meta = run_metadata(design, variant, "campaign-rerun", duration, ov)
-            meta.update(campaign=man["name"], campaign_hash=man["hash"], run_index=index)
-            with RunWriter(bag, meta, design.case["Ts"]) as writer:
-                write_run_params(design, variant, bag, bag / "params.yaml", duration, 10.0, ov)
+            bag = Path(bags) / f"{name}_{time.strftime('%Y%m%d-%H%M%S')}"
+            content = run_parameter_file(
+                design, variant, bag, duration, watchdog_s, ov, "campaign-rerun", extra
+            )
+            meta = recorder_metadata(content)
+            with RunWriter(bag, meta, design.case["Ts"], params=content) as writer:
                 run = simulate(design, variant, duration, writer=writer, overrides=ov)
     except Exception as exc:  # noqa: BLE001 - compared with the recorded failure
         error = f"{type(exc).__name__}: {exc}"
@@ -141,4 +161,85 @@ def rerun(
                 diff[k] = (recorded.get(k), v)
         if error and not recorded["reason"].startswith(error.split(" at t =")[0]):
             diff["reason"] = (recorded["reason"], error)
+    return Rerun(bag, m, recorded, diff, error)
+
+
+def rerun_file(
+    run: str | Path,
+    sil: bool = False,
+    bags: str | Path = "bags",
+    watchdog_s: float = 10.0,
+    quiet: bool = True,
+) -> Rerun:
+    """Rerun a recorded run from its file alone and compare the metrics with it.
+
+    The run's parameter file (every node, stored in the run file by every writer)
+    is simulated in process (:func:`fahv.loop.simulate.simulate_parameters`), or with
+    ``sil=True`` run through the node graph; the new run is recorded to
+    ``bags/<run>_rerun[_sil]_<time>/`` with the recorded run's metadata (source
+    ``rerun``, ``rerun_of``).
+
+    Parameters
+    ----------
+    run : path
+        Run folder or .mcap file (renamed, copied or alone).
+    sil : bool
+        Through the ROS 2 node graph instead of in process.
+    bags : path
+        Folder of the new run folder.
+    watchdog_s : float
+        Node watchdog of a SIL rerun [s].
+    quiet : bool
+        No progress lines from the SIL runner.
+
+    Returns
+    -------
+    Rerun
+        ``recorded``: the metrics of the recorded run; ``differences`` those that
+        differ in the rerun.
+
+    Raises
+    ------
+    RunError
+        If the run cannot be read, holds no parameter file (runs of earlier versions:
+        rerun them from their campaign folder or case), or no complete step.
+    """
+    rec = read_run(run)
+    params = rec.params()
+    if params is None:
+        raise RunError(
+            f"{rec.path} holds no parameter file ({PARAMS}): a run of an earlier version; "
+            "rerun it from its campaign folder (fahv campaign rerun DIR INDEX) or its case"
+        )
+    limits = run_vehicle(rec).limits
+    recorded = metrics(run_result_of(rec), limits)
+    meta = {**start_metadata(rec.metadata), "rerun_of": str(rec.path.resolve())}
+    content = {k: {"ros__parameters": dict(v["ros__parameters"])} for k, v in params.items()}
+    name = f"{rec.path.stem}_rerun"
+    bag, new, error = None, None, ""
+    try:
+        if sil:
+            meta["source"] = "sil"
+            content["recorder"]["ros__parameters"]["metadata_json"] = json.dumps(meta)
+            res = run_graph(content, f"{name}_sil_{time.strftime('%Y%m%d-%H%M%S')}",
+                            Path(bags), quiet, domain_id=None)  # fmt: skip
+            bag = res.bag
+            new = run_result_of(read_run(bag))
+        else:
+            meta["source"] = "rerun"
+            bag = Path(bags) / f"{name}_{time.strftime('%Y%m%d-%H%M%S')}"
+            content["recorder"]["ros__parameters"].update(
+                bag=str(bag.resolve()), metadata_json=json.dumps(meta)
+            )
+            nodes = {k: v["ros__parameters"] for k, v in content.items()
+                     if k not in ("recorder", "/**")}  # fmt: skip
+            with RunWriter(bag, meta, float(meta.get("Ts", nodes["plant"]["Ts"])),
+                           params=content) as writer:  # fmt: skip
+                new = simulate_parameters(nodes, writer=writer, info=meta)
+    except Exception as exc:  # noqa: BLE001 - reported with the differences
+        error = f"{type(exc).__name__}: {exc}"
+    m = metrics(new, limits) if new is not None else {}
+    diff = {k: (recorded.get(k), v) for k, v in m.items() if not _same(recorded.get(k), v)}
+    if error:
+        diff["error"] = ("", error)
     return Rerun(bag, m, recorded, diff, error)

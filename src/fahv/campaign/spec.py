@@ -167,6 +167,32 @@ class Campaign:
         """Simulated time of each run [s] (the case's when the file says 0)."""
         return float(self.data["duration"] or self.case["duration"])
 
+    @property
+    def warnings(self) -> list[str]:
+        """What the campaign does that its author may not expect (``fahv campaign`` prints it).
+
+        Fault onsets drawn (or the case's onset) beyond the run's duration: those runs
+        end before their fault, i.e. without one.
+        """
+        out = []
+        f, cf, d = self.data["dispersions"]["fault"], self.case["fault"], self.duration
+        kinds = f["kinds"] or [cf["kind"]]
+        if all(k == "none" for k in kinds):
+            return out
+        lo, hi = f["onset"] or (cf["t_onset"], cf["t_onset"])
+        if hi >= d:
+            share = 1.0 if lo >= d else (hi - d) / (hi - lo)
+            where = (
+                f"dispersions.fault.onset [{lo:g}, {hi:g}] s"
+                if f["onset"]
+                else f"the case's fault onset {lo:g} s"
+            )
+            out.append(
+                f"{self.path}: {where} reaches beyond the run's duration {d:g} s: "
+                f"{100.0 * share:.0f} % of the runs end before their fault (no fault in them)"
+            )
+        return out
+
     def content_hash(self) -> str:
         """sha256 of the campaign and case content (defaults included), 16 hex characters."""
         text = json.dumps({"campaign": self.data, "case": self.case.data}, sort_keys=True)

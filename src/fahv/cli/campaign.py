@@ -5,6 +5,10 @@
     fahv campaign CAMPAIGN.yaml [--out DIR] [--scheduler ADDRESS] [--workers N] [--resume]
     fahv campaign report DIR [--no-figures]
     fahv campaign rerun DIR INDEX [--variant V] [--sil] [--out BAGS]
+    fahv campaign rerun RUN [--sil] [--out BAGS]
+
+``rerun RUN`` reruns any recorded run (folder or .mcap) from the parameter file its
+run file holds, and compares the metrics with the recorded run's.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ from pathlib import Path
 
 from fahv.campaign.engine import run_campaign
 from fahv.campaign.report import make_report
-from fahv.campaign.rerun import rerun
+from fahv.campaign.rerun import rerun, rerun_file
 from fahv.campaign.spec import load_campaign
 from fahv.errors import CampaignError
 from fahv.runs.workspace import ROOT
@@ -30,9 +34,11 @@ def _err(line: str) -> None:
 
 
 def cmd_run(args) -> int:
-    """Run (or ``--resume``) a campaign file; print the report at the end."""
+    """Run (or ``--resume``) a campaign file; print the report's summary and path at the end."""
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     campaign = load_campaign(args.target)
+    for line in campaign.warnings:
+        _err(f"warning: {line}")
     out = Path(args.out) if args.out else ROOT / "campaigns" / campaign.name
     res = run_campaign(
         campaign,
@@ -60,30 +66,29 @@ def cmd_run(args) -> int:
         return INTERRUPTED
     if not args.no_report:
         rep = make_report(out, figures=True)
-        print(rep.text)
-        _err(f"report written to {out}/report/")
+        print(rep.summary())
+        print(f"report: {out / 'report' / 'report.md'} (worst runs, figures)")
     return 0 if res.missing == 0 else 1
 
 
 def cmd_report(args) -> int:
-    """Report of a campaign folder (tables printed, figures written)."""
+    """Report of a campaign folder written (tables, figures); its summary printed."""
     rep = make_report(args.dir, figures=not args.no_figures)
-    print(rep.text)
-    _err(f"report written to {Path(args.dir) / 'report'}/")
+    print(rep.summary())
+    print(f"report: {Path(args.dir) / 'report' / 'report.md'} (worst runs, figures)")
     return 0
 
 
 def cmd_rerun(args) -> int:
-    """One run of a campaign again, recorded (MCAP); compares its metrics with the row."""
-    r = rerun(
-        args.dir,
-        args.index,
-        args.variant,
-        sil=args.sil,
-        bags=args.out or ROOT / "bags",
-        quiet=args.quiet,
-    )
-    if r.bag is not None:
+    """One run of a campaign (or any recorded run) again, recorded (MCAP); compares metrics."""
+    bags = args.out or ROOT / "bags"
+    if args.index is None:
+        r = rerun_file(args.dir, sil=args.sil, bags=bags, quiet=args.quiet)
+        what = "the recorded run's"
+    else:
+        r = rerun(args.dir, args.index, args.variant, sil=args.sil, bags=bags, quiet=args.quiet)
+        what = "the campaign's row"
+    if r.bag is not None and not args.sil:  # the SIL runner says where it wrote the run
         print(f"run written to {r.bag}")
     if r.error:
         print(f"the run failed: {r.error}")
@@ -91,9 +96,9 @@ def cmd_rerun(args) -> int:
         print("the campaign's dataset does not hold this run (yet): nothing to compare")
         return 0
     if r.identical:
-        print(f"metrics identical to the campaign's row ({len(r.metrics)} metrics)")
+        print(f"metrics identical to {what} ({len(r.metrics)} metrics)")
         return 0
-    print("metrics differ from the campaign's row:")
+    print(f"metrics differ from {what}:")
     for k, (a, b) in r.differences.items():
         print(f"  {k}: campaign {a!r}, rerun {b!r}")
     return 1
@@ -108,8 +113,13 @@ def _dispatch(args) -> int:
         args.dir = rest[0]
         return cmd_report(args)
     if args.target == "rerun":
+        if len(rest) == 1:
+            args.dir, args.index = rest[0], None
+            return cmd_rerun(args)
         if len(rest) != 2 or not rest[1].isdigit():
-            raise CampaignError("usage: fahv campaign rerun DIR INDEX (a run index)")
+            raise CampaignError(
+                "usage: fahv campaign rerun DIR INDEX (a run index), or fahv campaign rerun RUN"
+            )
         args.dir, args.index = rest[0], int(rest[1])
         return cmd_rerun(args)
     if rest:
@@ -126,7 +136,7 @@ def add_parsers(sub) -> None:
         description=__doc__,
     )
     p.add_argument("target", help="campaign file, or 'report' / 'rerun'")
-    p.add_argument("rest", nargs="*", help="DIR (report), DIR INDEX (rerun)")
+    p.add_argument("rest", nargs="*", help="DIR (report), DIR INDEX or RUN (rerun)")
     p.add_argument(
         "--out",
         default=None,

@@ -43,8 +43,9 @@ def design_case(case, vehicle, out_dir: Path, log=print):
 def cmd_design(args) -> int:
     """Offline design of a case: print every certificate, write the artefacts."""
     case = load_case(args.case)
-    out = artefact_dir(case, args.out)
-    design = design_case(case, vehicle_of(args), out)
+    vehicle = vehicle_of(args)
+    out = artefact_dir(case, args.out, vehicle)
+    design = design_case(case, vehicle, out)
     prov = design.summary["provenance"]
     print(
         f"design hash {design.summary['design_hash']} (case {prov['case_hash']}, vehicle "
@@ -74,7 +75,7 @@ def load_or_design(case_path, design_dir, vehicle_file=None, log=_stderr):
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     case = load_case(case_path)
     vehicle = load_vehicle(vehicle_file)
-    out = artefact_dir(case, design_dir)
+    out = artefact_dir(case, design_dir, vehicle)
     try:
         design = load_design(out)
         reason = stale_reason(design, case, vehicle)
@@ -90,6 +91,10 @@ def add_parsers(sub) -> None:
     """Add the parsers of this command group."""
     p = sub.add_parser("design", help="offline design of a case: artefacts + ROS parameters")
     p.add_argument("case", help="case file, e.g. offline_design/case1.yaml")
-    p.add_argument("--out", default=None, help="artefact folder (offline_design/artefacts/NAME)")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="artefact folder (offline_design/artefacts/NAME, NAME@VEHICLE-HASH with --vehicle)",
+    )
     add_vehicle_option(p)
     p.set_defaults(func=cmd_design)

@@ -177,6 +177,13 @@ def cmd_tube(args) -> int:
     """Tube feasibility study: W by source, F and Z, box tube, input room."""
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     veh = vehicle_of(args)
+    rho_f = args.rho_f
+    if rho_f is None:  # the effectiveness the case's design covers
+        from fahv.design.case import load_case
+        from fahv.design.pipeline import design_rho_f
+
+        rho_f = design_rho_f(load_case(args.case))
+        print(f"rho_f = {rho_f:g}: the elevator effectiveness {args.case} designs its tube for")
     tp = _tp(args, veh, args.model, args.vertices)
     Dx = veh.state_scale
     for treatment in args.treatment:
@@ -189,7 +196,7 @@ def cmd_tube(args) -> int:
             tp,
             args.Ts,
             PAPER_UNCERTAINTY,
-            args.rho_f,
+            rho_f,
             DEFAULT_DEV_BOX,
             DEFAULT_DU_BOX,
             args.samples_w,
@@ -289,7 +296,17 @@ def add_parsers(sub) -> None:
     p.add_argument("--vertices", type=shape_arg, default=(4, 5), metavar="RHxRV")
     p.add_argument("--samples", type=shape_arg, default=(21, 21), metavar="NHxNV")
     p.add_argument("--Ts", type=float, default=0.02, help="sampling period [s]")
-    p.add_argument("--rho-f", type=float, default=0.9, help="elevator effectiveness")
+    p.add_argument(
+        "--rho-f",
+        type=float,
+        default=None,
+        help="elevator effectiveness (default: the one the case's tube is designed for)",
+    )
+    p.add_argument(
+        "--case",
+        default="offline_design/case1.yaml",
+        help="case whose design effectiveness is the default of --rho-f",
+    )
     p.add_argument("--samples-w", type=int, default=300, help="samples bounding W")
     p.add_argument("--margin", type=float, default=1.2, help="margin on the sampled W")
     p.add_argument("--seed", type=int, default=0)

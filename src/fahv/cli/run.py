@@ -12,11 +12,17 @@ from fahv.errors import FahvError, RunInterrupted
 from fahv.loop.graph import NODES, TOPICS, graph_nodes
 from fahv.loop.params import controller_node
 from fahv.loop.simulate import simulate
-from fahv.runs.bag import RunWriter, read_run, run_result_of, stored_metadata
+from fahv.runs.bag import RunWriter, encode, read_run, run_result_of, stored_metadata
 from fahv.runs.metrics import metrics
 from fahv.runs.plots import paper_figures
 from fahv.runs.replay import run_replay
-from fahv.runs.sil import run_metadata, run_name, run_sil, write_run_params
+from fahv.runs.sil import (
+    recorder_metadata,
+    run_name,
+    run_parameter_file,
+    run_sil,
+    write_run_params,
+)
 from fahv.runs.tools import format_metrics
 from fahv.runs.workspace import ROOT
 
@@ -37,20 +43,28 @@ class StepProgress:
         Steps of the run.
     writer : fahv.runs.bag.RunWriter, optional
         Receives every message.
+    live : fahv.runs.live.LiveView, optional
+        Serves every message (the same CDR bytes) to Foxglove.
     """
 
     #: The last topic of a step (:data:`fahv.loop.graph.TOPICS` order).
     LAST_TOPIC = list(TOPICS)[-1]
 
-    def __init__(self, desc: str, n_steps: int, writer=None) -> None:
+    def __init__(self, desc: str, n_steps: int, writer=None, live=None) -> None:
         self.bar = progress(total=n_steps, desc=desc, unit="step", leave=False)
         self.writer = writer
+        self.live = live
         self.k = 0
         self.solves = 0
 
     def write(self, topic: str, k: int, msg) -> None:
         """Forward one message of step k; count the step after its last topic."""
-        if self.writer is not None:
+        if self.live is not None:  # serialised once, the same bytes to both
+            data = encode(topic, msg)
+            self.live.log(topic, k, data)
+            if self.writer is not None:
+                self.writer.write_raw(topic, k, data)
+        elif self.writer is not None:
             self.writer.write(topic, k, msg)
         if topic == "/hsv/tube_status" and int(msg.lmi_solves[0]) != self.solves:
             self.solves = int(msg.lmi_solves[0])
@@ -64,11 +78,11 @@ class StepProgress:
         self.bar.close()
 
 
-def _simulate_recorded(design, variant: str, duration, out_dir):
+def _simulate_recorded(design, variant: str, duration, out_dir, live=None):
     """simulate() with a progress bar, recorded to ``out_dir/<run>/`` unless it is None.
 
-    The run folder also gets the run's ROS parameter file (``params.yaml``, the same
-    a SIL run gets), so ``fahv replay --node ...`` can start nodes against it.
+    The run file also holds the run's ROS parameter file (the one a SIL run's nodes
+    get), so ``fahv replay --node ...`` can start nodes against it.
 
     Raises
     ------
@@ -80,12 +94,13 @@ def _simulate_recorded(design, variant: str, duration, out_dir):
     d = case["duration"] if duration is None else duration
     n_steps = int(round(d / case["Ts"]))
     bag = None if out_dir is None else Path(out_dir) / run_name(case["name"], variant, "sim")
-    progress = StepProgress(desc, n_steps)
+    progress = StepProgress(desc, n_steps, live=live)
     try:
         if bag is None:
             return simulate(design, variant, duration, writer=progress)
-        with RunWriter(bag, run_metadata(design, variant, "simulate", d), case["Ts"]) as writer:
-            write_run_params(design, variant, bag, bag / "params.yaml", duration, 10.0)
+        content = run_parameter_file(design, variant, bag, duration, 10.0, source="simulate")
+        meta = recorder_metadata(content)
+        with RunWriter(bag, meta, case["Ts"], params=content) as writer:
             progress.writer = writer
             run = simulate(design, variant, duration, writer=progress)
     except KeyboardInterrupt:
@@ -102,16 +117,32 @@ def cmd_simulate(args) -> int:
     variants = args.variant or case["variants"]
     limits = vehicle.limits
     table = {}
-    for v in variants:
-        out = None if args.no_record else Path(args.out or ROOT / "bags")
-        run = _simulate_recorded(design, v, args.duration, out)
-        table[v] = metrics(run, limits)
+    live = _live_view(args.live, case["Ts"])
+    try:
+        for v in variants:
+            out = None if args.no_record else Path(args.out or ROOT / "bags")
+            run = _simulate_recorded(design, v, args.duration, out, live)
+            table[v] = metrics(run, limits)
+    finally:
+        if live is not None:
+            live.close()
     if args.json:
         print(to_json(table))
     else:
         print(f"case {case.name}, design {design.summary['design_hash']}")
         print(format_metrics(table))
     return 0
+
+
+def _live_view(port: int | None, Ts: float):
+    """The in-process live view of ``fahv simulate --live`` (None without ``--live``)."""
+    if port is None:
+        return None
+    from fahv.runs.live import LiveView, live_hint
+
+    live = LiveView(port, Ts)
+    print(f"live view on {live.url} ({live_hint()})", flush=True)
+    return live
 
 
 def cmd_sil(args) -> int:
@@ -128,6 +159,7 @@ def cmd_sil(args) -> int:
         args.watchdog,
         quiet=args.quiet,
         domain_id=args.domain_id,
+        live_port=args.live,
     )
     n_steps = int(round(res.simulated_s / case["Ts"]))
     if not res.bag.is_dir():
@@ -141,12 +173,15 @@ def cmd_sil(args) -> int:
     run = run_result_of(rec)
     if res.interrupted:
         raise RunInterrupted(int(rec.metadata.get("steps_recorded", run.t.size)), n_steps, res.bag)
-    print(f"run written to {res.bag}")
+    ran_s = run.t.size * case["Ts"]  # what the graph simulated, not what was asked for
+    rtf = f"{ran_s / res.wall_s:.2f}" if run.t.size and res.wall_s > 0 else "- (no step)"
     print(
-        f"status {rec.metadata.get('status', '?')}, {run.t.size} steps, wall time "
-        f"{res.wall_s:.1f} s, real-time factor {res.real_time_factor:.2f} "
-        f"(simulated {res.simulated_s:g} s)"
+        f"run {res.bag.name}: status {rec.metadata.get('status', '?')}, {run.t.size} of "
+        f"{n_steps} steps, wall time {res.wall_s:.1f} s, real-time factor {rtf} (simulated "
+        f"{ran_s:g} of {res.simulated_s:g} s)"
     )
+    if rec.metadata.get("reason"):
+        print(f"reason: {rec.metadata['reason']}")
     if run.t.size:
         table = {variant: metrics(run, vehicle.limits)}
         if args.json:
@@ -161,6 +196,9 @@ def cmd_sil(args) -> int:
 
 def _write_params_only(args, design, variant: str) -> int:
     """``fahv sil --write-params FILE``: the run's parameter file and how to start the nodes."""
+    from fahv.runs.workspace import ensure_built
+
+    ensure_built()  # the nodes started by hand are those of the current sources
     out = Path(args.out or ROOT / "bags").resolve()
     bag = out / run_name(design.case["name"], variant, "sil")
     path = Path(args.write_params)
@@ -168,10 +206,30 @@ def _write_params_only(args, design, variant: str) -> int:
     print(f"parameter file {path} written; the recorder will write {bag}")
     print("start the graph node by node (any order; the plant starts step 0 once all are up):")
     print("  source ros_ws/install/setup.bash")
+    print(f"  {export_line(free_domain())}   # a domain no other graph uses now")
     for name in graph_nodes(controller_node(content)):
         amp = "" if name == "plant" else " &"
         print(f"  ros2 run {NODES[name].package} {name} --ros-args --params-file {path}{amp}")
     return 0
+
+
+def free_domain() -> int:
+    """A ROS domain ID no other graph of this host holds now (ROS 2's domain_coordinator).
+
+    The ID is released again at once: it is a suggestion for a graph started by hand.
+    Without the ROS wheels (no ``domain_coordinator``) 42 is suggested.
+    """
+    try:
+        import domain_coordinator
+    except ImportError:
+        return 42
+    with domain_coordinator.domain_id() as domain:
+        return int(domain)
+
+
+def export_line(domain: int) -> str:
+    """The shell line that puts a shell into the graph's ROS domain (this host only)."""
+    return f"export ROS_DOMAIN_ID={domain} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 
 
 def cmd_replay(args) -> int:
@@ -186,6 +244,7 @@ def cmd_replay(args) -> int:
         steps=args.steps,
         watchdog_s=args.watchdog,
         quiet=args.quiet,
+        params=args.params,
     )
     if res.interrupted:
         done = stored_metadata(res.out) if res.out is not None else {}
@@ -195,8 +254,9 @@ def cmd_replay(args) -> int:
     if res.returncode != 0:
         print(f"fahv replay: failed (logs in {res.log_dir})", file=sys.stderr)
         return 1
-    if res.out is not None:
-        print(f"replayed run written to {res.out}")
+    if res.outputs is not None:  # the runner said where the replayed run was written
+        print(res.outputs.summary())
+        return 0 if res.outputs.identical else 1
     return 0
 
 
@@ -219,6 +279,21 @@ def cmd_paper_figures(args) -> int:
     return 0
 
 
+def _add_live_option(p) -> None:
+    from fahv.runs.live import DEFAULT_PORT
+
+    p.add_argument(
+        "--live",
+        type=int,
+        nargs="?",
+        const=DEFAULT_PORT,
+        default=None,
+        metavar="PORT",
+        help=f"serve the loop topics live to Foxglove on ws://localhost:PORT (default "
+        f"{DEFAULT_PORT}; 0: any free port)",
+    )
+
+
 def add_parsers(sub) -> None:
     """Add the parsers of this command group."""
     p = sub.add_parser("simulate", help="in-process closed loop of a case, metrics table")
@@ -228,6 +303,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
     p.add_argument("--out", default=None, help="folder of the recorded runs (default bags/)")
     p.add_argument("--no-record", action="store_true", help="do not write the runs to MCAP")
+    _add_live_option(p)
     p.add_argument("--json", action="store_true")
     add_vehicle_option(p)
     p.set_defaults(func=cmd_simulate)
@@ -257,6 +333,7 @@ def add_parsers(sub) -> None:
         "and print the `ros2 run` commands that start the graph by hand",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_live_option(p)
     p.add_argument("--json", action="store_true", help="metrics as JSON")
     add_vehicle_option(p)
     p.set_defaults(func=cmd_sil)
@@ -280,6 +357,13 @@ def add_parsers(sub) -> None:
     p.add_argument("--fast", action="store_true", help="as fast as possible (lockstep on captures)")
     p.add_argument("--steps", type=int, default=0, help="steps to replay (0: all)")
     p.add_argument("--watchdog", type=float, default=10.0, help="node watchdog [s wall time]")
+    p.add_argument(
+        "--params",
+        metavar="FILE",
+        default=None,
+        help="parameter file of the nodes under test (default: the one in the run file; "
+        "needed only for runs of earlier versions started by hand)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_replay)
     p = sub.add_parser(

@@ -128,8 +128,10 @@ def case_spec() -> Section:
             Section("certificate", (
                 Field("schedules", "int", "scheduling points of the domain check of W: 0 "
                       "skips it, 1 the envelope centre, 3 centre and two opposite corners, "
-                      "9 a 3 x 3 grid", choices=(0, 1, 3, 9), default=3),
-            ), "the tube certificate checked over its own domain (docs/control_design.md)"),
+                      "9 a 3 x 3 grid", lo=0, hi=9, default=3),
+            ), "the tube certificate checked over its own domain (docs/control_design.md)",
+                checks=(Check("schedules", lambda r: r["certificate"]["schedules"] in (0, 1, 3, 9),
+                              "must be 0, 1, 3 or 9"),)),
             Section("nominal", (
                 Field("lam", "float", "decay factor of (34')", lo=0.0, hi=1.0, lo_open=True,
                       hi_open=True, default=0.9995, equation="LMI (34)"),

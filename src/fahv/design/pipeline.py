@@ -64,6 +64,17 @@ class DesignContext:
     log: Callable[[str], None]
 
 
+def design_rho_f(case) -> float:
+    """Elevator effectiveness the tube of a case is designed for (eq. 15 with the fault).
+
+    The smaller of the case fault's design effectiveness
+    (:meth:`fahv.plant.faults.FaultKind.design_effectiveness`) and ``tube.rho_min``.
+    """
+    f = case["fault"]
+    fault = make_fault(f["kind"], f["t_onset"], f)
+    return float(min(fault.design_effectiveness(), case["tube"]["rho_min"]))
+
+
 def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     """Compute and verify every artefact of ``case``.
 
@@ -132,8 +143,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         f"W: {d['samples']} samples, margin {d['margin']}, constant part of the parameter "
         f"error {d['constant']}; dominant source per state: " + ", ".join(W.dominant())
     )
-    fault = make_fault(c["fault"]["kind"], c["fault"]["t_onset"], c["fault"])
-    rho_f = min(fault.design_effectiveness(), c["tube"]["rho_min"])
+    rho_f = design_rho_f(c)
     Af, Bf = fault_vertices(disc.A, disc.B, rho_f)
     room = input_room(veh)
     # row weights of the tube objective: the room of each row's binding side of the
@@ -148,7 +158,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     eigs = verify_tube(Af, Bf, tube, Dx, Du)
     log(
         f"certificate F, Z (LMI 24 + S-procedure, {Af.shape[0]} vertices incl. rho_f = "
-        f"{rho_f}): min eigenvalue {eigs.min():.3e} >= 0, lam = {tube.lam}  OK"
+        f"{rho_f}): min eigenvalue {eigs.min():.3e} >= -1e-12 x the largest entry of each "
+        f"vertex matrix (tolerance), lam = {tube.lam}  OK"
     )
     tau = c["tube"]["tau"]
     u_n_max = room - tau * tube.tightening
@@ -222,8 +233,9 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     cert = verify_nominal(disc.A, disc.B, nominal, Dn, u_n_max)
     log(
         f"certificate K (LMI 33-35'): contraction {cert['contraction']:.6f} < 1, input "
-        f"ratio {cert['input_ratio']:.4f} <= 1, LMI min eigenvalue "
-        f"{cert['lmi34_min_eig']:.2e}, fraction of the command in E(Q) s = {nominal.s:.3f}  OK"
+        f"ratio {cert['input_ratio']:.4f} <= 1, LMI (34') min eigenvalue "
+        f"{cert['lmi34_min_eig']:.2e} >= -{cert['lmi34_tol']:.2e} (tolerance: 1e-9 x the "
+        f"largest entry of the block), fraction of the command in E(Q) s = {nominal.s:.3f}  OK"
     )
     arrays = {
         "A": disc.A,

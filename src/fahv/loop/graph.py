@@ -39,6 +39,46 @@ QOS_DEPTH = 2000
 
 
 @dataclass(frozen=True)
+class QoS:
+    """A DDS quality-of-service profile, as numbers (the library imports no ROS code).
+
+    History is always keep-last; liveliness automatic, deadlines and lifespans
+    infinite. ``hsv_common`` turns it into an ``rclpy`` profile, the run writer into
+    the ``offered_qos_profiles`` of each MCAP channel.
+
+    Attributes
+    ----------
+    depth : int
+        Keep-last history depth [messages].
+    reliable : bool
+        Reliable (True) or best-effort delivery.
+    transient_local : bool
+        Late joiners get the writer's history (True) or only new messages.
+    """
+
+    depth: int
+    reliable: bool = True
+    transient_local: bool = False
+
+
+#: QoS of every loop topic: reliable, keep-last :data:`QOS_DEPTH`, volatile.
+LOOP_QOS = QoS(QOS_DEPTH)
+
+#: Topic on which every node of a graph publishes its status (std_msgs/String, JSON of
+#: :func:`fahv.loop.graph.node_status`): once when it starts, on every change of state,
+#: and every :data:`STATUS_PERIOD_S` as a heartbeat. Readiness, the start of step 0, the
+#: name of a missing or lost peer and the foreign-graph check all read it.
+STATUS_TOPIC = "/hsv/node_status"
+#: QoS of :data:`STATUS_TOPIC`: reliable, transient local, the latest statuses of each node
+#: (a node that joins later still learns the state of every peer).
+STATUS_QOS = QoS(20, reliable=True, transient_local=True)
+#: Heartbeat period of the node status [s wall time].
+STATUS_PERIOD_S = 1.0
+#: A peer whose latest status is older than this is lost (process gone) [s wall time].
+STATUS_LOST_S = 4.0
+
+
+@dataclass(frozen=True)
 class NodeSpec:
     """One node of the graph.
 

@@ -353,7 +353,39 @@ def simulate(
     """
     variant = design.case["variants"][0] if variant is None else variant
     p = run_parameters(design, variant, duration, overrides)
-    loop = Loop([p], Lanes(1, strict=True))
+    return simulate_parameters(
+        p, progress, writer, run_info(design, variant, p["plant"]["Ts"], p["plant"])
+    )
+
+
+def simulate_parameters(params: dict, progress=None, writer=None, info: dict | None = None):
+    """Run one run in process from its node parameters alone (B = 1).
+
+    The loop of :func:`simulate`, for a run given by its parameter file rather than a
+    design (e.g. the one a run file holds: ``fahv campaign rerun RUN``).
+
+    Parameters
+    ----------
+    params : dict
+        ``{node: {name: value}}`` of every loop node and the controller node
+        (:func:`run_parameters`; other sections, e.g. the recorder's, are ignored).
+    progress, writer
+        As :func:`simulate`.
+    info : dict, optional
+        ``RunResult.info``.
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    RunError
+        If the plant state becomes non-finite.
+    ParameterError
+        On an invalid node parameter (names the node and the key).
+    """
+    loop = Loop([params], Lanes(1, strict=True))
     hist = History(loop.n_steps, 1, loop.n)
     steps = range(loop.n_steps) if progress is None else progress(range(loop.n_steps))
     for k in steps:
@@ -362,4 +394,4 @@ def simulate(
         if writer is not None:
             for topic, msg in zip(TOPICS, msgs, strict=True):
                 writer.write(topic, k, msg)
-    return hist.result(0, run_info(design, variant, loop.Ts, p["plant"]))
+    return hist.result(0, info or {})

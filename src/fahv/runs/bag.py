@@ -21,6 +21,7 @@ import json
 import math
 import os
 import struct
+import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,8 +29,11 @@ from pathlib import Path
 import numpy as np
 import yaml
 from mcap.exceptions import McapError
-from mcap.records import Channel, Footer, Message, Metadata, Schema
+from mcap.reader import make_reader
+from mcap.records import Attachment, Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 from rosbags.interfaces import (
     Qos,
     QosDurability,
@@ -42,22 +46,32 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from fahv.errors import RunError
-from fahv.loop.graph import QOS_DEPTH, TOPICS
+from fahv.loop import graph
+from fahv.loop.graph import TOPICS
 from fahv.loop.simulate import RunResult, run_result
 from fahv.msg import MSG_DIR, PKG, LoopMessage
+from fahv.version import code_version
 
 _INF = QosTime(2147483647, 4294967295)
-LOOP_QOS = Qos(
-    QosHistory.KEEP_LAST,
-    QOS_DEPTH,
-    QosReliability.RELIABLE,
-    QosDurability.VOLATILE,
-    _INF,
-    _INF,
-    QosLiveliness.AUTOMATIC,
-    _INF,
-    False,
-)
+
+
+def offered_qos(q: graph.QoS) -> Qos:
+    """rosbag2 ``offered_qos_profiles`` entry of a :class:`fahv.loop.graph.QoS`."""
+    return Qos(
+        QosHistory.KEEP_LAST,
+        q.depth,
+        QosReliability.RELIABLE if q.reliable else QosReliability.BEST_EFFORT,
+        QosDurability.TRANSIENT_LOCAL if q.transient_local else QosDurability.VOLATILE,
+        _INF,
+        _INF,
+        QosLiveliness.AUTOMATIC,
+        _INF,
+        False,
+    )
+
+
+#: The loop topics' QoS (:data:`fahv.loop.graph.LOOP_QOS`) as the channels offer it.
+LOOP_QOS = offered_qos(graph.LOOP_QOS)
 
 
 @functools.cache
@@ -81,31 +95,171 @@ def typestore():
     return ts
 
 
+#: MCAP metadata record of the run metadata (written when the run starts, again at its end).
+RUN_RECORD = "fahv.run"
+#: Attachment: the ROS 2 parameter file of every node of the run.
+PARAMS = "params.yaml"
+#: Metadata keys a run gets when it ends (not part of what it was made from).
+END_KEYS = ("status", "steps_recorded", "wall_time_s", "ros_domain_id")
+
+
+def start_metadata(meta: dict) -> dict:
+    """Run metadata without what the end of the run added (status, counts, wall time).
+
+    What a replay or a rerun of the run inherits.
+    """
+    return {k: v for k, v in meta.items() if k not in END_KEYS and not k.startswith("anomalies")}
+
+
 def bag_paths(run: str | Path) -> tuple[Path, Path]:
-    """(bag folder, .mcap file) of a run given either of them."""
+    """(bag folder, .mcap file) of a run given either of them.
+
+    A folder's file is the one its ``metadata.yaml`` names (rosbag2's
+    ``relative_file_paths``, relative to the folder), else the only ``.mcap`` in it,
+    so a renamed or copied folder is read like the original. A folder without any
+    gives ``<folder>/<folder name>.mcap`` (which then does not exist).
+
+    Raises
+    ------
+    RunError
+        If a folder holds several .mcap files and no metadata.yaml names one.
+    """
     p = Path(run)
-    if p.suffix == ".mcap":
-        return p.parent, p
-    return p, p / f"{p.name}.mcap"
+    if p.suffix == ".mcap" or not p.is_dir():
+        return (p.parent, p) if p.suffix == ".mcap" else (p, p / f"{p.name}.mcap")
+    try:
+        info = yaml.safe_load((p / "metadata.yaml").read_text()) or {}
+        info = info.get("rosbag2_bagfile_information", info)
+        names = [n for n in info.get("relative_file_paths") or [] if str(n).endswith(".mcap")]
+    except (OSError, yaml.YAMLError, AttributeError):
+        names = []
+    for n in names:
+        if (p / n).is_file():
+            return p, p / n
+    found = sorted(p.glob("*.mcap"))
+    if len(found) > 1:
+        raise RunError(f"{p} holds several .mcap files {[f.name for f in found]}: name one")
+    return p, found[0] if found else p / f"{p.name}.mcap"
+
+
+def _legacy_folder(mcap: Path) -> Path | None:
+    """The run folder of an earlier version's file (sidecar files there), else None.
+
+    Earlier versions kept params.yaml, timestamps.npz and run.json beside the .mcap;
+    they count only in the file's own run folder (its metadata.yaml names the file,
+    or the folder is named after it), never for a bare file in any folder.
+    """
+    folder = mcap.parent
+    if folder.name == mcap.stem:
+        return folder
+    try:
+        return folder if mcap.name in (folder / "metadata.yaml").read_text() else None
+    except OSError:
+        return None
+
+
+class _McapStorage:
+    """rosbag2 storage of :class:`RunWriter`: the MCAP file, written with the ``mcap`` package.
+
+    The storage protocol of ``rosbags.rosbag2.Writer`` (which keeps the connections,
+    message definitions, QoS and ``metadata.yaml``) on :class:`mcap.writer.Writer`, so
+    the run file can also hold metadata records and attachments. ros2 profile,
+    ``ros2msg`` schemas, ``cdr`` messages, ``offered_qos_profiles`` channel metadata,
+    uncompressed 1 MiB chunks, summary with statistics and indexes, and the
+    ``rosbag2`` metadata record at the end, as rosbag2's MCAP plugin writes them.
+    """
+
+    def __init__(self, path: Path, compression) -> None:
+        self.path = path / f"{path.name}.mcap"
+        self._file = self.path.open("xb")
+        self._mcap = McapWriter(self._file, chunk_size=1 << 20, compression=CompressionType.NONE)
+        self._mcap.start(profile="ros2", library=f"fahv {code_version()} (mcap)")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[int, int] = {}
+
+    def add_msgtype(self, connection) -> None:
+        """Register the schema of a connection's message type."""
+        fmt = "ros2msg" if connection.msgdef.format.name == "MSG" else "ros2idl"
+        self._schemas[connection.msgtype] = self._mcap.register_schema(
+            connection.msgtype, fmt, connection.msgdef.data.encode()
+        )
+
+    def add_connection(self, connection, offered_qos_profiles: str) -> None:
+        """Register a channel with its offered QoS profiles."""
+        self._channels[connection.id] = self._mcap.register_channel(
+            connection.topic,
+            connection.ext.serialization_format,
+            self._schemas[connection.msgtype],
+            {"offered_qos_profiles": offered_qos_profiles},
+        )
+
+    def write(self, connection, timestamp: int, data) -> None:
+        """Append one message (log and publish time: ``timestamp``)."""
+        self._mcap.add_message(self._channels[connection.id], timestamp, bytes(data), timestamp)
+
+    def add_metadata(self, name: str, data: dict) -> None:
+        """A metadata record (string map)."""
+        self._mcap.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+
+    def add_attachment(self, name: str, data: bytes, media_type: str) -> None:
+        """An attachment (log time 0, created now)."""
+        self._mcap.add_attachment(time.time_ns(), 0, name, media_type, bytes(data))
+
+    def close(self, version: int, metadata: str) -> None:
+        """The ``rosbag2`` record (bag metadata as YAML), summary and footer."""
+        self._mcap.add_metadata("rosbag2", {"serialized_metadata": metadata})
+        self._mcap.finish()
+        self._file.close()
+
+    def abort(self) -> None:
+        """Close without summary."""
+        self._file.close()
+
+
+class _Bag(Writer):
+    """rosbags' rosbag2 writer with :class:`_McapStorage` as its MCAP storage."""
+
+    STORAGE_PLUGINS = {StoragePlugin.MCAP: _McapStorage}
+
+
+#: Media types of the attachments a run file holds.
+MEDIA_TYPES = {".yaml": "application/yaml", ".json": "application/json",
+               ".npz": "application/octet-stream"}  # fmt: skip
+
+
+def _media_type(name: str) -> str:
+    return MEDIA_TYPES.get(Path(name).suffix, "application/octet-stream")
 
 
 class RunWriter:
-    """Writer of one run: a rosbag2 bag with one MCAP file and every loop topic.
+    """Writer of one run: a rosbag2 bag with one MCAP file that holds everything of the run.
+
+    The file holds every loop topic, the run metadata (the bag's ``custom_data`` and
+    an MCAP metadata record :data:`RUN_RECORD`, written when the run starts, so a file
+    cut short still has it, and again when it closes) and the run's attachments: the
+    parameter file of every node (:data:`PARAMS`), and what the writer adds at the end
+    (the recorder: ``timestamps.npz``). The folder can be renamed or copied, or the
+    ``.mcap`` used alone: nothing else is needed.
 
     Parameters
     ----------
     path : str or Path
         Bag folder to create (must not exist); the file is ``<path>/<name>.mcap``.
     metadata : dict[str, str]
-        Run metadata stored as the bag's custom data (case, design_hash,
-        code_version, variant, source, fault ...); values are converted to str.
+        Run metadata (case, design_hash, code_version, variant, source, fault ...);
+        values are converted to str.
     Ts : float
         Control period [s]: message log time is k Ts in nanoseconds.
+    params : dict, str, Path or None
+        The run's ROS 2 parameter file: its content (``{node: {"ros__parameters":
+        ...}}``) or the path of the file (the recorder gets it as a parameter).
+    attachments : dict[str, bytes], optional
+        Further attachments by name.
 
     Raises
     ------
     RunError
-        If the folder exists or cannot be created.
+        If the folder exists or cannot be created, or the parameter file is unreadable.
 
     Notes
     -----
@@ -113,16 +267,32 @@ class RunWriter:
     how the run ended in the metadata (complete, interrupted, failed: ...).
     """
 
-    def __init__(self, path: str | Path, metadata: dict, Ts: float) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        metadata: dict,
+        Ts: float,
+        params: dict | str | Path | None = None,
+        attachments: dict | None = None,
+    ) -> None:
         self.path = Path(path)
         if self.path.exists():
             raise RunError(f"run folder {self.path} exists already")
+        atts = dict(attachments or {})
+        if isinstance(params, dict):
+            atts[PARAMS] = yaml.safe_dump(params, sort_keys=False, width=120).encode()
+        elif params is not None:
+            try:
+                atts[PARAMS] = Path(params).read_bytes()
+            except OSError as exc:
+                raise RunError(f"parameter file of the run {params}: {exc}") from None
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._ts = typestore()
         self.Ts_ns = int(round(Ts * 1e9))
-        self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-        for key, value in metadata.items():
-            self._writer.set_custom_data(key, str(value))
+        self._writer = _Bag(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self.metadata = {k: str(v) for k, v in metadata.items()}
+        for key, value in self.metadata.items():
+            self._writer.set_custom_data(key, value)
         try:
             self._writer.open()
         except OSError as exc:
@@ -133,13 +303,16 @@ class RunWriter:
             )
             for topic, msgtype in TOPICS.items()
         }
+        storage = self._writer.storage
+        storage.add_metadata(RUN_RECORD, {**self.metadata, "status": "running"})
+        for name, data in atts.items():
+            storage.add_attachment(name, data, _media_type(name))
         self.counts = dict.fromkeys(TOPICS, 0)
         self._closed = False
-        self.metadata = {k: str(v) for k, v in metadata.items()}
         self._write_sidecar(status="running")
 
     def _write_sidecar(self, **extra) -> None:
-        """run.json: the metadata, readable even if the process dies before close."""
+        """run.json: the metadata beside the file, for tools that look before it closes."""
         tmp = self.path / ".run.json.tmp"
         tmp.write_text(json.dumps({**self.metadata, **extra}, indent=1))
         os.replace(tmp, self.path / "run.json")
@@ -162,13 +335,27 @@ class RunWriter:
         self.metadata[key] = str(value)
         self._writer.set_custom_data(key, str(value))
 
-    def close(self, status: str = "complete") -> None:
-        """Finish the file (summary, indexes, metadata.yaml); idempotent."""
+    def close(self, status: str = "complete", attachments: dict | None = None) -> None:
+        """Finish the file (attachments, final metadata, summary, indexes, metadata.yaml).
+
+        Parameters
+        ----------
+        status : str
+            How the run ended (metadata ``status``).
+        attachments : dict[str, bytes], optional
+            Attachments known only at the end (the recorder's timestamps).
+
+        Idempotent: a second call does nothing.
+        """
         if self._closed:
             return
         self._closed = True
         self.set_metadata("status", status)
         self.set_metadata("steps_recorded", min(self.counts.values()))
+        storage = self._writer.storage
+        for name, data in (attachments or {}).items():
+            storage.add_attachment(name, data, _media_type(name))
+        storage.add_metadata(RUN_RECORD, self.metadata)
         self._writer.close()
         self._write_sidecar()
 
@@ -297,6 +484,8 @@ class Recording:
         The file ended before its footer; what was complete was read.
     schemas : dict[str, str]
         Stored message definition of each topic's type.
+    attachments : dict[str, bytes]
+        Attachments of the file by name (``params.yaml``, ``timestamps.npz`` ...).
     """
 
     path: Path
@@ -305,6 +494,30 @@ class Recording:
     topics: dict = field(default_factory=dict)
     truncated: bool = False
     schemas: dict = field(default_factory=dict)
+    attachments: dict = field(default_factory=dict)
+
+    def attachment(self, name: str) -> bytes | None:
+        """An attachment of the run file (None if it has none of that name).
+
+        For a run of an earlier version, the file of that name in its run folder.
+        """
+        if name in self.attachments:
+            return self.attachments[name]
+        folder = _legacy_folder(self.path)
+        try:
+            return None if folder is None else (folder / name).read_bytes()
+        except OSError:
+            return None
+
+    def params(self) -> dict | None:
+        """The run's ROS 2 parameter file (``{node: {"ros__parameters": ...}}``), or None.
+
+        Raises
+        ------
+        RunError
+            If the stored file is not a YAML mapping.
+        """
+        return _parse_params(self.attachment(PARAMS), self.path)
 
     @property
     def sim_span(self) -> tuple[float, float]:
@@ -368,22 +581,116 @@ class _Stream:
             )
 
 
-def stored_metadata(run: str | Path) -> dict:
-    """Run metadata without reading the messages: metadata.yaml, else run.json.
-
-    Returns an empty dict when neither file is readable.
-    """
-    folder, _ = bag_paths(run)
+def _legacy_metadata(mcap: Path) -> dict:
+    """run.json of an earlier version's run folder (metadata of a file cut short)."""
+    folder = _legacy_folder(mcap)
     try:
-        meta = _bag_custom_data((folder / "metadata.yaml").read_text())
-        if meta:
-            return meta
-    except OSError:
-        pass
-    try:
-        return {k: str(v) for k, v in json.loads((folder / "run.json").read_text()).items()}
+        data = json.loads((folder / "run.json").read_text()) if folder else {}
+        return {k: str(v) for k, v in data.items()}
     except (OSError, ValueError, AttributeError):
         return {}
+
+
+def _parse_params(data: bytes | None, where) -> dict | None:
+    if data is None:
+        return None
+    try:
+        params = yaml.safe_load(data.decode())
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise RunError(f"{where}: the stored {PARAMS} does not parse: {exc}") from None
+    if not isinstance(params, dict):
+        raise RunError(f"{where}: the stored {PARAMS} is not a ROS 2 parameter file")
+    return params
+
+
+def _file_extras(run: str | Path) -> tuple[dict, dict]:
+    """(metadata, attachments) of a run file without decoding its messages.
+
+    From the summary's indexes when the file has one; a file cut short is scanned.
+    """
+    stream = _Stream(run)
+    meta: dict = {}
+    atts: dict = {}
+    try:
+        with open(stream.path, "rb") as f:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            if summary is not None and (summary.metadata_indexes or summary.attachment_indexes):
+                for m in reader.iter_metadata():
+                    if m.name == "rosbag2":
+                        meta.update(_bag_custom_data(m.metadata.get("serialized_metadata", "")))
+                    elif m.name == RUN_RECORD:
+                        meta.update(m.metadata)
+                for a in reader.iter_attachments():
+                    atts[a.name] = bytes(a.data)
+                return meta, atts
+    except (McapError, EOFError, ValueError, KeyError, struct.error, OSError):
+        pass
+    for r in stream:
+        if isinstance(r, Metadata) and r.name == "rosbag2":
+            meta.update(_bag_custom_data(r.metadata.get("serialized_metadata", "")))
+        elif isinstance(r, Metadata) and r.name == RUN_RECORD:
+            meta.update(r.metadata)
+        elif isinstance(r, Attachment):
+            atts[r.name] = bytes(r.data)
+    return meta, atts
+
+
+def stored_metadata(run: str | Path) -> dict:
+    """Run metadata without decoding the messages.
+
+    From the run file's metadata records; for a run of an earlier version without
+    them, its folder's metadata.yaml or run.json. Empty when none is readable.
+
+    Raises
+    ------
+    RunError
+        If the file is missing or not an MCAP file.
+    """
+    _, mcap = bag_paths(run)
+    meta, _ = _file_extras(mcap)
+    if meta:
+        return meta
+    folder = _legacy_folder(mcap)
+    if folder is not None:
+        try:
+            meta = _bag_custom_data((folder / "metadata.yaml").read_text())
+        except OSError:
+            meta = {}
+    return meta or _legacy_metadata(mcap)
+
+
+def run_attachments(run: str | Path) -> dict[str, bytes]:
+    """Attachments of a run file by name (a run of an earlier version: none).
+
+    Raises
+    ------
+    RunError
+        If the file is missing or not an MCAP file.
+    """
+    return _file_extras(bag_paths(run)[1])[1]
+
+
+def run_params(run: str | Path) -> dict | None:
+    """The ROS 2 parameter file a run was made with, or None if it holds none.
+
+    From the run file (attachment ``params.yaml``); for a run of an earlier version,
+    the ``params.yaml`` in its run folder.
+
+    Raises
+    ------
+    RunError
+        If the file is missing, not an MCAP file, or the parameter file does not parse.
+    """
+    _, mcap = bag_paths(run)
+    data = run_attachments(mcap).get(PARAMS)
+    if data is None:
+        folder = _legacy_folder(mcap)
+        try:
+            data = None if folder is None else (folder / PARAMS).read_bytes()
+        except OSError:
+            data = None
+    return _parse_params(data, mcap)
 
 
 def read_run(run: str | Path) -> Recording:
@@ -444,14 +751,13 @@ def read_run(run: str | Path) -> Recording:
                     ) from None
         elif isinstance(r, Metadata) and r.name == "rosbag2":
             rec.metadata.update(_bag_custom_data(r.metadata.get("serialized_metadata", "")))
+        elif isinstance(r, Metadata) and r.name == RUN_RECORD:
+            rec.metadata.update(r.metadata)
+        elif isinstance(r, Attachment):
+            rec.attachments[r.name] = bytes(r.data)
     rec.truncated = not stream.complete
     if not rec.metadata:
-        side = path.parent / "run.json"
-        if side.is_file():
-            try:
-                rec.metadata = {k: str(v) for k, v in json.loads(side.read_text()).items()}
-            except (OSError, ValueError):
-                pass
+        rec.metadata = _legacy_metadata(path)
     stream.warn_if_truncated(sum(t["count"] for t in rec.topics.values()))
     rec.records = records
     return rec

@@ -1,8 +1,9 @@
 """Where the wall time of a SIL step goes: per-hop latency from recorded DDS timestamps.
 
 The SIL recorder keeps, for every message it records, the DDS source timestamp (wall
-clock when the producing node published it) and its own receive time, and writes them
-to ``<run>/timestamps.npz`` when it closes the run (:func:`save_timestamps`). From
+clock when the producing node published it) and its own receive time, and attaches them
+to the run file when it closes the run (attachment ``timestamps.npz``,
+:func:`timestamps_npz`; runs of earlier versions have the same file in the run folder). From
 them, :func:`hop_latencies` gives for every loop node of the step
 
     latency(node, k) = source time of its output of step k
@@ -22,6 +23,7 @@ Runs of ``fahv simulate`` have no such file: their timing is not a graph's.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +31,7 @@ import yaml
 
 from fahv.loop.graph import CONTROLLER_NODES, GRAPH, PREVIOUS, TOPICS, graph_nodes
 
-#: File of the recorded timestamps in a run folder.
+#: Name of the recorded timestamps (the run file's attachment; a file in older run folders).
 TIMESTAMPS_FILE = "timestamps.npz"
 #: The lockstep master: its output of step k + 1 answers its input of step k.
 MASTER = "plant"
@@ -39,16 +41,39 @@ def _key(topic: str) -> str:
     return topic.strip("/").replace("/", ".")
 
 
+def _arrays(stamps: dict) -> dict[str, np.ndarray]:
+    return {_key(t): np.asarray(v, dtype=np.int64).reshape(-1, 3) for t, v in stamps.items()}
+
+
+def timestamps_npz(stamps: dict) -> bytes:
+    """The recorder's timestamps of a run as the bytes of a compressed ``.npz`` file.
+
+    Parameters
+    ----------
+    stamps : dict
+        Topic -> flat int64 sequence ``k, source_ns, received_ns`` per message
+        (array of 3 N values, or an (N, 3) array); wall-clock nanoseconds.
+
+    Returns
+    -------
+    bytes
+        The attachment ``timestamps.npz`` of the run file (:func:`load_timestamps`
+        reads it back).
+    """
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **_arrays(stamps))
+    return buf.getvalue()
+
+
 def save_timestamps(folder: str | Path, stamps: dict) -> Path:
-    """Write the recorder's timestamps of a run to ``<folder>/timestamps.npz``.
+    """Write the timestamps to ``<folder>/timestamps.npz`` (the layout of earlier runs).
 
     Parameters
     ----------
     folder : path
-        Run folder (exists).
+        Folder (exists).
     stamps : dict
-        Topic -> flat int64 sequence ``k, source_ns, received_ns`` per message
-        (array of 3 N values, or an (N, 3) array); wall-clock nanoseconds.
+        As :func:`timestamps_npz`.
 
     Returns
     -------
@@ -60,31 +85,44 @@ def save_timestamps(folder: str | Path, stamps: dict) -> Path:
     OSError
         If the file cannot be written.
     """
-    arrays = {_key(t): np.asarray(v, dtype=np.int64).reshape(-1, 3) for t, v in stamps.items()}
     path = Path(folder) / TIMESTAMPS_FILE
-    np.savez_compressed(path, **arrays)
+    path.write_bytes(timestamps_npz(stamps))
     return path
 
 
-def load_timestamps(folder: str | Path) -> dict[str, np.ndarray] | None:
+def load_timestamps(source: str | Path | bytes | None) -> dict[str, np.ndarray] | None:
     """Timestamps of a run: topic -> (N, 3) int64 [k, source_ns, received_ns].
 
-    Returns None when the run has no (readable) timestamps file.
+    Parameters
+    ----------
+    source : bytes, path or None
+        The attachment's bytes (:func:`timestamps_npz`), or a run folder of an earlier
+        version holding ``timestamps.npz``.
+
+    Returns None when there are no (readable) timestamps.
     """
-    path = Path(folder) / TIMESTAMPS_FILE
+    if source is None:
+        return None
     try:
-        with np.load(path) as z:
+        data = io.BytesIO(source) if isinstance(source, bytes) else Path(source) / TIMESTAMPS_FILE
+        with np.load(data) as z:
             return {t: z[_key(t)] for t in TOPICS if _key(t) in z.files}
-    except (OSError, ValueError, KeyError):
+    except (OSError, ValueError, KeyError, EOFError):
         return None
 
 
-def run_controller(folder: str | Path) -> str:
-    """Controller node of a run from its ``params.yaml`` (``tube_mpc`` if unknown)."""
-    try:
-        params = yaml.safe_load((Path(folder) / "params.yaml").read_text()) or {}
-    except (OSError, yaml.YAMLError):
-        params = {}
+def run_controller(params: dict | str | Path | None) -> str:
+    """Controller node of a run from its parameter file (``tube_mpc`` if unknown).
+
+    ``params``: the parsed parameter file (``{node: {"ros__parameters": ...}}``), or a
+    run folder of an earlier version holding ``params.yaml``.
+    """
+    if params is not None and not isinstance(params, dict):
+        try:
+            params = yaml.safe_load((Path(params) / "params.yaml").read_text())
+        except (OSError, yaml.YAMLError):
+            params = None
+    params = params if isinstance(params, dict) else {}
     return next((n for n in CONTROLLER_NODES if n in params), CONTROLLER_NODES[0])
 
 
@@ -151,12 +189,35 @@ def hop_latencies(stamps: dict[str, np.ndarray], controller: str = "tube_mpc") -
     }
 
 
-def run_latencies(folder: str | Path) -> dict | None:
-    """:func:`hop_latencies` of a run folder, or None if it has no timestamps."""
-    stamps = load_timestamps(folder)
+def run_latencies(run: bytes | str | Path | None, params=None) -> dict | None:
+    """:func:`hop_latencies` of a run, or None if it has no timestamps.
+
+    Parameters
+    ----------
+    run : bytes, path or None
+        The timestamps attachment itself, or a run (folder or .mcap: its attachment;
+        a run folder of an earlier version: its ``timestamps.npz``).
+    params : dict, optional
+        The run's parameter file (:func:`run_controller`); by default the run's.
+    """
+    if run is None or isinstance(run, bytes):
+        stamps = load_timestamps(run)
+    else:
+        from fahv.errors import RunError
+        from fahv.runs.bag import bag_paths, run_attachments, run_params
+
+        try:
+            data = run_attachments(run).get(TIMESTAMPS_FILE)
+            if params is None:
+                params = run_params(run)
+        except RunError:
+            data = None
+        stamps = load_timestamps(data if data is not None else bag_paths(run)[0])
+        if params is None:
+            params = bag_paths(run)[0]
     if not stamps:
         return None
-    return hop_latencies(stamps, run_controller(folder))
+    return hop_latencies(stamps, run_controller(params))
 
 
 def format_latencies(lat: dict) -> str:

@@ -98,7 +98,9 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     ``theta_err_own_trim_max_deg`` are against the dispersed vehicle's own trim at the
     same point (:func:`own_trim_attitude`; only for runs that carry their parameters).
     Tracking errors are against the case command. Flexible RMS values are over
-    t >= t_fault (the whole run without fault).
+    t >= t_fault (the whole run without fault); ``t_fault_s`` is the onset within the
+    run (NaN: no fault within the run, so the "after fault" values are over the whole
+    run).
     """
     t, x = run.t, run.x
     if t.size == 0:
@@ -112,7 +114,8 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     ts_V = _settling_time(t, eV, SETTLE_TOL["V"], t_cmd_end)
     t_settle = max(ts_h, ts_V) if not (math.isnan(ts_h) or math.isnan(ts_V)) else math.nan
     after = t >= (t_settle if not math.isnan(t_settle) else t[-1])
-    tf = t_fault if t_fault is not None and t_fault < t[-1] else t[0]
+    in_run = t_fault is not None and t_fault < t[-1]
+    tf = t_fault if in_run else t[0]
     post = t >= tf
     ea = np.degrees(x[:, ALPHA] - run.x_r[:, ALPHA])
     et = np.degrees(x[:, THETA] - run.x_r[:, THETA])
@@ -144,6 +147,7 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
         **own_m,
         "eta_1_dev_peak": float(np.abs(x[:, ETA1] - run.x_r[:, ETA1]).max()),
         "eta_2_dev_peak": float(np.abs(x[:, ETA2] - run.x_r[:, ETA2]).max()),
+        "t_fault_s": float(tf) if in_run else math.nan,
         "eta_1_dot_rms_after_fault": float(np.sqrt(np.mean(x[post, ETA1_DOT] ** 2))),
         "eta_2_dot_rms_after_fault": float(np.sqrt(np.mean(x[post, ETA2_DOT] ** 2))),
         "Phi_min": float(u[:, 0].min()),

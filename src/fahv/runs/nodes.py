@@ -21,7 +21,11 @@ RECORDER = (
     DURATION,
     _WATCHDOG,
     _METADATA,
-)
+    Field("params_file", "str", "the run's parameter file, attached to the run file "
+          "(empty: none)", default=""),
+    Field("live_port", "int", "port of the live view (Foxglove WebSocket server on 127.0.0.1; "
+          "0: any free port, -1: no live view)", lo=-1, hi=65535, default=-1),
+)  # fmt: skip
 
 #: Parameters of the ``replay`` node.
 REPLAY = (
@@ -33,7 +37,7 @@ REPLAY = (
     Field("capture", "strs", "topics to capture from the graph (lockstep on them)",
           choices=tuple(TOPICS), default=()),
     Field("out", "str", "run folder to write (replayed + captured); empty: none", default=""),
-    Field("wait_for", "strs", "nodes to wait for on /hsv/ready before step 0",
+    Field("wait_for", "strs", "nodes that must be ready (/hsv/node_status) before step 0",
           choices=tuple(NODES), default=()),
     Field("steps", "int", "steps to replay (0: all)", lo=0, default=0),
     _WATCHDOG,

@@ -1,17 +1,140 @@
-"""``fahv replay``: republish a recorded run over DDS, optionally into nodes under test."""
+"""``fahv replay``: republish a recorded run over DDS, optionally into nodes under test.
+
+With nodes under test, the ``replay`` node publishes the recorded inputs of those
+nodes and captures their outputs in lockstep; its output run holds the captured
+topics and, for every other loop topic, the recorded messages, so it is a complete
+run (metrics, ``fahv compare``). :func:`compare_outputs` then says whether every
+captured message equals the recorded one, byte for byte.
+"""
 
 from __future__ import annotations
 
 import json
+import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from fahv.errors import RunError
+from fahv.runs.bag import (
+    END_KEYS,
+    PARAMS,
+    decode,
+    iter_raw,
+    run_attachments,
+    run_params,
+    stored_metadata,
+)
 from fahv.runs.sil import _runner, reserve_run, run_runner
 from fahv.runs.workspace import WS, ensure_built, ros_env
+
+
+@dataclass
+class OutputCheck:
+    """Captured outputs of a replay against the recorded ones (:func:`compare_outputs`).
+
+    Attributes
+    ----------
+    topics : list of str
+        Topics compared.
+    compared : int
+        Recorded messages of those topics (the steps replayed).
+    equal : int
+        Captured messages whose CDR bytes equal the recorded ones.
+    first_difference : str
+        The first difference in step order ("" when none): topic, step, and the first
+        field that differs with both values, or the message that is missing.
+    """
+
+    topics: list
+    compared: int
+    equal: int
+    first_difference: str = ""
+
+    @property
+    def identical(self) -> bool:
+        """Every recorded output was captured with the same bytes."""
+        return self.compared > 0 and self.equal == self.compared
+
+    def summary(self) -> str:
+        """One line: ``outputs identical: ...`` or ``outputs differ: ...``."""
+        where = ", ".join(self.topics)
+        if self.identical:
+            return (
+                f"outputs identical: {self.equal} of {self.compared} messages on {where} "
+                "equal the recorded ones byte for byte"
+            )
+        return (
+            f"outputs differ: {self.compared - self.equal} of {self.compared} messages on "
+            f"{where} are not the recorded ones; first: {self.first_difference or '-'}"
+        )
+
+
+def _first_field(topic: str, a: bytes, b: bytes) -> str:
+    """The first field in which two messages of a loop topic differ, with both values."""
+    try:
+        da, db = decode(topic, a), decode(topic, b)
+    except Exception:  # noqa: BLE001 - undecodable: report the bytes only
+        return f"bytes differ ({len(a)} recorded, {len(b)} replayed)"
+
+    def same(x, y) -> bool:
+        if isinstance(x, dict):
+            return isinstance(y, dict) and all(same(x[k], y.get(k)) for k in x)
+        return bool(np.array_equal(np.asarray(x), np.asarray(y)))
+
+    for k, va in da.items():
+        vb = db.get(k)
+        if not same(va, vb):
+            return f"field '{k}': recorded {va!r}, replayed {vb!r}"
+    return "bytes differ (the decoded fields are equal)"
+
+
+def compare_outputs(recorded: str | Path, replayed: str | Path, topics, steps: int = 0):
+    """Compare the captured outputs of a replay with the recorded messages.
+
+    Parameters
+    ----------
+    recorded : path
+        The run that was replayed.
+    replayed : path
+        The replay's output run.
+    topics : sequence of str
+        Captured topics.
+    steps : int
+        Steps replayed (0: all of the recorded run).
+
+    Returns
+    -------
+    OutputCheck
+
+    Raises
+    ------
+    RunError
+        If a run cannot be read.
+    """
+    topics = list(topics)
+    rec: dict = {t: {} for t in topics}
+    rep: dict = {t: {} for t in topics}
+    for run, into in ((recorded, rec), (replayed, rep)):
+        for topic, _, log_ns, data in iter_raw(run, topics):
+            into[topic].setdefault(log_ns, data)
+    compared = equal = 0
+    first = (math.inf, "")
+    for t in topics:
+        times = sorted(rec[t])[: steps or None]
+        for i, log_ns in enumerate(times):
+            compared += 1
+            new = rep[t].get(log_ns)
+            if new == rec[t][log_ns]:
+                equal += 1
+                continue
+            if log_ns < first[0]:
+                what = "not captured" if new is None else _first_field(t, rec[t][log_ns], new)
+                first = (log_ns, f"{t} at step {i}: {what}")
+    return OutputCheck(topics, compared, equal, first[1])
 
 
 @dataclass
@@ -30,6 +153,9 @@ class ReplayRun:
         Folder with the parameter file and the node logs.
     interrupted : bool
         Stopped by SIGINT / SIGTERM (the output run, if any, is finalised).
+    outputs : OutputCheck or None
+        The captured outputs against the recorded ones (None without captured topics
+        or when the replay did not finish).
     """
 
     out: Path | None
@@ -37,6 +163,7 @@ class ReplayRun:
     wall_s: float
     log_dir: Path
     interrupted: bool = False
+    outputs: OutputCheck | None = field(default=None)
 
 
 def _ros_list(values) -> list[str]:
@@ -55,43 +182,54 @@ def run_replay(
     watchdog_s: float = 10.0,
     quiet: bool = False,
     log=print,
+    params: str | Path | None = None,
 ) -> ReplayRun:
     """Republish a recorded run (``replay`` node), optionally into nodes under test.
 
     Parameters
     ----------
     run : path
-        Run folder (or its .mcap file).
+        Run folder (or its .mcap file, alone or in a renamed folder).
     nodes : sequence of str
         Nodes to start against the replay (e.g. ``["tube_mpc"]``), with the
-        parameters the run was made with (``<run>/params.yaml``).
+        parameters the run was made with (the parameter file in the run file).
     topics : sequence of str, optional
         Topics to republish; default: the inputs of ``nodes`` they do not produce
         (:func:`fahv.loop.replay_topics`), or every loop topic without nodes.
     capture : sequence of str, optional
         Topics to capture (lockstep on them); default: the outputs of ``nodes``.
     out : path, optional
-        Run folder to write (replayed + captured messages); None: not recorded.
+        Run folder to write: the captured topics and the recorded messages of every
+        other loop topic. With captured topics and no ``out``, the run is written to
+        the replay's log folder (the comparison needs it).
     rate : float
         1: recorded timing, r: r times faster, 0: as fast as possible.
     steps : int
         Steps to replay (0: all); the nodes under test run that many steps.
     watchdog_s : float
         Wall-clock watchdog of every node [s].
+    quiet : bool
+        No progress lines.
+    log : callable
+        Receives the line naming the log folder.
+    params : path, optional
+        Parameter file of the nodes under test, for a run recorded without one (runs of
+        earlier versions started by hand); by default the one in the run file.
 
     Returns
     -------
     ReplayRun
-        ``returncode`` 0 when the replay (and every node) finished.
+        ``returncode`` 0 when the replay (and every node) finished; ``outputs`` compares
+        the captured messages with the recorded ones.
 
     Raises
     ------
     RunError
-        If the run is missing, a node is unknown, the run has no parameter file
-        for a node under test, or the workspace cannot be built.
+        If the run is missing, a node is unknown, no parameters are known for a node
+        under test, or the workspace cannot be built.
     """
     from fahv.loop.graph import replay_topics
-    from fahv.runs.bag import bag_paths, stored_metadata
+    from fahv.runs.bag import bag_paths
 
     folder, mcap = bag_paths(run)
     if not mcap.is_file():
@@ -102,19 +240,35 @@ def run_replay(
     topics, capture = list(topics), list(outputs if capture is None else capture)
     content = {}
     if nodes:
-        pfile = folder / "params.yaml"
-        try:
-            recorded = yaml.safe_load(pfile.read_text())
-        except (OSError, yaml.YAMLError) as exc:
-            raise RunError(f"cannot start {list(nodes)}: parameters of the run: {exc}") from None
+        if params is not None:
+            try:
+                recorded = yaml.safe_load(Path(params).read_text())
+            except (OSError, yaml.YAMLError) as exc:
+                raise RunError(f"parameter file {params}: {exc}") from None
+            source = str(params)
+        else:
+            recorded, source = run_params(mcap), f"{mcap} ({PARAMS})"
+            if recorded is None:
+                raise RunError(
+                    f"{mcap} holds no node parameters (a run of an earlier version started "
+                    "by hand): pass the parameter file it was started with, --params FILE"
+                )
+        if not isinstance(recorded, dict):
+            raise RunError(f"{source} is not a ROS 2 parameter file")
         for n in nodes:
             if n not in recorded:
-                raise RunError(f"{pfile} has no parameters for node '{n}'")
+                raise RunError(f"{source} has no parameters for node '{n}'")
             p = dict(recorded[n]["ros__parameters"])
             if steps:
                 p["duration"] = steps * float(p["Ts"])
             content[n] = {"ros__parameters": p}
-    meta = stored_metadata(folder)
+    meta = {k: v for k, v in stored_metadata(mcap).items() if k not in END_KEYS}
+    meta.pop("source", None)
+    ensure_built(log=log)
+    env = ros_env()
+    _, work = reserve_run(time.strftime("%Y%m%d-%H%M%S"), WS / "log" / "replay")
+    if out is None and capture:
+        out = work / f"{mcap.stem}_replay"
     content["replay"] = {
         "ros__parameters": {
             "run": str(mcap.resolve()),
@@ -125,9 +279,7 @@ def run_replay(
             "wait_for": _ros_list(nodes),
             "steps": int(steps),
             "watchdog_s": float(watchdog_s),
-            "metadata_json": json.dumps(
-                {k: meta[k] for k in ("case", "variant", "design_hash", "Ts") if k in meta}
-            ),
+            "metadata_json": json.dumps(meta),
         }
     }
     content["/**"] = {
@@ -136,14 +288,23 @@ def run_replay(
             "graph_nodes": ["replay", *nodes],
         }
     }
-    ensure_built(log=log)
-    env = ros_env()
-    _, work = reserve_run(time.strftime("%Y%m%d-%H%M%S"), WS / "log" / "replay")
     (work / "params.yaml").write_text(yaml.safe_dump(content, sort_keys=False, width=120))
     cmd = _runner(work, ["--nodes", "replay", *nodes], quiet)
-    log(f"replay of {folder.name} into {list(nodes) or 'the graph'}: logs in {work}")
+    log(f"replay of {mcap.name} into {list(nodes) or 'the graph'}: logs in {work}")
     t0 = time.monotonic()
     rc, interrupted = run_runner(cmd, env)
-    return ReplayRun(
+    res = ReplayRun(
         None if out is None else Path(out), rc, time.monotonic() - t0, work, interrupted
     )
+    if rc == 0 and capture and res.out is not None and res.out.exists():
+        res.outputs = compare_outputs(mcap, res.out, capture, steps)
+    return res
+
+
+def output_attachments(run: str | Path) -> dict[str, bytes]:
+    """Attachments of a replay's output run: the replayed run's parameter file.
+
+    So the output is a run every tool takes (inspect, compare, replay again); the
+    recorded DDS timestamps are not copied, they belong to the original graph.
+    """
+    return {k: v for k, v in run_attachments(run).items() if k == PARAMS}

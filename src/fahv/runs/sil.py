@@ -29,6 +29,7 @@ import yaml
 from fahv.errors import RunError
 from fahv.loop.graph import graph_nodes
 from fahv.loop.params import controller_node, node_parameters, parameter_file
+from fahv.plant.faults import FAULTS
 from fahv.runs.workspace import ROOT, WS, ensure_built, ros_env
 from fahv.version import code_version
 
@@ -62,24 +63,53 @@ def run_name(case: str, variant: str, source: str) -> str:
     return f"{case}_{variant}_{source}_{time.strftime('%Y%m%d-%H%M%S')}"
 
 
+def fault_metadata(fault_params: dict) -> dict:
+    """``fault_<key>`` metadata of the fault a run's ``fault_injector`` applies.
+
+    Parameters
+    ----------
+    fault_params : dict
+        The node's parameters (after every override): ``kind``, ``t_onset`` and the
+        parameters of its kind (:data:`fahv.plant.faults.FAULTS`).
+    """
+    kind = fault_params["kind"]
+    keys = ("kind", "t_onset", *(f.name for f in FAULTS[kind].parameters))
+    return {f"fault_{k}": fault_params[k] for k in keys if k in fault_params}
+
+
 def run_metadata(
-    design, variant: str, source: str, duration: float, overrides: dict | None = None
+    design, variant: str, source: str, duration: float, nodes: dict | None = None
 ) -> dict:
     """Metadata recorded with every run: case, variant, design hash and provenance, fault.
 
     The provenance (case hash, vehicle file and hash, design code hash) lets
     ``fahv inspect`` say exactly what a run was made from, and the metrics use the
-    recorded vehicle's limits. ``plant_params.<p>`` are the run's perturbed parameters
-    (the design's draw, or the ``plant`` node's ``params.<p>`` of ``overrides``), from
-    which the metrics compute the attitude from the vehicle's own trim.
+    recorded vehicle's limits.
+
+    Parameters
+    ----------
+    design : fahv.design.Design
+    variant, source : str
+    duration : float
+        Simulated time [s].
+    nodes : dict, optional
+        The run's node parameters ``{node: {name: value}}`` after every override: the
+        fault is the one its ``fault_injector`` applies (a campaign run's own), not
+        the case file's; ``plant_params.<p>`` are its ``plant`` node's perturbed
+        parameters (the design's draw without ``nodes``), from which the metrics
+        compute the attitude from the vehicle's own trim.
     """
     params = dict(design.summary.get("plant_params", {}))
-    for k, v in ((overrides or {}).get("plant") or {}).items():
+    for k, v in ((nodes or {}).get("plant") or {}).items():
         if k.startswith("params."):
             params[k.split(".", 1)[1]] = float(v)
     c = design.case
-    f = c["fault"]
     prov = design.summary.get("provenance", {})
+    fault = (
+        fault_metadata(nodes["fault_injector"])
+        if nodes is not None and "fault_injector" in nodes
+        else {f"fault_{k}": v for k, v in c["fault"].items()}
+    )
     return {
         "case": c["name"],
         "variant": variant,
@@ -90,10 +120,10 @@ def run_metadata(
         "duration": duration,
         **{
             k: prov[k]
-            for k in ("case_hash", "vehicle_file", "vehicle_hash", "code_hash")
+            for k in ("case_file", "case_hash", "vehicle_file", "vehicle_hash", "code_hash")
             if k in prov
         },
-        **{f"fault_{k}": v for k, v in f.items()},
+        **fault,
         **{f"plant_params.{k}": float(v) for k, v in params.items()},
     }
 
@@ -125,6 +155,94 @@ def reserve_run(name: str, work_root: Path, out_dir=None) -> tuple[str, Path]:
     raise RunError(f"no free run name {name}-N in {work_root}")
 
 
+def run_parameter_file(
+    design,
+    variant: str,
+    bag: Path,
+    duration: float | None,
+    watchdog_s: float,
+    overrides: dict | None = None,
+    source: str = "sil",
+    metadata: dict | None = None,
+    params_file: Path | None = None,
+    live_port: int | None = None,
+) -> dict:
+    """The ROS 2 parameter file of one run (every node, the recorder's section, ``/**``).
+
+    Parameters
+    ----------
+    design : fahv.design.Design
+    variant : str
+    bag : Path
+        Run folder the recorder creates.
+    duration : float or None
+        Simulated time [s] (the case's by default).
+    watchdog_s : float
+        Wall-clock watchdog of every node [s].
+    overrides : dict, optional
+        ``{node: {name: value}}`` applied to the nodes before the run metadata is made
+        (a campaign run's dispersed values; tests inject faults or bad values).
+    source : str
+        ``source`` of the run metadata.
+    metadata : dict, optional
+        Further run metadata (a campaign run: campaign, index, dispersed values).
+    params_file : Path, optional
+        Where this content is written: the recorder attaches that file to the run.
+    live_port : int, optional
+        The recorder serves the live view on this port (0: any free port; None: no
+        live view, :mod:`fahv.runs.live`).
+
+    Every node gets ``graph_nodes`` and ``run_id`` (the run folder's name: it tells
+    this graph's nodes from another graph's in the same ROS domain).
+
+    Returns
+    -------
+    dict
+        ``{node: {"ros__parameters": {...}}}``; the recorder's ``metadata_json`` holds
+        the run metadata, with the fault of the (overridden) ``fault_injector``.
+
+    Raises
+    ------
+    RunError
+        On an override for a node that is not in the run.
+    """
+    nodes = node_parameters(design, variant, watchdog_s=watchdog_s)
+    if duration is not None:
+        for p in nodes.values():
+            p["duration"] = float(duration)
+    later = {}
+    for node, values in (overrides or {}).items():
+        if node in nodes:
+            nodes[node].update(values)
+        elif node in ("recorder", "/**"):
+            later[node] = values
+        else:
+            raise RunError(f"override for node '{node}', which is not in the run: {sorted(nodes)}")
+    controller = controller_node(nodes)
+    plant = nodes["plant"]
+    meta = {**run_metadata(design, variant, source, plant["duration"], nodes), **(metadata or {})}
+    nodes["recorder"] = {
+        "bag": str(bag),
+        "Ts": plant["Ts"],
+        "duration": plant["duration"],
+        "watchdog_s": float(watchdog_s),
+        "metadata_json": json.dumps(meta),
+        "params_file": "" if params_file is None else str(Path(params_file).resolve()),
+        "live_port": -1 if live_port is None else int(live_port),
+    }
+    content = parameter_file(nodes)
+    content["/**"] = {
+        "ros__parameters": {
+            "use_sim_time": USE_SIM_TIME,
+            "graph_nodes": graph_nodes(controller),
+            "run_id": Path(bag).name,
+        }
+    }
+    for node, values in later.items():
+        content[node]["ros__parameters"].update(values)
+    return content
+
+
 def write_run_params(
     design,
     variant: str,
@@ -133,36 +251,16 @@ def write_run_params(
     duration: float | None,
     watchdog_s: float,
     overrides: dict | None = None,
+    metadata: dict | None = None,
 ) -> dict:
-    """Write the parameter file of one SIL run and return its content.
+    """Write the parameter file of one SIL run to ``path`` and return its content.
 
-    ``overrides``: {node: {name: value}} applied last (tests use it to inject faults
-    or bad values).
+    :func:`run_parameter_file` with ``params_file = path``: the recorder attaches the
+    file to the run, so the run file holds every node's parameters.
     """
-    nodes = node_parameters(design, variant, watchdog_s=watchdog_s)
-    if duration is not None:
-        for p in nodes.values():
-            p["duration"] = float(duration)
-    controller = controller_node(nodes)
-    plant = nodes["plant"]
-    nodes["recorder"] = {
-        "bag": str(bag),
-        "Ts": plant["Ts"],
-        "duration": plant["duration"],
-        "watchdog_s": float(watchdog_s),
-        "metadata_json": json.dumps(
-            run_metadata(design, variant, "sil", plant["duration"], overrides)
-        ),
-    }
-    content = parameter_file(nodes)
-    content["/**"] = {
-        "ros__parameters": {
-            "use_sim_time": USE_SIM_TIME,
-            "graph_nodes": graph_nodes(controller),
-        }
-    }
-    for node, values in (overrides or {}).items():
-        content[node]["ros__parameters"].update(values)
+    content = run_parameter_file(
+        design, variant, bag, duration, watchdog_s, overrides, "sil", metadata, path
+    )
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(yaml.safe_dump(content, sort_keys=False, width=120))
     return content
@@ -210,6 +308,11 @@ def run_runner(cmd: list[str], env: dict) -> tuple[int, bool]:
     return rc, rc == EXIT_INTERRUPTED
 
 
+def recorder_metadata(content: dict) -> dict:
+    """The run metadata in a run's parameter file (the recorder's ``metadata_json``)."""
+    return json.loads(content["recorder"]["ros__parameters"]["metadata_json"])
+
+
 def run_sil(
     design,
     variant: str | None = None,
@@ -220,6 +323,9 @@ def run_sil(
     quiet: bool = False,
     log=print,
     domain_id: int | None = None,
+    name: str | None = None,
+    metadata: dict | None = None,
+    live_port: int | None = None,
 ) -> SilRun:
     """Run one variant of a designed case through the node graph, recorded to MCAP.
 
@@ -243,6 +349,13 @@ def run_sil(
     domain_id : int, optional
         ROS_DOMAIN_ID of the graph; by default the runner takes a free one from
         ``domain_coordinator`` (an exported ``ROS_DOMAIN_ID`` is not used).
+    name : str, optional
+        Run name without the time stamp (default ``<case>_<variant>_sil``); the
+        folder is ``<name>_<time>``.
+    metadata : dict, optional
+        Further run metadata (:func:`run_parameter_file`).
+    live_port : int, optional
+        Serve the live view on this port (0: any free one); None: no live view.
 
     Returns
     -------
@@ -253,29 +366,67 @@ def run_sil(
     Raises
     ------
     RunError
-        If the workspace cannot be built or sourced.
+        If the workspace cannot be built or sourced, or an override names a node that
+        is not in the run.
     """
     variant = design.case["variants"][0] if variant is None else variant
+    content = run_parameter_file(
+        design, variant, Path("."), duration, watchdog_s, overrides, "sil", metadata,
+        live_port=live_port,
+    )
+    base = name or f"{design.case['name']}_{variant}_sil"
+    stem = f"{base}_{time.strftime('%Y%m%d-%H%M%S')}"
+    return run_graph(content, stem, out_dir, quiet, log, domain_id)
+
+
+def run_graph(
+    content: dict,
+    name: str,
+    out_dir: Path | str = ROOT / "bags",
+    quiet: bool = False,
+    log=print,
+    domain_id: int | None = None,
+) -> SilRun:
+    """Run a parameter file's graph (every node in it, the recorder included).
+
+    Parameters
+    ----------
+    content : dict
+        The run's parameter file (:func:`run_parameter_file`, or the one stored in a
+        run file); the recorder's ``bag`` and ``params_file`` are set here.
+    name : str
+        Run name (``-2`` ... appended if it is taken).
+    out_dir, quiet, log, domain_id
+        As :func:`run_sil`.
+
+    Returns
+    -------
+    SilRun
+
+    Raises
+    ------
+    RunError
+        If the workspace cannot be built or sourced.
+    """
     ensure_built(log=log)
     env = ros_env()
-    name, work = reserve_run(
-        run_name(design.case["name"], variant, "sil"), WS / "log" / "sil", out_dir
-    )
+    name, work = reserve_run(name, WS / "log" / "sil", out_dir)
     bag = Path(out_dir).resolve() / name
-    params = write_run_params(
-        design, variant, bag, work / "params.yaml", duration, watchdog_s, overrides
-    )
-    sim_s = params["plant"]["ros__parameters"]["duration"]
-    controller = controller_node(params)
+    path = work / "params.yaml"
+    rec = content["recorder"]["ros__parameters"]
+    rec.update(bag=str(bag), params_file=str(path.resolve()))
+    content.setdefault("/**", {"ros__parameters": {}})["ros__parameters"]["run_id"] = name
+    path.write_text(yaml.safe_dump(content, sort_keys=False, width=120))
+    sim_s = content["plant"]["ros__parameters"]["duration"]
+    controller = controller_node(content)
     cmd = _runner(work, ["--controller", controller], quiet, domain_id)
     log(f"SIL run {name}: logs in {work}")
     t0 = time.monotonic()
     rc, interrupted = run_runner(cmd, env)
     wall = time.monotonic() - t0
-    if bag.is_dir():  # keep the parameters and node logs with the run
-        for src in [work / "params.yaml", *sorted((work / "logs").glob("*.log"))]:
-            if src.is_file():
-                dst = bag / ("params.yaml" if src.name == "params.yaml" else f"logs/{src.name}")
-                dst.parent.mkdir(exist_ok=True)
-                dst.write_bytes(src.read_bytes())
+    if bag.is_dir():  # keep the node logs with the run (the parameters are in its file)
+        for src in sorted((work / "logs").glob("*.log")):
+            dst = bag / "logs" / src.name
+            dst.parent.mkdir(exist_ok=True)
+            dst.write_bytes(src.read_bytes())
     return SilRun(bag, rc, wall, sim_s, interrupted)

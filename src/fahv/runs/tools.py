@@ -24,7 +24,7 @@ from fahv.loop.graph import TOPICS
 from fahv.model.vehicle import load_vehicle
 from fahv.msg import MSG_DIR
 from fahv.runs.bag import Recording, run_result_of, step_anomalies
-from fahv.runs.latency import format_latencies, run_latencies
+from fahv.runs.latency import TIMESTAMPS_FILE, format_latencies, run_latencies
 from fahv.runs.metrics import metrics
 
 #: Rows of the metrics table: (key of :func:`fahv.runs.metrics.metrics`, label, format).
@@ -50,6 +50,7 @@ METRIC_ROWS = (
     ),
     ("eta_1_dev_peak", "peak |eta_1 - eta_1,r|", "{:.4f}"),
     ("eta_2_dev_peak", "peak |eta_2 - eta_2,r|", "{:.4f}"),
+    ("t_fault_s", "fault onset [s]", "{:.2f}"),
     ("eta_1_dot_rms_after_fault", "RMS eta_1_dot after fault [1/s]", "{:.5f}"),
     ("eta_2_dot_rms_after_fault", "RMS eta_2_dot after fault [1/s]", "{:.5f}"),
     ("Phi_min", "Phi min", "{:.4f}"),
@@ -97,6 +98,16 @@ _FIELD = re.compile(r"^\s*([\w/]+(?:\[\])?)\s+(\w+)\s*(?:#\s*(.*))?$")
 _UNIT = re.compile(r"\[([^\]]+)\]\s*(?:\(.*\))?\s*$")
 
 
+#: Rows whose values are over the whole run when the run holds no fault.
+AFTER_FAULT = ("eta_1_dot_rms_after_fault", "eta_2_dot_rms_after_fault")
+
+
+def _no_fault(m: dict) -> bool:
+    """The run's metrics say it holds no fault (``t_fault_s`` NaN; unknown: False)."""
+    v = m.get("t_fault_s")
+    return isinstance(v, float) and math.isnan(v)
+
+
 def format_metrics(table: dict[str, dict]) -> str:
     """Metrics of several runs as a text table, one column per run.
 
@@ -105,18 +116,38 @@ def format_metrics(table: dict[str, dict]) -> str:
     table : dict[str, dict]
         Column name -> metrics dict (:func:`fahv.runs.metrics.metrics`); a missing key or
         None prints as ``-``.
+
+    Notes
+    -----
+    The "after fault" rows of a run without a fault within it are over the whole run:
+    their label says so when no column has a fault, a ``*`` marks such a cell
+    otherwise. A fault onset NaN prints as ``none in the run``.
     """
     names = list(table)
-    width = max(12, *(len(n) for n in names))
-    lines = [f"{'metric':<36} " + " ".join(f"{n:>{width}}" for n in names)]
+    none = [n for n in names if _no_fault(table[n])]
+    rows = []
     for key, label, fmt in METRIC_ROWS:
         if all(table[n].get(key) is None for n in names):
             continue
+        if key in AFTER_FAULT and len(none) == len(names):
+            label = label.replace("after fault", "over the run (no fault in it)")
         cells = []
         for n in names:
             v = table[n].get(key)
-            cells.append(f"{'-' if v is None else fmt.format(v):>{width}}")
-        lines.append(f"{label:<36} " + " ".join(cells))
+            if key == "t_fault_s" and isinstance(v, float) and math.isnan(v):
+                cells.append("none in the run")
+            elif v is None:
+                cells.append("-")
+            else:
+                star = "*" if key in AFTER_FAULT and n in none and len(none) < len(names) else ""
+                cells.append(fmt.format(v) + star)
+        rows.append((label, cells))
+    lw = max([len("metric")] + [len(label) for label, _ in rows])
+    width = max(12, *(len(n) for n in names), *(len(c) for _, cs in rows for c in cs))
+    lines = [f"{'metric':<{lw}} " + " ".join(f"{n:>{width}}" for n in names)]
+    lines += [f"{label:<{lw}} " + " ".join(f"{c:>{width}}" for c in cells) for label, cells in rows]
+    if 0 < len(none) < len(names):
+        lines.append("* no fault within this run: over the whole run")
     return "\n".join(lines)
 
 
@@ -341,7 +372,7 @@ def summarize(rec: Recording, limits) -> dict:
         "step_anomalies": {t: v for t, v in step_anomalies(rec).items() if rec.topics.get(t)},
         "metrics": m,
         "metrics_note": note,
-        "latency": run_latencies(rec.path.parent),
+        "latency": run_latencies(rec.attachment(TIMESTAMPS_FILE), rec.params()),
     }
 
 
@@ -434,6 +465,8 @@ def compare(a: dict, b: dict, names: tuple[str, str]) -> dict:
         va, vb = ma.get(k), mb.get(k)
         numeric = all(isinstance(v, int | float) and not isinstance(v, bool) for v in (va, vb))
         diff[k] = vb - va if numeric else None
+        if k == "t_fault_s" and diff[k] is not None and math.isnan(diff[k]):
+            diff[k] = None  # a run without fault: no difference of onsets
     keys = sorted(
         k
         for k in a["metadata"].keys() | b["metadata"].keys()

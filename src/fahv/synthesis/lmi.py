@@ -20,15 +20,26 @@ def min_eig(M: np.ndarray) -> float:
     return float(np.linalg.eigvalsh(0.5 * (M + M.T)).min())
 
 
+def psd_tolerance(M: np.ndarray, rtol: float = 1e-9) -> float:
+    """Tolerance of :func:`require_psd`: rtol max(1, max |M_ij|) (>= 0)."""
+    return float(rtol * max(1.0, float(np.abs(M).max())))
+
+
 def require_psd(M: np.ndarray, what: str, rtol: float = 1e-9) -> float:
     """Check M >= -rtol ||M|| I; return the smallest eigenvalue.
+
+    ``||M||`` is max(1, max |M_ij|) (:func:`psd_tolerance`): an eigenvalue that is
+    negative by less than that tolerance is rounding of the solver and accepted.
 
     Raises
     ------
     DesignError
-        Naming ``what`` and the eigenvalue found, if the check fails.
+        Naming ``what``, the eigenvalue found and the tolerance, if the check fails.
     """
     e = min_eig(M)
-    if not np.isfinite(e) or e < -rtol * max(1.0, float(np.abs(M).max())):
-        raise DesignError(f"certificate failed: {what} has eigenvalue {e:.3e} < 0")
+    tol = psd_tolerance(M, rtol)
+    if not np.isfinite(e) or e < -tol:
+        raise DesignError(
+            f"certificate failed: {what} has eigenvalue {e:.3e} < -{tol:.2e} (tolerance)"
+        )
     return e

@@ -28,7 +28,7 @@ import cvxpy as cp
 import numpy as np
 
 from fahv.errors import DesignError
-from fahv.synthesis.lmi import SDP_SOLVER, require_psd, scale_vertices
+from fahv.synthesis.lmi import SDP_SOLVER, psd_tolerance, require_psd, scale_vertices
 
 #: Default decay factor of (34): per-step Lyapunov decrease V+ <= lam V.
 DEFAULT_LAM = 0.9995
@@ -132,7 +132,9 @@ def verify_nominal(A, B, nd: NominalDesign, Dx, Du) -> dict[str, float]:
     dict
         ``containment`` = x0' Q^-1 x0 (<= 1); ``contraction`` (< 1, see
         :func:`contraction`); ``lmi34_min_eig``: smallest eigenvalue of the blocks
-        (34') over the vertices with Y = K Q (>= -1e-9 relative); ``input_ratio`` =
+        (34') over the vertices with Y = K Q, and ``lmi34_tol`` the tolerance it was
+        checked against (>= -lmi34_tol, :func:`fahv.synthesis.lmi.psd_tolerance` of
+        that vertex's block: 1e-9 relative); ``input_ratio`` =
         max_j sqrt(K_j Q K_j') / u_max,j (<= 1); ``spectral_radius`` = max_i
         rho(A_i + B_i K) (< 1).
 
@@ -154,10 +156,9 @@ def verify_nominal(A, B, nd: NominalDesign, Dx, Du) -> dict[str, float]:
         raise DesignError(
             f"certificate failed: nominal ellipsoid not invariant (34'), contraction {c:.9f}"
         )
-    eigs = [
-        require_psd(_block34(As[i], Bs[i], Qs, Ys, nd.lam), f"LMI (34') at vertex {i}")
-        for i in range(As.shape[0])
-    ]
+    blocks = [_block34(As[i], Bs[i], Qs, Ys, nd.lam) for i in range(As.shape[0])]
+    eigs = [require_psd(M, f"LMI (34') at vertex {i}") for i, M in enumerate(blocks)]
+    worst = int(np.argmin(eigs))
     rho = max(max(abs(np.linalg.eigvals(As[i] + Bs[i] @ Ks))) for i in range(As.shape[0]))
     if not rho < 1.0:
         raise DesignError(f"certificate failed: nominal closed loop not stable, rho = {rho:.6g}")
@@ -170,6 +171,7 @@ def verify_nominal(A, B, nd: NominalDesign, Dx, Du) -> dict[str, float]:
         "containment": cont,
         "contraction": c,
         "lmi34_min_eig": float(min(eigs)),
+        "lmi34_tol": psd_tolerance(blocks[worst]),
         "input_ratio": ratio,
         "spectral_radius": float(rho),
     }

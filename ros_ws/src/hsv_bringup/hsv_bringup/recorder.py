@@ -6,14 +6,23 @@ simulated time t_k = k Ts, and writes through :class:`fahv.runs.bag.RunWriter` (
 profile, full message definitions, offered QoS, summary with statistics and indexes,
 run metadata, the ROS domain of the graph as ``ros_domain_id``). With every message it
 keeps the DDS source timestamp (wall clock when the producing node published it) and
-its own receive time, written at the end to ``timestamps.npz`` in the run folder
-(:func:`fahv.runs.latency.save_timestamps`): the per-hop latency breakdown of
-``fahv inspect`` comes from them. It stops by itself once every topic holds
-``duration / Ts`` steps; on SIGINT/SIGTERM, a lost graph (watchdog) or an error it
-still closes the file, with the reason in the run metadata (``status``).
+its own receive time, attached to the run file when it closes (``timestamps.npz``,
+:func:`fahv.runs.latency.timestamps_npz`): the per-hop latency breakdown of
+``fahv inspect`` comes from them. The parameter file the graph was started with
+(``params_file``) is attached when the run starts, so the run file alone can be
+replayed and rerun. It stops by itself once every topic holds ``duration / Ts``
+steps; on SIGINT/SIGTERM, a lost graph (watchdog) or an error it still closes the
+file, with the reason in the run metadata (``status``).
+
+With ``live_port`` >= 0 it also serves every message it records, the same CDR bytes,
+on a Foxglove WebSocket server (:class:`fahv.runs.live.LiveView`): the live view costs
+the loop no extra DDS reader. Messages of a step already recorded on a topic (another
+graph's, later in the same domain) are counted as anomalies and not recorded.
 
 Parameters: ``bag`` (folder to create), ``Ts``, ``duration``, ``watchdog_s``,
-``metadata_json`` (JSON object of run metadata: case, design_hash, variant, ...).
+``metadata_json`` (JSON object of run metadata: case, design_hash, variant, ...),
+``params_file`` (the run's parameter file, attached to the run); ``live_port``;
+``graph_nodes`` and ``run_id`` like every node of the graph.
 """
 
 from __future__ import annotations
@@ -22,24 +31,19 @@ import struct
 import sys
 import time
 from array import array
+from pathlib import Path
 
-from hsv_common.lockstep import (
-    LOOP_QOS,
-    READY_QOS,
-    WatchdogError,
-    declare_validated,
-    end_reason,
-    main,
-    msg_type_of,
-    run_metadata_param,
-)
+from hsv_common.codec import msg_type_of
+from hsv_common.graph_status import GraphStatus
+from hsv_common.parameters import declare_graph, declare_validated, run_metadata_param
+from hsv_common.runtime import LOOP_QOS, WatchdogError, end_reason, main
 from rclpy.node import Node
-from std_msgs.msg import String
 
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
 from fahv.runs.bag import RunWriter
-from fahv.runs.latency import save_timestamps
+from fahv.runs.latency import TIMESTAMPS_FILE, timestamps_npz
+from fahv.runs.live import LiveView, live_hint
 from fahv.runs.nodes import RECORDER
 
 
@@ -64,6 +68,7 @@ class Recorder(Node):
 
     def __init__(self) -> None:
         super().__init__("recorder")
+        graph_nodes, run_id = declare_graph(self)
         get = declare_validated(self, RECORDER)
         meta = run_metadata_param("recorder", get["metadata_json"])
         meta.setdefault("source", "sil")
@@ -71,16 +76,25 @@ class Recorder(Node):
         self.Ts_ns = int(round(get["Ts"] * 1e9))
         self.n_steps = int(round(get["duration"] / get["Ts"]))
         self.watchdog_s = get["watchdog_s"]
+        self.status = GraphStatus(self, graph_nodes, run_id, self.watchdog_s)
+        self.live = None
+        if get["live_port"] >= 0:  # served from here: no extra DDS reader on the loop
+            try:
+                name = f"fahv {Path(get['bag']).name}"
+                self.live = LiveView(get["live_port"], get["Ts"], name=name)
+            except RunError as exc:
+                raise ParameterError(f"recorder: parameter 'live_port': {exc}") from None
+            print(f"live view on {self.live.url} ({live_hint()})", flush=True)
         try:
-            self.writer = RunWriter(get["bag"], meta, get["Ts"])
+            self.writer = RunWriter(get["bag"], meta, get["Ts"], params=get["params_file"] or None)
         except RunError as exc:
-            raise ParameterError(f"recorder: parameter 'bag': {exc}") from None
+            raise ParameterError(f"recorder: parameter 'bag' or 'params_file': {exc}") from None
         self.next_k = dict.fromkeys(TOPICS, 0)
         self.anomalies = dict.fromkeys(TOPICS, 0)
         # per topic: k, DDS source timestamp [ns], receive time [ns] of every message
         self.stamps = {t: array("q") for t in TOPICS}
-        self.subs = [
-            self.create_subscription(
+        self.subs = {
+            t: self.create_subscription(
                 msg_type_of(t),
                 t,
                 lambda data, info, t=t: self._record(t, data, info),
@@ -88,63 +102,105 @@ class Recorder(Node):
                 raw=True,
             )
             for t in TOPICS
-        ]
-        self.ready_pub = self.create_publisher(String, "/hsv/ready", READY_QOS)
-        self.ready = False
+        }
+        self.status.attach(self.subs, {})
+        self.status.waiting = []
         self.done = False
         self.k = 0
+        self.dropped = 0
         self.last_msg = time.monotonic()
         self.started = False
         self.t0 = time.monotonic()
 
     def _record(self, topic: str, data: bytes, info: dict) -> None:
         k = step_of(topic, data, self.Ts_ns)
+        if k < self.next_k[topic]:  # a step already recorded: another sender (a later graph)
+            self.anomalies[topic] += 1
+            self.dropped += 1
+            if self.dropped == 1 or self.dropped % 1000 == 0:
+                self.get_logger().warning(
+                    f"{topic}: step {k} received after step {self.next_k[topic] - 1}: not "
+                    f"recorded ({self.dropped} so far)"
+                )
+            return
         self.stamps[topic].extend((k, info["source_timestamp"], info["received_timestamp"]))
         if k != self.next_k[topic]:
             self.anomalies[topic] += 1
             self.get_logger().warning(
                 f"{topic}: step {k} received, step {self.next_k[topic]} expected"
             )
-        self.next_k[topic] = max(self.next_k[topic], k + 1)
+        self.next_k[topic] = k + 1
         self.writer.write_raw(topic, k, data)
+        if self.live is not None:
+            self.live.log(topic, k, data)
         self.last_msg = time.monotonic()
-        self.started = True
+        if not self.started:
+            self.started = True
+            self.status.set_state("running")
         done = min(self.writer.counts.values())
         if done > self.k:
-            self.k = done
+            self.k = self.status.k = done
             if self.k % 500 == 0:
                 print(f"progress {self.k} {self.n_steps}", flush=True)
         if self.n_steps and done >= self.n_steps:
             self.done = True
 
     def poll(self) -> None:
-        """Readiness and the watchdog of a silent graph."""
-        if not self.ready:
-            if all(s.get_publisher_count() >= 1 for s in self.subs):
-                self.ready = True
-                self.ready_pub.publish(String(data="recorder"))
+        """Readiness, failed or missing peers, foreign graphs, the watchdog.
+
+        Raises
+        ------
+        WatchdogError
+            If the graph does not start, a peer failed, or no message came for
+            ``watchdog_s`` (naming the missing peers).
+        ForeignGraphError
+            If another graph that joined first runs in the domain.
+        """
+        if not self.status.ready:
+            if self.status.poll_ready():
+                self.t_ready = time.monotonic()
                 self.get_logger().info(f"recording {len(self.subs)} topics to {self.writer.path}")
             return
-        idle = time.monotonic() - (self.last_msg if self.started else self.t0)
-        limit = self.watchdog_s if self.started else max(60.0, self.watchdog_s)
-        if idle > limit:
+        self.status.check_failed_peer()
+        self.status.check_foreign(force=False)
+        if not self.started:  # the graph's step 0 is still to come
+            stalled = self.status.stalled(self.t_ready)
+            if stalled is not None:
+                raise WatchdogError(
+                    f"recorder: no message of step 0: {stalled or 'every peer ready'}"
+                )
+            return
+        idle = time.monotonic() - self.last_msg
+        if idle > self.watchdog_s:
             behind = min(self.writer.counts, key=self.writer.counts.get)
+            missing = self.status.missing_text()
+            if missing:  # the missing peer first, as every node says it
+                raise WatchdogError(
+                    f"recorder: missing {missing}; no message for {self.watchdog_s:g} s at "
+                    f"step {self.k}"
+                )
             raise WatchdogError(
-                f"recorder: no message for {limit:g} s at step {self.k} ({behind} is behind)"
+                f"recorder: no message for {self.watchdog_s:g} s at step {self.k} ({behind} "
+                "is behind; every peer alive)"
             )
 
-    def close(self, status: int) -> None:
-        """Finish the file with the run status and the anomaly counts."""
+    def close(self, status: int, reason: str = "") -> None:
+        """Finish the file with the run status, the reason and the anomaly counts."""
+        if status != 0 and not self.done:  # a peer's own reason is the better one
+            failed = self.status.peers.failed()
+            if failed and not reason.startswith("recorder: peer"):
+                reason = f"{reason}; {failed[0]}" if reason else failed[0]
+        self.status.close(status, reason)
         for t, n in self.anomalies.items():
             self.writer.set_metadata(f"anomalies{t.replace('/', '.')}", n)
         self.writer.set_metadata("wall_time_s", f"{time.monotonic() - self.t0:.3f}")
-        reason = end_reason(self.done, status)
-        self.writer.close(reason)
-        try:
-            save_timestamps(self.writer.path, self.stamps)
-        except OSError as exc:  # the run itself is complete; only the timing is lost
-            print(f"recorder: timestamps not written: {exc}", file=sys.stderr)
-        print(f"closed {self.writer.path} ({reason}, {self.k} steps)", flush=True)
+        if reason:
+            self.writer.set_metadata("reason", reason)
+        status_text = end_reason(self.done, status)
+        self.writer.close(status_text, {TIMESTAMPS_FILE: timestamps_npz(self.stamps)})
+        if self.live is not None:
+            self.live.close()
+        print(f"closed {self.writer.path} ({status_text}, {self.k} steps)", flush=True)
 
 
 def run(args=None) -> None:

@@ -8,12 +8,13 @@ time in wall time, r > 0 is r times faster, 0 is as fast as possible.
 Regression use: with ``capture`` topics (the outputs of the node(s) under test),
 the replay runs in lockstep: step k + 1 is published only after every captured topic
 that has a publisher delivered step k, so nothing is dropped however slow the node
-is. With ``out`` the replayed and the captured messages are written to a new run
-(same format as the recorder's), to compare with the original.
+is. With ``out`` the captured messages and the recorded ones of every other loop
+topic are written to a new run (same format as the recorder's, with the replayed
+run's parameter file), a complete run to compare with the original.
 
 Parameters: ``run`` (file to replay), ``topics`` (default every loop topic of the
-run), ``rate``, ``capture``, ``out``, ``wait_for`` (nodes that must announce
-themselves on /hsv/ready before step 0), ``steps`` (0: all), ``watchdog_s``.
+run), ``rate``, ``capture``, ``out``, ``wait_for`` (nodes that must say they are
+ready on /hsv/node_status before step 0), ``steps`` (0: all), ``watchdog_s``.
 """
 
 from __future__ import annotations
@@ -23,23 +24,17 @@ import time
 import warnings
 from pathlib import Path
 
-from hsv_common.lockstep import (
-    LOOP_QOS,
-    READY_QOS,
-    WatchdogError,
-    declare_validated,
-    end_reason,
-    main,
-    msg_type_of,
-    run_metadata_param,
-)
+from hsv_common.codec import msg_type_of
+from hsv_common.graph_status import GraphStatus
+from hsv_common.parameters import declare_graph, declare_validated, run_metadata_param
+from hsv_common.runtime import LOOP_QOS, WatchdogError, end_reason, main
 from rclpy.node import Node
-from std_msgs.msg import String
 
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
 from fahv.runs.bag import RunWriter, iter_raw
 from fahv.runs.nodes import REPLAY
+from fahv.runs.replay import output_attachments
 from hsv_bringup.recorder import step_of
 
 
@@ -57,7 +52,9 @@ def load_steps(run: str, topics: list[str] | None, steps: int) -> tuple[list, fl
 
     Returns
     -------
-    ([(log_ns, [(topic, data), ...]), ...], Ts [s], topics loaded)
+    ([(log_ns, [(topic, data), ...]), ...], Ts [s], topics selected)
+        The steps hold every loop topic of the run (the output run copies the ones
+        that are neither published nor captured).
 
     Raises
     ------
@@ -69,7 +66,7 @@ def load_steps(run: str, topics: list[str] | None, steps: int) -> tuple[list, fl
             warnings.simplefilter("always")
             groups: dict[int, list] = {}
             seen = set()
-            for topic, _, log_ns, data in iter_raw(run, topics or list(TOPICS)):
+            for topic, _, log_ns, data in iter_raw(run, list(TOPICS)):
                 groups.setdefault(log_ns, []).append((topic, data))
                 seen.add(topic)
         for w in caught:
@@ -96,6 +93,7 @@ class Replay(Node):
 
     def __init__(self) -> None:
         super().__init__("replay")
+        graph_nodes, run_id = declare_graph(self)
         get = declare_validated(self, REPLAY)
         self.steps, Ts, self.topics = load_steps(get["run"], get["topics"] or None, get["steps"])
         self.Ts_ns = int(round(Ts * 1e9))
@@ -111,10 +109,9 @@ class Replay(Node):
             )
             for t in self.capture
         }
-        self.ready_names: set[str] = set()
-        self.create_subscription(
-            String, "/hsv/ready", lambda m: self.ready_names.add(m.data), READY_QOS
-        )
+        self.status = GraphStatus(self, graph_nodes, run_id, self.watchdog_s, self.wait_for)
+        self.status.attach(self.subs, self.pubs if self.wait_for else {})
+        self.status.waiting = []
         self.writer = None
         if get["out"]:
             meta = run_metadata_param("replay", get["metadata_json"])
@@ -125,7 +122,9 @@ class Replay(Node):
                 captured_topics=",".join(self.capture),
             )
             try:
-                self.writer = RunWriter(get["out"], meta, Ts)
+                self.writer = RunWriter(
+                    get["out"], meta, Ts, attachments=output_attachments(get["run"])
+                )
             except RunError as exc:
                 raise ParameterError(f"replay: parameter 'out': {exc}") from None
         self.lockstep: list[str] = []
@@ -142,20 +141,10 @@ class Replay(Node):
             self.writer.write_raw(topic, k, data)
         self.last_progress = time.monotonic()
 
-    def _matched(self) -> bool:
-        if not self.wait_for <= self.ready_names:
-            return False
-        if self.wait_for and any(p.get_subscription_count() < 1 for p in self.pubs.values()):
-            return False
-        return True
-
     def poll(self) -> None:
         """Start when the peers are ready; publish what the lockstep and timing allow."""
         if not self.started:
-            if not self._matched():
-                if time.monotonic() - self.last_progress > max(60.0, self.watchdog_s):
-                    missing = sorted(self.wait_for - self.ready_names)
-                    raise WatchdogError(f"replay: nodes {missing} never announced themselves")
+            if not self.status.poll_ready():
                 return
             self.lockstep = [t for t, s in self.subs.items() if s.get_publisher_count() >= 1]
             self.get_logger().info(
@@ -174,8 +163,9 @@ class Replay(Node):
             if self.rate > 0 and time.monotonic() < self.t0 + (log_ns - log0) * 1e-9 / self.rate:
                 break
             for topic, data in msgs:
-                self.pubs[topic].publish(data)
-                if self.writer is not None:
+                if topic in self.pubs:
+                    self.pubs[topic].publish(data)
+                if self.writer is not None and topic not in self.got:
                     self.writer.write_raw(topic, step_of(topic, data, self.Ts_ns), data)
             self.k += 1
             self.last_progress = time.monotonic()
@@ -192,8 +182,9 @@ class Replay(Node):
                 "(node under test dead or silent)"
             )
 
-    def close(self, status: int) -> None:
+    def close(self, status: int, reason: str = "") -> None:
         """Finish the output run with its status."""
+        self.status.close(status, reason)
         if self.writer is None:
             return
         reason = end_reason(self.done, status)

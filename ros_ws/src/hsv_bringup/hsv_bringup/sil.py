@@ -6,16 +6,20 @@ node table (:data:`fahv.loop.graph.NODES`: recorder, notch_filter, nominal_traje
 controller, fault_injector, plant; the plant waits until every other node has announced
 itself, so the order only saves time). It watches the processes: the run succeeds when
 every node exits 0 after the last step; the first node that exits non-zero or is killed
-fails the run, the others get SIGINT (the recorder closes its file), then SIGKILL after
-a grace period, and the runner exits 1 naming that node and showing the end of its log.
+(a node whose status is not 3 first: the cause rather than the peers that stopped
+because of it) fails the run, the others get SIGINT (the recorder closes its file),
+then SIGKILL after a grace period, and the runner exits 1 naming that node and showing
+the end of its log.
 
 Isolation: every graph runs in a DDS domain of its own. Unless ``--domain-id`` is
 given, the runner takes a free ``ROS_DOMAIN_ID`` from ROS 2's ``domain_coordinator``
 (unique among the processes of this host that use it, held until the runner exits),
 whatever ``ROS_DOMAIN_ID`` the shell exports, and restricts discovery to this host
-(``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``). Every loop node also refuses to run
-next to a foreign graph in its domain (more publishers on a loop topic than its graph
-has, exit status 5).
+(``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), and prints the domain with the line to
+type in another shell to see the graph (:func:`watch_line`). Should another graph join
+the domain anyway, the one that joined second stops (exit status 5, see
+``hsv_common.graph_status``). The recorder's live-view address (``--live``) is passed
+on to stderr.
 
 Interruption: SIGINT (Ctrl-C) or SIGTERM stops every node with SIGINT (the recorder
 closes its file with status ``interrupted``) and the runner exits 130; a second signal
@@ -48,6 +52,9 @@ from fahv.loop.graph import CONTROLLER_NODES, NODES, graph_nodes
 
 #: Exit status of the runner (and of ``fahv sil``) after SIGINT / SIGTERM (128 + SIGINT).
 EXIT_INTERRUPTED = 130
+#: Exit status of a node whose watchdog fired (hsv_common.runtime.EXIT_WATCHDOG); a node
+#: that stops because a peer failed exits so too, so the runner names another first.
+EXIT_WATCHDOG_NODE = 3
 
 
 def executable(name: str) -> Path:
@@ -118,6 +125,8 @@ class Graph:
                 if line.startswith("progress "):
                     _, k, n = line.split()
                     self.progress = (int(k), int(n))
+                elif line.startswith("live view "):  # the recorder's Foxglove server
+                    print(f"sil: {line.strip()}", file=sys.stderr, flush=True)
 
     def stop(self, grace_s: float = 15.0) -> None:
         """SIGINT to every running node, SIGKILL after the grace period."""
@@ -158,12 +167,15 @@ class Graph:
             if self.stop_signal is not None:
                 return None, EXIT_INTERRUPTED
             running = 0
+            failed = []
             for name in self.names:
                 rc = self.procs[name].poll()
                 if rc is None:
                     running += 1
                 elif rc != 0:
-                    return name, rc
+                    failed.append((name, rc))
+            if failed:  # the cause first: a node that stopped because a peer failed says 3
+                return min(failed, key=lambda f: f[1] == EXIT_WATCHDOG_NODE)
             if on_progress is not None:
                 on_progress(*self.progress)
             if running == 0:
@@ -181,6 +193,16 @@ def describe(rc: int) -> str:
         4: "stopped by a signal",
         5: "foreign graph in its ROS domain",
     }.get(rc, f"exit status {rc}")
+
+
+def watch_line(domain: int) -> str:
+    """The line to type in another shell to list the topics of a graph in ``domain``."""
+    prefix = os.environ.get("COLCON_PREFIX_PATH", "").split(os.pathsep)[0]
+    setup = Path(prefix) / "setup.bash" if prefix else Path("ros_ws/install/setup.bash")
+    return (
+        f"export ROS_DOMAIN_ID={domain} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; "
+        f"source {setup}; ros2 topic list"
+    )
 
 
 def _progress_bar(quiet: bool):
@@ -293,7 +315,9 @@ def main(argv: list[str] | None = None) -> int:
             if inherited not in (None, str(domain))
             else ""
         )
-        print(f"sil: ROS_DOMAIN_ID={domain}{note}", file=sys.stderr, flush=True)
+        print(f"sil: graph in ROS domain {domain}{note}", file=sys.stderr)
+        print(f"sil: to see it from another shell: {watch_line(domain)}", file=sys.stderr)
+        sys.stderr.flush()
         status = run_graph(graph, bag, args.quiet)
     return status
 

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import sys
 
-from hsv_common.lockstep import LockstepNode, main
+from hsv_common.lockstep import LockstepNode
+from hsv_common.runtime import main
 
 from fahv.lanes import Lanes
 from fahv.loop.cores import ControllerCore

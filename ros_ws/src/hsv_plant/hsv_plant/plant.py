@@ -8,10 +8,10 @@ only when every node of the graph has announced itself on /hsv/ready.
 from __future__ import annotations
 
 import sys
-import time
 
-from hsv_common.lockstep import READY_QOS, LockstepNode, WatchdogError, main, to_msg
-from std_msgs.msg import String
+from hsv_common.codec import to_msg
+from hsv_common.lockstep import LockstepNode
+from hsv_common.runtime import main
 
 from fahv.lanes import Lanes
 from fahv.loop.cores import PlantCore
@@ -19,51 +19,28 @@ from fahv.loop.graph import clock_msg
 
 
 class PlantNode(LockstepNode):
-    """Adapter of :class:`fahv.loop.PlantCore`."""
+    """Adapter of :class:`fahv.loop.PlantCore`; the lockstep master.
+
+    It is ready (and publishes step 0) only when every other node of the graph
+    announced itself ready; until then it logs which peers it still waits for.
+    """
 
     ROLE = "plant"
+    WAIT_FOR_PEERS = True
 
     def make_core(self, p: dict) -> None:
         """Build the library object from the raw node parameters."""
         self.core = PlantCore([p], Lanes(1))
-        self.peers_ready: set[str] = set()
-        self.create_subscription(String, "/hsv/ready", self._peer_ready, READY_QOS)
-
-    def _peer_ready(self, msg: String) -> None:
-        self.peers_ready.add(msg.data)
 
     def _publish_state(self) -> list:
         k = self.core.k
         return [("/clock", clock_msg(k, self.Ts)), ("/hsv/state", self.core.state())]
 
-    def poll(self) -> None:
-        """Start step 0 once every peer is ready; afterwards the watchdog.
-
-        Raises
-        ------
-        ForeignGraphError
-            If another graph publishes in the domain (checked before step 0).
-        WatchdogError
-            If the graph is not ready within max(60 s, watchdog_s).
-        """
-        if not self.ready:
-            self.check_foreign(time.monotonic())
-            waiting = [n for n in self.graph_nodes if n != "plant" and n not in self.peers_ready]
-            if self.matched() or waiting:
-                if time.monotonic() - self.last_progress > max(60.0, self.watchdog_s):
-                    raise WatchdogError(
-                        f"plant: graph not ready after {max(60.0, self.watchdog_s):g} s; "
-                        f"waiting for {waiting or self.matched()}"
-                    )
-                return
-            self.check_foreign()
-            self.ready = True
-            self.get_logger().info(f"graph ready ({len(self.peers_ready)} peers): step 0")
-            self.last_progress = self.t_ready = time.monotonic()
-            for topic, fields in self._publish_state():
-                self.pubs[topic].publish(to_msg(topic, fields))
-            return
-        self.check_watchdog()
+    def on_ready(self) -> None:
+        """Every peer is ready: publish the state of step 0."""
+        self.get_logger().info(f"graph ready ({len(self.graph_nodes) - 1} peers): step 0")
+        for topic, fields in self._publish_state():
+            self.pubs[topic].publish(to_msg(topic, fields))
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""

@@ -1,0 +1,300 @@
+"""The one readiness logic of every node: its status on the graph, its view of the peers.
+
+:class:`GraphStatus` publishes the node's status on :data:`fahv.loop.graph.STATUS_TOPIC`
+(at start, on every change, and as a heartbeat from a thread of its own, so a node busy
+building its core or solving still counts as alive), keeps the peers' statuses in a
+:class:`fahv.loop.peers.Peers` table, and decides:
+
+- **ready**: every subscription sees its publisher, every publisher sees each subscriber
+  the node table expects among ``graph_nodes``, every peer listed in ``wait_for`` (the
+  plant: all of them) announced itself ready, and no foreign publisher is on an input;
+- **start-up watchdog**: a node that is not ready, or waits for its first step, and
+  sees no progress in the graph's start (a peer appearing or changing state, a topic
+  matched) stops with :class:`WatchdogError`: after ``watchdog_s`` when a peer is
+  missing (never started, lost, exited), naming it before the topics it waits for;
+  after :data:`STARTUP_MAX_S` when every peer is alive but some are still starting;
+- **a failed peer**: a peer of the graph that exited with a non-zero status stops the
+  node at once, with that peer's name and reason;
+- **foreign graphs**: another graph in the ROS domain (statuses of another run id, or
+  more publishers on an input than the graph has producers of it) stops the graph that
+  joined second; the first one goes on and ignores the other's messages (which are of
+  earlier steps), unless the two cannot be told apart.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+from rclpy.duration import Duration
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from fahv.loop.graph import GRAPH, STATUS_PERIOD_S, STATUS_TOPIC, producer_of
+from fahv.loop.peers import Peers, parse_status, status
+from hsv_common.runtime import STATUS_QOS, ForeignGraphError, WatchdogError
+
+#: Wall time between two foreign-graph checks of a node [s].
+FOREIGN_CHECK_S = 1.0
+#: Wall time an unexplained extra publisher may take before its node announces itself [s].
+FOREIGN_GRACE_S = 2.0 * STATUS_PERIOD_S
+#: Longest start of a graph whose peers are all alive but not all ready [s wall time].
+STARTUP_MAX_S = 60.0
+#: Wall time between two "waiting for ..." lines of a node that is not ready [s].
+WAITING_LOG_S = 2.0
+
+
+class GraphStatus:
+    """Status of one node on the graph and its view of the peers.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node (its name, context, graph queries).
+    graph_nodes : sequence of str
+        Nodes of the running graph.
+    run_id : str
+        Run id shared by the graph's nodes.
+    watchdog_s : float
+        Start-up watchdog: wall time without progress of the start [s].
+    wait_for : sequence of str
+        Peers that must be ready before this node is (the plant: every peer).
+    """
+
+    def __init__(self, node: Node, graph_nodes, run_id: str, watchdog_s: float, wait_for=()):
+        self.node = node
+        self.name = node.get_name()
+        self.graph_nodes = list(graph_nodes)
+        self.watchdog_s = float(watchdog_s)
+        self.wait_for = [n for n in wait_for if n != self.name]
+        self.domain = node.context.get_domain_id()
+        self.peers = Peers(self.name, os.getpid(), run_id, time.time(), self.graph_nodes)
+        self.state, self.k, self.waiting = "starting", 0, ["its core"]
+        self.inputs: dict = {}  # topic -> subscription
+        self.outputs: dict = {}  # topic -> publisher
+        self.ready = False
+        now = time.monotonic()
+        self.t_progress = self.t_log = now
+        self.next_foreign = 0.0
+        self.extra_since: dict[str, float] = {}  # topic -> first time it had extra publishers
+        self.said_stay = False
+        self._held: str | None = None
+        self._key: list = []
+        self._lock = threading.Lock()
+        self._pub = node.create_publisher(String, STATUS_TOPIC, STATUS_QOS)
+        node.create_subscription(String, STATUS_TOPIC, self._on_status, STATUS_QOS)
+        self.publish()
+        self._stop = threading.Event()
+        self._beat = threading.Thread(target=self._heartbeat, name="status", daemon=True)
+        self._beat.start()
+
+    # -- own status ---------------------------------------------------------------------
+    def publish(self, exit_status: int | None = None, reason: str = "") -> None:
+        """Publish the node's current status."""
+        text = status(
+            self.name, self.peers.pid, self.peers.run, self.peers.start, self.state, self.k,
+            self.waiting, exit_status, reason,
+        )  # fmt: skip
+        with self._lock:
+            self._pub.publish(String(data=text))
+
+    def _heartbeat(self) -> None:
+        while not self._stop.wait(STATUS_PERIOD_S):
+            try:
+                self.publish()
+            except Exception:  # the context is shutting down: the node is leaving anyway
+                return
+
+    def set_state(self, state: str, k: int | None = None) -> None:
+        """Change the announced state (and step) and publish it at once."""
+        self.state = state
+        if k is not None:
+            self.k = k
+        self.publish()
+
+    def close(self, exit_status: int, reason: str) -> None:
+        """Stop the heartbeat; announce the exit with its status and reason."""
+        self._stop.set()
+        self._beat.join(timeout=2.0)
+        self.state = "exited"
+        try:  # delivered before the writer goes away (peers name this node's reason)
+            self.publish(exit_status, reason)
+            self._pub.wait_for_all_acked(Duration(seconds=0.5))
+        except Exception:  # the context may be gone already
+            pass
+
+    # -- peers ----------------------------------------------------------------------------
+    def _on_status(self, msg: String) -> None:
+        if self.peers.update(parse_status(msg.data)):
+            self.t_progress = time.monotonic()
+
+    def attach(self, inputs: dict, outputs: dict) -> None:
+        """The node's loop subscriptions and publishers ({topic: entity}) to match."""
+        self.inputs, self.outputs = dict(inputs), dict(outputs)
+
+    def consumers(self, topic: str) -> list[str]:
+        """Nodes of the graph other than this one that consume a topic."""
+        return [
+            n for n in self.graph_nodes if n in GRAPH and topic in GRAPH[n][0] and n != self.name
+        ]
+
+    def unmatched(self) -> list[str]:
+        """What the node's topics still wait for, e.g. ``/hsv/state (from plant)``."""
+        out = []
+        for t, sub in self.inputs.items():
+            producer = producer_of(t, self.graph_nodes)
+            if producer != "?" and sub.get_publisher_count() < 1:
+                out.append(f"{t} (from {producer})")
+        for t, pub in self.outputs.items():
+            want = self.consumers(t)
+            if pub.get_subscription_count() < len(want):
+                out.append(f"{t} (to {', '.join(want)})")
+        return out
+
+    def _peer_text(self, name: str) -> str:
+        """A waited-for peer, described: missing, starting (and what it waits for)."""
+        gone = self.peers.describe(name)
+        if gone is not None:
+            return gone
+        starting = [d for d in self.peers.not_ready() if d.startswith(f"{name} (")]
+        return starting[0] if starting else f"{name} (not ready)"
+
+    def missing_text(self) -> str:
+        """The missing peers, described, or ""."""
+        return "; ".join(self.peers.missing())
+
+    def check_failed_peer(self) -> None:
+        """Raise :class:`WatchdogError` if a peer of the graph exited with an error.
+
+        The message names first the peers that never started or were lost (the
+        failed peer may have stopped because of them), then the failed peer with its
+        own reason.
+        """
+        failed = self.peers.failed()
+        if failed:  # the root cause first: a peer that never started or was lost
+            gone = [d for d in self.peers.missing() if d not in failed and "(exited" not in d]
+            head = f"missing {'; '.join(gone)}; " if gone else ""
+            raise WatchdogError(f"{self.name}: {head}peer {failed[0]}")
+
+    # -- readiness ------------------------------------------------------------------------
+    def poll_ready(self) -> bool:
+        """One readiness check; True once the node is ready (then it announces itself).
+
+        Raises
+        ------
+        WatchdogError
+            If the graph's start made no progress for ``watchdog_s``, or a peer failed.
+        ForeignGraphError
+            If another graph that joined first runs in the domain.
+        """
+        if self.ready:
+            return True
+        now = time.monotonic()
+        self.check_failed_peer()
+        unmatched = self.unmatched()
+        peers = [n for n in self.wait_for if not self.peers.ready(n)]
+        foreign = self.check_foreign(force=False)
+        key = unmatched + peers + ([foreign.split(":")[0]] if foreign else [])
+        if key != self._key:  # progress of the start: something changed
+            self._key = key
+            self.t_progress = now
+        waiting = unmatched + [self._peer_text(n) for n in peers] + ([foreign] if foreign else [])
+        if [w.split(" (")[0] for w in waiting] != [w.split(" (")[0] for w in self.waiting]:
+            self.waiting = waiting
+            self.publish()
+        self.waiting = waiting
+        if not waiting:
+            self.ready = True
+            self.set_state("ready")
+            self.node.get_logger().info("all peers matched: ready")
+            return True
+        if now - self.t_log >= WAITING_LOG_S:
+            self.t_log = now
+            self.node.get_logger().info(f"waiting for {'; '.join(waiting)}")
+        stalled = self.stalled(self.t_progress)
+        if stalled is not None:
+            raise WatchdogError(
+                f"{self.name}: graph not ready, no progress for {now - self.t_progress:.0f} s: "
+                f"{stalled + '; ' if stalled else ''}waiting for {'; '.join(waiting)}"
+            )
+        return False
+
+    def stalled(self, since: float) -> str | None:
+        """Whether the graph's start has stalled (before the first step of this node).
+
+        A start makes progress while peers appear or change state. With a peer missing
+        (never started, lost, exited) it has stalled after ``watchdog_s`` without
+        progress; with every peer alive but some still starting (building their core,
+        waiting for others) only after :data:`STARTUP_MAX_S`.
+
+        Parameters
+        ----------
+        since : float
+            ``time.monotonic()`` from which this node waits.
+
+        Returns
+        -------
+        str or None
+            None while the start goes on; else the missing (or not ready) peers,
+            described ("" when every peer is ready).
+        """
+        idle = time.monotonic() - max(since, self.t_progress)
+        missing = self.peers.missing()
+        if missing:
+            return f"missing {'; '.join(missing)}" if idle > self.watchdog_s else None
+        not_ready = self.peers.not_ready()
+        if not_ready:
+            limit = max(self.watchdog_s, STARTUP_MAX_S)
+            return f"not ready: {'; '.join(not_ready)}" if idle > limit else None
+        return "" if idle > self.watchdog_s else None
+
+    # -- foreign graphs -------------------------------------------------------------------
+    def check_foreign(self, force: bool = True) -> str | None:
+        """Foreign-graph check (at most every :data:`FOREIGN_CHECK_S` unless ``force``).
+
+        Returns
+        -------
+        str or None
+            What holds the node back while another graph's extra publishers are still
+            on its inputs (they joined later and stop by themselves), else None.
+
+        Raises
+        ------
+        ForeignGraphError
+            If this graph joined second, the two cannot be told apart, or an input has
+            extra publishers that no node status explains for :data:`FOREIGN_GRACE_S`
+            (or that a later graph still holds after ``watchdog_s``).
+        """
+        now = time.monotonic()
+        if not force and now < self.next_foreign:
+            return self._held
+        self.next_foreign = now + FOREIGN_CHECK_S
+        verdict = self.peers.foreign_verdict(self.domain)
+        if verdict is not None:
+            action, text = verdict
+            if action == "stop":
+                raise ForeignGraphError(text)
+            if not self.said_stay:
+                self.said_stay = True
+                self.node.get_logger().warning(text)
+        self._held = None
+        for topic in self.inputs:
+            producers = [n for n in self.graph_nodes if n in GRAPH and topic in GRAPH[n][1]]
+            found = self.node.count_publishers(topic)
+            if found <= len(producers):
+                self.extra_since.pop(topic, None)
+                continue
+            since = self.extra_since.setdefault(topic, now)
+            later = any(self.peers.explains(p) for p in producers)
+            limit = self.watchdog_s if later else FOREIGN_GRACE_S
+            if now - since > limit:
+                raise ForeignGraphError(
+                    f"{self.name}: {found} publishers on {topic}, but its graph has "
+                    f"{len(producers)} ({', '.join(producers) or 'none'}): another graph is "
+                    f"running in ROS domain {self.domain} (ROS_DOMAIN_ID={self.domain}); give "
+                    "each graph its own domain (fahv sil takes a free one from "
+                    "domain_coordinator)"
+                )
+            self._held = f"{topic}: {found - len(producers)} extra publisher(s) to go"
+        return self._held

@@ -1,0 +1,174 @@
+"""Process runtime of every node: QoS profiles, exit codes, executor, signals, ``main``.
+
+Exit status of a node (:func:`main`), also in docs/architecture.md:
+
+==  =====================================================================
+0   done: every step, and every subscriber acknowledged the last messages
+1   any other error (the traceback follows the message)
+2   bad parameter (:class:`fahv.errors.ParameterError`)
+3   watchdog: the graph did not start, or a peer went missing or silent
+4   stopped by SIGINT / SIGTERM before the end
+5   another graph in the ROS domain that joined first (or cannot be told apart)
+==  =====================================================================
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import time
+
+import rclpy
+from rclpy.duration import Duration
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from fahv.errors import ParameterError
+from fahv.loop import graph
+
+EXIT_OK, EXIT_ERROR, EXIT_PARAM, EXIT_WATCHDOG, EXIT_SIGNAL, EXIT_FOREIGN = 0, 1, 2, 3, 4, 5
+
+#: Parameter services cost every spin of every node (more entities in the wait set).
+START_PARAMETER_SERVICES = os.environ.get("HSV_PARAM_SERVICES", "0") == "1"
+
+
+def qos_profile(q: graph.QoS) -> QoSProfile:
+    """The rclpy profile of a :class:`fahv.loop.graph.QoS` (the library owns the numbers)."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=q.depth,
+        reliability=ReliabilityPolicy.RELIABLE if q.reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=(
+            DurabilityPolicy.TRANSIENT_LOCAL if q.transient_local else DurabilityPolicy.VOLATILE
+        ),
+    )
+
+
+#: Loop topics (:data:`fahv.loop.graph.LOOP_QOS`).
+LOOP_QOS = qos_profile(graph.LOOP_QOS)
+#: Node status topic (:data:`fahv.loop.graph.STATUS_QOS`).
+STATUS_QOS = qos_profile(graph.STATUS_QOS)
+
+
+class WatchdogError(RuntimeError):
+    """The graph did not start, or a peer went missing or silent (exit status 3)."""
+
+
+class ForeignGraphError(RuntimeError):
+    """Another graph publishes loop topics in this node's ROS domain (exit status 5)."""
+
+
+def end_reason(done: bool, status: int) -> str:
+    """Run status for a recorded run: complete, interrupted, or with the exit status.
+
+    ``interrupted`` when the run stopped early on a signal (or with status 0), else
+    ``interrupted (exit status N)`` (N: the node's exit status, e.g. 3 watchdog).
+    """
+    if done:
+        return "complete"
+    if status in (EXIT_OK, EXIT_SIGNAL):
+        return "interrupted"
+    return f"interrupted (exit status {status})"
+
+
+def make_executor(message_info: bool = False):
+    """Executor of every node: rclpy's EventsExecutor unless ``HSV_EXECUTOR=single``.
+
+    ``message_info=True`` (the recorder: it keeps the DDS source timestamps) selects
+    the SingleThreadedExecutor, since the EventsExecutor of Jazzy cannot call a
+    subscription callback with its message info (SystemError, measured).
+
+    The events executor (rclpy.experimental, C++ event queue) runs the Case 1 graph
+    about 1.4x faster than the SingleThreadedExecutor on this 2-core machine
+    (6.5 vs 9.3 ms per step, measured); docs/environment.md saw it hang in another test,
+    so the SIL integration tests (lockstep, kill, SIGINT, watchdog) run with it, and
+    ``HSV_EXECUTOR=single`` selects the classic executor.
+    """
+    if message_info or os.environ.get("HSV_EXECUTOR", "events") == "single":
+        return SingleThreadedExecutor()
+    from rclpy.experimental.events_executor import EventsExecutor
+
+    return EventsExecutor()
+
+
+class _Stop:
+    def __init__(self) -> None:
+        self.signal = None
+
+    def __call__(self, signum, frame) -> None:
+        self.signal = signum
+
+
+def all_acked(node: Node) -> bool:
+    """True when every subscriber acknowledged every message of the node's publishers."""
+    return all(p.wait_for_all_acked(Duration(seconds=0)) for p in node.publishers)
+
+
+def main(node_cls, args=None, linger_s: float = 10.0) -> int:
+    """Run one node until its last step, a signal, or an error; returns the exit status.
+
+    The node class provides ``done`` (bool), ``k`` (step), ``poll()`` (called between
+    spins; raises to stop) and ``close(status, reason)`` (called once at the end, with
+    the exit status and the error message, "" when none).
+
+    After the last step the node stays until every subscriber (the recorder too, which
+    may lag behind the loop) acknowledged its messages, at most ``linger_s`` seconds:
+    a reliable writer that goes away earlier loses what is still unacknowledged.
+    SIGINT and SIGTERM stop the spin loop cleanly (the node's ``close`` runs, so
+    the recorder finishes its file).
+    """
+    stop = _Stop()
+    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    node = None
+    status = EXIT_OK
+    reason = ""
+    name = node_cls.ROLE
+    try:
+        node = node_cls()
+        name = node.get_name()
+        ex = make_executor(getattr(node, "MESSAGE_INFO", False))
+        ex.add_node(node)
+        while not node.done and stop.signal is None:
+            ex.spin_once(timeout_sec=0.05)
+            if stop.signal is None:  # a signal first: peers stopping by it are no failure
+                node.poll()
+        if stop.signal is not None and not node.done:
+            reason = f"stopped by signal {signal.Signals(stop.signal).name} at step {node.k}"
+            print(f"[{name}] {reason}", file=sys.stderr)
+            status = EXIT_SIGNAL
+        else:  # let reliable QoS deliver the last messages before the writers go away
+            t_end = time.monotonic() + linger_s
+            while time.monotonic() < t_end and stop.signal is None and not all_acked(node):
+                ex.spin_once(timeout_sec=0.01)
+    except ParameterError as exc:
+        reason = str(exc)
+        print(f"[{name}] parameter error: {exc}", file=sys.stderr)
+        status = EXIT_PARAM
+    except WatchdogError as exc:
+        reason = str(exc)
+        print(f"[{name}] watchdog: {exc}", file=sys.stderr)
+        status = EXIT_WATCHDOG
+    except ForeignGraphError as exc:
+        reason = str(exc)
+        print(f"[{name}] error: {exc}", file=sys.stderr)
+        status = EXIT_FOREIGN
+    except Exception as exc:  # report any failure with the node's name, then the traceback
+        import traceback
+
+        reason = f"{type(exc).__name__}: {exc}"
+        print(f"[{name}] error: {reason}", file=sys.stderr)
+        traceback.print_exc()
+        status = EXIT_ERROR
+    finally:
+        if node is not None:
+            try:
+                node.close(status, reason)
+            finally:
+                node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return status

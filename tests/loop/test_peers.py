@@ -1,0 +1,79 @@
+"""The rules a node applies to its peers' statuses (fahv.loop.peers), without a graph."""
+
+import json
+
+import pytest
+
+from fahv.loop.graph import DEFAULT_GRAPH, STATUS_LOST_S
+from fahv.loop.peers import Peers, parse_status, status
+
+T0 = 1_000_000.0
+
+
+def st(node, pid, run="run-a", start=T0, state="ready", stamp=T0 + 5, **kw):
+    return parse_status(status(node, pid, run, start, state, stamp=stamp, **kw))
+
+
+def table(node="notch_filter", run="run-a", start=T0 + 1):
+    return Peers(node, 100, run, start, list(DEFAULT_GRAPH))
+
+
+def test_a_status_round_trips_and_other_texts_are_not_statuses():
+    s = st("plant", 7, state="exited", exit_status=3, reason="plant: x", k=12)
+    assert (s["node"], s["pid"], s["state"], s["exit"], s["k"]) == ("plant", 7, "exited", 3, 12)
+    assert parse_status("plant") is None  # the old plain-name readiness message
+    assert parse_status(json.dumps({"node": "plant"})) is None
+    with pytest.raises(ValueError, match="node state must be one of"):
+        status("plant", 1, "", T0, "sleeping")
+
+
+def test_missing_peers_are_named_never_started_exited_or_lost():
+    p = table()
+    now = T0 + 6
+    for i, n in enumerate(["recorder", "nominal_trajectory", "tube_mpc", "plant"]):
+        p.update(st(n, 10 + i))
+    assert p.missing(now) == ["fault_injector (never started)"]
+    assert p.ready("plant") and not p.ready("fault_injector")
+    p.update(st("tube_mpc", 12, state="exited", exit_status=2, reason="tube_mpc: bad F", k=0,
+                stamp=T0 + 5.5))  # fmt: skip
+    assert "tube_mpc (exited with status 2 at step 0: tube_mpc: bad F)" in p.missing(now)
+    assert p.failed() == ["tube_mpc (exited with status 2 at step 0: tube_mpc: bad F)"]
+    lost = p.missing(T0 + 5 + STATUS_LOST_S + 1.5)
+    assert "plant (lost: no status for 5.5 s, last at step 0)" in lost
+    p.update(st("plant", 13, stamp=T0 + 4))  # an older status of the same instance: ignored
+    assert p.own("plant")["stamp"] == T0 + 5
+
+
+def test_a_starting_peer_is_not_missing_and_says_what_it_waits_for():
+    p = table("plant")
+    p.update(st("tube_mpc", 3, state="starting", waiting=["/hsv/control_command (to x)"]))
+    assert p.missing(T0 + 6)[0] != "tube_mpc (never started)"
+    assert p.not_ready(T0 + 6) == ["tube_mpc (starting, waits for /hsv/control_command (to x))"]
+
+
+def test_the_graph_that_joined_second_stops_and_the_first_goes_on():
+    first = table(run="run-a", start=T0 + 1)
+    second = table(run="run-b", start=T0 + 30)
+    for n, pid in (("plant", 1), ("tube_mpc", 2)):
+        first.update(st(n, pid, run="run-a", start=T0, stamp=T0 + 31))
+        second.update(st(n, pid, run="run-a", start=T0, stamp=T0 + 31))
+        first.update(st(n, 50 + pid, run="run-b", start=T0 + 29, stamp=T0 + 31))
+        second.update(st(n, 50 + pid, run="run-b", start=T0 + 29, stamp=T0 + 31))
+    action, text = second.foreign_verdict(7, now=T0 + 31)
+    assert action == "stop"
+    assert "another graph (run 'run-a': plant, tube_mpc) is running in ROS domain 7" in text
+    assert "this graph stops" in text
+    action, text = first.foreign_verdict(7, now=T0 + 31)
+    assert action == "stay" and "joined ROS domain 7" in text and "this run goes on" in text
+    assert first.explains("plant", now=T0 + 31) and not second.explains("plant", now=T0 + 31)
+    # once the later graph's nodes have exited, nothing is left to explain or to stop
+    for n, pid in (("plant", 51), ("tube_mpc", 52)):
+        first.update(st(n, pid, run="run-b", start=T0 + 29, state="exited", stamp=T0 + 32))
+    assert first.foreign_verdict(7, now=T0 + 33) is None
+
+
+def test_the_same_run_twice_cannot_be_told_apart():
+    p = table("plant", run="run-a")
+    p.update(st("plant", 555, run="run-a", start=T0 - 100, stamp=T0 + 5))
+    action, text = p.foreign_verdict(3, now=T0 + 6)
+    assert action == "stop" and "a second plant of the same run 'run-a'" in text
