@@ -96,16 +96,50 @@ def _simulate_recorded(design, variant: str, duration, out_dir):
     return run
 
 
+def selected_variants(case, requested: list[str] | None) -> list[str]:
+    """Variants a command runs: the case's default (its first) unless ``requested``.
+
+    ``requested`` lists variant names of the case, or is ``["all"]`` for every variant
+    of the case in its order.
+
+    Raises
+    ------
+    FahvError
+        On a variant the case does not list (naming the case's variants).
+    """
+    listed = list(case["variants"])
+    if not requested:
+        return listed[:1]
+    if requested == ["all"]:
+        return listed
+    unknown = [v for v in requested if v not in listed]
+    if unknown:
+        raise FahvError(
+            f"{case.name}: variant(s) {', '.join(unknown)} not in the case's variants "
+            f"{listed} (or use --variant all)"
+        )
+    return list(dict.fromkeys(requested))
+
+
 def cmd_simulate(args) -> int:
     """In-process closed loop of a case; records each variant to bags/, prints metrics."""
+    import time
+
     case, design, vehicle = load_or_design(args.case, args.design, args.vehicle)
-    variants = args.variant or case["variants"]
+    variants = selected_variants(case, args.variant)
     limits = vehicle.limits
     table = {}
-    for v in variants:
+    for i, v in enumerate(variants, 1):
         out = None if args.no_record else Path(args.out or ROOT / "bags")
+        print(f"[{i}/{len(variants)}] {case.name} {v}: simulating", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
         run = _simulate_recorded(design, v, args.duration, out)
         table[v] = metrics(run, limits)
+        print(
+            f"[{i}/{len(variants)}] {case.name} {v}: done in {time.perf_counter() - t0:.1f} s",
+            file=sys.stderr,
+            flush=True,
+        )
     if args.json:
         print(to_json(table))
     else:
@@ -224,7 +258,13 @@ def add_parsers(sub) -> None:
     p = sub.add_parser("simulate", help="in-process closed loop of a case, metrics table")
     p.add_argument("case", help="case file")
     p.add_argument("--design", default=None, help="artefact folder (designed if missing)")
-    p.add_argument("--variant", nargs="+", default=None, help="variants (default: the case's)")
+    p.add_argument(
+        "--variant",
+        nargs="+",
+        default=None,
+        help="variants to run (default: the case's first, its default variant; 'all': every "
+        "variant of the case, with a progress line per variant)",
+    )
     p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
     p.add_argument("--out", default=None, help="folder of the recorded runs (default bags/)")
     p.add_argument("--no-record", action="store_true", help="do not write the runs to MCAP")
