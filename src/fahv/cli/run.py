@@ -253,6 +253,34 @@ def cmd_paper_figures(args) -> int:
     return 0
 
 
+def cmd_results(args) -> int:
+    """Every variant of each case: the README's results table; reference JSON write/check."""
+    from fahv.runs.results import (
+        compare_reference,
+        markdown_table,
+        read_reference,
+        run_case,
+        write_reference,
+    )
+
+    results = {}
+    for path in args.cases:
+        case, design, vehicle = load_or_design(path, None, args.vehicle)
+        print(f"{case.name}: design {design.summary['design_hash']}", file=sys.stderr)
+        log = lambda line: print(line, file=sys.stderr, flush=True)  # noqa: E731
+        results[case.name] = run_case(design, case["variants"], vehicle.limits, log)
+    print(markdown_table(results))
+    if args.write_reference:
+        print(f"reference written to {write_reference(results, args.write_reference)}")
+    if args.check:
+        bad = compare_reference(results, read_reference(args.check))
+        for line in bad:
+            print(f"differs: {line}")
+        print(f"{args.check}: {'within' if not bad else 'OUTSIDE'} the tolerances")
+        return 1 if bad else 0
+    return 0
+
+
 def add_parsers(sub) -> None:
     """Add the parsers of this command group."""
     p = sub.add_parser("simulate", help="in-process closed loop of a case, metrics table")
@@ -335,3 +363,17 @@ def add_parsers(sub) -> None:
     p.add_argument("--out", default="docs/figures")
     add_vehicle_option(p)
     p.set_defaults(func=cmd_paper_figures)
+    p = sub.add_parser(
+        "results",
+        help="every variant of Cases 1 and 2 in process: the README's results tables; "
+        "write or check the metrics reference (tests/data/results_reference.json)",
+    )
+    p.add_argument(
+        "--cases", nargs="+", default=["offline_design/case1.yaml", "offline_design/case2.yaml"]
+    )
+    p.add_argument("--write-reference", metavar="FILE", default=None,
+                   help="write the metrics of every case and variant as JSON")  # fmt: skip
+    p.add_argument("--check", metavar="FILE", default=None,
+                   help="compare with a reference JSON; exit 1 outside the tolerances")  # fmt: skip
+    add_vehicle_option(p)
+    p.set_defaults(func=cmd_results)
