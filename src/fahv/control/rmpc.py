@@ -235,6 +235,7 @@ class RMPCLaw(ControlLaw):
             "rmpc_gamma": seq.gamma,
             "rmpc_Ds": Ds,
             "rmpc_d": d,
+            "rmpc_z": seq.z,
         }
 
     @classmethod
