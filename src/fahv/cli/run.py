@@ -26,7 +26,7 @@ class StepProgress:
 
     Passed to :func:`fahv.loop.simulate.simulate` as its ``writer``: it sees every
     message of every step, forwards it to the run writer (if any), advances the bar
-    once per step and shows the RMPC's LMI solves so far. On a terminal the bar
+    once per step. On a terminal the bar
     updates in place; in a log it writes a line every 10 s.
 
     Parameters
@@ -46,16 +46,12 @@ class StepProgress:
         self.bar = progress(total=n_steps, desc=desc, unit="step", leave=False)
         self.writer = writer
         self.k = 0
-        self.solves = 0
 
     def write(self, topic: str, k: int, msg) -> None:
         """Forward one message of step k; count the step after its last topic."""
         if self.writer is not None:
             self.writer.write(topic, k, msg)
-        if topic == "/hsv/tube_status" and int(msg.lmi_solves[0]) != self.solves:
-            self.solves = int(msg.lmi_solves[0])
-            self.bar.set_postfix(lmi_solves=self.solves, refresh=False)
-        elif topic == self.LAST_TOPIC:
+        if topic == self.LAST_TOPIC:
             self.k = k + 1
             self.bar.update(1)
 
