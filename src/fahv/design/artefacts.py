@@ -152,6 +152,7 @@ def provenance(case, vehicle) -> dict:
         "vehicle_hash": vehicle.data_hash,
         "code_version": __version__,
         "code_hash": code_hash(),
+        "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", ""),
     }
 
 
