@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from fahv.campaign.engine import batches
 from fahv.campaign.paired import paired_stats, paired_text
@@ -38,10 +39,14 @@ def test_paired_differences_and_intervals():
     att = res["stats"]["attitude_deg"]
     assert att.mean_diff == pytest.approx(0.1, abs=1e-12)  # the same draw, shifted by 0.1
     assert att.t_ci[0] == pytest.approx(0.1, abs=1e-9) and att.frac_b_larger == 1.0
-    h = res["stats"]["h_final_ft"]  # |N(50, 1)| - |N(0, 1)|: mean 50 - sqrt(2 / pi)
-    true = 50.0 - math.sqrt(2.0 / math.pi)
-    assert h.t_ci[0] < true < h.t_ci[1] and h.boot_ci[0] < true < h.boot_ci[1]
-    assert h.t_ci[1] - h.t_ci[0] < 0.5 and abs(h.mean_diff - true) < 0.2
+    h = res["stats"]["h_final_ft"]  # |N(50, 1)| - |N(0, 1)|, run by run
+    xa, xb = res["values"]["h_final_ft"]
+    d = xb - xa
+    half = stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / math.sqrt(d.size)
+    assert h.t_ci == pytest.approx((d.mean() - half, d.mean() + half), rel=1e-12)
+    assert h.boot_ci[0] == pytest.approx(h.t_ci[0], abs=0.3 * half)  # bootstrap ~ t here
+    assert h.boot_ci[1] == pytest.approx(h.t_ci[1], abs=0.3 * half)
+    assert abs(h.mean_diff - (50.0 - math.sqrt(2.0 / math.pi))) < 4 * half
     s = res["stats"]["settling_s"]
     assert s.n == 100 and s.mean_diff == pytest.approx(10.0)  # over runs settled in both
     text = "\n".join(paired_text(res, "a", "b"))
