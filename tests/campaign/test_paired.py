@@ -57,3 +57,20 @@ def test_batches_interleave_the_variants_by_index_range():
     camp = {"batch_size": 2, "runs": 5, "variants": ["a", "b"]}
     out = batches(camp, {(0, "b")})
     assert out == [("a", [0, 1]), ("b", [1, 2]), ("a", [2, 3]), ("b", [3, 4]), ("a", [4])]
+
+
+def test_completion_counts_and_pairs_with_envelope_exits():
+    from fahv.campaign.paired import completion, pairs
+
+    def row(i, v, ok, metrics=True):
+        r = {"index": i, "variant": v, "status": "ok" if ok else "failed"}
+        return {**r, "alpha_err_max_deg": 0.1} if metrics else r
+
+    rows = [row(0, "a", True), row(0, "b", True), row(1, "a", True), row(1, "b", False),
+            row(2, "a", True), row(2, "b", False, metrics=False), row(3, "a", False),
+            row(3, "b", False), row(4, "a", True)]  # fmt: skip
+    c = completion(rows, "a", "b")
+    assert (c["n"], c["both"], c["only_a"], c["only_b"], c["neither"]) == (4, 1, 2, 0, 1)
+    assert c["p_mcnemar"] == 0.5  # 2 discordant pairs, both one way: 2 * 0.5^2
+    assert [i["index"] for i, _ in pairs(rows, "a", "b")] == [0]
+    assert [i["index"] for i, _ in pairs(rows, "a", "b", completed=False)] == [0, 1]

@@ -77,14 +77,50 @@ class PairedStat:
     frac_b_larger: float
 
 
-def pairs(rows: list[dict], a: str, b: str) -> list[tuple[dict, dict]]:
-    """(row of A, row of B) of every run index that completed in both variants."""
-    ra = {r["index"]: r for r in rows if r["variant"] == a and r["status"] == "ok"}
-    rb = {r["index"]: r for r in rows if r["variant"] == b and r["status"] == "ok"}
+def _has_metrics(r: dict) -> bool:
+    return r.get("alpha_err_max_deg") is not None
+
+
+def pairs(rows: list[dict], a: str, b: str, completed: bool = True) -> list[tuple[dict, dict]]:
+    """(row of A, row of B) of every run index present in both variants.
+
+    ``completed``: only indices whose runs both completed (status ``ok``); otherwise
+    every index where both runs have metrics (a run that left the flight envelope
+    keeps its metrics, :mod:`fahv.campaign.engine`).
+    """
+    keep = (lambda r: r["status"] == "ok") if completed else _has_metrics
+    ra = {r["index"]: r for r in rows if r["variant"] == a and keep(r)}
+    rb = {r["index"]: r for r in rows if r["variant"] == b and keep(r)}
     return [(ra[i], rb[i]) for i in sorted(ra.keys() & rb.keys())]
 
 
-def paired_stats(rows: list[dict], a: str, b: str, confidence: float = 0.95) -> dict:
+def completion(rows: list[dict], a: str, b: str) -> dict:
+    """Paired completion counts over the indices run in both variants.
+
+    Returns
+    -------
+    dict
+        ``both``, ``only_a``, ``only_b``, ``neither`` (counts of indices by which
+        variant completed), ``n``, and ``p_mcnemar``: exact McNemar test (two-sided
+        binomial test on the discordant pairs) of equal completion probabilities.
+    """
+    from scipy.stats import binomtest
+
+    ra = {r["index"]: r["status"] == "ok" for r in rows if r["variant"] == a}
+    rb = {r["index"]: r["status"] == "ok" for r in rows if r["variant"] == b}
+    idx = sorted(ra.keys() & rb.keys())
+    both = sum(ra[i] and rb[i] for i in idx)
+    only_a = sum(ra[i] and not rb[i] for i in idx)
+    only_b = sum(rb[i] and not ra[i] for i in idx)
+    disc = only_a + only_b
+    p = binomtest(only_a, disc, 0.5).pvalue if disc else 1.0
+    return {"n": len(idx), "both": both, "only_a": only_a, "only_b": only_b,
+            "neither": len(idx) - both - only_a - only_b, "p_mcnemar": float(p)}  # fmt: skip
+
+
+def paired_stats(
+    rows: list[dict], a: str, b: str, confidence: float = 0.95, completed: bool = True
+) -> dict:
     """Paired statistics of variant b against variant a (module notes).
 
     Parameters
@@ -95,17 +131,22 @@ def paired_stats(rows: list[dict], a: str, b: str, confidence: float = 0.95) -> 
         Variants; differences are b - a.
     confidence : float
         Level of the intervals.
+    completed : bool
+        Pairs of completed runs only (default), or every pair with metrics
+        (:func:`pairs`).
 
     Returns
     -------
     dict
-        ``n_pairs``, ``settled`` ((fraction of A, fraction of B) over the pairs),
-        ``stats`` {key: PairedStat}, ``values`` {key: (x_a (n,), x_b (n,))}.
+        ``n_pairs``, ``completed`` (the flag), ``completion`` (:func:`completion`),
+        ``settled`` ((fraction of A, fraction of B) over the pairs), ``stats`` {key:
+        PairedStat}, ``values`` {key: (x_a (n,), x_b (n,))}.
     """
     from scipy import stats
 
-    pr = pairs(rows, a, b)
-    out: dict = {"n_pairs": len(pr), "stats": {}, "values": {}}
+    pr = pairs(rows, a, b, completed)
+    out: dict = {"n_pairs": len(pr), "completed": completed,
+                 "completion": completion(rows, a, b), "stats": {}, "values": {}}  # fmt: skip
     sa = np.array([_get(x, "settling_after_command_s") for x, _ in pr])
     sb = np.array([_get(y, "settling_after_command_s") for _, y in pr])
     out["settled"] = (
@@ -148,12 +189,21 @@ def _g(v: float) -> str:
 def paired_text(res: dict, a: str, b: str) -> list[str]:
     """Markdown lines of a paired comparison (:func:`paired_stats`)."""
     sa, sb = res["settled"]
+    c = res["completion"]
+    which = (
+        "completed in both variants"
+        if res["completed"]
+        else "with metrics in both variants (runs that left the flight envelope included)"
+    )
     lines = [
-        f"## Paired comparison: {b} - {a} (same draws per run index)",
+        f"## Paired comparison: {b} - {a} (same draws per run index; {which})",
         "",
-        f"{res['n_pairs']} run indices completed in both variants. Settled within the "
-        f"tolerances (10 ft, 2 ft/s) and held to the end: {a} {100 * sa:.1f} %, "
-        f"{b} {100 * sb:.1f} %.",
+        f"Completion over the {c['n']} indices run in both: both {c['both']}, only {a} "
+        f"{c['only_a']}, only {b} {c['only_b']}, neither {c['neither']} (exact McNemar "
+        f"p = {c['p_mcnemar']:.3g}).",
+        "",
+        f"{res['n_pairs']} run indices {which}. Settled within the tolerances (10 ft, "
+        f"2 ft/s) and held to the end: {a} {100 * sa:.1f} %, {b} {100 * sb:.1f} %.",
         "",
         f"| metric | n | mean {a} | mean {b} | mean diff ({b} - {a}) | 95 % CI paired t | "
         f"95 % CI bootstrap | median diff | runs with {b} larger |",

@@ -204,6 +204,8 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
         res = paired_stats(rows, a, b, conf)
         paired.append((a, b, res))
         lines += [""] + paired_text(res, a, b)
+        if res["completion"]["both"] < res["completion"]["n"]:  # also with envelope exits
+            lines += [""] + paired_text(paired_stats(rows, a, b, conf, completed=False), a, b)
     lines += ["", f"## Worst {worst} runs per metric", ""]
     for key, label, worse, _ in WORST_METRICS:
         for v in data["variants"]:
