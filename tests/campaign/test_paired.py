@@ -73,4 +73,4 @@ def test_completion_counts_and_pairs_with_envelope_exits():
     assert (c["n"], c["both"], c["only_a"], c["only_b"], c["neither"]) == (4, 1, 2, 0, 1)
     assert c["p_mcnemar"] == 0.5  # 2 discordant pairs, both one way: 2 * 0.5^2
     assert [i["index"] for i, _ in pairs(rows, "a", "b")] == [0]
-    assert [i["index"] for i, _ in pairs(rows, "a", "b", completed=False)] == [0, 1]
+    assert [i["index"] for i, _ in pairs(rows, "a", "b", completed=False)] == [0, 1, 3]
