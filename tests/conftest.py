@@ -41,8 +41,11 @@ def quick(raw, **changes):
 
 @pytest.fixture(scope="session")
 def make_case(raw):
-    """Factory of quick cases: ``make_case(**changes)`` (Case 1, small W sample)."""
-    return lambda **changes: quick(raw, **changes)
+    """Factory of quick cases: ``make_case(**changes)`` (Case 1, small W sample; without
+    the RMPC baseline, whose off-line design costs about a minute, unless ``variants``
+    is given)."""
+    no_rmpc = [v for v in raw["variants"] if v != "rmpc"]
+    return lambda **changes: quick(raw, **{"variants": no_rmpc, **changes})
 
 
 @pytest.fixture(scope="session")

@@ -34,3 +34,32 @@ def test_sigterm_on_simulate_finalises_the_run_and_exits_130(quick_case, tmp_pat
     )  # fmt: skip
     assert "fahv simulate: interrupted at step" in text
     assert 0 < steps < 15000
+
+
+def test_simulate_runs_the_default_variant_unless_told(raw):
+    """`fahv simulate CASE` runs the case's first variant; `--variant all` every one."""
+    import pytest
+
+    from fahv.cli.run import selected_variants
+    from fahv.design.case import case_from_mapping
+    from fahv.errors import FahvError
+
+    case = case_from_mapping(raw, "case1.yaml")
+    assert selected_variants(case, None) == ["tube_mpc"]
+    assert selected_variants(case, ["all"]) == list(raw["variants"])
+    assert selected_variants(case, ["rmpc", "tube_mpc", "rmpc"]) == ["rmpc", "tube_mpc"]
+    with pytest.raises(FahvError, match="not in the case's variants"):
+        selected_variants(case, ["tube_mpc_online"])
+
+
+def test_simulate_all_prints_a_progress_line_per_variant(quick_case, tmp_path, capsys):
+    case_file, art = quick_case
+    args = ["simulate", str(case_file), "--design", str(art), "--no-record",
+            "--duration", "0.1", "--variant", "all", "--json"]  # fmt: skip
+    assert main(args) == 0
+    out = capsys.readouterr()
+    table = json.loads(out.out)
+    assert list(table) == ["tube_mpc", "tube_mpc_no_notch", "tube_mpc_notch2",
+                           "tube_mpc_paper", "rmpc"]  # fmt: skip
+    for i, v in enumerate(table, 1):
+        assert f"[{i}/5] case1 {v}: done in" in out.err

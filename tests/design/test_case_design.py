@@ -126,14 +126,14 @@ def test_defaulted_knobs_may_be_omitted(raw):
     d = copy.deepcopy(raw)
     for key in ("samples", "trim_grid", "plant_substeps", "disturbance", "nominal"):
         d.pop(key)
-    for key in ("vertices", "resolve_every"):
+    for key in ("vertices", "ellipsoids", "ratio", "margin"):
         d["rmpc"].pop(key)
     d["tube"].pop("lam")
     c = case_from_mapping(d, "lean.yaml")
     full = case_from_mapping(raw, "full.yaml")
     assert c.data == full.data  # case1.yaml sets every knob to its default
     assert c.defaults_used["disturbance.samples"] == 300
-    assert c.defaults_used["rmpc.resolve_every"] == 250
+    assert c.defaults_used["rmpc.ellipsoids"] == 9
     assert set(c.defaults_used) >= {"samples", "trim_grid", "tube.lam", "nominal.lam"}
     assert full.defaults_used == {}
 

@@ -91,10 +91,13 @@ def test_failing_runs_are_reported_and_the_others_complete(design):
 
 def test_rmpc_runs_batched_and_equal(design):
     ovs = [{"fault_injector": {"kind": "bias", "t_onset": 0.0, "bias_deg": 1.0}}, None]
-    res = simulate_batch(design, "rmpc", ovs, 0.1)
+    ovs.append({"plant": {"params.m": 1.05 * design.summary["plant_params"]["m"]}})
+    res = simulate_batch(design, "rmpc", ovs, 20.0)
     for ov, r in zip(ovs, res, strict=True):
-        _assert_same(simulate(design, "rmpc", 0.1, overrides=ov), r)
-    assert res[0].lmi_counts[0] == 1  # one online LMI solve per run at step 0
+        _assert_same(simulate(design, "rmpc", 20.0, overrides=ov), r)
+    # off-line law: no online solve, every state inside the largest ellipsoid
+    assert all(r.lmi_counts.tolist() == [0, 0, 0] for r in res)
+    assert not np.array_equal(res[1].x, res[2].x)  # the runs differ, each equals simulate
 
 
 @pytest.fixture(scope="module")

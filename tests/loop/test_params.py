@@ -61,6 +61,8 @@ def test_variants(design):
     rmpc = node_parameters(design, "rmpc")
     assert "rmpc" in rmpc and "tube_mpc" not in rmpc
     assert rmpc["nominal_trajectory"]["nominal"] == "command"
-    assert np.asarray(rmpc["rmpc"]["rmpc_A"]).size == 20 * 81
+    N = design.case["rmpc"]["ellipsoids"]  # the off-line RMPC: ellipsoids and gains
+    assert np.asarray(rmpc["rmpc"]["rmpc_P"]).size == N * 81
+    assert np.asarray(rmpc["rmpc"]["rmpc_K"]).size == N * 18
     with pytest.raises(ParameterError, match="variant 'pid'"):
         node_parameters(design, "pid")

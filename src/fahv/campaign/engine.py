@@ -275,12 +275,20 @@ def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=p
 
 
 def batches(campaign: Campaign, done: set) -> list[tuple[str, list[int]]]:
-    """(variant, indices) of every batch still to run, in index order per variant."""
-    out = []
+    """(variant, indices) of every batch still to run.
+
+    In index order, the variants of one range of indices next to each other (runs
+    0-99 of every variant, then 100-199, ...), so that the finished part of an
+    interrupted or partly run campaign holds both runs of each pair (paired report).
+    """
     size = campaign["batch_size"]
-    for v in campaign["variants"]:
-        todo = [i for i in range(campaign["runs"]) if (i, v) not in done]
-        out += [(v, todo[j : j + size]) for j in range(0, len(todo), size)]
+    todo = {
+        v: [i for i in range(campaign["runs"]) if (i, v) not in done]
+        for v in campaign["variants"]
+    }
+    out = []
+    for j in range(0, max((len(t) for t in todo.values()), default=0), size):
+        out += [(v, t[j : j + size]) for v, t in todo.items() if t[j : j + size]]
     return out
 
 

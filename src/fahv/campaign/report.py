@@ -15,7 +15,9 @@ final_h         |h - h_c| at the end <= h_final_ft
 final_V         |V - V_c| at the end <= V_final_fps
 ==============  ===============================================================
 
-A run without metrics (it raised) fails every requirement. Failure-probability
+With two or more variants, each other variant is compared with the first run by run
+on the same draws (:mod:`fahv.campaign.paired`: paired differences with confidence
+intervals, figures). A run without metrics (it raised) fails every requirement. Failure-probability
 bound: with k failures in n runs, the one-sided Clopper-Pearson upper bound at
 confidence C, ``beta.ppf(C, k + 1, n - k)``; for k = 0 it is the zero-failure bound
 1 - (1 - C)^(1/n) (n runs without a failure show p < that bound at confidence C).
@@ -33,6 +35,7 @@ from scipy.stats import beta
 
 from fahv.campaign import store
 from fahv.campaign.draws import scatter_columns
+from fahv.campaign.paired import paired_figures, paired_stats, paired_text
 
 #: Requirements in report order: (key, description).
 REQUIREMENTS = (
@@ -212,6 +215,14 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
     if reasons:
         lines += ["", "Failed runs by reason:", ""]
         lines += [f"- {n} x {reason}" for reason, n in reasons.most_common()]
+    paired = []
+    for b in data["variants"][1:]:  # every other variant against the first, run by run
+        a = data["variants"][0]
+        res = paired_stats(rows, a, b, conf)
+        paired.append((a, b, res))
+        lines += [""] + paired_text(res, a, b)
+        if res["completion"]["both"] < res["completion"]["n"]:  # also with envelope exits
+            lines += [""] + paired_text(paired_stats(rows, a, b, conf, completed=False), a, b)
     lines += ["", f"## Worst {worst} runs per metric", ""]
     for key, label, worse, _ in WORST_METRICS:
         for v in data["variants"]:
@@ -234,6 +245,14 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
     figs: list[Path] = []
     if figures and rows:
         figs = draw_figures(out, data, per_variant, cols)
+        if paired:
+            import matplotlib
+
+            matplotlib.use("Agg")
+            import matplotlib.pyplot as plt
+
+            for a, b, res in paired:
+                figs += paired_figures(res, a, b, out / "report", plt)
         lines += ["## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figs]
     text = "\n".join(lines) + "\n"
     rep = out / "report"

@@ -11,6 +11,7 @@ Subcommands::
     fahv sil       the ROS 2 node graph of a case in lockstep, recorded to MCAP
     fahv plot      paper-style figures of recorded runs, overlaid
     fahv paper-figures   Fig. 9-17 of the paper from Cases 1 and 2
+    fahv results   every variant of Cases 1 and 2: the README's results tables, reference
     fahv inspect   topics, metadata, step anomalies and metrics of a run
     fahv export    one CSV / Parquet table per topic, with units
     fahv compare   metrics of two runs side by side

@@ -32,7 +32,7 @@ class StepProgress:
 
     Passed to :func:`fahv.loop.simulate.simulate` as its ``writer``: it sees every
     message of every step, forwards it to the run writer (if any), advances the bar
-    once per step and shows the RMPC's LMI solves so far. On a terminal the bar
+    once per step. On a terminal the bar
     updates in place; in a log it writes a line every 10 s.
 
     Parameters
@@ -55,7 +55,6 @@ class StepProgress:
         self.writer = writer
         self.live = live
         self.k = 0
-        self.solves = 0
 
     def write(self, topic: str, k: int, msg) -> None:
         """Forward one message of step k; count the step after its last topic."""
@@ -66,10 +65,7 @@ class StepProgress:
                 self.writer.write_raw(topic, k, data)
         elif self.writer is not None:
             self.writer.write(topic, k, msg)
-        if topic == "/hsv/tube_status" and int(msg.lmi_solves[0]) != self.solves:
-            self.solves = int(msg.lmi_solves[0])
-            self.bar.set_postfix(lmi_solves=self.solves, refresh=False)
-        elif topic == self.LAST_TOPIC:
+        if topic == self.LAST_TOPIC:
             self.k = k + 1
             self.bar.update(1)
 
@@ -111,18 +107,50 @@ def _simulate_recorded(design, variant: str, duration, out_dir, live=None):
     return run
 
 
+def selected_variants(case, requested: list[str] | None) -> list[str]:
+    """Variants a command runs: the case's default (its first) unless ``requested``.
+
+    ``requested`` lists variant names of the case, or is ``["all"]`` for every variant
+    of the case in its order.
+
+    Raises
+    ------
+    FahvError
+        On a variant the case does not list (naming the case's variants).
+    """
+    listed = list(case["variants"])
+    if not requested:
+        return listed[:1]
+    if requested == ["all"]:
+        return listed
+    unknown = [v for v in requested if v not in listed]
+    if unknown:
+        raise FahvError(
+            f"{case.name}: variant(s) {', '.join(unknown)} not in the case's variants "
+            f"{listed} (or use --variant all)"
+        )
+    return list(dict.fromkeys(requested))
+
+
 def cmd_simulate(args) -> int:
     """In-process closed loop of a case; records each variant to bags/, prints metrics."""
+    import time
+
     case, design, vehicle = load_or_design(args.case, args.design, args.vehicle)
-    variants = args.variant or case["variants"]
+    variants = selected_variants(case, args.variant)
     limits = vehicle.limits
     table = {}
     live = _live_view(args.live, case["Ts"])
     try:
-        for v in variants:
+        for i, v in enumerate(variants, 1):
             out = None if args.no_record else Path(args.out or ROOT / "bags")
+            n = len(variants)
+            print(f"[{i}/{n}] {case.name} {v}: simulating", file=sys.stderr, flush=True)
+            t0 = time.perf_counter()
             run = _simulate_recorded(design, v, args.duration, out, live)
             table[v] = metrics(run, limits)
+            print(f"[{i}/{n}] {case.name} {v}: done in {time.perf_counter() - t0:.1f} s",
+                  file=sys.stderr, flush=True)  # fmt: skip
     finally:
         if live is not None:
             live.close()
@@ -293,13 +321,46 @@ def _add_live_option(p) -> None:
         f"{DEFAULT_PORT}; 0: any free port)",
     )
 
+def cmd_results(args) -> int:
+    """Every variant of each case: the README's results table; reference JSON write/check."""
+    from fahv.runs.results import (
+        compare_reference,
+        markdown_table,
+        read_reference,
+        run_case,
+        write_reference,
+    )
+
+    results = {}
+    for path in args.cases:
+        case, design, vehicle = load_or_design(path, None, args.vehicle)
+        print(f"{case.name}: design {design.summary['design_hash']}", file=sys.stderr)
+        log = lambda line: print(line, file=sys.stderr, flush=True)  # noqa: E731
+        results[case.name] = run_case(design, case["variants"], vehicle.limits, log)
+    print(markdown_table(results))
+    if args.write_reference:
+        print(f"reference written to {write_reference(results, args.write_reference)}")
+    if args.check:
+        bad = compare_reference(results, read_reference(args.check))
+        for line in bad:
+            print(f"differs: {line}")
+        print(f"{args.check}: {'within' if not bad else 'OUTSIDE'} the tolerances")
+        return 1 if bad else 0
+    return 0
+
 
 def add_parsers(sub) -> None:
     """Add the parsers of this command group."""
     p = sub.add_parser("simulate", help="in-process closed loop of a case, metrics table")
     p.add_argument("case", help="case file")
     p.add_argument("--design", default=None, help="artefact folder (designed if missing)")
-    p.add_argument("--variant", nargs="+", default=None, help="variants (default: the case's)")
+    p.add_argument(
+        "--variant",
+        nargs="+",
+        default=None,
+        help="variants to run (default: the case's first, its default variant; 'all': every "
+        "variant of the case, with a progress line per variant)",
+    )
     p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
     p.add_argument("--out", default=None, help="folder of the recorded runs (default bags/)")
     p.add_argument("--no-record", action="store_true", help="do not write the runs to MCAP")
@@ -379,3 +440,17 @@ def add_parsers(sub) -> None:
     p.add_argument("--out", default="docs/figures")
     add_vehicle_option(p)
     p.set_defaults(func=cmd_paper_figures)
+    p = sub.add_parser(
+        "results",
+        help="every variant of Cases 1 and 2 in process: the README's results tables; "
+        "write or check the metrics reference (tests/data/results_reference.json)",
+    )
+    p.add_argument(
+        "--cases", nargs="+", default=["offline_design/case1.yaml", "offline_design/case2.yaml"]
+    )
+    p.add_argument("--write-reference", metavar="FILE", default=None,
+                   help="write the metrics of every case and variant as JSON")  # fmt: skip
+    p.add_argument("--check", metavar="FILE", default=None,
+                   help="compare with a reference JSON; exit 1 outside the tolerances")  # fmt: skip
+    add_vehicle_option(p)
+    p.set_defaults(func=cmd_results)

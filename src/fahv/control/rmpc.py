@@ -1,4 +1,14 @@
-"""Robust MPC of Kothare, Balakrishnan and Morari (1996): the baseline of sec. 5.2."""
+"""Robust MPC baseline of sec. 5.2 (Kothare et al. 1996, ref. [37]) in its off-line form.
+
+The paper compares its Tube-MPC with the "traditional" robust MPC of Kothare,
+Balakrishnan & Morari (1996) on the DM LPV model: at each step, the min-gamma problem
+(32)-(35) with the current state. This law is the off-line formulation of that
+controller by Wan & Kothare (2003): ``fahv design`` solves the same problem for a
+sequence of states along the case's set-point change, with nested ellipsoids, and
+re-checks every certificate (:mod:`fahv.synthesis.offline_rmpc`); on line the law
+finds the smallest stored ellipsoid that holds the state deviation and interpolates
+the gain in closed form (no solver, a few stacked products per step, for B runs).
+"""
 
 from __future__ import annotations
 
@@ -12,156 +22,85 @@ from fahv.control.reference import CommandReference
 from fahv.errors import DesignError, ParameterError
 from fahv.lanes import Lanes
 from fahv.model.tp_model import build_tp_model
+from fahv.model.trim import TrimMap
 from fahv.msg import NominalTrajectory
-from fahv.synthesis.lmi import SDP_SOLVER, scale_vertices
+from fahv.synthesis.offline_rmpc import design_sequence
+
+#: Plant states the baseline feeds back (the 9 states of the DM).
+NX = 9
 
 
-class RobustMPC:
-    """The "traditional" robust MPC of Kothare, Balakrishnan & Morari (1996), sec. 5.2.
+class OfflineRMPC:
+    """On-line part of the off-line RMPC (Wan & Kothare 2003) for B runs at once.
 
-    At every ``resolve_every``-th step, minimise gamma subject to (33)-(35) with the
-    current state x(k) - x_r (in place of x_n; x_r the trim of the raw command, no
-    governor) and the full input room (no tube), and apply u = u_r + K (x - x_r)
-    until the next solve.
+    For each run, z = (x - x_r) / Ds and the levels l_i = z' P_i z of the N nested
+    ellipsoids (l_1 <= l_2 <= ... since E_{i+1} lies inside E_i). With i the smallest
+    ellipsoid holding z (l_i <= 1 < l_{i+1}), a = (l_{i+1} - 1) / (l_{i+1} - l_i)
+    solves z' (a P_i + (1 - a) P_{i+1}) z = 1, and
 
-    Each solve is certified numerically: contraction of E(Q) < 1 for every vertex,
-    the input bound on E(Q), and x(k) - x_r inside E(Q). When the min-gamma solve
-    is not certified (large set-point steps put its optimum on the edge of
-    feasibility, where gamma ~ 1e6 and interior-point solvers lose accuracy), the
-    same LMIs are solved for the largest margin s (s (x - x_r) in E(Q), s <= 1.1)
-    and that feasible, certified (Q, Y) is used: it is still a Kothare gain, only
-    not cost-optimal (counted in ``n_fallback``). If both fail, the previous gain
-    is kept and the failure is counted (``n_failed``).
+        u = u_r + u_max * ((a K_i + (1 - a) K_{i+1}) z);
+
+    inside the smallest ellipsoid u = u_r + u_max * K_N z. A state outside the largest
+    ellipsoid E_1 gets K_1 (no certificate holds there) and is counted.
 
     Parameters
     ----------
-    A : (R, n, n) ndarray
-    B : (R, n, m) ndarray
-        Discrete vertices of the design model (the DM LPV model in the paper).
-    u_room : (m,) ndarray
-        Input bounds |u - u_r| <= u_room.
-    psi : (n,) ndarray
-    sigma : (m,) ndarray
-        Diagonal weights of (31), scaled units.
-    Dx, Du : ndarray
-        State and input scales.
-    resolve_every : int
-        Steps between LMI solves (>= 1).
+    P : (N, n, n) ndarray
+        Inverses of the ellipsoids, scaled units
+        (:class:`~fahv.synthesis.offline_rmpc.EllipsoidSequence`).
+    K : (N, m, n) ndarray
+        Gains, scaled units (v = K z, u - u_r = u_max v).
+    Ds : (n,) ndarray
+        State scales.
+    u_max : (m,) ndarray
+        Input bounds of the design (input scales).
 
     Raises
     ------
     ValueError
-        If ``resolve_every`` < 1.
+        On inconsistent shapes or non-finite values.
     """
 
-    #: Upper bound on the margin s of the fallback problem (s >= 1 is required).
-    S_CAP = 1.1
+    def __init__(self, P, K, Ds, u_max) -> None:
+        P, K = np.asarray(P, float), np.asarray(K, float)
+        Ds, u_max = np.asarray(Ds, float), np.asarray(u_max, float)
+        N, n = P.shape[0], Ds.size
+        if P.shape != (N, n, n) or K.shape != (N, u_max.size, n) or N < 1:
+            raise ValueError(f"offline RMPC: P {P.shape}, K {K.shape}, Ds {Ds.shape} do not match")
+        if not all(np.all(np.isfinite(a)) for a in (P, K, Ds, u_max)):
+            raise ValueError("offline RMPC: P, K, Ds and u_max must be finite")
+        self.P, self.K, self.Ds, self.u_max, self.N = P, K, Ds, u_max, N
 
-    def __init__(self, A, B, u_room, psi, sigma, Dx, Du, resolve_every: int) -> None:
-        if resolve_every < 1:
-            raise ValueError(f"RMPC resolve_every must be >= 1, got {resolve_every}")
-        import cvxpy as cp  # imported here: the other controllers start without it
+    def levels(self, z: np.ndarray) -> np.ndarray:
+        """Levels z_b' P_i z_b (B, N) of scaled deviations z (B, n) (stacked products)."""
+        Pz = np.matmul(self.P[None], z[:, None, :, None])  # (B, N, n, 1)
+        return np.matmul(z[:, None, None, :], Pz)[..., 0, 0]
 
-        As, Bs = scale_vertices(np.asarray(A, float), np.asarray(B, float), Dx, Du)
-        R, n, m = Bs.shape
-        self.Dx, self.Du, self.resolve_every = np.asarray(Dx), np.asarray(Du), resolve_every
-        self._As, self._Bs = As, Bs
-        self.u_room_s = np.asarray(u_room, float) / self.Du
-        self._x0 = cp.Parameter(n)
-        Qv = cp.Variable((n, n), symmetric=True)
-        Y = cp.Variable((m, n))
-        g = cp.Variable()
-        Xd = cp.Variable(m)
-        s = cp.Variable()
-        ps, ss = np.sqrt(np.asarray(psi, float)), np.sqrt(np.asarray(sigma, float))
-        lmis = [Xd <= self.u_room_s**2]  # (33)-(35) without the initial-state LMI
-        for i in range(R):
-            AQ = As[i] @ Qv + Bs[i] @ Y
-            blk = cp.bmat(
-                [
-                    [Qv, AQ.T, Qv @ np.diag(ps), Y.T @ np.diag(ss)],
-                    [AQ, Qv, np.zeros((n, n)), np.zeros((n, m))],
-                    [np.diag(ps) @ Qv, np.zeros((n, n)), g * np.eye(n), np.zeros((n, m))],
-                    [np.diag(ss) @ Y, np.zeros((m, n)), np.zeros((m, n)), g * np.eye(m)],
-                ]
-            )
-            lmis.append(0.5 * (blk + blk.T) >> 0)
-        blk = cp.bmat([[cp.diag(Xd), Y], [Y.T, Qv]])
-        lmis.append(0.5 * (blk + blk.T) >> 0)
+    def control(self, dx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Input deviations u - u_r (B, m) for state deviations dx (B, n).
 
-        def contains(x):  # x' Q^-1 x <= 1 as an LMI (33)
-            return cp.bmat([[np.ones((1, 1)), x[None, :]], [x[:, None], Qv]]) >> 0
-
-        self._prob = cp.Problem(cp.Minimize(g), [contains(self._x0), *lmis])
-        self._prob_margin = cp.Problem(
-            cp.Maximize(s), [contains(s * self._x0), s <= self.S_CAP, *lmis]
-        )
-        self._Q, self._Y = Qv, Y
-        self.K = np.zeros((m, n))
-        self.Q_s = None  # scaled Q of the gain in use
-        self.n_solves = 0
-        self.n_fallback = 0
-        self.n_failed = 0
-        self.have_gain = False
-
-    def _certified_gain(self, prob, x0s: np.ndarray) -> tuple | None:
-        """Solve ``prob``; (K, Q) in scaled units if its result is certified, else None."""
-        import cvxpy as cp
-
-        from fahv.synthesis.nominal import contraction, input_ratio
-
-        try:
-            prob.solve(solver=SDP_SOLVER)
-        except cp.error.SolverError:
-            return None
-        if prob.status not in ("optimal", "optimal_inaccurate") or self._Q.value is None:
-            return None
-        Qs = 0.5 * (self._Q.value + self._Q.value.T)
-        try:
-            Ks = self._Y.value @ np.linalg.inv(Qs)
-            c = contraction(self._As, self._Bs, Ks, Qs)
-        except np.linalg.LinAlgError:  # Q singular or not positive definite
-            return None
-        ratio = input_ratio(Ks, Qs, self.u_room_s)
-        level = float(x0s @ np.linalg.solve(Qs, x0s))
-        if not (c < 1.0 and np.all(ratio <= 1.0 + 1e-6) and level <= 1.0 + 1e-6):
-            return None
-        return Ks, Qs
-
-    def _solve(self, dx: np.ndarray) -> bool:
-        x0s = dx / self.Dx
-        self._x0.value = x0s
-        self.n_solves += 1
-        gain = self._certified_gain(self._prob, x0s)
-        if gain is None:
-            gain = self._certified_gain(self._prob_margin, x0s)
-            if gain is None:
-                return False
-            self.n_fallback += 1
-        Ks, self.Q_s = gain
-        self.K = Ks * self.Du[:, None] / self.Dx[None, :]
-        return True
-
-    def step(self, k: int, x: np.ndarray, x_r: np.ndarray, u_r: np.ndarray) -> np.ndarray:
-        """Command u (2,) at step k for the measured state x (n,) and the trim x_r, u_r.
-
-        Raises
-        ------
-        DesignError
-            If the very first solve fails (there is no gain to fall back on).
+        Returns
+        -------
+        du : (B, m) ndarray
+        index : (B,) int ndarray
+            Number of ellipsoids holding the state (0: outside E_1, N: inside E_N).
+        alpha : (B,) ndarray
+            Interpolation weight of the smaller-index gain K_i.
         """
-        dx = np.asarray(x, float) - x_r
-        if k % self.resolve_every == 0:
-            if self._solve(dx):
-                self.have_gain = True
-            else:
-                self.n_failed += 1
-                if not self.have_gain:
-                    raise DesignError(
-                        "RMPC: the first LMI solve (33)-(35) failed: no invariant "
-                        "ellipsoid contains the initial state within the input room"
-                    )
-        return u_r + self.K @ dx
+        z = dx / self.Ds
+        lv = self.levels(z)
+        c = np.count_nonzero(lv <= 1.0, axis=1)
+        i = np.maximum(c - 1, 0)
+        j = np.minimum(c, self.N - 1)
+        rows = np.arange(z.shape[0])
+        li, lj = lv[rows, i], lv[rows, j]
+        between = (c >= 1) & (c < self.N)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            a = np.where(between, (lj - 1.0) / (lj - li), 1.0)
+        vi = np.matmul(self.K[i], z[:, :, None])[..., 0]
+        vj = np.matmul(self.K[j], z[:, :, None])[..., 0]
+        v = a[:, None] * vi + (1.0 - a[:, None]) * vj
+        return v * self.u_max, c, a
 
 
 def _uses_rmpc(root) -> bool:
@@ -178,12 +117,22 @@ def _matrix(name: str, description: str) -> Field:
     )
 
 
-class RMPCLaw(ControlLaw):
-    """Kothare robust MPC (1996), the paper's baseline: u = u_r + K_k (x - x_r).
+def fractions(case_rmpc: dict) -> np.ndarray:
+    """Fractions f_i = margin * ratio^(i - 1), i = 1..ellipsoids, of the case's step."""
+    r = case_rmpc
+    return float(r["margin"]) * float(r["ratio"]) ** np.arange(int(r["ellipsoids"]))
 
-    Offline it builds the DM polytopic LPV model (the model of the baseline in the
-    paper) with ``rmpc.vertices``; online :class:`RobustMPC` solves the LMIs
-    (33)-(35) every ``resolve_every`` steps, certified after each solve.
+
+class RMPCLaw(ControlLaw):
+    """Kothare robust MPC (1996), the paper's baseline, off-line form (Wan & Kothare 2003).
+
+    Offline (``fahv design``): the DM polytopic LPV model (the model of the baseline in
+    the paper, ``rmpc.vertices``), and N nested invariant ellipsoids with their gains
+    from the min-gamma LMIs (32)-(35) at N states along the case's set-point change
+    (:func:`fahv.synthesis.offline_rmpc.design_sequence`, every certificate re-checked).
+    Online: u = u_r + K(x) (x - x_r), K(x) interpolated between the two ellipsoids
+    around x (:class:`OfflineRMPC`); x_r, u_r the trim of the raw command (no governor,
+    no tube).
     """
 
     name = "rmpc"
@@ -195,95 +144,123 @@ class RMPCLaw(ControlLaw):
         (
             Field("vertices", "ints", "TP vertices of the DM model (h, V)", lo=1, length=2,
                   default=(4, 5), equation="eq. (11)"),
-            Field("resolve_every", "int", "steps between LMI solves", lo=1, default=250),
-            Field("psi", "float", "state weight of the cost (31), scaled units", lo=0.0,
-                  lo_open=True, equation="eq. (31)"),
-            Field("sigma", "float", "input weight of the cost (31), scaled units", lo=0.0,
-                  lo_open=True, equation="eq. (31)"),
+            Field("psi", "floats", "diagonal state weights of the cost (31) (h, V, alpha, "
+                  "theta, q, eta_1, eta_1_dot, eta_2, eta_2_dot) on z = (x - x_r) / Ds",
+                  lo=0.0, lo_open=True, length=NX, equation="eq. (31)"),
+            Field("sigma", "float", "input weight of the cost (31), on (u - u_r) / u_room",
+                  lo=0.0, lo_open=True, equation="eq. (31)"),
+            Field("ellipsoids", "int", "number N of nested ellipsoids (Wan & Kothare 2003)",
+                  lo=1, hi=200, default=9),
+            Field("ratio", "float", "size ratio of consecutive design states x_{i+1} / x_i",
+                  lo=0.0, hi=1.0, lo_open=True, hi_open=True, default=0.6),
+            Field("margin", "float", "design state of E_1 as a multiple of the case's step "
+                  "x(0) - x_r (>= 1: the step starts inside E_1)", lo=0.0, lo_open=True,
+                  default=1.05),
         ),
-        "Kothare robust MPC baseline",
+        "Kothare robust MPC baseline (off-line form, Wan & Kothare 2003)",
         when=_uses_rmpc,
         when_text="a variant uses the law rmpc",
     )  # fmt: skip
     parameters = (
-        _matrix("rmpc_A", "RMPC model vertices A_i (R, 9, 9)"),
-        _matrix("rmpc_B", "RMPC model vertices B_i (R, 9, 2)"),
+        _matrix("rmpc_P", "inverses P_i of the nested ellipsoids (N, 9, 9), scaled units"),
+        _matrix("rmpc_K", "gains K_i (N, 2, 9), scaled units: (u - u_r) / u_room = K_i z"),
+        _matrix("rmpc_Ds", "state scales of the ellipsoids (9,): z = (x - x_r) / Ds"),
         _matrix("u_room", "RMPC input room |u - u_r| <= u_room (2,) [-, rad]"),
-        _matrix("psi", "RMPC state weights (9,), scaled units"),
-        _matrix("sigma", "RMPC input weights (2,), scaled units"),
-        _matrix("Dx", "state scales (9,)"),
-        _matrix("Du", "input scales (2,)"),
-        Field("resolve_every", "int", "RMPC steps between LMI solves", lo=1, hi=10**7,
-              when=lambda p: p.get("law") == "rmpc", when_text="law is rmpc"),
-    )  # fmt: skip
+    )
 
     def __init__(self, p: dict, n_runs: int = 1) -> None:
         super().__init__(p, n_runs)
-        R = p["rmpc_A"].shape[0] if p["rmpc_A"].ndim == 3 else -1
+        N = p["rmpc_P"].shape[0] if p["rmpc_P"].ndim == 3 else -1
         for name, shape in (
-            ("rmpc_A", (R, 9, 9)),
-            ("rmpc_B", (R, 9, 2)),
+            ("rmpc_P", (N, NX, NX)),
+            ("rmpc_K", (N, 2, NX)),
+            ("rmpc_Ds", (NX,)),
             ("u_room", (2,)),
-            ("psi", (9,)),
-            ("sigma", (2,)),
-            ("Du", (2,)),
         ):
             if p[name].shape != shape:
                 raise ParameterError(
                     f"rmpc: parameter '{name}' has shape {p[name].shape}, expected {shape}"
                 )
-        if p["Dx"].ndim != 1 or p["Dx"].size < 9:
-            raise ParameterError("rmpc: parameter 'Dx' needs at least 9 scales")
-        #: one online problem per run (each run re-solves at its own state)
-        self.rmpc = [
-            RobustMPC(
-                p["rmpc_A"], p["rmpc_B"], p["u_room"], p["psi"], p["sigma"], p["Dx"][:9],
-                p["Du"], p["resolve_every"],
-            )
-            for _ in range(n_runs)
-        ]  # fmt: skip
+        try:
+            self.kernel = OfflineRMPC(p["rmpc_P"], p["rmpc_K"], p["rmpc_Ds"], p["u_room"])
+        except ValueError as exc:
+            raise ParameterError(f"rmpc: {exc}") from None
+        self.outside = np.zeros(n_runs, dtype=np.int64)
 
     @classmethod
     def design(cls, ctx) -> dict[str, np.ndarray]:
-        """DM vertices of the baseline (``rmpc_A``, ``rmpc_B``), discretised at Ts."""
-        rv = ctx.case["rmpc"]["vertices"]
+        """DM vertices and the certified ellipsoid sequence of the baseline.
+
+        Raises
+        ------
+        DesignError
+            If an ellipsoid cannot be solved or a certificate fails
+            (:func:`fahv.synthesis.offline_rmpc.design_sequence`).
+        """
+        r = ctx.case["rmpc"]
+        rv = r["vertices"]
         dm = build_tp_model(ctx.vehicle, "dm", rv[0], rv[1], *ctx.case["samples"])
         dmd = dm.discretize(ctx.case["Ts"])
-        return {"rmpc_A": dmd.A, "rmpc_B": dmd.B}
+        a = ctx.arrays
+        tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+        cmd = ctx.case["command"]
+        x_r = np.asarray(tm(cmd["h_c"], cmd["V_c"])[0][:NX], float)
+        d = np.asarray(a["x0"][:NX], float) - x_r
+        Dx = np.asarray(dm.state_scale, float)[:NX]
+        Ds = Dx * np.maximum(1.0, np.abs(d) / Dx)  # command-sized scales
+        f = fractions(r)
+        seq, cert = design_sequence(
+            dmd.A, dmd.B, d, a["u_room"], np.asarray(r["psi"], float),
+            np.full(2, float(r["sigma"])), Ds, f,
+        )  # fmt: skip
+        level0 = float((d / Ds) @ seq.P[0] @ (d / Ds))
+        if not level0 <= 1.0:
+            raise DesignError(f"rmpc: the case's step lies outside E_1 (level {level0:.6f})")
+        ctx.log(
+            f"certificate RMPC (Wan & Kothare 2003, {f.size} ellipsoids on the "
+            f"{dmd.A.shape[0]}-vertex DM, fractions {f[0]:.3g}..{f[-1]:.3g} of the step): "
+            f"contraction <= {cert['contraction'].max():.7f}, input ratio <= "
+            f"{cert['input_ratio'].max():.4f}, nesting <= {cert['nesting'].max(initial=0):.4f}, "
+            f"interpolation (WK) <= {cert['wk'].max(initial=0):.7f}, interpolated law on "
+            f"the a grid: contraction <= {cert['interp_contraction'].max(initial=0):.7f}, "
+            f"input ratio <= {cert['interp_input_ratio'].max(initial=0):.4f}; the step's "
+            f"level in E_1 {level0:.4f}  OK"
+        )
+        return {
+            "rmpc_A": dmd.A,
+            "rmpc_B": dmd.B,
+            "rmpc_P": seq.P,
+            "rmpc_Q": seq.Q,
+            "rmpc_K": seq.K,
+            "rmpc_gamma": seq.gamma,
+            "rmpc_Ds": Ds,
+            "rmpc_d": d,
+            "rmpc_z": seq.z,
+        }
 
     @classmethod
     def node_values(cls, arrays: dict, case: dict) -> dict:
-        """The RMPC's arrays, weights and scales."""
-        r = case["rmpc"]
+        """The ellipsoids, gains and scales of the baseline."""
         return {
-            "rmpc_A": arrays["rmpc_A"],
-            "rmpc_B": arrays["rmpc_B"],
+            "rmpc_P": arrays["rmpc_P"],
+            "rmpc_K": arrays["rmpc_K"],
+            "rmpc_Ds": arrays["rmpc_Ds"],
             "u_room": arrays["u_room"],
-            "psi": np.full(9, float(r["psi"])),
-            "sigma": np.full(2, float(r["sigma"])),
-            "Dx": arrays["Dx"][:9],
-            "Du": arrays["Du"],
-            "resolve_every": int(r["resolve_every"]),
         }
 
     def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
-        """Commands of step k for B runs, each with its own online LMI problem (no tube).
+        """Commands of step k for B runs (closed form, no solver; no tube).
 
-        A run whose first solve fails fails alone (:class:`~fahv.errors.DesignError`).
+        ``LawStep.lmi`` holds (0, 0, steps so far with the state outside E_1).
         """
+        x = np.asarray(x, float)
+        dx = x[:, :NX] - ref.x_r[:, :NX]
+        du, c, _ = self.kernel.control(dx)
+        self.outside += (c == 0) & lanes.alive
         B = x.shape[0]
-        u = np.zeros((B, 2))
         lmi = np.zeros((B, 3), dtype=np.int64)
-        for b in range(B):
-            if not lanes.alive[b]:
-                continue
-            r = self.rmpc[b]
-            try:
-                u[b] = r.step(k, x[b, :9], ref.x_r[b, :9], ref.u_r[b])
-            except DesignError as exc:
-                lanes.fail(b, exc)
-            lmi[b] = (r.n_solves, r.n_fallback, r.n_failed)
-        return LawStep(u, np.asarray(x, float) - ref.x_r, np.full(B, math.nan), lmi)
+        lmi[:, 2] = self.outside
+        return LawStep(ref.u_r + du, x - ref.x_r, np.full(B, math.nan), lmi)
 
 
 register_law(RMPCLaw)

@@ -36,7 +36,9 @@ class Design:
         ``W_h``, ``W_V`` TP weighting functions; ``Dx``, ``Du`` scales; ``w_max`` (n,)
         W; ``F`` (2, n), ``N`` (n, n) tube; ``K`` (2, n), ``Q`` (n, n) nominal;
         ``u_room``, ``u_n_max`` (2,); ``trim_h``, ``trim_V``, ``trim_x`` (Nh, NV, n),
-        ``trim_u`` (Nh, NV, 2); ``rmpc_A``, ``rmpc_B`` (DM vertices);
+        ``trim_u`` (Nh, NV, 2); ``rmpc_A``, ``rmpc_B`` (DM vertices), ``rmpc_Q``,
+        ``rmpc_P``, ``rmpc_K``, ``rmpc_gamma``, ``rmpc_z``, ``rmpc_Ds``, ``rmpc_d`` (the
+        RMPC's nested ellipsoids, gains, cost bounds, design states, scales, step);
         ``omega_flex`` (2,) flexible-mode frequencies at the initial trim [rad/s].
     summary : dict
         Scalars: certificates, W breakdown, plant parameters, hash.
@@ -150,6 +152,7 @@ def provenance(case, vehicle) -> dict:
         "vehicle_hash": vehicle.data_hash,
         "code_version": __version__,
         "code_hash": code_hash(),
+        "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", ""),
     }
 
 

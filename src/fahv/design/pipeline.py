@@ -221,7 +221,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     )
     if d["constant"] == "estimated":
         for v in c["variants"]:
-            if not LAWS[VARIANTS[v].law].nominal.estimates_disturbance:
+            law = LAWS[VARIANTS[v].law]
+            if law.has_tube and not law.nominal.estimates_disturbance:
                 log(
                     f"note: variant {v} has no disturbance estimate; W leaves the constant "
                     "part of the parameter error to one, so its tube certificate does not "

@@ -5,10 +5,10 @@ parameters, faults, commands and initial trims (node parameter ``overrides``, as
 :func:`fahv.loop.simulate.simulate` takes them). :func:`simulate_batch` stacks such
 runs and steps them together through :class:`fahv.loop.simulate.Loop`, the very loop
 of ``simulate``: every node core works on a leading axis of B runs (the plant's RK4
-compiled, the QPs of the nominal MPC and the LMIs of the RMPC a loop over the runs
-inside their classes), so the Python overhead of a step is paid once per batch and a
-run's numbers are those of ``simulate`` -- by construction, there is no second
-implementation (the tests still compare the two with ``array_equal``).
+compiled, the QPs of the nominal MPC a loop over the runs inside their class), so
+the Python overhead of a step is paid once per batch and a run's numbers are those
+of ``simulate`` -- by construction, there is no second implementation (the tests
+still compare the two with ``array_equal``).
 
 Grouping
     Runs share a batch when every parameter except their own (:data:`PER_RUN`: the

@@ -38,7 +38,8 @@ from fahv.msg import (
     VehicleState,
 )
 
-#: Counters of the RMPC's LMI solves in /hsv/tube_status (``lmi_<name>``).
+#: Counters of online LMI solves in /hsv/tube_status (``lmi_<name>``; the off-line
+#: RMPC counts its steps outside its largest ellipsoid as ``failed``).
 LMI_COUNTS = ("solves", "fallback", "failed")
 #: Counters of the nominal MPC's QP in /hsv/nominal (``qp_<name>``).
 QP_COUNTS = ("solves", "fallback", "terminal", "recovered")
@@ -73,8 +74,8 @@ class RunResult:
     fault_active : (N,) bool ndarray
         Fault applied at the step.
     lmi_counts : (3,) int ndarray
-        RMPC LMI solves, certified fallbacks and rejected solves over the run
-        (zeros for the tube laws).
+        Online LMI solves, solves that were not cost-optimal, and (RMPC) steps with
+        the state outside its largest ellipsoid over the run (zeros for the tube laws).
     info : dict
         Variant, case name, metadata.
     qp_counts : (4,) int ndarray
@@ -337,7 +338,7 @@ def simulate(
         k, msg)`` with a :class:`fahv.msg.LoopMessage` of one run (the Clock as fields).
     overrides : dict, optional
         Node parameter overrides ``{node: {name: value}}`` applied last (e.g.
-        ``{"rmpc": {"resolve_every": 50}}``); validated like every parameter.
+        ``{"plant": {"params.m": 1.05 * m}}``); validated like every parameter.
 
     Returns
     -------

@@ -271,11 +271,13 @@ class TubeStatus(LoopMessage):
     level: np.ndarray = _f("float64", "e' (tau^2 N)^-1 e, <= 1 inside the tube; NaN for rmpc")
     inside: np.ndarray = _f("bool", "level <= 1")
     e: np.ndarray = _f("float64[]", "tube error, design-model order")
-    lmi_solves: np.ndarray = _f("int64", "rmpc: LMI (33)-(35) solves so far (0 for the tube laws)")
-    lmi_fallback: np.ndarray = _f(
-        "int64", "rmpc: solves that used the certified max-margin fallback"
+    lmi_solves: np.ndarray = _f(
+        "int64", "online LMI (33)-(35) solves so far (0: rmpc solves off line, tube laws none)"
     )
-    lmi_failed: np.ndarray = _f("int64", "rmpc: solves rejected; the previous gain was kept")
+    lmi_fallback: np.ndarray = _f("int64", "online LMI solves not cost-optimal (0 for every law)")
+    lmi_failed: np.ndarray = _f(
+        "int64", "rmpc: steps so far with the state outside its largest ellipsoid E_1"
+    )
     qp_solves: np.ndarray = _f(
         "int64", "nominal MPC QPs accepted so far (copied from /hsv/nominal)"
     )

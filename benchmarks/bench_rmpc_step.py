@@ -1,0 +1,114 @@
+"""Per-step cost of the off-line RMPC baseline (law ``rmpc``), Case 1, in process.
+
+Times every call of the law's step (ellipsoid search, gain interpolation, command) and
+of the controller core around it (messages in and out), over a whole Case 1 run of
+``fahv.loop.simulate.simulate`` (B = 1), and the whole in-process step; then the law
+alone on the run's recorded states, each step timed in 5 passes and the minimum kept
+(what the step costs without preemption by other processes), and the law step of a
+batch of B runs (per run). Prints median, p99 and max.
+
+Run: .venv/bin/python benchmarks/bench_rmpc_step.py [--steps 15000] [--batch 100]
+Target: law step p99 <= 0.2 ms (issue 21). Time it on a quiet machine.
+"""
+
+import argparse
+import io
+import time
+
+import numpy as np
+
+from fahv.cli.design import load_or_design
+from fahv.control.rmpc import RMPCLaw
+from fahv.lanes import Lanes
+from fahv.loop.cores import ControllerCore
+from fahv.loop.simulate import simulate
+
+
+def stats(name: str, t) -> None:
+    """Print median, p99 and max of times t [s] in ms."""
+    t = np.asarray(t) * 1e3
+    print(
+        f"{name:44s} n={t.size:6d}  median {np.median(t):.4f} ms  "
+        f"p99 {np.percentile(t, 99):.4f} ms  max {t.max():.4f} ms"
+    )
+
+
+def main() -> None:
+    """Run Case 1 with timers around the law and the step; print the figures."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=15000)
+    ap.add_argument("--batch", type=int, default=100)
+    args = ap.parse_args()
+    _, design, _ = load_or_design("offline_design/case1.yaml", None, None, io.StringIO().write)
+    law_t, core_t, steps = [], [], []
+    law_step, core_step = RMPCLaw.step, ControllerCore.on_inputs
+
+    def timed_law(self, *a):
+        t0 = time.perf_counter()
+        out = law_step(self, *a)
+        law_t.append(time.perf_counter() - t0)
+        return out
+
+    def timed_core(self, *a):
+        t0 = time.perf_counter()
+        out = core_step(self, *a)
+        core_t.append(time.perf_counter() - t0)
+        return out
+
+    def step_timer(it):
+        t0 = time.perf_counter()
+        for k in it:
+            yield k
+            t1 = time.perf_counter()
+            steps.append(t1 - t0)
+            t0 = t1
+
+    RMPCLaw.step, ControllerCore.on_inputs = timed_law, timed_core
+    try:
+        t0 = time.perf_counter()
+        run = simulate(design, "rmpc", args.steps * design.case["Ts"], progress=step_timer)
+        wall = time.perf_counter() - t0
+    finally:
+        RMPCLaw.step, ControllerCore.on_inputs = law_step, core_step
+    print(f"Case 1 rmpc, {run.t.size} steps in process: wall {wall:.2f} s")
+    stats("law step (RMPCLaw.step), B = 1", law_t)
+    stats("controller core (messages + law), B = 1", core_t)
+    stats("whole in-process step, B = 1", steps)
+    # the law alone on the recorded states, B = 1, each step timed in 5 passes; the
+    # minimum per step drops preemption by other processes (a loaded machine)
+    from types import SimpleNamespace
+
+    from fahv.loop.params import node_parameters, validate
+
+    p = validate("rmpc", node_parameters(design, "rmpc")["rmpc"])
+    law1, lanes1 = RMPCLaw(p, 1), Lanes(1, strict=False)
+    xs, refs = run.x.copy(), run.x_r.copy()
+    xs[:, 4] = run.q_f  # the controller sees q'
+    ref_u = np.zeros((1, 2))
+    per = np.full((5, run.t.size), np.inf)
+    for rep in range(5):
+        for k in range(run.t.size):
+            ref = SimpleNamespace(x_r=refs[k : k + 1], u_r=ref_u)
+            x = xs[k : k + 1]
+            t0 = time.perf_counter()
+            law1.step(k, x, ref, lanes1)
+            per[rep, k] = time.perf_counter() - t0
+    stats("law step, B = 1, min of 5 passes per step", per.min(axis=0))
+    # a batch: the same recorded states and references stacked B times
+    B = args.batch
+    law = RMPCLaw(p, B)
+    lanes = Lanes(B, strict=False)
+    rng = np.random.default_rng(0)
+    idx = rng.integers(0, run.t.size, size=(200, B))
+    times = []
+    for rows in idx:
+        ref = SimpleNamespace(x_r=run.x_r[rows], u_r=np.zeros((B, 2)))
+        x = run.x[rows]
+        t0 = time.perf_counter()
+        law.step(0, x, ref, lanes)
+        times.append((time.perf_counter() - t0) / B)
+    stats(f"law step per run, batch of B = {B}", times)
+
+
+if __name__ == "__main__":
+    main()
