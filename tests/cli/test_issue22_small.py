@@ -74,7 +74,7 @@ def test_tube_figure_is_scaled_to_the_levels():
 
 
 def test_tube_study_takes_the_case_design_effectiveness(monkeypatch, capsys):
-    """`fahv tube` without --rho-f: the rho_f the case designs its tube for (0.7), not 0.9."""
+    """`fahv tube` without --rho-f: the rho_f the case designs its tube for (0.76), not 0.9."""
     import fahv.cli.modelling as modelling
 
     seen = {}
@@ -90,8 +90,8 @@ def test_tube_study_takes_the_case_design_effectiveness(monkeypatch, capsys):
     monkeypatch.setattr(modelling, "tube_feasibility", fake)
     with pytest.raises(Stop):
         main(["tube", "--case", str(CASE1)])
-    assert seen["rho_f"] == 0.7
-    assert "rho_f = 0.7: the elevator effectiveness" in capsys.readouterr().out
+    assert seen["rho_f"] == 0.76
+    assert "rho_f = 0.76: the elevator effectiveness" in capsys.readouterr().out
     with pytest.raises(Stop):
         main(["tube", "--rho-f", "0.85"])
     assert seen["rho_f"] == 0.85
