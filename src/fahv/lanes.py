@@ -27,6 +27,10 @@ class Lanes:
     alive : (B,) bool ndarray
     errors : list of Exception or None
         Per run, the error that ended it.
+    step : int
+        The loop step under way (set by the loop; -1 before the first).
+    failed_step : list of int or None
+        Per run, the step at which it failed (its steps before are valid).
     """
 
     def __init__(self, n: int, strict: bool = True) -> None:
@@ -35,6 +39,8 @@ class Lanes:
         self.n, self.strict = int(n), bool(strict)
         self.alive = np.ones(self.n, dtype=bool)
         self.errors: list[Exception | None] = [None] * self.n
+        self.step = -1
+        self.failed_step: list[int | None] = [None] * self.n
 
     def fail(self, b: int, exc: Exception) -> None:
         """Run ``b`` failed with ``exc``: raise it (strict) or record it.
@@ -48,6 +54,7 @@ class Lanes:
             raise exc
         if self.alive[b]:
             self.errors[b] = exc
+            self.failed_step[b] = self.step
             self.alive[b] = False
 
     def fail_mask(self, mask: np.ndarray, make_error) -> None:

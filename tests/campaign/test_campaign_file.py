@@ -96,8 +96,13 @@ def test_docs_key_table_is_the_declaration():
 def test_fault_onsets_beyond_the_run_are_warned(write_campaign, capsys, monkeypatch):
     """Issue 22: onsets drawn after the run's end used to pass silently (no fault then)."""
     assert load_campaign(write_campaign("onset_ok")).warnings == []  # onset [1, 4], 6 s runs
-    c = load_campaign(write_campaign("onset_late", duration=6.0, fault={
-        "kinds": ["loss_of_effectiveness"], "loss": [0.0, 0.3], "onset": [2.0, 10.0]}))
+    c = load_campaign(
+        write_campaign(
+            "onset_late",
+            duration=6.0,
+            fault={"kinds": ["loss_of_effectiveness"], "loss": [0.0, 0.3], "onset": [2.0, 10.0]},
+        )
+    )
     [w] = c.warnings
     assert "dispersions.fault.onset [2, 10] s reaches beyond the run's duration 6 s" in w
     assert "50 % of the runs end before their fault" in w  # (10 - 6) / (10 - 2)

@@ -85,6 +85,12 @@ def test_failing_runs_are_reported_and_the_others_complete(design):
     assert str(res[2]) == str(exc.value)
     t_fail = float(str(res[2]).split("at t = ")[1].split(" s")[0])
     assert 1.0 < t_fail < 4.0  # the inertia 1e-3 of the nominal diverges in about 2 s
+    # what the failed run flew is kept: every step before the failing one, all finite
+    assert res[1].partial is None  # never built
+    part = res[2].partial
+    assert part.t.size == round(t_fail / part.info["Ts"])
+    assert part.t[-1] == pytest.approx(t_fail - part.info["Ts"], abs=1e-9)
+    assert np.isfinite(part.x).all() and np.isfinite(part.u).all()
     _assert_same(simulate(design, "tube_mpc", 4.0), res[0])
     _assert_same(res[0], res[3])
 

@@ -246,12 +246,10 @@ def _watchdog_lines(logs, started):
     text = {n: (logs / f"{n}.log").read_text() for n in started}
     for n, log in text.items():
         assert "watchdog: " in log, f"{n}:\n{log[-2000:]}"
-    return {n: log[log.index("watchdog: "):].splitlines()[0] for n, log in text.items()}, text
+    return {n: log[log.index("watchdog: ") :].splitlines()[0] for n, log in text.items()}, text
 
 
-def test_graph_started_by_hand_without_a_node_names_it_and_every_process_ends(
-    quick_case, tmp_path
-):
+def test_graph_started_by_hand_without_a_node_names_it_and_every_process_ends(quick_case, tmp_path):
     """The README's commands without `fault_injector`: every node (the recorder too)
     names fault_injector, not its neighbour, and exits by itself within its watchdog;
     the plant says whom it waits for; the run is readable with status and reason."""

@@ -70,16 +70,11 @@ def settling_after(m: dict, t_end: float) -> float:
 def envelope_exit(run: RunResult, envelope) -> str | None:
     """Why a run left the flight envelope (first step outside), None if it stayed in."""
     h, Vel = run.x[:, H], run.x[:, V]
-    out = (h < envelope.h_min) | (h > envelope.h_max) | (Vel < envelope.V_min)
-    out |= Vel > envelope.V_max
+    out = envelope.outside(h, Vel)
     if not out.any():
         return None
     k = int(np.argmax(out))
-    return (
-        f"left the flight envelope at t = {run.t[k]:.2f} s (h = {h[k]:.1f} ft, V = "
-        f"{Vel[k]:.1f} ft/s; envelope h in [{envelope.h_min:g}, {envelope.h_max:g}] ft, "
-        f"V in [{envelope.V_min:g}, {envelope.V_max:g}] ft/s)"
-    )
+    return envelope.describe(float(run.t[k]), float(h[k]), float(Vel[k]))
 
 
 def trajectory(run: RunResult, dt: float = TRAJECTORY_DT) -> dict:
@@ -145,25 +140,29 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
     for i, vals, res in zip(indices, values, results, strict=True):
         row = {"index": int(i), "variant": variant, "campaign_seed": seed,
                "run_seed": run_seed(seed, i), **vals}  # fmt: skip
-        if isinstance(res, BaseException):
-            row.update(status="failed", reason=f"{type(res).__name__}: {res}")
+        failure = f"{type(res).__name__}: {res}" if isinstance(res, BaseException) else None
+        run = getattr(res, "partial", None) if failure else res
+        if run is None:
+            row.update(status="failed", reason=failure)
         else:
+            # a failed run keeps the metrics and trajectory of the steps it flew
             try:
-                m = metrics(res, veh.limits)
+                m = metrics(run, veh.limits)
             except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
-                row.update(status="failed", reason=f"metrics: {type(exc).__name__}: {exc}")
+                why = f"metrics: {type(exc).__name__}: {exc}"
+                row.update(status="failed", reason=failure or why)
             else:
-                exit_reason = envelope_exit(res, veh.envelope)
-                t_end = command_end(res)
+                exit_reason = envelope_exit(run, veh.envelope)
+                t_end = command_end(run)
                 settle = settling_after(m, t_end)
                 row.update(
-                    status="ok" if exit_reason is None else "failed",
-                    reason=exit_reason or "",
+                    status="ok" if failure is None and exit_reason is None else "failed",
+                    reason=failure or exit_reason or "",
                     t_command_end_s=t_end,
                     settling_after_command_s=settle,
                     **m,
                 )
-                trajs.append({"index": int(i), "variant": variant, **trajectory(res)})
+                trajs.append({"index": int(i), "variant": variant, **trajectory(run)})
         rows.append(row)
     wall = time.perf_counter() - t0
     for row in rows:
@@ -283,8 +282,7 @@ def batches(campaign: Campaign, done: set) -> list[tuple[str, list[int]]]:
     """
     size = campaign["batch_size"]
     todo = {
-        v: [i for i in range(campaign["runs"]) if (i, v) not in done]
-        for v in campaign["variants"]
+        v: [i for i in range(campaign["runs"]) if (i, v) not in done] for v in campaign["variants"]
     }
     out = []
     for j in range(0, max((len(t) for t in todo.values()), default=0), size):

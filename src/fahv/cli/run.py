@@ -321,6 +321,7 @@ def _add_live_option(p) -> None:
         f"{DEFAULT_PORT}; 0: any free port)",
     )
 
+
 def cmd_results(args) -> int:
     """Every variant of each case: the README's results table; reference JSON write/check."""
     from fahv.runs.results import (

@@ -17,7 +17,10 @@ Grouping
 
 Failures
     A run that fails (non-finite state, an infeasible first solve, a bad override)
-    gets its exception in the result list; the others go on.
+    gets its exception in the result list; the others go on. The exception of a run
+    that failed while stepping carries what it flew before: ``exc.partial`` is the
+    :class:`~fahv.loop.simulate.RunResult` of its steps before the failing one (for
+    its metrics and figures; None when it failed before step 0 or was never built).
 """
 
 from __future__ import annotations
@@ -87,7 +90,8 @@ def simulate_batch(
         ``simulate(design, variant, duration, overrides=...)``), or the exception
         that run raised (:class:`~fahv.errors.RunError` for a non-finite state,
         :class:`~fahv.errors.ParameterError` naming the node and key of a bad
-        override, ...). One failing run never stops the others.
+        override, ...) with ``partial`` set (see Failures above). One failing run
+        never stops the others.
     """
     variant = design.case["variants"][0] if variant is None else variant
     results: list = [None] * len(overrides)
@@ -98,6 +102,7 @@ def simulate_batch(
             p = run_parameters(design, variant, duration, ov)
             controller_node(p)
         except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
+            exc.partial = None
             results[i] = exc
             continue
         params[i] = p
@@ -115,15 +120,21 @@ def _run_group(runs: list[dict], design, variant: str) -> list[RunResult | Excep
         loop = Loop(runs, lanes)
     except Exception as exc:  # noqa: BLE001 - a bad parameter of one run: build them one by one
         if len(runs) == 1:
+            exc.partial = None
             return [exc]
         return [res for r in runs for res in _run_group([r], design, variant)]
     hist = History(loop.n_steps, len(runs), loop.n)
     with np.errstate(all="ignore"):
         for k in range(loop.n_steps):
             hist.add(*loop.step(k)[1:])
-    return [
-        lanes.errors[b]
-        if lanes.errors[b] is not None
-        else hist.result(b, run_info(design, variant, loop.Ts, runs[b]["plant"]))
-        for b in range(len(runs))
-    ]
+    out: list[RunResult | Exception] = []
+    for b in range(len(runs)):
+        info = run_info(design, variant, loop.Ts, runs[b]["plant"])
+        exc = lanes.errors[b]
+        if exc is None:
+            out.append(hist.result(b, info))
+            continue
+        k = lanes.failed_step[b]
+        exc.partial = hist.result(b, info, k) if k is not None and k > 0 else None
+        out.append(exc)
+    return out

@@ -29,7 +29,7 @@ from fahv.lanes import Lanes
 from fahv.loop.graph import CONTROLLER_NODES, n_steps_of
 from fahv.loop.params import validate
 from fahv.model.notch import DiscreteNotch, NotchFilter
-from fahv.model.vehicle import DELTA_E, IQ, load_vehicle
+from fahv.model.vehicle import DELTA_E, IQ, H, V, load_vehicle
 from fahv.msg import (
     ControlCommand,
     FaultStatus,
@@ -81,6 +81,9 @@ class PlantCore:
             for r in runs
         ]
         self.Ts, self.n_steps, self.limits = p["Ts"], n_steps_of(p), veh.limits
+        self.envelope = veh.envelope
+        # first exit from the flight envelope of each run (reason of a later divergence)
+        self.exit_reason: list[str | None] = [None] * len(runs)
         self.x0 = np.stack([np.asarray(r["x0"], float) for r in runs])
         self.plant = Plant(params, veh.limits, self.x0, p["Ts"], p["plant_substeps"])
         self.lanes = lanes
@@ -101,11 +104,21 @@ class PlantCore:
             For a single run whose state is no longer finite (a batch records it).
         """
         t = self.k * self.Ts
-        bad = ~np.all(np.isfinite(self.plant.x), axis=1)
+        x = self.plant.x
+        out = self.envelope.outside(x[:, H], x[:, V])
+        if out.any():
+            for b in np.flatnonzero(out):
+                if self.exit_reason[b] is None:
+                    self.exit_reason[b] = self.envelope.describe(t, x[b, H], x[b, V])
+        bad = ~np.all(np.isfinite(x), axis=1)
         if bad.any():
-            self.lanes.fail_mask(
-                bad, lambda b: RunError(f"plant: state not finite at t = {t:.2f} s")
-            )
+
+            def error(b: int) -> RunError:
+                why = self.exit_reason[b]
+                after = f" after it {why}" if why else ""
+                return RunError(f"plant: state not finite at t = {t:.2f} s{after}")
+
+            self.lanes.fail_mask(bad, error)
             self._reset(bad)
         return VehicleState.of(self.k, t, self.plant.x)
 

@@ -221,8 +221,6 @@ def clock_msg(k: int, Ts: float) -> dict:
     return {"clock": {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}}
 
 
-
-
 def registry_tables() -> str:
     """The registries of laws, nominal parts, variants and fault kinds as Markdown.
 

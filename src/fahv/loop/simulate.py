@@ -174,9 +174,9 @@ class History:
         )
         self.count += 1
 
-    def result(self, b: int, info: dict) -> RunResult:
-        """:class:`RunResult` of run ``b`` over the steps stored so far."""
-        n = self.count
+    def result(self, b: int, info: dict, n: int | None = None) -> RunResult:
+        """:class:`RunResult` of run ``b`` over its first ``n`` steps (all stored ones)."""
+        n = self.count if n is None else min(int(n), self.count)
         col = {k: np.ascontiguousarray(v[:n, b]) for k, v in self.a.items()}
         return RunResult(
             t=self.t[:n].copy(), **col, lmi_counts=self.lmi[b].astype(int),
@@ -287,6 +287,7 @@ class Loop:
 
     def step(self, k: int) -> tuple:
         """Messages of step k in topic order (:data:`fahv.loop.graph.TOPICS`)."""
+        self.lanes.step = k
         state = self.plant.state()
         qf = self.notch.on_state(state)
         nom = self.nominal.on_state(state, self.cmd)

@@ -188,8 +188,9 @@ class DiscreteNotch:
         q = np.asarray(q, dtype=float).reshape(-1)
         if not np.all(np.isfinite(q)):
             raise ValueError(f"notch filter input q must be finite, got {q}")
-        self.x_q = np.matmul(self.A_d, self.x_q[:, :, None])[..., 0] + self.B_d[None, :] * (
-            self.q_prev + q
-        )[:, None]
+        self.x_q = (
+            np.matmul(self.A_d, self.x_q[:, :, None])[..., 0]
+            + self.B_d[None, :] * (self.q_prev + q)[:, None]
+        )
         self.q_prev = q.copy()
         return np.matmul(self.x_q[:, None, :], self.C_q)[:, 0] + self.D_q * q

@@ -156,6 +156,23 @@ class Envelope:
             self.V_min - tv <= V <= self.V_max + tv
         )
 
+    def outside(self, h: np.ndarray, V: np.ndarray) -> np.ndarray:
+        """Element-wise True where (h [ft], V [ft/s]) lies outside the closed envelope.
+
+        ``h`` and ``V`` broadcast together; NaN counts as inside (a non-finite state is
+        reported by itself).
+        """
+        h, V = np.asarray(h), np.asarray(V)
+        return (h < self.h_min) | (h > self.h_max) | (V < self.V_min) | (V > self.V_max)
+
+    def describe(self, t: float, h: float, V: float) -> str:
+        """The sentence naming where a run left the envelope (t [s], h [ft], V [ft/s])."""
+        return (
+            f"left the flight envelope at t = {t:.2f} s (h = {h:.1f} ft, V = {V:.1f} ft/s; "
+            f"envelope h in [{self.h_min:g}, {self.h_max:g}] ft, "
+            f"V in [{self.V_min:g}, {self.V_max:g}] ft/s)"
+        )
+
     def check(self, h: float, V: float) -> None:
         """Raise :class:`EnvelopeError` naming the envelope if (h, V) lies outside it."""
         if not (np.isfinite(h) and np.isfinite(V)) or not self.contains(h, V):

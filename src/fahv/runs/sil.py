@@ -371,7 +371,14 @@ def run_sil(
     """
     variant = design.case["variants"][0] if variant is None else variant
     content = run_parameter_file(
-        design, variant, Path("."), duration, watchdog_s, overrides, "sil", metadata,
+        design,
+        variant,
+        Path("."),
+        duration,
+        watchdog_s,
+        overrides,
+        "sil",
+        metadata,
         live_port=live_port,
     )
     base = name or f"{design.case['name']}_{variant}_sil"

@@ -167,7 +167,9 @@ class Recorder(Node):
             stalled = self.status.stalled(self.t_ready)
             if stalled is not None:
                 raise WatchdogError(
-                    f"recorder: no message of step 0: {stalled or 'every peer ready'}"
+                    f"recorder: {stalled}; no message of step 0"
+                    if stalled
+                    else "recorder: no message of step 0 (every peer ready)"
                 )
             return
         idle = time.monotonic() - self.last_msg

@@ -55,6 +55,8 @@ EXIT_INTERRUPTED = 130
 #: Exit status of a node whose watchdog fired (hsv_common.runtime.EXIT_WATCHDOG); a node
 #: that stops because a peer failed exits so too, so the runner names another first.
 EXIT_WATCHDOG_NODE = 3
+#: How long a watchdog exit waits for the failed peer it names to exit too [s].
+CAUSE_GRACE_S = 3.0
 
 
 def executable(name: str) -> Path:
@@ -163,6 +165,7 @@ class Graph:
             The first node that failed and its exit status; (None, 0) when every node
             finished; (None, 130) after :meth:`on_signal`.
         """
+        t_watchdog = None
         while True:
             if self.stop_signal is not None:
                 return None, EXIT_INTERRUPTED
@@ -175,7 +178,15 @@ class Graph:
                 elif rc != 0:
                     failed.append((name, rc))
             if failed:  # the cause first: a node that stopped because a peer failed says 3
-                return min(failed, key=lambda f: f[1] == EXIT_WATCHDOG_NODE)
+                cause = [f for f in failed if f[1] != EXIT_WATCHDOG_NODE]
+                if cause:
+                    return cause[0]
+                # a watchdog exit names a peer's failure that peer may still be ending
+                # with (its own exit status tells the cause): wait for it a moment
+                if t_watchdog is None:
+                    t_watchdog = time.monotonic()
+                if time.monotonic() - t_watchdog > CAUSE_GRACE_S or running == 0:
+                    return failed[0]
             if on_progress is not None:
                 on_progress(*self.progress)
             if running == 0:

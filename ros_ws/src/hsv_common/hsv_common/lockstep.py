@@ -207,15 +207,17 @@ class LockstepNode(Node):
             if stalled is None:
                 return
             idle = now - max(self.t_ready, self.status.t_progress)
+            cause = f"{stalled}; " if stalled else ""  # the cause first, as below
             raise WatchdogError(
-                f"{self.get_name()}: no step 0 within {idle:.0f} s of the graph's last "
-                f"progress: {stalled or 'every peer ready'}"
+                f"{self.get_name()}: {cause}no step 0 within {idle:.0f} s of the graph's "
+                f"last progress{'' if stalled else ' (every peer ready)'}"
             )
         if now - self.last_progress <= self.watchdog_s:
             return
         silent = [
-            t for t in self.inputs if self.k not in self.buf[t] and not (
-                self.k == 0 and t in self.previous)
+            t
+            for t in self.inputs
+            if self.k not in self.buf[t] and not (self.k == 0 and t in self.previous)
         ] or list(self.inputs)
         inputs = ", ".join(f"{t} from {self.producer_of(t)}" for t in silent)
         missing = self.status.missing_text()
