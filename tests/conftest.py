@@ -1,4 +1,6 @@
 import copy
+import os
+import subprocess
 import warnings
 
 import pytest
@@ -119,3 +121,60 @@ def interrupt_fahv():
         return steps, rec, text
 
     return run
+
+
+def hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None):
+    """The README's graph by hand: `fahv sil --write-params`, then one `ros2 run` per node.
+
+    Parameters
+    ----------
+    quick_case : (Path, Path)
+        Case file and design folder (fixture ``quick_case``).
+    out : Path
+        Folder of the parameter file ``run.yaml`` and of the run (``out/bags``).
+    duration, watchdog : float
+        Run length and node watchdog [s] (None: the default watchdog).
+    without : sequence of str
+        Nodes not started (a graph with a node missing).
+    logs : Path, optional
+        Each node's output in ``logs/<node>.log`` (else the shell's output).
+
+    Returns
+    -------
+    (list of str, list of str, dict, Path)
+        The shell lines (the shell ends once every node has exited and prints a line
+        ``exit NODE STATUS`` per node: :func:`exit_statuses`), the nodes started in
+        order, the environment (without ROS_DOMAIN_ID: the caller takes a free one) and
+        the parameter file.
+    """
+    from fahv.runs.workspace import ROOT
+
+    case_file, art = quick_case
+    params = out / "run.yaml"
+    argv = [str(ROOT / ".venv" / "bin" / "fahv"), "sil", str(case_file), "--design", str(art),
+            "--duration", str(duration), "--out", str(out / "bags"), "--write-params", str(params)]
+    if watchdog is not None:
+        argv += ["--watchdog", str(watchdog)]
+    r = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, check=True)
+    commands = [ln.strip() for ln in r.stdout.splitlines() if ln.strip().startswith("ros2 run")]
+    if logs is not None:
+        logs.mkdir(parents=True, exist_ok=True)
+    lines, started = ["source ros_ws/install/setup.bash"], []
+    for c in commands:  # each node in the background
+        name = c.split()[3]
+        if name in without:
+            continue
+        started.append(name)
+        to_log = f" > {logs / name}.log 2>&1" if logs is not None else ""
+        lines.append(f"{c.removesuffix(' &')}{to_log} & pid_{name}=$!")
+    lines += [f'wait "$pid_{n}"; echo "exit {n} $?"' for n in started]
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("AMENT", "COLCON"))}
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    return lines, started, env, params
+
+
+def exit_statuses(stdout):
+    """{node: exit status} from the ``exit NODE STATUS`` lines of :func:`hand_graph`."""
+    import re
+
+    return {m[1]: int(m[2]) for m in re.finditer(r"^exit (\w+) (\d+)$", stdout, re.M)}

@@ -3,7 +3,6 @@ whose file holds its parameter file, so `fahv replay` works on it (renamed or ba
 says whether every captured output equals the recorded one, and writes a run that the
 other tools accept."""
 
-import os
 import re
 import shutil
 import subprocess
@@ -13,6 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
+from conftest import exit_statuses, hand_graph
 from fahv.cli import main
 from fahv.loop.graph import TOPICS
 from fahv.runs.bag import bag_paths, iter_raw, read_run, run_result_of
@@ -27,24 +27,15 @@ T, N = 2.0, 100
 @pytest.fixture(scope="module")
 def hand_run(quick_case, tmp_path_factory):
     """The README's graph by hand: `fahv sil --write-params`, then one `ros2 run` per node."""
-    case_file, art = quick_case
     tmp = tmp_path_factory.mktemp("hand")
-    params = tmp / "run.yaml"
-    fahv = str(ROOT / ".venv" / "bin" / "fahv")
-    r = subprocess.run(
-        [fahv, "sil", str(case_file), "--design", str(art), "--duration", str(T),
-         "--out", str(tmp / "bags"), "--write-params", str(params)],
-        cwd=ROOT, capture_output=True, text=True, check=True,
-    )  # fmt: skip
-    commands = [ln.strip() for ln in r.stdout.splitlines() if ln.strip().startswith("ros2 run")]
-    script = "\n".join(["source ros_ws/install/setup.bash", *commands, "rc=$?; wait; exit $rc"])
+    lines, started, env, params = hand_graph(quick_case, tmp, T)
     with domain_coordinator.domain_id() as domain:
-        env = {k: v for k, v in os.environ.items() if not k.startswith(("AMENT", "COLCON"))}
-        env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        env["ROS_DOMAIN_ID"] = str(domain)
         done = subprocess.run(
-            ["bash", "-c", script], cwd=ROOT, env=env, capture_output=True, text=True, timeout=180
-        )
-    assert done.returncode == 0, done.stderr[-3000:]
+            ["bash", "-c", "\n".join(lines)], cwd=ROOT, env=env, capture_output=True,
+            text=True, timeout=180,
+        )  # fmt: skip
+    assert exit_statuses(done.stdout) == dict.fromkeys(started, 0), done.stderr[-3000:]
     bag = next((tmp / "bags").iterdir())
     return bag, params
 

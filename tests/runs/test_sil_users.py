@@ -13,6 +13,7 @@ import domain_coordinator
 import numpy as np
 import pytest
 
+from conftest import exit_statuses, hand_graph
 from fahv.loop.graph import NODES, TOPICS
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import read_run, run_result_of
@@ -214,32 +215,8 @@ def test_ros2_standin_bag_info_is_fahv_inspect(design, tmp_path):
 
 
 def _by_hand(quick_case, tmp_path, duration, watchdog, without=()):
-    """The README's commands, each node's output in ``tmp_path/logs/<node>.log``.
-
-    Returns the running shell (``wait`` ends it once every node has exited), the nodes
-    started and the parameter file.
-    """
-    case_file, art = quick_case
-    params = tmp_path / "run.yaml"
-    fahv = str(ROOT / ".venv" / "bin" / "fahv")
-    r = subprocess.run(
-        [fahv, "sil", str(case_file), "--design", str(art), "--duration", str(duration),
-         "--out", str(tmp_path / "bags"), "--watchdog", str(watchdog),
-         "--write-params", str(params)],
-        cwd=ROOT, capture_output=True, text=True, check=True,
-    )  # fmt: skip
-    commands = [ln.strip() for ln in r.stdout.splitlines() if ln.strip().startswith("ros2 run")]
-    logs = tmp_path / "logs"
-    logs.mkdir()
-    lines, started = ["source ros_ws/install/setup.bash"], []
-    for c in commands:  # each node in the background, its output in a log of its own
-        name = c.split()[3]
-        if name not in without:
-            started.append(name)
-            lines.append(f"{c.removesuffix(' &')} > {logs / name}.log 2>&1 &")
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("AMENT", "COLCON"))}
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    return lines + ["wait"], started, env, params
+    """The README's commands, each node's output in ``tmp_path/logs/<node>.log``."""
+    return hand_graph(quick_case, tmp_path, duration, watchdog, without, tmp_path / "logs")
 
 
 def _watchdog_lines(logs, started):
@@ -263,8 +240,9 @@ def test_graph_started_by_hand_without_a_node_names_it_and_every_process_ends(qu
             text=True, timeout=120,
         )  # fmt: skip
         elapsed = time.monotonic() - t0
-    assert done.returncode == 0  # `wait` returned: every node process has ended
     assert started == ["recorder", "notch_filter", "nominal_trajectory", "tube_mpc", "plant"]
+    # every node process has ended, each with the watchdog's exit status
+    assert exit_statuses(done.stdout) == dict.fromkeys(started, 3), done.stdout
     verdicts, text = _watchdog_lines(tmp_path / "logs", started)
     for n, verdict in verdicts.items():
         assert verdict.startswith(f"watchdog: {n}: "), verdict
@@ -292,8 +270,8 @@ def test_graph_started_by_hand_names_a_node_killed_mid_run(quick_case, tmp_path)
     with domain_coordinator.domain_id() as domain:
         env["ROS_DOMAIN_ID"] = str(domain)
         shell = subprocess.Popen(
-            ["bash", "-c", "\n".join(lines)], cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
+            ["bash", "-c", "\n".join(lines)], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL, text=True,
         )  # fmt: skip
         t0 = time.monotonic()
         while "progress 500" not in _read(tmp_path / "logs" / "recorder.log"):
@@ -305,8 +283,10 @@ def test_graph_started_by_hand_names_a_node_killed_mid_run(quick_case, tmp_path)
         assert len(pids) == 1
         t_kill = time.monotonic()
         os.kill(int(pids[0]), signal.SIGKILL)
-        shell.wait(timeout=120)
+        out, _ = shell.communicate(timeout=120)
         elapsed = time.monotonic() - t_kill
+    # the killed node by its signal (128 + 9), every other one by its watchdog
+    assert exit_statuses(out) == {n: 137 if n == "tube_mpc" else 3 for n in started}, out
     verdicts, _ = _watchdog_lines(tmp_path / "logs", [n for n in started if n != "tube_mpc"])
     for n, verdict in verdicts.items():  # the lost node first, not the neighbour
         assert verdict.startswith(f"watchdog: {n}: missing tube_mpc (lost: no status for"), (
