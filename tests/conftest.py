@@ -151,8 +151,19 @@ def hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None):
 
     case_file, art = quick_case
     params = out / "run.yaml"
-    argv = [str(ROOT / ".venv" / "bin" / "fahv"), "sil", str(case_file), "--design", str(art),
-            "--duration", str(duration), "--out", str(out / "bags"), "--write-params", str(params)]
+    argv = [
+        str(ROOT / ".venv" / "bin" / "fahv"),
+        "sil",
+        str(case_file),
+        "--design",
+        str(art),
+        "--duration",
+        str(duration),
+        "--out",
+        str(out / "bags"),
+        "--write-params",
+        str(params),
+    ]
     if watchdog is not None:
         argv += ["--watchdog", str(watchdog)]
     r = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, check=True)

@@ -11,6 +11,7 @@ import re
 import shutil
 import subprocess
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -24,7 +25,7 @@ from fahv.runs.workspace import ROOT
 pytestmark = pytest.mark.ros  # runs the built node graph
 
 CLIENT = ROOT / "tests" / "live" / "client.cjs"
-N = 500  # 10 s of simulated time
+N = 1500  # 30 s of simulated time: the graph runs while `ros2 topic list` looks
 
 
 def _read_until(stream, pattern, sink):
@@ -62,7 +63,12 @@ def test_live_view_serves_every_loop_topic_to_a_foxglove_client(quick_case, tmp_
             cwd=CLIENT.parent,
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )  # fmt: skip
-        # the user's line in another shell, while the graph runs
+        # the user's line in another shell, while the graph runs (its first step is out)
+        t0 = time.monotonic()
+        got_path = tmp_path / "client.jsonl"
+        while '"op":"message"' not in (got_path.read_text() if got_path.exists() else ""):
+            assert time.monotonic() - t0 < 120 and proc.poll() is None, "".join(err)
+            time.sleep(0.05)
         topics = subprocess.run(
             ["bash", "-c", domain.group(1)], capture_output=True, text=True, timeout=60,
             env={k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"},

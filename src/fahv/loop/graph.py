@@ -259,3 +259,23 @@ def registry_tables() -> str:
         params = ", ".join(f"`{f.name}`" for f in cls.parameters) or "-"
         out.append(f"| `{name}` | {where(cls)} | {params} | {first_line(cls)} |")
     return "\n".join(out)
+
+
+#: Line a node process prints (``[name] closed with exit status S; DDS teardown``) after
+#: its close, before the DDS teardown that a C-level timer bounds (hsv_common.runtime).
+TEARDOWN_MARK = "closed with exit status"
+
+
+def teardown_hung(log: str) -> int | None:
+    """The node's own exit status if its log shows a hung DDS teardown, else None.
+
+    ``log`` is the node's output; a hung teardown is the line ``[name] closed with exit
+    status S; DDS teardown`` followed by faulthandler's ``Timeout (...)!`` dump.
+    """
+    i = log.rfind(TEARDOWN_MARK)
+    if i < 0 or "Timeout (" not in log[i:]:
+        return None
+    try:
+        return int(log[i + len(TEARDOWN_MARK) :].split(";")[0])
+    except ValueError:
+        return None

@@ -48,7 +48,7 @@ import domain_coordinator
 import yaml
 from tqdm import tqdm
 
-from fahv.loop.graph import CONTROLLER_NODES, NODES, graph_nodes
+from fahv.loop.graph import CONTROLLER_NODES, NODES, graph_nodes, teardown_hung
 
 #: Exit status of the runner (and of ``fahv sil``) after SIGINT / SIGTERM (128 + SIGINT).
 EXIT_INTERRUPTED = 130
@@ -57,6 +57,9 @@ EXIT_INTERRUPTED = 130
 EXIT_WATCHDOG_NODE = 3
 #: How long a watchdog exit waits for the failed peer it names to exit too [s].
 CAUSE_GRACE_S = 3.0
+#: How long a failed graph waits for a still-starting recorder to open its run file [s]
+#: (so that even a graph that failed at once leaves a run with status and reason).
+RECORDING_START_S = 30.0
 
 
 def executable(name: str) -> Path:
@@ -96,6 +99,7 @@ class Graph:
         self.logs: dict[str, Path] = {}
         self.progress = (0, 0)
         self.stop_signal: int | None = None
+        self.teardown_noted: dict[str, int] = {}
 
     def start(self) -> None:
         """Start every node (own process group, output to <log_dir>/<node>.log)."""
@@ -146,6 +150,46 @@ class Graph:
                 os.killpg(p.pid, signal.SIGKILL)
                 p.wait()
 
+    def await_recording(self, bag: str | None, timeout_s: float = RECORDING_START_S) -> None:
+        """Wait until the recording node (recorder or replay) has opened ``bag``.
+
+        Returns at once without a recording node or run folder, when the folder exists,
+        when that node has exited, or after ``timeout_s``; the node then records why the
+        graph stopped (a peer's failure) when it is stopped.
+        """
+        rec = next((self.procs[n] for n in ("recorder", "replay") if n in self.procs), None)
+        if rec is None or not bag:
+            return
+        t_end = time.monotonic() + timeout_s
+        while not Path(bag).exists() and rec.poll() is None and time.monotonic() < t_end:
+            if self.stop_signal is not None:
+                return
+            time.sleep(0.1)
+
+    def own_status(self, name: str, rc: int) -> int:
+        """Exit status of node ``name`` as the node meant it.
+
+        A node whose DDS teardown hung after it closed is ended by its teardown timer
+        with status 1 (hsv_common.runtime.TEARDOWN_S); its own status is then the one
+        it closed with (said once on stderr), not a failure of the run.
+        """
+        if rc != 1 or name in self.teardown_noted:
+            return self.teardown_noted.get(name, rc) if rc == 1 else rc
+        try:
+            own = teardown_hung(self.logs[name].read_text(errors="replace"))
+        except OSError:
+            own = None
+        if own is None:
+            return rc
+        self.teardown_noted[name] = own
+        print(
+            f"sil: node '{name}' closed with status {own}, then its DDS teardown hung "
+            "(Fast DDS); its teardown timer ended it",
+            file=sys.stderr,
+            flush=True,
+        )
+        return own
+
     def on_signal(self, signum: int, frame) -> None:
         """Handler of SIGINT / SIGTERM: the first one ends :meth:`supervise`.
 
@@ -175,7 +219,9 @@ class Graph:
                 rc = self.procs[name].poll()
                 if rc is None:
                     running += 1
-                elif rc != 0:
+                    continue
+                rc = self.own_status(name, rc)
+                if rc != 0:
                     failed.append((name, rc))
             if failed:  # the cause first: a node that stopped because a peer failed says 3
                 cause = [f for f in failed if f[1] != EXIT_WATCHDOG_NODE]
@@ -267,6 +313,7 @@ def run_graph(graph: Graph, bag, quiet: bool) -> int:
         return EXIT_INTERRUPTED
     if failed is not None:
         print(f"sil: node '{failed}' failed ({describe(rc)}); stopping the graph", file=sys.stderr)
+        graph.await_recording(bag)
         graph.stop()
         print(f"--- end of {graph.logs[failed]}\n{_tail(graph.logs[failed])}", file=sys.stderr)
         print(f"sil: run (incomplete) written to {bag}", file=sys.stderr)

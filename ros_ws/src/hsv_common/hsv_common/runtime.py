@@ -14,6 +14,7 @@ Exit status of a node (:func:`main`), also in docs/architecture.md:
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import signal
 import sys
@@ -27,8 +28,17 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from fahv.errors import ParameterError
 from fahv.loop import graph
+from fahv.loop.graph import TEARDOWN_MARK
 
 EXIT_OK, EXIT_ERROR, EXIT_PARAM, EXIT_WATCHDOG, EXIT_SIGNAL, EXIT_FOREIGN = 0, 1, 2, 3, 4, 5
+#: Longest DDS teardown (node and participant destruction) after the node closed [s].
+#: Fast DDS 2.14 can deadlock destroying a participant while its peers leave (seen in
+#: CI: the main thread spinning in DomainParticipant::set_listener while a discovery
+#: thread waits for a lock it holds, with the GIL held). A C-level timer
+#: (faulthandler) then dumps every thread's traceback and ends the process with status
+#: 1 after the line ``TEARDOWN_MARK``; the runner reads that as a hung teardown, not a
+#: failure, when the node had closed with status 0.
+TEARDOWN_S = 10.0
 
 #: Parameter services cost every spin of every node (more entities in the wait set).
 START_PARAMETER_SERVICES = os.environ.get("HSV_PARAM_SERVICES", "0") == "1"
@@ -168,7 +178,11 @@ def main(node_cls, args=None, linger_s: float = 10.0) -> int:
             try:
                 node.close(status, reason)
             finally:
+                print(f"[{name}] {TEARDOWN_MARK} {status}; DDS teardown", file=sys.stderr,
+                      flush=True)  # fmt: skip
+                faulthandler.dump_traceback_later(TEARDOWN_S, exit=True, file=sys.stderr)
                 node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
+        faulthandler.cancel_dump_traceback_later()
     return status
