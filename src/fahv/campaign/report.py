@@ -46,6 +46,7 @@ REQUIREMENTS = (
     ("settling", "settled within {settling_s:g} s of the command"),
     ("final_h", "final |h - h_c| <= {h_final_ft:g} ft"),
     ("final_V", "final |V - V_c| <= {V_final_fps:g} ft/s"),
+    ("all", "every requirement at once"),
 )
 
 #: Metrics of the worst-run tables and histograms: (column, label, how it is made
@@ -87,6 +88,13 @@ def verdicts(row: dict, req: dict) -> dict[str, bool | None]:
     has = row.get("alpha_err_max_deg") is not None
     if not has:
         return {k: (False if k != "tube" else None) for k, _ in REQUIREMENTS}
+    out = _each(row, req)
+    out["all"] = all(v for v in out.values() if v is not None)
+    return out
+
+
+def _each(row: dict, req: dict) -> dict[str, bool | None]:
+    """The verdicts of :func:`verdicts` but "all"."""
     att = max(_num(row, "alpha_err_max_deg"), _num(row, "theta_err_max_deg"))
     tube = _num(row, "tube_fraction_inside")
     settle = _num(row, "settling_after_command_s")
@@ -211,6 +219,19 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
                 "n/a" if n == 0 else f"{ok}/{n} ({100.0 * ok / n:.1f} %), p_fail < {bound:.3g}"
             )
         lines.append(f"| {desc.format(**req)} | " + " | ".join(cells) + " |")
+    for v in data["variants"]:  # a nominal part stuck on its terminal law off the command
+        stuck = [
+            r["index"] for r, x in zip(per_variant[v], verd[v], strict=True)
+            if (r.get("nominal_qp_terminal") or 0) > 0 and not (x["final_h"] and x["final_V"])
+        ]  # fmt: skip
+        if any(r.get("nominal_qp_terminal") is not None for r in per_variant[v]):
+            lines += [
+                "",
+                f"{v}: {len(stuck)} runs end away from the command (final error beyond its "
+                "bound) after nominal steps on the terminal law"
+                + (f": runs {', '.join(map(str, stuck[:20]))}" if stuck else "")
+                + ".",
+            ]
     reasons = Counter(r["reason"].split(" at t =")[0] for r in rows if r["status"] != "ok")
     if reasons:
         lines += ["", "Failed runs by reason:", ""]
