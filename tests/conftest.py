@@ -123,7 +123,7 @@ def interrupt_fahv():
     return run
 
 
-def hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None):
+def _hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None):
     """The README's graph by hand: `fahv sil --write-params`, then one `ros2 run` per node.
 
     Parameters
@@ -143,7 +143,7 @@ def hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None):
     -------
     (list of str, list of str, dict, Path)
         The shell lines (the shell ends once every node has exited and prints a line
-        ``exit NODE STATUS`` per node: :func:`exit_statuses`), the nodes started in
+        ``exit NODE STATUS`` per node: :func:`_exit_statuses`), the nodes started in
         order, the environment (without ROS_DOMAIN_ID: the caller takes a free one) and
         the parameter file.
     """
@@ -184,8 +184,20 @@ def hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None):
     return lines, started, env, params
 
 
-def exit_statuses(stdout):
-    """{node: exit status} from the ``exit NODE STATUS`` lines of :func:`hand_graph`."""
+def _exit_statuses(stdout):
+    """{node: exit status} from the ``exit NODE STATUS`` lines of :func:`_hand_graph`."""
     import re
 
     return {m[1]: int(m[2]) for m in re.finditer(r"^exit (\w+) (\d+)$", stdout, re.M)}
+
+
+@pytest.fixture(scope="session")
+def hand_graph():
+    """The README's graph by hand as a function (:func:`_hand_graph`)."""
+    return _hand_graph
+
+
+@pytest.fixture(scope="session")
+def exit_statuses():
+    """Per-node exit statuses of a hand-started graph's output (:func:`_exit_statuses`)."""
+    return _exit_statuses

@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 import yaml
 
-from conftest import exit_statuses, hand_graph
 from fahv.cli import main
 from fahv.loop.graph import TOPICS
 from fahv.runs.bag import bag_paths, iter_raw, read_run, run_result_of
@@ -25,7 +24,7 @@ T, N = 2.0, 100
 
 
 @pytest.fixture(scope="module")
-def hand_run(quick_case, tmp_path_factory):
+def hand_run(quick_case, tmp_path_factory, hand_graph, exit_statuses):
     """The README's graph by hand: `fahv sil --write-params`, then one `ros2 run` per node."""
     tmp = tmp_path_factory.mktemp("hand")
     lines, started, env, params = hand_graph(quick_case, tmp, T)

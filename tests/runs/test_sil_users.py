@@ -13,7 +13,6 @@ import domain_coordinator
 import numpy as np
 import pytest
 
-from conftest import exit_statuses, hand_graph
 from fahv.loop.graph import NODES, TOPICS
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import read_run, run_result_of
@@ -214,7 +213,7 @@ def test_ros2_standin_bag_info_is_fahv_inspect(design, tmp_path):
     assert expected in r.stderr
 
 
-def _by_hand(quick_case, tmp_path, duration, watchdog, without=()):
+def _by_hand(hand_graph, quick_case, tmp_path, duration, watchdog, without=()):
     """The README's commands, each node's output in ``tmp_path/logs/<node>.log``."""
     return hand_graph(quick_case, tmp_path, duration, watchdog, without, tmp_path / "logs")
 
@@ -226,12 +225,16 @@ def _watchdog_lines(logs, started):
     return {n: log[log.index("watchdog: ") :].splitlines()[0] for n, log in text.items()}, text
 
 
-def test_graph_started_by_hand_without_a_node_names_it_and_every_process_ends(quick_case, tmp_path):
+def test_graph_started_by_hand_without_a_node_names_it_and_every_process_ends(
+    quick_case, tmp_path, hand_graph, exit_statuses
+):
     """The README's commands without `fault_injector`: every node (the recorder too)
     names fault_injector, not its neighbour, and exits by itself within its watchdog;
     the plant says whom it waits for; the run is readable with status and reason."""
     watchdog = 5.0
-    lines, started, env, _ = _by_hand(quick_case, tmp_path, 2, watchdog, ["fault_injector"])
+    lines, started, env, _ = _by_hand(
+        hand_graph, quick_case, tmp_path, 2, watchdog, ["fault_injector"]
+    )
     with domain_coordinator.domain_id() as domain:
         env["ROS_DOMAIN_ID"] = str(domain)
         t0 = time.monotonic()
@@ -261,12 +264,14 @@ def test_graph_started_by_hand_without_a_node_names_it_and_every_process_ends(qu
     assert rec.topics["/hsv/state"]["count"] == 0
 
 
-def test_graph_started_by_hand_names_a_node_killed_mid_run(quick_case, tmp_path):
+def test_graph_started_by_hand_names_a_node_killed_mid_run(
+    quick_case, tmp_path, hand_graph, exit_statuses
+):
     """A node of a hand-started graph killed (SIGKILL) mid-run: every other node, the
     recorder included, names it as lost and exits within its watchdog; the run keeps
     every step recorded so far."""
     watchdog = 5.0
-    lines, started, env, params = _by_hand(quick_case, tmp_path, 300, watchdog)
+    lines, started, env, params = _by_hand(hand_graph, quick_case, tmp_path, 300, watchdog)
     with domain_coordinator.domain_id() as domain:
         env["ROS_DOMAIN_ID"] = str(domain)
         shell = subprocess.Popen(
