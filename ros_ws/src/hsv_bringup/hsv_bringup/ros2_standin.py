@@ -105,14 +105,42 @@ def cmd_bag_info(args) -> int:
     return fahv_main(["inspect", args.bag_path])
 
 
-def _discover(node, wait_s: float, want: str | None = None) -> dict[str, list[str]]:
-    """Topic names and types after ``wait_s`` seconds of discovery (or once ``want`` is seen)."""
+#: topics every rclpy node (this one too) publishes: seeing only these means no peer yet
+OWN_TOPICS = frozenset({"/rosout", "/parameter_events"})
+#: discovery of ``list`` goes on until the topic set has not changed for this long [s]
+SETTLE_S = 1.0
+
+
+def _discover(
+    node, spin_time: float, want: str | None = None, longest: float | None = None
+) -> dict[str, list[str]]:
+    """Topic names and types seen by ``node`` through DDS discovery.
+
+    With ``want`` (``echo``): spins until that topic is seen or ``spin_time`` [s] has
+    passed. Without it (``list``): spins at least ``spin_time``, then on while the topic
+    set still changes (until it has been the same for ``SETTLE_S``) or while no peer's
+    topic has been seen yet, ``longest`` [s] at most. A loaded host can answer a new
+    participant's discovery late (Fast DDS repeats its announcements every few seconds),
+    and a fixed short window then lists an empty graph.
+    """
     import rclpy
 
-    end = time.monotonic() + wait_s
-    while time.monotonic() < end:
+    t0 = time.monotonic()
+    longest = spin_time if longest is None else max(longest, spin_time)
+    seen: dict[str, list[str]] = {}
+    changed = t0
+    while (now := time.monotonic()) - t0 < longest:
         rclpy.spin_once(node, timeout_sec=0.05)
-        if want is not None and want in dict(node.get_topic_names_and_types()):
+        topics = dict(node.get_topic_names_and_types())
+        if want is not None:
+            if want in topics:
+                return topics
+            if now - t0 >= spin_time:
+                return topics
+            continue
+        if topics.keys() != seen.keys():
+            seen, changed = topics, now
+        if now - t0 >= spin_time and now - changed >= SETTLE_S and set(seen) - OWN_TOPICS:
             break
     return dict(node.get_topic_names_and_types())
 
@@ -152,7 +180,10 @@ def cmd_topic(args) -> int:
     rclpy.init()
     node = rclpy.create_node(f"ros2_standin_{os.getpid()}", start_parameter_services=False)
     try:
-        topics = _discover(node, args.wait, None if args.verb == "list" else args.topic)
+        if args.verb == "list":
+            topics = _discover(node, args.spin_time, None, args.longest)
+        else:
+            topics = _discover(node, args.wait, args.topic)
         if args.verb == "list":
             for name, types in sorted(topics.items()):
                 print(f"{name} [{', '.join(types)}]" if args.show_types else name)
@@ -209,7 +240,14 @@ def build_parser() -> argparse.ArgumentParser:
     topic.required = True
     p = topic.add_parser("list", help="topics seen in ROS_DOMAIN_ID")
     p.add_argument("-t", "--show-types", action="store_true")
-    p.add_argument("--wait", type=float, default=2.0, help="discovery time [s]")
+    p.add_argument(
+        "-s", "--spin-time", type=float, default=2.0,
+        help="least discovery time [s]; discovery goes on while topics still appear",
+    )  # fmt: skip
+    p.add_argument(
+        "--longest", type=float, default=10.0,
+        help="longest discovery time [s] (reached when no other node is seen)",
+    )  # fmt: skip
     p.set_defaults(func=cmd_topic)
     p = topic.add_parser("echo", help="print the messages of a topic as YAML")
     p.add_argument("topic")
