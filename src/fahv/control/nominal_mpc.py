@@ -445,27 +445,30 @@ class TrackingMPC:
         self._u_hi = np.asarray(value, float)
 
     # -- scheduling ----------------------------------------------------------------
-    def _trim_jacobian(self, h: float, V: float):
+    def _trim_and_jacobian(self, h: float, V: float):
+        """Trim (x_r, u_r) at (h, V) and its Jacobian per scaled set-point step.
+
+        One evaluation of the trim map at five points: (h, V) and central differences
+        of 10 ft and 5 ft/s (one-sided at the grid's edges). Returns x_r (n,), u_r (2,),
+        Gx (n, 2), Gu (2, 2).
+        """
         dh, dV = 10.0, 5.0
         tm = self.trim_map
-        h_lo, h_hi = tm.h_grid[0], tm.h_grid[-1]
-        V_lo, V_hi = tm.V_grid[0], tm.V_grid[-1]
-        h1, h2 = max(h - dh, h_lo), min(h + dh, h_hi)
-        V1, V2 = max(V - dV, V_lo), min(V + dV, V_hi)
-        xa, ua = tm(h2, V)
-        xb, ub = tm(h1, V)
-        xc, uc = tm(h, V2)
-        xd, ud = tm(h, V1)
-        Gx = np.stack([(xa - xb) / (h2 - h1), (xc - xd) / (V2 - V1)], axis=1)
-        Gu = np.stack([(ua - ub) / (h2 - h1), (uc - ud) / (V2 - V1)], axis=1)
-        return Gx * self.theta_scale, Gu * self.theta_scale  # per scaled delta
+        h1, h2 = max(h - dh, tm.h_grid[0]), min(h + dh, tm.h_grid[-1])
+        V1, V2 = max(V - dV, tm.V_grid[0]), min(V + dV, tm.V_grid[-1])
+        x, u = tm.at(np.array([h, h2, h1, h, h]), np.array([V, V, V, V2, V1]))
+        Gx = np.stack([(x[1] - x[2]) / (h2 - h1), (x[3] - x[4]) / (V2 - V1)], axis=1)
+        Gu = np.stack([(u[1] - u[2]) / (h2 - h1), (u[3] - u[4]) / (V2 - V1)], axis=1)
+        return x[0], u[0], Gx * self.theta_scale, Gu * self.theta_scale
 
     def schedule(self, h: float, V: float) -> None:
         """Build the condensed QP at the scheduling point (h, V) [ft, ft/s].
 
         Decision y of :class:`QPLayout`. Also the steady-state shift of a constant
         disturbance, Hx (n, n) and Hu (m, n) (module docstring), and the constraint
-        matrix of :meth:`solve` (it does not depend on the state).
+        matrix of :meth:`solve` (it does not depend on the state). The horizon's
+        products are stacked (one matrix product per block of rows, not one per move):
+        scheduling is a large part of a campaign's time (docs/campaigns.md).
 
         Raises
         ------
@@ -477,45 +480,50 @@ class TrackingMPC:
         A, B = self.lpv.system(h, V)
         self.A, self.B = A, B
         self.theta_s = np.array([h, V], float)
-        self.x_r_s, self.u_r_s = self.trim_map(h, V)
-        Gx, Gu = self._trim_jacobian(h, V)
+        self.x_r_s, self.u_r_s, Gx, Gu = self._trim_and_jacobian(h, V)
         self.Gx, self.Gu = Gx, Gu
         AK = A + B @ self.K
         E = (A - np.eye(n)) @ Gx + B @ Gu
-        # one move held for M fast steps
+        # one move held for M fast steps: after i fast steps (i = 1..M) of a move,
+        # zeta = Phi_i zeta_0 + Gam_i c + Psi_i delta
+        M = s.M
+        Phi_w = np.empty((M, n, n))
+        Gam_w = np.empty((M, n, m))
+        Psi_w = np.empty((M, n, 2))
         Phi, Gam, Psi = np.eye(n), np.zeros((n, m)), np.zeros((n, 2))
-        within = []  # (Phi_i, Gam_i, Psi_i) after i = 1..M-1 fast steps of a move
-        for i in range(s.M):
+        for i in range(M):
             Gam = AK @ Gam + B
             Psi = AK @ Psi + E
             Phi = AK @ Phi
-            if i < s.M - 1:
-                within.append((Phi, Gam * self.Du[None, :], Psi))
-        Gam = Gam * self.Du[None, :]  # per scaled move
-        N_p = s.N_p
-        ny = ly.ny
-        # zeta_j = S[j] zeta_0 + C[j] y, zeta_0 = z0 - Gx delta  (j = 0..N_p)
-        S = np.zeros((N_p + 1, n, n))
-        C = np.zeros((N_p + 1, n, ny))
+            Phi_w[i], Gam_w[i], Psi_w[i] = Phi, Gam, Psi
+        Gam_w *= self.Du  # per scaled move
+        Gam = Gam_w[-1]
+        N_p, ny = s.N_p, ly.ny
+        mv_cols = np.arange(N_p * m).reshape(N_p, m)  # y columns of move j
+        # zeta_j = S[j] zeta_0 + C[j] y, zeta_0 = z0 - Gx delta  (j = 0..N_p):
+        # S[j] = Phi^j; the move columns are block Toeplitz, C[j][:, c_i] = Phi^(j-1-i) Gam
+        # (i < j); the delta columns -Phi^j Gx + sum_(k<j) Phi^k Psi
+        S = np.empty((N_p + 1, n, n))
         S[0] = np.eye(n)
-        C[0, :, ly.delta] = -Gx
         for j in range(N_p):
             S[j + 1] = Phi @ S[j]
-            C[j + 1] = Phi @ C[j]
-            C[j + 1, :, ly.move(j)] += Gam
-            C[j + 1, :, ly.delta] += Psi
+        C = np.zeros((N_p + 1, n, ny))
+        SG = S[:N_p] @ Gam  # (N_p, n, m): Phi^k Gam
+        for i in range(N_p):
+            C[i + 1 :, :, mv_cols[i]] = SG[: N_p - i]
+        SP = np.cumsum(S[:N_p] @ Psi_w[-1], axis=0)  # sum_(k<j) Phi^k Psi, j = 1..N_p
+        C[:, :, ly.delta] = -(S @ Gx)
+        C[1:, :, ly.delta] += SP
         self.S, self.C = S, C
         # cost (scaled): sum_j |zeta_j/Dx|^2_qw M + |c_j|^2_rw + |zeta_N/Dx|^2_P + offset
-        Wq = np.diag(s.q_w / self.Dx**2) * s.M
+        wq = s.q_w / self.Dx**2 * s.M  # diagonal of the stage weight
         Phi_s = Phi * self.Dx[None, :] / self.Dx[:, None]  # scaled coordinates
         P_s = scipy.linalg.solve_discrete_lyapunov(Phi_s.T, np.diag(s.q_w) * s.M, "bilinear")
         P = (0.5 * (P_s + P_s.T)) / np.outer(self.Dx, self.Dx)
-        H = np.zeros((ny, ny))
-        Fz = np.zeros((ny, n))
-        for j in range(N_p + 1):
-            Wj = P if j == N_p else Wq
-            H += C[j].T @ Wj @ C[j]
-            Fz += C[j].T @ Wj @ S[j]
+        Cs, Ss = C[:N_p], S[:N_p]
+        WC = Cs * wq[None, :, None]  # Wq C[j], (N_p, n, ny)
+        H = Cs.reshape(-1, ny).T @ WC.reshape(-1, ny) + C[N_p].T @ P @ C[N_p]
+        Fz = WC.reshape(-1, ny).T @ Ss.reshape(-1, n) + C[N_p].T @ P @ S[N_p]
         R = np.zeros(ny)
         R[ly.moves] = np.tile(s.r_w, N_p)
         H += np.diag(R)
@@ -530,28 +538,27 @@ class TrackingMPC:
         # so H_qp = 2 H (symmetrised) and f = 2 (Fz z0 + ...)
         self.H = H + H.T
         self.Fz = Fz
-        rows = []  # input rows: (matrix (m, ny), z0 matrix (m, n)) per move
-        for j in range(N_p):
-            # u_j = u_base + Gu delta + K zeta_j + c_j  (absolute)
-            Uy = self.K @ C[j]
-            Uy[:, ly.delta] += Gu
-            Uy[:, ly.move(j)] += np.diag(self.Du)
-            rows.append((Uy, self.K @ S[j]))
-        self.U_y = np.concatenate([r[0] for r in rows])  # (N_p m, ny)
-        self.U_z = np.concatenate([r[1] for r in rows])  # (N_p m, n)
+        # input rows: u_j = u_base + Gu delta + K zeta_j + c_j (absolute), (N_p m, ny)
+        U_y = self.K @ Cs  # (N_p, m, ny)
+        U_y[:, :, ly.delta] += Gu
+        jj = np.arange(N_p)
+        for r in range(m):
+            U_y[jj, r, mv_cols[:, r]] += self.Du[r]
+        self.U_y = U_y.reshape(N_p * m, ny)
+        self.U_z = (self.K @ Ss).reshape(N_p * m, n)
         # attitude rows: alpha (2) and theta (3) of zeta at every fast step inside the
         # first fine_moves moves (closed form: zeta = Phi_i zeta_j + Gam_i c_j + Psi_i delta)
         # and at the move starts j = 1..N_p
         att_y, att_z = [], []
+        PhA = Phi_w[: M - 1, 2:4]  # rows alpha, theta of Phi_i, i = 1..M-1
         for j in range(min(s.fine_moves, N_p)):
-            for Phi_i, Gam_i, Psi_i in within:
-                Ci = Phi_i @ C[j]
-                Ci[:, ly.move(j)] += Gam_i
-                Ci[:, ly.delta] += Psi_i
-                att_y.append(Ci[2:4])
-                att_z.append((Phi_i @ S[j])[2:4])
-        att_y += [C[j][2:4] for j in range(1, N_p + 1)]
-        att_z += [S[j][2:4] for j in range(1, N_p + 1)]
+            Ci = PhA @ C[j]  # (M-1, 2, ny)
+            Ci[:, :, mv_cols[j]] += Gam_w[: M - 1, 2:4]
+            Ci[:, :, ly.delta] += Psi_w[: M - 1, 2:4]
+            att_y.append(Ci.reshape(-1, ny))
+            att_z.append((PhA @ S[j]).reshape(-1, n))
+        att_y.append(C[1:, 2:4].reshape(-1, ny))
+        att_z.append(S[1:, 2:4].reshape(-1, n))
         self.Att_y = np.concatenate(att_y)
         self.Att_z = np.concatenate(att_z)
         self.Tb_y = self.L_inv @ C[N_p]  # terminal box rows, (n, ny)
