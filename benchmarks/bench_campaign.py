@@ -7,10 +7,16 @@ simulated time; every figure is also given per 300 s run, the length of the
 
 The machine is shared: the figures move with its load (run twice and compare).
 
+Last, the machine's own ceiling for two workers: the same batch simulated by one
+process alone, then by two processes at once (no Dask, no files). What two processes
+get over one is the most two Dask workers can get over one worker here; on a virtual
+machine whose two cores share a physical one it is well below 2.
+
 Usage: .venv/bin/python benchmarks/bench_campaign.py [DURATION] [BATCH] [RUNS]
        (defaults 30 s, 50 runs per batch, 200 runs per campaign)
 """
 
+import subprocess
 import sys
 import tempfile
 import time
@@ -38,7 +44,36 @@ def line(what, runs, seconds, duration):
     )
 
 
+def one_batch(duration: float, batch: int) -> None:
+    """Simulate one batch (the ceiling measurement's unit of work)."""
+    c = load_campaign(ROOT / "offline_design" / "campaign_case1.yaml")
+    design = load_design(ROOT / "offline_design" / "artefacts" / "case1")
+    ovs = [overrides(draw(c.data, design.case, i), design, "tube_mpc") for i in range(batch)]
+    simulate(design, "tube_mpc", 1.0, overrides=ovs[0])  # warm-up, as in main()
+    t0 = time.perf_counter()
+    simulate_batch(design, "tube_mpc", ovs, duration)
+    print(f"{time.perf_counter() - t0:.6f}")
+
+
+def ceiling(duration: float, batch: int) -> None:
+    """One process alone, then two at once, each simulating one batch; print both."""
+    cmd = [sys.executable, __file__, "--one-batch", str(duration), str(batch)]
+
+    def wall(n):  # the slowest of n processes started together
+        procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True) for _ in range(n)]
+        return max(float(p.communicate()[0].split()[-1]) for p in procs)
+
+    one = wall(1)
+    two = wall(2)
+    line("ceiling: one process, one batch", batch, one, duration)
+    line("ceiling: two processes at once", 2 * batch, two, duration)
+    print(f"  two processes get {2 * one / two:.2f}x one process (the bound for 2 workers / 1)")
+
+
 def main():
+    if sys.argv[1:2] == ["--one-batch"]:
+        one_batch(float(sys.argv[2]), int(sys.argv[3]))
+        return
     duration = float(sys.argv[1]) if len(sys.argv) > 1 else 30.0
     batch = int(sys.argv[2]) if len(sys.argv) > 2 else 50
     runs = int(sys.argv[3]) if len(sys.argv) > 3 else 200
@@ -72,6 +107,7 @@ def main():
         assert res.missing == 0, res
         line(f"campaign, LocalCluster {workers} worker(s)", runs, wall, duration)
     print("(campaign lines include cluster start, design copy and Parquet writes)")
+    ceiling(duration, batch)
 
 
 if __name__ == "__main__":

@@ -420,7 +420,6 @@ class TrackingMPC:
         #: support of K E(Q) per input: max over E(Q) of |K_j x|
         self.k_max = np.sqrt(np.einsum("ij,jk,ik->i", self.K, self.Q, self.K))
         self.theta_scale = np.array([100.0, 100.0])
-        self._sc = np.tile(self.Du, settings.N_p)
         self.stats = QPStats()
         self.theta_s = None
         self.last_y = None
@@ -662,24 +661,25 @@ class TrackingMPC:
         f = 2.0 * (self.Fz @ z0)
         f[ly.delta] += 2.0 * s.t_w * e_theta
         lo_b, hi_b = (self._lo_b_rec, self._hi_b_rec) if recover else (self._lo_b, self._hi_b)
-        u_off = self.U_z @ z0 + np.tile(u_base, N_p)
-        sc = self._sc
-        lo_u = (np.tile(self._u_lo, N_p) - u_off) / sc
-        hi_u = (np.tile(self._u_hi, N_p) - u_off) / sc
+        # per-move rows as (N_p, m) and (n_att, 2) blocks broadcast against their
+        # (m,) / (2,) bounds (the same element-wise operations as tiling the bounds)
+        u_off = (self.U_z @ z0).reshape(N_p, m) + u_base
+        lo_u = ((self._u_lo - u_off) / self.Du).reshape(-1)
+        hi_u = ((self._u_hi - u_off) / self.Du).reshape(-1)
         tz = self.Tb_z @ z0
-        att = self.Att_z @ z0
-        n_att = att.size // 2
-        a_max = np.tile(np.minimum(np.broadcast_to(s.att_max, (2,)), 1e3), n_att)
+        att = (self.Att_z @ z0).reshape(-1, 2)
+        a_max = np.minimum(np.broadcast_to(s.att_max, (2,)), 1e3)
         att_lo, att_hi = -a_max, a_max
         if x_off is not None:
-            off = np.tile(np.asarray(x_off, float)[2:4], n_att)
+            off = np.asarray(x_off, float)[2:4]
             att_lo, att_hi = np.minimum(att_lo - off, 0.0), np.maximum(att_hi - off, 0.0)
         hi_c = np.concatenate(
-            [hi_u, -tz, tz, (self.u_hi - u_base) / self.Du, np.full(m, 1e30), att_hi - att]
-        )
+            [hi_u, -tz, tz, (self.u_hi - u_base) / self.Du, np.full(m, 1e30),
+             (att_hi - att).reshape(-1)]
+        )  # fmt: skip
         lo_c = np.concatenate(
             [lo_u, np.full(2 * n, -1e30), np.full(m, -1e30), (self.u_lo - u_base) / self.Du,
-             att_lo - att]
+             (att_lo - att).reshape(-1)]
         )  # fmt: skip
         bu = np.concatenate([hi_b, hi_c])
         bl = np.concatenate([lo_b, lo_c])
@@ -770,7 +770,8 @@ class TrackingMPCNominal(NominalSource):
             for _ in range(B)
         ]
         m0 = self.mpcs[0]
-        self.M, self.K, self.Du, self.scale, self.L = st.M, m0.K, m0.Du, m0.theta_scale, m0.L
+        self.M, self.K, self.Du, self.scale = st.M, m0.K, m0.Du, m0.theta_scale
+        self.L_inv = m0.L_inv
         self.filter = None
         self.p_est = 9
         if n == 11:  # ECM: the estimator works in its coordinates (q', x_q, eq. 43)
@@ -901,7 +902,7 @@ class TrackingMPCNominal(NominalSource):
         u_dev = (u_s + mv(self.K, zx)) + self.PLAN[:, 0] * self.Du
         u_nom = (self.URS + u_d) + u_dev
         x_r, u_r = self.TRX.copy(), self.TRU + u_d
-        w = np.linalg.solve(self.L, zx[:, :, None])[..., 0]
+        w = mv(self.L_inv, zx)  # L^-1 (z - x_s): the level in E(Q) is w'w
         st = [m.stats for m in self.mpcs]
         out = NominalTrajectory(
             k, t, h_c, V_c, self.TH[:, 0].copy(), self.TH[:, 1].copy(), x_r, u_r,

@@ -168,7 +168,10 @@ class VehicleState(LoopMessage):
 
     def x(self) -> np.ndarray:
         """Plant states (B, 9) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]."""
-        return np.stack([getattr(self, f) for f in self.STATE], axis=1)
+        out = np.empty(np.shape(self.h) + (9,))  # filled column by column: cheaper than np.stack
+        for i, f in enumerate(self.STATE):
+            out[..., i] = getattr(self, f)
+        return out
 
 
 @dataclass(frozen=True)
@@ -254,7 +257,9 @@ class ControlCommand(LoopMessage):
 
     def u(self) -> np.ndarray:
         """Inputs (B, 2) [Phi, delta_e rad]."""
-        return np.stack([self.phi, self.delta_e], axis=1)
+        out = np.empty(np.shape(self.phi) + (2,))
+        out[..., 0], out[..., 1] = self.phi, self.delta_e
+        return out
 
 
 @dataclass(frozen=True)
