@@ -141,6 +141,9 @@ class Peers:
     graph_nodes: list
     lost_s: float = STATUS_LOST_S
     table: dict = field(default_factory=dict)
+    #: Count of changes of :attr:`table` by :meth:`update` (keys the cache of :meth:`failed`).
+    version: int = field(default=0, compare=False)
+    _failed: tuple = field(default=(-1, ()), init=False, repr=False, compare=False)
 
     def update(self, s: dict | None) -> bool:
         """Take one status; True if it is news (a new instance or another state)."""
@@ -151,6 +154,7 @@ class Peers:
         if old is not None and old["stamp"] > s["stamp"]:
             return False
         self.table[key] = s
+        self.version += 1
         return old is None or old["state"] != s["state"]
 
     def alive(self, s: dict, now: float | None = None) -> bool:
@@ -190,13 +194,19 @@ class Peers:
         return [d for d in found if d is not None]
 
     def failed(self) -> list[str]:
-        """Peers that exited with a non-zero status, described (their own reasons)."""
-        out = []
-        for n in self.peers():
-            s = self.own(n)
-            if s is not None and s["state"] == "exited" and s.get("exit"):
-                out.append(self.describe(n))
-        return out
+        """Peers that exited with a non-zero status, described (their own reasons).
+
+        Depends on the table only, so it is computed once per :attr:`version` (every
+        node asks between any two spins).
+        """
+        if self._failed[0] != self.version:
+            out = []
+            for n in self.peers():
+                s = self.own(n)
+                if s is not None and s["state"] == "exited" and s.get("exit"):
+                    out.append(self.describe(n))
+            self._failed = (self.version, tuple(out))
+        return list(self._failed[1])
 
     def not_ready(self, now: float | None = None) -> list[str]:
         """Peers alive but still starting, with what each waits for."""

@@ -45,6 +45,9 @@ _STEP_K = "step index"
 _STEP_T = "simulated time t_k [s]"
 
 
+_ROS_FIELDS: dict[type, tuple[tuple[str, str, str], ...]] = {}
+
+
 class LoopMessage:
     """Base of the loop messages (see the module notes for shapes).
 
@@ -56,9 +59,15 @@ class LoopMessage:
     HEADER: ClassVar[tuple[str, ...]] = ()
 
     @classmethod
-    def ros_fields(cls) -> list[tuple[str, str, str]]:
-        """(name, ROS type, comment) of every field, in message order."""
-        return [(f.name, f.metadata["ros"], f.metadata["doc"]) for f in dataclasses.fields(cls)]
+    def ros_fields(cls) -> tuple[tuple[str, str, str], ...]:
+        """(name, ROS type, comment) of every field, in message order (cached per class)."""
+        fields = _ROS_FIELDS.get(cls)
+        if fields is None:  # every codec call asks: built once (the classes are frozen)
+            fields = tuple(
+                (f.name, f.metadata["ros"], f.metadata["doc"]) for f in dataclasses.fields(cls)
+            )
+            _ROS_FIELDS[cls] = fields
+        return fields
 
     @classmethod
     def ros_type(cls) -> str:
@@ -127,6 +136,8 @@ class LoopMessage:
                 values[name] = np.array(col, dtype=bool)
             elif ros == "string":
                 values[name] = tuple(str(s) for s in col)
+            elif len(col) == 1:  # one run (every node of the graph): no stacking
+                values[name] = np.array(col[0], dtype=float)[None, :]
             else:
                 rows = [np.asarray(c, dtype=float) for c in col]
                 if len({r.shape for r in rows}) != 1:

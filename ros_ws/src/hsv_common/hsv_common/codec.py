@@ -8,6 +8,7 @@ recorder and the replay never convert: they move the CDR bytes.
 from __future__ import annotations
 
 import array
+import functools
 
 import numpy as np
 
@@ -15,6 +16,7 @@ from fahv.loop.graph import TOPICS
 from fahv.msg import MESSAGES, LoopMessage
 
 
+@functools.cache
 def msg_type_of(topic: str):
     """ROS message class of a loop topic (rosgraph_msgs/Clock for ``/clock``).
 
@@ -26,19 +28,6 @@ def msg_type_of(topic: str):
     pkg, _, name = TOPICS[topic].split("/")
     module = __import__(f"{pkg}.msg", fromlist=[name])
     return getattr(module, name)
-
-
-def to_dict(msg) -> dict:
-    """ROS message -> dict of its fields; float64[] as float64 ndarrays, nested as dicts."""
-    out = {}
-    for name in msg.get_fields_and_field_types():
-        v = getattr(msg, name)
-        if isinstance(v, array.array | np.ndarray | list):
-            v = np.asarray(v, dtype=float)
-        elif hasattr(v, "get_fields_and_field_types"):
-            v = to_dict(v)
-        out[name] = v
-    return out
 
 
 def to_msg(topic: str, message):
@@ -55,8 +44,19 @@ def to_msg(topic: str, message):
 
 
 def from_msg(topic: str, msg):
-    """ROS message of a loop topic -> :mod:`fahv.msg` message of one run (B = 1)."""
-    return MESSAGES[TOPICS[topic]].from_lanes([to_dict(msg)])
+    """ROS message of a loop topic -> :mod:`fahv.msg` message of one run (B = 1).
+
+    The fields are read by the typed message's own field list (the loop messages are
+    flat: no nested message to convert); arrays become float64 ndarrays in
+    :meth:`~fahv.msg.LoopMessage.from_lanes`.
+
+    Raises
+    ------
+    KeyError
+        If ``topic`` is not a loop topic of a typed message.
+    """
+    cls = MESSAGES[TOPICS[topic]]
+    return cls.from_lanes([{name: getattr(msg, name) for name, _, _ in cls.ros_fields()}])
 
 
 def _fill(msg, fields: dict) -> None:
