@@ -44,11 +44,18 @@ def line(what, runs, seconds, duration):
     )
 
 
-def one_batch(duration: float, batch: int) -> None:
-    """Simulate one batch (the ceiling measurement's unit of work)."""
+def case1_runs(batch: int):
+    """The Case 1 design and the overrides of the campaign's first ``batch`` runs."""
     c = load_campaign(ROOT / "offline_design" / "campaign_case1.yaml")
     design = load_design(ROOT / "offline_design" / "artefacts" / "case1")
-    ovs = [overrides(draw(c.data, design.case, i), design, "tube_mpc") for i in range(batch)]
+    return design, [
+        overrides(draw(c.data, design.case, i), design, "tube_mpc") for i in range(batch)
+    ]
+
+
+def one_batch(duration: float, batch: int) -> None:
+    """Simulate one batch (the ceiling measurement's unit of work)."""
+    design, ovs = case1_runs(batch)
     simulate(design, "tube_mpc", 1.0, overrides=ovs[0])  # warm-up, as in main()
     t0 = time.perf_counter()
     simulate_batch(design, "tube_mpc", ovs, duration)
@@ -77,9 +84,7 @@ def main():
     duration = float(sys.argv[1]) if len(sys.argv) > 1 else 30.0
     batch = int(sys.argv[2]) if len(sys.argv) > 2 else 50
     runs = int(sys.argv[3]) if len(sys.argv) > 3 else 200
-    c = load_campaign(ROOT / "offline_design" / "campaign_case1.yaml")
-    design = load_design(ROOT / "offline_design" / "artefacts" / "case1")
-    ovs = [overrides(draw(c.data, design.case, i), design, "tube_mpc") for i in range(batch)]
+    design, ovs = case1_runs(batch)
     print(f"Case 1 tube_mpc, {duration:g} s per run (Ts 0.02 s: {duration / 0.02:.0f} steps)")
     # warm-up: compiled kernels (numba cache), imports and first-call costs are not timed
     t0 = time.perf_counter()

@@ -34,6 +34,7 @@ def test_missing_peers_are_named_never_started_exited_or_lost():
         p.update(st(n, 10 + i))
     assert p.missing(now) == ["fault_injector (never started)"]
     assert p.ready("plant") and not p.ready("fault_injector")
+    assert p.failed() == []  # asked before the exit: the answer must follow the new status
     p.update(st("tube_mpc", 12, state="exited", exit_status=2, reason="tube_mpc: bad F", k=0,
                 stamp=T0 + 5.5))  # fmt: skip
     assert "tube_mpc (exited with status 2 at step 0: tube_mpc: bad F)" in p.missing(now)

@@ -142,7 +142,7 @@ class Peers:
     lost_s: float = STATUS_LOST_S
     table: dict = field(default_factory=dict)
     #: Count of changes of :attr:`table` by :meth:`update` (keys the cache of :meth:`failed`).
-    version: int = field(default=0, compare=False)
+    version: int = field(default=0, init=False, compare=False)
     _failed: tuple = field(default=(-1, ()), init=False, repr=False, compare=False)
 
     def update(self, s: dict | None) -> bool:

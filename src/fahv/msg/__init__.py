@@ -22,6 +22,7 @@ Lane form
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -45,9 +46,6 @@ _STEP_K = "step index"
 _STEP_T = "simulated time t_k [s]"
 
 
-_ROS_FIELDS: dict[type, tuple[tuple[str, str, str], ...]] = {}
-
-
 class LoopMessage:
     """Base of the loop messages (see the module notes for shapes).
 
@@ -59,15 +57,12 @@ class LoopMessage:
     HEADER: ClassVar[tuple[str, ...]] = ()
 
     @classmethod
+    @functools.cache  # every codec call asks: built once per class (the classes are frozen)
     def ros_fields(cls) -> tuple[tuple[str, str, str], ...]:
         """(name, ROS type, comment) of every field, in message order (cached per class)."""
-        fields = _ROS_FIELDS.get(cls)
-        if fields is None:  # every codec call asks: built once (the classes are frozen)
-            fields = tuple(
-                (f.name, f.metadata["ros"], f.metadata["doc"]) for f in dataclasses.fields(cls)
-            )
-            _ROS_FIELDS[cls] = fields
-        return fields
+        return tuple(
+            (f.name, f.metadata["ros"], f.metadata["doc"]) for f in dataclasses.fields(cls)
+        )
 
     @classmethod
     def ros_type(cls) -> str:
