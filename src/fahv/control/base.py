@@ -26,6 +26,7 @@ A *variant* is what a case lists and a run is made of: a law plus a notch settin
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -132,6 +133,20 @@ class LawStep:
     e: np.ndarray
     level: np.ndarray
     lmi: np.ndarray
+
+
+@functools.cache
+def no_lmi(n_runs: int) -> np.ndarray:
+    """Zero online-LMI counters (n_runs, 3) of a law without online LMIs (read-only, shared).
+
+    Raises
+    ------
+    ValueError
+        If ``n_runs`` is negative.
+    """
+    out = np.zeros((n_runs, 3), dtype=np.int64)
+    out.setflags(write=False)
+    return out
 
 
 class ControlLaw:

@@ -82,6 +82,10 @@ class CommandSchedule:
         self.h0, self.V0, self.h_c, self.V_c = col("h0"), col("V0"), col("h_c"), col("V_c")
         self.t_start, self.t_ramp = col("t_start"), col("t_ramp")
         self.is_step = np.array([c.kind == "step" for c in self.commands])
+        # per-call constants: the changes, and t_ramp with 1 on step lanes (whose ramp
+        # fraction is never used) so that no division by 0 needs an errstate per call
+        self._dh, self._dV = self.h_c - self.h0, self.V_c - self.V0
+        self._t_ramp = np.where(self.is_step, 1.0, self.t_ramp)
 
     def __call__(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Commanded (h_c (B,) [ft], V_c (B,) [ft/s]) at time t [s].
@@ -89,10 +93,6 @@ class CommandSchedule:
         The fraction of the change made by t: 0 before t_start, 1 after a step,
         min(1, (t - t_start) / t_ramp) on a ramp.
         """
-        with np.errstate(divide="ignore", invalid="ignore"):
-            f = np.where(
-                t < self.t_start,
-                0.0,
-                np.where(self.is_step, 1.0, np.minimum(1.0, (t - self.t_start) / self.t_ramp)),
-            )
-        return self.h0 + f * (self.h_c - self.h0), self.V0 + f * (self.V_c - self.V0)
+        ramp = np.minimum(1.0, (t - self.t_start) / self._t_ramp)
+        f = np.where(t < self.t_start, 0.0, np.where(self.is_step, 1.0, ramp))
+        return self.h0 + f * self._dh, self.V0 + f * self._dV

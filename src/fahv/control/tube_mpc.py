@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fahv.control.base import ControlLaw, LawStep, Variant, register_law
+from fahv.control.base import ControlLaw, LawStep, Variant, no_lmi, register_law
 from fahv.control.nominal_mpc import TrackingMPCNominal
 from fahv.control.reference import ReferenceGovernor, mv, quad
 from fahv.errors import ParameterError
@@ -106,7 +106,7 @@ class PaperTubeMPCLaw(ControlLaw):
     def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
         """Commands and tube status of step k (see :meth:`ControlLaw.step`)."""
         u, e = self.tube.step(x, ref)
-        return LawStep(u, e, self.tube.tube_level(e), np.zeros((e.shape[0], 3), dtype=np.int64))
+        return LawStep(u, e, self.tube.tube_level(e), no_lmi(e.shape[0]))
 
 
 class TubeMPCLaw(PaperTubeMPCLaw):

@@ -156,6 +156,8 @@ class NotchCore:
             nf = NotchFilter(p["omega_z"], p["eps_z"], p["omega_p"], p["eps_p"])
             self.filter = DiscreteNotch(nf, p["Ts"], np.zeros(self.n_runs))
         self.k = 0
+        self._enabled = np.full(self.n_runs, self.enabled)  # read-only: shared by messages
+        self._enabled.setflags(write=False)
 
     def on_state(self, state: VehicleState) -> FilteredPitchRate:
         """FilteredPitchRate of step k from VehicleState k."""
@@ -166,8 +168,7 @@ class NotchCore:
         else:
             q_f, x_q = self.filter.step(q), self.filter.x_q.copy()
         self.k += 1
-        enabled = np.full(self.n_runs, self.enabled)
-        return FilteredPitchRate(state.k, state.t, q, q_f, enabled, x_q)
+        return FilteredPitchRate(state.k, state.t, q, q_f, self._enabled, x_q)
 
 
 class NominalCore:
@@ -211,6 +212,10 @@ class ControllerCore:
         self.tau = p["tau"]
         self.lanes = lanes
         self.k = 0
+        # the TubeStatus fields that never change (read-only: shared by every message)
+        self._law_names = (self.law.name,) * self.n_runs
+        self._tau = np.full(self.n_runs, float(self.tau))
+        self._tau.setflags(write=False)
 
     def measured_state(self, state: VehicleState, qf: FilteredPitchRate) -> np.ndarray:
         """Controller states (B, n): x with q' for q (notch on), plus x_q for the ECM (eq. 43).
@@ -221,8 +226,7 @@ class ControllerCore:
             If the 11-state controller gets no filter states.
         """
         x = state.x()
-        on = np.asarray(qf.enabled, bool)
-        x[on, IQ] = qf.q_f[on]
+        x[:, IQ] = np.where(qf.enabled, qf.q_f, x[:, IQ])
         if self.n == 11:
             if qf.x_q.shape[1:] != (2,):
                 raise RunError("tube_mpc: the 11-state (ECM) controller needs the notch states")
@@ -238,9 +242,9 @@ class ControllerCore:
             check_step("tube_mpc", topic, msg, k)
         ls = self.law.step(k, self.measured_state(state, qf), nominal, self.lanes)
         self.k += 1
-        t, B = state.t, self.n_runs
+        t = state.t
         tube = TubeStatus(
-            k, t, (self.law.name,) * B, np.full(B, float(self.tau)), ls.level, ls.level <= 1.0,
+            k, t, self._law_names, self._tau, ls.level, ls.level <= 1.0,
             ls.e, ls.lmi[:, 0], ls.lmi[:, 1], ls.lmi[:, 2], nominal.qp_solves,
             nominal.qp_fallback, nominal.qp_terminal, nominal.qp_recovered,
         )  # fmt: skip
@@ -251,8 +255,13 @@ class FaultCore:
     """Fault-injector node (:class:`fahv.plant.faults.FaultInjector`), each run its fault."""
 
     def __init__(self, runs: Sequence[dict], lanes: Lanes) -> None:
-        self.injector = FaultInjector([make_fault(r["kind"], r["t_onset"], r) for r in runs])
+        self.injector = inj = FaultInjector([make_fault(r["kind"], r["t_onset"], r) for r in runs])
         self.k = 0
+        # the FaultStatus fields that do not depend on t (read-only: shared by messages)
+        self._kind = tuple(inj.kind)
+        self._const = [inj.t_onset, inj.rho_f, inj.bias]
+        for a in self._const:
+            a.setflags(write=False)
 
     def on_command(self, cmd: ControlCommand) -> tuple[ControlCommand, FaultStatus]:
         """Actuator ControlCommand and FaultStatus of step k from ControlCommand k."""
@@ -262,7 +271,7 @@ class FaultCore:
         ua = inj.apply(cmd.t, u)
         self.k += 1
         status = FaultStatus(
-            cmd.k, cmd.t, tuple(inj.kind), inj.active(cmd.t), inj.t_onset, inj.rho_f, inj.bias,
+            cmd.k, cmd.t, self._kind, inj.active(cmd.t), *self._const,
             u[:, DELTA_E].copy(), ua[:, DELTA_E].copy(),
         )  # fmt: skip
         return ControlCommand.of(cmd.k, cmd.t, ua), status
