@@ -24,7 +24,6 @@ from fahv.lanes import Lanes
 from fahv.model.tp_model import build_tp_model
 from fahv.model.trim import TrimMap
 from fahv.msg import NominalTrajectory
-from fahv.synthesis.offline_rmpc import design_sequence
 
 #: Plant states the baseline feeds back (the 9 states of the DM).
 NX = 9
@@ -197,6 +196,9 @@ class RMPCLaw(ControlLaw):
             If an ellipsoid cannot be solved or a certificate fails
             (:func:`fahv.synthesis.offline_rmpc.design_sequence`).
         """
+        # offline only: the nodes and the campaign workers never import cvxpy (0.6 s each)
+        from fahv.synthesis.offline_rmpc import design_sequence
+
         r = ctx.case["rmpc"]
         rv = r["vertices"]
         dm = build_tp_model(ctx.vehicle, "dm", rv[0], rv[1], *ctx.case["samples"])

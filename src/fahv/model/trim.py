@@ -12,7 +12,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import interpolate
 
 from fahv.errors import TrimError
 from fahv.model.dynamics import dm_rhs, forces, make_model
@@ -283,6 +282,8 @@ class TrimMap:
         vals = np.concatenate([self.x_r, self.u_r], axis=2)
         if not np.all(np.isfinite(vals)):
             raise ValueError("trim map contains non-finite values")
+        from scipy import interpolate  # here: nodes without a trim map skip its 0.4 s import
+
         splines = [
             interpolate.RectBivariateSpline(self.h_grid, self.V_grid, vals[:, :, j])
             for j in range(vals.shape[2])

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-import numba
+import functools
+
 import numpy as np
 
 #: Primal feasibility and KKT tolerances of the solution check (scaled units).
@@ -40,7 +41,7 @@ def check_kkt(H, f, A_c, bl, bu, y, lam, primal_tol=PRIMAL_TOL, kkt_tol=KKT_TOL)
     str
         '' when every condition holds, else the first that failed.
     """
-    r = _kkt_measures(
+    r = _kkt_kernel()(
         np.ascontiguousarray(H, dtype=float), np.ascontiguousarray(f, dtype=float),
         np.ascontiguousarray(A_c, dtype=float), np.ascontiguousarray(bl, dtype=float),
         np.ascontiguousarray(bu, dtype=float), np.ascontiguousarray(y, dtype=float),
@@ -58,7 +59,17 @@ def check_kkt(H, f, A_c, bl, bu, y, lam, primal_tol=PRIMAL_TOL, kkt_tol=KKT_TOL)
     return ""
 
 
-@numba.njit(cache=True)
+@functools.cache
+def _kkt_kernel():
+    """:func:`_kkt_measures` compiled by numba (cached on disk), built at its first use.
+
+    A process that never checks a QP (most nodes) does not import numba (0.16 s).
+    """
+    import numba
+
+    return numba.njit(cache=True)(_kkt_measures)
+
+
 def _kkt_measures(H, f, A_c, bl, bu, y, lam, big, primal_tol, kkt_tol):  # pragma: no cover
     """The numbers :func:`check_kkt` compares (compiled: a QP per re-plan and run).
 
