@@ -771,6 +771,7 @@ class TrackingMPCNominal(NominalSource):
         ]
         m0 = self.mpcs[0]
         self.M, self.K, self.Du, self.scale = st.M, m0.K, m0.Du, m0.theta_scale
+        self.trim_map = tm
         self.L_inv = m0.L_inv
         self.filter = None
         self.p_est = 9
@@ -807,6 +808,19 @@ class TrackingMPCNominal(NominalSource):
             self.TRX[b], self.TRU[b] = tm(*self.TH[b])
         self.XN = np.stack([np.asarray(r["x0"], float) for r in runs])
         self.k = 0
+        self._counts = self._qp_counts()
+
+    def _qp_counts(self) -> tuple[np.ndarray, ...]:
+        """Per-run QP counters (solves, fallback, terminal, recovered), each (B,) int64.
+
+        Only a re-plan changes them: :meth:`step` builds them after each re-plan and
+        its messages share them until the next (no message array is written in place).
+        """
+        st = [m.stats for m in self.mpcs]
+        return tuple(
+            np.array([getattr(s, c) for s in st], dtype=np.int64)
+            for c in ("solves", "fallback", "terminal", "recovered")
+        )
 
     # -- per run: scheduling and the QP ------------------------------------------------
     def _schedule(self, b: int, theta) -> None:
@@ -818,8 +832,12 @@ class TrackingMPCNominal(NominalSource):
         self.HX[b], self.HU[b] = mpc.Hx[:, :pe], mpc.Hu[:, :pe]
         self.EA[b], self.EB[b] = mpc.A[:pe, :pe], mpc.B[:pe]
 
-    def _plan(self, b: int, cmd: np.ndarray) -> None:
-        """Re-plan run b: reschedule if needed, solve its QP, or fall back (counted)."""
+    def _plan(self, b: int, cmd: np.ndarray) -> bool:
+        """Re-plan run b: reschedule if needed, solve its QP, or fall back (counted).
+
+        Returns True when the plan moved the set point ``TH[b]``: its trim ``TRX[b]``,
+        ``TRU[b]`` is then due (evaluated for all such runs at once by :meth:`step`).
+        """
         mpc, ly = self.mpcs[b], self.mpcs[b].layout
         # schedule at the nominal operating point (h, V of X_n), not at the set point:
         # the set point may sit a steady offset away from the state it holds
@@ -844,9 +862,9 @@ class TrackingMPCNominal(NominalSource):
                 mpc.stats.solves += 1
             self.PLAN[b] = y[ly.moves].reshape(ly.N_p, ly.m)
             self.TH[b] = mpc.theta_s + y[ly.delta] * mpc.theta_scale
-            self.TRX[b], self.TRU[b] = mpc.trim_map(*self.TH[b])
             self.moves_left[b] = ly.N_p
             self.status[b] = f"recovered ({why})" if recovered else "ok"
+            return True
         elif self.moves_left[b] > 1:  # the set point stays where it is
             mpc.stats.fallback += 1
             self.PLAN[b] = np.vstack([self.PLAN[b, 1:], np.zeros((1, ly.m))])
@@ -857,6 +875,7 @@ class TrackingMPCNominal(NominalSource):
             self.PLAN[b] = 0.0
             self.moves_left[b] = 0
             self.status[b] = f"terminal law ({why})"
+        return False
 
     # -- the batched fast step ----------------------------------------------------------
     def _measure(self, x: np.ndarray) -> np.ndarray:
@@ -884,11 +903,16 @@ class TrackingMPCNominal(NominalSource):
             self.has_prev = True
         h_c, V_c = self.command(t)
         if self.k % self.M == 0:  # re-plan: each run's own QP
+            moved = []
             for b in np.flatnonzero(self.lanes.alive):
                 try:
-                    self._plan(int(b), np.array([h_c[b], V_c[b]]))
+                    if self._plan(int(b), np.array([h_c[b], V_c[b]])):
+                        moved.append(b)
                 except Exception as exc:  # noqa: BLE001 - the run fails alone
                     self.lanes.fail(int(b), exc)
+            if moved:  # the trims of the new set points, in one evaluation of the map
+                self.TRX[moved], self.TRU[moved] = self.trim_map.at(*self.TH[moved].T)
+            self._counts = self._qp_counts()
         if self.has_est:
             Dc = np.ascontiguousarray(self.est.d)
             x_d, u_d = mv(self.HX, Dc), mv(self.HU, Dc)
@@ -903,14 +927,11 @@ class TrackingMPCNominal(NominalSource):
         u_nom = (self.URS + u_d) + u_dev
         x_r, u_r = self.TRX.copy(), self.TRU + u_d
         w = mv(self.L_inv, zx)  # L^-1 (z - x_s): the level in E(Q) is w'w
-        st = [m.stats for m in self.mpcs]
+        solves, fallback, terminal, recovered = self._counts
         out = NominalTrajectory(
             k, t, h_c, V_c, self.TH[:, 0].copy(), self.TH[:, 1].copy(), x_r, u_r,
             self.XN - x_r, u_nom - u_r, (w[:, None, :] @ w[:, :, None])[:, 0, 0],
-            np.array([s.solves for s in st], dtype=np.int64),
-            np.array([s.fallback for s in st], dtype=np.int64),
-            np.array([s.terminal for s in st], dtype=np.int64), -u_d,
-            np.array([s.recovered for s in st], dtype=np.int64),
+            solves, fallback, terminal, -u_d, recovered,
         )  # fmt: skip
         zc = np.ascontiguousarray(z)
         d_n = np.zeros_like(z)

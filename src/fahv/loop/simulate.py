@@ -133,8 +133,7 @@ class History:
             "tube_level": np.empty((N, B)),
             "fault_active": np.empty((N, B), dtype=bool),
         }
-        self.lmi = np.zeros((B, 3), dtype=int)
-        self.qp = np.zeros((B, 4), dtype=int)
+        self._counters = None  # the last step's (TubeStatus, NominalTrajectory)
 
     def add(
         self,
@@ -168,20 +167,24 @@ class History:
         a["h_g"][k], a["V_g"][k] = nom.h_g, nom.v_g
         a["tube_level"][k] = tube.level
         a["fault_active"][k] = fs.active
-        self.lmi = np.stack([tube.lmi_solves, tube.lmi_fallback, tube.lmi_failed], axis=1)
-        self.qp = np.stack(
-            [nom.qp_solves, nom.qp_fallback, nom.qp_terminal, nom.qp_recovered], axis=1
-        )
+        self._counters = (tube, nom)  # running totals: the last step's are the run's
         self.count += 1
+
+    def counts(self, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """LMI (3,) and QP (4,) counters of run ``b`` at the last stored step (zeros before)."""
+        if self._counters is None:
+            return np.zeros(3, dtype=int), np.zeros(4, dtype=int)
+        tube, nom = self._counters
+        lmi = (tube.lmi_solves, tube.lmi_fallback, tube.lmi_failed)
+        qp = (nom.qp_solves, nom.qp_fallback, nom.qp_terminal, nom.qp_recovered)
+        return np.array([c[b] for c in lmi], dtype=int), np.array([c[b] for c in qp], dtype=int)
 
     def result(self, b: int, info: dict, n: int | None = None) -> RunResult:
         """:class:`RunResult` of run ``b`` over its first ``n`` steps (all stored ones)."""
         n = self.count if n is None else min(int(n), self.count)
         col = {k: np.ascontiguousarray(v[:n, b]) for k, v in self.a.items()}
-        return RunResult(
-            t=self.t[:n].copy(), **col, lmi_counts=self.lmi[b].astype(int),
-            info=dict(info), qp_counts=self.qp[b].astype(int),
-        )  # fmt: skip
+        lmi, qp = self.counts(b)
+        return RunResult(t=self.t[:n].copy(), **col, lmi_counts=lmi, info=dict(info), qp_counts=qp)
 
 
 def run_result(records: dict, info: dict | None = None) -> RunResult:
