@@ -424,6 +424,9 @@ class TrackingMPC:
         self.theta_s = None
         self.last_y = None
         self._qp = None  # DAQP workspace (daqp.Model) of the current scheduling
+        # bounds of the rows that have none on one side (terminal rows, steady input)
+        self._no_lo_t, self._no_hi_u = np.full(2 * n, -1e30), np.full(self.m, 1e30)
+        self._no_lo_u = np.full(self.m, -1e30)
 
     @property
     def u_lo(self) -> np.ndarray:
@@ -655,7 +658,7 @@ class TrackingMPC:
             :func:`fahv.synthesis.qp.check_kkt`); a rejected QP raises nothing, the
             caller falls back.
         """
-        s, ly, m, n = self.s, self.layout, self.m, self.n
+        s, ly, m = self.s, self.layout, self.m
         N_p = s.N_p
         e_theta = (self.theta_s - cmd) / self.theta_scale
         f = 2.0 * (self.Fz @ z0)
@@ -673,16 +676,14 @@ class TrackingMPC:
         if x_off is not None:
             off = np.asarray(x_off, float)[2:4]
             att_lo, att_hi = np.minimum(att_lo - off, 0.0), np.maximum(att_hi - off, 0.0)
-        hi_c = np.concatenate(
-            [hi_u, -tz, tz, (self.u_hi - u_base) / self.Du, np.full(m, 1e30),
+        bu = np.concatenate(
+            [hi_b, hi_u, -tz, tz, (self.u_hi - u_base) / self.Du, self._no_hi_u,
              (att_hi - att).reshape(-1)]
         )  # fmt: skip
-        lo_c = np.concatenate(
-            [lo_u, np.full(2 * n, -1e30), np.full(m, -1e30), (self.u_lo - u_base) / self.Du,
+        bl = np.concatenate(
+            [lo_b, lo_u, self._no_lo_t, self._no_lo_u, (self.u_lo - u_base) / self.Du,
              (att_lo - att).reshape(-1)]
         )  # fmt: skip
-        bu = np.concatenate([hi_b, hi_c])
-        bl = np.concatenate([lo_b, lo_c])
         if self._qp is None:  # a new workspace per scheduling: H and A_c fixed until then
             self._qp = _daqp().Model()
             self._qp.settings = {"iter_limit": 2000}
