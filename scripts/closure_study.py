@@ -4,17 +4,22 @@ Iterates W <- max(W, bound of the one-step disturbance over the domain of Z(W)) 
 the tube LMI (24) re-solved each time, for a chosen domain: scheduling points, the
 nominal input rows around the scheduling trim, a scale of the nominal state ranges
 the nominal MPC allows, the nominal vehicle or the whole parameter box, and the
-starting W as a fraction of the design's. Prints per iteration the tightening, the
+starting W as a fraction of the design's. With ``--directions K`` the tube's vertices
+carry the parameter box along its K principal directions
+(:func:`fahv.design.certificate.parameter_directions`; the TP vertices shifted to every
+corner of the coefficient box) and W bounds only the rest. Prints per iteration the tightening, the
 alpha extent of Z and bound / W per row; stops when the pair closes (bound <= W) or
 the tube LMI becomes infeasible.
 
 Usage (after `fahv design offline_design/case1.yaml`):
     .venv/bin/python scripts/closure_study.py SCHEDULES DPHI DDELTA_E_DEG NOMINAL_SCALE \
-        {nominal,box} W0_FRACTION [ITERATIONS]
+        {nominal,box} W0_FRACTION [ITERATIONS] [--directions K]
 e.g. scripts/closure_study.py 1 0.1 3 1.0 box 1.0     (the MPC's ranges: diverges)
      scripts/closure_study.py 1 0.01 0.3 0.1 nominal 0.1
+     scripts/closure_study.py 1 0.1 3 1.0 box 1.0 1 --directions 1
 """
 
+import dataclasses
 import sys
 import warnings
 from pathlib import Path
@@ -26,6 +31,7 @@ from fahv.design.certificate import (
     CertificateDomain,
     bound_disturbance,
     nominal_half_widths,
+    parameter_directions,
     schedule_points,
 )
 from fahv.design.disturbance import DEFAULT_DEV_BOX
@@ -42,6 +48,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def main(argv):
     """Run the iteration of the module docstring with the command-line arguments."""
+    k_dirs = 0
+    if "--directions" in argv:
+        i = argv.index("--directions")
+        k_dirs = int(argv[i + 1])
+        argv = argv[:i] + argv[i + 2 :]
     n_s, dphi, dde, nom_scale, veh_kind, w0 = argv[:6]
     iterations = int(argv[6]) if len(argv) > 6 else 12
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
@@ -60,6 +71,20 @@ def main(argv):
     nominal = nominal * float(nom_scale)
     unc = dict(PAPER_UNCERTAINTY) if veh_kind == "box" else {}
     W = a["w_max"] * float(w0)
+    scheds = schedule_points(veh.envelope, int(n_s))
+    dirs = None
+    if k_dirs:
+        if veh_kind != "box":
+            raise SystemExit("--directions needs the parameter box ('box')")
+        dirs = parameter_directions(veh, tm, scheds, unc, c["Ts"], c["plant_substeps"],
+                                    tp.state_scale, tp.input_scale, k_dirs)  # fmt: skip
+        Af, Bf = fault_vertices(*dirs.vertices(disc.A, disc.B), rho)
+        print(
+            f"parameter box in the vertices along {k_dirs} direction(s): RMS singular values "
+            + " ".join(f"{s:.3g}" for s in dirs.singular_values[:4])
+            + f"; {Af.shape[0]} vertices",
+            flush=True,
+        )
     for it in range(iterations):
         try:
             tube = design_tube(Af, Bf, W, tp.state_scale, tp.input_scale, room_f,
@@ -68,13 +93,20 @@ def main(argv):
             print(f"iteration {it}: tube LMI infeasible ({exc})")
             return
         bounds = []
-        for s in schedule_points(veh.envelope, int(n_s)):
+        for si, s in enumerate(scheds):
             u_r = tm(*s)[1]
             t = tube.tightening
             dom = CertificateDomain(np.array([s]), nominal + tube.z_box, nominal, u_r - du - t,
                                     u_r + du + t, unc, (rho, 1.0), c["Ts"],
                                     c["plant_substeps"], notes)  # fmt: skip
-            bounds.append(bound_disturbance(dom, veh, tp, tm).w_bound)
+            d_s = None
+            if dirs is not None:
+                d_s = dataclasses.replace(
+                    dirs,
+                    schedules=scheds[si : si + 1],
+                    corner_linear=dirs.corner_linear[si : si + 1],
+                )
+            bounds.append(bound_disturbance(dom, veh, tp, tm, directions=d_s).w_bound)
         Wb = np.max(bounds, axis=0)
         print(
             f"iteration {it}: tightening {tube.tightening[0]:.3f} / "

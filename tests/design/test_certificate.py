@@ -11,6 +11,7 @@ from fahv.design.certificate import (
     disturbance_at,
     nominal_half_widths,
     onset_levels,
+    parameter_directions,
     worst_level,
 )
 from fahv.design.disturbance import DEFAULT_DEV_BOX
@@ -115,6 +116,55 @@ def test_disturbance_bound_holds_on_100000_independent_samples(model):
     assert np.all(ratio <= 1.0), ratio
     # and the bound is not vacuous: the samples reach a good part of it
     assert np.all(ratio >= 0.3), ratio
+
+
+def test_parameter_directions_carry_the_box_and_the_bound_stays_sound(model):
+    """The parameter box's Jacobian deviation is dominated by one direction (I_yy, which
+    scales the pitch row); with it in the tube's vertices the bound of the rest drops in
+    the rigid-body rows and still contains the true disturbance at every parameter
+    corner (both rho_f ends, box corners and interior points of the state/input box)."""
+    veh, tp, tm = model
+    h, V = 85500.0, 7900.0
+    x_r, u_r = tm(h, V)
+    dirs = parameter_directions(veh, tm, [[h, V]], dict(PAPER_UNCERTAINTY), 0.02, 5,
+                                tp.state_scale, tp.input_scale, 1)  # fmt: skip
+    sv = dirs.singular_values
+    print("RMS singular values of the corners' deviations:", np.round(sv[:4], 5))
+    assert sv[0] > 5 * sv[1]
+    # the first direction separates the corners by I_yy (the 2nd parameter of the box)
+    corners = np.array(list(itertools.product((-1.0, 1.0), repeat=len(PAPER_UNCERTAINTY))))
+    coef = np.einsum("cij,ij->c", dirs.corner_linear[0][:, :, :9], dirs.dA[0])
+    assert abs(np.corrcoef(coef, corners[:, 1])[0, 1]) > 0.95
+    A, B = tp.discretize(0.02).A, tp.discretize(0.02).B
+    Av, Bv = dirs.vertices(A, B)
+    assert Av.shape == (2 * A.shape[0], 9, 9) and Bv.shape == (2 * B.shape[0], 9, 2)
+    nominal, notes = nominal_half_widths(
+        {"reschedule": [100.0, 50.0], "dtheta_max": [300.0, 150.0], "att_max": 0.35},
+        DEFAULT_DEV_BOX,
+    )
+    dom = CertificateDomain(
+        np.array([[h, V]]), 0.25 * nominal, 0.25 * nominal, u_r - [0.05, np.radians(2.0)],
+        u_r + [0.05, np.radians(2.0)], dict(PAPER_UNCERTAINTY), (0.7, 1.0), 0.02, 5, notes,
+    )  # fmt: skip
+    plain = bound_disturbance(dom, veh, tp, tm)
+    bnd = bound_disturbance(dom, veh, tp, tm, directions=dirs)
+    print("bound with / without the direction per row:", np.round(bnd.w_bound / plain.w_bound, 3))
+    assert np.all(bnd.w_bound[2:5] < 0.7 * plain.w_bound[2:5])  # alpha, theta, q
+    n = 2 * 2048
+    unit, a, _ = _samples(dom, n, seed=7)
+    signs = np.concatenate([corners] * 4)
+    center = np.concatenate([np.zeros(9), 0.5 * (dom.u_lo + dom.u_hi) - u_r])
+    worst = np.zeros(9)
+    for rho, sl in ((0.7, slice(0, n, 2)), (1.0, slice(1, n, 2))):
+        D = disturbance_at(dom, veh, tp, tm, (h, V), center + unit[sl] * a, signs[sl], rho,
+                           directions=dirs)  # fmt: skip
+        worst = np.maximum(worst, np.max(np.abs(D), axis=0))
+    ratio = worst / bnd.w_bound
+    print("sampled max / bound per row (with the direction):", np.round(ratio, 3))
+    assert np.all(ratio <= 1.0), ratio
+    with pytest.raises(ValueError, match="corners only"):
+        disturbance_at(dom, veh, tp, tm, (h, V), center[None], 0.5 * corners[:1], 1.0,
+                       directions=dirs)  # fmt: skip
 
 
 @pytest.mark.xfail(

@@ -127,15 +127,24 @@ def _one_step(X, U, P, Ts, n_sub):
     return rk4_cm(np.ascontiguousarray(X), np.ascontiguousarray(U), P, Ts, n_sub)
 
 
-def _disturbance(Z, x_rs, u_rs, A_s, B_s, rho, recs, Ts, n_sub):
-    """Delta (module docstring) for L points Z (L, 11) and parameter records (L,)."""
+def _disturbance(Z, x_rs, u_rs, A_s, B_s, rho, recs, Ts, n_sub, lin=None):
+    """Delta (module docstring) for L points Z (L, 11) and parameter records (L,).
+
+    ``lin`` (L, 9, 11), optional: a per-point linear term [dA, dB] of the vehicle's
+    parameters that the tube's vertices carry (:class:`ParameterDirections`); it is
+    removed from Delta as A_s z_x + B_s P z_u is.
+    """
     L = Z.shape[0]
     P = np.array([1.0, rho])
     X = x_rs[None, :] + Z[:, :9]
     U = (u_rs[None, :] + Z[:, 9:]) * P[None, :]
     x1 = _one_step(X, U, recs, Ts, n_sub)
     x0 = _one_step(np.tile(x_rs, (L, 1)), np.tile(u_rs * P, (L, 1)), recs, Ts, n_sub)
-    return x1 - x0 - Z[:, :9] @ A_s.T - (Z[:, 9:] * P[None, :]) @ B_s.T
+    out = x1 - x0 - Z[:, :9] @ A_s.T - (Z[:, 9:] * P[None, :]) @ B_s.T
+    if lin is not None:
+        zp = np.concatenate([Z[:, :9], Z[:, 9:] * P[None, :]], axis=1)
+        out -= np.einsum("lij,lj->li", lin, zp)
+    return out
 
 
 def _stencil(a: np.ndarray):
@@ -201,7 +210,9 @@ class DisturbanceBound:
     n_evaluations: int
 
 
-def bound_disturbance(domain: CertificateDomain, vehicle, tp, trim_map, progress=None):
+def bound_disturbance(
+    domain: CertificateDomain, vehicle, tp, trim_map, progress=None, directions=None
+):
     """Bound max |Delta_j| over the whole domain (module docstring), deterministic.
 
     For every scheduling point, parameter corner (all 2^P) and rho_f of the domain,
@@ -224,6 +235,11 @@ def bound_disturbance(domain: CertificateDomain, vehicle, tp, trim_map, progress
         Scheduling trims (x_rs, u_rs).
     progress : callable, optional
         Iterable wrapper (tqdm).
+    directions : ParameterDirections, optional
+        When the tube's vertices carry the parameter box along principal directions
+        (:func:`parameter_directions`), the linear part they carry is removed from Delta
+        corner by corner (it is covered by the vertices, not by W). Its schedules must
+        be those of ``domain``.
 
     Returns
     -------
@@ -252,8 +268,11 @@ def bound_disturbance(domain: CertificateDomain, vehicle, tp, trim_map, progress
     items = list(itertools.product(range(len(domain.schedules)), domain.rho))
     it = items if progress is None else progress(items)
     cache = {}
+    if directions is not None and not np.allclose(directions.schedules, domain.schedules):
+        raise DesignError("certificate domain: parameter directions built for other schedules")
     for si, rho in it:
         h_s, V_s = domain.schedules[si]
+        lin_c = None if directions is None else directions.corner_linear[si]  # (C, 9, 11)
         x_rs, u_rs = trim_map(h_s, V_s)
         x_rs = np.asarray(x_rs[:9], float)
         A_s, B_s = _scheduled(disc, tp, h_s, V_s)
@@ -265,7 +284,8 @@ def bound_disturbance(domain: CertificateDomain, vehicle, tp, trim_map, progress
         K, C = S.shape[0], corners.shape[0]
         Zs = np.tile(center + S, (C, 1))
         recs = np.repeat(recs_all, K)
-        G = _disturbance(Zs, x_rs, u_rs, A_s, B_s, rho, recs, domain.Ts, domain.n_sub)
+        lin = None if lin_c is None else np.repeat(lin_c, K, axis=0)
+        G = _disturbance(Zs, x_rs, u_rs, A_s, B_s, rho, recs, domain.Ts, domain.n_sub, lin)
         n_eval += 2 * G.shape[0]
         if not np.all(np.isfinite(G)):
             raise DesignError(
@@ -280,20 +300,21 @@ def bound_disturbance(domain: CertificateDomain, vehicle, tp, trim_map, progress
             for j in range(n):
                 if qb[j] > quad[j]:
                     quad[j] = qb[j]
-                    best[j] = (si, c, rho, center, a, x_rs, u_rs, A_s, B_s)
+                    best[j] = (si, c, rho, center, a, x_rs, u_rs, A_s, B_s, lin_c)
     # third-order remainder at the 2^11 corners of the box, for each row's worst case
     rem = np.zeros(n)
     cmax = np.zeros(n)
     signs = np.array(list(itertools.product((-1.0, 1.0), repeat=11)))
     done = {}
     for j in range(n):
-        si, c, rho, center, a, x_rs, u_rs, A_s, B_s = best[j]
+        si, c, rho, center, a, x_rs, u_rs, A_s, B_s, lin_c = best[j]
         key = (si, rho, c)
         if key not in done:
             Zc = center + signs * a
+            lin = None if lin_c is None else np.repeat(lin_c[c : c + 1], len(Zc), axis=0)
             exact = _disturbance(
                 Zc, x_rs, u_rs, A_s, B_s, rho, np.repeat(recs_all[c : c + 1], len(Zc)),
-                domain.Ts, domain.n_sub,
+                domain.Ts, domain.n_sub, lin,
             )  # fmt: skip
             n_eval += 2 * len(Zc)
             g0, J, H = cache[key]
@@ -319,7 +340,9 @@ def _scheduled(disc, tp, h, V):
     return np.tensordot(w, disc.A, 1), np.tensordot(w, disc.B, 1)
 
 
-def disturbance_at(domain: CertificateDomain, vehicle, tp, trim_map, schedule, Z, signs, rho):
+def disturbance_at(
+    domain: CertificateDomain, vehicle, tp, trim_map, schedule, Z, signs, rho, directions=None
+):
     """Delta (L, 9) at explicit points: an independent evaluation for tests.
 
     Parameters
@@ -335,6 +358,14 @@ def disturbance_at(domain: CertificateDomain, vehicle, tp, trim_map, schedule, Z
         Parameter values as fractions in [-1, 1] of the box, one row per point.
     rho : float
         Elevator effectiveness.
+    directions : ParameterDirections, optional
+        Remove the linear part the tube's vertices carry (as :func:`bound_disturbance`);
+        defined at the corners of the box only, for one schedule.
+
+    Raises
+    ------
+    ValueError
+        With ``directions``, if a row of ``signs`` is not a corner of the box.
     """
     disc = tp.discretize(domain.Ts)
     names = list(domain.uncertainty)
@@ -344,10 +375,154 @@ def disturbance_at(domain: CertificateDomain, vehicle, tp, trim_map, schedule, Z
         [perturb(vehicle.params, domain.uncertainty, dict(zip(names, s, strict=True)))
          for s in signs]
     )  # fmt: skip
+    lin = None
+    if directions is not None:
+        signs = np.asarray(signs, float)
+        if not np.all(np.abs(signs) == 1.0):
+            raise ValueError("disturbance_at: directions are defined at the box corners only")
+        bits = (signs > 0).astype(int) @ (1 << np.arange(signs.shape[1])[::-1])
+        si = int(np.argmin(np.abs(directions.schedules - np.asarray(schedule)).sum(axis=1)))
+        lin = directions.corner_linear[si][bits]
     return _disturbance(
         np.asarray(Z, float), np.asarray(x_rs[:9], float), u_rs, A_s, B_s, rho, recs,
-        domain.Ts, domain.n_sub,
+        domain.Ts, domain.n_sub, lin,
     )  # fmt: skip
+
+
+# -- the parameter box in the tube's vertices ---------------------------------------------
+@dataclass(frozen=True)
+class ParameterDirections:
+    """The parameter box's first-order effect as principal directions of [dA, dB].
+
+    At a fixed trim, a vehicle of the box differs from the nominal one to first order by
+    its Jacobian deviation [dA_p, dB_p] (one control period, discrete). Over the 2^P
+    corners these deviations are dominated by a few directions (on this vehicle one:
+    I_yy scales the pitch and coupled flexible rows). Along k directions G_l
+    (scaled coordinates) with coefficient ranges [c_lo, c_hi] covering every corner at
+    every schedule, the vertex set {A_i + sum_l c_l dA_l, B_i + sum_l c_l dB_l} over
+    the corners of the coefficient box carries that part in the tube's LMI (24), so W
+    need not hold it; the rest of each corner's deviation stays in W
+    (:func:`bound_disturbance` with ``directions``).
+
+    Attributes
+    ----------
+    schedules : (S, 2) ndarray
+        Scheduling points (h, V) [ft, ft/s] the Jacobians were taken at.
+    dA, dB : (k, 9, 9), (k, 9, 2) ndarray
+        Unit directions (unscaled units).
+    c_lo, c_hi : (k,) ndarray
+        Coefficient range over all corners and schedules.
+    corner_linear : (S, C, 9, 11) ndarray
+        Per schedule and corner, the projection of [dA_p, dB_p] on the directions.
+    singular_values : (r,) ndarray
+        RMS singular values of the corners' scaled deviations (all directions), to
+        judge what k leaves out.
+    """
+
+    schedules: np.ndarray
+    dA: np.ndarray
+    dB: np.ndarray
+    c_lo: np.ndarray
+    c_hi: np.ndarray
+    corner_linear: np.ndarray
+    singular_values: np.ndarray
+
+    def vertices(self, A, B):
+        """Vertex set of the tube LMI: every vertex shifted to every corner of the box.
+
+        Parameters
+        ----------
+        A : (R, 9, 9) ndarray
+        B : (R, 9, 2) ndarray
+            Vertices of the nominal vehicle (discrete).
+
+        Returns
+        -------
+        (R 2^k, 9, 9), (R 2^k, 9, 2) ndarray
+        """
+        As, Bs = [], []
+        for c in itertools.product(*zip(self.c_lo, self.c_hi, strict=True)):
+            c = np.asarray(c, float)
+            As.append(A + np.tensordot(c, self.dA, 1)[None])
+            Bs.append(B + np.tensordot(c, self.dB, 1)[None])
+        return np.concatenate(As), np.concatenate(Bs)
+
+
+def parameter_directions(
+    vehicle, trim_map, schedules, uncertainty: dict, Ts: float, n_sub: int, Dx, Du, k: int
+) -> ParameterDirections:
+    """Principal directions of the parameter box's Jacobian deviation (one period).
+
+    The discrete Jacobians of one control period of the CM (the plant's RK4) at the
+    nominal trim of each scheduling point are taken by central differences (steps 1e-4
+    of the scaling) for the nominal vehicle and every corner of the box; the scaled
+    deviations (rows / Dx, columns times (Dx, Du)) of all corners and schedules are
+    decomposed by an SVD and the first k right singular vectors kept.
+
+    Parameters
+    ----------
+    vehicle : fahv.model.vehicle.Vehicle
+    trim_map : fahv.model.trim.TrimMap
+    schedules : (S, 2) array_like
+        Scheduling points (h, V) [ft, ft/s].
+    uncertainty : dict[str, float]
+        Relative bounds of the box (every corner is evaluated).
+    Ts : float
+        Control period [s].
+    n_sub : int
+        RK4 sub-steps per period.
+    Dx : (9,) ndarray
+    Du : (2,) ndarray
+        State and input scaling.
+    k : int
+        Number of directions (0: none, the result carries no vertex shift).
+
+    Returns
+    -------
+    ParameterDirections
+
+    Raises
+    ------
+    ValueError
+        If k is negative or larger than the number of corners.
+    """
+    names = list(uncertainty)
+    corners = np.array(list(itertools.product((-1.0, 1.0), repeat=len(names))))
+    if not 0 <= k <= len(corners):
+        raise ValueError(f"parameter directions: k must be in [0, {len(corners)}], got {k}")
+    recs = params_records(
+        [vehicle.params]
+        + [perturb(vehicle.params, uncertainty, dict(zip(names, s, strict=True))) for s in corners]
+    )
+    sc = np.concatenate([Dx, Du])
+    schedules = np.atleast_2d(np.asarray(schedules, float))
+    dev = []
+    for h, V in schedules:
+        x, u = trim_map(h, V)
+        z0 = np.concatenate([np.asarray(x[:9], float), np.asarray(u, float)])
+        J = np.empty((len(recs), 9, 11))
+        for i in range(11):
+            zp = np.tile(z0, (len(recs), 1))
+            zm = zp.copy()
+            zp[:, i] += 1e-4 * sc[i]
+            zm[:, i] -= 1e-4 * sc[i]
+            fp = _one_step(zp[:, :9], zp[:, 9:], recs, Ts, n_sub)
+            fm = _one_step(zm[:, :9], zm[:, 9:], recs, Ts, n_sub)
+            J[:, :, i] = (fp - fm) / (2e-4 * sc[i])
+        dev.append((J[1:] - J[0]) / Dx[None, :, None] * sc[None, None, :])
+    dev = np.array(dev)  # (S, C, 9, 11) scaled
+    flat = dev.reshape(-1, 99)
+    _, s, Vt = np.linalg.svd(flat, full_matrices=False)
+    G = Vt[:k]  # (k, 99) orthonormal, scaled
+    coef = flat @ G.T
+    lo = coef.min(axis=0) if k else np.zeros(0)
+    hi = coef.max(axis=0) if k else np.zeros(0)
+    unscale = Dx[:, None] / sc[None, :]
+    dirs = G.reshape(k, 9, 11) * unscale[None]
+    proj = (coef @ G).reshape(dev.shape) * unscale[None, None]
+    return ParameterDirections(
+        schedules, dirs[:, :, :9], dirs[:, :, 9:], lo, hi, proj, s / np.sqrt(len(flat))
+    )
 
 
 # -- the RPI property itself -------------------------------------------------------------
