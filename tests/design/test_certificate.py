@@ -87,6 +87,19 @@ def _samples(dom, n, seed):
     return unit, a, signs
 
 
+def _trim_domain(h, V, u_r):
+    """A quarter of the nominal MPC's ranges and inputs +/-(0.05, 2 deg) around the trim at
+    (h, V), the whole sec. 5.1 box, rho_f 0.7 and 1 (the domain of the bound's tests)."""
+    nominal, notes = nominal_half_widths(
+        {"reschedule": [100.0, 50.0], "dtheta_max": [300.0, 150.0], "att_max": 0.35},
+        DEFAULT_DEV_BOX,
+    )
+    return CertificateDomain(
+        np.array([[h, V]]), 0.25 * nominal, 0.25 * nominal, u_r - [0.05, np.radians(2.0)],
+        u_r + [0.05, np.radians(2.0)], dict(PAPER_UNCERTAINTY), (0.7, 1.0), 0.02, 5, notes,
+    )  # fmt: skip
+
+
 def test_disturbance_bound_holds_on_100000_independent_samples(model):
     """The deterministic bound of W over a domain contains the true one-step disturbance
     of the perturbed nonlinear CM at 100 000 points of that domain, every corner of the
@@ -94,14 +107,7 @@ def test_disturbance_bound_holds_on_100000_independent_samples(model):
     veh, tp, tm = model
     h, V = 85500.0, 7900.0
     x_r, u_r = tm(h, V)
-    nominal, notes = nominal_half_widths(
-        {"reschedule": [100.0, 50.0], "dtheta_max": [300.0, 150.0], "att_max": 0.35},
-        DEFAULT_DEV_BOX,
-    )
-    dom = CertificateDomain(
-        np.array([[h, V]]), 0.25 * nominal, 0.25 * nominal, u_r - [0.05, np.radians(2.0)],
-        u_r + [0.05, np.radians(2.0)], dict(PAPER_UNCERTAINTY), (0.7, 1.0), 0.02, 5, notes,
-    )  # fmt: skip
+    dom = _trim_domain(h, V, u_r)
     bnd = bound_disturbance(dom, veh, tp, tm)
     assert np.all(bnd.corner_max <= bnd.w_bound)
     n = 100_000
@@ -138,14 +144,7 @@ def test_parameter_directions_carry_the_box_and_the_bound_stays_sound(model):
     A, B = tp.discretize(0.02).A, tp.discretize(0.02).B
     Av, Bv = dirs.vertices(A, B)
     assert Av.shape == (2 * A.shape[0], 9, 9) and Bv.shape == (2 * B.shape[0], 9, 2)
-    nominal, notes = nominal_half_widths(
-        {"reschedule": [100.0, 50.0], "dtheta_max": [300.0, 150.0], "att_max": 0.35},
-        DEFAULT_DEV_BOX,
-    )
-    dom = CertificateDomain(
-        np.array([[h, V]]), 0.25 * nominal, 0.25 * nominal, u_r - [0.05, np.radians(2.0)],
-        u_r + [0.05, np.radians(2.0)], dict(PAPER_UNCERTAINTY), (0.7, 1.0), 0.02, 5, notes,
-    )  # fmt: skip
+    dom = _trim_domain(h, V, u_r)
     plain = bound_disturbance(dom, veh, tp, tm)
     bnd = bound_disturbance(dom, veh, tp, tm, directions=dirs)
     print("bound with / without the direction per row:", np.round(bnd.w_bound / plain.w_bound, 3))
