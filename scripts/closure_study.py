@@ -88,7 +88,7 @@ def main(argv):
     for it in range(iterations):
         try:
             tube = design_tube(Af, Bf, W, tp.state_scale, tp.input_scale, room_f,
-                               tuple(c["tube"]["lam"]))  # fmt: skip
+                               tuple(c["tube"]["lam"]), w_ref=a["w_max"])  # fmt: skip
         except DesignError as exc:
             print(f"iteration {it}: tube LMI infeasible ({exc})")
             return

@@ -102,3 +102,20 @@ def test_box_tube_infeasible_when_abs_radius_exceeds_one():
     res = box_tube(R[None], np.zeros((1, 2, 1)), np.zeros((1, 2)), W, ONE2, ONE1)
     assert res.spectral_radius_abs[0] == pytest.approx(0.9 * (np.cos(1) + np.sin(1)), rel=1e-9)
     assert not res.feasible
+
+
+def test_w_ref_solves_at_the_reference_scale_and_scales_back(tube):
+    """With w_ref the LMI is the one for W at the reference size: a W 1000 times smaller
+    gives the same F and Z / 1000 exactly (the homogeneity of the RPI condition), which
+    the fixed strictness margins of a direct solve at that scale do not."""
+    small = design_tube(A, B, W * 1e-3, ONE2, ONE1, np.array([1.0]), lam_grid=(0.8, 0.9, 0.95),
+                        w_ref=W)  # fmt: skip
+    assert np.array_equal(small.F, tube.F)
+    np.testing.assert_allclose(small.N, tube.N * 1e-6, rtol=1e-12)
+    np.testing.assert_allclose(small.tightening, tube.tightening * 1e-3, rtol=1e-12)
+    assert np.array_equal(small.w_max, W * 1e-3)
+    assert small.min_eigs.min() >= -1e-9
+    direct = design_tube(A, B, W * 1e-3, ONE2, ONE1, np.array([1.0]), lam_grid=(0.8, 0.9, 0.95))
+    print("tightening direct / scaled:", direct.tightening / small.tightening)
+    with pytest.raises(ValueError, match="w_ref and state_max"):
+        design_tube(A, B, W, ONE2, ONE1, np.array([1.0]), w_ref=W, state_max=[1.0, 1.0])

@@ -133,6 +133,7 @@ def design_tube(
     lam_grid=(0.9, 0.95, 0.97, 0.98, 0.99, 0.995),
     state_weight=None,
     state_max=None,
+    w_ref=None,
 ) -> TubeDesign:
     """Design F and the ellipsoidal RPI tube Z for the box W = {|w| <= w_max}.
 
@@ -160,6 +161,12 @@ def design_tube(
         (unscaled; inf: no bound), entered as N_jj <= state_max_j^2 (linear in N). Used
         for the attitude rows: the support of Z in alpha and theta is what the
         nominal MPC's attitude rows are tightened by.
+    w_ref : (n,) array_like, optional
+        Reference size of W. The RPI condition is homogeneous (Z is RPI for W iff s Z
+        is for s W), so the LMI is solved for W / s with s = max_j w_j / w_ref,j and Z
+        scaled back by s: a W far smaller or larger than w_ref would otherwise meet the
+        fixed strictness margins of the LMI at another scale (measured: a W of 1/100 of
+        the design's gave the tube of W / 10). Not with ``state_max``.
 
     Returns
     -------
@@ -171,6 +178,17 @@ def design_tube(
     DesignError
         If no lam gives a feasible LMI or the certificate check fails.
     """
+    if w_ref is not None:
+        if state_max is not None:
+            raise ValueError("design_tube: w_ref and state_max cannot be combined")
+        s = float(np.max(np.asarray(w_max, float) / np.asarray(w_ref, float)))
+        t = design_tube(A, B, np.asarray(w_max, float) / s, Dx, Du, u_room, lam_grid,
+                        state_weight)  # fmt: skip
+        tube = dataclasses.replace(
+            t, N=t.N * s**2, mu=t.mu / s**2, w_max=np.asarray(w_max, float),
+            tightening=t.tightening * s, z_box=t.z_box * s,
+        )  # fmt: skip
+        return dataclasses.replace(tube, min_eigs=verify_tube(A, B, tube, Dx, Du))
     As, Bs = scale_vertices(np.asarray(A), np.asarray(B), Dx, Du)
     R, n, m = Bs.shape
     ws = np.asarray(w_max, float) / Dx
