@@ -17,6 +17,12 @@ Usage (after `fahv design offline_design/case1.yaml`):
 e.g. scripts/closure_study.py 1 0.1 3 1.0 box 1.0     (the MPC's ranges: diverges)
      scripts/closure_study.py 1 0.01 0.3 0.1 nominal 0.1
      scripts/closure_study.py 1 0.1 3 1.0 box 1.0 1 --directions 1
+     scripts/closure_study.py 1 0 0 0 box 0.01 12 --directions 3 --rows-by-w --lam 0.995 \
+         --grow 1.05     (holding the centre trim: closes)
+Options: --directions K (parameter box in the vertices along K directions),
+--rows-by-w (directions chosen relative to the design's W row by row), --lam L1,L2
+(contraction factors tried), --grow G (W <- max(W, G bound): a fixed point with slack),
+--save FILE (the closed pair W, F, N and its domain, .npz).
 """
 
 import dataclasses
@@ -33,6 +39,7 @@ from fahv.design.certificate import (
     nominal_half_widths,
     parameter_directions,
     schedule_points,
+    worst_level,
 )
 from fahv.design.disturbance import DEFAULT_DEV_BOX
 from fahv.design.feasibility import fault_vertices, input_room
@@ -48,11 +55,15 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def main(argv):
     """Run the iteration of the module docstring with the command-line arguments."""
-    k_dirs = 0
-    if "--directions" in argv:
-        i = argv.index("--directions")
-        k_dirs = int(argv[i + 1])
-        argv = argv[:i] + argv[i + 2 :]
+    opts = {"--directions": "0", "--lam": "", "--grow": "1.0", "--save": ""}
+    for name in opts:
+        if name in argv:
+            i = argv.index(name)
+            opts[name] = argv[i + 1]
+            argv = argv[:i] + argv[i + 2 :]
+    rows_by_w = "--rows-by-w" in argv
+    argv = [v for v in argv if v != "--rows-by-w"]
+    k_dirs, grow = int(opts["--directions"]), float(opts["--grow"])
     n_s, dphi, dde, nom_scale, veh_kind, w0 = argv[:6]
     iterations = int(argv[6]) if len(argv) > 6 else 12
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
@@ -64,6 +75,7 @@ def main(argv):
     tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
     disc = tp.discretize(c["Ts"])
     rho = c["tube"]["rho_min"]
+    lam = tuple(float(v) for v in opts["--lam"].split(",")) if opts["--lam"] else c["tube"]["lam"]
     Af, Bf = fault_vertices(disc.A, disc.B, rho)
     room_f = input_room(veh, rho_f=rho)
     du = np.array([float(dphi), np.radians(float(dde))])
@@ -77,7 +89,8 @@ def main(argv):
         if veh_kind != "box":
             raise SystemExit("--directions needs the parameter box ('box')")
         dirs = parameter_directions(veh, tm, scheds, unc, c["Ts"], c["plant_substeps"],
-                                    tp.state_scale, tp.input_scale, k_dirs)  # fmt: skip
+                                    tp.state_scale, tp.input_scale, k_dirs,
+                                    row_scale=a["w_max"] if rows_by_w else None)  # fmt: skip
         Af, Bf = fault_vertices(*dirs.vertices(disc.A, disc.B), rho)
         print(
             f"parameter box in the vertices along {k_dirs} direction(s): RMS singular values "
@@ -87,8 +100,8 @@ def main(argv):
         )
     for it in range(iterations):
         try:
-            tube = design_tube(Af, Bf, W, tp.state_scale, tp.input_scale, room_f,
-                               tuple(c["tube"]["lam"]), w_ref=a["w_max"])  # fmt: skip
+            tube = design_tube(Af, Bf, W, tp.state_scale, tp.input_scale, room_f, tuple(lam),
+                               w_ref=a["w_max"])  # fmt: skip
         except DesignError as exc:
             print(f"iteration {it}: tube LMI infeasible ({exc})")
             return
@@ -112,13 +125,29 @@ def main(argv):
             f"iteration {it}: tightening {tube.tightening[0]:.3f} / "
             f"{np.degrees(tube.tightening[1]):.2f} deg, alpha extent of Z "
             f"{np.degrees(tube.z_box[2]):.2f} deg, bound / W: "
-            + " ".join(f"{r:.2f}" for r in Wb / W),
+            + " ".join(f"{r:.3f}" for r in Wb / W),
             flush=True,
         )
         if np.all(Wb <= W):
-            print("closed: the disturbance over the domain of Z lies inside W")
+            level, _ = worst_level(Af, Bf, tube.F, tube.N, W)
+            print(
+                "closed: the disturbance over the domain of Z lies inside W (slack per row "
+                + " ".join(f"{s:+.3f}" for s in (W - Wb) / W)
+                + f"); exact worst one-step level over {Af.shape[0]} vertices and the corners "
+                f"of W: {level:.5f} (margin {1 - level:.2e}); W / design W: "
+                + " ".join(f"{r:.4f}" for r in W / a["w_max"])
+                + "; support of Z: "
+                + " ".join(f"{z:.3g}" for z in tube.z_box)
+                + f"; lam {tube.lam}"
+            )
+            if opts["--save"]:
+                np.savez(opts["--save"], W=W, F=tube.F, N=tube.N, lam=tube.lam,
+                         w_design=a["w_max"], schedules=scheds, rho_min=rho, k=k_dirs,
+                         rows_by_w=rows_by_w, dphi=float(dphi), ddelta_e_deg=float(dde),
+                         nominal=nominal)  # fmt: skip
+                print(f"closed pair written to {opts['--save']}")
             return
-        W = np.maximum(W, Wb)
+        W = np.maximum(W, grow * Wb)
     print("not closed within the iterations")
 
 

@@ -449,7 +449,16 @@ class ParameterDirections:
 
 
 def parameter_directions(
-    vehicle, trim_map, schedules, uncertainty: dict, Ts: float, n_sub: int, Dx, Du, k: int
+    vehicle,
+    trim_map,
+    schedules,
+    uncertainty: dict,
+    Ts: float,
+    n_sub: int,
+    Dx,
+    Du,
+    k: int,
+    row_scale=None,
 ) -> ParameterDirections:
     """Principal directions of the parameter box's Jacobian deviation (one period).
 
@@ -476,6 +485,10 @@ def parameter_directions(
         State and input scaling.
     k : int
         Number of directions (0: none, the result carries no vertex shift).
+    row_scale : (9,) array_like, optional
+        Divisor of each row of the deviations before the SVD (default ``Dx``). With the
+        half-widths of W the directions are those that matter most relative to W, row
+        by row (a row W bounds tightly gets its share even if its entries are small).
 
     Returns
     -------
@@ -495,6 +508,7 @@ def parameter_directions(
         + [perturb(vehicle.params, uncertainty, dict(zip(names, s, strict=True))) for s in corners]
     )
     sc = np.concatenate([Dx, Du])
+    rs = np.asarray(Dx if row_scale is None else row_scale, float)
     schedules = np.atleast_2d(np.asarray(schedules, float))
     dev = []
     for h, V in schedules:
@@ -509,7 +523,7 @@ def parameter_directions(
             fp = _one_step(zp[:, :9], zp[:, 9:], recs, Ts, n_sub)
             fm = _one_step(zm[:, :9], zm[:, 9:], recs, Ts, n_sub)
             J[:, :, i] = (fp - fm) / (2e-4 * sc[i])
-        dev.append((J[1:] - J[0]) / Dx[None, :, None] * sc[None, None, :])
+        dev.append((J[1:] - J[0]) / rs[None, :, None] * sc[None, None, :])
     dev = np.array(dev)  # (S, C, 9, 11) scaled
     flat = dev.reshape(-1, 99)
     _, s, Vt = np.linalg.svd(flat, full_matrices=False)
@@ -517,7 +531,7 @@ def parameter_directions(
     coef = flat @ G.T
     lo = coef.min(axis=0) if k else np.zeros(0)
     hi = coef.max(axis=0) if k else np.zeros(0)
-    unscale = Dx[:, None] / sc[None, :]
+    unscale = rs[:, None] / sc[None, :]
     dirs = G.reshape(k, 9, 11) * unscale[None]
     proj = (coef @ G).reshape(dev.shape) * unscale[None, None]
     return ParameterDirections(
