@@ -359,8 +359,9 @@ def disturbance_at(
     rho : float
         Elevator effectiveness.
     directions : ParameterDirections, optional
-        Remove the linear part the tube's vertices carry (as :func:`bound_disturbance`);
-        defined at the corners of the box only, for one schedule.
+        Remove the linear part the tube's vertices carry (as :func:`bound_disturbance`),
+        that of the directions' schedule nearest to ``schedule``; defined at the corners
+        of the box only (an interior vehicle's carried part is not computed).
 
     Raises
     ------
