@@ -359,14 +359,15 @@ def disturbance_at(
     rho : float
         Elevator effectiveness.
     directions : ParameterDirections, optional
-        Remove the linear part the tube's vertices carry (as :func:`bound_disturbance`),
-        that of the directions' schedule nearest to ``schedule``; defined at the corners
-        of the box only (an interior vehicle's carried part is not computed).
+        Remove the linear part the tube's vertices carry (as :func:`bound_disturbance`)
+        for every vehicle, corners and interior alike
+        (:meth:`ParameterDirections.carried`).
 
     Raises
     ------
-    ValueError
-        With ``directions``, if a row of ``signs`` is not a corner of the box.
+    DesignError
+        With ``directions``, if a vehicle's carried coefficient leaves the vertices'
+        coefficient box (the vertices would not cover it).
     """
     disc = tp.discretize(domain.Ts)
     names = list(domain.uncertainty)
@@ -378,12 +379,8 @@ def disturbance_at(
     )  # fmt: skip
     lin = None
     if directions is not None:
-        signs = np.asarray(signs, float)
-        if not np.all(np.abs(signs) == 1.0):
-            raise ValueError("disturbance_at: directions are defined at the box corners only")
-        bits = (signs > 0).astype(int) @ (1 << np.arange(signs.shape[1])[::-1])
-        si = int(np.argmin(np.abs(directions.schedules - np.asarray(schedule)).sum(axis=1)))
-        lin = directions.corner_linear[si][bits]
+        lin = directions.carried(vehicle, trim_map, schedule, recs, Ts=domain.Ts,
+                                 n_sub=domain.n_sub)  # fmt: skip
     return _disturbance(
         np.asarray(Z, float), np.asarray(x_rs[:9], float), u_rs, A_s, B_s, rho, recs,
         domain.Ts, domain.n_sub, lin,
@@ -418,6 +415,10 @@ class ParameterDirections:
     singular_values : (r,) ndarray
         RMS singular values of the corners' scaled deviations (all directions), to
         judge what k leaves out.
+    row_scale : (9,) ndarray
+        Row divisor the directions were chosen with (``Dx`` or the half-widths of W).
+    scale : (11,) ndarray
+        Column scaling (Dx, Du) of the finite differences and the SVD.
     """
 
     schedules: np.ndarray
@@ -427,6 +428,39 @@ class ParameterDirections:
     c_hi: np.ndarray
     corner_linear: np.ndarray
     singular_values: np.ndarray
+    row_scale: np.ndarray
+    scale: np.ndarray
+
+    def carried(self, vehicle, trim_map, schedule, recs, Ts: float, n_sub: int) -> np.ndarray:
+        """The part of each vehicle's Jacobian deviation the vertices carry, (L, 9, 11).
+
+        Taken at the nominal trim of ``schedule`` (h, V) [ft, ft/s] for L vehicles
+        (``recs``, parameter records), by the same central differences as
+        :func:`parameter_directions`, and projected on the directions.
+
+        Raises
+        ------
+        DesignError
+            If a coefficient lies outside [c_lo, c_hi] (beyond 1e-9 of the range).
+        """
+        h, V = np.asarray(schedule, float)
+        sc, rs = self.scale, self.row_scale
+        J = _trim_jacobians(trim_map, h, V, np.concatenate([params_records([vehicle.params]),
+                            recs]), Ts, n_sub, sc)  # fmt: skip
+        dev = (J[1:] - J[0]) / rs[None, :, None] * sc[None, None, :]
+        unscale = rs[:, None] / sc[None, :]
+        G = np.concatenate([self.dA, self.dB], axis=2) / unscale[None]  # (k, 9, 11) scaled
+        coef = np.einsum("lij,kij->lk", dev, G)
+        tol = 1e-9 * (self.c_hi - self.c_lo + 1.0)
+        out = (coef < self.c_lo - tol) | (coef > self.c_hi + tol)
+        if out.any():
+            i, j = np.argwhere(out)[0]
+            raise DesignError(
+                f"parameter directions: vehicle {i} has coefficient {coef[i, j]:.6g} along "
+                f"direction {j}, outside the vertices' range [{self.c_lo[j]:.6g}, "
+                f"{self.c_hi[j]:.6g}]: the vertices do not cover it"
+            )
+        return np.einsum("lk,kij->lij", coef, G) * unscale[None]
 
     def vertices(self, A, B):
         """Vertex set of the tube LMI: every vertex shifted to every corner of the box.
@@ -513,17 +547,7 @@ def parameter_directions(
     schedules = np.atleast_2d(np.asarray(schedules, float))
     dev = []
     for h, V in schedules:
-        x, u = trim_map(h, V)
-        z0 = np.concatenate([np.asarray(x[:9], float), np.asarray(u, float)])
-        J = np.empty((len(recs), 9, 11))
-        for i in range(11):
-            zp = np.tile(z0, (len(recs), 1))
-            zm = zp.copy()
-            zp[:, i] += 1e-4 * sc[i]
-            zm[:, i] -= 1e-4 * sc[i]
-            fp = _one_step(zp[:, :9], zp[:, 9:], recs, Ts, n_sub)
-            fm = _one_step(zm[:, :9], zm[:, 9:], recs, Ts, n_sub)
-            J[:, :, i] = (fp - fm) / (2e-4 * sc[i])
+        J = _trim_jacobians(trim_map, h, V, recs, Ts, n_sub, sc)
         dev.append((J[1:] - J[0]) / rs[None, :, None] * sc[None, None, :])
     dev = np.array(dev)  # (S, C, 9, 11) scaled
     flat = dev.reshape(-1, 99)
@@ -536,8 +560,35 @@ def parameter_directions(
     dirs = G.reshape(k, 9, 11) * unscale[None]
     proj = (coef @ G).reshape(dev.shape) * unscale[None, None]
     return ParameterDirections(
-        schedules, dirs[:, :, :9], dirs[:, :, 9:], lo, hi, proj, s / np.sqrt(len(flat))
+        schedules,
+        dirs[:, :, :9],
+        dirs[:, :, 9:],
+        lo,
+        hi,
+        proj,
+        s / np.sqrt(len(flat)),
+        rs,
+        sc,
     )
+
+
+def _trim_jacobians(trim_map, h, V, recs, Ts, n_sub, sc) -> np.ndarray:
+    """One-period Jacobians [A, B] (L, 9, 11) of L vehicles at the nominal trim.
+
+    At (h, V) [ft, ft/s], by central differences with steps 1e-4 of the scaling ``sc`` (11,).
+    """
+    x, u = trim_map(h, V)
+    z0 = np.concatenate([np.asarray(x[:9], float), np.asarray(u, float)])
+    J = np.empty((len(recs), 9, 11))
+    for i in range(11):
+        zp = np.tile(z0, (len(recs), 1))
+        zm = zp.copy()
+        zp[:, i] += 1e-4 * sc[i]
+        zm[:, i] -= 1e-4 * sc[i]
+        fp = _one_step(zp[:, :9], zp[:, 9:], recs, Ts, n_sub)
+        fm = _one_step(zm[:, :9], zm[:, 9:], recs, Ts, n_sub)
+        J[:, :, i] = (fp - fm) / (2e-4 * sc[i])
+    return J
 
 
 # -- the RPI property itself -------------------------------------------------------------
