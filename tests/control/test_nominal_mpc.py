@@ -147,6 +147,53 @@ def test_case1_tracks_the_step_within_the_requirements(design):
         180, 0, 0)  # fmt: skip
 
 
+def test_nonlinear_nominal_moves_by_the_nominal_cm(design):
+    """mpc.nominal_model 'cm': z+ = f_0(z, u_nominal) + d with f_0 one period of the
+    nominal vehicle's CM, and the estimate filters the residual x_k - f_0(x_k-1, u_k-1)
+    (exact to 1e-9 relative against an independent evaluation of the kernel)."""
+    from fahv.plant.rk4 import params_records, rk4_cm
+
+    p = node_parameters(design, "tube_mpc")["nominal_trajectory"]
+    p["mpc.nominal_model"] = "cm"
+    src = build_core("nominal_trajectory", p).source
+    veh = load_vehicle()
+    rec = params_records([veh.params])
+    Ts, n_sub = design.case["Ts"], design.case["plant_substeps"]
+
+    def f0(x, u):
+        u = np.clip(u, veh.limits.u_min, veh.limits.u_max)
+        return rk4_cm(x[None].copy(), u[None].copy(), rec, Ts, n_sub)[0]
+
+    x0 = np.asarray(design.arrays["x0"], float)
+    z0 = src.XN[0].copy()
+    out = src.step(0, 0.0, x0[None], None)
+    u_nom = out.u_r[0] + out.u_n[0]
+    np.testing.assert_allclose(src.XN[0], f0(z0, u_nom), rtol=1e-12)  # no estimate yet
+    # a measured step the nominal CM does not explain: the estimate takes gamma of it
+    u_prev = np.array([0.3, np.radians(13.0)])
+    x1 = f0(x0, u_prev) + np.array([0.0, 0.01, 1e-5, 0, 0, 0, 0, 0, 0])
+    z1 = src.XN[0].copy()
+    out = src.step(1, Ts, x1[None], u_prev[None])
+    gamma = Ts / design.case["mpc"]["est_tau"]
+    d = gamma * (x1 - f0(x0, u_prev))
+    np.testing.assert_allclose(src.est.d[0], d, rtol=1e-9, atol=1e-15)
+    u_nom = out.u_r[0] + out.u_n[0]
+    np.testing.assert_allclose(src.XN[0], f0(z1, u_nom) + d, rtol=1e-12)
+
+
+def test_case1_with_the_nonlinear_nominal_tracks(design):
+    """Quick Case 1, 90 s, nominal on the nonlinear CM: settled within 10 ft / 2 ft/s
+    after 60 s, attitude within 0.5 deg, e in Z, every re-plan accepted."""
+    run = simulate(design, "tube_mpc", duration=90.0,
+                   overrides={"nominal_trajectory": {"mpc.nominal_model": "cm"}})  # fmt: skip
+    late = run.t >= 60.0
+    assert np.max(np.abs(run.x[late, 0] - run.h_c[late])) <= 10.0
+    assert np.max(np.abs(run.x[late, 1] - run.V_c[late])) <= 2.0
+    assert np.degrees(np.abs(run.x[:, 2:4] - run.x_r[:, 2:4])).max() <= 0.5
+    assert np.nanmax(run.tube_level) <= 1.0
+    assert run.qp_counts.tolist() == [180, 0, 0, 0]
+
+
 def test_attitude_rows_hold_at_every_fast_step_of_the_applied_moves(design):
     """Issue 20, item 5: the plan's nominal alpha, theta deviation, propagated fast step by
     fast step on the scheduled model under u = u_s + K (z - x_s) + c_j, stays within the

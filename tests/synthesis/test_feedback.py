@@ -122,3 +122,21 @@ def test_w_ref_solves_at_the_reference_scale_and_scales_back(tube):
     assert np.all(direct.tightening > 10 * small.tightening)
     with pytest.raises(ValueError, match="w_ref and state_max"):
         design_tube(A, B, W, ONE2, ONE1, np.array([1.0]), w_ref=W, state_max=[1.0, 1.0])
+
+
+def test_constraint_generation_gives_the_full_lmi_solution():
+    """With ``active`` the LMI is solved on a growing subset of 40 vertices: the tube is
+    the one of the full solve (tightening and shape within 1e-3), it holds at every
+    vertex (verify_tube re-checks all 40), and the subset is a proper one that grew."""
+    rng = np.random.default_rng(3)
+    R = 40
+    dA = rng.uniform(-1.0, 1.0, (R, 2, 2)) * np.array([[0.02, 0.02], [0.01, 0.02]])
+    Av = np.repeat(A[:1], R, axis=0) + dA
+    Bv = np.repeat(B[:1], R, axis=0) * rng.uniform(0.8, 1.2, (R, 1, 1))
+    full = design_tube(Av, Bv, W, ONE2, ONE1, np.array([1.0]), lam_grid=(0.9,))
+    gen = design_tube(Av, Bv, W, ONE2, ONE1, np.array([1.0]), lam_grid=(0.9,), active=3)
+    assert full.n_blocks == R
+    assert 3 < gen.n_blocks < R  # it grew from 3 and did not need every block
+    assert gen.min_eigs.shape == (R,) and gen.min_eigs.min() >= -1e-9
+    np.testing.assert_allclose(gen.tightening, full.tightening, rtol=1e-3)
+    np.testing.assert_allclose(gen.N, full.N, rtol=1e-3, atol=1e-3 * np.abs(full.N).max())

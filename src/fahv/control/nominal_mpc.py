@@ -65,7 +65,9 @@ from fahv.control.reference import lpv_of, mv, trim_map_of
 from fahv.errors import DesignError, RunError
 from fahv.lanes import Lanes
 from fahv.model.notch import DiscreteNotch, NotchFilter
+from fahv.model.vehicle import load_vehicle
 from fahv.msg import NominalTrajectory
+from fahv.plant.rk4 import params_records, rk4_cm
 from fahv.synthesis.qp import NO_BOUND, check_kkt
 
 #: Solver status of a successful DAQP solve.
@@ -102,6 +104,10 @@ MPC_SECTION_FIELDS = (
           "used but reported as not certified", unit="deg", lo=0.0, hi=10.0, default=0.0),
     Field("est_tau", "float", "time constant of the state-disturbance estimate (0: none)",
           unit="s", lo=0.0, hi=1e3, default=0.5),
+    Field("nominal_model", "str", "model the nominal state moves by: 'lpv' (the scheduled "
+          "LPV model, eq. 12) or 'cm' (the nonlinear CM of the nominal vehicle, eq. 1-3, so "
+          "that the tube error is linearised along the nominal, not at the scheduling trim)",
+          choices=("lpv", "cm"), default="lpv"),
 )  # fmt: skip
 
 
@@ -133,6 +139,8 @@ class MPCSettings:
     fine_moves : int
         Moves whose attitude is bounded at every fast step (the move the plan applies
         before the next re-plan, and the one a shifted plan applies).
+    nominal_model : str
+        'lpv' or 'cm': what the nominal state moves by (:class:`TrackingMPCNominal`).
     """
 
     M: int
@@ -144,6 +152,7 @@ class MPCSettings:
     reschedule: np.ndarray
     att_max: np.ndarray = dataclasses.field(default_factory=lambda: np.full(2, math.inf))
     fine_moves: int = 2
+    nominal_model: str = "lpv"
 
     @classmethod
     def of_parameters(cls, p: dict, n: int) -> MPCSettings:
@@ -155,6 +164,7 @@ class MPCSettings:
             np.asarray(m["t_w"], float), np.asarray(m["dtheta_max"], float),
             np.asarray(m["reschedule"], float),
             np.radians(np.broadcast_to(np.asarray(m["att_max"], float), (2,))).copy(),
+            nominal_model=str(m.get("nominal_model", "lpv")),
         )  # fmt: skip
 
 
@@ -342,6 +352,14 @@ class DisturbanceEstimator:
             Commands of step k - 1 minus the scheduling trim input.
         """
         r = (dx - mv(A, np.ascontiguousarray(dx_prev))) - mv(B, np.ascontiguousarray(du_prev))
+        return self.update_residual(r)
+
+    def update_residual(self, r: np.ndarray) -> np.ndarray:
+        """Estimates d (B, p) after one step whose residual r (B, p) is given.
+
+        r is what the nominal model missed in the measured step (for the nonlinear
+        nominal, x_k - f_0(x_{k-1}, u_{k-1}) with f_0 one period of the nominal CM).
+        """
         self.d = self.d + self.gamma * (r - self.d)
         return self.d
 
@@ -733,6 +751,15 @@ class TrackingMPCNominal(NominalSource):
     artificial set point theta, x_n = X_n - x_r, u_n = u_nominal - u_r, so that the
     ancillary law u = u_r + u_n + tau F (x - x_r - x_n) (eq. 36/54) is unchanged.
 
+    With ``mpc.nominal_model`` 'cm' (9-state CM designs) the nominal state moves by the
+    nonlinear CM of the nominal vehicle instead, z+ = f_0(z, u_nominal) + d (one period
+    of the plant's RK4, inputs clipped to the actuator limits as the plant does), and
+    the estimate filters the residual of that model, r = x_k - f_0(x_k-1, u_k-1). The
+    QP still predicts with the scheduled LPV model. The tube error x - z is then
+    linearised along the nominal rather than at the scheduling trim: what the tube
+    must hold no longer grows with the nominal's distance from the trim
+    (docs/control_design.md, "The error along the nominal").
+
     For an 11-state (ECM) design the estimate works in ECM coordinates: a replica of
     the notch_filter node's filter on the same q samples gives q' and x_q (eq. 43).
 
@@ -808,6 +835,17 @@ class TrackingMPCNominal(NominalSource):
                 continue
             self.TRX[b], self.TRU[b] = tm(*self.TH[b])
         self.XN = np.stack([np.asarray(r["x0"], float) for r in runs])
+        self.nominal_cm = st.nominal_model == "cm"
+        if self.nominal_cm:
+            if n != 9:
+                raise RunError(
+                    f"nominal_trajectory: mpc.nominal_model 'cm' needs the 9-state CM design, "
+                    f"got {n} states"
+                )
+            veh = load_vehicle(p["vehicle_file"] or None)
+            self.nominal_vehicle = params_records([veh.params] * B)
+            self.limits_lo, self.limits_hi = veh.limits.u_min, veh.limits.u_max
+            self.n_sub = int(p["plant_substeps"])
         self.k = 0
         self._counts = self._qp_counts()
 
@@ -886,6 +924,12 @@ class TrackingMPCNominal(NominalSource):
         q_f = self.filter.step(x[:, 4])
         return np.concatenate([x[:, :4], q_f[:, None], x[:, 5:9], self.filter.x_q], axis=1)
 
+    def _nominal_step(self, X: np.ndarray, U) -> np.ndarray:
+        """One period of the nominal vehicle's CM (eq. 1-3) from X (B, 9) under U (B, 2)."""
+        U = np.clip(np.asarray(U, float), self.limits_lo, self.limits_hi)
+        return rk4_cm(np.ascontiguousarray(X, float), np.ascontiguousarray(U), self.nominal_vehicle,
+                      self.Ts, self.n_sub)  # fmt: skip
+
     def step(self, k, t, x, u_prev) -> NominalTrajectory:
         """Output of step k for the B runs (class docstring), then advance one fast step.
 
@@ -895,7 +939,9 @@ class TrackingMPCNominal(NominalSource):
         B = x.shape[0]
         if self.has_est:
             xm = self._measure(np.asarray(x, float))
-            if self.has_prev and u_prev is not None:
+            if self.has_prev and u_prev is not None and self.nominal_cm:
+                self.est.update_residual(xm - self._nominal_step(self.prev, u_prev))
+            elif self.has_prev and u_prev is not None:
                 self.est.update(
                     self.EA, self.EB, self.prev - self.XRS[:, : self.p_est],
                     np.asarray(u_prev, float) - self.URS, xm - self.XRS[:, : self.p_est],
@@ -934,13 +980,16 @@ class TrackingMPCNominal(NominalSource):
             self.XN - x_r, u_nom - u_r, (w[:, None, :] @ w[:, :, None])[:, 0, 0],
             solves, fallback, terminal, -u_d, recovered,
         )  # fmt: skip
-        zc = np.ascontiguousarray(z)
         d_n = np.zeros_like(z)
         if self.has_est:
             d_n[:, : self.p_est] = self.est.d
-        self.XN = (
-            (self.XRS + mv(self.A, zc)) + mv(self.Bm, np.ascontiguousarray(u_d + u_dev))
-        ) + d_n
+        if self.nominal_cm:  # z+ = f_0(z, u_nominal) + d: the nonlinear nominal
+            self.XN = self._nominal_step(self.XN, u_nom) + d_n
+        else:  # z+ = A z + B u + d: the scheduled LPV model
+            zc = np.ascontiguousarray(z)
+            self.XN = (
+                (self.XRS + mv(self.A, zc)) + mv(self.Bm, np.ascontiguousarray(u_d + u_dev))
+            ) + d_n
         self.k += 1
         return out
 

@@ -84,6 +84,10 @@ def specs() -> dict[str, tuple[Field, ...]]:
         "notch_filter": (*COMMON, *NOTCH),
         "nominal_trajectory": (
             *COMMON,
+            PLANT_SUBSTEPS,
+            Field("vehicle_file", "str", "vehicle data file (YAML) of the nominal vehicle (the "
+                  "nonlinear nominal model, mpc.nominal_model 'cm'); empty: the packaged one",
+                  default=""),
             *_prefixed(COMMAND, "command."),
             Field("nominal", "str", "nominal part of the law (registered nominal source)",
                   choices=NOMINAL_SOURCES.names),
@@ -265,6 +269,8 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         "notch_filter": {**common, "enabled": enabled, **notch},
         "nominal_trajectory": {
             **common,
+            "plant_substeps": int(c["plant_substeps"]),
+            "vehicle_file": design.summary.get("provenance", {}).get("vehicle_file", ""),
             **{f"command.{k}": (val if k == "kind" else float(val)) for k, val in cmd.items()},
             "nominal": law.nominal.name,
             "level_max": float(c["nominal"]["level_max"]),

@@ -52,6 +52,9 @@ class TubeDesign:
         Half-widths of the smallest box containing Z: sqrt(diag N).
     min_eigs : (R,) ndarray
         Smallest eigenvalue of each vertex LMI after the solve (scaled).
+    n_blocks : int
+        Vertex blocks the last LMI solve held (R, or fewer with constraint generation:
+        the rest held at its solution).
     """
 
     F: np.ndarray
@@ -62,6 +65,7 @@ class TubeDesign:
     tightening: np.ndarray
     z_box: np.ndarray
     min_eigs: np.ndarray
+    n_blocks: int = 0
 
     def contains(self, e: np.ndarray, scale: float = 1.0) -> bool:
         """True if the error e (n,) lies in scale * Z."""
@@ -123,6 +127,88 @@ def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
     return np.array(eigs)
 
 
+#: Strict margin of the RPI LMI blocks (scaled units), so that the solver's tolerance
+#: cannot break the re-check.
+LMI_MARGIN = 1e-5
+
+
+def _rpi_blocks_min_eig(As, Bs, N, M, mu, lam) -> np.ndarray:
+    """Smallest eigenvalue (R,) of every vertex block of the RPI LMI at a solution."""
+    R, n, _ = As.shape
+    AN = As @ N + Bs @ M
+    blk = np.zeros((R, 3 * n, 3 * n))
+    blk[:, :n, :n] = lam * N
+    blk[:, n : 2 * n, n : 2 * n] = np.diag(mu)
+    blk[:, n : 2 * n, 2 * n :] = np.eye(n)
+    blk[:, 2 * n :, n : 2 * n] = np.eye(n)
+    blk[:, 2 * n :, :n] = AN
+    blk[:, :n, 2 * n :] = AN.transpose(0, 2, 1)
+    blk[:, 2 * n :, 2 * n :] = N
+    return np.linalg.eigvalsh(blk)[:, 0]
+
+
+def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active):
+    """Solve the tube LMI for one lam (scaled data); (value, lam, N, M, mu, blocks) or None.
+
+    With ``active`` (an int) the vertex blocks are generated: the LMI is solved with
+    the ``active`` vertices of largest open-loop norm, every block is then evaluated at
+    the solution, and the worst violated blocks (at most ``active`` per round) are
+    added until every block holds with half the strict margin (constraint generation;
+    the result satisfies all R blocks, which :func:`verify_tube` re-checks). The
+    optimum is the one of the full LMI: a vertex left out is satisfied at it.
+    """
+    R, n, m = Bs.shape
+    if active is None or active >= R:
+        chosen = np.arange(R)
+    else:
+        norms = np.linalg.norm(As.reshape(R, -1), axis=1)
+        norms = norms + np.linalg.norm(Bs.reshape(R, -1), axis=1)
+        chosen = np.sort(np.argsort(-norms)[:active])
+    while True:
+        N = cp.Variable((n, n), symmetric=True)
+        M = cp.Variable((m, n))
+        mu = cp.Variable(n, nonneg=True)
+        t = cp.Variable(m)
+        cons = [N >> LMI_MARGIN * np.eye(n), mu @ (ws**2) <= (1.0 - lam) * (1.0 - 1e-6)]
+        if state_max is not None:
+            zs_max = np.asarray(state_max, float) / Dx
+            cons += [N[j, j] <= (1.0 - 1e-6) * zs_max[j] ** 2
+                     for j in range(n) if np.isfinite(zs_max[j])]  # fmt: skip
+        for i in chosen:
+            AN = As[i] @ N + Bs[i] @ M
+            blk = cp.bmat(
+                [
+                    [lam * N, np.zeros((n, n)), AN.T],
+                    [np.zeros((n, n)), cp.diag(mu), np.eye(n)],
+                    [AN, np.eye(n), N],
+                ]
+            )
+            cons.append(0.5 * (blk + blk.T) >> LMI_MARGIN * np.eye(3 * n))
+        for j in range(m):
+            blk = cp.bmat(
+                [[cp.reshape(t[j], (1, 1), order="F"), M[j : j + 1, :]], [M[j : j + 1, :].T, N]]
+            )
+            cons.append(0.5 * (blk + blk.T) >> 0)
+        obj = cp.Minimize(cp.sum(cp.multiply(t, 1.0 / room**2)) + sw @ cp.diag(N))
+        prob = cp.Problem(obj, cons)
+        try:
+            prob.solve(solver=SDP_SOLVER)
+        except cp.error.SolverError:
+            return None
+        if prob.status not in ("optimal", "optimal_inaccurate"):
+            return None
+        if len(chosen) == R:
+            return prob.value, lam, N.value, M.value, mu.value, R
+        Nv = 0.5 * (N.value + N.value.T)
+        eig = _rpi_blocks_min_eig(As, Bs, Nv, M.value, np.maximum(mu.value, 0.0), lam)
+        bad = np.flatnonzero(eig < 0.5 * LMI_MARGIN)
+        bad = np.setdiff1d(bad, chosen)
+        if bad.size == 0:
+            return prob.value, lam, N.value, M.value, mu.value, len(chosen)
+        worst = bad[np.argsort(eig[bad])[:active]]
+        chosen = np.union1d(chosen, worst)
+
+
 def design_tube(
     A,
     B,
@@ -134,6 +220,7 @@ def design_tube(
     state_weight=None,
     state_max=None,
     w_ref=None,
+    active=None,
 ) -> TubeDesign:
     """Design F and the ellipsoidal RPI tube Z for the box W = {|w| <= w_max}.
 
@@ -167,6 +254,10 @@ def design_tube(
         scaled back by s: a W far smaller or larger than w_ref would otherwise meet the
         fixed strictness margins of the LMI at another scale (measured: a W of 1/100 of
         the design's gave the tube of W / 10). Not with ``state_max``.
+    active : int, optional
+        Vertex blocks per round of constraint generation, for large vertex sets: the
+        LMI is solved on a growing subset of the vertices until every block holds at
+        the solution (:func:`_solve_rpi_lmi`); None: all blocks at once.
 
     Returns
     -------
@@ -183,7 +274,7 @@ def design_tube(
             raise ValueError("design_tube: w_ref and state_max cannot be combined")
         s = float(np.max(np.asarray(w_max, float) / np.asarray(w_ref, float)))
         t = design_tube(A, B, np.asarray(w_max, float) / s, Dx, Du, u_room, lam_grid,
-                        state_weight)  # fmt: skip
+                        state_weight, active=active)  # fmt: skip
         tube = dataclasses.replace(
             t, N=t.N * s**2, mu=t.mu / s**2, w_max=np.asarray(w_max, float),
             tightening=t.tightening * s, z_box=t.z_box * s,
@@ -196,41 +287,9 @@ def design_tube(
     sw = np.ones(n) * 1e-3 if state_weight is None else np.asarray(state_weight, float)
     best = None
     for lam in lam_grid:
-        N = cp.Variable((n, n), symmetric=True)
-        M = cp.Variable((m, n))
-        mu = cp.Variable(n, nonneg=True)
-        t = cp.Variable(m)
-        eps = 1e-5  # strict margin, so the solver's tolerance cannot break the check
-        cons = [N >> eps * np.eye(n), mu @ (ws**2) <= (1.0 - lam) * (1.0 - 1e-6)]
-        if state_max is not None:
-            zs_max = np.asarray(state_max, float) / Dx
-            cons += [N[j, j] <= (1.0 - 1e-6) * zs_max[j] ** 2
-                     for j in range(n) if np.isfinite(zs_max[j])]  # fmt: skip
-        for i in range(R):
-            AN = As[i] @ N + Bs[i] @ M
-            blk = cp.bmat(
-                [
-                    [lam * N, np.zeros((n, n)), AN.T],
-                    [np.zeros((n, n)), cp.diag(mu), np.eye(n)],
-                    [AN, np.eye(n), N],
-                ]
-            )
-            cons.append(0.5 * (blk + blk.T) >> eps * np.eye(3 * n))
-        for j in range(m):
-            blk = cp.bmat(
-                [[cp.reshape(t[j], (1, 1), order="F"), M[j : j + 1, :]], [M[j : j + 1, :].T, N]]
-            )
-            cons.append(0.5 * (blk + blk.T) >> 0)
-        obj = cp.Minimize(cp.sum(cp.multiply(t, 1.0 / room**2)) + sw @ cp.diag(N))
-        prob = cp.Problem(obj, cons)
-        try:
-            prob.solve(solver=SDP_SOLVER)
-        except cp.error.SolverError:
-            continue
-        if prob.status not in ("optimal", "optimal_inaccurate"):
-            continue
-        if best is None or prob.value < best[0]:
-            best = (prob.value, lam, N.value, M.value, mu.value)
+        sol = _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active)
+        if sol is not None and (best is None or sol[0] < best[0]):
+            best = sol
     if best is None:
         bound = ""
         if state_max is not None:
@@ -240,7 +299,7 @@ def design_tube(
             "tube LMI (24) with RPI condition is infeasible for every lam in "
             f"{list(lam_grid)}{bound}: W is too large for any common ellipsoidal tube"
         )
-    _, lam, Ns, Ms, mus = best
+    _, lam, Ns, Ms, mus, n_blocks = best
     Ns = 0.5 * (Ns + Ns.T)
     Fs = Ms @ np.linalg.inv(Ns)
     F = Fs * Du[:, None] / Dx[None, :]
@@ -255,6 +314,7 @@ def design_tube(
         tightening=np.sqrt(np.einsum("ij,jk,ik->i", F, N, F)),
         z_box=np.sqrt(np.diag(N)),
         min_eigs=np.zeros(R),
+        n_blocks=int(n_blocks),
     )
     eigs = verify_tube(A, B, tube, Dx, Du)
     if state_max is not None:
