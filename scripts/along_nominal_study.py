@@ -1,0 +1,123 @@
+"""W-Z closure of the tube along the nominal (docs/control_design.md, "The error along ...").
+
+With the nominal on the nominal vehicle's nonlinear CM (``mpc.nominal_model: cm``), the
+tube error is linearised along the nominal (:mod:`fahv.design.along_nominal`): the
+vertices are the nominal vehicle's Jacobians at the 64 corners of a scheduling box
+(the whole envelope in h, V; the nominal's attitude and applied-input deviations from
+the trim), shifted along K parameter directions, with the fault vertices of rho_min;
+W bounds what they leave. Iterates W <- max(W, GROW bound) with the tube LMI (24)
+re-solved (constraint generation over the vertices) until the bound lies inside W.
+
+Usage (after `fahv design offline_design/case1.yaml`):
+    .venv/bin/python scripts/along_nominal_study.py [--k K] [--scale S] [--w0 F]
+        [--grow G] [--iterations I] [--lam L] [--save FILE]
+--scale S multiplies the nominal ranges (attitude +/-0.4 deg, Phi -0.12..+1.1,
+delta_e -1..+7 deg from the trim, q +/-0.7 deg/s, flexible states); --w0 F starts at
+F times the design's W. About 5 minutes for the vertex data, 2 minutes per iteration.
+"""
+
+import argparse
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from fahv.design.along_nominal import SchedulingBox, bound_along_nominal, nominal_vertices
+from fahv.design.artefacts import load_design
+from fahv.design.feasibility import input_room
+from fahv.errors import DesignError
+from fahv.model.tp_model import build_tp_model
+from fahv.model.trim import TrimMap
+from fahv.model.vehicle import load_vehicle
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.synthesis.feedback import design_tube
+
+ROOT = Path(__file__).resolve().parents[1]
+DEG = np.pi / 180.0
+
+
+def case1_box(envelope, scale: float = 1.0) -> SchedulingBox:
+    """The scheduling box of Case 1's nominal MPC (ranges of the module docstring)."""
+    lo = np.array([envelope.h_min, envelope.V_min, -0.4 * DEG * scale, -0.4 * DEG * scale,
+                   -0.12 * scale, -1.0 * DEG * scale])  # fmt: skip
+    hi = np.array([envelope.h_max, envelope.V_max, 0.4 * DEG * scale, 0.4 * DEG * scale,
+                   1.1 * scale, 7.0 * DEG * scale])  # fmt: skip
+    return SchedulingBox(lo, hi, np.array([0.7 * DEG, 0.5, 3.5, 0.3, 3.5]) * scale)
+
+
+def main():
+    """Run the closure of the module docstring with the command-line options."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--k", type=int, default=3)
+    ap.add_argument("--scale", type=float, default=1.0)
+    ap.add_argument("--w0", type=float, default=0.01)
+    ap.add_argument("--grow", type=float, default=1.05)
+    ap.add_argument("--iterations", type=int, default=6)
+    ap.add_argument("--lam", type=float, default=0.995)
+    ap.add_argument("--save", default="")
+    o = ap.parse_args()
+    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+    d = load_design(ROOT / "offline_design" / "artefacts" / "case1")
+    a, c = d.arrays, d.case
+    veh = load_vehicle()
+    tp = build_tp_model(veh, "cm", *c["vertices"], *c["samples"])
+    tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+    rho = float(c["tube"]["rho_min"])
+    box = case1_box(veh.envelope, o.scale)
+    scale = np.concatenate([tp.state_scale, tp.input_scale])
+    t_design = np.sqrt(np.einsum("ij,jk,ik->i", a["F"], a["N"], a["F"]))
+    cols = np.concatenate([np.sqrt(np.diag(a["N"])), t_design])
+    t0 = time.time()
+    nv = nominal_vertices(box, veh, tm, dict(PAPER_UNCERTAINTY), rho, c["Ts"],
+                          c["plant_substeps"], scale, o.k, a["w_max"], cols)  # fmt: skip
+    A, B = nv.vertices()
+    print(f"vertex data: {A.shape[0]} vertices, {sum(nv.n_vehicles)} vehicles "
+          f"({time.time() - t0:.0f} s)", flush=True)  # fmt: skip
+    room = input_room(veh, rho_f=rho)
+    W = a["w_max"] * o.w0
+    for it in range(o.iterations):
+        t1 = time.time()
+        try:
+            tube = design_tube(A, B, W, tp.state_scale, tp.input_scale, room, (o.lam,),
+                               w_ref=a["w_max"], active=96)  # fmt: skip
+        except DesignError as exc:
+            print(f"iteration {it}: tube LMI infeasible ({exc})")
+            return
+        b = bound_along_nominal(nv, tube.F, tube.N)
+        print(
+            f"iteration {it} ({time.time() - t1:.0f} s, {tube.n_blocks} of {A.shape[0]} blocks "
+            f"active): tightening {tube.tightening[0]:.5f} / {np.degrees(tube.tightening[1]):.4f}"
+            f" deg, support of Z in alpha {np.degrees(tube.z_box[2]):.5f} deg\n"
+            + "".join(
+                f"  {name:>14} / W: " + " ".join(f"{v:.3f}" for v in part / W) + "\n"
+                for name, part in (
+                    ("parameters", b.parameters),
+                    ("interpolation", b.interpolation),
+                    ("second order", b.second_order),
+                    ("bound", b.total),
+                )
+            ),  # fmt: skip
+            end="",
+            flush=True,
+        )
+        if np.all(b.total <= W):
+            print(
+                "closed: slack per row " + " ".join(f"{s:+.3f}" for s in (W - b.total) / W)
+                + f"; smallest vertex-block eigenvalue {tube.min_eigs.min():.3g} over all "
+                f"{A.shape[0]} vertices; W / design W "
+                + " ".join(f"{r:.4g}" for r in W / a["w_max"])
+            )  # fmt: skip
+            if o.save:
+                np.savez(o.save, W=W, F=tube.F, N=tube.N, lam=tube.lam, w_design=a["w_max"],
+                         lo=box.lo, hi=box.hi, other_half=box.other_half, k=o.k, rho_min=rho,
+                         col_scale=cols, bound=b.total, parameters=b.parameters,
+                         interpolation=b.interpolation, second_order=b.second_order)  # fmt: skip
+                print(f"closed pair written to {o.save}")
+            return
+        W = np.maximum(W, o.grow * b.total)
+    print("not closed within the iterations")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,380 @@
+"""The tube certificate along the nominal: vertices over a scheduling box, W of what is left.
+
+With the nominal state moving by the nominal vehicle's nonlinear CM (``mpc.nominal_model:
+cm``), z+ = f_0(z, v) + d, and the plant x+ = f_p(x, P u) under u = v + F e (P =
+diag(1, rho_f), eq. 15), the tube error e = x - z obeys, once the estimate d holds the
+constant part c(z, v) = f_p(z, P v) - f_0(z, v) at the nominal point::
+
+    e+ = f_p(z + e, P (v + F e)) - f_p(z, P v)
+       = J_p(z, P v) [e; P F e] + w2(e)                                    (1)
+
+with J_p the one-period Jacobian [A, B] of the perturbed vehicle at the nominal point
+and w2 second order in e. Unlike the error around the scheduling trim
+(:mod:`fahv.design.certificate`), nothing in (1) grows with the distance of the nominal
+from the trim: the nominal's manoeuvre enters only through *where* J_p is taken.
+
+This module covers J_p by a vertex set and bounds the rest by W:
+
+* **Scheduling box** (:class:`SchedulingBox`): the nominal points the certificate covers,
+  s = (h, V, alpha - alpha_r, theta - theta_r, Phi - Phi_r, delta_e - delta_e,r) with the
+  trim (x_r, u_r) at (h, V) and the applied input; q and the flexible states of the
+  nominal within stated half-widths.
+* **Vertices** (:func:`nominal_vertices`): the nominal vehicle's J_0 at the 64 corners
+  of the box, each shifted along k principal directions of the parameter box's Jacobian
+  deviation (the corners of their coefficient range), with B and B P for rho_f in
+  {rho_min, 1}: (64 2^k 2) vertices. Between corners J_0 is the multilinear
+  interpolation of its corner values (a convex combination of them) plus a remainder
+  bounded by sum_i a_i^2 / 8 max |d^2 J_0 / ds_i^2| (tensor-product linear interpolation),
+  the second derivatives taken as REMAINDER_FACTOR times the largest second difference
+  along each edge of the box.
+* **W** (:func:`bound_along_nominal`), per row, three parts, each first or second order
+  in the size of Z: the part of each vehicle's Jacobian deviation the directions do not
+  carry (every corner of the sec. 5.1 box and interior vehicles, at every corner of the
+  scheduling box), the interpolation remainder and the linear effect of the nominal's q
+  and flexible deviations (elementwise bounds times the supports of e and F e over Z),
+  and w2 over Z (the exact extreme of the quadratic term over the ellipsoid from the
+  Hessian at every corner point and vehicle, times REMAINDER_FACTOR for the variation
+  between corners and the third-order rest).
+
+What it assumes (stated by :class:`AlongNominalBound`): the estimate has converged to the
+constant part at the nominal point (the onset of a fault and the estimate's lag are not
+in W), the nominal stays in the scheduling box (the QP's attitude rows bound alpha and
+theta; its input rows and q, the flexible states are assumed), vehicles inside the box
+are covered as sampled (the worst case of each parameter's monotone effect at the
+corners, interior vehicles checked).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from fahv.design.certificate import REMAINDER_FACTOR, _stencil, _taylor
+from fahv.errors import DesignError
+from fahv.plant.rk4 import params_records, rk4_cm
+from fahv.plant.uncertainty import perturb
+
+#: Widening of the parameter coefficients' range (fraction of its width, each side).
+COEF_MARGIN = 0.01
+
+#: Coordinates of the scheduling box (units: ft, ft/s, rad, rad, -, rad).
+BOX_COORDINATES = ("h", "V", "alpha", "theta", "Phi", "delta_e")
+
+
+@dataclass(frozen=True)
+class SchedulingBox:
+    """Nominal points a certificate along the nominal covers.
+
+    Attributes
+    ----------
+    lo, hi : (6,) ndarray
+        Bounds of s = (h [ft], V [ft/s], alpha - alpha_r [rad], theta - theta_r [rad],
+        Phi - Phi_r [-], delta_e - delta_e,r [rad]), the last two of the applied input,
+        (x_r, u_r) the nominal vehicle's trim at (h, V).
+    other_half : (5,) ndarray
+        Half-widths of the nominal's q [rad/s], eta_1, eta_1_dot [1/s], eta_2,
+        eta_2_dot [1/s] deviations from the trim (their effect goes into W, linearly).
+    """
+
+    lo: np.ndarray
+    hi: np.ndarray
+    other_half: np.ndarray
+
+    def __post_init__(self):
+        lo, hi = np.asarray(self.lo, float), np.asarray(self.hi, float)
+        if lo.shape != (6,) or hi.shape != (6,) or np.asarray(self.other_half).shape != (5,):
+            raise ValueError("scheduling box: lo, hi must have shape (6,), other_half (5,)")
+        if not np.all(np.isfinite(lo)) or not np.all(np.isfinite(hi)) or np.any(lo > hi):
+            raise ValueError(f"scheduling box: need finite lo <= hi, got {lo} and {hi}")
+
+    def corners(self) -> np.ndarray:
+        """The 64 corners (64, 6), in :func:`itertools.product` order (lo first)."""
+        return np.array(list(itertools.product(*zip(self.lo, self.hi, strict=True))))
+
+    def points(self, trim_map, s) -> tuple[np.ndarray, np.ndarray]:
+        """Nominal states (L, 9) and applied inputs (L, 2) of box points s (L, 6)."""
+        s = np.atleast_2d(np.asarray(s, float))
+        x_r, u_r = trim_map.at(s[:, 0], s[:, 1])
+        X = np.array(x_r, float)[:, :9].copy()
+        X[:, 2] += s[:, 2]
+        X[:, 3] += s[:, 3]
+        return X, np.array(u_r, float) + s[:, 4:6]
+
+
+def _one_step(X, U, recs, Ts, n_sub):
+    return rk4_cm(np.ascontiguousarray(X, float), np.ascontiguousarray(U, float), recs, Ts, n_sub)
+
+
+def jacobians(X, U, recs, Ts: float, n_sub: int, scale) -> np.ndarray:
+    """One-period Jacobians [A, B] (L, 9, 11) of the CM at L points (central differences).
+
+    X (L, 9) states, U (L, 2) applied inputs, ``recs`` (L,) parameter records, steps
+    1e-4 of ``scale`` (11,) (the design scaling Dx, Du).
+    """
+    z0 = np.concatenate([X, U], axis=1)
+    J = np.empty((len(X), 9, 11))
+    for i in range(11):
+        zp, zm = z0.copy(), z0.copy()
+        zp[:, i] += 1e-4 * scale[i]
+        zm[:, i] -= 1e-4 * scale[i]
+        fp = _one_step(zp[:, :9], zp[:, 9:], recs, Ts, n_sub)
+        fm = _one_step(zm[:, :9], zm[:, 9:], recs, Ts, n_sub)
+        J[:, :, i] = (fp - fm) / (2e-4 * scale[i])
+    return J
+
+
+@dataclass(frozen=True)
+class NominalVertices:
+    """The vertex set of a certificate along the nominal and what it leaves to W.
+
+    Attributes
+    ----------
+    box : SchedulingBox
+    J0 : (64, 9, 11) ndarray
+        Nominal vehicle's Jacobians at the box corners.
+    dirs : (k, 9, 11) ndarray
+        Parameter directions (unscaled).
+    c_lo, c_hi : (k,) ndarray
+        Coefficient range over every vehicle and corner, widened by ``coef_margin`` of
+        :func:`nominal_vertices`.
+    residual : (64, C, 9, 11) ndarray
+        Each vehicle's Jacobian deviation minus its carried part, per corner.
+    interp : (9, 11) ndarray
+        Elementwise bound of the interpolation remainder of J_0 plus the linear effect
+        of the nominal's q and flexible deviations.
+    hessians : (64, C, 9, 11, 11) ndarray
+        Hessians of one period in (x, u) at every corner point and vehicle.
+    rho_min : float
+    n_vehicles : tuple of int
+        Corners of the parameter box and interior vehicles in ``residual``.
+    """
+
+    box: SchedulingBox
+    J0: np.ndarray
+    dirs: np.ndarray
+    c_lo: np.ndarray
+    c_hi: np.ndarray
+    residual: np.ndarray
+    interp: np.ndarray
+    hessians: np.ndarray
+    rho_min: float
+    n_vehicles: tuple
+
+    def vertices(self) -> tuple[np.ndarray, np.ndarray]:
+        """(A, B) vertex arrays (64 2^k 2, 9, 9), (64 2^k 2, 9, 2) of the tube LMI (24)."""
+        As, Bs = [], []
+        for rho in (self.rho_min, 1.0):
+            for c in itertools.product(*zip(self.c_lo, self.c_hi, strict=True)):
+                Jv = self.J0 + np.tensordot(np.asarray(c, float), self.dirs, 1)[None]
+                As.append(Jv[:, :, :9])
+                Bs.append(Jv[:, :, 9:] * np.array([1.0, rho]))
+        return np.concatenate(As), np.concatenate(Bs)
+
+
+def nominal_vertices(
+    box: SchedulingBox,
+    vehicle,
+    trim_map,
+    uncertainty: dict,
+    rho_min: float,
+    Ts: float,
+    n_sub: int,
+    scale,
+    k: int,
+    row_scale,
+    col_scale,
+    interior: int = 256,
+    seed: int = 0,
+    hessians: bool = True,
+    coef_margin: float = COEF_MARGIN,
+) -> NominalVertices:
+    """Build the vertex set of module docstring (1) and the data W is bounded from.
+
+    Parameters
+    ----------
+    box : SchedulingBox
+    vehicle : fahv.model.vehicle.Vehicle
+        The nominal vehicle.
+    trim_map : fahv.model.trim.TrimMap
+    uncertainty : dict[str, float]
+        Relative half-widths of the parameter box (all 2^P corners are evaluated).
+    rho_min : float
+        Smallest elevator effectiveness (eq. 15).
+    Ts : float
+        Control period [s].
+    n_sub : int
+        RK4 sub-steps of the plant per period.
+    scale : (11,) array_like
+        Design scaling (Dx, Du) of the finite differences.
+    k : int
+        Parameter directions carried by the vertices.
+    row_scale, col_scale : (9,), (11,) array_like
+        Row divisor (a W) and column factor (supports of e and F e over a Z) of the
+        Jacobian deviations before the SVD: the directions that matter most for that
+        pair.
+    interior : int
+        Vehicles drawn uniformly inside the box (seeded) besides the corners.
+    seed : int
+    hessians : bool
+        Compute the Hessians (243 plant steps per point and vehicle; needed by
+        :func:`bound_along_nominal`).
+    coef_margin : float
+        The coefficient range over the corners, widened by this fraction of its width
+        on each side, so that it holds the coefficients of points inside the box too
+        (measured by the tests: they exceed the corners' range by less than 1e-4 of it).
+
+    Returns
+    -------
+    NominalVertices
+
+    Raises
+    ------
+    DesignError
+        If a plant step is not finite (the box leaves the model's validity).
+    """
+    scale = np.asarray(scale, float)
+    names = list(uncertainty)
+    corners = np.array(list(itertools.product((-1.0, 1.0), repeat=len(names))))
+    inner = np.random.default_rng(seed).uniform(-1.0, 1.0, (interior, len(names)))
+    fractions = np.vstack([corners, inner])
+    recs = params_records(
+        [perturb(vehicle.params, uncertainty, dict(zip(names, f, strict=True))) for f in fractions]
+    )
+    r0 = params_records([vehicle.params])
+    S = box.corners()
+    X, U = box.points(trim_map, S)
+    J0 = jacobians(X, U, np.repeat(r0, len(S)), Ts, n_sub, scale)
+    C = len(recs)
+    Jp = jacobians(np.repeat(X, C, 0), np.repeat(U, C, 0), np.tile(recs, len(S)), Ts, n_sub,
+                   scale).reshape(len(S), C, 9, 11)  # fmt: skip
+    if not (np.all(np.isfinite(J0)) and np.all(np.isfinite(Jp))):
+        raise DesignError("scheduling box: a plant step is not finite; the box leaves the model")
+    rs, cs = np.asarray(row_scale, float), np.asarray(col_scale, float)
+    dev = (Jp - J0[:, None]) / rs[None, None, :, None] * cs
+    flat = dev.reshape(-1, 99)
+    _, _, Vt = np.linalg.svd(flat, full_matrices=False)
+    G = Vt[:k]
+    coef = flat @ G.T
+    unscale = rs[:, None] / cs[None, :]
+    residual = (flat - coef @ G).reshape(Jp.shape) * unscale
+    interp = _interpolation_remainder(box, trim_map, r0, Ts, n_sub, scale)
+    H = np.zeros((len(S), C, 9, 11, 11), dtype=np.float32)
+    if hessians:
+        H = _hessians(X, U, recs, Ts, n_sub, scale)
+    c_lo, c_hi = coef.min(axis=0), coef.max(axis=0)
+    pad = coef_margin * (c_hi - c_lo)
+    return NominalVertices(
+        box, J0, G.reshape(k, 9, 11) * unscale[None], c_lo - pad, c_hi + pad,
+        residual, interp, H, float(rho_min), (len(corners), interior),
+    )  # fmt: skip
+
+
+def _interpolation_remainder(box, trim_map, r0, Ts, n_sub, scale) -> np.ndarray:
+    """Elementwise bound (9, 11) of J_0 minus its multilinear interpolation, plus q/flex.
+
+    Along each coordinate i and each of the 32 edges of the box in that direction,
+    the second difference J(mid) - (J(lo) + J(hi)) / 2 = a_i^2 / 8 J'' (exact for a
+    quadratic); REMAINDER_FACTOR times the largest over the edges, summed over the six
+    coordinates. The nominal's q and flexible deviations enter J_0 about linearly:
+    their effect |J(x + half_j e_j) - J(x)| at the box centre, times REMAINDER_FACTOR.
+    """
+    lo, hi = np.asarray(box.lo, float), np.asarray(box.hi, float)
+    pts = []
+    for i in range(6):
+        rest = [j for j in range(6) if j != i]
+        for sel in itertools.product((0, 1), repeat=5):
+            base = np.where(np.array(sel) == 0, lo[rest], hi[rest])
+            for t in (lo[i], 0.5 * (lo[i] + hi[i]), hi[i]):
+                pts.append(np.insert(base, i, t))
+    X, U = box.points(trim_map, np.array(pts))
+    J = jacobians(X, U, np.repeat(r0, len(X)), Ts, n_sub, scale).reshape(6, 32, 3, 9, 11)
+    second = np.abs(J[:, :, 1] - 0.5 * (J[:, :, 0] + J[:, :, 2]))  # (6, 32, 9, 11)
+    E = REMAINDER_FACTOR * second.max(axis=1).sum(axis=0)
+    Xc, Uc = box.points(trim_map, 0.5 * (lo + hi))
+    Xo = np.repeat(Xc, 6, 0)
+    for j, idx in enumerate((4, 5, 6, 7, 8)):
+        Xo[j + 1, idx] += box.other_half[j]
+    Jo = jacobians(Xo, np.repeat(Uc, 6, 0), np.repeat(r0, 6), Ts, n_sub, scale)
+    return E + REMAINDER_FACTOR * np.abs(Jo[1:] - Jo[0]).sum(axis=0)
+
+
+def _hessians(X, U, recs, Ts, n_sub, scale) -> np.ndarray:
+    """Hessians (S, C, 9, 11, 11) of one period in (x, u) at S points for C vehicles.
+
+    Central differences with steps of 1e-2 of the scaling (the stencil of
+    :func:`fahv.design.certificate._stencil`), kept in float32 (their use is a bound
+    with a factor REMAINDER_FACTOR; the rounding is 1e-7 relative).
+    """
+    S, C = len(X), len(recs)
+    St, hstep = _stencil(1e-2 * np.asarray(scale, float))
+    K = len(St)
+    out = np.empty((S, C, 9, 11, 11), dtype=np.float32)  # 1.1 kB per point and vehicle
+    for si in range(S):
+        Z = np.concatenate([X[si], U[si]])[None, :] + St  # (K, 11)
+        Zr = np.tile(Z, (C, 1))
+        G = _one_step(Zr[:, :9], Zr[:, 9:], np.repeat(recs, K), Ts, n_sub).reshape(C, K, 9)
+        for c in range(C):
+            out[si, c] = _taylor(G[c], hstep, 11)[2]
+    return out
+
+
+@dataclass(frozen=True)
+class AlongNominalBound:
+    """Per-row bound of W along the nominal for one tube (module docstring).
+
+    Attributes
+    ----------
+    parameters, interpolation, second_order, total : (9,) ndarray
+        The three parts and their sum, state units.
+    assumptions : tuple of str
+    """
+
+    parameters: np.ndarray
+    interpolation: np.ndarray
+    second_order: np.ndarray
+    total: np.ndarray
+    assumptions: tuple
+
+    def ratio(self, W) -> np.ndarray:
+        """The bound relative to W: total / W per row (9,)."""
+        return self.total / np.asarray(W, float)
+
+
+ASSUMPTIONS = (
+    "the estimate holds the constant part f_p(z, P v) - f_0(z, v) at the nominal point "
+    "(onset of a fault and the estimate's lag not in W)",
+    "the nominal state and applied input stay in the scheduling box; q and the flexible "
+    "states within the stated half-widths",
+    "vehicles inside the parameter box: corners and the sampled interior vehicles",
+)
+
+
+def bound_along_nominal(nv: NominalVertices, F, N) -> AlongNominalBound:
+    """Bound (9,) of what the vertices leave of e+ over Z, for the tube (F (2, 9), N (9, 9)).
+
+    Parameters part: max over corners, vehicles and rho_f of the exact support over Z of
+    each row of residual [I; P F] (sqrt(r N r')). Interpolation part: interp times the
+    supports of (e, P F e) over Z (rho_f = 1 is the larger). Second order:
+    REMAINDER_FACTOR times max over corners, vehicles and rho_f of the largest
+    |eigenvalue| of (1/2) L' M_P' H_j M_P L (N = L L', M_P = [I; P F]), the exact extreme
+    of the quadratic term over the ellipsoid.
+    """
+    F, N = np.asarray(F, float), np.asarray(N, float)
+    L = np.linalg.cholesky(N)
+    sZ = np.sqrt(np.diag(N))
+    sF = np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
+    par = np.zeros(9)
+    sec = np.zeros(9)
+    for rho in (nv.rho_min, 1.0):
+        MP = np.vstack([np.eye(9), np.array([1.0, rho])[:, None] * F])
+        R = nv.residual @ MP
+        par = np.maximum(par, np.sqrt(np.einsum("scij,jk,scik->sci", R, N, R)).max(axis=(0, 1)))
+        ML = MP @ L
+        for Hs in nv.hessians:  # one corner point at a time (memory)
+            Q = 0.5 * np.einsum("ki,cjkl,lm->cjim", ML, Hs.astype(float), ML)
+            sec = np.maximum(sec, np.abs(np.linalg.eigvalsh(Q)).max(axis=(0, 2)))
+    interp = nv.interp @ np.concatenate([sZ, sF])
+    sec = REMAINDER_FACTOR * sec
+    return AlongNominalBound(par, interp, sec, par + interp + sec, ASSUMPTIONS)

@@ -1,0 +1,140 @@
+"""The tube certificate along the nominal (fahv.design.along_nominal), checked independently."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fahv.design.along_nominal import SchedulingBox, jacobians, nominal_vertices
+from fahv.design.certificate import worst_level
+from fahv.model.trim import TrimMap
+from fahv.model.vehicle import load_vehicle
+from fahv.plant.rk4 import params_records, rk4_cm
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturb
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+TS, N_SUB = 0.02, 5
+
+
+@pytest.fixture(scope="module")
+def along(design):
+    """The stored closed pair, its scheduling box and its vertex data rebuilt here."""
+    from fahv.model.tp_model import build_tp_model
+
+    d = np.load(DATA / "closed_tube_along_nominal.npz")
+    a = design.arrays
+    veh = load_vehicle()
+    tp = build_tp_model(veh, "cm", 4, 5, 21, 21)
+    tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+    box = SchedulingBox(d["lo"], d["hi"], d["other_half"])
+    scale = np.concatenate([tp.state_scale, tp.input_scale])
+    nv = nominal_vertices(box, veh, tm, dict(PAPER_UNCERTAINTY), float(d["rho_min"]), TS, N_SUB,
+                          scale, int(d["k"]), d["w_design"], d["col_scale"],
+                          hessians=False)  # fmt: skip
+    return d, veh, tm, box, scale, nv
+
+
+def test_scheduling_box_rejects_bad_bounds():
+    """Wrong shapes, NaN or lo > hi are refused with the box named."""
+    ok = np.zeros(6), np.ones(6), np.ones(5)
+    SchedulingBox(*ok)
+    with pytest.raises(ValueError, match="scheduling box"):
+        SchedulingBox(np.zeros(5), np.ones(6), np.ones(5))
+    with pytest.raises(ValueError, match="scheduling box"):
+        SchedulingBox(np.ones(6), np.zeros(6), np.ones(5))
+    with pytest.raises(ValueError, match="scheduling box"):
+        SchedulingBox(np.full(6, np.nan), np.ones(6), np.ones(5))
+
+
+def test_along_nominal_pair_is_rpi_at_every_vertex(along):
+    """Exact worst one-step level of the stored tube over its 1024 vertices (64 box
+    corners x 8 parameter-direction corners x rho_f at both ends) and the corners of W:
+    at most 1 (printed with its margin)."""
+    d, *_, nv = along
+    A, B = nv.vertices()
+    assert A.shape[0] == 1024
+    level, _ = worst_level(A, B, d["F"], d["N"], d["W"])
+    print(f"worst one-step level {level:.6f} over {A.shape[0]} vertices, margin {1 - level:.2e}")
+    assert level <= 1.0
+
+
+def _interp_weights(box, s):
+    """Multilinear weights (L, 64) of points s (L, 6) on the box corners (product order)."""
+    t = (s - box.lo) / (box.hi - box.lo)
+    w = np.ones((len(s), 1))
+    for i in range(6):
+        w = (w[:, :, None] * np.stack([1.0 - t[:, i], t[:, i]], axis=1)[:, None, :]).reshape(
+            len(s), -1
+        )
+    return w
+
+
+def test_along_nominal_disturbance_lies_inside_W(along):
+    """100 000 true one-step errors along the nominal lie inside W: at nominal points of
+    the scheduling box (its corners first, then inside, with q and the flexible states of
+    the nominal within their half-widths), for every corner of the sec. 5.1 box at both
+    rho_f ends and then random corners and interior vehicles, e on the boundary of Z and
+    inside, w = f_p(z + e, v + P F e) - f_p(z, v) - J_theta [e; P F e] with J_theta in the
+    vertices' hull: the multilinear weights of the point and the carried coefficient of
+    the vehicle's own deviation J_p - J_0 at the point (which must lie in the vertices'
+    range)."""
+    d, veh, tm, box, scale, nv = along
+    W, F, N, rho_min = d["W"], d["F"], d["N"], float(d["rho_min"])
+    rs, cs = d["w_design"], d["col_scale"]
+    unscale = rs[:, None] / cs[None, :]
+    G = nv.dirs / unscale[None]  # scaled, orthonormal
+    names = list(PAPER_UNCERTAINTY)
+    corners = np.array(list(np.ndindex(*(2,) * len(names))), float) * 2 - 1
+    L_N = np.linalg.cholesky(N)
+    r0 = params_records([veh.params])
+    rng = np.random.default_rng(11)
+    worst, n_done, tol = np.zeros(9), 0, 1e-6 * (nv.c_hi - nv.c_lo)
+    excess = np.full(nv.c_lo.size, -np.inf)
+    S_corners = box.corners()
+    for chunk in range(10):
+        n = 10_000
+        if chunk == 0:  # every vehicle corner at both rho_f ends, at box corners (cycled)
+            frac = np.vstack([corners, corners, rng.uniform(-1, 1, (n - 2048, len(names)))])
+            rho = np.r_[np.full(1024, rho_min), np.ones(1024), rng.choice([rho_min, 1.0], n - 2048)]
+            s = np.vstack([S_corners[np.arange(2048) % 64],
+                           box.lo + rng.random((n - 2048, 6)) * (box.hi - box.lo)])  # fmt: skip
+        else:
+            at_corner = rng.random(n) < 0.5
+            frac = np.where(at_corner[:, None], rng.choice([-1.0, 1.0], (n, len(names))),
+                            rng.uniform(-1, 1, (n, len(names))))  # fmt: skip
+            rho = rng.choice([rho_min, 1.0], n)
+            s = box.lo + rng.random((n, 6)) * (box.hi - box.lo)
+            edge = rng.random(n) < 0.25
+            s[edge] = S_corners[rng.integers(0, 64, edge.sum())]
+        recs = params_records(
+            [perturb(veh.params, dict(PAPER_UNCERTAINTY), dict(zip(names, f, strict=True)))
+             for f in frac]
+        )  # fmt: skip
+        X, U = box.points(tm, s)
+        X[:, 4:9] += rng.uniform(-1, 1, (n, 5)) * box.other_half
+        u = rng.normal(size=(n, 9))
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        u[n // 2 :] *= rng.random((n - n // 2, 1)) ** (1 / 9)  # inside Z
+        e = u @ L_N.T
+        du = (e @ F.T) * np.stack([np.ones(n), rho], axis=1)  # P F e
+        Jp = jacobians(X, U, recs, TS, N_SUB, scale)
+        J0 = jacobians(X, U, np.repeat(r0, n), TS, N_SUB, scale)
+        J_int = np.einsum("lc,cij->lij", _interp_weights(box, s), nv.J0)
+        coef = np.einsum("lij,kij->lk", (Jp - J0) / rs[None, :, None] * cs, G)
+        excess = np.maximum(excess, np.max(np.maximum(nv.c_lo - coef, coef - nv.c_hi), axis=0))
+        assert np.all(coef >= nv.c_lo - tol) and np.all(coef <= nv.c_hi + tol), (
+            "a vehicle's carried coefficient leaves the vertices' range"
+        )
+        J_th = J_int + np.einsum("lk,kij->lij", coef, nv.dirs)
+        f1 = rk4_cm(np.ascontiguousarray(X + e), np.ascontiguousarray(U + du), recs, TS, N_SUB)
+        f0 = rk4_cm(np.ascontiguousarray(X), np.ascontiguousarray(U), recs, TS, N_SUB)
+        w = f1 - f0 - np.einsum("lij,lj->li", J_th, np.concatenate([e, du], axis=1))
+        worst = np.maximum(worst, np.abs(w).max(axis=0))
+        n_done += n
+    ratio = worst / W
+    print(f"{n_done} samples: max |w| / W per row:", np.round(ratio, 3))
+    print("largest coefficient beyond the vertices' range / its width (< 0: inside):",
+          np.round(excess / (nv.c_hi - nv.c_lo), 5))  # fmt: skip
+    assert n_done == 100_000
+    assert np.all(ratio <= 1.0), ratio
+    assert np.all(ratio >= 0.05), ratio  # the samples reach into W: the test is not vacuous
