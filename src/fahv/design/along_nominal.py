@@ -51,9 +51,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fahv.design.certificate import REMAINDER_FACTOR, _stencil, _taylor
+from fahv.design.certificate import REMAINDER_FACTOR, _one_step, _stencil, _taylor, jacobians
 from fahv.errors import DesignError
-from fahv.plant.rk4 import params_records, rk4_cm
+from fahv.plant.rk4 import params_records
 from fahv.plant.uncertainty import perturb
 
 #: Widening of the parameter coefficients' range (fraction of its width, each side).
@@ -101,28 +101,6 @@ class SchedulingBox:
         X[:, 2] += s[:, 2]
         X[:, 3] += s[:, 3]
         return X, np.array(u_r, float) + s[:, 4:6]
-
-
-def _one_step(X, U, recs, Ts, n_sub):
-    return rk4_cm(np.ascontiguousarray(X, float), np.ascontiguousarray(U, float), recs, Ts, n_sub)
-
-
-def jacobians(X, U, recs, Ts: float, n_sub: int, scale) -> np.ndarray:
-    """One-period Jacobians [A, B] (L, 9, 11) of the CM at L points (central differences).
-
-    X (L, 9) states, U (L, 2) applied inputs, ``recs`` (L,) parameter records, steps
-    1e-4 of ``scale`` (11,) (the design scaling Dx, Du).
-    """
-    z0 = np.concatenate([X, U], axis=1)
-    J = np.empty((len(X), 9, 11))
-    for i in range(11):
-        zp, zm = z0.copy(), z0.copy()
-        zp[:, i] += 1e-4 * scale[i]
-        zm[:, i] -= 1e-4 * scale[i]
-        fp = _one_step(zp[:, :9], zp[:, 9:], recs, Ts, n_sub)
-        fm = _one_step(zm[:, :9], zm[:, 9:], recs, Ts, n_sub)
-        J[:, :, i] = (fp - fm) / (2e-4 * scale[i])
-    return J
 
 
 @dataclass(frozen=True)

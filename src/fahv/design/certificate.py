@@ -578,16 +578,26 @@ def _trim_jacobians(trim_map, h, V, recs, Ts, n_sub, sc) -> np.ndarray:
     At (h, V) [ft, ft/s], by central differences with steps 1e-4 of the scaling ``sc`` (11,).
     """
     x, u = trim_map(h, V)
-    z0 = np.concatenate([np.asarray(x[:9], float), np.asarray(u, float)])
-    J = np.empty((len(recs), 9, 11))
+    L = len(recs)
+    X = np.tile(np.asarray(x[:9], float), (L, 1))
+    return jacobians(X, np.tile(np.asarray(u, float), (L, 1)), recs, Ts, n_sub, sc)
+
+
+def jacobians(X, U, recs, Ts: float, n_sub: int, scale) -> np.ndarray:
+    """One-period Jacobians [A, B] (L, 9, 11) of the CM at L points (central differences).
+
+    X (L, 9) states, U (L, 2) applied inputs, ``recs`` (L,) parameter records, steps
+    1e-4 of ``scale`` (11,) (the design scaling Dx, Du).
+    """
+    z0 = np.concatenate([X, U], axis=1)
+    J = np.empty((len(X), 9, 11))
     for i in range(11):
-        zp = np.tile(z0, (len(recs), 1))
-        zm = zp.copy()
-        zp[:, i] += 1e-4 * sc[i]
-        zm[:, i] -= 1e-4 * sc[i]
+        zp, zm = z0.copy(), z0.copy()
+        zp[:, i] += 1e-4 * scale[i]
+        zm[:, i] -= 1e-4 * scale[i]
         fp = _one_step(zp[:, :9], zp[:, 9:], recs, Ts, n_sub)
         fm = _one_step(zm[:, :9], zm[:, 9:], recs, Ts, n_sub)
-        J[:, :, i] = (fp - fm) / (2e-4 * sc[i])
+        J[:, :, i] = (fp - fm) / (2e-4 * scale[i])
     return J
 
 
