@@ -259,3 +259,63 @@ def test_infeasible_replan_recovers_by_moving_the_set_point(design):
     assert abs(dth[0]) > 10.0  # beyond the 1 ft trust region (measured: -38 ft)
     u_s = u_base + mpc.Gu @ y[mpc.layout.delta]
     assert u_s[1] <= mpc.u_hi[1] + 1e-9
+
+
+def _inputs_of_plan(mpc, y, z0, u_base):
+    """The plan's nominal input at every fast step (N_p, M, m), propagated step by step on
+    the scheduled model under u = u_base + Gu delta + K zeta + Du c_j."""
+    s, ly, n = mpc.s, mpc.layout, mpc.n
+    delta = y[ly.delta]
+    AK = mpc.A + mpc.B @ mpc.K
+    E = (mpc.A - np.eye(n)) @ mpc.Gx + mpc.B @ mpc.Gu
+    zeta = z0 - mpc.Gx @ delta
+    u = np.empty((s.N_p, s.M, mpc.m))
+    for j in range(s.N_p):
+        cj = y[ly.move(j)] * mpc.Du
+        for i in range(s.M):
+            u[j, i] = u_base + mpc.Gu @ delta + mpc.K @ zeta + cj
+            zeta = AK @ zeta + mpc.B @ cj + E @ delta
+    return u
+
+
+def test_rate_rows_bound_the_jumps_of_the_nominal_input(design):
+    """mpc.du_max: the nominal input, propagated fast step by fast step, jumps at each move
+    start by at most du_max (from the last fast step of the move before), and the first
+    input of a re-plan lies within du_max of the input applied before it; the rows bind
+    (without them the same QP jumps by more than 3x du_max)."""
+    c = design.case["command"]
+    cmd = np.array([c["h_c"], c["V_c"]])
+    du = np.array([0.02, np.radians(0.2)])
+    free = _mpc(design)
+    free.schedule(c["h0"], c["V0"])
+    z0 = np.zeros(free.n)
+    y0, why = free.solve(z0, free.u_r_s, cmd)
+    assert why == "ok"
+    u_free = _inputs_of_plan(free, y0, z0, free.u_r_s)
+    jumps_free = np.abs(np.diff(u_free.reshape(-1, 2), axis=0)).max(axis=0)
+    assert np.all(jumps_free > 3.0 * du)
+    mpc = _mpc(design, du_max=du)
+    mpc.schedule(c["h0"], c["V0"])
+    u_prev = mpc.u_r_s + np.array([0.01, np.radians(-0.1)])  # the input applied before
+    y, why = mpc.solve(z0, mpc.u_r_s, cmd, u_prev=u_prev)
+    assert why == "ok"
+    assert mpc.A_c.shape[0] == free.A_c.shape[0] + 2 * mpc.s.N_p
+    u = _inputs_of_plan(mpc, y, z0, mpc.u_r_s)
+    tol = 1e-6 * mpc.Du  # the KKT check's primal tolerance (scaled rows)
+    assert np.all(np.abs(u[0, 0] - u_prev) <= du + tol)
+    starts = np.abs(u[1:, 0] - u[:-1, -1])  # jump at each move start j = 1..N_p-1
+    assert np.all(starts <= du + tol)
+    assert np.all(starts.max(axis=0) > 0.99 * du)  # the rows bind
+    # the constraint rows' own evaluation equals the propagated jumps
+    rows = (mpc.Rate_y @ y + mpc.Rate_z @ z0).reshape(-1, 2) * mpc.Du
+    np.testing.assert_allclose(rows, u[1:, 0] - u[:-1, -1], atol=1e-9)
+
+
+def test_rate_limits_are_checked():
+    from fahv.control.nominal_mpc import rate_limits
+
+    assert np.all(np.isinf(rate_limits([0.0, 0.0])))
+    np.testing.assert_allclose(rate_limits([0.02, 0.5]), [0.02, np.radians(0.5)])
+    for bad in ([0.02, 0.0], [-0.1, 1.0], [np.nan, 1.0], [0.1]):
+        with pytest.raises(ValueError, match="mpc.du_max"):
+            rate_limits(bad)

@@ -134,3 +134,16 @@ def test_case2_eleven_state_law_batched_and_equal(design_case2):
     for ov, res in zip(ovs, simulate_batch(d, "tube_mpc", ovs, 1.5), strict=True):
         _assert_same(simulate(d, "tube_mpc", 1.5, overrides=ov), res)
         assert res.x_n.shape == (75, 11)
+
+
+def test_nonlinear_nominal_refuses_the_eleven_state_design(design_case2):
+    """mpc.nominal_model 'cm' moves the nominal by the 9-state CM: an ECM design (11
+    states, q' and x_q) is refused with a RunError that names the key and the size."""
+    from fahv.loop.cores import build_core
+    from fahv.loop.params import node_parameters
+
+    p = node_parameters(design_case2, "tube_mpc")["nominal_trajectory"]
+    p["mpc.nominal_model"] = "cm"
+    with pytest.raises(RunError, match=r"mpc\.nominal_model 'cm' needs the 9-state CM design, "
+                       r"got 11 states"):  # fmt: skip
+        build_core("nominal_trajectory", p)

@@ -104,6 +104,11 @@ MPC_SECTION_FIELDS = (
           "used but reported as not certified", unit="deg", lo=0.0, hi=10.0, default=0.0),
     Field("est_tau", "float", "time constant of the state-disturbance estimate (0: none)",
           unit="s", lo=0.0, hi=1e3, default=0.5),
+    Field("du_max", "floats", "largest change of the nominal input (Phi, delta_e) at a move "
+          "start: between consecutive moves of the plan and, at a re-plan, from the nominal "
+          "input applied at the step before (0: no rate rows); bounds how fast the residual "
+          "the disturbance estimate filters can move (docs/control_design.md)",
+          unit="-, deg", lo=0.0, length=2, default=(0.0, 0.0)),
     Field("nominal_model", "str", "model the nominal state moves by: 'lpv' (the scheduled "
           "LPV model, eq. 12) or 'cm' (the nonlinear CM of the nominal vehicle, eq. 1-3, so "
           "that the tube error is linearised along the nominal, not at the scheduling trim)",
@@ -141,6 +146,11 @@ class MPCSettings:
         before the next re-plan, and the one a shifted plan applies).
     nominal_model : str
         'lpv' or 'cm': what the nominal state moves by (:class:`TrackingMPCNominal`).
+    du_max : (2,) ndarray
+        Largest change of the nominal input at a move start [Phi, delta_e rad]: rows on
+        the jump between consecutive moves of the plan and, at a re-plan, on the jump from
+        the nominal input applied at the previous fast step (:meth:`TrackingMPC.solve`);
+        inf (the default, ``mpc.du_max`` 0): no rate rows.
     """
 
     M: int
@@ -153,6 +163,12 @@ class MPCSettings:
     att_max: np.ndarray = dataclasses.field(default_factory=lambda: np.full(2, math.inf))
     fine_moves: int = 2
     nominal_model: str = "lpv"
+    du_max: np.ndarray = dataclasses.field(default_factory=lambda: np.full(2, math.inf))
+
+    @property
+    def has_rate_rows(self) -> bool:
+        """True if the QP carries the rate rows of ``du_max``."""
+        return bool(np.all(np.isfinite(self.du_max)))
 
     @classmethod
     def of_parameters(cls, p: dict, n: int) -> MPCSettings:
@@ -165,7 +181,27 @@ class MPCSettings:
             np.asarray(m["reschedule"], float),
             np.radians(np.broadcast_to(np.asarray(m["att_max"], float), (2,))).copy(),
             nominal_model=str(m.get("nominal_model", "lpv")),
+            du_max=rate_limits(m.get("du_max", (0.0, 0.0))),
         )  # fmt: skip
+
+
+def rate_limits(du_max) -> np.ndarray:
+    """``mpc.du_max`` (Phi, delta_e deg; 0: none) as the QP's rate bounds (2,) [-, rad].
+
+    Raises
+    ------
+    ValueError
+        If it is not two non-negative finite numbers, or only one of them is 0 (a rate
+        row on one input only is not a design the certificate can use).
+    """
+    v = np.asarray(du_max, float)
+    if v.shape != (2,) or not np.all(np.isfinite(v)) or np.any(v < 0.0):
+        raise ValueError(f"mpc.du_max must be two non-negative numbers (Phi, deg), got {du_max!r}")
+    if np.all(v == 0.0):
+        return np.full(2, math.inf)
+    if np.any(v == 0.0):
+        raise ValueError(f"mpc.du_max: give both rates or none (0, 0), got {du_max!r}")
+    return np.array([v[0], math.radians(v[1])])
 
 
 @dataclass(frozen=True)
@@ -583,6 +619,8 @@ class TrackingMPC:
         self.Att_z = np.concatenate(att_z)
         self.Tb_y = self.L_inv @ C[N_p]  # terminal box rows, (n, ny)
         self.Tb_z = self.L_inv @ S[N_p]
+        if s.has_rate_rows:
+            self._rate_rows(Phi_w, Gam_w, Psi_w)
         self._constraint_matrix()
         self._qp = None
         # steady-state shift of a constant disturbance d: (A - I) x_d + B u_d + d = 0,
@@ -600,6 +638,37 @@ class TrackingMPC:
         self.Hx[2:] = H_ss[: n - 2]
         self.Hu = H_ss[n - 2 :]
         self.stats.reschedules += 1
+
+    def _rate_rows(self, Phi_w, Gam_w, Psi_w) -> None:
+        """Rows of the jumps of the nominal input at the move starts (``mpc.du_max``).
+
+        At the start of move j = 1..N_p-1 the nominal input changes from the last fast step
+        of move j-1 to the first of move j by K (zeta_j - zeta_j-1,M-1) + Du (c_j - c_j-1)
+        (zeta is continuous, the move jumps), with zeta_j-1,M-1 = Phi_M-1 zeta_j-1 +
+        Gam_M-1 c_j-1 + Psi_M-1 delta in closed form: ``Rate_y`` ((N_p-1) m, ny) and
+        ``Rate_z`` ((N_p-1) m, n), per Du. The re-plan's own jump, from the input applied
+        at the previous fast step to u_0, uses the first m input rows (:meth:`solve`).
+        Between move starts the input moves with K zeta only (the pre-stabilised model).
+        """
+        s, n, m, ly, N_p, M = self.s, self.n, self.m, self.layout, self.s.N_p, self.s.M
+        C, S = self.C, self.S
+        if M >= 2:
+            P_l, G_l, Q_l = Phi_w[M - 2], Gam_w[M - 2], Psi_w[M - 2]
+        else:  # one fast step per move: the last step of a move is its start
+            P_l, G_l, Q_l = np.eye(n), np.zeros((n, m)), np.zeros((n, 2))
+        mv_cols = np.arange(N_p * m).reshape(N_p, m)
+        last_y = P_l @ C[: N_p - 1]  # zeta at the last fast step of moves 0..N_p-2
+        for j in range(N_p - 1):
+            last_y[j][:, mv_cols[j]] += G_l
+        last_y[:, :, ly.delta] += Q_l
+        J_y = self.K @ (C[1:N_p] - last_y)  # (N_p - 1, m, ny)
+        J_z = self.K @ (S[1:N_p] - P_l @ S[: N_p - 1])
+        for r in range(m):
+            J_y[np.arange(N_p - 1), r, mv_cols[1:, r]] += self.Du[r]
+            J_y[np.arange(N_p - 1), r, mv_cols[:-1, r]] -= self.Du[r]
+        self.Rate_y = (J_y / self.Du[None, :, None]).reshape(-1, ly.ny)
+        self.Rate_z = (J_z / self.Du[None, :, None]).reshape(-1, n)
+        self._rate_scaled = np.tile(s.du_max / self.Du, N_p - 1)
 
     def _constraint_matrix(self) -> None:
         """Rows of the QP (state independent): inputs, terminal box, steady input, attitude.
@@ -622,7 +691,10 @@ class TrackingMPC:
         kcol[:, ly.alpha] = self.k_max
         A_s1 = (G + kcol) / self.Du[:, None]
         A_s2 = (G - kcol) / self.Du[:, None]
-        self.A_c = np.vstack([A_u, A_t1, A_t2, A_s1, A_s2, self.Att_y])
+        rows = [A_u, A_t1, A_t2, A_s1, A_s2, self.Att_y]
+        if self.s.has_rate_rows:  # the re-plan's jump (first move's input rows), then the moves'
+            rows += [A_u[:m], self.Rate_y]
+        self.A_c = np.vstack(rows)
         # simple bounds on y: set point trust region and map bounds (delta), alpha in [0, 1]
         s = self.s
         lo_b = np.full(nb, -1e30)
@@ -644,7 +716,10 @@ class TrackingMPC:
         self._lo_b, self._hi_b = lo_b, hi_b
 
     # -- solve -----------------------------------------------------------------------
-    def solve(self, z0: np.ndarray, u_base: np.ndarray, cmd: np.ndarray, x_off=None, recover=False):
+    def solve(
+        self, z0: np.ndarray, u_base: np.ndarray, cmd: np.ndarray, x_off=None, recover=False,
+        u_prev=None,
+    ):
         """QP at nominal deviation z0 (n,) from the scheduling trim.
 
         Parameters
@@ -666,6 +741,10 @@ class TrackingMPC:
             re-plan). The trust region only keeps the trim map's linearisation local;
             no certificate needs it, while every row the certificate needs (inputs,
             attitude, terminal set, steady input) stays.
+        u_prev : (2,) ndarray, optional
+            Nominal input applied at the previous fast step (absolute). With rate rows
+            (``mpc.du_max``) the first move's input may differ from it by at most du_max;
+            None: no such row (the first plan of a run).
 
         Returns
         -------
@@ -702,6 +781,16 @@ class TrackingMPC:
             [lo_b, lo_u, self._no_lo_t, self._no_lo_u, (self.u_lo - u_base) / self.Du,
              (att_lo - att).reshape(-1)]
         )  # fmt: skip
+        if s.has_rate_rows:
+            du = s.du_max / self.Du
+            if u_prev is None:
+                lo0, hi0 = self._no_lo_u, self._no_hi_u
+            else:
+                c0 = (u_off[0] - np.asarray(u_prev, float)) / self.Du
+                lo0, hi0 = -du - c0, du - c0
+            rz = self.Rate_z @ z0
+            bu = np.concatenate([bu, hi0, self._rate_scaled - rz])
+            bl = np.concatenate([bl, lo0, -self._rate_scaled - rz])
         if self._qp is None:  # a new workspace per scheduling: H and A_c fixed until then
             self._qp = _daqp().Model()
             self._qp.settings = {"iter_limit": 2000}
@@ -823,6 +912,7 @@ class TrackingMPCNominal(NominalSource):
         self.TH = np.stack([self.command.h0, self.command.V0], axis=1)
         self.TRX, self.TRU = np.empty((B, n)), np.empty((B, 2))
         self.PLAN = np.zeros((B, st.N_p, 2))
+        self.U_NOM = np.zeros((B, 2))  # nominal input of the last fast step (rate rows)
         self.moves_left = np.zeros(B, dtype=int)
         self.prev = np.zeros((B, pe))
         self.has_prev = False
@@ -888,10 +978,11 @@ class TrackingMPCNominal(NominalSource):
         else:
             x_d, u_d = np.zeros(self.n), np.zeros(2)
         args = (self.XN[b] - mpc.x_r_s - x_d, mpc.u_r_s + u_d, cmd, x_d)
-        y, why = mpc.solve(*args)
+        u_prev = self.U_NOM[b] if self.k > 0 else None  # the rate rows' start (mpc.du_max)
+        y, why = mpc.solve(*args, u_prev=u_prev)
         recovered = False
         if y is None:  # recovery: the set point free on the trim map (no trust region)
-            y, why_rec = mpc.solve(*args, recover=True)
+            y, why_rec = mpc.solve(*args, recover=True, u_prev=u_prev)
             recovered = y is not None
             why = why if y is not None else f"{why}; recovery: {why_rec}"
         if y is not None:
@@ -972,6 +1063,7 @@ class TrackingMPCNominal(NominalSource):
         zx = np.ascontiguousarray(z - x_s)
         u_dev = (u_s + mv(self.K, zx)) + self.PLAN[:, 0] * self.Du
         u_nom = (self.URS + u_d) + u_dev
+        self.U_NOM = u_nom
         x_r, u_r = self.TRX.copy(), self.TRU + u_d
         w = mv(self.L_inv, zx)  # L^-1 (z - x_s): the level in E(Q) is w'w
         solves, fallback, terminal, recovered = self._counts

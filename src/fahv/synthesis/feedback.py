@@ -72,12 +72,24 @@ class TubeDesign:
         return float(e @ np.linalg.solve(self.N, e)) <= scale**2 * (1.0 + 1e-9)
 
 
-def _rpi_matrix(Acl, lam, mu, N):
-    n = N.shape[0]
-    top = np.hstack([lam * N, np.zeros((n, n)), (Acl @ N).T])
-    mid = np.hstack([np.zeros((n, n)), np.diag(mu), np.eye(n)])
-    bot = np.hstack([Acl @ N, np.eye(n), N])
-    return np.vstack([top, mid, bot])
+def _rpi_blocks(AN, lam, mu, N) -> np.ndarray:
+    """Vertex blocks (R, 3n, 3n) of the RPI LMI (24) at a solution (scaled units).
+
+    [[lam N, 0, (A_cl,i N)'], [0, diag(mu), I], [A_cl,i N, I, N]] for each stacked
+    AN[i] = A_cl,i N = A_i N + B_i M (M = F N). The certificate holds at vertex i iff the
+    block is positive semidefinite (S-procedure form of (A_cl e + w)' N^-1 (A_cl e + w)
+    <= lam e' N^-1 e + sum_j mu_j w_j^2, with sum_j mu_j w_j^2 <= 1 - lam).
+    """
+    R, n, _ = AN.shape
+    blk = np.zeros((R, 3 * n, 3 * n))
+    blk[:, :n, :n] = lam * N
+    blk[:, n : 2 * n, n : 2 * n] = np.diag(mu)
+    blk[:, n : 2 * n, 2 * n :] = np.eye(n)
+    blk[:, 2 * n :, n : 2 * n] = np.eye(n)
+    blk[:, 2 * n :, :n] = AN
+    blk[:, :n, 2 * n :] = AN.transpose(0, 2, 1)
+    blk[:, 2 * n :, 2 * n :] = N
+    return blk
 
 
 def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
@@ -116,35 +128,15 @@ def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
     if np.any(tube.mu < -1e-12):
         raise DesignError("certificate failed: negative S-procedure multiplier")
     require_psd(Ns, "tube shape matrix N")
-    eigs = []
-    for i in range(As.shape[0]):
-        Acl = As[i] + Bs[i] @ Fs
-        eigs.append(
-            require_psd(
-                _rpi_matrix(Acl, tube.lam, tube.mu, Ns), f"RPI LMI at vertex {i}", rtol=1e-12
-            )
-        )
-    return np.array(eigs)
+    blocks = _rpi_blocks((As + Bs @ Fs) @ Ns, tube.lam, tube.mu, Ns)
+    return np.array(
+        [require_psd(blk, f"RPI LMI at vertex {i}", rtol=1e-12) for i, blk in enumerate(blocks)]
+    )
 
 
 #: Strict margin of the RPI LMI blocks (scaled units), so that the solver's tolerance
 #: cannot break the re-check.
 LMI_MARGIN = 1e-5
-
-
-def _rpi_blocks_min_eig(As, Bs, N, M, mu, lam) -> np.ndarray:
-    """Smallest eigenvalue (R,) of every vertex block of the RPI LMI at a solution."""
-    R, n, _ = As.shape
-    AN = As @ N + Bs @ M
-    blk = np.zeros((R, 3 * n, 3 * n))
-    blk[:, :n, :n] = lam * N
-    blk[:, n : 2 * n, n : 2 * n] = np.diag(mu)
-    blk[:, n : 2 * n, 2 * n :] = np.eye(n)
-    blk[:, 2 * n :, n : 2 * n] = np.eye(n)
-    blk[:, 2 * n :, :n] = AN
-    blk[:, :n, 2 * n :] = AN.transpose(0, 2, 1)
-    blk[:, 2 * n :, 2 * n :] = N
-    return np.linalg.eigvalsh(blk)[:, 0]
 
 
 def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active):
@@ -153,9 +145,10 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active):
     With ``active`` (an int) the vertex blocks are generated: the LMI is solved with
     the ``active`` vertices of largest open-loop norm, every block is then evaluated at
     the solution, and the worst violated blocks (at most ``active`` per round) are
-    added until every block holds with half the strict margin (constraint generation;
-    the result satisfies all R blocks, which :func:`verify_tube` re-checks). The
-    optimum is the one of the full LMI: a vertex left out is satisfied at it.
+    added until every block holds with half the strict margin (constraint generation).
+    The blocks solved hold with the full margin ``LMI_MARGIN``, the ones left out with
+    at least half of it, so the result is the full LMI's optimum up to that margin (not
+    exactly); :func:`verify_tube` re-checks every one of the R blocks either way.
     """
     R, n, m = Bs.shape
     if active is None or active >= R:
@@ -200,7 +193,8 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active):
         if len(chosen) == R:
             return prob.value, lam, N.value, M.value, mu.value, R
         Nv = 0.5 * (N.value + N.value.T)
-        eig = _rpi_blocks_min_eig(As, Bs, Nv, M.value, np.maximum(mu.value, 0.0), lam)
+        blocks = _rpi_blocks(As @ Nv + Bs @ M.value, lam, np.maximum(mu.value, 0.0), Nv)
+        eig = np.linalg.eigvalsh(blocks)[:, 0]
         bad = np.flatnonzero(eig < 0.5 * LMI_MARGIN)
         bad = np.setdiff1d(bad, chosen)
         if bad.size == 0:
