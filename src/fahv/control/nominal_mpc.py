@@ -717,7 +717,12 @@ class TrackingMPC:
 
     # -- solve -----------------------------------------------------------------------
     def solve(
-        self, z0: np.ndarray, u_base: np.ndarray, cmd: np.ndarray, x_off=None, recover=False,
+        self,
+        z0: np.ndarray,
+        u_base: np.ndarray,
+        cmd: np.ndarray,
+        x_off=None,
+        recover=False,
         u_prev=None,
     ):
         """QP at nominal deviation z0 (n,) from the scheduling trim.
