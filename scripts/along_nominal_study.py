@@ -11,19 +11,31 @@ re-solved (constraint generation over the vertices) until the bound lies inside 
 Usage (after `fahv design offline_design/case1.yaml`):
     .venv/bin/python scripts/along_nominal_study.py [--k K] [--scale S] [--w0 F]
         [--grow G] [--iterations I] [--lam L] [--save FILE]
+        [--integral X] [--eps E1,...,E9]
 --scale S multiplies the nominal ranges (attitude +/-0.4 deg, Phi -0.12..+1.1,
 delta_e -1..+7 deg from the trim, q +/-0.7 deg/s, flexible states); --w0 F starts at
 F times the design's W. About 5 minutes for the vertex data, 2 minutes per iteration.
+--integral X: the integral form (no second-order part): the nominal keeps the ranges
+above (h, V: the envelope shrunk by the tube), the scheduling box is them grown by X
+times the supports of Z and F Z of the closed pair in tests/data (the iteration stops
+if its own Z outgrows that). --eps: a part of W that does not shrink with Z (the
+disturbance estimate's error), per row in units of that pair's W, added to the bound.
 """
 
 import argparse
+import dataclasses
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from fahv.design.along_nominal import SchedulingBox, bound_along_nominal, nominal_vertices
+from fahv.design.along_nominal import (
+    SchedulingBox,
+    bound_along_nominal,
+    nominal_vertices,
+    segment_supports,
+)
 from fahv.design.artefacts import load_design
 from fahv.design.feasibility import input_room
 from fahv.errors import DesignError
@@ -46,6 +58,11 @@ def case1_box(envelope, scale: float = 1.0) -> SchedulingBox:
     return SchedulingBox(lo, hi, np.array([0.7 * DEG, 0.5, 3.5, 0.3, 3.5]) * scale)
 
 
+def grown(box: SchedulingBox, s6, s5, x: float) -> SchedulingBox:
+    """``box`` grown by x times the supports s6 (6,) and s5 (5,) on every side."""
+    return SchedulingBox(box.lo - x * s6, box.hi + x * s6, box.other_half + x * s5)
+
+
 def main():
     """Run the closure of the module docstring with the command-line options."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -56,6 +73,8 @@ def main():
     ap.add_argument("--iterations", type=int, default=6)
     ap.add_argument("--lam", type=float, default=0.995)
     ap.add_argument("--save", default="")
+    ap.add_argument("--integral", type=float, default=0.0)
+    ap.add_argument("--eps", default="")
     o = ap.parse_args()
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     d = load_design(ROOT / "offline_design" / "artefacts" / "case1")
@@ -64,7 +83,19 @@ def main():
     tp = build_tp_model(veh, "cm", *c["vertices"], *c["samples"])
     tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
     rho = float(c["tube"]["rho_min"])
-    box = case1_box(veh.envelope, o.scale)
+    box = nominal = case1_box(veh.envelope, o.scale)
+    stored = np.load(ROOT / "tests" / "data" / "closed_tube_along_nominal.npz")
+    eps = np.zeros(9)
+    if o.eps:
+        eps = np.array([float(v) for v in o.eps.split(",")]) * stored["W"]
+    if o.integral > 0.0:
+        s6, s5 = segment_supports(stored["F"], stored["N"])
+        # the nominal's h, V: the envelope shrunk by the tube; the box: the envelope
+        nominal = grown(box, np.r_[-s6[:2], np.zeros(4)] * o.integral, np.zeros(5), 1.0)
+        box = grown(nominal, s6, s5, o.integral)
+        print("integral form: box = nominal ranges grown by "
+              f"{o.integral:g} x the stored pair's supports; eps / stored W "
+              + " ".join(f"{v:.2f}" for v in eps / stored["W"]), flush=True)  # fmt: skip
     scale = np.concatenate([tp.state_scale, tp.input_scale])
     t_design = np.sqrt(np.einsum("ij,jk,ik->i", a["F"], a["N"], a["F"]))
     cols = np.concatenate([np.sqrt(np.diag(a["N"])), t_design])
@@ -84,7 +115,13 @@ def main():
         except DesignError as exc:
             print(f"iteration {it}: tube LMI infeasible ({exc})")
             return
-        b = bound_along_nominal(nv, tube.F, tube.N)
+        try:
+            b = bound_along_nominal(nv, tube.F, tube.N, nominal if o.integral > 0 else None)
+        except DesignError as exc:
+            print(f"iteration {it}: {exc}")
+            return
+        if o.eps:
+            b = dataclasses.replace(b, total=b.total + eps)
         print(
             f"iteration {it} ({time.time() - t1:.0f} s, {tube.n_blocks} of {A.shape[0]} blocks "
             f"active): tightening {tube.tightening[0]:.5f} / {np.degrees(tube.tightening[1]):.4f}"
@@ -95,12 +132,16 @@ def main():
                     ("parameters", b.parameters),
                     ("interpolation", b.interpolation),
                     ("second order", b.second_order),
+                    ("estimate", eps),
                     ("bound", b.total),
                 )
             ),  # fmt: skip
             end="",
             flush=True,
         )
+        if b.margin is not None:
+            print(f"  box margin over nominal + Z: {b.margin.min():+.2f} x the supports "
+                  "(smallest coordinate)", flush=True)  # fmt: skip
         if np.all(b.total <= W):
             print(
                 "closed: slack per row " + " ".join(f"{s:+.3f}" for s in (W - b.total) / W)
@@ -111,6 +152,8 @@ def main():
             if o.save:
                 np.savez(o.save, W=W, F=tube.F, N=tube.N, lam=tube.lam, w_design=a["w_max"],
                          lo=box.lo, hi=box.hi, other_half=box.other_half, k=o.k, rho_min=rho,
+                         nominal_lo=nominal.lo, nominal_hi=nominal.hi, eps=eps,
+                         nominal_other_half=nominal.other_half,
                          col_scale=cols, bound=b.total, parameters=b.parameters,
                          interpolation=b.interpolation, second_order=b.second_order)  # fmt: skip
                 print(f"closed pair written to {o.save}")

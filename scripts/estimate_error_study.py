@@ -16,7 +16,9 @@ Usage (after `fahv design offline_design/case1.yaml`):
 after the step, h / V error at the end, max attitude error, QP counters, and max |eps|
 per row as a multiple of the closed pair's W over the estimate's start-up (t < 5 est_tau:
 it starts at d = 0 while the dispersed vehicle's residual is there from t = 0), the
-manoeuvre (from then to the fault onset) and from the onset on.
+manoeuvre (from then to the fault onset) and from the onset on, where it also prints
+the largest level eps' N^-1 eps of one step's eps in the closed pair's Z and in the
+design's Z (--rho sets the loss).
 """
 
 import argparse
@@ -65,9 +67,12 @@ def main():
     ap.add_argument("--rates", default="0:0,0.05:0.5,0.02:0.2,0.01:0.1")
     ap.add_argument("--est-tau", default="0.5")
     ap.add_argument("--duration", type=float, default=300.0)
+    ap.add_argument("--rho", type=float, default=0.0, help="fault rho_f (0: the case's)")
     o = ap.parse_args()
     design = load_design(o.design)
-    W = np.load(ROOT / "tests" / "data" / "closed_tube_along_nominal.npz")["W"]
+    pair = np.load(ROOT / "tests" / "data" / "closed_tube_along_nominal.npz")
+    W, N_inv = pair["W"], np.linalg.inv(pair["N"])
+    Nd_inv = np.linalg.inv(design.arrays["N"])
     Ts, n_sub = design.case["Ts"], design.case["plant_substeps"]
     limits = load_vehicle().limits
     print("rows:", ", ".join(ROWS))
@@ -76,11 +81,14 @@ def main():
             du = [float(v) for v in pair.split(":")]
             ov = {"nominal_trajectory": {"mpc.nominal_model": "cm", "mpc.du_max": du,
                                          "mpc.est_tau": tau}}  # fmt: skip
+            if o.rho > 0.0:
+                ov["fault_injector"] = {"rho_f": o.rho}
             t0 = time.perf_counter()
             run = simulate(design, "tube_mpc", o.duration, overrides=ov)
             wall = time.perf_counter() - t0
             m = metrics(run, limits)
-            eps = np.abs(estimate_error(run, Ts, n_sub, tau)) / W
+            eps_abs = estimate_error(run, Ts, n_sub, tau)
+            eps = np.abs(eps_abs) / W
             onset = m["t_fault_s"] if np.isfinite(m["t_fault_s"]) else run.t[-1] + 1.0
             start = run.t < 5.0 * tau  # the estimate starts at d = 0: a start-up transient
             climb, fault = ~start & (run.t < onset), run.t >= onset
@@ -96,6 +104,11 @@ def main():
             print("  |eps| / W, manoeuvre: " + " ".join(f"{v:.2f}" for v in eps[climb].max(axis=0)))
             if fault.any():
                 print("  |eps| / W, fault: " + " ".join(f"{v:.1f}" for v in eps[fault].max(axis=0)))
+                lv = np.einsum("ki,ij,kj->k", eps_abs[fault], N_inv, eps_abs[fault])
+                lv_d = np.einsum("ki,ij,kj->k", eps_abs[fault], Nd_inv, eps_abs[fault])
+                print(f"  one step of eps from the onset on, level eps' N^-1 eps: {lv.max():.1f} "
+                      f"in the closed pair's Z, {lv_d.max():.4f} in the design's Z; e reached "
+                      f"{np.nanmax(run.tube_level[fault]):.4f} of the design's Z")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -16,12 +16,17 @@ DATA = Path(__file__).resolve().parents[1] / "data"
 TS, N_SUB = 0.02, 5
 
 
-@pytest.fixture(scope="module")
-def along(design):
-    """The stored closed pair, its scheduling box and its vertex data rebuilt here."""
+#: The stored closed pairs: form (1), the Jacobian at the nominal point and a second-order
+#: part in W; form (2), the integral form (no second-order part, the segment in the box).
+PAIRS = ("closed_tube_along_nominal.npz", "closed_tube_integral.npz")
+
+
+@pytest.fixture(scope="module", params=PAIRS)
+def along(design, request):
+    """A stored closed pair, its scheduling box and its vertex data rebuilt here."""
     from fahv.model.tp_model import build_tp_model
 
-    d = np.load(DATA / "closed_tube_along_nominal.npz")
+    d = dict(np.load(DATA / request.param))
     a = design.arrays
     veh = load_vehicle()
     tp = build_tp_model(veh, "cm", 4, 5, 21, 21)
@@ -69,17 +74,39 @@ def _interp_weights(box, s):
     return w
 
 
+def _coordinates(tm, X, U):
+    """Scheduling-box coordinates (L, 6) of states X (L, 9) and applied inputs U (L, 2),
+    and the deviations (L, 5) of q and the flexible states from the trim."""
+    x_r, u_r = tm.at(X[:, 0], X[:, 1])
+    x_r, u_r = np.asarray(x_r, float), np.asarray(u_r, float)
+    s = np.column_stack([X[:, :2], X[:, 2:4] - x_r[:, 2:4], U - u_r])
+    return s, X[:, 4:9] - x_r[:, 4:9]
+
+
+#: Gauss-Legendre nodes and weights on [0, 1] of the integral form's mean Jacobian.
+GAUSS = ((0.5 - 0.5 / np.sqrt(3.0), 0.5), (0.5 + 0.5 / np.sqrt(3.0), 0.5))
+
+
 def test_along_nominal_disturbance_lies_inside_W(along):
-    """100 000 true one-step errors along the nominal lie inside W: at nominal points of
-    the scheduling box (its corners first, then inside, with q and the flexible states of
-    the nominal within their half-widths), for every corner of the sec. 5.1 box at both
-    rho_f ends and then random corners and interior vehicles, e on the boundary of Z and
-    inside, w = f_p(z + e, v + P F e) - f_p(z, v) - J_theta [e; P F e] with J_theta in the
-    vertices' hull: the multilinear weights of the point and the carried coefficient of
-    the vehicle's own deviation J_p - J_0 at the point (which must lie in the vertices'
-    range)."""
+    """100 000 true one-step errors along the nominal lie inside W: at nominal points (the
+    box's corners first, then inside, with q and the flexible states of the nominal within
+    their half-widths), for every corner of the sec. 5.1 box at both rho_f ends and then
+    random corners and interior vehicles, e on the boundary of Z and inside,
+    w = f_p(z + e, v + P F e) - f_p(z, v) - J_theta [e; P F e] with J_theta in the
+    vertices' hull: the multilinear weights of a point and the carried coefficient of the
+    vehicle's own deviation J_p - J_0 there (which must lie in the vertices' range). Form
+    (1): nominal points anywhere in the scheduling box, J_theta at the point. Form (2),
+    the integral form: nominal points in the nominal's own ranges, J_theta the mean of its
+    values at the two Gauss nodes of the segment (z + s e, v + s P F e), whose points must
+    lie in the scheduling box."""
     d, veh, tm, box, scale, nv = along
     W, F, N, rho_min = d["W"], d["F"], d["N"], float(d["rho_min"])
+    integral = "nominal_lo" in d
+    nominal = box
+    nodes = ((0.0, 1.0),)
+    if integral:
+        nominal = SchedulingBox(d["nominal_lo"], d["nominal_hi"], d["nominal_other_half"])
+        nodes = GAUSS
     rs, cs = d["w_design"], d["col_scale"]
     unscale = rs[:, None] / cs[None, :]
     G = nv.dirs / unscale[None]  # scaled, orthonormal
@@ -90,42 +117,53 @@ def test_along_nominal_disturbance_lies_inside_W(along):
     rng = np.random.default_rng(11)
     worst, n_done, tol = np.zeros(9), 0, 1e-6 * (nv.c_hi - nv.c_lo)
     excess = np.full(nv.c_lo.size, -np.inf)
-    S_corners = box.corners()
+    S_corners = nominal.corners()
     for chunk in range(10):
         n = 10_000
         if chunk == 0:  # every vehicle corner at both rho_f ends, at box corners (cycled)
             frac = np.vstack([corners, corners, rng.uniform(-1, 1, (n - 2048, len(names)))])
             rho = np.r_[np.full(1024, rho_min), np.ones(1024), rng.choice([rho_min, 1.0], n - 2048)]
-            s = np.vstack([S_corners[np.arange(2048) % 64],
-                           box.lo + rng.random((n - 2048, 6)) * (box.hi - box.lo)])  # fmt: skip
+            inside = nominal.lo + rng.random((n - 2048, 6)) * (nominal.hi - nominal.lo)
+            s = np.vstack([S_corners[np.arange(2048) % 64], inside])
         else:
             at_corner = rng.random(n) < 0.5
             frac = np.where(at_corner[:, None], rng.choice([-1.0, 1.0], (n, len(names))),
                             rng.uniform(-1, 1, (n, len(names))))  # fmt: skip
             rho = rng.choice([rho_min, 1.0], n)
-            s = box.lo + rng.random((n, 6)) * (box.hi - box.lo)
+            s = nominal.lo + rng.random((n, 6)) * (nominal.hi - nominal.lo)
             edge = rng.random(n) < 0.25
             s[edge] = S_corners[rng.integers(0, 64, edge.sum())]
         recs = params_records(
             [perturb(veh.params, dict(PAPER_UNCERTAINTY), dict(zip(names, f, strict=True)))
              for f in frac]
         )  # fmt: skip
-        X, U = box.points(tm, s)
-        X[:, 4:9] += rng.uniform(-1, 1, (n, 5)) * box.other_half
+        X, U = nominal.points(tm, s)
+        X[:, 4:9] += rng.uniform(-1, 1, (n, 5)) * nominal.other_half
         u = rng.normal(size=(n, 9))
         u /= np.linalg.norm(u, axis=1, keepdims=True)
         u[n // 2 :] *= rng.random((n - n // 2, 1)) ** (1 / 9)  # inside Z
         e = u @ L_N.T
         du = (e @ F.T) * np.stack([np.ones(n), rho], axis=1)  # P F e
-        Jp = jacobians(X, U, recs, TS, N_SUB, scale)
-        J0 = jacobians(X, U, np.repeat(r0, n), TS, N_SUB, scale)
-        J_int = np.einsum("lc,cij->lij", _interp_weights(box, s), nv.J0)
-        coef = np.einsum("lij,kij->lk", (Jp - J0) / rs[None, :, None] * cs, G)
-        excess = np.maximum(excess, np.max(np.maximum(nv.c_lo - coef, coef - nv.c_hi), axis=0))
-        assert np.all(coef >= nv.c_lo - tol) and np.all(coef <= nv.c_hi + tol), (
-            "a vehicle's carried coefficient leaves the vertices' range"
-        )
-        J_th = J_int + np.einsum("lk,kij->lij", coef, nv.dirs)
+        J_th = np.zeros((n, 9, 11))
+        for sigma, weight in nodes:  # J_theta at each node of the segment
+            Xs, Us = X + sigma * e, U + sigma * du
+            ss, other = _coordinates(tm, Xs, Us)
+            tol_s = 1e-9 * (box.hi - box.lo)
+            assert np.all(ss >= box.lo - tol_s) and np.all(ss <= box.hi + tol_s), (
+                "the segment leaves the scheduling box"
+            )
+            assert np.all(np.abs(other) <= box.other_half * (1 + 1e-9)), (
+                "the segment's q or flexible states leave the box's half-widths"
+            )
+            Jp = jacobians(Xs, Us, recs, TS, N_SUB, scale)
+            J0 = jacobians(Xs, Us, np.repeat(r0, n), TS, N_SUB, scale)
+            J_int = np.einsum("lc,cij->lij", _interp_weights(box, ss), nv.J0)
+            coef = np.einsum("lij,kij->lk", (Jp - J0) / rs[None, :, None] * cs, G)
+            excess = np.maximum(excess, np.max(np.maximum(nv.c_lo - coef, coef - nv.c_hi), 0))
+            assert np.all(coef >= nv.c_lo - tol) and np.all(coef <= nv.c_hi + tol), (
+                "a vehicle's carried coefficient leaves the vertices' range"
+            )
+            J_th += weight * (J_int + np.einsum("lk,kij->lij", coef, nv.dirs))
         f1 = rk4_cm(np.ascontiguousarray(X + e), np.ascontiguousarray(U + du), recs, TS, N_SUB)
         f0 = rk4_cm(np.ascontiguousarray(X), np.ascontiguousarray(U), recs, TS, N_SUB)
         w = f1 - f0 - np.einsum("lij,lj->li", J_th, np.concatenate([e, du], axis=1))

@@ -36,6 +36,20 @@ This module covers J_p by a vertex set and bounds the rest by W:
   Hessian at every corner point and vehicle, times REMAINDER_FACTOR for the variation
   between corners and the third-order rest).
 
+**The integral form** (``bound_along_nominal(..., nominal=...)``). By the mean-value
+theorem in integral form, (1) holds exactly with the Jacobian averaged along the segment,
+
+    e+ = [int_0^1 J_p(z + s e, P (v + s F e)) ds] [e; P F e],                (2)
+
+no second-order term. If the segment lies in the scheduling box, that average lies in
+the convex hull of J_p over the box, hence of the vertices up to the same remainders
+(interpolation, parameter residual). The segment lies in the box when the box holds the
+nominal's own ranges grown by the supports of Z and F Z: then W has only parts of first
+order in the size of Z, so a pair that closes at one size closes at any size whose Z
+still fits the box's margin, and W can hold what does not shrink with Z (the estimate's
+error). :func:`bound_along_nominal` checks the containment and refuses a box that does
+not hold it.
+
 What it assumes (stated by :class:`AlongNominalBound`): the estimate has converged to the
 constant part at the nominal point (the onset of a fault and the estimate's lag are not
 in W), the nominal stays in the scheduling box (the QP's attitude rows bound alpha and
@@ -88,6 +102,18 @@ class SchedulingBox:
             raise ValueError("scheduling box: lo, hi must have shape (6,), other_half (5,)")
         if not np.all(np.isfinite(lo)) or not np.all(np.isfinite(hi)) or np.any(lo > hi):
             raise ValueError(f"scheduling box: need finite lo <= hi, got {lo} and {hi}")
+
+    def margin_to(self, inner: SchedulingBox) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """How far this box reaches beyond ``inner``, in the coordinates' units.
+
+        Returns the lo side (6,), the hi side (6,) and other_half - inner.other_half (5,);
+        negative where ``inner`` is not inside.
+        """
+        return (
+            np.asarray(inner.lo, float) - np.asarray(self.lo, float),
+            np.asarray(self.hi, float) - np.asarray(inner.hi, float),
+            np.asarray(self.other_half, float) - np.asarray(inner.other_half, float),
+        )
 
     def corners(self) -> np.ndarray:
         """The 64 corners (64, 6), in :func:`itertools.product` order (lo first)."""
@@ -305,8 +331,14 @@ class AlongNominalBound:
     Attributes
     ----------
     parameters, interpolation, second_order, total : (9,) ndarray
-        The three parts and their sum, state units.
+        The three parts and their sum, state units (``second_order`` zero in the
+        integral form).
     assumptions : tuple of str
+    margin : (17,) ndarray or None
+        Integral form: the scheduling box's reach beyond the nominal's ranges grown by
+        the supports of Z and F Z, as a fraction of those supports (lo side of h, V,
+        alpha, theta, Phi, delta_e; hi side; q and the flexible states); >= 0 where it
+        holds them. None: the second-order form.
     """
 
     parameters: np.ndarray
@@ -314,6 +346,7 @@ class AlongNominalBound:
     second_order: np.ndarray
     total: np.ndarray
     assumptions: tuple
+    margin: np.ndarray | None = None
 
     def ratio(self, W) -> np.ndarray:
         """The bound relative to W: total / W per row (9,)."""
@@ -328,9 +361,68 @@ ASSUMPTIONS = (
     "vehicles inside the parameter box: corners and the sampled interior vehicles",
 )
 
+INTEGRAL_ASSUMPTIONS = (
+    ASSUMPTIONS[0],
+    "the nominal state and applied input stay in the nominal box given (the scheduling box "
+    "holds it grown by the supports of Z and F Z: checked); q and the flexible states of "
+    "the nominal within its half-widths",
+    ASSUMPTIONS[2],
+)
 
-def bound_along_nominal(nv: NominalVertices, F, N) -> AlongNominalBound:
+
+def segment_supports(F, N) -> tuple[np.ndarray, np.ndarray]:
+    """How far e in Z reaches in the box's coordinates.
+
+    Returns (6,) for (h, V, alpha, theta, Phi, delta_e): sqrt(N_jj), and the support of
+    F e for the inputs (P F e is smaller for rho_f <= 1); and (5,) for q and the flexible
+    states. F (2, 9), N (9, 9), state and input units.
+    """
+    F, N = np.asarray(F, float), np.asarray(N, float)
+    sZ = np.sqrt(np.diag(N))
+    sF = np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
+    return np.concatenate([sZ[:4], sF]), sZ[4:9]
+
+
+def check_segment_box(box: SchedulingBox, nominal: SchedulingBox, F, N) -> np.ndarray:
+    """Margin (17,) of the scheduling box over nominal + Z, per support (integral form).
+
+    Returns the box's reach beyond the nominal's ranges minus the supports of Z and F Z,
+    divided by those supports (:class:`AlongNominalBound` ``margin``).
+
+    Raises
+    ------
+    DesignError
+        If the box does not hold nominal + Z in some coordinate: names it, with the
+        reach needed and the reach the box has.
+    """
+    s6, s5 = segment_supports(F, N)
+    lo, hi, oth = box.margin_to(nominal)
+    need = np.concatenate([s6, s6, s5])
+    have = np.concatenate([lo, hi, oth])
+    margin = (have - need) / np.maximum(need, 1e-300)
+    names = ([f"{c} (lo)" for c in BOX_COORDINATES] + [f"{c} (hi)" for c in BOX_COORDINATES]
+             + ["q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot"])  # fmt: skip
+    bad = np.flatnonzero(have < need)
+    if bad.size:
+        i = int(bad[np.argmin(margin[bad])])
+        raise DesignError(
+            f"integral form: the scheduling box does not hold the nominal's range grown by "
+            f"the tube in {names[i]}: needs {need[i]:.4g} beyond it, has {have[i]:.4g} "
+            f"({bad.size} coordinates short)"
+        )
+    return margin
+
+
+def bound_along_nominal(
+    nv: NominalVertices, F, N, nominal: SchedulingBox | None = None
+) -> AlongNominalBound:
     """Bound (9,) of what the vertices leave of e+ over Z, for the tube (F (2, 9), N (9, 9)).
+
+    With ``nominal`` (the ranges the nominal itself keeps, a :class:`SchedulingBox`), the
+    integral form (2) of the module docstring: the scheduling box must hold ``nominal``
+    grown by the supports of Z and F Z (:func:`check_segment_box`, DesignError if not),
+    and there is no second-order part. Without it, form (1): the nominal anywhere in the
+    box, the second-order part below.
 
     Parameters part: max over corners, vehicles and rho_f of the exact support over Z of
     each row of residual [I; P F] (sqrt(r N r')). Interpolation part: interp times the
@@ -340,6 +432,8 @@ def bound_along_nominal(nv: NominalVertices, F, N) -> AlongNominalBound:
     of the quadratic term over the ellipsoid.
     """
     F, N = np.asarray(F, float), np.asarray(N, float)
+    integral = nominal is not None
+    margin = check_segment_box(nv.box, nominal, F, N) if integral else None
     L = np.linalg.cholesky(N)
     sZ = np.sqrt(np.diag(N))
     sF = np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
@@ -350,9 +444,11 @@ def bound_along_nominal(nv: NominalVertices, F, N) -> AlongNominalBound:
         R = nv.residual @ MP
         par = np.maximum(par, np.sqrt(np.einsum("scij,jk,scik->sci", R, N, R)).max(axis=(0, 1)))
         ML = MP @ L
-        for Hs in nv.hessians:  # one corner point at a time (memory)
+        for Hs in () if integral else nv.hessians:  # one corner point at a time (memory)
             Q = 0.5 * np.einsum("ki,cjkl,lm->cjim", ML, Hs.astype(float), ML)
             sec = np.maximum(sec, np.abs(np.linalg.eigvalsh(Q)).max(axis=(0, 2)))
     interp = nv.interp @ np.concatenate([sZ, sF])
+    if integral:
+        return AlongNominalBound(par, interp, sec, par + interp, INTEGRAL_ASSUMPTIONS, margin)
     sec = REMAINDER_FACTOR * sec
     return AlongNominalBound(par, interp, sec, par + interp + sec, ASSUMPTIONS)
