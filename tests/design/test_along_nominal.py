@@ -176,3 +176,30 @@ def test_along_nominal_disturbance_lies_inside_W(along):
     assert n_done == 100_000
     assert np.all(ratio <= 1.0), ratio
     assert np.all(ratio >= 0.05), ratio  # the samples reach into W: the test is not vacuous
+
+
+def test_integral_form_refuses_a_box_that_does_not_hold_nominal_plus_Z():
+    """check_segment_box: the margin per support when the box holds the nominal's ranges
+    grown by the supports of Z and F Z, a DesignError naming the coordinate when not."""
+    from fahv.design.along_nominal import check_segment_box, segment_supports
+    from fahv.errors import DesignError
+
+    N = np.diag([4.0, 0.09, 1e-8, 1e-8, 1e-6, 1e-4, 1e-4, 1e-4, 1e-4])  # supports 2 ft, ...
+    F = np.zeros((2, 9))
+    F[0, 1], F[1, 2] = 0.01, 2.0  # F e supports: 0.003 (Phi), 2e-4 rad (delta_e)
+    s6, s5 = segment_supports(F, N)
+    np.testing.assert_allclose(s6, [2.0, 0.3, 1e-4, 1e-4, 0.003, 2e-4])
+    np.testing.assert_allclose(s5, [1e-3, 0.01, 0.01, 0.01, 0.01])
+    nominal = SchedulingBox(np.full(6, -1.0), np.ones(6), np.ones(5))
+    box = SchedulingBox(nominal.lo - 3 * s6, nominal.hi + 2 * s6, nominal.other_half + 2 * s5)
+    margin = check_segment_box(box, nominal, F, N)
+    np.testing.assert_allclose(margin, np.r_[np.full(6, 2.0), np.ones(6), np.ones(5)])
+    hi = box.hi.copy()
+    hi[3] = nominal.hi[3] + 0.5 * s6[3]  # theta: half the tube's support
+    short = SchedulingBox(box.lo, hi, box.other_half)
+    with pytest.raises(DesignError, match=r"theta \(hi\): needs 0.0001 beyond it, has 5e-05 "
+                       r"\(1 coordinates short\)"):  # fmt: skip
+        check_segment_box(short, nominal, F, N)
+    wide = SchedulingBox(box.lo, box.hi, nominal.other_half)  # q and flexible: no reach
+    with pytest.raises(DesignError, match=r"in q: needs 0.001 beyond it, has 0 \(5 coordinates"):
+        check_segment_box(wide, nominal, F, N)
