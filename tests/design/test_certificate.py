@@ -246,3 +246,20 @@ def test_design_tube_is_rpi_for_its_W_exactly(design):
     level, _ = worst_level(Af, Bf, a["F"], a["N"], a["w_max"])
     print(f"worst one-step level {level:.6f}, margin {1 - level:.2e}")
     assert level <= 1.0
+
+
+def test_worst_level_bounds_the_nearly_hard_case_tightly():
+    """The trust-region maximum when M'c is almost orthogonal to the top eigenvector
+    (the case that a primal fill along that eigenvector once overstated by 4e-3): an
+    upper bound of the brute-force maximum over 2 000 001 points of the circle, within
+    1e-9 of it."""
+    from fahv.design.certificate import _max_on_ball
+
+    M = np.diag([0.9974, 0.9961])
+    c = np.array([[2.5e-11, 0.0139], [0.0, 0.0139], [0.3, 0.2]])
+    t = np.linspace(0.0, 2.0 * np.pi, 2_000_001)
+    U = np.stack([np.cos(t), np.sin(t)], axis=1)
+    brute = np.array([np.max(np.sum((U @ M.T + cl) ** 2, axis=1)) for cl in c])
+    got = _max_on_ball(M, c)
+    assert np.all(got >= brute - 1e-12), (got, brute)
+    np.testing.assert_allclose(got, brute, rtol=0, atol=1e-9)
