@@ -299,7 +299,7 @@ def test_rate_rows_bound_the_jumps_of_the_nominal_input(design):
     u_prev = mpc.u_r_s + np.array([0.01, np.radians(-0.1)])  # the input applied before
     y, why = mpc.solve(z0, mpc.u_r_s, cmd, u_prev=u_prev)
     assert why == "ok"
-    assert mpc.A_c.shape[0] == free.A_c.shape[0] + 2 * mpc.s.N_p
+    assert mpc.A_c.shape[0] == free.A_c.shape[0] + 2 * (mpc.s.N_p - 1)
     u = _inputs_of_plan(mpc, y, z0, mpc.u_r_s)
     tol = 1e-6 * mpc.Du  # the KKT check's primal tolerance (scaled rows)
     assert np.all(np.abs(u[0, 0] - u_prev) <= du + tol)

@@ -647,7 +647,9 @@ class TrackingMPC:
         (zeta is continuous, the move jumps), with zeta_j-1,M-1 = Phi_M-1 zeta_j-1 +
         Gam_M-1 c_j-1 + Psi_M-1 delta in closed form: ``Rate_y`` ((N_p-1) m, ny) and
         ``Rate_z`` ((N_p-1) m, n), per Du. The re-plan's own jump, from the input applied
-        at the previous fast step to u_0, uses the first m input rows (:meth:`solve`).
+        at the previous fast step to u_0, narrows the bounds of the first m input rows
+        (:meth:`solve`; a second copy of those rows would be a degenerate constraint set
+        for the active-set solver).
         Between move starts the input moves with K zeta only (the pre-stabilised model).
         """
         s, n, m, ly, N_p, M = self.s, self.n, self.m, self.layout, self.s.N_p, self.s.M
@@ -692,8 +694,8 @@ class TrackingMPC:
         A_s1 = (G + kcol) / self.Du[:, None]
         A_s2 = (G - kcol) / self.Du[:, None]
         rows = [A_u, A_t1, A_t2, A_s1, A_s2, self.Att_y]
-        if self.s.has_rate_rows:  # the re-plan's jump (first move's input rows), then the moves'
-            rows += [A_u[:m], self.Rate_y]
+        if self.s.has_rate_rows:  # the jumps between moves (the re-plan's: the first input rows)
+            rows.append(self.Rate_y)
         self.A_c = np.vstack(rows)
         # simple bounds on y: set point trust region and map bounds (delta), alpha in [0, 1]
         s = self.s
@@ -771,6 +773,11 @@ class TrackingMPC:
         u_off = (self.U_z @ z0).reshape(N_p, m) + u_base
         lo_u = ((self._u_lo - u_off) / self.Du).reshape(-1)
         hi_u = ((self._u_hi - u_off) / self.Du).reshape(-1)
+        if s.has_rate_rows and u_prev is not None:  # u_0 within du_max of the input before
+            c0 = (u_off[0] - np.asarray(u_prev, float)) / self.Du
+            du = s.du_max / self.Du
+            lo_u[:m] = np.maximum(lo_u[:m], -du - c0)
+            hi_u[:m] = np.minimum(hi_u[:m], du - c0)
         tz = self.Tb_z @ z0
         att = (self.Att_z @ z0).reshape(-1, 2)
         a_max = np.minimum(np.broadcast_to(s.att_max, (2,)), 1e3)
@@ -787,15 +794,9 @@ class TrackingMPC:
              (att_lo - att).reshape(-1)]
         )  # fmt: skip
         if s.has_rate_rows:
-            du = s.du_max / self.Du
-            if u_prev is None:
-                lo0, hi0 = self._no_lo_u, self._no_hi_u
-            else:
-                c0 = (u_off[0] - np.asarray(u_prev, float)) / self.Du
-                lo0, hi0 = -du - c0, du - c0
             rz = self.Rate_z @ z0
-            bu = np.concatenate([bu, hi0, self._rate_scaled - rz])
-            bl = np.concatenate([bl, lo0, -self._rate_scaled - rz])
+            bu = np.concatenate([bu, self._rate_scaled - rz])
+            bl = np.concatenate([bl, -self._rate_scaled - rz])
         if self._qp is None:  # a new workspace per scheduling: H and A_c fixed until then
             self._qp = _daqp().Model()
             self._qp.settings = {"iter_limit": 2000}
