@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fahv.control.nominal_mpc import DisturbanceEstimator
 from fahv.design.artefacts import load_design
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
@@ -51,12 +52,11 @@ def estimate_error(run, Ts: float, n_sub: int, est_tau: float) -> np.ndarray:
     u = np.clip(run.u[:-1], veh.limits.u_min, veh.limits.u_max)
     f0 = rk4_cm(np.ascontiguousarray(run.x[:-1]), np.ascontiguousarray(u), rec, Ts, n_sub)
     r = run.x[1:] - f0
-    gamma = min(1.0, Ts / est_tau)
-    d = np.zeros(9)
+    est = DisturbanceEstimator(1, 9, min(1.0, Ts / est_tau))  # the node's estimate
     eps = np.zeros_like(run.x)
     for k in range(r.shape[0]):
-        eps[k + 1] = r[k] - d  # the step k -> k+1 moves the nominal with d_k
-        d = d + gamma * (r[k] - d)
+        eps[k + 1] = r[k] - est.d[0]  # the step k -> k+1 moves the nominal with d_k
+        est.update_residual(r[k][None])
     return eps
 
 

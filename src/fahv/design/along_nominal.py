@@ -377,10 +377,14 @@ def segment_supports(F, N) -> tuple[np.ndarray, np.ndarray]:
     F e for the inputs (P F e is smaller for rho_f <= 1); and (5,) for q and the flexible
     states. F (2, 9), N (9, 9), state and input units.
     """
-    F, N = np.asarray(F, float), np.asarray(N, float)
-    sZ = np.sqrt(np.diag(N))
-    sF = np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
+    sZ, sF = _supports(F, N)
     return np.concatenate([sZ[:4], sF]), sZ[4:9]
+
+
+def _supports(F, N) -> tuple[np.ndarray, np.ndarray]:
+    """Supports over Z = {e' N^-1 e <= 1} of e (9,), sqrt(N_jj), and of F e (2,)."""
+    F, N = np.asarray(F, float), np.asarray(N, float)
+    return np.sqrt(np.diag(N)), np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
 
 
 def check_segment_box(box: SchedulingBox, nominal: SchedulingBox, F, N) -> np.ndarray:
@@ -435,8 +439,7 @@ def bound_along_nominal(
     integral = nominal is not None
     margin = check_segment_box(nv.box, nominal, F, N) if integral else None
     L = np.linalg.cholesky(N)
-    sZ = np.sqrt(np.diag(N))
-    sF = np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
+    sZ, sF = _supports(F, N)
     par = np.zeros(9)
     sec = np.zeros(9)
     for rho in (nv.rho_min, 1.0):

@@ -642,8 +642,9 @@ def worst_level(A, B, F, N, w_max, tau: float = 1.0):
     """Exact max of (A_cl,i e + w)' (tau^2 N)^-1 (A_cl,i e + w) over e in tau Z, w in W.
 
     The level is convex in (e, w), so over the box W its maximum lies at a corner; over
-    the ellipsoid the trust-region subproblem of :func:`_max_on_ball` is solved
-    exactly. The tube is RPI for W iff the result is at most 1.
+    the ellipsoid the trust-region subproblem of :func:`_max_on_ball` is solved by its
+    dual (an upper bound, exact up to the bisection's rounding). The tube is RPI for W
+    if the result is at most 1.
 
     Parameters
     ----------
