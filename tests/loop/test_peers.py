@@ -45,6 +45,28 @@ def test_missing_peers_are_named_never_started_exited_or_lost():
     assert p.own("plant")["stamp"] == T0 + 5
 
 
+def test_a_peer_that_stopped_for_the_same_missing_node_is_not_named_as_the_cause():
+    """Without fault_injector, the plant's watchdog may fire before the recorder's: the
+    recorder names fault_injector and only lists the plant, without its reason; a peer
+    that failed for its own reason is described."""
+    p = table("recorder")
+    now = T0 + 6
+    for i, n in enumerate(["notch_filter", "nominal_trajectory", "tube_mpc"]):
+        p.update(st(n, 10 + i, state="starting"))
+    assert p.failed_verdict(now) is None
+    why = "plant: graph not ready: missing fault_injector (never started); waiting for x"
+    p.update(st("plant", 13, state="exited", exit_status=3, reason=why))
+    assert p.failed_verdict(now) == (
+        "missing fault_injector (never started); stopped with plant, which exited for it too"
+    )
+    p.update(st("tube_mpc", 12, state="exited", exit_status=2, reason="tube_mpc: bad F"))
+    verdict = p.failed_verdict(now)
+    assert verdict == (
+        "missing fault_injector (never started); "
+        "peer tube_mpc (exited with status 2 at step 0: tube_mpc: bad F)"
+    )
+
+
 def test_a_starting_peer_is_not_missing_and_says_what_it_waits_for():
     p = table("plant")
     p.update(st("tube_mpc", 3, state="starting", waiting=["/hsv/control_command (to x)"]))

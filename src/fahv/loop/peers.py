@@ -208,6 +208,33 @@ class Peers:
             self._failed = (self.version, tuple(out))
         return list(self._failed[1])
 
+    def failed_verdict(self, now: float | None = None) -> str | None:
+        """Why this node must stop because a peer exited with an error (None if none did).
+
+        The root cause comes first: the peers that never started or were lost (a
+        failed peer may have stopped because of them). When every failed peer names
+        one of those in its own reason, they are only listed (``stopped with plant,
+        which exited for it too``); otherwise the first failed peer with a reason of
+        its own is described.
+
+        Returns
+        -------
+        str or None
+            E.g. ``missing fault_injector (never started); stopped with plant, which
+            exited for it too`` or ``peer tube_mpc (exited with status 2 at step 0: ...)``.
+        """
+        failed = self.failed()
+        if not failed:
+            return None
+        gone = [d for d in self.missing(now) if d not in failed and "(exited" not in d]
+        head = f"missing {'; '.join(gone)}; " if gone else ""
+        names = [d.split(" (")[0] for d in gone]
+        own = [d for d in failed if not any(f"{n} (" in d for n in names)]
+        if not own:
+            same = ", ".join(d.split(" (")[0] for d in failed)
+            return f"{head}stopped with {same}, which exited for it too"
+        return f"{head}peer {own[0]}"
+
     def not_ready(self, now: float | None = None) -> list[str]:
         """Peers alive but still starting, with what each waits for."""
         out = []

@@ -167,15 +167,12 @@ class GraphStatus:
     def check_failed_peer(self) -> None:
         """Raise :class:`WatchdogError` if a peer of the graph exited with an error.
 
-        The message names first the peers that never started or were lost (the
-        failed peer may have stopped because of them), then the failed peer with its
-        own reason.
+        The message is :meth:`fahv.loop.peers.Peers.failed_verdict`: the root cause
+        (a peer that never started or was lost) first.
         """
-        failed = self.peers.failed()
-        if failed:  # the root cause first: a peer that never started or was lost
-            gone = [d for d in self.peers.missing() if d not in failed and "(exited" not in d]
-            head = f"missing {'; '.join(gone)}; " if gone else ""
-            raise WatchdogError(f"{self.name}: {head}peer {failed[0]}")
+        verdict = self.peers.failed_verdict()
+        if verdict is not None:
+            raise WatchdogError(f"{self.name}: {verdict}")
 
     # -- readiness ------------------------------------------------------------------------
     def poll_ready(self) -> bool:
