@@ -142,8 +142,8 @@ class MPCSettings:
         attitude requirement minus the support of the tube in alpha, theta), at every
         fast step of the first ``fine_moves`` moves and at the start of every later one.
     fine_moves : int
-        Moves whose attitude is bounded at every fast step (the move the plan applies
-        before the next re-plan, and the one a shifted plan applies).
+        Moves whose attitude and inputs are bounded at every fast step (the move the
+        plan applies before the next re-plan, and the one a shifted plan applies).
     nominal_model : str
         'lpv' or 'cm': what the nominal state moves by (:class:`TrackingMPCNominal`).
     du_max : (2,) ndarray
@@ -373,6 +373,8 @@ class DisturbanceEstimator:
             raise ValueError(f"estimator gain gamma must be in (0, 1], got {gamma}")
         self.gamma = float(gamma)
         self.d = np.zeros((n_runs, p))
+        #: False until the first residual: it initialises d (the filter's start).
+        self.started = False
 
     def update(self, A, B, dx_prev, du_prev, dx) -> np.ndarray:
         """Estimates d (B, p) [state units per step Ts] after one measured step.
@@ -395,8 +397,18 @@ class DisturbanceEstimator:
 
         r is what the nominal model missed in the measured step (for the nonlinear
         nominal, x_k - f_0(x_{k-1}, u_{k-1}) with f_0 one period of the nominal CM).
+        The first residual initialises the filter, d = r: the vehicle was flying
+        before the run's first step, so its constant model error is known from the
+        first measured step; starting from d = 0 instead made every run begin with a
+        start-up transient of the estimate (its error 20-48x the tube's W,
+        docs/control_design.md) during which the nominal input of the first move
+        drifted with it beyond the bounds its QP had enforced.
         """
-        self.d = self.d + self.gamma * (r - self.d)
+        if self.started:
+            self.d = self.d + self.gamma * (r - self.d)
+        else:
+            self.d = np.array(r, float, copy=True)
+            self.started = True
         return self.d
 
 
@@ -602,6 +614,20 @@ class TrackingMPC:
             U_y[jj, r, mv_cols[:, r]] += self.Du[r]
         self.U_y = U_y.reshape(N_p * m, ny)
         self.U_z = (self.K @ Ss).reshape(N_p * m, n)
+        # the same inside the first fine_moves moves: between move starts the input of the
+        # pre-stabilised model moves with K zeta, zeta = Phi_i zeta_j + Gam_i c_j + Psi_i
+        # delta (i = 1..M-1), and the tube's tightening holds only if it stays in the
+        # tightened set at every fast step, not at the move starts alone
+        KPh = self.K @ Phi_w[: M - 1]  # (M-1, m, n)
+        uf_y, uf_z = [], []
+        for j in range(min(s.fine_moves, N_p)):
+            Ci = KPh @ C[j]  # (M-1, m, ny)
+            Ci[:, :, mv_cols[j]] += self.K @ Gam_w[: M - 1] + np.diag(self.Du)[None]
+            Ci[:, :, ly.delta] += self.K @ Psi_w[: M - 1] + Gu[None]
+            uf_y.append(Ci.reshape(-1, ny))
+            uf_z.append((KPh @ S[j]).reshape(-1, n))
+        self.Uf_y = np.concatenate(uf_y) if uf_y else np.zeros((0, ny))
+        self.Uf_z = np.concatenate(uf_z) if uf_z else np.zeros((0, n))
         # attitude rows: alpha (2) and theta (3) of zeta at every fast step inside the
         # first fine_moves moves (closed form: zeta = Phi_i zeta_j + Gam_i c_j + Psi_i delta)
         # and at the move starts j = 1..N_p
@@ -677,7 +703,9 @@ class TrackingMPC:
 
         Input limits (N_p m), terminal box |L^-1 zeta_N| <= alpha / sqrt(n) (two one-sided
         sets of n rows), steady input u_base + Gu delta +/- alpha k_max within the
-        tightened limits (2 m), attitude rows (2 N_p).
+        tightened limits (2 m), attitude rows, the rate rows (``du_max``), and the input
+        limits at every fast step inside the first ``fine_moves`` moves
+        (fine_moves (M - 1) m rows).
         """
         ly, n, m, N_p = self.layout, self.n, self.m, self.s.N_p
         nb = ly.ny
@@ -696,6 +724,8 @@ class TrackingMPC:
         rows = [A_u, A_t1, A_t2, A_s1, A_s2, self.Att_y]
         if self.s.has_rate_rows:  # the jumps between moves (the re-plan's: the first input rows)
             rows.append(self.Rate_y)
+        # inputs at the fast steps inside the first fine_moves moves
+        rows.append(self.Uf_y / np.tile(self.Du, self.Uf_y.shape[0] // m)[:, None])
         self.A_c = np.vstack(rows)
         # simple bounds on y: set point trust region and map bounds (delta), alpha in [0, 1]
         s = self.s
@@ -797,6 +827,9 @@ class TrackingMPC:
             rz = self.Rate_z @ z0
             bu = np.concatenate([bu, self._rate_scaled - rz])
             bl = np.concatenate([bl, -self._rate_scaled - rz])
+        uf_off = (self.Uf_z @ z0).reshape(-1, m) + u_base
+        bu = np.concatenate([bu, ((self._u_hi - uf_off) / self.Du).reshape(-1)])
+        bl = np.concatenate([bl, ((self._u_lo - uf_off) / self.Du).reshape(-1)])
         if self._qp is None:  # a new workspace per scheduling: H and A_c fixed until then
             self._qp = _daqp().Model()
             self._qp.settings = {"iter_limit": 2000}
@@ -838,10 +871,16 @@ class TrackingMPCNominal(NominalSource):
 
     Fast step k of each run: the estimate d (p,) is updated from the measured step
     (d <- d + gamma (r - d), r the one-step residual of the scheduled model,
-    gamma = Ts / est_tau), the nominal state z (deviation from the scheduling trim)
-    moves by z+ = A z + B (u_d + u_dev) + d with u_dev = Gu delta + K (z - Gx delta -
-    x_d) + c_j (the nominal input is u_r,s + u_d + u_dev); every M steps each run's
-    QP (:class:`TrackingMPC`) chooses the moves and the set-point step delta. The
+    gamma = Ts / est_tau; the first residual initialises it), the nominal state z
+    (deviation from the scheduling trim) moves by z+ = A z + B (u_d + u_dev) + d with
+    u_dev = Gu delta + K (z - Gx delta - x_d) + c_j (the nominal input is
+    u_r,s + u_d + u_dev, (x_d, u_d) the estimate's steady-state shift); every M steps
+    (the first at step 1, once the estimate has started) each run's QP
+    (:class:`TrackingMPC`) chooses the moves and the set-point step delta, with its
+    input limits at every fast step of the first two moves. Between re-plans u_d
+    follows the estimate, which the QP does not bound: the nominal input stays within
+    the tightened limits by the plan only as far as d stays near its re-plan value
+    (clipping it there instead made the loop diverge after an early loss, measured). The
     output reference is x_r = trim_x(theta), u_r = trim_u(theta) + u_d at the
     artificial set point theta, x_n = X_n - x_r, u_n = u_nominal - u_r, so that the
     ancillary law u = u_r + u_n + tau F (x - x_r - x_n) (eq. 36/54) is unchanged.
@@ -1046,7 +1085,11 @@ class TrackingMPCNominal(NominalSource):
             self.prev = xm.copy()
             self.has_prev = True
         h_c, V_c = self.command(t)
-        if self.k % self.M == 0:  # re-plan: each run's own QP
+        # re-plan every M steps (each run's own QP); with an estimate, the first plan
+        # waits for step 1, when the first residual has initialised it (step 0 holds
+        # the initial trim: no plan yet, u = u_r + K (x_n - x_s))
+        first = 1 if self.has_est else 0
+        if self.k == first or (self.k > first and self.k % self.M == 0):
             moved = []
             for b in np.flatnonzero(self.lanes.alive):
                 try:
