@@ -333,6 +333,29 @@ def test_infeasible_replan_recovers_by_moving_the_set_point(design):
     assert u_s[1] <= mpc.u_hi[1] + 1e-9
 
 
+def test_a_steady_input_outside_the_tightened_set_recovers_without_its_rows(design):
+    """Issue 20, item 6: an estimate shift asking a steady throttle below the tightened
+    limit anywhere on the trim map (measured in campaign (a): light vehicles in the
+    climb) leaves the QP and the set-point recovery infeasible; the last recovery drops
+    only the steady-input rows (no certificate of the tube needs them) and plans with
+    every move's input within the tightened limits."""
+    mpc = _mpc(design)
+    mpc.schedule(85500.0, 8000.0)
+    u_base = mpc.u_r_s.copy()
+    u_base[0] = mpc.u_lo[0] - 0.2  # the steady throttle 0.2 below the tightened limit
+    cmd = np.array([85500.0, 8000.0])
+    z0 = np.zeros(mpc.n)
+    for recover in (False, True):
+        y, why = mpc.solve(z0, u_base, cmd, recover=recover)
+        assert y is None and "exit flag" in why, why
+    y, why = mpc.solve(z0, u_base, cmd, recover=True, relax_steady=True)
+    assert why == "ok"
+    u = _inputs_of_plan(mpc, y, z0, u_base)
+    tol = 1e-6 * mpc.Du
+    assert np.all(u[:, 0] >= mpc.u_lo - tol) and np.all(u[:, 0] <= mpc.u_hi + tol)
+    assert np.all(u[:2] >= mpc.u_lo - tol) and np.all(u[:2] <= mpc.u_hi + tol)
+
+
 def _inputs_of_plan(mpc, y, z0, u_base):
     """The plan's nominal input at every fast step (N_p, M, m), propagated step by step on
     the scheduled model under u = u_base + Gu delta + K zeta + Du c_j."""

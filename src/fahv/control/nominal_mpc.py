@@ -426,7 +426,8 @@ class QPStats:
         Nominal steps that used the terminal law (no plan left).
     recovered : int
         Re-plans whose QP was infeasible and that the recovery QP (set point free on
-        the trim map, :meth:`TrackingMPC.solve`) planned.
+        the trim map, then also without the steady-input rows,
+        :meth:`TrackingMPC.solve`) planned.
     reschedules : int
         Rebuilds of the QP matrices (scheduling changes).
     """
@@ -756,6 +757,7 @@ class TrackingMPC:
         x_off=None,
         recover=False,
         u_prev=None,
+        relax_steady=False,
     ):
         """QP at nominal deviation z0 (n,) from the scheduling trim.
 
@@ -782,6 +784,12 @@ class TrackingMPC:
             Nominal input applied at the previous fast step (absolute). With rate rows
             (``mpc.du_max``) the first move's input may differ from it by at most du_max;
             None: no such row (the first plan of a run).
+        relax_steady : bool
+            Drop the steady-input rows (the terminal ingredients' admissibility beyond
+            the horizon, which the nominal MPC's recursive feasibility needs and the
+            tube's certificate does not): the last recovery, when the estimate's shift
+            u_d transiently asks for a steady input outside the tightened set anywhere
+            on the trim map. The input rows of every move stay.
 
         Returns
         -------
@@ -815,13 +823,13 @@ class TrackingMPC:
         if x_off is not None:
             off = np.asarray(x_off, float)[2:4]
             att_lo, att_hi = np.minimum(att_lo - off, 0.0), np.maximum(att_hi - off, 0.0)
+        s_hi = self._no_hi_u if relax_steady else (self.u_hi - u_base) / self.Du
+        s_lo = self._no_lo_u if relax_steady else (self.u_lo - u_base) / self.Du
         bu = np.concatenate(
-            [hi_b, hi_u, -tz, tz, (self.u_hi - u_base) / self.Du, self._no_hi_u,
-             (att_hi - att).reshape(-1)]
+            [hi_b, hi_u, -tz, tz, s_hi, self._no_hi_u, (att_hi - att).reshape(-1)]
         )  # fmt: skip
         bl = np.concatenate(
-            [lo_b, lo_u, self._no_lo_t, self._no_lo_u, (self.u_lo - u_base) / self.Du,
-             (att_lo - att).reshape(-1)]
+            [lo_b, lo_u, self._no_lo_t, self._no_lo_u, s_lo, (att_lo - att).reshape(-1)]
         )  # fmt: skip
         if s.has_rate_rows:
             rz = self.Rate_z @ z0
@@ -1028,6 +1036,10 @@ class TrackingMPCNominal(NominalSource):
         recovered = False
         if y is None:  # recovery: the set point free on the trim map (no trust region)
             y, why_rec = mpc.solve(*args, recover=True, u_prev=u_prev)
+            if y is None:  # then without the steady-input rows (solve: relax_steady)
+                y, why_st = mpc.solve(*args, recover=True, u_prev=u_prev, relax_steady=True)
+                why = f"{why}; steady input relaxed" if y is not None else why
+                why_rec = f"{why_rec}; without the steady-input rows: {why_st}"
             recovered = y is not None
             why = why if y is not None else f"{why}; recovery: {why_rec}"
         if y is not None:
