@@ -179,17 +179,7 @@ def test_input_rows_hold_at_every_fast_step_of_the_applied_moves(design):
     assert mpc.Uf_y.shape == (s.fine_moves * (s.M - 1) * m, ly.ny)
     y, why = mpc.solve(np.zeros(n), mpc.u_r_s, np.array([c["h_c"], c["V_c"]]))
     assert why == "ok"
-    delta = y[ly.delta]
-    AK = mpc.A + mpc.B @ mpc.K
-    E = (mpc.A - np.eye(n)) @ mpc.Gx + mpc.B @ mpc.Gu
-    zeta = -mpc.Gx @ delta
-    u = []
-    for j in range(2):
-        cj = y[ly.move(j)] * mpc.Du
-        for _ in range(s.M):
-            u.append(mpc.u_r_s + mpc.Gu @ delta + mpc.K @ zeta + cj)
-            zeta = AK @ zeta + mpc.B @ cj + E @ delta
-    u = np.array(u)
+    u = _inputs_of_plan(mpc, y, np.zeros(n), mpc.u_r_s)[:2].reshape(-1, m)
     tol = 1e-6 * mpc.Du
     assert np.all(u <= mpc.u_hi + tol) and np.all(u >= mpc.u_lo - tol), (u.max(0), mpc.u_hi)
     assert u[:, 0].max() > mpc.u_hi[0] - 1e-3  # the climb uses the throttle to its limit

@@ -615,33 +615,31 @@ class TrackingMPC:
             U_y[jj, r, mv_cols[:, r]] += self.Du[r]
         self.U_y = U_y.reshape(N_p * m, ny)
         self.U_z = (self.K @ Ss).reshape(N_p * m, n)
-        # the same inside the first fine_moves moves: between move starts the input of the
-        # pre-stabilised model moves with K zeta, zeta = Phi_i zeta_j + Gam_i c_j + Psi_i
-        # delta (i = 1..M-1), and the tube's tightening holds only if it stays in the
-        # tightened set at every fast step, not at the move starts alone
-        KPh = self.K @ Phi_w[: M - 1]  # (M-1, m, n)
-        uf_y, uf_z = [], []
+        # zeta at every fast step i = 1..M-1 inside the first fine_moves moves, in closed
+        # form zeta = Phi_i zeta_j + Gam_i c_j + Psi_i delta: (M-1, n, ny) per y and
+        # (M-1, n, n) per z0, shared by the attitude and the input rows below
+        fine = []
         for j in range(min(s.fine_moves, N_p)):
-            Ci = KPh @ C[j]  # (M-1, m, ny)
-            Ci[:, :, mv_cols[j]] += self.K @ Gam_w[: M - 1] + np.diag(self.Du)[None]
-            Ci[:, :, ly.delta] += self.K @ Psi_w[: M - 1] + Gu[None]
+            Zy = Phi_w[: M - 1] @ C[j]
+            Zy[:, :, mv_cols[j]] += Gam_w[: M - 1]
+            Zy[:, :, ly.delta] += Psi_w[: M - 1]
+            fine.append((Zy, Phi_w[: M - 1] @ S[j]))
+        # the input rows inside those moves: between move starts the input of the
+        # pre-stabilised model moves with K zeta, and the tube's tightening holds only if
+        # it stays in the tightened set at every fast step, not at the move starts alone
+        uf_y, uf_z = [], []
+        for j, (Zy, Zz) in enumerate(fine):
+            Ci = self.K @ Zy  # (M-1, m, ny)
+            Ci[:, :, mv_cols[j]] += np.diag(self.Du)[None]
+            Ci[:, :, ly.delta] += Gu[None]
             uf_y.append(Ci.reshape(-1, ny))
-            uf_z.append((KPh @ S[j]).reshape(-1, n))
+            uf_z.append((self.K @ Zz).reshape(-1, n))
         self.Uf_y = np.concatenate(uf_y) if uf_y else np.zeros((0, ny))
         self.Uf_z = np.concatenate(uf_z) if uf_z else np.zeros((0, n))
-        # attitude rows: alpha (2) and theta (3) of zeta at every fast step inside the
-        # first fine_moves moves (closed form: zeta = Phi_i zeta_j + Gam_i c_j + Psi_i delta)
-        # and at the move starts j = 1..N_p
-        att_y, att_z = [], []
-        PhA = Phi_w[: M - 1, 2:4]  # rows alpha, theta of Phi_i, i = 1..M-1
-        for j in range(min(s.fine_moves, N_p)):
-            Ci = PhA @ C[j]  # (M-1, 2, ny)
-            Ci[:, :, mv_cols[j]] += Gam_w[: M - 1, 2:4]
-            Ci[:, :, ly.delta] += Psi_w[: M - 1, 2:4]
-            att_y.append(Ci.reshape(-1, ny))
-            att_z.append((PhA @ S[j]).reshape(-1, n))
-        att_y.append(C[1:, 2:4].reshape(-1, ny))
-        att_z.append(S[1:, 2:4].reshape(-1, n))
+        # attitude rows: alpha (2) and theta (3) of zeta at those fast steps and at the
+        # move starts j = 1..N_p
+        att_y = [Zy[:, 2:4].reshape(-1, ny) for Zy, _ in fine] + [C[1:, 2:4].reshape(-1, ny)]
+        att_z = [Zz[:, 2:4].reshape(-1, n) for _, Zz in fine] + [S[1:, 2:4].reshape(-1, n)]
         self.Att_y = np.concatenate(att_y)
         self.Att_z = np.concatenate(att_z)
         self.Tb_y = self.L_inv @ C[N_p]  # terminal box rows, (n, ny)
@@ -954,6 +952,8 @@ class TrackingMPCNominal(NominalSource):
         est_tau = p["mpc.est_tau"]
         pe = self.p_est
         self.has_est = est_tau > 0.0
+        #: step of the first plan: 1 with an estimate (it starts from the first residual)
+        self.k_first_plan = 1 if self.has_est else 0
         self.est = DisturbanceEstimator(B, pe, min(1.0, p["Ts"] / est_tau) if self.has_est else 1.0)
         self.command = CommandSchedule([Command.of_parameters(r) for r in runs])
         # per-run state of the fast step (stacked) and of the scheduled models
@@ -1100,8 +1100,8 @@ class TrackingMPCNominal(NominalSource):
         # re-plan every M steps (each run's own QP); with an estimate, the first plan
         # waits for step 1, when the first residual has initialised it (step 0 holds
         # the initial trim: no plan yet, u = u_r + K (x_n - x_s))
-        first = 1 if self.has_est else 0
-        if self.k == first or (self.k > first and self.k % self.M == 0):
+        k0 = self.k_first_plan
+        if self.k == k0 or (self.k > k0 and self.k % self.M == 0):
             moved = []
             for b in np.flatnonzero(self.lanes.alive):
                 try:
