@@ -20,6 +20,11 @@ above (h, V: the envelope shrunk by the tube), the scheduling box is them grown 
 times the supports of Z and F Z of the closed pair in tests/data (the iteration stops
 if its own Z outgrows that). --eps: a part of W that does not shrink with Z (the
 disturbance estimate's error), per row in units of that pair's W, added to the bound.
+--onset L: the onset of a loss L (0.24: the design's) as pulse generators of the tube
+(:func:`fahv.design.along_nominal.onset_pulse` over the nominal box, --pulses of them,
+what they leave added to the bound): the tube LMI is solved RPI for W plus the pulse,
+which keeps e in Z through the onset and the estimate's lag. --flex Y grows the box's q and
+flexible half-widths by Y (instead of X) times the supports.
 """
 
 import argparse
@@ -34,9 +39,11 @@ from fahv.design.along_nominal import (
     SchedulingBox,
     bound_along_nominal,
     nominal_vertices,
+    onset_pulse,
     segment_supports,
 )
 from fahv.design.artefacts import load_design
+from fahv.design.certificate import worst_level
 from fahv.design.feasibility import input_room
 from fahv.errors import DesignError
 from fahv.model.tp_model import build_tp_model
@@ -58,6 +65,16 @@ def case1_box(envelope, scale: float = 1.0) -> SchedulingBox:
     return SchedulingBox(lo, hi, np.array([0.7 * DEG, 0.5, 3.5, 0.3, 3.5]) * scale)
 
 
+def case1_context():
+    """Case 1's saved design: (arrays, case dict, vehicle, TP model, trim map)."""
+    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+    d = load_design(ROOT / "offline_design" / "artefacts" / "case1")
+    a, c = d.arrays, d.case
+    veh = load_vehicle()
+    tp = build_tp_model(veh, "cm", *c["vertices"], *c["samples"])
+    return a, c, veh, tp, TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+
+
 def grown(box: SchedulingBox, s6, s5, x: float) -> SchedulingBox:
     """``box`` grown by x times the supports s6 (6,) and s5 (5,) on every side."""
     return SchedulingBox(box.lo - x * s6, box.hi + x * s6, box.other_half + x * s5)
@@ -75,13 +92,11 @@ def main():
     ap.add_argument("--save", default="")
     ap.add_argument("--integral", type=float, default=0.0)
     ap.add_argument("--eps", default="")
+    ap.add_argument("--onset", type=float, default=0.0)
+    ap.add_argument("--pulses", type=int, default=2)
+    ap.add_argument("--flex", type=float, default=0.0)
     o = ap.parse_args()
-    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    d = load_design(ROOT / "offline_design" / "artefacts" / "case1")
-    a, c = d.arrays, d.case
-    veh = load_vehicle()
-    tp = build_tp_model(veh, "cm", *c["vertices"], *c["samples"])
-    tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+    a, c, veh, tp, tm = case1_context()
     rho = float(c["tube"]["rho_min"])
     box = nominal = case1_box(veh.envelope, o.scale)
     stored = np.load(ROOT / "tests" / "data" / "closed_tube_along_nominal.npz")
@@ -92,7 +107,8 @@ def main():
         s6, s5 = segment_supports(stored["F"], stored["N"])
         # the nominal's h, V: the envelope shrunk by the tube; the box: the envelope
         nominal = grown(box, np.r_[-s6[:2], np.zeros(4)] * o.integral, np.zeros(5), 1.0)
-        box = grown(nominal, s6, s5, o.integral)
+        flex = o.flex if o.flex > 0.0 else o.integral
+        box = grown(nominal, s6, s5 * flex / o.integral, o.integral)
         print("integral form: box = nominal ranges grown by "
               f"{o.integral:g} x the stored pair's supports; eps / stored W "
               + " ".join(f"{v:.2f}" for v in eps / stored["W"]), flush=True)  # fmt: skip
@@ -107,11 +123,24 @@ def main():
           f"({time.time() - t0:.0f} s)", flush=True)  # fmt: skip
     room = input_room(veh, rho_f=rho)
     W = a["w_max"] * o.w0
+    pulse, rest = None, np.zeros(9)
+    if o.onset > 0.0:
+        t0 = time.time()
+        op = onset_pulse(nominal, veh, tm, dict(PAPER_UNCERTAINTY), 1.0 - o.onset, c["Ts"],
+                         c["plant_substeps"], stored["N"], o.pulses)  # fmt: skip
+        pulse, rest = op.G, op.remainder
+        lev = np.einsum("si,ij,sj->s", op.jumps, np.linalg.inv(stored["N"]), op.jumps)
+        print(f"onset of a {100 * o.onset:g} % loss: {len(op.jumps)} jumps ({time.time() - t0:.0f}"
+              f" s), level in the stored pair's Z up to {lev.max():.3g}; generators / stored W:\n"
+              + "".join("  " + " ".join(f"{v:.2f}" for v in gl / stored["W"]) + "\n"
+                        for gl in pulse)
+              + "  remainder / stored W: " + " ".join(f"{v:.3f}" for v in rest / stored["W"]),
+              flush=True)  # fmt: skip
     for it in range(o.iterations):
         t1 = time.time()
         try:
             tube = design_tube(A, B, W, tp.state_scale, tp.input_scale, room, (o.lam,),
-                               w_ref=a["w_max"], active=96)  # fmt: skip
+                               w_ref=a["w_max"], active=96, pulse=pulse)  # fmt: skip
         except DesignError as exc:
             print(f"iteration {it}: tube LMI infeasible ({exc})")
             return
@@ -120,8 +149,8 @@ def main():
         except DesignError as exc:
             print(f"iteration {it}: {exc}")
             return
-        if o.eps:
-            b = dataclasses.replace(b, total=b.total + eps)
+        if o.eps or o.onset:
+            b = dataclasses.replace(b, total=b.total + eps + rest)
         print(
             f"iteration {it} ({time.time() - t1:.0f} s, {tube.n_blocks} of {A.shape[0]} blocks "
             f"active): tightening {tube.tightening[0]:.5f} / {np.degrees(tube.tightening[1]):.4f}"
@@ -133,6 +162,7 @@ def main():
                     ("interpolation", b.interpolation),
                     ("second order", b.second_order),
                     ("estimate", eps),
+                    ("pulse remainder", rest),
                     ("bound", b.total),
                 )
             ),  # fmt: skip
@@ -143,6 +173,13 @@ def main():
             print(f"  box margin over nominal + Z: {b.margin.min():+.2f} x the supports "
                   "(smallest coordinate)", flush=True)  # fmt: skip
         if np.all(b.total <= W):
+            if pulse is not None:
+                level, _ = worst_level(A, B, tube.F, tube.N, W, pulse=pulse)
+                sz = np.sqrt(np.diag(tube.N))
+                print(f"  exact worst one-step level with the pulse {level:.6f}; supports of Z"
+                      f" (alpha, theta deg; q deg/s): {np.degrees(sz[2]):.4f}, "
+                      f"{np.degrees(sz[3]):.4f}, {np.degrees(sz[4]):.4f}; pulse multipliers "
+                      f"{np.array2string(tube.mu_pulse, precision=3)}", flush=True)  # fmt: skip
             print(
                 "closed: slack per row " + " ".join(f"{s:+.3f}" for s in (W - b.total) / W)
                 + f"; smallest vertex-block eigenvalue {tube.min_eigs.min():.3g} over all "

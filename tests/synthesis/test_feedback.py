@@ -140,3 +140,53 @@ def test_constraint_generation_gives_the_full_lmi_solution():
     assert gen.min_eigs.shape == (R,) and gen.min_eigs.min() >= -1e-9
     np.testing.assert_allclose(gen.tightening, full.tightening, rtol=1e-3)
     np.testing.assert_allclose(gen.N, full.N, rtol=1e-3, atol=1e-3 * np.abs(full.N).max())
+
+
+#: A pulse along the input column, 5 times the box W in the second state.
+PULSE = np.array([[0.0, 0.1]])
+
+
+@pytest.fixture(scope="module")
+def pulse_tube():
+    return design_tube(A, B, W, ONE2, ONE1, np.array([1.0]), lam_grid=(0.8, 0.9, 0.95),
+                       pulse=PULSE)  # fmt: skip
+
+
+def test_pulse_generators_enter_the_certificate(tube, pulse_tube):
+    """With a pulse generator G the tube is RPI for W + {G' p, |p| <= 1}: the exact worst
+    level over the vertices, the corners of W and p = +/-1 is at most 1, and its budget
+    holds the pulse's multiplier; the tube designed for W alone is not RPI for it."""
+    from fahv.design.certificate import worst_level
+
+    level, where = worst_level(A, B, pulse_tube.F, pulse_tube.N, W, pulse=PULSE)
+    assert level <= 1.0 and level > 0.9  # the LMI leaves at most its strictness margin
+    assert len(where[1]) == 3
+    ws = W
+    budget = pulse_tube.mu @ ws**2 + pulse_tube.mu_pulse.sum()
+    assert budget <= 1.0 - pulse_tube.lam + 1e-9 and pulse_tube.mu_pulse[0] > 0.0
+    plain, _ = worst_level(A, B, tube.F, tube.N, W, pulse=PULSE)
+    assert plain > 1.5
+    # the pulse as a sampled disturbance: boundary of Z, corners of W and of p
+    L = np.linalg.cholesky(pulse_tube.N)
+    d = np.random.default_rng(5).normal(size=(2, 400))
+    e = L @ (d / np.linalg.norm(d, axis=0))
+    worst = 0.0
+    for i in range(2):
+        Acl = A[i] + B[i] @ pulse_tube.F
+        for s in ([1, 1, 1], [1, -1, -1], [-1, 1, 1], [-1, -1, 1], [1, 1, -1]):
+            ep = Acl @ e + (np.array(s[:2]) * W + s[2] * PULSE[0])[:, None]
+            worst = max(
+                worst, float(np.max(np.einsum("in,ij,jn->n", ep, np.linalg.inv(pulse_tube.N), ep)))
+            )
+    assert worst <= level + 1e-9
+
+
+def test_pulse_multiplier_is_rechecked(pulse_tube):
+    """verify_tube counts the pulse's multiplier in the budget and refuses a tube whose
+    pulse it does not hold."""
+    verify_tube(A, B, pulse_tube, ONE2, ONE1)
+    with pytest.raises(DesignError, match="pulses"):
+        verify_tube(A, B, dataclasses.replace(pulse_tube, mu_pulse=pulse_tube.mu_pulse + 1.0),
+                    ONE2, ONE1)  # fmt: skip
+    with pytest.raises(DesignError, match="certificate failed"):
+        verify_tube(A, B, dataclasses.replace(pulse_tube, pulse=3.0 * PULSE), ONE2, ONE1)

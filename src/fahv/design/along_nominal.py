@@ -455,3 +455,133 @@ def bound_along_nominal(
         return AlongNominalBound(par, interp, sec, par + interp, INTEGRAL_ASSUMPTIONS, margin)
     sec = REMAINDER_FACTOR * sec
     return AlongNominalBound(par, interp, sec, par + interp + sec, ASSUMPTIONS)
+
+
+@dataclass(frozen=True)
+class OnsetPulse:
+    """The onset of an elevator loss as pulse generators of the tube (docs/control_design.md).
+
+    At the step a loss of 1 - rho_f starts, the plant moves by f_p(z, P v) while the
+    nominal (with the estimate of the step before) expects f_p(z, v): the tube error
+    receives the jump J = f_p(z, P v) - f_p(z, v) once, and after it the estimate's lag
+    (1 - gamma)^k J' of the same kind, whatever the filter gain gamma. J lies close to
+    one direction (the elevator column of the one-period map, scaled by delta_e), so
+    the set of jumps over the nominal box and the parameter box is covered by a few
+    generators, J = G' p + r with |p_l| <= 1 and |r| <= ``remainder``: the tube is then
+    made RPI for W + remainder plus {G' p} (:func:`fahv.synthesis.feedback.design_tube`,
+    ``pulse``), which keeps e in Z through the onset and the estimate's lag.
+
+    Attributes
+    ----------
+    G : (g, 9) ndarray
+        Generators (state units per step).
+    remainder : (9,) ndarray
+        Elementwise bound of what the generators leave of the sampled jumps.
+    jumps : (S, 9) ndarray
+        The sampled jumps (every parameter-box corner at the nominal box's corners,
+        then interior points and vehicles).
+    rho_f : float
+        The loss's effectiveness.
+    metric : (9, 9) ndarray
+        The metric the generators were chosen in.
+    """
+
+    G: np.ndarray
+    remainder: np.ndarray
+    jumps: np.ndarray
+    rho_f: float
+    metric: np.ndarray
+
+    def decompose(self, J) -> tuple[np.ndarray, np.ndarray]:
+        """Coefficients p (S, g) and rest r (S, 9) of jumps J (S, 9) = p G + r.
+
+        p is the projection of J on the generators in ``metric``; J is covered when
+        |p| <= 1 and |r| <= ``remainder`` elementwise.
+        """
+        L = np.linalg.cholesky(self.metric)
+        Gm = np.linalg.solve(L, self.G.T)
+        Jm = np.linalg.solve(L, np.atleast_2d(np.asarray(J, float)).T)
+        p = np.linalg.lstsq(Gm, Jm, rcond=None)[0].T
+        return p, np.atleast_2d(J) - p @ self.G
+
+
+def onset_pulse(nominal: SchedulingBox, vehicle, trim_map, uncertainty: dict, rho_f: float,
+                Ts: float, n_sub: int, metric, g: int = 2, interior: int = 4096,
+                seed: int = 0) -> OnsetPulse:  # fmt: skip
+    """Jumps of the one-step residual at the onset of a loss, and generators covering them.
+
+    J = f_p(z, (Phi, rho_f delta_e)) - f_p(z, (Phi, delta_e)) at nominal points z, v of
+    the box ``nominal`` (its 64 corners with all 2^P corners of the parameter box, then
+    ``interior`` points inside with random corner or interior vehicles, seeded). The
+    generators are the g leading principal directions of the jumps in the metric
+    ``metric`` (9, 9) (e.g. the tube's N, so the directions that matter for Z come
+    first), each scaled to the largest coefficient of a sample; what they leave is bounded
+    per row by ``remainder``. Jumps are linear in 1 - rho_f to first order, the
+    monotone effect of each parameter puts their extremes at the box corners (sampled
+    besides).
+
+    Parameters
+    ----------
+    nominal : SchedulingBox
+        Nominal states and applied inputs where a loss may start.
+    vehicle, trim_map
+        The nominal vehicle and its trim map.
+    uncertainty : dict[str, float]
+        Relative half-widths of the parameter box.
+    rho_f : float
+        Elevator effectiveness after the loss, in (0, 1].
+    Ts : float
+        Control period [s].
+    n_sub : int
+        RK4 sub-steps per period.
+    metric : (9, 9) ndarray
+        Positive definite metric of the principal directions.
+    g : int
+        Generators.
+    interior : int
+        Interior samples.
+    seed : int
+
+    Returns
+    -------
+    OnsetPulse
+
+    Raises
+    ------
+    ValueError
+        If rho_f is not in (0, 1] or g is not in 1..9.
+    DesignError
+        If a plant step is not finite.
+    """
+    if not 0.0 < rho_f <= 1.0:
+        raise ValueError(f"onset_pulse: rho_f must be in (0, 1], got {rho_f}")
+    if not 1 <= g <= 9:
+        raise ValueError(f"onset_pulse: g must be in 1..9, got {g}")
+    names = list(uncertainty)
+    corners = np.array(list(itertools.product((-1.0, 1.0), repeat=len(names))))
+    rng = np.random.default_rng(seed)
+    S = nominal.corners()
+    s_in = rng.uniform(nominal.lo, nominal.hi, (interior, 6))
+    f_in = np.where(rng.random((interior, 1)) < 0.5, corners[rng.integers(len(corners),
+                    size=interior)], rng.uniform(-1.0, 1.0, (interior, len(names))))  # fmt: skip
+    s_all = np.vstack([np.repeat(S, len(corners), 0), s_in])
+    f_all = np.vstack([np.tile(corners, (len(S), 1)), f_in])
+    X, U = nominal.points(trim_map, s_all)
+    other = rng.uniform(-1.0, 1.0, (len(s_all), 5)) * np.asarray(nominal.other_half, float)
+    other[: len(S) * len(corners)] = 0.0  # the corner points at the trim's q, eta
+    X[:, 4:9] += other
+    recs = params_records(
+        [perturb(vehicle.params, uncertainty, dict(zip(names, f, strict=True))) for f in f_all]
+    )
+    Uf = U.copy()
+    Uf[:, 1] *= rho_f
+    J = _one_step(X, Uf, recs, Ts, n_sub) - _one_step(X, U, recs, Ts, n_sub)
+    if not np.all(np.isfinite(J)):
+        raise DesignError("onset_pulse: a plant step is not finite; the box leaves the model")
+    L = np.linalg.cholesky(np.asarray(metric, float))
+    Jm = np.linalg.solve(L, J.T).T
+    _, _, Vt = np.linalg.svd(Jm, full_matrices=False)
+    coef = Jm @ Vt[:g].T
+    G = (np.abs(coef).max(axis=0)[:, None] * Vt[:g]) @ L.T
+    rest = J - (coef @ Vt[:g]) @ L.T
+    return OnsetPulse(G, np.abs(rest).max(axis=0), J, float(rho_f), np.asarray(metric, float))

@@ -638,7 +638,7 @@ def _max_on_ball(M: np.ndarray, c: np.ndarray) -> np.ndarray:
     return cc + hi + terms.sum(axis=1)
 
 
-def worst_level(A, B, F, N, w_max, tau: float = 1.0):
+def worst_level(A, B, F, N, w_max, tau: float = 1.0, pulse=None):
     """Exact max of (A_cl,i e + w)' (tau^2 N)^-1 (A_cl,i e + w) over e in tau Z, w in W.
 
     The level is convex in (e, w), so over the box W its maximum lies at a corner; over
@@ -658,20 +658,23 @@ def worst_level(A, B, F, N, w_max, tau: float = 1.0):
         Half-widths of W.
     tau : float
         Adjustable factor (eq. 54): the tube is tau Z, the gain tau F.
+    pulse : (g, n) ndarray, optional
+        Pulse generators G: w ranges over W + {G' p : |p| <= 1} (the corners of both).
 
     Returns
     -------
     level : float
         The worst one-step level (1: the boundary of the tube).
     where : tuple
-        (vertex index, corner of W as signs (n,)).
+        (vertex index, corner of W (and of p) as signs (n + g,)).
     """
     Ns = tau**2 * np.asarray(N, float)
     L = np.linalg.cholesky(Ns)
     Linv = np.linalg.inv(L)
     n = Ns.shape[0]
-    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=n)))
-    C = (signs * np.asarray(w_max, float)[None, :]) @ Linv.T
+    G = np.zeros((0, n)) if pulse is None else np.atleast_2d(np.asarray(pulse, float))
+    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=n + len(G))))
+    C = (signs[:, :n] * np.asarray(w_max, float)[None, :] + signs[:, n:] @ G) @ Linv.T
     best, where = -1.0, None
     for i in range(A.shape[0]):
         Acl = A[i] + B[i] @ (tau * F)

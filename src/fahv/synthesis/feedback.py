@@ -13,7 +13,13 @@ the tube used is an ellipsoid Z = {e : e' N^-1 e <= 1} designed jointly with F::
 
 By the S-procedure this gives (A_cl e + w)' N^-1 (A_cl e + w) <= lam e'N^-1 e +
 sum mu_j w_j^2 <= 1 for every e in Z and |w_j| <= w_j: Z is RPI for the whole box W
-and all vertices. Deleting the middle row and column leaves
+and all vertices.
+
+Pulse generators. A disturbance that is not a box, w + G' p with |p_l| <= 1 (G (g, n):
+the onset of an elevator loss, whose one-step jump of the residual lies along a few
+directions, docs/control_design.md), enters the same way: the middle block becomes
+diag(mu, mu_p), its off-diagonal block [I, G'], and the budget
+sum_j mu_j w_j^2 + sum_l mu_p,l <= 1 - lam. Deleting the middle row and column leaves
 [[lam N, (A_i N + B_i M)'], [A_i N + B_i M, N]] >= 0, i.e. LMI (24) with a decay
 rate lam < 1, so F stabilises every vertex.
 """
@@ -55,6 +61,10 @@ class TubeDesign:
     n_blocks : int
         Vertex blocks the last LMI solve held (R, or fewer with constraint generation:
         the rest held at its solution).
+    pulse : (g, n) ndarray or None
+        Pulse generators G (unscaled): Z is RPI for w + G' p, |w| <= w_max, |p| <= 1.
+    mu_pulse : (g,) ndarray or None
+        Their S-procedure multipliers (scaled coordinates).
     """
 
     F: np.ndarray
@@ -66,30 +76,42 @@ class TubeDesign:
     z_box: np.ndarray
     min_eigs: np.ndarray
     n_blocks: int = 0
+    pulse: np.ndarray | None = None
+    mu_pulse: np.ndarray | None = None
 
     def contains(self, e: np.ndarray, scale: float = 1.0) -> bool:
         """True if the error e (n,) lies in scale * Z."""
         return float(e @ np.linalg.solve(self.N, e)) <= scale**2 * (1.0 + 1e-9)
 
 
-def _rpi_blocks(AN, lam, mu, N) -> np.ndarray:
-    """Vertex blocks (R, 3n, 3n) of the RPI LMI (24) at a solution (scaled units).
+def _rpi_blocks(AN, lam, mu, N, G=None) -> np.ndarray:
+    """Vertex blocks (R, 3n + g, 3n + g) of the RPI LMI (24) at a solution (scaled units).
 
-    [[lam N, 0, (A_cl,i N)'], [0, diag(mu), I], [A_cl,i N, I, N]] for each stacked
-    AN[i] = A_cl,i N = A_i N + B_i M (M = F N). The certificate holds at vertex i iff the
-    block is positive semidefinite (S-procedure form of (A_cl e + w)' N^-1 (A_cl e + w)
-    <= lam e' N^-1 e + sum_j mu_j w_j^2, with sum_j mu_j w_j^2 <= 1 - lam).
+    [[lam N, 0, (A_cl,i N)'], [0, diag(mu), E'], [A_cl,i N, E, N]] for each stacked
+    AN[i] = A_cl,i N = A_i N + B_i M (M = F N), E = [I, G'] (n, n + g), mu (n + g,).
+    The certificate holds at vertex i iff the block is positive semidefinite
+    (S-procedure form of (A_cl e + w + G' p)' N^-1 (A_cl e + w + G' p) <= lam e' N^-1 e
+    + sum_j mu_j w_j^2 + sum_l mu_p,l p_l^2, with the budget at most 1 - lam).
     """
     R, n, _ = AN.shape
-    blk = np.zeros((R, 3 * n, 3 * n))
+    E = _generators(n, G)
+    k = E.shape[1]
+    blk = np.zeros((R, 2 * n + k, 2 * n + k))
     blk[:, :n, :n] = lam * N
-    blk[:, n : 2 * n, n : 2 * n] = np.diag(mu)
-    blk[:, n : 2 * n, 2 * n :] = np.eye(n)
-    blk[:, 2 * n :, n : 2 * n] = np.eye(n)
-    blk[:, 2 * n :, :n] = AN
-    blk[:, :n, 2 * n :] = AN.transpose(0, 2, 1)
-    blk[:, 2 * n :, 2 * n :] = N
+    blk[:, n : n + k, n : n + k] = np.diag(mu)
+    blk[:, n : n + k, n + k :] = E.T
+    blk[:, n + k :, n : n + k] = E
+    blk[:, n + k :, :n] = AN
+    blk[:, :n, n + k :] = AN.transpose(0, 2, 1)
+    blk[:, n + k :, n + k :] = N
     return blk
+
+
+def _generators(n: int, G) -> np.ndarray:
+    """Disturbance matrix E = [I_n, G'] (n, n + g) of the box W and the pulse generators."""
+    if G is None or len(G) == 0:
+        return np.eye(n)
+    return np.hstack([np.eye(n), np.asarray(G, float).T])
 
 
 def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
@@ -113,22 +135,26 @@ def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
     Raises
     ------
     DesignError
-        If lam is not in (0, 1), sum mu_j w_j^2 > 1 - lam, N is not positive
-        definite, or a vertex certificate matrix has a negative eigenvalue.
+        If lam is not in (0, 1), the budget sum mu_j w_j^2 (+ sum mu_p,l) > 1 - lam, N is
+        not positive definite, or a vertex certificate matrix has a negative eigenvalue.
     """
     As, Bs = scale_vertices(A, B, Dx, Du)
     Ns = tube.N / np.outer(Dx, Dx)
     Fs = tube.F * Dx[None, :] / Du[:, None]
     ws = tube.w_max / Dx
+    Gs, mu = None, np.asarray(tube.mu, float)
+    if tube.pulse is not None and len(tube.pulse):
+        Gs = np.asarray(tube.pulse, float) / Dx[None, :]
+        mu = np.concatenate([mu, np.asarray(tube.mu_pulse, float)])
     if not 0.0 < tube.lam < 1.0:
         raise DesignError(f"certificate failed: contraction lam = {tube.lam} not in (0, 1)")
-    budget = float(tube.mu @ ws**2)
+    budget = float(tube.mu @ ws**2) + float(np.sum(mu[ws.size :]))
     if budget > (1.0 - tube.lam) * (1 + 1e-9):
-        raise DesignError(f"certificate failed: sum mu w^2 = {budget:.6g} > 1 - lam")
-    if np.any(tube.mu < -1e-12):
+        raise DesignError(f"certificate failed: sum mu w^2 (+ pulses) = {budget:.6g} > 1 - lam")
+    if np.any(mu < -1e-12):
         raise DesignError("certificate failed: negative S-procedure multiplier")
     require_psd(Ns, "tube shape matrix N")
-    blocks = _rpi_blocks((As + Bs @ Fs) @ Ns, tube.lam, tube.mu, Ns)
+    blocks = _rpi_blocks((As + Bs @ Fs) @ Ns, tube.lam, mu, Ns, Gs)
     return np.array(
         [require_psd(blk, f"RPI LMI at vertex {i}", rtol=1e-12) for i, blk in enumerate(blocks)]
     )
@@ -139,7 +165,7 @@ def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
 LMI_MARGIN = 1e-5
 
 
-def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active):
+def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None):
     """Solve the tube LMI for one lam (scaled data); (value, lam, N, M, mu, blocks) or None.
 
     With ``active`` (an int) the vertex blocks are generated: the LMI is solved with
@@ -148,9 +174,12 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active):
     added until every block holds with half the strict margin (constraint generation).
     The blocks solved hold with the full margin ``LMI_MARGIN``, the ones left out with
     at least half of it, so the result is the full LMI's optimum up to that margin (not
-    exactly); :func:`verify_tube` re-checks every one of the R blocks either way.
+    exactly); :func:`verify_tube` re-checks every one of the R blocks either way. ``Gs`` (g, n):
+    pulse generators (scaled), the last g multipliers of the returned mu.
     """
     R, n, m = Bs.shape
+    E = _generators(n, Gs)
+    k = E.shape[1]
     if active is None or active >= R:
         chosen = np.arange(R)
     else:
@@ -160,9 +189,10 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active):
     while True:
         N = cp.Variable((n, n), symmetric=True)
         M = cp.Variable((m, n))
-        mu = cp.Variable(n, nonneg=True)
+        mu = cp.Variable(k, nonneg=True)
         t = cp.Variable(m)
-        cons = [N >> LMI_MARGIN * np.eye(n), mu @ (ws**2) <= (1.0 - lam) * (1.0 - 1e-6)]
+        budget = mu[:n] @ (ws**2) + (cp.sum(mu[n:]) if k > n else 0.0)
+        cons = [N >> LMI_MARGIN * np.eye(n), budget <= (1.0 - lam) * (1.0 - 1e-6)]
         if state_max is not None:
             zs_max = np.asarray(state_max, float) / Dx
             cons += [N[j, j] <= (1.0 - 1e-6) * zs_max[j] ** 2
@@ -171,12 +201,12 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active):
             AN = As[i] @ N + Bs[i] @ M
             blk = cp.bmat(
                 [
-                    [lam * N, np.zeros((n, n)), AN.T],
-                    [np.zeros((n, n)), cp.diag(mu), np.eye(n)],
-                    [AN, np.eye(n), N],
+                    [lam * N, np.zeros((n, k)), AN.T],
+                    [np.zeros((k, n)), cp.diag(mu), E.T],
+                    [AN, E, N],
                 ]
             )
-            cons.append(0.5 * (blk + blk.T) >> LMI_MARGIN * np.eye(3 * n))
+            cons.append(0.5 * (blk + blk.T) >> LMI_MARGIN * np.eye(2 * n + k))
         for j in range(m):
             blk = cp.bmat(
                 [[cp.reshape(t[j], (1, 1), order="F"), M[j : j + 1, :]], [M[j : j + 1, :].T, N]]
@@ -193,7 +223,7 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active):
         if len(chosen) == R:
             return prob.value, lam, N.value, M.value, mu.value, R
         Nv = 0.5 * (N.value + N.value.T)
-        blocks = _rpi_blocks(As @ Nv + Bs @ M.value, lam, np.maximum(mu.value, 0.0), Nv)
+        blocks = _rpi_blocks(As @ Nv + Bs @ M.value, lam, np.maximum(mu.value, 0.0), Nv, Gs)
         eig = np.linalg.eigvalsh(blocks)[:, 0]
         bad = np.flatnonzero(eig < 0.5 * LMI_MARGIN)
         bad = np.setdiff1d(bad, chosen)
@@ -215,6 +245,7 @@ def design_tube(
     state_max=None,
     w_ref=None,
     active=None,
+    pulse=None,
 ) -> TubeDesign:
     """Design F and the ellipsoidal RPI tube Z for the box W = {|w| <= w_max}.
 
@@ -244,14 +275,19 @@ def design_tube(
         nominal MPC's attitude rows are tightened by.
     w_ref : (n,) array_like, optional
         Reference size of W. The RPI condition is homogeneous (Z is RPI for W iff s Z
-        is for s W), so the LMI is solved for W / s with s = max_j w_j / w_ref,j and Z
-        scaled back by s: a W far smaller or larger than w_ref would otherwise meet the
-        fixed strictness margins of the LMI at another scale (measured: a W of 1/100 of
-        the design's gave the tube of W / 10). Not with ``state_max``.
+        is for s W), so the LMI is solved for W / s with s = max_j w_j / w_ref,j (w_j plus
+        the pulses' |G_lj| with ``pulse``) and Z scaled back by s: a W far smaller or
+        larger than w_ref would otherwise meet the fixed strictness margins of the LMI at
+        another scale (measured: a W of 1/100 of the design's gave the tube of W / 10).
+        Not with ``state_max``.
     active : int, optional
         Vertex blocks per round of constraint generation, for large vertex sets: the
         LMI is solved on a growing subset of the vertices until every block holds at
         the solution (:func:`_solve_rpi_lmi`); None: all blocks at once.
+    pulse : (g, n) array_like, optional
+        Pulse generators G (unscaled): Z is made RPI for w + G' p, |w| <= w_max,
+        |p_l| <= 1 (module docstring), e.g. the one-step jumps of the residual at the
+        onset of a loss.
 
     Returns
     -------
@@ -266,12 +302,17 @@ def design_tube(
     if w_ref is not None:
         if state_max is not None:
             raise ValueError("design_tube: w_ref and state_max cannot be combined")
-        s = float(np.max(np.asarray(w_max, float) / np.asarray(w_ref, float)))
+        reach = np.asarray(w_max, float)
+        if pulse is not None:  # the pulse is scaled with W: size the two together
+            reach = reach + np.abs(np.atleast_2d(np.asarray(pulse, float))).sum(axis=0)
+        s = float(np.max(reach / np.asarray(w_ref, float)))
         t = design_tube(A, B, np.asarray(w_max, float) / s, Dx, Du, u_room, lam_grid,
-                        state_weight, active=active)  # fmt: skip
+                        state_weight, active=active,
+                        pulse=None if pulse is None else np.asarray(pulse, float) / s)  # fmt: skip
         tube = dataclasses.replace(
             t, N=t.N * s**2, mu=t.mu / s**2, w_max=np.asarray(w_max, float),
             tightening=t.tightening * s, z_box=t.z_box * s,
+            pulse=None if pulse is None else np.asarray(pulse, float),
         )  # fmt: skip
         return dataclasses.replace(tube, min_eigs=verify_tube(A, B, tube, Dx, Du))
     As, Bs = scale_vertices(np.asarray(A), np.asarray(B), Dx, Du)
@@ -279,9 +320,10 @@ def design_tube(
     ws = np.asarray(w_max, float) / Dx
     room = np.asarray(u_room, float) / Du
     sw = np.ones(n) * 1e-3 if state_weight is None else np.asarray(state_weight, float)
+    Gs = None if pulse is None else np.atleast_2d(np.asarray(pulse, float)) / Dx[None, :]
     best = None
     for lam in lam_grid:
-        sol = _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active)
+        sol = _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs)
         if sol is not None and (best is None or sol[0] < best[0]):
             best = sol
     if best is None:
@@ -303,12 +345,14 @@ def design_tube(
         F=F,
         N=N,
         lam=float(lam),
-        mu=mus,
+        mu=mus[:n],
         w_max=np.asarray(w_max, float),
         tightening=np.sqrt(np.einsum("ij,jk,ik->i", F, N, F)),
         z_box=np.sqrt(np.diag(N)),
         min_eigs=np.zeros(R),
         n_blocks=int(n_blocks),
+        pulse=None if Gs is None else Gs * Dx[None, :],
+        mu_pulse=None if Gs is None else mus[n:],
     )
     eigs = verify_tube(A, B, tube, Dx, Du)
     if state_max is not None:
