@@ -13,15 +13,15 @@ the tube used is an ellipsoid Z = {e : e' N^-1 e <= 1} designed jointly with F::
 
 By the S-procedure this gives (A_cl e + w)' N^-1 (A_cl e + w) <= lam e'N^-1 e +
 sum mu_j w_j^2 <= 1 for every e in Z and |w_j| <= w_j: Z is RPI for the whole box W
-and all vertices.
+and all vertices. Deleting the middle row and column leaves
+[[lam N, (A_i N + B_i M)'], [A_i N + B_i M, N]] >= 0, i.e. LMI (24) with a decay
+rate lam < 1, so F stabilises every vertex.
 
 Pulse generators. A disturbance that is not a box, w + G' p with |p_l| <= 1 (G (g, n):
 the onset of an elevator loss, whose one-step jump of the residual lies along a few
 directions, docs/control_design.md), enters the same way: the middle block becomes
 diag(mu, mu_p), its off-diagonal block [I, G'], and the budget
-sum_j mu_j w_j^2 + sum_l mu_p,l <= 1 - lam. Deleting the middle row and column leaves
-[[lam N, (A_i N + B_i M)'], [A_i N + B_i M, N]] >= 0, i.e. LMI (24) with a decay
-rate lam < 1, so F stabilises every vertex.
+sum_j mu_j w_j^2 + sum_l mu_p,l <= 1 - lam.
 """
 
 from __future__ import annotations
