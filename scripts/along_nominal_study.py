@@ -80,17 +80,27 @@ def grown(box: SchedulingBox, s6, s5, x: float) -> SchedulingBox:
     return SchedulingBox(box.lo - x * s6, box.hi + x * s6, box.other_half + x * s5)
 
 
-def main():
-    """Run the closure of the module docstring with the command-line options."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--k", type=int, default=3)
-    ap.add_argument("--scale", type=float, default=1.0)
-    ap.add_argument("--w0", type=float, default=0.01)
+def closure_options(doc: str, k: int, w0: float, integral: float) -> argparse.ArgumentParser:
+    """The options every W-Z closure study takes.
+
+    Parameter directions, start, growth, iterations, lam, where to save the pair, the
+    integral form's box.
+    """
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--k", type=int, default=k)
+    ap.add_argument("--w0", type=float, default=w0)
     ap.add_argument("--grow", type=float, default=1.05)
     ap.add_argument("--iterations", type=int, default=6)
     ap.add_argument("--lam", type=float, default=0.995)
     ap.add_argument("--save", default="")
-    ap.add_argument("--integral", type=float, default=0.0)
+    ap.add_argument("--integral", type=float, default=integral)
+    return ap
+
+
+def main():
+    """Run the closure of the module docstring with the command-line options."""
+    ap = closure_options(__doc__, 3, 0.01, 0.0)
+    ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--eps", default="")
     ap.add_argument("--onset", type=float, default=0.0)
     ap.add_argument("--pulses", type=int, default=2)

@@ -18,11 +18,13 @@ TS, N_SUB = 0.02, 5
 
 #: The stored closed pairs: form (1), the Jacobian at the nominal point and a second-order
 #: part in W; form (2), the integral form (no second-order part, the segment in the box);
-#: form (2) with a part of W kept for the disturbance estimate's error (``eps``).
+#: form (2) with a part of W kept for the disturbance estimate's error (``eps``); form (2)
+#: with h outside the tube (eight states, |e_h| <= H by the nominal's reset, ``H``).
 PAIRS = (
     "closed_tube_along_nominal.npz",
     "closed_tube_integral.npz",
     "closed_tube_integral_estimate.npz",
+    "closed_tube_h_reset.npz",
 )
 
 
@@ -58,11 +60,14 @@ def test_scheduling_box_rejects_bad_bounds():
 
 def test_along_nominal_pair_is_rpi_at_every_vertex(along):
     """Exact worst one-step level of the stored tube over its vertices (64 box corners x
-    2^k parameter-direction corners x rho_f at both ends: 1024 for k = 3, 2048 for k = 4)
-    and the corners of W: at most 1 (printed with its margin)."""
+    2^k parameter-direction corners x rho_f at both ends: 1024 for k = 3, 2048 for k = 4,
+    4096 for k = 5; the eight states after h for the pair with h outside the tube) and the
+    corners of W: at most 1 (printed with its margin)."""
     d, *_, nv = along
     A, B = nv.vertices()
     assert A.shape[0] == 64 * 2 ** int(d["k"]) * 2
+    if "H" in d:  # h outside the tube: the eight states after it
+        A, B = A[:, 1:, 1:], B[:, 1:, :]
     level, _ = worst_level(A, B, d["F"], d["N"], d["W"])
     print(f"worst one-step level {level:.6f} over {A.shape[0]} vertices, margin {1 - level:.2e}")
     assert level <= 1.0
@@ -104,9 +109,19 @@ def test_along_nominal_disturbance_lies_inside_W(along):
     the integral form: nominal points in the nominal's own ranges, J_theta the mean of its
     values at the two Gauss nodes of the segment (z + s e, v + s P F e), whose points must
     lie in the scheduling box."""
-    d, veh, tm, box, scale, nv = along
+    _check_true_errors(*along)
+
+
+def _check_true_errors(d, veh, tm, box, scale, nv):
+    """The sampling check of :func:`test_along_nominal_disturbance_lies_inside_W`; for a
+    pair with h outside the tube (``H`` in ``d``), e = (e_h, e_8) with |e_h| <= H and e_8
+    in Z_8, F blind to e_h: rows 1-8 of w (with J_theta's h column times e_h, which W_8
+    holds) lie inside W_8, and one step's change of e_h is at most H / moves."""
     W, F, N, rho_min = d["W"], d["F"], d["N"], float(d["rho_min"])
-    W = W - d.get("eps", np.zeros(9))  # the part kept for the estimate's error is not for w
+    h_out = "H" in d
+    if h_out:  # the tube on the eight states after h; e_h in [-H, H]
+        F = np.hstack([np.zeros((2, 1)), F])
+    W = W - d.get("eps", np.zeros_like(W))  # the part kept for the estimate's error is not w
     integral = "nominal_lo" in d
     nominal = box
     nodes = ((0.0, 1.0),)
@@ -121,7 +136,7 @@ def test_along_nominal_disturbance_lies_inside_W(along):
     L_N = np.linalg.cholesky(N)
     r0 = params_records([veh.params])
     rng = np.random.default_rng(11)
-    worst, n_done, tol = np.zeros(9), 0, 1e-6 * (nv.c_hi - nv.c_lo)
+    worst, n_done, tol, h_step = np.zeros(9), 0, 1e-6 * (nv.c_hi - nv.c_lo), 0.0
     excess = np.full(nv.c_lo.size, -np.inf)
     S_corners = nominal.corners()
     for chunk in range(10):
@@ -145,10 +160,15 @@ def test_along_nominal_disturbance_lies_inside_W(along):
         )  # fmt: skip
         X, U = nominal.points(tm, s)
         X[:, 4:9] += rng.uniform(-1, 1, (n, 5)) * nominal.other_half
-        u = rng.normal(size=(n, 9))
+        m = N.shape[0]
+        u = rng.normal(size=(n, m))
         u /= np.linalg.norm(u, axis=1, keepdims=True)
-        u[n // 2 :] *= rng.random((n - n // 2, 1)) ** (1 / 9)  # inside Z
+        u[n // 2 :] *= rng.random((n - n // 2, 1)) ** (1 / m)  # inside Z
         e = u @ L_N.T
+        if h_out:
+            e_h = float(d["H"]) * np.where(rng.random(n) < 0.5, rng.choice([-1.0, 1.0], n),
+                                           rng.uniform(-1.0, 1.0, n))  # fmt: skip
+            e = np.column_stack([e_h, e])
         du = (e @ F.T) * np.stack([np.ones(n), rho], axis=1)  # P F e
         J_th = np.zeros((n, 9, 11))
         for sigma, weight in nodes:  # J_theta at each node of the segment
@@ -173,8 +193,16 @@ def test_along_nominal_disturbance_lies_inside_W(along):
         f1 = rk4_cm(np.ascontiguousarray(X + e), np.ascontiguousarray(U + du), recs, TS, N_SUB)
         f0 = rk4_cm(np.ascontiguousarray(X), np.ascontiguousarray(U), recs, TS, N_SUB)
         w = f1 - f0 - np.einsum("lij,lj->li", J_th, np.concatenate([e, du], axis=1))
+        if h_out:
+            w[:, 1:] += J_th[:, 1:, 0] * e[:, :1]  # e_h's effect: W_8 holds it
+            h_step = np.maximum(h_step, np.abs(f1[:, 0] - f0[:, 0] - e[:, 0]).max())
         worst = np.maximum(worst, np.abs(w).max(axis=0))
         n_done += n
+    if h_out:
+        print(f"largest one-step change of e_h {h_step:.4f} ft, H / moves "
+              f"{float(d['H']) / float(d['moves']):.4f} ft")  # fmt: skip
+        assert h_step <= float(d["H"]) / float(d["moves"])
+        worst = worst[1:]
     ratio = worst / W
     print(f"{n_done} samples: max |w| / W per row:", np.round(ratio, 3))
     print("largest coefficient beyond the vertices' range / its width (< 0: inside):",

@@ -1,0 +1,180 @@
+"""The tube along the nominal with h outside its RPI condition (docs/control_design.md).
+
+The W-Z iteration at the size the onset of a loss needs diverges in the h row: the
+kinematic integrator h_dot = V sin(theta - alpha) is held by the tube only through theta
+and q, and its W grows with the box. This study takes h out of the tube: the tube is
+designed on the other eight states (V, alpha, theta, q, eta_1, eta_1_dot, eta_2,
+eta_2_dot) with F blind to e_h, and the altitude error is bounded instead by a reset of
+the nominal's h to the measured altitude at every re-plan (M fast steps apart; *assumed*
+here, not implemented in the controller):
+
+    |e_h| <= H = M (max over the vertices and Z_8 of |a_h e_8 + b_h F e_8| + w_h),
+
+with the h row's own disturbance w_h. The error e_h then enters the other rows as a
+disturbance: max over the vertices of |A_rh| H, added to their W. The disturbance bound
+is the integral form's (parameter residual and interpolation, no second-order part) over
+the product set {|e_h| <= H} x Z_8, each support exact for the product. Iterates W_8 <-
+max(W_8, GROW bound) with the tube LMI re-solved until the bound lies inside W_8, then
+prints the exact worst one-step level of the eight-state tube.
+
+Usage (after `fahv design offline_design/case1.yaml`):
+    .venv/bin/python scripts/h_reset_study.py [--integral X] [--k K] [--w0 F]
+        [--h-margin FT] [--iterations I]
+--save FILE writes the closed pair (and its boxes) for tests/design/test_along_nominal.py.
+--integral X: the box is the nominal ranges grown by X times the supports of the stored
+pair along the nominal (as in along_nominal_study.py); --h-margin: the nominal's h range
+is the envelope shrunk by this [ft], the box's h range the envelope.
+"""
+
+import time
+
+import numpy as np
+from along_nominal_study import ROOT, case1_box, case1_context, closure_options, grown
+
+import fahv.design.along_nominal as an
+from fahv.design.certificate import worst_level
+from fahv.design.feasibility import input_room
+from fahv.errors import DesignError
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.synthesis.feedback import design_tube
+
+
+def product_bound(nv, F8, N8, H):
+    """Parameter and interpolation parts (9,) over {|e_h| <= H} x Z_8 (F blind to e_h)."""
+    F9 = np.hstack([np.zeros((2, 1)), F8])
+    sZ8 = np.sqrt(np.diag(N8))
+    sF = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
+    par = np.zeros(9)
+    for rho in (nv.rho_min, 1.0):
+        MP = np.vstack([np.eye(9), np.array([1.0, rho])[:, None] * F9])
+        R = nv.residual @ MP  # (64, C, 9, 9)
+        sup = np.abs(R[..., 0]) * H + np.sqrt(np.einsum("scij,jk,scik->sci", R[..., 1:], N8,
+                                                        R[..., 1:]))  # fmt: skip
+        par = np.maximum(par, sup.max(axis=(0, 1)))
+    interp = nv.interp @ np.concatenate([[H], sZ8, sF])
+    return par, interp, np.concatenate([[H], sZ8[:3], sF]), sZ8[3:]
+
+
+def main():
+    """Run the study of the module docstring."""
+    ap = closure_options(__doc__, 5, 0.15, 22.0)
+    ap.add_argument("--h-margin", type=float, default=150.0)
+    ap.add_argument("--moves", type=int, default=25)
+    ap.add_argument("--loss", type=float, default=0.24)
+    ap.add_argument("--gamma", type=float, default=0.2)
+    ap.add_argument("--scales", type=lambda v: [float(x) for x in v.split(",") if x],
+                    default=[1.5, 2.0, 3.0, 5.0])  # fmt: skip
+    o = ap.parse_args()
+    a, c, veh, tp, tm = case1_context()
+    rho = float(c["tube"]["rho_min"])
+    env = case1_box(veh.envelope)
+    stored = np.load(ROOT / "tests" / "data" / "closed_tube_along_nominal.npz")
+    s6, s5 = an.segment_supports(stored["F"], stored["N"])
+    shrink = np.r_[-o.h_margin, -s6[1] * o.integral, np.zeros(4)]
+    nominal = grown(env, shrink, np.zeros(5), 1.0)
+    box = grown(nominal, np.r_[0.0, s6[1:]] * o.integral, s5 * o.integral, 1.0)
+    box = an.SchedulingBox(np.r_[env.lo[0], box.lo[1:]], np.r_[env.hi[0], box.hi[1:]],
+                           box.other_half)  # fmt: skip
+    scale = np.concatenate([tp.state_scale, tp.input_scale])
+    cols = np.concatenate([np.sqrt(np.diag(a["N"])),
+                           np.sqrt(np.einsum("ij,jk,ik->i", a["F"], a["N"], a["F"]))])  # fmt: skip
+    t0 = time.time()
+    nv = an.nominal_vertices(box, veh, tm, dict(PAPER_UNCERTAINTY), rho, c["Ts"],
+                             c["plant_substeps"], scale, o.k, a["w_max"], cols,
+                             hessians=False)  # fmt: skip
+    A, B = nv.vertices()
+    A8, B8, Arh = A[:, 1:, 1:], B[:, 1:, :], np.abs(A[:, 1:, 0]).max(axis=0)
+    Dx8 = tp.state_scale[1:]
+    print(f"vertex data: {A.shape[0]} vertices ({time.time() - t0:.0f} s); A_hh in "
+          f"[{A[:, 0, 0].min():.6f}, {A[:, 0, 0].max():.6f}]", flush=True)  # fmt: skip
+    room = input_room(veh, rho_f=rho)
+    W8 = a["w_max"][1:] * o.w0
+    for it in range(o.iterations):
+        t1 = time.time()
+        try:
+            tube = design_tube(A8, B8, W8, Dx8, tp.input_scale, room, (o.lam,),
+                               w_ref=a["w_max"][1:], active=96)  # fmt: skip
+        except DesignError as exc:
+            print(f"iteration {it}: tube LMI infeasible ({exc})")
+            return
+        F8, N8 = tube.F, tube.N
+        step = max(np.sqrt((A[i, 0, 1:] + B[i, 0] @ F8) @ N8 @ (A[i, 0, 1:] + B[i, 0] @ F8))
+                   for i in range(A.shape[0]))  # fmt: skip
+        H = o.moves * step
+        for _ in range(5):  # H holds the h row's own disturbance, which grows with H
+            par, interp, s_lo, s_oth = product_bound(nv, F8, N8, H)
+            H = o.moves * (step + par[0] + interp[0])
+        lo, hi, oth = box.margin_to(nominal)
+        short = np.r_[lo - s_lo, hi - s_lo, oth - s_oth]
+        need8 = par[1:] + interp[1:] + Arh * H
+        ratio = need8 / W8
+        print(f"iteration {it} ({time.time() - t1:.0f} s): tightening {tube.tightening[0]:.4f}"
+              f" / {np.degrees(tube.tightening[1]):.3f} deg, alpha support "
+              f"{np.degrees(np.sqrt(N8[1, 1])):.4f} deg, H = {H:.1f} ft (step {step:.3f} ft, "
+              f"w_h {par[0] + interp[0]:.3f} ft)\n  bound / W_8 (V ... eta_2_dot): "
+              + " ".join(f"{r:.3f}" for r in ratio)
+              + "\n    of which e_h: " + " ".join(f"{v:.3f}" for v in Arh * H / W8)
+              + f"\n  box reach beyond nominal + tube: smallest {short.min():+.4g}",
+              flush=True)  # fmt: skip
+        if short.min() < 0:
+            print("  the box does not hold nominal + tube: diverges")
+            return
+        if np.all(ratio <= 1.0):
+            level, _ = worst_level(A8, B8, F8, N8, W8)
+            print(f"closed: slack per row {np.array2string(1 - ratio, precision=3)}; exact "
+                  f"worst one-step level {level:.6f}; Z_8 supports V {np.sqrt(N8[0, 0]):.3f} "
+                  f"ft/s, theta {np.degrees(np.sqrt(N8[2, 2])):.4f} deg, q "
+                  f"{np.degrees(np.sqrt(N8[3, 3])):.4f} deg/s")  # fmt: skip
+            if o.save:
+                np.savez(o.save, W=W8, F=F8, N=N8, H=H, moves=o.moves, lam=tube.lam,
+                         w_design=a["w_max"], lo=box.lo, hi=box.hi, other_half=box.other_half,
+                         nominal_lo=nominal.lo, nominal_hi=nominal.hi,
+                         nominal_other_half=nominal.other_half, k=o.k, rho_min=rho,
+                         col_scale=cols, bound=need8)  # fmt: skip
+                print(f"closed pair written to {o.save}", flush=True)
+            onset(o, nv, nominal, veh, tm, c, rho, scale, a["w_max"], cols, F8, N8, W8, H, tube.lam)
+            return
+        W8 = np.maximum(W8, o.grow * need8)
+    print("not closed within the iterations")
+
+
+def onset(o, nv, nominal, veh, tm, c, rho, scale, row_scale, cols, F8, N8, W8, H, lam):
+    """The onset of --loss against the closed pair, and the pair scaled by --scales."""
+    metric = np.zeros((9, 9))
+    metric[0, 0], metric[1:, 1:] = H**2, N8
+    op = an.onset_pulse(nominal, veh, tm, dict(PAPER_UNCERTAINTY), 1.0 - o.loss, c["Ts"],
+                        c["plant_substeps"], metric, g=1, interior=4096)  # fmt: skip
+    J8 = op.jumps[:, 1:]
+    jz = float(np.sqrt(np.einsum("si,ij,sj->s", J8, np.linalg.inv(N8), J8).max()))
+    slow = np.sqrt(1.0 - lam)
+    print(f"onset of a {100 * o.loss:g} % loss: ||J||_Z8 up to {jz:.3f} (h part of the jump "
+          f"up to {np.abs(op.jumps[:, 0]).max():.4f} ft); needs s >= "
+          f"{1 + jz / (o.gamma - slow):.2f} (gamma {o.gamma:g}), {1 + jz / (1 - slow):.2f} "
+          "(one-step estimate)", flush=True)  # fmt: skip
+    for sc in o.scales:
+        _, _, s_lo, s_oth = product_bound(nv, F8, N8, H)
+        x = 1.01 * sc
+        lo = np.r_[nv.box.lo[0], nominal.lo[1:] - x * s_lo[1:]]
+        hi = np.r_[nv.box.hi[0], nominal.hi[1:] + x * s_lo[1:]]
+        box = an.SchedulingBox(lo, hi, nominal.other_half + x * s_oth)
+        nv_s = an.nominal_vertices(box, veh, tm, dict(PAPER_UNCERTAINTY), rho, c["Ts"],
+                                   c["plant_substeps"], scale, o.k, row_scale, cols,
+                                   hessians=False)  # fmt: skip
+        A, B = nv_s.vertices()
+        step = max(np.sqrt((A[i, 0, 1:] + B[i, 0] @ F8) @ (sc * sc * N8)
+                           @ (A[i, 0, 1:] + B[i, 0] @ F8)) for i in range(A.shape[0]))  # fmt: skip
+        Hs = o.moves * step
+        for _ in range(5):
+            par, interp, _, _ = product_bound(nv_s, F8, sc * sc * N8, Hs)
+            Hs = o.moves * (step + par[0] + interp[0])
+        need8 = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * Hs
+        level, _ = worst_level(A[:, 1:, 1:], B[:, 1:, :], F8, sc * sc * N8, sc * W8)
+        ratio = need8 / (sc * W8)
+        print(f"s = {sc:g}: worst level {level:.5f}; H {Hs:.1f} ft; bound / (s W_8) "
+              + " ".join(f"{r:.3f}" for r in ratio)
+              + ("  closed" if level <= 1 and np.all(ratio <= 1) else "  NOT closed"),
+              flush=True)  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
