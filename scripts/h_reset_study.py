@@ -55,6 +55,34 @@ def product_bound(nv, F8, N8, H):
     return par, interp, np.concatenate([[H], sZ8[:3], sF]), sZ8[3:]
 
 
+def eight_state_bound(nv, A, B, F8, N8, moves):
+    """H, the h row's step, and W_8's need (8,) with the product-set supports.
+
+    H = moves (step + w_h(H)) is solved by iteration to its fixed point (w_h grows with
+    H, weakly); step is the largest support over Z_8 of the h row's increment
+    a_h e_8 + b_h F e_8 over the vertices (A, B).
+
+    Raises
+    ------
+    RuntimeError
+        If the iteration for H does not converge (the h row's own disturbance grows
+        with H as fast as the reset allows).
+    """
+    c = A[:, 0, 1:] + B[:, 0] @ F8  # (R, 8)
+    step = float(np.sqrt(np.einsum("ri,ij,rj->r", c, N8, c)).max())
+    H = moves * step
+    for _ in range(100):
+        par, interp, s_lo, s_oth = product_bound(nv, F8, N8, H)
+        H_new = moves * (step + par[0] + interp[0])
+        if abs(H_new - H) <= 1e-12 * H_new:
+            break
+        H = H_new
+    else:
+        raise RuntimeError(f"the altitude bound H does not converge ({H:.4g} ft)")
+    need8 = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H_new
+    return H_new, step, par[0] + interp[0], need8, s_lo, s_oth
+
+
 def main():
     """Run the study of the module docstring."""
     ap = closure_options(__doc__, 5, 0.15, 22.0)
@@ -83,7 +111,7 @@ def main():
                              c["plant_substeps"], scale, o.k, a["w_max"], cols,
                              hessians=False)  # fmt: skip
     A, B = nv.vertices()
-    A8, B8, Arh = A[:, 1:, 1:], B[:, 1:, :], np.abs(A[:, 1:, 0]).max(axis=0)
+    A8, B8, Arh = A[:, 1:, 1:], B[:, 1:, :], np.abs(A[:, 1:, 0]).max(axis=0)  # Arh: e_h coupling
     Dx8 = tp.state_scale[1:]
     print(f"vertex data: {A.shape[0]} vertices ({time.time() - t0:.0f} s); A_hh in "
           f"[{A[:, 0, 0].min():.6f}, {A[:, 0, 0].max():.6f}]", flush=True)  # fmt: skip
@@ -98,20 +126,14 @@ def main():
             print(f"iteration {it}: tube LMI infeasible ({exc})")
             return
         F8, N8 = tube.F, tube.N
-        step = max(np.sqrt((A[i, 0, 1:] + B[i, 0] @ F8) @ N8 @ (A[i, 0, 1:] + B[i, 0] @ F8))
-                   for i in range(A.shape[0]))  # fmt: skip
-        H = o.moves * step
-        for _ in range(5):  # H holds the h row's own disturbance, which grows with H
-            par, interp, s_lo, s_oth = product_bound(nv, F8, N8, H)
-            H = o.moves * (step + par[0] + interp[0])
+        H, step, w_h, need8, s_lo, s_oth = eight_state_bound(nv, A, B, F8, N8, o.moves)
         lo, hi, oth = box.margin_to(nominal)
         short = np.r_[lo - s_lo, hi - s_lo, oth - s_oth]
-        need8 = par[1:] + interp[1:] + Arh * H
         ratio = need8 / W8
         print(f"iteration {it} ({time.time() - t1:.0f} s): tightening {tube.tightening[0]:.4f}"
               f" / {np.degrees(tube.tightening[1]):.3f} deg, alpha support "
               f"{np.degrees(np.sqrt(N8[1, 1])):.4f} deg, H = {H:.1f} ft (step {step:.3f} ft, "
-              f"w_h {par[0] + interp[0]:.3f} ft)\n  bound / W_8 (V ... eta_2_dot): "
+              f"w_h {w_h:.3f} ft)\n  bound / W_8 (V ... eta_2_dot): "
               + " ".join(f"{r:.3f}" for r in ratio)
               + "\n    of which e_h: " + " ".join(f"{v:.3f}" for v in Arh * H / W8)
               + f"\n  box reach beyond nominal + tube: smallest {short.min():+.4g}",
@@ -151,8 +173,8 @@ def onset(o, nv, nominal, veh, tm, c, rho, scale, row_scale, cols, F8, N8, W8, H
           f"up to {np.abs(op.jumps[:, 0]).max():.4f} ft); needs s >= "
           f"{1 + jz / (o.gamma - slow):.2f} (gamma {o.gamma:g}), {1 + jz / (1 - slow):.2f} "
           "(one-step estimate)", flush=True)  # fmt: skip
+    _, _, s_lo, s_oth = product_bound(nv, F8, N8, H)
     for sc in o.scales:
-        _, _, s_lo, s_oth = product_bound(nv, F8, N8, H)
         x = 1.01 * sc
         lo = np.r_[nv.box.lo[0], nominal.lo[1:] - x * s_lo[1:]]
         hi = np.r_[nv.box.hi[0], nominal.hi[1:] + x * s_lo[1:]]
@@ -161,13 +183,7 @@ def onset(o, nv, nominal, veh, tm, c, rho, scale, row_scale, cols, F8, N8, W8, H
                                    c["plant_substeps"], scale, o.k, row_scale, cols,
                                    hessians=False)  # fmt: skip
         A, B = nv_s.vertices()
-        step = max(np.sqrt((A[i, 0, 1:] + B[i, 0] @ F8) @ (sc * sc * N8)
-                           @ (A[i, 0, 1:] + B[i, 0] @ F8)) for i in range(A.shape[0]))  # fmt: skip
-        Hs = o.moves * step
-        for _ in range(5):
-            par, interp, _, _ = product_bound(nv_s, F8, sc * sc * N8, Hs)
-            Hs = o.moves * (step + par[0] + interp[0])
-        need8 = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * Hs
+        Hs, _, _, need8, _, _ = eight_state_bound(nv_s, A, B, F8, sc * sc * N8, o.moves)
         level, _ = worst_level(A[:, 1:, 1:], B[:, 1:, :], F8, sc * sc * N8, sc * W8)
         ratio = need8 / (sc * W8)
         print(f"s = {sc:g}: worst level {level:.5f}; H {Hs:.1f} ft; bound / (s W_8) "

@@ -1,6 +1,7 @@
 """Tube design: F (LMI 24), ellipsoidal RPI Z, the paper's box LP, and failing certificates."""
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
@@ -161,8 +162,7 @@ def test_pulse_generators_enter_the_certificate(tube, pulse_tube):
     level, where = worst_level(A, B, pulse_tube.F, pulse_tube.N, W, pulse=PULSE)
     assert level <= 1.0 and level > 0.9  # the LMI leaves at most its strictness margin
     assert len(where[1]) == 3
-    ws = W
-    budget = pulse_tube.mu @ ws**2 + pulse_tube.mu_pulse.sum()
+    budget = pulse_tube.mu @ W**2 + pulse_tube.mu_pulse.sum()
     assert budget <= 1.0 - pulse_tube.lam + 1e-9 and pulse_tube.mu_pulse[0] > 0.0
     plain, _ = worst_level(A, B, tube.F, tube.N, W, pulse=PULSE)
     assert plain > 1.5
@@ -173,7 +173,7 @@ def test_pulse_generators_enter_the_certificate(tube, pulse_tube):
     worst = 0.0
     for i in range(2):
         Acl = A[i] + B[i] @ pulse_tube.F
-        for s in ([1, 1, 1], [1, -1, -1], [-1, 1, 1], [-1, -1, 1], [1, 1, -1]):
+        for s in itertools.product((-1.0, 1.0), repeat=3):
             ep = Acl @ e + (np.array(s[:2]) * W + s[2] * PULSE[0])[:, None]
             worst = max(
                 worst, float(np.max(np.einsum("in,ij,jn->n", ep, np.linalg.inv(pulse_tube.N), ep)))
