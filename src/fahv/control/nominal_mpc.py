@@ -113,6 +113,10 @@ MPC_SECTION_FIELDS = (
           "LPV model, eq. 12) or 'cm' (the nonlinear CM of the nominal vehicle, eq. 1-3, so "
           "that the tube error is linearised along the nominal, not at the scheduling trim)",
           choices=("lpv", "cm"), default="lpv"),
+    Field("h_reset", "bool", "reset the nominal's altitude to the measured one at every "
+          "re-plan (before the QP), so that the altitude error e_h = h - h_r - h_n returns to "
+          "0 every M steps and the tube need not hold the kinematic integrator h "
+          "(docs/control_design.md, 'The altitude reset')", default=False),
 )  # fmt: skip
 
 
@@ -151,6 +155,9 @@ class MPCSettings:
         the jump between consecutive moves of the plan and, at a re-plan, on the jump from
         the nominal input applied at the previous fast step (:meth:`TrackingMPC.solve`);
         inf (the default, ``mpc.du_max`` 0): no rate rows.
+    h_reset : bool
+        Reset the nominal's altitude to the measured one at every re-plan
+        (:class:`TrackingMPCNominal`).
     """
 
     M: int
@@ -164,6 +171,7 @@ class MPCSettings:
     fine_moves: int = 2
     nominal_model: str = "lpv"
     du_max: np.ndarray = dataclasses.field(default_factory=lambda: np.full(2, math.inf))
+    h_reset: bool = False
 
     @property
     def has_rate_rows(self) -> bool:
@@ -182,6 +190,7 @@ class MPCSettings:
             np.radians(np.broadcast_to(np.asarray(m["att_max"], float), (2,))).copy(),
             nominal_model=str(m.get("nominal_model", "lpv")),
             du_max=rate_limits(m.get("du_max", (0.0, 0.0))),
+            h_reset=bool(m.get("h_reset", False)),
         )  # fmt: skip
 
 
@@ -900,6 +909,13 @@ class TrackingMPCNominal(NominalSource):
     must hold no longer grows with the nominal's distance from the trim
     (docs/control_design.md, "The error along the nominal").
 
+    With ``mpc.h_reset`` the nominal's altitude is set to the measured one at every
+    re-plan, before the QP: the altitude error e_h returns to 0 every M steps, so that
+    |e_h| is bounded by M steps of its increment and the tube can be designed on the
+    eight states after h (docs/control_design.md, "The altitude reset"). The QP plans
+    from the reset nominal; its rows do not depend on h but through the trim map's
+    slope in h, which the artificial set point follows.
+
     For an 11-state (ECM) design the estimate works in ECM coordinates: a replica of
     the notch_filter node's filter on the same q samples gives q' and x_q (eq. 43).
 
@@ -979,6 +995,7 @@ class TrackingMPCNominal(NominalSource):
             self.TRX[b], self.TRU[b] = tm(*self.TH[b])
         self.XN = np.stack([np.asarray(r["x0"], float) for r in runs])
         self.nominal_cm = st.nominal_model == "cm"
+        self.h_reset = st.h_reset
         if self.nominal_cm:
             if n != 9:
                 raise RunError(
@@ -1102,6 +1119,9 @@ class TrackingMPCNominal(NominalSource):
         # the initial trim: no plan yet, u = u_r + K (x_n - x_s))
         k0 = self.k_first_plan
         if self.k == k0 or (self.k > k0 and self.k % self.M == 0):
+            if self.h_reset:  # the nominal's altitude to the measured one (e_h = 0)
+                alive = self.lanes.alive
+                self.XN[alive, 0] = np.asarray(x, float)[alive, 0]
             moved = []
             for b in np.flatnonzero(self.lanes.alive):
                 try:

@@ -100,7 +100,9 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     Tracking errors are against the case command. Flexible RMS values are over
     t >= t_fault (the whole run without fault); ``t_fault_s`` is the onset within the
     run (NaN: no fault within the run, so the "after fault" values are over the whole
-    run).
+    run). ``tube_error_h_max_ft`` is the largest altitude part of the tube error,
+    |h - h_r - h_n| (with ``mpc.h_reset`` it returns to 0 at every re-plan; NaN
+    without a tube).
     """
     t, x = run.t, run.x
     if t.size == 0:
@@ -159,6 +161,9 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
         if np.all(np.isfinite(lvl))
         else math.nan,
         "tube_level_max": float(np.nanmax(lvl)) if np.any(np.isfinite(lvl)) else math.nan,
+        "tube_error_h_max_ft": float(np.abs(x[:, H] - run.x_r[:, H] - run.x_n[:, H]).max())
+        if np.all(np.isfinite(lvl))
+        else math.nan,
         **(lmi if run.lmi_counts.any() else {}),
         **(qp if run.qp_counts.any() else {}),
     }

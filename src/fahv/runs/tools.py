@@ -60,6 +60,7 @@ METRIC_ROWS = (
     ("input_limit_violations", "steps with a command beyond limits", "{}"),
     ("tube_fraction_inside", "fraction of steps with e in Z", "{:.4f}"),
     ("tube_level_max", "max e' Z^-1 e", "{:.4f}"),
+    ("tube_error_h_max_ft", "max |e_h| (altitude part of the tube error) [ft]", "{:.3f}"),
     ("rmpc_lmi_solves", "RMPC online LMI solves", "{}"),
     ("rmpc_lmi_fallback", "RMPC online solves not cost-optimal", "{}"),
     ("rmpc_lmi_failed", "RMPC steps outside its largest ellipsoid", "{}"),
