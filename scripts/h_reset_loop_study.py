@@ -18,7 +18,8 @@ assumes, measured along the run:
 
 Usage (after `fahv design offline_design/case1.yaml`):
     .venv/bin/python scripts/h_reset_loop_study.py [--rates P:E] [--losses L,...]
-        [--onsets T,...] [--corners C] [--duration S] [--no-reset]
+        [--onsets T,...] [--corners C] [--corner-ids I,...] [--duration S] [--no-reset]
+        [--att-max DEG]
 """
 
 import argparse
@@ -30,7 +31,7 @@ from along_nominal_study import ROOT, case1_context
 
 from fahv.design.along_nominal import SchedulingBox
 from fahv.design.artefacts import load_design
-from fahv.loop.params import _flat
+from fahv.loop.params import flat_parameter
 from fahv.loop.simulate import simulate
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.runs.metrics import metrics
@@ -52,8 +53,11 @@ def pair_overrides(pair: dict, veh, rates, reset: bool) -> dict:
     t = np.sqrt(np.einsum("ij,jk,ik->i", pair["F"], pair["N"], pair["F"]))
     lo, hi = veh.limits.u_min + t, veh.limits.u_max - t
     mpc = {"mpc.nominal_model": "cm", "mpc.h_reset": reset, "mpc.du_max": list(rates),
-           **_flat("u_lo", lo), **_flat("u_hi", hi)}  # fmt: skip
-    return {"tube_mpc": {**_flat("F", F), **_flat("N", N)}, "nominal_trajectory": mpc}
+           **flat_parameter("u_lo", lo), **flat_parameter("u_hi", hi)}  # fmt: skip
+    return {
+        "tube_mpc": {**flat_parameter("F", F), **flat_parameter("N", N)},
+        "nominal_trajectory": mpc,
+    }
 
 
 def assumption_figures(run, pair: dict, tm) -> dict:
@@ -82,16 +86,21 @@ def assumption_figures(run, pair: dict, tm) -> dict:
     return {"l8": l8, "eh": eh, "reach": np.r_[reach6, reach5]}
 
 
-def corner_parameters(veh, n: int) -> list[dict]:
-    """The case's draw and n corners of the sec. 5.1 box (plant parameter overrides)."""
+def corner_parameters(veh, n: int, ids=()) -> list[tuple[str, dict]]:
+    """The case's draw, then n corners of the sec. 5.1 box and the corners ``ids``.
+
+    The n corners come in a fixed random order; ``ids`` index the corners in
+    :func:`itertools.product` order of the sorted parameter names (-1 first). Returns
+    (label, plant parameter overrides) per vehicle.
+    """
     names = sorted(PAPER_UNCERTAINTY)
     corners = list(itertools.product((-1.0, 1.0), repeat=len(names)))
-    rng = np.random.default_rng(7)
-    pick = rng.choice(len(corners), size=n, replace=False) if n else []
-    out = [{}]
-    for i in pick:
-        out.append({f"params.{k}": float(getattr(veh.params, k) * (1.0 + c * PAPER_UNCERTAINTY[k]))
-                    for k, c in zip(names, corners[i], strict=True)})  # fmt: skip
+    order = np.random.default_rng(7).permutation(len(corners))
+    out = [("case", {})]
+    for i in [*order[:n], *ids]:
+        out.append((f"corner {i}", {
+            f"params.{k}": float(getattr(veh.params, k) * (1.0 + c * PAPER_UNCERTAINTY[k]))
+            for k, c in zip(names, corners[i], strict=True)}))  # fmt: skip
     return out
 
 
@@ -102,20 +111,28 @@ def main():
     ap.add_argument("--losses", default="0.1")
     ap.add_argument("--onsets", default="100")
     ap.add_argument("--corners", type=int, default=0)
+    ap.add_argument("--corner-ids", default="")
     ap.add_argument("--duration", type=float, default=0.0)
     ap.add_argument("--no-reset", action="store_true")
+    ap.add_argument("--att-max", type=float, default=0.0)
     o = ap.parse_args()
     _, c, veh, _, tm = case1_context()
     design = load_design(ROOT / "offline_design" / "artefacts" / "case1")
     pair = dict(np.load(PAIR))
     p, e = (float(v) for v in o.rates.split(":"))
     base = pair_overrides(pair, veh, (p, e), not o.no_reset)
-    print(f"pair: H {float(pair['H']):.2f} ft, tightening "
-          f"{np.sqrt(pair['F'][0] @ pair['N'] @ pair['F'][0]):.4f} / "
-          f"{np.degrees(np.sqrt(pair['F'][1] @ pair['N'] @ pair['F'][1])):.3f} deg; rates "
-          f"{p:g} / {e:g} deg per move; reset {'on' if not o.no_reset else 'OFF'}", flush=True)
+    if o.att_max > 0.0:  # the QP's attitude rows [deg] (the case's: 0.40)
+        base["nominal_trajectory"]["mpc.att_max"] = [o.att_max, o.att_max]
+    print(
+        f"pair: H {float(pair['H']):.2f} ft, tightening "
+        f"{np.sqrt(pair['F'][0] @ pair['N'] @ pair['F'][0]):.4f} / "
+        f"{np.degrees(np.sqrt(pair['F'][1] @ pair['N'] @ pair['F'][1])):.3f} deg; rates "
+        f"{p:g} / {e:g} deg per move; reset {'on' if not o.no_reset else 'OFF'}",
+        flush=True,
+    )
     dur = o.duration or None
-    for pi, plant in enumerate(corner_parameters(veh, o.corners)):
+    ids = [int(v) for v in o.corner_ids.split(",") if v]
+    for label, plant in corner_parameters(veh, o.corners, ids):
         for loss, onset in itertools.product(
             (float(v) for v in o.losses.split(",")), (float(v) for v in o.onsets.split(","))
         ):
@@ -130,7 +147,7 @@ def main():
             pre = run.t < onset
             post = ~pre
             qp = run.qp_counts.tolist()
-            print(f"vehicle {'case' if not plant else f'corner {pi}'}, loss {100 * loss:g} % at "
+            print(f"vehicle {label}, loss {100 * loss:g} % at "
                   f"{onset:g} s ({time.time() - t0:.0f} s): settling {m['settling_time_h_s']:.1f}"
                   f" / {m['settling_time_V_s']:.1f} s; end {m['h_err_final_ft']:+.2f} ft "
                   f"{m['V_err_final_fps']:+.2f} ft/s; attitude {m['alpha_err_max_deg']:.3f} / "

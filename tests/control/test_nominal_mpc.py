@@ -435,13 +435,18 @@ def test_altitude_reset_sets_the_nominal_h_to_the_measured_one_at_each_replan(de
 
 
 def test_case1_with_the_altitude_reset_tracks_and_every_replan_is_accepted(design):
-    """Quick Case 1, 90 s, nominal on the nonlinear CM with the altitude reset: every
+    """Quick Case 1, 90 s, the 10 % loss at 30 s, nominal on the nonlinear CM with the
+    altitude reset: every
     re-plan after a reset is accepted by the QP itself (no recovery, no fallback), the
     loop settles within 10 ft / 2 ft/s after 60 s with the attitude within 0.5 deg, the
     altitude error e_h is 0 at every re-plan step (1, 25, 50, ...) and below 0.5 ft
-    between them (measured 0.13 ft: the estimate takes the h residual too)."""
-    ov = {"mpc.nominal_model": "cm", "mpc.h_reset": True}
-    run = simulate(design, "tube_mpc", duration=90.0, overrides={"nominal_trajectory": ov})
+    between them (measured 0.13 ft: the estimate takes the h residual too), and the loop
+    ends on the command after the loss (the QP's steady-state shift from the scheduled
+    model's residual: with the nominal CM's residual in it this last assertion fails,
+    checked; the full Case 1 then ended 0.16 ft / 0.28 ft/s off)."""
+    ov = {"nominal_trajectory": {"mpc.nominal_model": "cm", "mpc.h_reset": True},
+          "fault_injector": {"t_onset": 30.0}}  # fmt: skip
+    run = simulate(design, "tube_mpc", duration=90.0, overrides=ov)
     m = metrics(run, load_vehicle().limits)
     late = run.t >= 60.0
     assert np.max(np.abs(run.x[late, 0] - run.h_c[late])) <= 10.0
@@ -452,3 +457,4 @@ def test_case1_with_the_altitude_reset_tracks_and_every_replan_is_accepted(desig
     replans = np.r_[1, np.arange(25, run.t.size, 25)]
     assert np.abs(e_h[replans]).max() <= 1e-9 * run.x[0, 0]
     assert 0.01 <= m["tube_error_h_max_ft"] <= 0.5
+    assert abs(m["h_err_final_ft"]) <= 0.02 and abs(m["V_err_final_fps"]) <= 0.02

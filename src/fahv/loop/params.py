@@ -188,8 +188,13 @@ def validate(node: str, values: dict) -> dict:
     return out
 
 
-def _flat(name: str, value) -> dict:
-    """``{name: value}``; an array becomes ``{name: flat list, name_shape: shape}``."""
+def flat_parameter(name: str, value) -> dict:
+    """A node parameter as the parameter files hold it: ``{name: value}``.
+
+    An array (any shape) becomes ``{name: flat list, name_shape: shape}`` (how F, N,
+    u_lo, ... reach the nodes; e.g. for ``simulate(..., overrides=...)``); other values
+    are kept as given. Raises nothing.
+    """
     if isinstance(value, np.ndarray):
         arr = np.asarray(value, float)
         return {name: arr.ravel().tolist(), f"{name}_shape": list(arr.shape)}
@@ -230,7 +235,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     n = a["A"].shape[1]
 
     def mat(name, arr=None):
-        return _flat(name, np.asarray(a[name] if arr is None else arr, float))
+        return flat_parameter(name, np.asarray(a[name] if arr is None else arr, float))
 
     common = {
         "case": c["name"],
@@ -256,7 +261,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     fault.update({p.name: f[p.name] for p in FAULTS[f["kind"]].parameters})
     controller = {**common, "law": law.name, "tau": tau, **mat("F"), **mat("N")}
     for name, value in law.node_values(a, c).items():
-        controller.update(_flat(name, value))
+        controller.update(flat_parameter(name, value))
     return {
         "plant": {
             **common,
