@@ -19,7 +19,9 @@ assumes, measured along the run:
 Usage (after `fahv design offline_design/case1.yaml`):
     .venv/bin/python scripts/h_reset_loop_study.py [--rates P:E] [--losses L,...]
         [--onsets T,...] [--corners C] [--corner-ids I,...] [--duration S] [--no-reset]
-        [--att-max DEG]
+        [--att-max DEG] [--pair FILE]
+--pair: another eight-state pair (``scripts/h_reset_study.py --save``); the stored one
+by default.
 """
 
 import argparse
@@ -115,10 +117,11 @@ def main():
     ap.add_argument("--duration", type=float, default=0.0)
     ap.add_argument("--no-reset", action="store_true")
     ap.add_argument("--att-max", type=float, default=0.0)
+    ap.add_argument("--pair", default=str(PAIR))
     o = ap.parse_args()
     _, c, veh, _, tm = case1_context()
     design = load_design(ROOT / "offline_design" / "artefacts" / "case1")
-    pair = dict(np.load(PAIR))
+    pair = dict(np.load(o.pair))
     p, e = (float(v) for v in o.rates.split(":"))
     base = pair_overrides(pair, veh, (p, e), not o.no_reset)
     if o.att_max > 0.0:  # the QP's attitude rows [deg] (the case's: 0.40)

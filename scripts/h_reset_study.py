@@ -23,7 +23,10 @@ Usage (after `fahv design offline_design/case1.yaml`):
 --save FILE writes the closed pair (and its boxes) for tests/design/test_along_nominal.py.
 --integral X: the box is the nominal ranges grown by X times the supports of the stored
 pair along the nominal (as in along_nominal_study.py); --h-margin: the nominal's h range
-is the envelope shrunk by this [ft], the box's h range the envelope.
+is the envelope shrunk by this [ft], the box's h range the envelope. --resolve S: start
+from the stored eight-state pair instead, over its nominal box grown for S times its
+tube, and re-solve the iteration there from S times its W_8 (a pair S times the size,
+sought rather than scaled).
 """
 
 import time
@@ -52,7 +55,7 @@ def product_bound(nv, F8, N8, H):
                                                         R[..., 1:]))  # fmt: skip
         par = np.maximum(par, sup.max(axis=(0, 1)))
     interp = nv.interp @ np.concatenate([[H], sZ8, sF])
-    return par, interp, np.concatenate([[H], sZ8[:3], sF]), sZ8[3:]
+    return par, interp, *pair_supports(F8, N8, H)
 
 
 def eight_state_bound(nv, A, B, F8, N8, moves):
@@ -83,40 +86,16 @@ def eight_state_bound(nv, A, B, F8, N8, moves):
     return H_new, step, par[0] + interp[0], need8, s_lo, s_oth
 
 
-def main():
-    """Run the study of the module docstring."""
-    ap = closure_options(__doc__, 5, 0.15, 22.0)
-    ap.add_argument("--h-margin", type=float, default=150.0)
-    ap.add_argument("--moves", type=int, default=25)
-    ap.add_argument("--loss", type=float, default=0.24)
-    ap.add_argument("--gamma", type=float, default=0.2)
-    ap.add_argument("--scales", type=lambda v: [float(x) for x in v.split(",") if x],
-                    default=[1.5, 2.0, 3.0, 5.0])  # fmt: skip
-    o = ap.parse_args()
-    a, c, veh, tp, tm = case1_context()
-    rho = float(c["tube"]["rho_min"])
-    env = case1_box(veh.envelope)
-    stored = np.load(ROOT / "tests" / "data" / "closed_tube_along_nominal.npz")
-    s6, s5 = an.segment_supports(stored["F"], stored["N"])
-    shrink = np.r_[-o.h_margin, -s6[1] * o.integral, np.zeros(4)]
-    nominal = grown(env, shrink, np.zeros(5), 1.0)
-    box = grown(nominal, np.r_[0.0, s6[1:]] * o.integral, s5 * o.integral, 1.0)
-    box = an.SchedulingBox(np.r_[env.lo[0], box.lo[1:]], np.r_[env.hi[0], box.hi[1:]],
-                           box.other_half)  # fmt: skip
-    scale = np.concatenate([tp.state_scale, tp.input_scale])
-    cols = np.concatenate([np.sqrt(np.diag(a["N"])),
-                           np.sqrt(np.einsum("ij,jk,ik->i", a["F"], a["N"], a["F"]))])  # fmt: skip
-    t0 = time.time()
-    nv = an.nominal_vertices(box, veh, tm, dict(PAPER_UNCERTAINTY), rho, c["Ts"],
-                             c["plant_substeps"], scale, o.k, a["w_max"], cols,
-                             hessians=False)  # fmt: skip
+def closure(o, a, tp, nv, nominal, room, W8):
+    """The W_8-Z_8 iteration over the vertices nv, from W8 (8,); prints each iteration.
+
+    Returns (F8, N8, W8, H, lam, need8) of the closed pair, or None if the tube LMI is
+    infeasible, the box does not hold nominal + tube, or the iterations run out.
+    """
+    box = nv.box
     A, B = nv.vertices()
     A8, B8, Arh = A[:, 1:, 1:], B[:, 1:, :], np.abs(A[:, 1:, 0]).max(axis=0)  # Arh: e_h coupling
     Dx8 = tp.state_scale[1:]
-    print(f"vertex data: {A.shape[0]} vertices ({time.time() - t0:.0f} s); A_hh in "
-          f"[{A[:, 0, 0].min():.6f}, {A[:, 0, 0].max():.6f}]", flush=True)  # fmt: skip
-    room = input_room(veh, rho_f=rho)
-    W8 = a["w_max"][1:] * o.w0
     for it in range(o.iterations):
         t1 = time.time()
         try:
@@ -124,7 +103,7 @@ def main():
                                w_ref=a["w_max"][1:], active=96)  # fmt: skip
         except DesignError as exc:
             print(f"iteration {it}: tube LMI infeasible ({exc})")
-            return
+            return None
         F8, N8 = tube.F, tube.N
         H, step, w_h, need8, s_lo, s_oth = eight_state_bound(nv, A, B, F8, N8, o.moves)
         lo, hi, oth = box.margin_to(nominal)
@@ -140,24 +119,123 @@ def main():
               flush=True)  # fmt: skip
         if short.min() < 0:
             print("  the box does not hold nominal + tube: diverges")
-            return
+            return None
         if np.all(ratio <= 1.0):
             level, _ = worst_level(A8, B8, F8, N8, W8)
             print(f"closed: slack per row {np.array2string(1 - ratio, precision=3)}; exact "
                   f"worst one-step level {level:.6f}; Z_8 supports V {np.sqrt(N8[0, 0]):.3f} "
-                  f"ft/s, theta {np.degrees(np.sqrt(N8[2, 2])):.4f} deg, q "
+                  f"ft/s, alpha {np.degrees(np.sqrt(N8[1, 1])):.4f} deg, theta "
+                  f"{np.degrees(np.sqrt(N8[2, 2])):.4f} deg, q "
                   f"{np.degrees(np.sqrt(N8[3, 3])):.4f} deg/s")  # fmt: skip
-            if o.save:
-                np.savez(o.save, W=W8, F=F8, N=N8, H=H, moves=o.moves, lam=tube.lam,
-                         w_design=a["w_max"], lo=box.lo, hi=box.hi, other_half=box.other_half,
-                         nominal_lo=nominal.lo, nominal_hi=nominal.hi,
-                         nominal_other_half=nominal.other_half, k=o.k, rho_min=rho,
-                         col_scale=cols, bound=need8)  # fmt: skip
-                print(f"closed pair written to {o.save}", flush=True)
-            onset(o, nv, nominal, veh, tm, c, rho, scale, a["w_max"], cols, F8, N8, W8, H, tube.lam)
-            return
+            if level > 1.0:
+                print("  but the exact level exceeds 1: not closed")
+                return None
+            return F8, N8, W8, H, tube.lam, need8
         W8 = np.maximum(W8, o.grow * need8)
     print("not closed within the iterations")
+    return None
+
+
+def pair_supports(F8, N8, H):
+    """Supports of the product set {|e_h| <= H} x Z_8 in the box coordinates.
+
+    Returns s_lo (6,): h, V, alpha, theta, then F Z_8 in Phi, delta_e; and s_oth (5,):
+    q and the flexible states.
+    """
+    sZ8 = np.sqrt(np.diag(N8))
+    sF = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
+    return np.concatenate([[H], sZ8[:3], sF]), sZ8[3:]
+
+
+def scaled_box(env_h, nominal, F8, N8, H, sc):
+    """The scheduling box that holds the nominal box plus sc times the pair's tube."""
+    s_lo, s_oth = pair_supports(F8, N8, H)
+    x = 1.01 * sc
+    lo = np.r_[env_h[0], nominal.lo[1:] - x * s_lo[1:]]
+    hi = np.r_[env_h[1], nominal.hi[1:] + x * s_lo[1:]]
+    return an.SchedulingBox(lo, hi, nominal.other_half + x * s_oth)
+
+
+def main():
+    """Run the study of the module docstring."""
+    ap = closure_options(__doc__, 5, 0.15, 22.0)
+    ap.add_argument("--h-margin", type=float, default=150.0)
+    ap.add_argument("--moves", type=int, default=25)
+    ap.add_argument("--loss", type=float, default=0.24)
+    ap.add_argument("--gamma", type=float, default=0.2)
+    ap.add_argument("--scales", type=lambda v: [float(x) for x in v.split(",") if x],
+                    default=[1.5, 2.0, 3.0, 5.0])  # fmt: skip
+    ap.add_argument("--resolve", type=float, default=0.0)
+    o = ap.parse_args()
+    a, c, veh, tp, tm = case1_context()
+    rho = float(c["tube"]["rho_min"])
+    scale = np.concatenate([tp.state_scale, tp.input_scale])
+    room = input_room(veh, rho_f=rho)
+    if o.resolve > 0.0:
+        return resolve(o, a, c, veh, tp, tm, rho, scale, room)
+    env = case1_box(veh.envelope)
+    stored = np.load(ROOT / "tests" / "data" / "closed_tube_along_nominal.npz")
+    s6, s5 = an.segment_supports(stored["F"], stored["N"])
+    shrink = np.r_[-o.h_margin, -s6[1] * o.integral, np.zeros(4)]
+    nominal = grown(env, shrink, np.zeros(5), 1.0)
+    box = grown(nominal, np.r_[0.0, s6[1:]] * o.integral, s5 * o.integral, 1.0)
+    box = an.SchedulingBox(np.r_[env.lo[0], box.lo[1:]], np.r_[env.hi[0], box.hi[1:]],
+                           box.other_half)  # fmt: skip
+    cols = np.concatenate([np.sqrt(np.diag(a["N"])),
+                           np.sqrt(np.einsum("ij,jk,ik->i", a["F"], a["N"], a["F"]))])  # fmt: skip
+    t0 = time.time()
+    nv = an.nominal_vertices(box, veh, tm, dict(PAPER_UNCERTAINTY), rho, c["Ts"],
+                             c["plant_substeps"], scale, o.k, a["w_max"], cols,
+                             hessians=False)  # fmt: skip
+    A, _ = nv.vertices()
+    print(f"vertex data: {A.shape[0]} vertices ({time.time() - t0:.0f} s); A_hh in "
+          f"[{A[:, 0, 0].min():.6f}, {A[:, 0, 0].max():.6f}]", flush=True)  # fmt: skip
+    pair = closure(o, a, tp, nv, nominal, room, a["w_max"][1:] * o.w0)
+    if pair is None:
+        return
+    F8, N8, W8, H, lam, need8 = pair
+    if o.save:
+        save_pair(o, a, nv.box, nominal, rho, cols, F8, N8, W8, H, lam, need8)
+    onset(o, nv, nominal, veh, tm, c, rho, scale, a["w_max"], cols, F8, N8, W8, H, lam)
+
+
+def save_pair(o, a, box, nominal, rho, cols, F8, N8, W8, H, lam, need8):
+    """Write the closed pair and its boxes to ``--save`` (for the CI tests)."""
+    np.savez(o.save, W=W8, F=F8, N=N8, H=H, moves=o.moves, lam=lam, w_design=a["w_max"],
+             lo=box.lo, hi=box.hi, other_half=box.other_half, nominal_lo=nominal.lo,
+             nominal_hi=nominal.hi, nominal_other_half=nominal.other_half, k=o.k,
+             rho_min=rho, col_scale=cols, bound=need8)  # fmt: skip
+    print(f"closed pair written to {o.save}", flush=True)
+
+
+def resolve(o, a, c, veh, tp, tm, rho, scale, room):
+    """--resolve S: the stored pair's box grown for S times its tube, the pair re-solved.
+
+    The vertices are rebuilt over the nominal box of tests/data/closed_tube_h_reset.npz
+    grown by 1.01 S times the supports of its product set; the iteration starts from S
+    times its W_8, so that a pair S times the stored one is sought rather than scaled.
+    """
+    st = dict(np.load(ROOT / "tests" / "data" / "closed_tube_h_reset.npz"))
+    nominal = an.SchedulingBox(st["nominal_lo"], st["nominal_hi"], st["nominal_other_half"])
+    box = scaled_box((st["lo"][0], st["hi"][0]), nominal, st["F"], st["N"], float(st["H"]),
+                     o.resolve)  # fmt: skip
+    t0 = time.time()
+    nv = an.nominal_vertices(box, veh, tm, dict(PAPER_UNCERTAINTY), rho, c["Ts"],
+                             c["plant_substeps"], scale, int(st["k"]), a["w_max"],
+                             st["col_scale"], hessians=False)  # fmt: skip
+    print(
+        f"vertex data over the box for {o.resolve:g} times the stored pair: "
+        f"{nv.vertices()[0].shape[0]} vertices ({time.time() - t0:.0f} s)",
+        flush=True,
+    )
+    pair = closure(o, a, tp, nv, nominal, room, o.resolve * st["W"])
+    if pair is None:
+        return
+    F8, N8, W8, H, lam, need8 = pair
+    if o.save:
+        save_pair(o, a, nv.box, nominal, rho, st["col_scale"], F8, N8, W8, H, lam, need8)
+    onset(o, nv, nominal, veh, tm, c, rho, scale, a["w_max"], st["col_scale"], F8, N8, W8, H,
+          lam)  # fmt: skip
 
 
 def onset(o, nv, nominal, veh, tm, c, rho, scale, row_scale, cols, F8, N8, W8, H, lam):
@@ -173,12 +251,8 @@ def onset(o, nv, nominal, veh, tm, c, rho, scale, row_scale, cols, F8, N8, W8, H
           f"up to {np.abs(op.jumps[:, 0]).max():.4f} ft); needs s >= "
           f"{1 + jz / (o.gamma - slow):.2f} (gamma {o.gamma:g}), {1 + jz / (1 - slow):.2f} "
           "(one-step estimate)", flush=True)  # fmt: skip
-    _, _, s_lo, s_oth = product_bound(nv, F8, N8, H)
     for sc in o.scales:
-        x = 1.01 * sc
-        lo = np.r_[nv.box.lo[0], nominal.lo[1:] - x * s_lo[1:]]
-        hi = np.r_[nv.box.hi[0], nominal.hi[1:] + x * s_lo[1:]]
-        box = an.SchedulingBox(lo, hi, nominal.other_half + x * s_oth)
+        box = scaled_box((nv.box.lo[0], nv.box.hi[0]), nominal, F8, N8, H, sc)
         nv_s = an.nominal_vertices(box, veh, tm, dict(PAPER_UNCERTAINTY), rho, c["Ts"],
                                    c["plant_substeps"], scale, o.k, row_scale, cols,
                                    hessians=False)  # fmt: skip

@@ -58,6 +58,7 @@ WORST_METRICS = (
     ("V_err_final_fps", "|V - V_c| at the end [ft/s]", abs, "V_final_fps"),
     ("settling_after_command_s", "settling after the command [s]", abs, "settling_s"),
     ("tube_level_max", "max tube level e' N^-1 e", abs, None),
+    ("tube_error_h_max_ft", "max |e_h| of the tube error [ft]", abs, None),
     ("eta_1_dot_rms_after_fault", "RMS eta_1_dot after the fault [1/s]", abs, None),
     ("delta_e_max_deg", "max delta_e [deg]", abs, None),
 )
