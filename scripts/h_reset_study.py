@@ -26,7 +26,7 @@ pair along the nominal (as in along_nominal_study.py); --h-margin: the nominal's
 is the envelope shrunk by this [ft], the box's h range the envelope. --resolve S: start
 from the stored eight-state pair instead, over its nominal box grown for S times its
 tube, and re-solve the iteration there from S times its W_8 (a pair S times the size,
-sought rather than scaled).
+sought rather than scaled); --box-scale B builds that box for B times the tube instead.
 """
 
 import time
@@ -118,7 +118,11 @@ def closure(o, a, tp, nv, nominal, room, W8):
               + f"\n  box reach beyond nominal + tube: smallest {short.min():+.4g}",
               flush=True)  # fmt: skip
         if short.min() < 0:
-            print("  the box does not hold nominal + tube: diverges")
+            names = [f"{side} {c}" for side in ("lo", "hi") for c in an.BOX_COORDINATES]
+            names += ["q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot"]
+            print("  the box does not hold nominal + tube: diverges (short in "
+                  + ", ".join(f"{n} {v:+.3g}" for n, v in zip(names, short, strict=True)
+                              if v < 0) + ")")  # fmt: skip
             return None
         if np.all(ratio <= 1.0):
             level, _ = worst_level(A8, B8, F8, N8, W8)
@@ -166,6 +170,7 @@ def main():
     ap.add_argument("--scales", type=lambda v: [float(x) for x in v.split(",") if x],
                     default=[1.5, 2.0, 3.0, 5.0])  # fmt: skip
     ap.add_argument("--resolve", type=float, default=0.0)
+    ap.add_argument("--box-scale", type=float, default=0.0)
     o = ap.parse_args()
     a, c, veh, tp, tm = case1_context()
     rho = float(c["tube"]["rho_min"])
@@ -218,7 +223,7 @@ def resolve(o, a, c, veh, tp, tm, rho, scale, room):
     st = dict(np.load(ROOT / "tests" / "data" / "closed_tube_h_reset.npz"))
     nominal = an.SchedulingBox(st["nominal_lo"], st["nominal_hi"], st["nominal_other_half"])
     box = scaled_box((st["lo"][0], st["hi"][0]), nominal, st["F"], st["N"], float(st["H"]),
-                     o.resolve)  # fmt: skip
+                     o.box_scale or o.resolve)  # fmt: skip
     t0 = time.time()
     nv = an.nominal_vertices(box, veh, tm, dict(PAPER_UNCERTAINTY), rho, c["Ts"],
                              c["plant_substeps"], scale, int(st["k"]), a["w_max"],
