@@ -29,13 +29,15 @@ import itertools
 import time
 
 import numpy as np
-from along_nominal_study import ROOT, case1_context
+from along_nominal_study import ROOT
 
 from fahv.design.along_nominal import SchedulingBox
 from fahv.design.artefacts import load_design
 from fahv.loop.params import flat_parameter
 from fahv.loop.simulate import simulate
-from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.model.trim import TrimMap
+from fahv.model.vehicle import load_vehicle
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturb
 from fahv.runs.metrics import metrics
 
 PAIR = ROOT / "tests" / "data" / "closed_tube_h_reset.npz"
@@ -100,9 +102,8 @@ def corner_parameters(veh, n: int, ids=()) -> list[tuple[str, dict]]:
     order = np.random.default_rng(7).permutation(len(corners))
     out = [("case", {})]
     for i in [*order[:n], *ids]:
-        out.append((f"corner {i}", {
-            f"params.{k}": float(getattr(veh.params, k) * (1.0 + c * PAPER_UNCERTAINTY[k]))
-            for k, c in zip(names, corners[i], strict=True)}))  # fmt: skip
+        vp = perturb(veh.params, PAPER_UNCERTAINTY, dict(zip(names, corners[i], strict=True)))
+        out.append((f"corner {i}", {f"params.{k}": float(getattr(vp, k)) for k in names}))
     return out
 
 
@@ -119,8 +120,9 @@ def main():
     ap.add_argument("--att-max", type=float, default=0.0)
     ap.add_argument("--pair", default=str(PAIR))
     o = ap.parse_args()
-    _, c, veh, _, tm = case1_context()
     design = load_design(ROOT / "offline_design" / "artefacts" / "case1")
+    a, veh = design.arrays, load_vehicle()
+    tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
     pair = dict(np.load(o.pair))
     p, e = (float(v) for v in o.rates.split(":"))
     base = pair_overrides(pair, veh, (p, e), not o.no_reset)

@@ -414,13 +414,12 @@ def test_altitude_reset_sets_the_nominal_h_to_the_measured_one_at_each_replan(de
     p = node_parameters(design, "tube_mpc")["nominal_trajectory"]
     p["mpc.nominal_model"] = model
     x0 = np.asarray(design.arrays["x0"], float)
-    u0 = np.asarray(design.arrays["u0"], float) if "u0" in design.arrays else None
     h_n = {}
     for reset in (False, True):
         p["mpc.h_reset"] = reset
         src = build_core("nominal_trajectory", p).source
         out = src.step(0, 0.0, x0[None], None)
-        u_prev = (out.u_r + out.u_n) if u0 is None else u0[None]
+        u_prev = out.u_r + out.u_n
         x1 = x0.copy()
         x1[0] += 2.5  # the plant 2.5 ft above the nominal at the first re-plan
         out = src.step(1, p["Ts"], x1[None], u_prev)
