@@ -35,129 +35,32 @@ import numpy as np
 from along_nominal_study import ROOT, case1_box, case1_context, closure_options, grown
 
 import fahv.design.along_nominal as an
+import fahv.design.eight_state as es
 from fahv.design.certificate import worst_level
 from fahv.design.feasibility import input_room
 from fahv.errors import DesignError
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
-from fahv.synthesis.feedback import design_tube
-
-
-def product_bound(nv, F8, N8, H):
-    """Parameter and interpolation parts (9,) over {|e_h| <= H} x Z_8 (F blind to e_h)."""
-    F9 = np.hstack([np.zeros((2, 1)), F8])
-    sZ8 = np.sqrt(np.diag(N8))
-    sF = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
-    par = np.zeros(9)
-    for rho in (nv.rho_min, 1.0):
-        MP = np.vstack([np.eye(9), np.array([1.0, rho])[:, None] * F9])
-        R = nv.residual @ MP  # (64, C, 9, 9)
-        sup = np.abs(R[..., 0]) * H + np.sqrt(np.einsum("scij,jk,scik->sci", R[..., 1:], N8,
-                                                        R[..., 1:]))  # fmt: skip
-        par = np.maximum(par, sup.max(axis=(0, 1)))
-    interp = nv.interp @ np.concatenate([[H], sZ8, sF])
-    return par, interp, *pair_supports(F8, N8, H)
-
-
-def eight_state_bound(nv, A, B, F8, N8, moves):
-    """H, the h row's step, and W_8's need (8,) with the product-set supports.
-
-    H = moves (step + w_h(H)) is solved by iteration to its fixed point (w_h grows with
-    H, weakly); step is the largest support over Z_8 of the h row's increment
-    a_h e_8 + b_h F e_8 over the vertices (A, B).
-
-    Raises
-    ------
-    RuntimeError
-        If the iteration for H does not converge (the h row's own disturbance grows
-        with H as fast as the reset allows).
-    """
-    c = A[:, 0, 1:] + B[:, 0] @ F8  # (R, 8)
-    step = float(np.sqrt(np.einsum("ri,ij,rj->r", c, N8, c)).max())
-    H = moves * step
-    for _ in range(100):
-        par, interp, s_lo, s_oth = product_bound(nv, F8, N8, H)
-        H_new = moves * (step + par[0] + interp[0])
-        if abs(H_new - H) <= 1e-12 * H_new:
-            break
-        H = H_new
-    else:
-        raise RuntimeError(f"the altitude bound H does not converge ({H:.4g} ft)")
-    need8 = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H_new
-    return H_new, step, par[0] + interp[0], need8, s_lo, s_oth
 
 
 def closure(o, a, tp, nv, nominal, room, W8):
-    """The W_8-Z_8 iteration over the vertices nv, from W8 (8,); prints each iteration.
+    """The W_8-Z_8 iteration (:func:`fahv.design.eight_state.close_pair`), study options.
 
-    Returns (F8, N8, W8, H, lam, need8) of the closed pair, or None if the tube LMI is
-    infeasible, the box does not hold nominal + tube, or the iterations run out.
+    Prints each iteration and the closed pair, or why it did not close (then None).
     """
-    box = nv.box
-    A, B = nv.vertices()
-    A8, B8, Arh = A[:, 1:, 1:], B[:, 1:, :], np.abs(A[:, 1:, 0]).max(axis=0)  # Arh: e_h coupling
-    Dx8 = tp.state_scale[1:]
-    for it in range(o.iterations):
-        t1 = time.time()
-        try:
-            tube = design_tube(A8, B8, W8, Dx8, tp.input_scale, room, (o.lam,),
-                               w_ref=a["w_max"][1:], active=96)  # fmt: skip
-        except DesignError as exc:
-            print(f"iteration {it}: tube LMI infeasible ({exc})")
-            return None
-        F8, N8 = tube.F, tube.N
-        H, step, w_h, need8, s_lo, s_oth = eight_state_bound(nv, A, B, F8, N8, o.moves)
-        lo, hi, oth = box.margin_to(nominal)
-        short = np.r_[lo - s_lo, hi - s_lo, oth - s_oth]
-        ratio = need8 / W8
-        print(f"iteration {it} ({time.time() - t1:.0f} s): tightening {tube.tightening[0]:.4f}"
-              f" / {np.degrees(tube.tightening[1]):.3f} deg, alpha support "
-              f"{np.degrees(np.sqrt(N8[1, 1])):.4f} deg, H = {H:.1f} ft (step {step:.3f} ft, "
-              f"w_h {w_h:.3f} ft)\n  bound / W_8 (V ... eta_2_dot): "
-              + " ".join(f"{r:.3f}" for r in ratio)
-              + "\n    of which e_h: " + " ".join(f"{v:.3f}" for v in Arh * H / W8)
-              + f"\n  box reach beyond nominal + tube: smallest {short.min():+.4g}",
-              flush=True)  # fmt: skip
-        if short.min() < 0:
-            names = [f"{side} {c}" for side in ("lo", "hi") for c in an.BOX_COORDINATES]
-            names += ["q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot"]
-            print("  the box does not hold nominal + tube: diverges (short in "
-                  + ", ".join(f"{n} {v:+.3g}" for n, v in zip(names, short, strict=True)
-                              if v < 0) + ")")  # fmt: skip
-            return None
-        if np.all(ratio <= 1.0):
-            level, _ = worst_level(A8, B8, F8, N8, W8)
-            print(f"closed: slack per row {np.array2string(1 - ratio, precision=3)}; exact "
-                  f"worst one-step level {level:.6f}; Z_8 supports V {np.sqrt(N8[0, 0]):.3f} "
-                  f"ft/s, alpha {np.degrees(np.sqrt(N8[1, 1])):.4f} deg, theta "
-                  f"{np.degrees(np.sqrt(N8[2, 2])):.4f} deg, q "
-                  f"{np.degrees(np.sqrt(N8[3, 3])):.4f} deg/s")  # fmt: skip
-            if level > 1.0:
-                print("  but the exact level exceeds 1: not closed")
-                return None
-            return F8, N8, W8, H, tube.lam, need8
-        W8 = np.maximum(W8, o.grow * need8)
-    print("not closed within the iterations")
-    return None
-
-
-def pair_supports(F8, N8, H):
-    """Supports of the product set {|e_h| <= H} x Z_8 in the box coordinates.
-
-    Returns s_lo (6,): h, V, alpha, theta, then F Z_8 in Phi, delta_e; and s_oth (5,):
-    q and the flexible states.
-    """
-    sZ8 = np.sqrt(np.diag(N8))
-    sF = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
-    return np.concatenate([[H], sZ8[:3], sF]), sZ8[3:]
-
-
-def scaled_box(env_h, nominal, F8, N8, H, sc):
-    """The scheduling box that holds the nominal box plus sc times the pair's tube."""
-    s_lo, s_oth = pair_supports(F8, N8, H)
-    x = 1.01 * sc
-    lo = np.r_[env_h[0], nominal.lo[1:] - x * s_lo[1:]]
-    hi = np.r_[env_h[1], nominal.hi[1:] + x * s_lo[1:]]
-    return an.SchedulingBox(lo, hi, nominal.other_half + x * s_oth)
+    try:
+        pair = es.close_pair(nv, nominal, W8, tp.state_scale, tp.input_scale, room, o.lam,
+                             o.moves, grow=o.grow, iterations=o.iterations, w_ref=a["w_max"],
+                             log=lambda line: print(line, flush=True))  # fmt: skip
+    except DesignError as exc:
+        print(f"not closed: {exc}")
+        return None
+    N8 = pair.N8
+    print(f"closed: slack per row {np.array2string(pair.slack, precision=3)}; exact "
+          f"worst one-step level {pair.level:.6f}; Z_8 supports V {np.sqrt(N8[0, 0]):.3f} "
+          f"ft/s, alpha {np.degrees(np.sqrt(N8[1, 1])):.4f} deg, theta "
+          f"{np.degrees(np.sqrt(N8[2, 2])):.4f} deg, q "
+          f"{np.degrees(np.sqrt(N8[3, 3])):.4f} deg/s")  # fmt: skip
+    return pair.F8, pair.N8, pair.W8, pair.H, pair.lam, pair.bound
 
 
 def main():
@@ -222,8 +125,8 @@ def resolve(o, a, c, veh, tp, tm, rho, scale, room):
     """
     st = dict(np.load(ROOT / "tests" / "data" / "closed_tube_h_reset.npz"))
     nominal = an.SchedulingBox(st["nominal_lo"], st["nominal_hi"], st["nominal_other_half"])
-    box = scaled_box((st["lo"][0], st["hi"][0]), nominal, st["F"], st["N"], float(st["H"]),
-                     o.box_scale or o.resolve)  # fmt: skip
+    box = es.box_for((st["lo"][0], st["hi"][0]), nominal, st["F"], st["N"], float(st["H"]),
+                    o.box_scale or o.resolve)  # fmt: skip
     t0 = time.time()
     nv = an.nominal_vertices(box, veh, tm, dict(PAPER_UNCERTAINTY), rho, c["Ts"],
                              c["plant_substeps"], scale, int(st["k"]), a["w_max"],
@@ -257,12 +160,13 @@ def onset(o, nv, nominal, veh, tm, c, rho, scale, row_scale, cols, F8, N8, W8, H
           f"{1 + jz / (o.gamma - slow):.2f} (gamma {o.gamma:g}), {1 + jz / (1 - slow):.2f} "
           "(one-step estimate)", flush=True)  # fmt: skip
     for sc in o.scales:
-        box = scaled_box((nv.box.lo[0], nv.box.hi[0]), nominal, F8, N8, H, sc)
+        box = es.box_for((nv.box.lo[0], nv.box.hi[0]), nominal, F8, N8, H, sc)
         nv_s = an.nominal_vertices(box, veh, tm, dict(PAPER_UNCERTAINTY), rho, c["Ts"],
                                    c["plant_substeps"], scale, o.k, row_scale, cols,
                                    hessians=False)  # fmt: skip
         A, B = nv_s.vertices()
-        Hs, _, _, need8, _, _ = eight_state_bound(nv_s, A, B, F8, sc * sc * N8, o.moves)
+        ab = es.altitude_bound(nv_s, A, B, F8, sc * sc * N8, o.moves)
+        Hs, need8 = ab.H, ab.bound
         level, _ = worst_level(A[:, 1:, 1:], B[:, 1:, :], F8, sc * sc * N8, sc * W8)
         ratio = need8 / (sc * W8)
         print(f"s = {sc:g}: worst level {level:.5f}; H {Hs:.1f} ft; bound / (s W_8) "

@@ -272,3 +272,38 @@ def test_onset_pulse_covers_fresh_jumps_and_scales_with_the_loss(design):
     expected = np.ones(9)
     expected[1] = 2.0 * (1.0 - 0.88**2) / (1.0 - 0.76**2)
     np.testing.assert_allclose(ratio, expected, rtol=0.01)
+
+
+def test_eight_state_bound_reproduces_the_stored_pair(along):
+    """fahv.design.eight_state on the stored eight-state pair's own vertex data: the
+    altitude bound H of the reset (1) and the eight rows' bound are the ones stored when
+    it closed (to 1e-6), inside W_8 with the stored slack; the box holds nominal plus the
+    product set, and a box without theta's reach is refused naming it."""
+    import fahv.design.eight_state as es
+
+    d, *_, nv = along
+    if "H" not in d:
+        pytest.skip("a nine-state pair: no altitude bound")
+    A, B = nv.vertices()
+    ab = es.altitude_bound(nv, A, B, d["F"], d["N"], int(d["moves"]))
+    ratio = " ".join(f"{v:.3f}" for v in ab.bound / d["W"])
+    print(f"H {ab.H:.4f} ft (stored {float(d['H']):.4f}), step {ab.step:.4f} ft, "
+          f"w_h {ab.w_h:.4f} ft; bound / W_8 {ratio}")  # fmt: skip
+    assert ab.H == pytest.approx(float(d["H"]), rel=1e-6)
+    np.testing.assert_allclose(ab.bound, d["bound"], rtol=1e-6)
+    assert np.all(ab.bound <= d["W"])
+    assert 0.14 < (1.0 - ab.bound / d["W"]).min() < 0.16  # the V row's slack, 15 %
+    nominal = SchedulingBox(d["nominal_lo"], d["nominal_hi"], d["nominal_other_half"])
+    assert es.box_shortfall(nv.box, nominal, d["F"], d["N"], ab.H) == {}
+    s_lo, _ = es.product_supports(d["F"], d["N"], ab.H)
+    hi = nv.box.hi.copy()
+    hi[3] = nominal.hi[3] + 0.5 * s_lo[3]
+    short = es.box_shortfall(SchedulingBox(nv.box.lo, hi, nv.box.other_half), nominal,
+                             d["F"], d["N"], ab.H)  # fmt: skip
+    assert list(short) == ["hi theta"]
+    assert short["hi theta"] == pytest.approx(0.5 * s_lo[3], rel=1e-9)
+    pair = es.EightStatePair(d["F"], d["N"], d["W"], ab.H, float(d["lam"]), ab.bound, 1.0,
+                             int(d["moves"]), ab.step, ab.w_h)  # fmt: skip
+    assert pair.F.shape == (2, 9) and np.all(pair.F[:, 0] == 0.0)
+    assert pair.N[0, 0] == pytest.approx(ab.H**2) and np.all(pair.N[0, 1:] == 0.0)
+    np.testing.assert_allclose(np.degrees(pair.tightening[1]), 2.87, atol=0.005)

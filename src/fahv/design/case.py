@@ -59,6 +59,72 @@ COMMAND = (
           when=lambda r: lookup(r, "command.kind") == "ramp", when_text="command.kind is ramp"),
 )  # fmt: skip
 
+#: Forms of the tube (``tube.form``).
+TUBE_FORMS = ("vertices", "eight_state")
+
+
+def _eight_state(root) -> bool:
+    return lookup(root, "tube.form") == "eight_state"
+
+
+#: The eight-state tube (:mod:`fahv.design.eight_state`): vertex data, the nominal box
+#: (the ranges of the nominal the certificate covers), the scheduling box beyond it and
+#: the W_8-Z_8 iteration. Defaults: the pair of docs/control_design.md.
+EIGHT_STATE = (
+    Field("k", "int", "parameter directions the vertices carry (64 box corners x 2^k x 2 "
+          "rho_f vertices)", lo=1, hi=8, default=5),
+    Field("lam", "float", "contraction factor of the eight-state tube LMI", lo=0.0, hi=1.0,
+          lo_open=True, hi_open=True, default=0.995, equation="LMI (24)"),
+    Field("w0", "float", "W_8 the iteration starts from, as a fraction of the sampled W",
+          lo=0.0, hi=100.0, lo_open=True, default=0.15, equation="eq. (19)"),
+    Field("grow", "float", "W_8 <- max(W_8, grow x bound) between iterations", lo=1.0,
+          hi=2.0, default=1.05),
+    Field("iterations", "int", "most W_8-Z_8 iterations", lo=1, hi=50, default=6),
+    Field("h_margin", "float", "nominal box: the nominal's h range is the envelope's shrunk "
+          "by this on each side (the scheduling box spans the envelope)", unit="ft",
+          lo=0.0, default=150.0),
+    Field("V_margin", "float", "nominal box: the nominal's V range is the envelope's shrunk "
+          "by this on each side", unit="ft/s", lo=0.0, default=4.98),
+    Field("attitude", "float", "nominal box: half-width of the nominal's alpha and theta "
+          "deviation from the trim at its own (h, V); at least mpc.att_max", unit="deg",
+          lo=0.0, lo_open=True, hi=5.0, default=0.4),
+    Field("Phi", "floats", "nominal box: range of the nominal's applied Phi minus the "
+          "trim's", lo=-2.0, hi=2.0, length=2, default=(-0.12, 1.1)),
+    Field("delta_e", "floats", "nominal box: range of the nominal's applied delta_e minus "
+          "the trim's", unit="deg", lo=-30.0, hi=30.0, length=2, default=(-1.0, 7.0)),
+    Field("other", "floats", "nominal box: half-widths of the nominal's q [deg/s] and "
+          "eta_1, eta_1_dot, eta_2, eta_2_dot deviations from the trim", lo=0.0,
+          lo_open=True, length=5, default=(0.7, 0.5, 3.5, 0.3, 3.5)),
+    Field("reach", "floats", "scheduling box beyond the nominal box, each side: alpha, "
+          "theta [deg], Phi, delta_e [deg], q [deg/s], eta_1, eta_1_dot, eta_2, eta_2_dot; "
+          "must hold the tube's supports (the design refuses it otherwise)", lo=0.0,
+          length=9, default=(0.59, 0.554, 0.0772, 4.39, 0.886, 0.716, 9.48, 0.24, 5.655)),
+)  # fmt: skip
+
+EIGHT_STATE_CHECKS = (
+    Check("Phi", lambda r: r["eight_state"]["Phi"][0] < r["eight_state"]["Phi"][1],
+          "must be an increasing pair"),
+    Check("delta_e", lambda r: r["eight_state"]["delta_e"][0] < r["eight_state"]["delta_e"][1],
+          "must be an increasing pair"),
+)  # fmt: skip
+
+
+def _eight_state_needs(r) -> bool:
+    """True unless the case asks for the eight-state tube without the loop it is closed for.
+
+    That loop: the CM design model, the CM nominal with the altitude reset, the baseline
+    tau, and attitude rows inside the nominal box.
+    """
+    if r["tube"]["form"] != "eight_state":
+        return True
+    m = r.get("mpc")
+    return bool(
+        r["design_model"] == "cm" and r["tube"]["tau"] == 1.0 and m is not None
+        and m["nominal_model"] == "cm" and m["h_reset"]
+        and 0.0 < m["att_max"] <= r["eight_state"]["attitude"]
+    )  # fmt: skip
+
+
 UNCERTAINTY = (
     Field("seed", "int", "seed of the parameter draw s_p ~ U(-1, 1)", lo=0),
     Field("scale", "float", "fraction of the sec. 5.1 uncertainty box", lo=0.0, hi=1.0),
@@ -124,7 +190,17 @@ def case_spec() -> Section:
                 Field("rho_min", "float", "smallest elevator effectiveness the tube covers "
                       "(fault vertices, with the case fault's if smaller)", lo=0.0, hi=1.0,
                       lo_open=True, default=1.0, equation="eq. (15)"),
+                Field("form", "str", "the tube the law runs on: 'vertices', Z over the TP "
+                      "vertices for the sampled W (the paper), or 'eight_state', Z_8 along "
+                      "the nominal on the eight states after h with |e_h| bounded by the "
+                      "nominal's altitude reset, W_8 bounded over its own domain "
+                      "(section eight_state; docs/control_design.md)",
+                      choices=TUBE_FORMS, default="vertices", equation="LMI (24)"),
             ), "tube: F and Z"),
+            Section("eight_state", EIGHT_STATE, "the eight-state tube along the nominal "
+                    "(tube.form eight_state): its vertices, nominal box and closure",
+                    when=_eight_state, when_text="tube.form is eight_state",
+                    checks=EIGHT_STATE_CHECKS),
             Section("certificate", (
                 Field("schedules", "int", "scheduling points of the domain check of W: 0 "
                       "skips it, 1 the envelope centre, 3 centre and two opposite corners, "
@@ -149,6 +225,9 @@ def case_spec() -> Section:
                   "must be true for design_model ecm"),
             Check("variants", lambda r: r["design_model"] != "ecm"
                   or set(r["variants"]) <= {"tube_mpc"}, "an ECM case runs only 'tube_mpc'"),
+            Check("tube.form", _eight_state_needs, "eight_state needs design_model cm, "
+                  "tube.tau 1 and the loop it is closed for: mpc.nominal_model cm, mpc.h_reset "
+                  "true, 0 < mpc.att_max <= eight_state.attitude"),
         ),
     )  # fmt: skip
 

@@ -24,6 +24,7 @@ from fahv.design.artefacts import Design, provenance
 from fahv.design.case import Case
 from fahv.design.certificate import certify_tube
 from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
+from fahv.design.eight_state import design_pair, pair_report
 from fahv.design.feasibility import box_coverage, fault_vertices, input_room
 from fahv.errors import DesignError
 from fahv.model.linearize import classify_modes, linearize
@@ -162,17 +163,6 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         f"vertex matrix (tolerance), lam = {tube.lam}  OK"
     )
     tau = c["tube"]["tau"]
-    u_n_max = room - tau * tube.tightening
-    log(
-        f"tightened inputs (eq. 30{', 53 with tau = ' + str(tau) if tau < 1 else ''}): "
-        f"room {room[0]:.4f} / {np.degrees(room[1]):.3f} deg, tightening "
-        f"{tau * tube.tightening[0]:.4f} / {np.degrees(tau * tube.tightening[1]):.3f} deg"
-    )
-    if np.any(u_n_max <= 0.0):
-        raise DesignError(
-            f"tightened input set U minus F Z is empty (eq. 30): room {room}, "
-            f"tightening {tau * tube.tightening}"
-        )
     cmd = c["command"]
     veh.envelope.check(cmd["h0"], cmd["V0"])
     veh.envelope.check(cmd["h_c"], cmd["V_c"])
@@ -180,8 +170,28 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     tm = trim_map(veh, tg[0], tg[1], kind, notch if kind == "ecm" else None)
     x_start, _ = tm(cmd["h0"], cmd["V0"])
     x_end, _ = tm(cmd["h_c"], cmd["V_c"])
-    u_lo = veh.limits.u_min + tau * tube.tightening
-    u_hi = veh.limits.u_max - tau * tube.tightening
+    F, N, tightening, pair = tube.F, tube.N, tube.tightening, None
+    if c["tube"]["form"] == "eight_state":  # the law runs on the eight-state tube
+        cols = np.concatenate([tube.z_box, tube.tightening])  # the directions' column scale
+        pair, es_nominal, es_box = design_pair(
+            c, veh, tm, np.concatenate([Dx, Du]), W.w_max, cols, rho_f, room_f, log
+        )
+        for line in pair_report(pair, es_nominal, es_box):
+            log(line)
+        F, N, tightening = pair.F, pair.N, pair.tightening
+    u_n_max = room - tau * tightening
+    log(
+        f"tightened inputs (eq. 30{', 53 with tau = ' + str(tau) if tau < 1 else ''}): "
+        f"room {room[0]:.4f} / {np.degrees(room[1]):.3f} deg, tightening "
+        f"{tau * tightening[0]:.4f} / {np.degrees(tau * tightening[1]):.3f} deg"
+    )
+    if np.any(u_n_max <= 0.0):
+        raise DesignError(
+            f"tightened input set U minus F Z is empty (eq. 30): room {room}, "
+            f"tightening {tau * tightening}"
+        )
+    u_lo = veh.limits.u_min + tau * tightening
+    u_hi = veh.limits.u_max - tau * tightening
     coverage = box_coverage(
         veh, unc, tm, u_lo, u_hi, path=[(cmd["h0"], cmd["V0"]), (cmd["h_c"], cmd["V_c"])]
     )
@@ -198,27 +208,30 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     why = coverage.failing(rho_f, u_hi[1])
     if why:
         raise DesignError(f"tube.rho_min = {c['tube']['rho_min']} / fault: {why}")
-    cert_case = c
-    if "mpc" in c:  # the domain of the certificate: the attitude rows the QP will use
-        att = attitude_bounds(tube.N, tau, c["mpc"]["att_max"])
-        cert_case = {**c, "mpc": {**c["mpc"], "att_max": float(np.degrees(att.used.max()))}}
-    certificate = certify_tube(
-        cert_case,
-        veh,
-        tp,
-        tm,
-        Af,
-        Bf,
-        tube,
-        tau,
-        u_lo,
-        u_hi,
-        rho_f,
-        Dx,
-        DEFAULT_DEV_BOX,
-        log,
-        progress,
-    )
+    if pair is None:
+        cert_case = c
+        if "mpc" in c:  # the domain of the certificate: the attitude rows the QP will use
+            att = attitude_bounds(tube.N, tau, c["mpc"]["att_max"])
+            cert_case = {**c, "mpc": {**c["mpc"], "att_max": float(np.degrees(att.used.max()))}}
+        certificate = certify_tube(
+            cert_case,
+            veh,
+            tp,
+            tm,
+            Af,
+            Bf,
+            tube,
+            tau,
+            u_lo,
+            u_hi,
+            rho_f,
+            Dx,
+            DEFAULT_DEV_BOX,
+            log,
+            progress,
+        )
+    else:  # W_8 is bounded over the pair's own domain: the summary of the pair
+        certificate = pair.summary(es_nominal, es_box)
     if d["constant"] == "estimated":
         for v in c["variants"]:
             law = LAWS[VARIANTS[v].law]
@@ -248,8 +261,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         "Dx": Dx,
         "Du": Du,
         "w_max": W.w_max,
-        "F": tube.F,
-        "N": tube.N,
+        "F": F,
+        "N": N,
         "K": nominal.K,
         "Q": nominal.Q,
         "u_room": room,
@@ -280,10 +293,11 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         "W_parts": {k: v.tolist() for k, v in W.parts.items()},
         "W_dominant": W.dominant(),
         "tube": {
-            "lam": tube.lam,
+            "form": c["tube"]["form"],
+            "lam": tube.lam if pair is None else pair.lam,
             "min_eig": float(eigs.min()),
-            "tightening": (tau * tube.tightening).tolist(),
-            "z_box": tube.z_box.tolist(),
+            "tightening": (tau * tightening).tolist(),
+            "z_box": np.sqrt(np.diag(N)).tolist(),
             "rho_f": rho_f,
             "row_room": room_f.tolist(),
             "loss_covered": coverage.summary(),

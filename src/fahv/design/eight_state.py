@@ -1,0 +1,556 @@
+"""The tube on the eight states after h, with the altitude error bounded by a reset.
+
+Along the nominal (:mod:`fahv.design.along_nominal`, integral form (2)), the W-Z
+iteration at the size the onset of a loss needs diverges in the h row: the kinematic
+integrator h_dot = V sin(theta - alpha) is held by the tube only through theta and q,
+and its disturbance grows with the box. This module takes h out of the tube's RPI
+condition. The tube (F_8, Z_8 = {e_8' N_8^-1 e_8 <= 1}) is designed on the other eight
+states e_8 = (V, alpha, theta, q, eta_1, eta_1_dot, eta_2, eta_2_dot) with the
+ancillary gain blind to e_h, and the altitude error is bounded by the nominal MPC's
+reset of its h to the measured altitude at every re-plan (``mpc.h_reset``, M fast steps
+apart), which makes e_h = 0 there:
+
+    |e_h| <= H = M (step + w_h),                                                (1)
+    step = max over the vertices of max over Z_8 of |a_h,8 e_8 + b_h F_8 e_8|,
+
+with w_h the h row's own disturbance over the product set {|e_h| <= H} x Z_8 (solved
+to its fixed point: w_h grows with H, weakly). The altitude error then enters the
+other rows as a disturbance, max over the vertices of |A_8h| H, added to their bound.
+Each support is exact for the product set (:func:`product_bound`): the parameter
+residual of every vehicle at every box corner for rho_f at both ends, and the
+interpolation remainder (elementwise bounds times the product set's supports).
+
+:func:`close_pair` iterates W_8 <- max(W_8, grow x bound) with the tube LMI (24) re-solved
+over the vertices until the bound lies inside W_8, checks that the scheduling box holds
+the nominal's box grown by the product set's supports (the integral form's segment
+condition), and re-checks the exact worst one-step level over the vertices and the
+corners of W_8 (:func:`fahv.design.certificate.worst_level`).
+
+What the pair assumes besides the vertices' own assumptions (stated by
+:data:`ASSUMPTIONS`): the nominal resets its altitude every ``moves`` fast steps; the
+nominal stays inside the nominal box; the disturbance estimate has converged (the
+onset of a loss is not in W_8).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from fahv.design.along_nominal import BOX_COORDINATES, NominalVertices, SchedulingBox
+from fahv.design.certificate import worst_level
+from fahv.errors import DesignError
+from fahv.synthesis.feedback import design_tube
+
+#: The states of the tube, after h (the design's state order without its first entry).
+EIGHT_STATES = ("V", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
+
+#: What a pair of :func:`close_pair` assumes beyond the vertices' own assumptions.
+ASSUMPTIONS = (
+    "the nominal resets its altitude to the measured one every `moves` fast steps "
+    "(mpc.h_reset, M = moves), so |e_h| <= H between resets",
+    "the ancillary gain is blind to e_h: u = v + F_8 e_8",
+    "the nominal stays inside the nominal box (its h, V, attitude, input and q, flexible ranges)",
+    "the disturbance estimate has converged: the onset of a loss and the estimate's lag "
+    "are not in W_8",
+)
+
+
+@dataclass(frozen=True)
+class EightStatePair:
+    """A closed eight-state pair and its altitude bound.
+
+    Attributes
+    ----------
+    F8 : (2, 8) ndarray
+        Ancillary gain on e_8 [(-, rad) per state unit].
+    N8 : (8, 8) ndarray
+        Shape of Z_8 = {e_8' N8^-1 e_8 <= 1} (state units squared).
+    W8 : (8,) ndarray
+        Half-widths of W_8 (state units per period Ts).
+    H : float
+        Altitude error bound (1) [ft].
+    lam : float
+        Contraction factor of the tube LMI (24).
+    bound : (8,) ndarray
+        The disturbance bound over the product set, per row (<= W8 when closed).
+    level : float
+        Exact worst one-step level over the vertices and the corners of W_8 (<= 1).
+    moves : int
+        Fast steps between the nominal's altitude resets (M).
+    step : float
+        Largest one-step change of e_h by the tube's own dynamics [ft].
+    w_h : float
+        The h row's disturbance over the product set [ft].
+    """
+
+    F8: np.ndarray
+    N8: np.ndarray
+    W8: np.ndarray
+    H: float
+    lam: float
+    bound: np.ndarray
+    level: float
+    moves: int
+    step: float
+    w_h: float
+
+    @property
+    def F(self) -> np.ndarray:
+        """(2, 9) ancillary gain on the nine states, zero on e_h."""
+        return np.hstack([np.zeros((2, 1)), self.F8])
+
+    @property
+    def N(self) -> np.ndarray:
+        """(9, 9) diag(H^2, N_8), the tube shape the nodes take.
+
+        Its ellipsoid holds the product set's e_8 part and its h support is H; the
+        node's tube level with it is a bound, not the product set's level.
+        """
+        N = np.zeros((9, 9))
+        N[0, 0], N[1:, 1:] = self.H**2, self.N8
+        return N
+
+    @property
+    def tightening(self) -> np.ndarray:
+        """(2,) support of F_8 Z_8 per input [-, rad]: the tightening of eq. (30)."""
+        return np.sqrt(np.einsum("ij,jk,ik->i", self.F8, self.N8, self.F8))
+
+    @property
+    def slack(self) -> np.ndarray:
+        """(8,) 1 - bound / W_8 per row (>= 0 when closed)."""
+        return 1.0 - self.bound / self.W8
+
+    def summary(self, nominal: SchedulingBox, box: SchedulingBox) -> dict:
+        """JSON-ready record of the pair for the design summary (``certificate``).
+
+        Units as the attributes; the boxes in their coordinates (:data:`BOX_COORDINATES`).
+        """
+        return {
+            "form": "eight_state",
+            "states": list(EIGHT_STATES),
+            "W_8": self.W8.tolist(),
+            "bound": self.bound.tolist(),
+            "slack": self.slack.tolist(),
+            "level": self.level,
+            "level_margin": 1.0 - self.level,
+            "lam": self.lam,
+            "H_ft": self.H,
+            "moves": self.moves,
+            "h_step_ft": self.step,
+            "w_h_ft": self.w_h,
+            "tightening": self.tightening.tolist(),
+            "nominal_box": {
+                "lo": nominal.lo.tolist(),
+                "hi": nominal.hi.tolist(),
+                "other_half": nominal.other_half.tolist(),
+            },  # fmt: skip
+            "scheduling_box": {
+                "lo": box.lo.tolist(),
+                "hi": box.hi.tolist(),
+                "other_half": box.other_half.tolist(),
+            },  # fmt: skip
+            "assumptions": list(ASSUMPTIONS),
+        }
+
+
+def product_supports(F8, N8, H: float) -> tuple[np.ndarray, np.ndarray]:
+    """Supports of the product set {|e_h| <= H} x Z_8 in the scheduling box's coordinates.
+
+    Parameters
+    ----------
+    F8 : (2, 8) array_like
+    N8 : (8, 8) array_like
+    H : float
+        Altitude error bound [ft].
+
+    Returns
+    -------
+    s_lo : (6,) ndarray
+        h [ft], V [ft/s], alpha, theta [rad], then F_8 Z_8 in Phi [-] and delta_e [rad].
+    s_oth : (5,) ndarray
+        q [rad/s] and the flexible states.
+    """
+    F8, N8 = np.asarray(F8, float), np.asarray(N8, float)
+    sZ8 = np.sqrt(np.diag(N8))
+    sF = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
+    return np.concatenate([[H], sZ8[:3], sF]), sZ8[3:]
+
+
+def product_bound(nv: NominalVertices, F8, N8, H: float) -> tuple[np.ndarray, np.ndarray]:
+    """Parameter and interpolation parts (9,), (9,) of the disturbance over the product set.
+
+    The parameter part is, per row, the largest support over {|e_h| <= H} x Z_8 of each
+    vehicle's residual (the part of its Jacobian deviation the vertices do not carry)
+    applied to [e; P F e], P = diag(1, rho_f), at every box corner, for rho_f at both
+    ends of [rho_min, 1] (exact for the product set: |r_h| H plus the ellipsoid's
+    support). The interpolation part is the elementwise remainder bound times the
+    product set's supports in e and F e.
+
+    Parameters
+    ----------
+    nv : NominalVertices
+        Vertex data over the scheduling box (:func:`fahv.design.along_nominal.nominal_vertices`).
+    F8 : (2, 8) array_like
+    N8 : (8, 8) array_like
+    H : float
+        Altitude error bound [ft].
+
+    Returns
+    -------
+    parameters, interpolation : (9,) ndarray
+        In state units per period, rows h ... eta_2_dot.
+    """
+    F8, N8 = np.asarray(F8, float), np.asarray(N8, float)
+    F9 = np.hstack([np.zeros((2, 1)), F8])
+    par = np.zeros(9)
+    for rho in (nv.rho_min, 1.0):
+        MP = np.vstack([np.eye(9), np.array([1.0, rho])[:, None] * F9])
+        R = nv.residual @ MP  # (64, C, 9, 9)
+        sup = np.abs(R[..., 0]) * H + np.sqrt(
+            np.einsum("scij,jk,scik->sci", R[..., 1:], N8, R[..., 1:])
+        )
+        par = np.maximum(par, sup.max(axis=(0, 1)))
+    sZ8 = np.sqrt(np.diag(N8))
+    sF = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
+    interp = nv.interp @ np.concatenate([[H], sZ8, sF])
+    return par, interp
+
+
+@dataclass(frozen=True)
+class AltitudeBound:
+    """H of (1) and the disturbance bound of the eight rows it implies.
+
+    Attributes
+    ----------
+    H : float
+        [ft], the fixed point of H = moves (step + w_h(H)).
+    step : float
+        [ft] largest support over Z_8 of a_h,8 e_8 + b_h F_8 e_8 over the vertices.
+    w_h : float
+        [ft] the h row's disturbance at H.
+    bound : (8,) ndarray
+        Disturbance bound of rows V ... eta_2_dot over the product set, e_h's coupling
+        max |A_8h| H included.
+    """
+
+    H: float
+    step: float
+    w_h: float
+    bound: np.ndarray
+
+
+def altitude_bound(nv: NominalVertices, A, B, F8, N8, moves: int) -> AltitudeBound:
+    """Solve (1) for H and bound the eight rows' disturbance over the product set.
+
+    Parameters
+    ----------
+    nv : NominalVertices
+    A : (R, 9, 9) array_like
+    B : (R, 9, 2) array_like
+        The vertices (:meth:`NominalVertices.vertices`).
+    F8 : (2, 8) array_like
+    N8 : (8, 8) array_like
+    moves : int
+        Fast steps between the nominal's altitude resets.
+
+    Returns
+    -------
+    AltitudeBound
+
+    Raises
+    ------
+    DesignError
+        If the iteration for H does not converge (the h row's own disturbance grows with
+        H as fast as the reset allows).
+    """
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    F8, N8 = np.asarray(F8, float), np.asarray(N8, float)
+    c = A[:, 0, 1:] + B[:, 0] @ F8  # (R, 8)
+    step = float(np.sqrt(np.einsum("ri,ij,rj->r", c, N8, c)).max())
+    H = moves * step
+    for _ in range(100):
+        par, interp = product_bound(nv, F8, N8, H)
+        H_new = moves * (step + par[0] + interp[0])
+        if abs(H_new - H) <= 1e-12 * H_new:
+            break
+        H = H_new
+    else:
+        raise DesignError(f"eight-state tube: the altitude bound H does not converge ({H:.4g} ft)")
+    bound = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H_new
+    return AltitudeBound(float(H_new), step, float(par[0] + interp[0]), bound)
+
+
+def box_shortfall(box: SchedulingBox, nominal: SchedulingBox, F8, N8, H: float) -> dict:
+    """Where the scheduling box does not hold the nominal box grown by the product set.
+
+    Returns a mapping from coordinate name ("lo alpha", "hi Phi", "q", ...) to how far
+    [coordinate units] the box falls short there; empty when it holds it (the integral
+    form's segment condition, :mod:`fahv.design.along_nominal` (2)).
+    """
+    s_lo, s_oth = product_supports(F8, N8, H)
+    lo, hi, oth = box.margin_to(nominal)
+    reach = np.r_[lo - s_lo, hi - s_lo, oth - s_oth]
+    names = [f"{side} {c}" for side in ("lo", "hi") for c in BOX_COORDINATES]
+    names += ["q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot"]
+    return {n: float(-v) for n, v in zip(names, reach, strict=True) if v < 0}
+
+
+def box_for(h_range, nominal: SchedulingBox, F8, N8, H: float, scale: float) -> SchedulingBox:
+    """The scheduling box holding ``nominal`` plus 1.01 ``scale`` times the product set.
+
+    Parameters
+    ----------
+    h_range : (2,) array_like
+        The box's h range [ft] (the envelope).
+    nominal : SchedulingBox
+    F8, N8, H
+        The pair whose product set's supports grow the box.
+    scale : float
+        Size of the tube the box is for, in units of the pair's.
+    """
+    s_lo, s_oth = product_supports(F8, N8, H)
+    x = 1.01 * scale
+    lo = np.r_[h_range[0], nominal.lo[1:] - x * s_lo[1:]]
+    hi = np.r_[h_range[1], nominal.hi[1:] + x * s_lo[1:]]
+    return SchedulingBox(lo, hi, nominal.other_half + x * s_oth)
+
+
+def close_pair(
+    nv: NominalVertices,
+    nominal: SchedulingBox,
+    W8,
+    state_scale,
+    input_scale,
+    room,
+    lam: float,
+    moves: int,
+    *,
+    grow: float = 1.05,
+    iterations: int = 6,
+    w_ref=None,
+    active: int = 96,
+    log: Callable[[str], None] = print,
+) -> EightStatePair:
+    """Iterate W_8 and Z_8 to a closed pair over the vertices ``nv`` (module docstring).
+
+    Parameters
+    ----------
+    nv : NominalVertices
+        Vertex data over the scheduling box (``hessians=False`` suffices).
+    nominal : SchedulingBox
+        The nominal's own box, which the scheduling box must hold grown by the tube.
+    W8 : (8,) array_like
+        Starting half-widths of W_8 (state units per period).
+    state_scale : (9,) array_like
+        Design state scaling (Dx); its eight entries after h scale the LMI.
+    input_scale : (2,) array_like
+        Design input scaling (Du).
+    room : (2,) array_like
+        Input room of each row (:func:`fahv.design.feasibility.input_room`).
+    lam : float
+        Contraction factor of the tube LMI (24).
+    moves : int
+        Fast steps between the nominal's altitude resets (M of ``mpc``).
+    grow : float
+        W_8 <- max(W_8, grow x bound) between iterations.
+    iterations : int
+    w_ref : (9,) array_like, optional
+        Reference size of W for the LMI's scaling (:func:`fahv.synthesis.feedback.design_tube`);
+        its eight entries after h are used.
+    active : int
+        Vertex blocks per round of constraint generation.
+    log : callable
+        Receives one line per iteration.
+
+    Returns
+    -------
+    EightStatePair
+        Closed: bound <= W8 in every row, the box holds nominal + product set, exact
+        one-step level <= 1.
+
+    Raises
+    ------
+    DesignError
+        If the tube LMI is infeasible, the tube outgrows the scheduling box (names the
+        coordinates), the exact level exceeds 1, or the iterations run out (gives the
+        last bound / W_8).
+    """
+    A, B = nv.vertices()
+    A8, B8 = A[:, 1:, 1:], B[:, 1:, :]
+    W8 = np.asarray(W8, float).copy()
+    w_ref8 = None if w_ref is None else np.asarray(w_ref, float)[1:]
+    ratio = np.full(8, np.inf)
+    for it in range(iterations):
+        tube = design_tube(A8, B8, W8, np.asarray(state_scale, float)[1:], input_scale, room,
+                           (lam,), w_ref=w_ref8, active=active)  # fmt: skip
+        F8, N8 = tube.F, tube.N
+        ab = altitude_bound(nv, A, B, F8, N8, moves)
+        ratio = ab.bound / W8
+        short = box_shortfall(nv.box, nominal, F8, N8, ab.H)
+        log(
+            f"eight-state tube, iteration {it}: tightening {tube.tightening[0]:.4f} / "
+            f"{np.degrees(tube.tightening[1]):.3f} deg, alpha support "
+            f"{np.degrees(np.sqrt(N8[1, 1])):.4f} deg, H = {ab.H:.2f} ft (step {ab.step:.3f} "
+            f"ft, w_h {ab.w_h:.3f} ft); bound / W_8 (V ... eta_2_dot) "
+            + " ".join(f"{r:.3f}" for r in ratio)
+        )
+        if short:
+            raise DesignError(
+                "eight-state tube: the scheduling box does not hold the nominal box grown by "
+                "the tube (short by "
+                + ", ".join(f"{n} {v:.3g}" for n, v in short.items())
+                + "); grow the box or shrink the nominal's ranges"
+            )
+        if np.all(ratio <= 1.0):
+            level, _ = worst_level(A8, B8, F8, N8, W8)
+            if level > 1.0:
+                raise DesignError(
+                    f"eight-state tube: bound inside W_8 but the exact worst one-step level "
+                    f"is {level:.6f} > 1 over {A8.shape[0]} vertices"
+                )
+            return EightStatePair(F8, N8, W8, ab.H, float(tube.lam), ab.bound, float(level),
+                                  int(moves), ab.step, ab.w_h)  # fmt: skip
+        W8 = np.maximum(W8, grow * ab.bound)
+    raise DesignError(
+        f"eight-state tube: not closed in {iterations} iterations (bound / W_8 "
+        + " ".join(f"{r:.3f}" for r in ratio)
+        + ")"
+    )
+
+
+def nominal_box(section: dict, envelope) -> tuple[SchedulingBox, SchedulingBox]:
+    """The nominal box and the scheduling box of a case's ``eight_state`` section.
+
+    Parameters
+    ----------
+    section : dict
+        The validated ``eight_state`` section (:mod:`fahv.design.case`).
+    envelope : fahv.model.vehicle.Envelope
+        The flight envelope (h, V ranges).
+
+    Returns
+    -------
+    nominal, box : SchedulingBox
+        The nominal's ranges (h, V: the envelope shrunk by the margins; attitude, input
+        deviations from the trim and q, flexible half-widths as given) and the scheduling
+        box: the envelope in h, V, the nominal ranges grown by ``reach`` elsewhere.
+    """
+    deg = np.pi / 180.0
+    att = section["attitude"] * deg
+    hm, Vm = section["h_margin"], section["V_margin"]
+    if hm >= 0.5 * (envelope.h_max - envelope.h_min) or Vm >= 0.5 * (
+        envelope.V_max - envelope.V_min
+    ):
+        raise DesignError(
+            f"eight_state.h_margin {hm} / V_margin {Vm} leave no nominal range in the envelope"
+        )
+    lo = np.array([envelope.h_min + hm, envelope.V_min + Vm, -att, -att,
+                   section["Phi"][0], section["delta_e"][0] * deg])  # fmt: skip
+    hi = np.array([envelope.h_max - hm, envelope.V_max - Vm, att, att,
+                   section["Phi"][1], section["delta_e"][1] * deg])  # fmt: skip
+    other = np.asarray(section["other"], float) * np.r_[deg, np.ones(4)]
+    nominal = SchedulingBox(lo, hi, other)
+    r = np.asarray(section["reach"], float) * np.r_[deg, deg, 1.0, deg, deg, np.ones(4)]
+    box = SchedulingBox(
+        np.r_[envelope.h_min, envelope.V_min, lo[2:] - r[:4]],
+        np.r_[envelope.h_max, envelope.V_max, hi[2:] + r[:4]],
+        other + r[4:],
+    )
+    return nominal, box
+
+
+def design_pair(
+    case: dict,
+    vehicle,
+    trim_map,
+    scale,
+    w_max,
+    col_scale,
+    rho_min: float,
+    room,
+    log: Callable[[str], None] = print,
+) -> tuple[EightStatePair, SchedulingBox, SchedulingBox]:
+    """The eight-state tube of a case (``tube.form: eight_state``), closed and checked.
+
+    Parameters
+    ----------
+    case : dict
+        Validated case data (its ``eight_state``, ``uncertainty``, ``mpc.M``, ``Ts``,
+        ``plant_substeps``).
+    vehicle : fahv.model.vehicle.Vehicle
+        The nominal vehicle.
+    trim_map : fahv.model.trim.TrimMap
+    scale : (11,) array_like
+        Design scaling (Dx, Du).
+    w_max : (9,) array_like
+        The sampled W (eq. 19): the row scale of the parameter directions and the unit of
+        ``eight_state.w0``.
+    col_scale : (11,) array_like
+        Supports of e and F e over the vertex tube: the column scale of the directions.
+    rho_min : float
+        Smallest elevator effectiveness (eq. 15) the vertices cover.
+    room : (2,) array_like
+        Input room of each row with the faulty trim (the tube objective's weights).
+    log : callable
+
+    Returns
+    -------
+    pair : EightStatePair
+    nominal, box : SchedulingBox
+        The nominal box and the scheduling box the pair is closed over.
+
+    Raises
+    ------
+    DesignError
+        If the boxes are malformed, a plant step leaves the model, or the pair does not
+        close (:func:`close_pair`).
+    """
+    from fahv.design.along_nominal import nominal_vertices
+    from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+
+    s = case["eight_state"]
+    nominal, box = nominal_box(s, vehicle.envelope)
+    unc = {k: v * case["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
+    nv = nominal_vertices(box, vehicle, trim_map, unc, rho_min, case["Ts"],
+                          case["plant_substeps"], scale, s["k"], w_max, col_scale,
+                          hessians=False)  # fmt: skip
+    n_vert = nv.J0.shape[0] * 2 ** s["k"] * 2
+    log(f"eight-state tube: {n_vert} vertices along the nominal (64 scheduling-box corners x "
+        f"2^{s['k']} parameter directions x rho_f in {{{rho_min:g}, 1}}), "
+        f"{sum(nv.n_vehicles)} vehicles for the residual")  # fmt: skip
+    scale = np.asarray(scale, float)
+    w_max = np.asarray(w_max, float)
+    pair = close_pair(nv, nominal, s["w0"] * w_max[1:], scale[:9], scale[9:], room, s["lam"],
+                      case["mpc"]["M"], grow=s["grow"], iterations=s["iterations"],
+                      w_ref=w_max, log=log)  # fmt: skip
+    return pair, nominal, box
+
+
+def pair_report(pair: EightStatePair, nominal: SchedulingBox, box: SchedulingBox) -> list[str]:
+    """The certificate lines of a closed pair, each with its margin (for the design log)."""
+    s_lo, s_oth = product_supports(pair.F8, pair.N8, pair.H)
+    lo, hi, oth = box.margin_to(nominal)
+    room = np.r_[np.minimum(lo, hi)[1:] / s_lo[1:], oth / s_oth]
+    names = [*BOX_COORDINATES[1:], "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot"]
+    worst = int(np.argmin(room))
+    sz = np.sqrt(np.diag(pair.N8))
+    return [
+        "W_8 bounds the one-step disturbance over its domain (the nominal box, the product "
+        "set |e_h| <= H x Z_8, every corner of the parameter box, rho_f in [rho_min, 1]): "
+        "slack per row (V ... eta_2_dot) "
+        + " ".join(f"{v:.3f}" for v in pair.slack)
+        + f", smallest {pair.slack.min():.3f}  OK",
+        f"closed: Z_8 RPI for W_8, exact worst one-step level {pair.level:.6f} <= 1 (margin "
+        f"{1.0 - pair.level:.2e}), lam = {pair.lam}  OK",
+        f"altitude: |e_h| <= H = {pair.H:.3f} ft by the reset every {pair.moves} steps (step "
+        f"{pair.step:.4f} ft, w_h {pair.w_h:.4f} ft)",
+        f"scheduling box holds the nominal box plus the tube: smallest reach "
+        f"{room[worst]:.2f} x the tube's support ({names[worst]})  OK",
+        f"Z_8 supports: V {sz[0]:.3f} ft/s, alpha {np.degrees(sz[1]):.4f} deg, theta "
+        f"{np.degrees(sz[2]):.4f} deg, q {np.degrees(sz[3]):.4f} deg/s; tightening "
+        f"{pair.tightening[0]:.4f} / {np.degrees(pair.tightening[1]):.3f} deg",
+        "assumed, not certified: " + "; ".join(ASSUMPTIONS),
+    ]

@@ -1,0 +1,124 @@
+"""The eight-state tube in `fahv design` (tube.form: eight_state): case keys, boxes, plumbing.
+
+The closure itself (4096 vertices, LMI iterations of minutes) is not run here: the stored
+pair's bound is reproduced from its own vertex data in tests/design/test_along_nominal.py,
+and the full design's figures are in docs/control_design.md.
+"""
+
+import copy
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fahv.config.yamlio import load_yaml
+from fahv.design.case import case_from_mapping, load_case
+from fahv.errors import CaseError
+
+CASE = "offline_design/case1_eight_state.yaml"
+PAIR = Path(__file__).resolve().parents[1] / "data" / "closed_tube_h_reset.npz"
+
+
+@pytest.fixture(scope="module")
+def raw8():
+    with open(CASE) as fh:
+        return load_yaml(fh.read())
+
+
+def test_eight_state_case_sets_every_knob(raw8):
+    c = load_case(CASE)
+    assert c.defaults_used == {}
+    assert c["tube"]["form"] == "eight_state" and c["eight_state"]["k"] == 5
+    plain = load_case("offline_design/case1.yaml")
+    assert plain["tube"]["form"] == "vertices" and "eight_state" not in plain.data
+
+
+@pytest.mark.parametrize(
+    "mutate, match",
+    [
+        (lambda d: d["mpc"].update(nominal_model="lpv"), "'tube.form' eight_state needs"),
+        (lambda d: d["mpc"].update(h_reset=False), "'tube.form' eight_state needs"),
+        (lambda d: d["mpc"].update(att_max=0.45), "'tube.form' eight_state needs"),
+        (lambda d: d["mpc"].update(att_max=0.0), "'tube.form' eight_state needs"),
+        (lambda d: d["tube"].update(tau=0.8), "'tube.form' eight_state needs"),
+        (lambda d: d["eight_state"].update(Phi=[1.0, 0.0]), "'eight_state.Phi' must be an incr"),
+        (lambda d: d["eight_state"].update(reach=[0.1] * 8), "'eight_state.reach' must have 9"),
+        (lambda d: d["tube"].update(form="ellipse"), "'tube.form'"),
+    ],
+)
+def test_eight_state_case_refuses_a_loop_it_is_not_closed_for(raw8, mutate, match):
+    d = copy.deepcopy(raw8)
+    mutate(d)
+    with pytest.raises(CaseError, match=match):
+        case_from_mapping(d, "bad.yaml")
+
+
+def test_case_boxes_are_the_stored_pairs_within_rounding(vehicle):
+    """The case's nominal box is the stored pair's (V margin 4.98 for 4.978 ft/s) and its
+    scheduling box holds the stored one, larger by at most 0.3 % of a reach."""
+    from fahv.design.eight_state import nominal_box
+
+    d = dict(np.load(PAIR))
+    nominal, box = nominal_box(load_case(CASE)["eight_state"], vehicle.envelope)
+    np.testing.assert_allclose(nominal.lo, d["nominal_lo"], rtol=0, atol=0.0025)
+    np.testing.assert_allclose(nominal.hi, d["nominal_hi"], rtol=0, atol=0.0025)
+    np.testing.assert_allclose(nominal.other_half, d["nominal_other_half"], rtol=1e-9)
+    reach_lo, reach_hi = d["nominal_lo"] - d["lo"], d["hi"] - d["nominal_hi"]
+    assert np.all(box.lo <= d["lo"]) and np.all(box.hi >= d["hi"])
+    assert np.all(box.other_half >= d["other_half"])
+    assert np.all(d["lo"][2:] - box.lo[2:] <= 0.003 * reach_lo[2:])
+    assert np.all(box.hi[2:] - d["hi"][2:] <= 0.003 * reach_hi[2:])
+    with pytest.raises(Exception, match="h_margin"):
+        nominal_box({**load_case(CASE)["eight_state"], "h_margin": 1e4}, vehicle.envelope)
+
+
+def test_design_runs_the_law_on_the_eight_state_pair(raw8, vehicle, monkeypatch):
+    """A quick design of the case (40 W samples) with the closure replaced by the stored
+    pair: the law's F, N and tightened inputs are the pair's, the summary carries its
+    certificate, the node parameters take it, and 20 s of the loop (CM nominal, reset)
+    keep e_8 inside Z_8 and |e_h| <= H with e_h = 0 at every re-plan."""
+    import fahv.design.pipeline as pmod
+    from fahv.design.eight_state import EightStatePair, nominal_box
+    from fahv.loop.params import node_parameters
+    from fahv.loop.simulate import simulate
+    from fahv.runs.metrics import metrics
+
+    d = dict(np.load(PAIR))
+    pair = EightStatePair(d["F"], d["N"], d["W"], float(d["H"]), float(d["lam"]), d["bound"],
+                          0.999505, int(d["moves"]), 0.0, 0.0)  # fmt: skip
+    calls = []
+
+    def stored(case, veh, tm, scale, w_max, cols, rho, room, log):
+        calls.append((rho, np.asarray(scale).shape, np.asarray(cols).shape))
+        return (pair, *nominal_box(case["eight_state"], veh.envelope))
+
+    monkeypatch.setattr(pmod, "design_pair", stored)
+    r = copy.deepcopy(raw8)
+    r["disturbance"]["samples"] = 40
+    r["certificate"] = {"schedules": 0}
+    lines = []
+    design = pmod.run_design(case_from_mapping(r, "quick8.yaml"), log=lines.append)
+    assert calls == [(0.76, (11,), (11,))]
+    a, s = design.arrays, design.summary
+    np.testing.assert_array_equal(a["F"], pair.F)
+    np.testing.assert_array_equal(a["N"], pair.N)
+    lim = vehicle.limits
+    np.testing.assert_allclose(a["u_lo"], lim.u_min + pair.tightening, rtol=1e-12)
+    np.testing.assert_allclose(a["u_hi"], lim.u_max - pair.tightening, rtol=1e-12)
+    assert s["tube"]["form"] == "eight_state"
+    assert s["certificate"]["level"] == 0.999505 and s["certificate"]["H_ft"] == pair.H
+    assert any(line.startswith("closed: Z_8 RPI for W_8") for line in lines)
+    # the attitude rows: Z_8's alpha support (0.33 deg) leaves 0.17 deg: 0.37 not certified
+    assert np.degrees(a["att_support"][0]) == pytest.approx(0.33, abs=0.01)
+    params = node_parameters(design)
+    assert np.asarray(params["tube_mpc"]["F"]).size == 18
+    run = simulate(design, "tube_mpc", duration=20.0)
+    e = run.x - run.x_r - run.x_n[:, :9]
+    l8 = np.einsum("ki,ij,kj->k", e[:, 1:], np.linalg.inv(pair.N8), e[:, 1:])
+    m = metrics(run, lim, design.case["fault"]["t_onset"])
+    print(f"20 s: largest level in Z_8 {l8.max():.4f}, max |e_h| {m['tube_error_h_max_ft']:.4f} "
+          f"ft (H = {pair.H:.3f} ft)")  # fmt: skip
+    assert l8.max() <= 1.0
+    assert m["tube_error_h_max_ft"] <= pair.H
+    assert np.all(np.abs(e[25::25, 0]) <= 1e-6)  # the reset: e_h = 0 at each re-plan
+    assert run.x[-1, 0] > 85500.0 + 1.0  # climbing
