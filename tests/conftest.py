@@ -51,10 +51,28 @@ def make_case(raw):
 
 
 @pytest.fixture(scope="session")
-def design(raw):
-    """Case 1 designed with a small W sample (shared by the design, SIL and log tests)."""
+def design(raw, tmp_path_factory, worker_id):
+    """Case 1 designed with a small W sample (shared by the design, SIL and log tests).
+
+    Under pytest-xdist the first worker designs it and saves the artefacts next to the
+    workers' temporary folders; the others wait on the lock and load them (the content
+    hash is checked by load_design), so the suite designs it once.
+    """
+    from filelock import FileLock
+
+    from fahv.design.artefacts import load_design, save_design
+
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    return run_design(quick(raw), log=lambda *_: None)
+    if worker_id == "master":  # not distributed
+        return run_design(quick(raw), log=lambda *_: None)
+    shared = tmp_path_factory.getbasetemp().parent
+    with FileLock(str(shared / "quick_design.lock")):
+        folder = shared / "quick_design"
+        if (folder / "design.json").exists():
+            return load_design(folder)
+        d = run_design(quick(raw), log=lambda *_: None)
+        save_design(d, folder)
+        return d
 
 
 @pytest.fixture(scope="session")
