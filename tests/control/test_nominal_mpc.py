@@ -457,3 +457,39 @@ def test_case1_with_the_altitude_reset_tracks_and_every_replan_is_accepted(desig
     assert np.abs(e_h[replans]).max() <= 1e-9 * run.x[0, 0]
     assert 0.01 <= m["tube_error_h_max_ft"] <= 0.5
     assert abs(m["h_err_final_ft"]) <= 0.02 and abs(m["V_err_final_fps"]) <= 0.02
+
+
+def test_input_box_rows_bound_the_input_from_the_set_points_trim(design):
+    """mpc.u_box (the eight-state tube's nominal box): the nominal input minus the set
+    point's trim input, u_d + K zeta + Du c_j, stays inside the box at every move start and
+    at every fast step of the first two moves; a box of +0.05 in Phi binds in the Case 1
+    climb (without it the same QP asks for more than 0.1 above the trim)."""
+    from fahv.control.nominal_mpc import input_box
+
+    c = design.case["command"]
+    cmd = np.array([c["h_c"], c["V_c"]])
+    free = _mpc(design)
+    free.schedule(c["h0"], c["V0"])
+    z0 = np.zeros(free.n)
+    y0, why = free.solve(z0, free.u_r_s, cmd)
+    assert why == "ok"
+    u_free = _inputs_of_plan(free, y0, z0, free.u_r_s)
+    trim_free = free.u_r_s + free.Gu @ y0[free.layout.delta]
+    assert (u_free[:, 0, 0] - trim_free[0]).max() > 0.1
+    box = input_box([-0.12, 0.05, -1.0, 7.0])
+    mpc = _mpc(design, u_box=box)
+    mpc.schedule(c["h0"], c["V0"])
+    u_d = np.array([0.0, np.radians(0.5)])  # an estimate's steady shift: part of the input
+    y, why = mpc.solve(z0, mpc.u_r_s + u_d, cmd)
+    assert why == "ok"
+    n_fine = mpc.Uf_y.shape[0]
+    assert mpc.A_c.shape[0] == free.A_c.shape[0] + mpc.s.N_p * mpc.m + n_fine
+    u = _inputs_of_plan(mpc, y, z0, mpc.u_r_s + u_d)
+    off = u - (mpc.u_r_s + mpc.Gu @ y[mpc.layout.delta])  # from the set point's trim
+    tol = 1e-6 * mpc.Du
+    checked = np.concatenate([off[:2].reshape(-1, 2), off[2:, 0]])  # fine moves, then starts
+    assert np.all(checked <= box[1] + tol) and np.all(checked >= box[0] - tol)
+    assert checked[:, 0].max() > 0.05 - 1e-4  # the Phi row binds
+    with pytest.raises(ValueError, match="mpc.u_box"):
+        input_box([0.1, 0.2, -1.0, 7.0])  # the trim itself outside
+    assert input_box([0.0, 0.0, 0.0, 0.0]) is None

@@ -158,6 +158,11 @@ class MPCSettings:
     h_reset : bool
         Reset the nominal's altitude to the measured one at every re-plan
         (:class:`TrackingMPCNominal`).
+    u_box : (2, 2) ndarray or None
+        Rows [lo, hi] of the nominal box's input ranges [Phi, delta_e rad]: the nominal
+        input minus the set point's trim input, u_d + K zeta + c, at every move start
+        and every fast step of the first ``fine_moves`` moves (the eight-state tube's
+        assumption, :mod:`fahv.design.eight_state`); None (``mpc.u_box`` all 0): no rows.
     """
 
     M: int
@@ -172,6 +177,7 @@ class MPCSettings:
     nominal_model: str = "lpv"
     du_max: np.ndarray = dataclasses.field(default_factory=lambda: np.full(2, math.inf))
     h_reset: bool = False
+    u_box: np.ndarray | None = None
 
     @property
     def has_rate_rows(self) -> bool:
@@ -191,7 +197,32 @@ class MPCSettings:
             nominal_model=str(m.get("nominal_model", "lpv")),
             du_max=rate_limits(m.get("du_max", (0.0, 0.0))),
             h_reset=bool(m.get("h_reset", False)),
+            u_box=input_box(m.get("u_box", (0.0, 0.0, 0.0, 0.0))),
         )  # fmt: skip
+
+
+def input_box(u_box) -> np.ndarray | None:
+    """``mpc.u_box`` (Phi lo, Phi hi, delta_e lo, delta_e hi [deg]; all 0: none) as rows.
+
+    Returns
+    -------
+    (2, 2) ndarray or None
+        [[Phi lo, delta_e lo], [Phi hi, delta_e hi]] [-, rad]; None for all zeros.
+
+    Raises
+    ------
+    ValueError
+        If it is not four finite numbers with lo < 0 < hi for both inputs (the trim
+        itself must lie inside).
+    """
+    v = np.asarray(u_box, float)
+    if v.shape != (4,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"mpc.u_box must be four finite numbers, got {u_box!r}")
+    if np.all(v == 0.0):
+        return None
+    if not (v[0] < 0.0 < v[1] and v[2] < 0.0 < v[3]):
+        raise ValueError(f"mpc.u_box needs lo < 0 < hi for Phi and delta_e, got {u_box!r}")
+    return np.array([[v[0], np.radians(v[2])], [v[1], np.radians(v[3])]])
 
 
 def rate_limits(du_max) -> np.ndarray:
@@ -711,9 +742,10 @@ class TrackingMPC:
 
         Input limits (N_p m), terminal box |L^-1 zeta_N| <= alpha / sqrt(n) (two one-sided
         sets of n rows), steady input u_base + Gu delta +/- alpha k_max within the
-        tightened limits (2 m), attitude rows, the rate rows (``du_max``), and the input
+        tightened limits (2 m), attitude rows, the rate rows (``du_max``), the input
         limits at every fast step inside the first ``fine_moves`` moves
-        (fine_moves (M - 1) m rows).
+        (fine_moves (M - 1) m rows), and with ``u_box`` the nominal box's rows on the
+        input minus the set point's trim input at the same move starts and fast steps.
         """
         ly, n, m, N_p = self.layout, self.n, self.m, self.s.N_p
         nb = ly.ny
@@ -733,7 +765,13 @@ class TrackingMPC:
         if self.s.has_rate_rows:  # the jumps between moves (the re-plan's: the first input rows)
             rows.append(self.Rate_y)
         # inputs at the fast steps inside the first fine_moves moves
-        rows.append(self.Uf_y / np.tile(self.Du, self.Uf_y.shape[0] // m)[:, None])
+        sf = np.tile(self.Du, self.Uf_y.shape[0] // m)[:, None]
+        rows.append(self.Uf_y / sf)
+        if self.s.u_box is not None:  # the nominal box: the input minus the set point's trim
+            G_all = np.zeros((m, nb))
+            G_all[:, ly.delta] = self.Gu
+            rows.append((self.U_y - np.tile(G_all, (N_p, 1))) / sc[:, None])
+            rows.append((self.Uf_y - np.tile(G_all, (self.Uf_y.shape[0] // m, 1))) / sf)
         self.A_c = np.vstack(rows)
         # simple bounds on y: set point trust region and map bounds (delta), alpha in [0, 1]
         s = self.s
@@ -845,6 +883,11 @@ class TrackingMPC:
         uf_off = (self.Uf_z @ z0).reshape(-1, m) + u_base
         bu = np.concatenate([bu, ((self._u_hi - uf_off) / self.Du).reshape(-1)])
         bl = np.concatenate([bl, ((self._u_lo - uf_off) / self.Du).reshape(-1)])
+        if s.u_box is not None:  # u - u_r(set point) = u_off - u_r_s + Du (row y)
+            lo_box, hi_box = self.u_r_s + s.u_box[0], self.u_r_s + s.u_box[1]
+            for off in (u_off, uf_off):
+                bu = np.concatenate([bu, ((hi_box - off) / self.Du).reshape(-1)])
+                bl = np.concatenate([bl, ((lo_box - off) / self.Du).reshape(-1)])
         if self._qp is None:  # a new workspace per scheduling: H and A_c fixed until then
             self._qp = _daqp().Model()
             self._qp.settings = {"iter_limit": 2000}
@@ -1228,6 +1271,12 @@ class TrackingMPCNominal(NominalSource):
             for k, v in mpc.items()
         }
         out["mpc.att_max"] = [float(v) for v in np.degrees(arrays["att_max"])]
+        box = arrays.get("u_box")  # (2, 2) [[Phi lo, de lo], [Phi hi, de hi]] of the design
+        out["mpc.u_box"] = (
+            [0.0] * 4 if box is None
+            else [float(box[0, 0]), float(box[1, 0]),
+                  float(np.degrees(box[0, 1])), float(np.degrees(box[1, 1]))]
+        )  # fmt: skip
         return out
 
 
@@ -1239,9 +1288,20 @@ ATT_MAX_PARAMETER = Field(
     lo_open=True, hi=10.0, length=2, default=(0.35, 0.35),
 )  # fmt: skip
 
+#: Node parameter ``mpc.u_box``: the nominal box's input ranges the design assumed.
+U_BOX_PARAMETER = Field(
+    "mpc.u_box", "floats", "rows of the nominal's input minus the set point's trim input: "
+    "Phi lo, Phi hi, delta_e lo, delta_e hi (Phi -, delta_e deg), from the design's nominal "
+    "box (tube.form eight_state); all 0: no rows", lo=-30.0, hi=30.0, length=4,
+    default=(0.0, 0.0, 0.0, 0.0),
+)  # fmt: skip
+
 #: Node parameters of the nominal MPC: its case section's keys under ``mpc.`` (``att_max``
-#: as the design's bounds).
-TrackingMPCNominal.parameters = tuple(
-    ATT_MAX_PARAMETER if f.name == "att_max" else dataclasses.replace(f, name=f"mpc.{f.name}")
-    for f in MPC_SECTION_FIELDS
+#: as the design's bounds) and the design's ``mpc.u_box``.
+TrackingMPCNominal.parameters = (
+    *(
+        ATT_MAX_PARAMETER if f.name == "att_max" else dataclasses.replace(f, name=f"mpc.{f.name}")
+        for f in MPC_SECTION_FIELDS
+    ),
+    U_BOX_PARAMETER,
 )

@@ -208,6 +208,24 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     why = coverage.failing(rho_f, u_hi[1])
     if why:
         raise DesignError(f"tube.rho_min = {c['tube']['rho_min']} / fault: {why}")
+    if pair is not None:  # the nominal box must hold every corner's faulty trim input
+        need_lo, need_hi = coverage.input_offsets(rho_f)
+        box_lo, box_hi = es_nominal.lo[4:6], es_nominal.hi[4:6]
+        log(
+            f"nominal box inputs: every box corner's trim with rho_f in [{rho_f}, 1] needs Phi "
+            f"{need_lo[0]:+.4f}..{need_hi[0]:+.4f} and delta_e {np.degrees(need_lo[1]):+.3f}.."
+            f"{np.degrees(need_hi[1]):+.3f} deg from the nominal trim; the box allows "
+            f"{box_lo[0]:+.3f}..{box_hi[0]:+.3f} and {np.degrees(box_lo[1]):+.2f}.."
+            f"{np.degrees(box_hi[1]):+.2f} deg (room for manoeuvres "
+            f"{np.degrees(box_hi[1] - need_hi[1]):.3f} deg of elevator)"
+        )
+        if np.any(need_lo < box_lo) or np.any(need_hi > box_hi):
+            raise DesignError(
+                "eight_state.Phi / delta_e: the nominal box does not hold the trim input of "
+                f"every box corner with rho_f down to {rho_f} (needs Phi {need_lo[0]:+.4f}.."
+                f"{need_hi[0]:+.4f}, delta_e {np.degrees(need_lo[1]):+.3f}.."
+                f"{np.degrees(need_hi[1]):+.3f} deg): widen the box or raise tube.rho_min"
+            )
     if pair is None:
         cert_case = c
         if "mpc" in c:  # the domain of the certificate: the attitude rows the QP will use
@@ -276,6 +294,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         "trim_u": tm.u_r,
         "omega_flex": omega_flex,
     }
+    if pair is not None:  # the QP's rows on the nominal box's input ranges (mpc.u_box)
+        arrays["u_box"] = np.array([es_nominal.lo[4:6], es_nominal.hi[4:6]])
     # largest trim attitude offset of a parameter-box corner from the nominal trim
     arrays["att_trim_offset"] = np.array(coverage.alpha_offset_max)
     arrays["x0"] = np.asarray(x_start[:9], float)  # plant initial state: trim at (h0, V0)
