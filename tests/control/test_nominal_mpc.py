@@ -363,20 +363,26 @@ def _inputs_of_plan(mpc, y, z0, u_base):
     return u
 
 
-def test_rate_rows_bound_the_jumps_of_the_nominal_input(design):
-    """mpc.du_max: the nominal input, propagated fast step by fast step, jumps at each move
-    start by at most du_max (from the last fast step of the move before), and the first
-    input of a re-plan lies within du_max of the input applied before it; the rows bind
-    (without them the same QP jumps by more than 3x du_max)."""
+def _free_climb_plan(design):
+    """The first plan of the Case 1 climb without rate or box rows: (command section, (h_c,
+    V_c), the MPC, z0 = 0, its solution y, the plan's inputs (N_p, M, m))."""
     c = design.case["command"]
     cmd = np.array([c["h_c"], c["V_c"]])
-    du = np.array([0.02, np.radians(0.2)])
     free = _mpc(design)
     free.schedule(c["h0"], c["V0"])
     z0 = np.zeros(free.n)
     y0, why = free.solve(z0, free.u_r_s, cmd)
     assert why == "ok"
-    u_free = _inputs_of_plan(free, y0, z0, free.u_r_s)
+    return c, cmd, free, z0, y0, _inputs_of_plan(free, y0, z0, free.u_r_s)
+
+
+def test_rate_rows_bound_the_jumps_of_the_nominal_input(design):
+    """mpc.du_max: the nominal input, propagated fast step by fast step, jumps at each move
+    start by at most du_max (from the last fast step of the move before), and the first
+    input of a re-plan lies within du_max of the input applied before it; the rows bind
+    (without them the same QP jumps by more than 3x du_max)."""
+    c, cmd, free, z0, y0, u_free = _free_climb_plan(design)
+    du = np.array([0.02, np.radians(0.2)])
     jumps_free = np.abs(np.diff(u_free.reshape(-1, 2), axis=0)).max(axis=0)
     assert np.all(jumps_free > 3.0 * du)
     mpc = _mpc(design, du_max=du)
@@ -466,14 +472,7 @@ def test_input_box_rows_bound_the_input_from_the_set_points_trim(design):
     climb (without it the same QP asks for more than 0.1 above the trim)."""
     from fahv.control.nominal_mpc import input_box
 
-    c = design.case["command"]
-    cmd = np.array([c["h_c"], c["V_c"]])
-    free = _mpc(design)
-    free.schedule(c["h0"], c["V0"])
-    z0 = np.zeros(free.n)
-    y0, why = free.solve(z0, free.u_r_s, cmd)
-    assert why == "ok"
-    u_free = _inputs_of_plan(free, y0, z0, free.u_r_s)
+    c, cmd, free, z0, y0, u_free = _free_climb_plan(design)
     trim_free = free.u_r_s + free.Gu @ y0[free.layout.delta]
     assert (u_free[:, 0, 0] - trim_free[0]).max() > 0.1
     box = input_box([-0.12, 0.05, -1.0, 7.0])

@@ -213,9 +213,8 @@ def product_bound(nv: NominalVertices, F8, N8, H: float) -> tuple[np.ndarray, np
             np.einsum("scij,jk,scik->sci", R[..., 1:], N8, R[..., 1:])
         )
         par = np.maximum(par, sup.max(axis=(0, 1)))
-    sZ8 = np.sqrt(np.diag(N8))
-    sF = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
-    interp = nv.interp @ np.concatenate([[H], sZ8, sF])
+    s_lo, s_oth = product_supports(F8, N8, H)  # (h, V, alpha, theta, F Z), (q, flexible)
+    interp = nv.interp @ np.concatenate([s_lo[:4], s_oth, s_lo[4:]])
     return par, interp
 
 
