@@ -465,10 +465,11 @@ def test_case1_with_the_altitude_reset_tracks_and_every_replan_is_accepted(desig
     assert abs(m["h_err_final_ft"]) <= 0.02 and abs(m["V_err_final_fps"]) <= 0.02
 
 
-def test_input_box_rows_bound_the_input_from_the_set_points_trim(design):
-    """mpc.u_box (the eight-state tube's nominal box): the nominal input minus the set
-    point's trim input, u_d + K zeta + Du c_j, stays inside the box at every move start and
-    at every fast step of the first two moves; a box of +0.05 in Phi binds in the Case 1
+def test_input_box_rows_bound_the_manoeuvre_part_of_the_input(design):
+    """mpc.u_box (the eight-state tube's nominal box less the corners' trim offsets): the
+    manoeuvre part of the nominal input, K zeta + Du c_j (the input minus the set point's
+    steady input, trim plus the estimate's shift u_d), stays inside the rows at every move
+    start and at every fast step of the first two moves; +0.05 in Phi binds in the Case 1
     climb (without it the same QP asks for more than 0.1 above the trim)."""
     from fahv.control.nominal_mpc import input_box
 
@@ -478,13 +479,13 @@ def test_input_box_rows_bound_the_input_from_the_set_points_trim(design):
     box = input_box([-0.12, 0.05, -1.0, 7.0])
     mpc = _mpc(design, u_box=box)
     mpc.schedule(c["h0"], c["V0"])
-    u_d = np.array([0.0, np.radians(0.5)])  # an estimate's steady shift: part of the input
+    u_d = np.array([-0.02, np.radians(2.0)])  # an estimate's steady shift: not in the rows
     y, why = mpc.solve(z0, mpc.u_r_s + u_d, cmd)
     assert why == "ok"
     n_fine = mpc.Uf_y.shape[0]
     assert mpc.A_c.shape[0] == free.A_c.shape[0] + mpc.s.N_p * mpc.m + n_fine
     u = _inputs_of_plan(mpc, y, z0, mpc.u_r_s + u_d)
-    off = u - (mpc.u_r_s + mpc.Gu @ y[mpc.layout.delta])  # from the set point's trim
+    off = u - (mpc.u_r_s + u_d + mpc.Gu @ y[mpc.layout.delta])  # the manoeuvre part
     tol = 1e-6 * mpc.Du
     checked = np.concatenate([off[:2].reshape(-1, 2), off[2:, 0]])  # fine moves, then starts
     assert np.all(checked <= box[1] + tol) and np.all(checked >= box[0] - tol)

@@ -159,10 +159,12 @@ class MPCSettings:
         Reset the nominal's altitude to the measured one at every re-plan
         (:class:`TrackingMPCNominal`).
     u_box : (2, 2) ndarray or None
-        Rows [lo, hi] of the nominal box's input ranges [Phi, delta_e rad]: the nominal
-        input minus the set point's trim input, u_d + K zeta + c, at every move start
-        and every fast step of the first ``fine_moves`` moves (the eight-state tube's
-        assumption, :mod:`fahv.design.eight_state`); None (``mpc.u_box`` all 0): no rows.
+        Rows [lo, hi] on the manoeuvre part of the nominal input [Phi, delta_e rad], the
+        input minus the steady input of the set point (its trim plus the estimate's
+        shift u_d), K zeta + c, at every move start and every fast step of the first
+        ``fine_moves`` moves: the eight-state tube's nominal box less the box corners'
+        trim offsets (the plant applies its own trim at steady state, whatever its loss
+        or bias; :mod:`fahv.design.eight_state`); None (``mpc.u_box`` all 0): no rows.
     """
 
     M: int
@@ -744,8 +746,9 @@ class TrackingMPC:
         sets of n rows), steady input u_base + Gu delta +/- alpha k_max within the
         tightened limits (2 m), attitude rows, the rate rows (``du_max``), the input
         limits at every fast step inside the first ``fine_moves`` moves
-        (fine_moves (M - 1) m rows), and with ``u_box`` the nominal box's rows on the
-        input minus the set point's trim input at the same move starts and fast steps.
+        (fine_moves (M - 1) m rows), and with ``u_box`` the rows on the manoeuvre part of
+        the input (minus the set point's steady input) at the same move starts and fast
+        steps.
         """
         ly, n, m, N_p = self.layout, self.n, self.m, self.s.N_p
         nb = ly.ny
@@ -883,11 +886,10 @@ class TrackingMPC:
         uf_off = (self.Uf_z @ z0).reshape(-1, m) + u_base
         bu = np.concatenate([bu, ((self._u_hi - uf_off) / self.Du).reshape(-1)])
         bl = np.concatenate([bl, ((self._u_lo - uf_off) / self.Du).reshape(-1)])
-        if s.u_box is not None:  # u - u_r(set point) = u_off - u_r_s + Du (row y)
-            lo_box, hi_box = self.u_r_s + s.u_box[0], self.u_r_s + s.u_box[1]
-            for off in (u_off, uf_off):
-                bu = np.concatenate([bu, ((hi_box - off) / self.Du).reshape(-1)])
-                bl = np.concatenate([bl, ((lo_box - off) / self.Du).reshape(-1)])
+        if s.u_box is not None:  # the manoeuvre part K zeta + c = u_off - u_base + Du (row y)
+            for off in (u_off - u_base, uf_off - u_base):
+                bu = np.concatenate([bu, ((s.u_box[1] - off) / self.Du).reshape(-1)])
+                bl = np.concatenate([bl, ((s.u_box[0] - off) / self.Du).reshape(-1)])
         if self._qp is None:  # a new workspace per scheduling: H and A_c fixed until then
             self._qp = _daqp().Model()
             self._qp.settings = {"iter_limit": 2000}
@@ -1290,9 +1292,10 @@ ATT_MAX_PARAMETER = Field(
 
 #: Node parameter ``mpc.u_box``: the nominal box's input ranges the design assumed.
 U_BOX_PARAMETER = Field(
-    "mpc.u_box", "floats", "rows of the nominal's input minus the set point's trim input: "
-    "Phi lo, Phi hi, delta_e lo, delta_e hi (Phi -, delta_e deg), from the design's nominal "
-    "box (tube.form eight_state); all 0: no rows", lo=-30.0, hi=30.0, length=4,
+    "mpc.u_box", "floats", "rows on the manoeuvre part of the nominal input (the input minus "
+    "the set point's steady input, trim plus estimate shift): Phi lo, Phi hi, delta_e lo, "
+    "delta_e hi (Phi -, delta_e deg), from the design's nominal box less the box corners' "
+    "trim offsets (tube.form eight_state); all 0: no rows", lo=-30.0, hi=30.0, length=4,
     default=(0.0, 0.0, 0.0, 0.0),
 )  # fmt: skip
 

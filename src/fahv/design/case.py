@@ -88,10 +88,12 @@ EIGHT_STATE = (
     Field("attitude", "float", "nominal box: half-width of the nominal's alpha and theta "
           "deviation from the trim at its own (h, V); at least mpc.att_max", unit="deg",
           lo=0.0, lo_open=True, hi=5.0, default=0.4),
-    Field("Phi", "floats", "nominal box: range of the nominal's applied Phi minus the "
-          "trim's", lo=-2.0, hi=2.0, length=2, default=(-0.12, 1.1)),
-    Field("delta_e", "floats", "nominal box: range of the nominal's applied delta_e minus "
-          "the trim's", unit="deg", lo=-30.0, hi=30.0, length=2, default=(-1.1, 7.0)),
+    Field("Phi", "floats", "nominal box: range of the applied Phi minus the nominal trim's "
+          "(it must hold every box corner's trim and the manoeuvres)", lo=-2.0, hi=2.0,
+          length=2, default=(-0.2, 1.1)),
+    Field("delta_e", "floats", "nominal box: range of the applied delta_e minus the nominal "
+          "trim's (it must hold every box corner's trim and the manoeuvres)", unit="deg",
+          lo=-30.0, hi=30.0, length=2, default=(-3.0, 7.0)),
     Field("other", "floats", "nominal box: half-widths of the nominal's q [deg/s] and "
           "eta_1, eta_1_dot, eta_2, eta_2_dot deviations from the trim", lo=0.0,
           lo_open=True, length=5, default=(0.7, 0.5, 3.5, 0.3, 3.5)),

@@ -180,9 +180,7 @@ class BoxCoverage:
         every corner (then its maximum lies on the envelope's corners).
     input_offset : (C, nh, nV, 2) ndarray
         Every corner's trim input minus the nominal vehicle's at the same grid point
-        [Phi -, delta_e rad] (:meth:`input_offsets`).
-    delta_e_nominal : (nh, nV) ndarray
-        The nominal vehicle's trim elevator on the grid [rad].
+        [Phi -, delta_e rad] (:meth:`trim_offsets`).
     """
 
     loss: float
@@ -197,32 +195,25 @@ class BoxCoverage:
     points: int
     monotone: tuple
     input_offset: np.ndarray = field(default=None, repr=False)
-    delta_e_nominal: np.ndarray = field(default=None, repr=False)
 
-    def input_offsets(self, rho_f: float) -> tuple[np.ndarray, np.ndarray]:
-        """Trim input of a box corner with effectiveness in [rho_f, 1] minus the nominal's.
+    def trim_offsets(self) -> tuple[np.ndarray, np.ndarray]:
+        """Range of a box corner's trim input minus the nominal vehicle's at the same point.
 
-        The range over the corners and the grid of what a corner's faulty trim needs
-        (eq. 15) minus the nominal vehicle's trim input at the same point.
-
-        Parameters
-        ----------
-        rho_f : float
-            Smallest elevator effectiveness.
+        What the plant applies at steady state, whatever its elevator loss or bias (a
+        vehicle that lost effectiveness is commanded delta_e,r / rho_f and applies
+        delta_e,r, eq. 15; a bias is taken off the command the same way).
 
         Returns
         -------
         lo, hi : (2,) ndarray
-            Smallest and largest [Phi -, delta_e rad] over the corners and the grid; the
-            elevator's widened by the remainder bound between grid points for the
-            corner's trim (divided by rho_f) and the nominal's (the same bound, taken
-            for it too), Phi's at the grid points (it does not depend on rho_f).
+            Smallest and largest [Phi -, delta_e rad] over the corners and the trim grid;
+            the elevator's widened by the remainder bound between grid points for the
+            corner's trim and the nominal's (the same bound, taken for it too), Phi's at
+            the grid points.
         """
-        de_p = self.input_offset[..., 1] + self.delta_e_nominal[None]
-        need = np.stack([de_p / rho_f, de_p]) - self.delta_e_nominal[None, None]
-        phi = self.input_offset[..., 0]
-        lo = np.array([phi.min(), need.min() - 2.0 * self.remainder])
-        hi = np.array([phi.max(), need.max() + self.remainder * (1.0 / rho_f + 1.0)])
+        off = self.input_offset
+        lo = np.array([off[..., 0].min(), off[..., 1].min() - 2.0 * self.remainder])
+        hi = np.array([off[..., 0].max(), off[..., 1].max() + 2.0 * self.remainder])
         return lo, hi
 
     def failing(self, rho_f: float, u_hi_e: float) -> str:
@@ -412,5 +403,4 @@ def box_coverage(vehicle, rel: dict, tm, u_lo, u_hi, path=()) -> BoxCoverage:
         points=int(de.shape[1] * de.shape[2]),
         monotone=monotone,
         input_offset=np.stack([Phi - tm.u_r[None, ..., 0], de - tm.u_r[None, ..., 1]], axis=-1),
-        delta_e_nominal=np.asarray(tm.u_r[..., 1], float),
     )

@@ -208,23 +208,27 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     why = coverage.failing(rho_f, u_hi[1])
     if why:
         raise DesignError(f"tube.rho_min = {c['tube']['rho_min']} / fault: {why}")
-    if pair is not None:  # the nominal box must hold every corner's faulty trim input
-        need_lo, need_hi = coverage.input_offsets(rho_f)
+    if pair is not None:  # the nominal box less every corner's trim offset: the QP's rows
+        off_lo, off_hi = coverage.trim_offsets()
         box_lo, box_hi = es_nominal.lo[4:6], es_nominal.hi[4:6]
+        room_lo, room_hi = box_lo - off_lo, box_hi - off_hi
         log(
-            f"nominal box inputs: every box corner's trim with rho_f in [{rho_f}, 1] needs Phi "
-            f"{need_lo[0]:+.4f}..{need_hi[0]:+.4f} and delta_e {np.degrees(need_lo[1]):+.3f}.."
-            f"{np.degrees(need_hi[1]):+.3f} deg from the nominal trim; the box allows "
-            f"{box_lo[0]:+.3f}..{box_hi[0]:+.3f} and {np.degrees(box_lo[1]):+.2f}.."
-            f"{np.degrees(box_hi[1]):+.2f} deg (room for manoeuvres "
-            f"{np.degrees(box_hi[1] - need_hi[1]):.3f} deg of elevator)"
+            f"nominal box inputs (applied input minus the nominal trim): the box corners' trims "
+            f"lie at Phi {off_lo[0]:+.4f}..{off_hi[0]:+.4f}, delta_e {np.degrees(off_lo[1]):+.3f}"
+            f"..{np.degrees(off_hi[1]):+.3f} deg (any loss or bias: the plant applies its own "
+            f"trim); the box allows {box_lo[0]:+.3f}..{box_hi[0]:+.3f} and "
+            f"{np.degrees(box_lo[1]):+.2f}..{np.degrees(box_hi[1]):+.2f} deg, so the QP bounds "
+            f"the manoeuvre part K zeta + c of the nominal input to Phi {room_lo[0]:+.4f}.."
+            f"{room_hi[0]:+.4f}, delta_e {np.degrees(room_lo[1]):+.3f}.."
+            f"{np.degrees(room_hi[1]):+.3f} deg (mpc.u_box; a loss scales the applied part "
+            "towards 0)"
         )
-        if np.any(need_lo < box_lo) or np.any(need_hi > box_hi):
+        if np.any(room_lo >= 0.0) or np.any(room_hi <= 0.0):
             raise DesignError(
                 "eight_state.Phi / delta_e: the nominal box does not hold the trim input of "
-                f"every box corner with rho_f down to {rho_f} (needs Phi {need_lo[0]:+.4f}.."
-                f"{need_hi[0]:+.4f}, delta_e {np.degrees(need_lo[1]):+.3f}.."
-                f"{np.degrees(need_hi[1]):+.3f} deg): widen the box or raise tube.rho_min"
+                f"every box corner with room to manoeuvre (trims at Phi {off_lo[0]:+.4f}.."
+                f"{off_hi[0]:+.4f}, delta_e {np.degrees(off_lo[1]):+.3f}.."
+                f"{np.degrees(off_hi[1]):+.3f} deg from the nominal trim): widen the box"
             )
     if pair is None:
         cert_case = c
@@ -294,8 +298,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         "trim_u": tm.u_r,
         "omega_flex": omega_flex,
     }
-    if pair is not None:  # the QP's rows on the nominal box's input ranges (mpc.u_box)
-        arrays["u_box"] = np.array([es_nominal.lo[4:6], es_nominal.hi[4:6]])
+    if pair is not None:  # the QP's rows on the manoeuvre part of the input (mpc.u_box)
+        arrays["u_box"] = np.array([room_lo, room_hi])
     # largest trim attitude offset of a parameter-box corner from the nominal trim
     arrays["att_trim_offset"] = np.array(coverage.alpha_offset_max)
     arrays["x0"] = np.asarray(x_start[:9], float)  # plant initial state: trim at (h0, V0)
