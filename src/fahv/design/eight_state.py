@@ -193,10 +193,8 @@ def product_bound(nv: NominalVertices, F8, N8, H: float) -> tuple[np.ndarray, np
     ----------
     nv : NominalVertices
         Vertex data over the scheduling box (:func:`fahv.design.along_nominal.nominal_vertices`).
-    F8 : (2, 8) array_like
-    N8 : (8, 8) array_like
-    H : float
-        Altitude error bound [ft].
+    F8, N8, H
+        The pair and its altitude bound, as in :func:`product_supports`.
 
     Returns
     -------
