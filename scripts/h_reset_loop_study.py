@@ -33,6 +33,7 @@ from along_nominal_study import ROOT
 
 from fahv.design.along_nominal import SchedulingBox
 from fahv.design.artefacts import load_design
+from fahv.design.eight_state import EightStatePair
 from fahv.loop.params import flat_parameter
 from fahv.loop.simulate import simulate
 from fahv.model.trim import TrimMap
@@ -51,10 +52,10 @@ def pair_overrides(pair: dict, veh, rates, reset: bool) -> dict:
     study computes itself); the nominal MPC's input limits are the actuator limits
     tightened by the support of F_8 Z_8 (eq. 30).
     """
-    F = np.hstack([np.zeros((2, 1)), pair["F"]])
-    N = np.zeros((9, 9))
-    N[0, 0], N[1:, 1:] = float(pair["H"]) ** 2, pair["N"]
-    t = np.sqrt(np.einsum("ij,jk,ik->i", pair["F"], pair["N"], pair["F"]))
+    nan = float("nan")  # figures of the closure the stored file does not carry
+    es = EightStatePair(pair["F"], pair["N"], pair["W"], float(pair["H"]), float(pair["lam"]),
+                        pair["bound"], nan, int(pair["moves"]), nan, nan)  # fmt: skip
+    F, N, t = es.F, es.N, es.tightening
     lo, hi = veh.limits.u_min + t, veh.limits.u_max - t
     mpc = {"mpc.nominal_model": "cm", "mpc.h_reset": reset, "mpc.du_max": list(rates),
            **flat_parameter("u_lo", lo), **flat_parameter("u_hi", hi)}  # fmt: skip

@@ -77,20 +77,27 @@ def test_case_boxes_are_the_stored_pairs_within_rounding(vehicle):
         nominal_box({**load_case(CASE)["eight_state"], "h_margin": 1e4}, vehicle.envelope)
 
 
+def _stored_pair():
+    """The stored eight-state pair as the closure's result (its level 0.999505, docs)."""
+    from fahv.design.eight_state import EightStatePair
+
+    d = dict(np.load(PAIR))
+    return EightStatePair(d["F"], d["N"], d["W"], float(d["H"]), float(d["lam"]), d["bound"],
+                          0.999505, int(d["moves"]), 0.0, 0.0)  # fmt: skip
+
+
 def test_design_runs_the_law_on_the_eight_state_pair(raw8, vehicle, monkeypatch):
     """A quick design of the case (40 W samples) with the closure replaced by the stored
     pair: the law's F, N and tightened inputs are the pair's, the summary carries its
     certificate, the node parameters take it, and 20 s of the loop (CM nominal, reset)
     keep e_8 inside Z_8 and |e_h| <= H with e_h = 0 at every re-plan."""
     import fahv.design.pipeline as pmod
-    from fahv.design.eight_state import EightStatePair, nominal_box
+    from fahv.design.eight_state import nominal_box
     from fahv.loop.params import node_parameters
     from fahv.loop.simulate import simulate
     from fahv.runs.metrics import metrics
 
-    d = dict(np.load(PAIR))
-    pair = EightStatePair(d["F"], d["N"], d["W"], float(d["H"]), float(d["lam"]), d["bound"],
-                          0.999505, int(d["moves"]), 0.0, 0.0)  # fmt: skip
+    pair = _stored_pair()
     calls = []
 
     def stored(case, veh, tm, scale, w_max, cols, rho, room, log):
@@ -143,12 +150,10 @@ def test_a_nominal_box_without_room_for_the_faulty_trim_is_refused(raw8, monkeyp
     """delta_e down to -0.9 deg from the nominal trim: the lightest corner trims 1.007 deg
     below it, which leaves no room to manoeuvre; the design says so, naming the range."""
     import fahv.design.pipeline as pmod
-    from fahv.design.eight_state import EightStatePair, nominal_box
+    from fahv.design.eight_state import nominal_box
     from fahv.errors import DesignError
 
-    d = dict(np.load(PAIR))
-    pair = EightStatePair(d["F"], d["N"], d["W"], float(d["H"]), float(d["lam"]), d["bound"],
-                          0.999505, int(d["moves"]), 0.0, 0.0)  # fmt: skip
+    pair = _stored_pair()
     monkeypatch.setattr(pmod, "design_pair", lambda case, veh, *_: (
         pair, *nominal_box(case["eight_state"], veh.envelope)))  # fmt: skip
     r = copy.deepcopy(raw8)

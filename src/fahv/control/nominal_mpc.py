@@ -770,11 +770,9 @@ class TrackingMPC:
         # inputs at the fast steps inside the first fine_moves moves
         sf = np.tile(self.Du, self.Uf_y.shape[0] // m)[:, None]
         rows.append(self.Uf_y / sf)
-        if self.s.u_box is not None:  # the nominal box: the input minus the set point's trim
-            G_all = np.zeros((m, nb))
-            G_all[:, ly.delta] = self.Gu
-            rows.append((self.U_y - np.tile(G_all, (N_p, 1))) / sc[:, None])
-            rows.append((self.Uf_y - np.tile(G_all, (self.Uf_y.shape[0] // m, 1))) / sf)
+        if self.s.u_box is not None:  # the manoeuvre part: the input rows less Gu delta (G)
+            rows.append((self.U_y - np.tile(G, (N_p, 1))) / sc[:, None])
+            rows.append((self.Uf_y - np.tile(G, (self.Uf_y.shape[0] // m, 1))) / sf)
         self.A_c = np.vstack(rows)
         # simple bounds on y: set point trust region and map bounds (delta), alpha in [0, 1]
         s = self.s

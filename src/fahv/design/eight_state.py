@@ -39,9 +39,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fahv.design.along_nominal import BOX_COORDINATES, NominalVertices, SchedulingBox
+from fahv.design.along_nominal import (
+    BOX_COORDINATES,
+    NominalVertices,
+    SchedulingBox,
+    nominal_vertices,
+)
 from fahv.design.certificate import worst_level
 from fahv.errors import DesignError
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.synthesis.feedback import design_tube
 
 #: The states of the tube, after h (the design's state order without its first entry).
@@ -434,6 +440,11 @@ def nominal_box(section: dict, envelope) -> tuple[SchedulingBox, SchedulingBox]:
         The nominal's ranges (h, V: the envelope shrunk by the margins; attitude, input
         deviations from the trim and q, flexible half-widths as given) and the scheduling
         box: the envelope in h, V, the nominal ranges grown by ``reach`` elsewhere.
+
+    Raises
+    ------
+    DesignError
+        If the margins leave no nominal h or V range inside the envelope.
     """
     deg = np.pi / 180.0
     att = section["attitude"] * deg
@@ -505,9 +516,6 @@ def design_pair(
         If the boxes are malformed, a plant step leaves the model, or the pair does not
         close (:func:`close_pair`).
     """
-    from fahv.design.along_nominal import nominal_vertices
-    from fahv.plant.uncertainty import PAPER_UNCERTAINTY
-
     s = case["eight_state"]
     nominal, box = nominal_box(s, vehicle.envelope)
     unc = {k: v * case["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
@@ -551,3 +559,42 @@ def pair_report(pair: EightStatePair, nominal: SchedulingBox, box: SchedulingBox
         f"{pair.tightening[0]:.4f} / {np.degrees(pair.tightening[1]):.3f} deg",
         "assumed, not certified: " + "; ".join(ASSUMPTIONS),
     ]
+
+
+def input_rows(trim_offsets, nominal: SchedulingBox) -> np.ndarray:
+    """Rows of the QP on the manoeuvre part of the nominal input (``mpc.u_box``).
+
+    The nominal box bounds the input the plant applies minus the nominal vehicle's trim
+    (where the vertices' Jacobians are taken). At steady state the plant applies its own
+    trim whatever its loss or bias (eq. 15), so what is left of the box after every box
+    corner's trim offset is the room of the manoeuvre part K zeta + c; a loss only scales
+    the applied part towards 0.
+
+    Parameters
+    ----------
+    trim_offsets : tuple of (2,) ndarray
+        (lo, hi) of the corners' trim inputs minus the nominal trim [Phi -, delta_e rad]
+        (:meth:`fahv.design.feasibility.BoxCoverage.trim_offsets`).
+    nominal : SchedulingBox
+        The nominal box (its Phi and delta_e coordinates).
+
+    Returns
+    -------
+    (2, 2) ndarray
+        [[Phi lo, delta_e lo], [Phi hi, delta_e hi]] [-, rad], lo < 0 < hi.
+
+    Raises
+    ------
+    DesignError
+        If the box leaves no room on a side (names the offsets).
+    """
+    off_lo, off_hi = (np.asarray(v, float) for v in trim_offsets)
+    room = np.array([nominal.lo[4:6] - off_lo, nominal.hi[4:6] - off_hi])
+    if np.any(room[0] >= 0.0) or np.any(room[1] <= 0.0):
+        raise DesignError(
+            "eight_state.Phi / delta_e: the nominal box does not hold the trim input of "
+            f"every box corner with room to manoeuvre (trims at Phi {off_lo[0]:+.4f}.."
+            f"{off_hi[0]:+.4f}, delta_e {np.degrees(off_lo[1]):+.3f}.."
+            f"{np.degrees(off_hi[1]):+.3f} deg from the nominal trim): widen the box"
+        )
+    return room

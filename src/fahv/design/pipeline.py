@@ -24,7 +24,7 @@ from fahv.design.artefacts import Design, provenance
 from fahv.design.case import Case
 from fahv.design.certificate import certify_tube
 from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
-from fahv.design.eight_state import design_pair, pair_report
+from fahv.design.eight_state import design_pair, input_rows, pair_report
 from fahv.design.feasibility import box_coverage, fault_vertices, input_room
 from fahv.errors import DesignError
 from fahv.model.linearize import classify_modes, linearize
@@ -210,27 +210,20 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         raise DesignError(f"tube.rho_min = {c['tube']['rho_min']} / fault: {why}")
     if pair is not None:  # the nominal box less every corner's trim offset: the QP's rows
         off_lo, off_hi = coverage.trim_offsets()
-        box_lo, box_hi = es_nominal.lo[4:6], es_nominal.hi[4:6]
-        room_lo, room_hi = box_lo - off_lo, box_hi - off_hi
+        u_box = input_rows((off_lo, off_hi), es_nominal)
         log(
             f"nominal box inputs (applied input minus the nominal trim): the box corners' trims "
             f"lie at Phi {off_lo[0]:+.4f}..{off_hi[0]:+.4f}, delta_e {np.degrees(off_lo[1]):+.3f}"
             f"..{np.degrees(off_hi[1]):+.3f} deg (any loss or bias: the plant applies its own "
-            f"trim); the box allows {box_lo[0]:+.3f}..{box_hi[0]:+.3f} and "
-            f"{np.degrees(box_lo[1]):+.2f}..{np.degrees(box_hi[1]):+.2f} deg, so the QP bounds "
-            f"the manoeuvre part K zeta + c of the nominal input to Phi {room_lo[0]:+.4f}.."
-            f"{room_hi[0]:+.4f}, delta_e {np.degrees(room_lo[1]):+.3f}.."
-            f"{np.degrees(room_hi[1]):+.3f} deg (mpc.u_box; a loss scales the applied part "
+            f"trim); the box allows {es_nominal.lo[4]:+.3f}..{es_nominal.hi[4]:+.3f} and "
+            f"{np.degrees(es_nominal.lo[5]):+.2f}..{np.degrees(es_nominal.hi[5]):+.2f} deg, so "
+            f"the QP bounds the manoeuvre part K zeta + c of the nominal input to Phi "
+            f"{u_box[0, 0]:+.4f}..{u_box[1, 0]:+.4f}, delta_e {np.degrees(u_box[0, 1]):+.3f}.."
+            f"{np.degrees(u_box[1, 1]):+.3f} deg (mpc.u_box; a loss scales the applied part "
             "towards 0)"
         )
-        if np.any(room_lo >= 0.0) or np.any(room_hi <= 0.0):
-            raise DesignError(
-                "eight_state.Phi / delta_e: the nominal box does not hold the trim input of "
-                f"every box corner with room to manoeuvre (trims at Phi {off_lo[0]:+.4f}.."
-                f"{off_hi[0]:+.4f}, delta_e {np.degrees(off_lo[1]):+.3f}.."
-                f"{np.degrees(off_hi[1]):+.3f} deg from the nominal trim): widen the box"
-            )
-    if pair is None:
+        certificate = pair.summary(es_nominal, es_box)  # W_8 over the pair's own domain
+    else:
         cert_case = c
         if "mpc" in c:  # the domain of the certificate: the attitude rows the QP will use
             att = attitude_bounds(tube.N, tau, c["mpc"]["att_max"])
@@ -252,8 +245,6 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             log,
             progress,
         )
-    else:  # W_8 is bounded over the pair's own domain: the summary of the pair
-        certificate = pair.summary(es_nominal, es_box)
     if d["constant"] == "estimated":
         for v in c["variants"]:
             law = LAWS[VARIANTS[v].law]
@@ -299,7 +290,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         "omega_flex": omega_flex,
     }
     if pair is not None:  # the QP's rows on the manoeuvre part of the input (mpc.u_box)
-        arrays["u_box"] = np.array([room_lo, room_hi])
+        arrays["u_box"] = u_box
     # largest trim attitude offset of a parameter-box corner from the nominal trim
     arrays["att_trim_offset"] = np.array(coverage.alpha_offset_max)
     arrays["x0"] = np.asarray(x_start[:9], float)  # plant initial state: trim at (h0, V0)
