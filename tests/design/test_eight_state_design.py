@@ -39,6 +39,7 @@ def test_eight_state_case_sets_every_knob(raw8):
     [
         (lambda d: d["mpc"].update(nominal_model="lpv"), "'tube.form' eight_state needs"),
         (lambda d: d["mpc"].update(h_reset=False), "'tube.form' eight_state needs"),
+        (lambda d: d["mpc"].update(est_tau=0.0), "'tube.form' eight_state needs"),
         (lambda d: d["mpc"].update(att_max=0.45), "'tube.form' eight_state needs"),
         (lambda d: d["mpc"].update(att_max=0.0), "'tube.form' eight_state needs"),
         (lambda d: d["tube"].update(tau=0.8), "'tube.form' eight_state needs"),
@@ -100,8 +101,8 @@ def test_design_runs_the_law_on_the_eight_state_pair(raw8, vehicle, monkeypatch)
     pair = _stored_pair()
     calls = []
 
-    def stored(case, veh, tm, scale, w_max, cols, rho, room, log):
-        calls.append((rho, np.asarray(scale).shape, np.asarray(cols).shape))
+    def stored(case, veh, tm, scale, w_max, cols, rho, room, log, gamma):
+        calls.append((rho, np.asarray(scale).shape, np.asarray(cols).shape, gamma))
         return (pair, *nominal_box(case["eight_state"], veh.envelope))
 
     monkeypatch.setattr(pmod, "design_pair", stored)
@@ -110,7 +111,7 @@ def test_design_runs_the_law_on_the_eight_state_pair(raw8, vehicle, monkeypatch)
     r["certificate"] = {"schedules": 0}
     lines = []
     design = pmod.run_design(case_from_mapping(r, "quick8.yaml"), log=lines.append)
-    assert calls == [(0.76, (11,), (11,))]
+    assert calls == [(0.76, (11,), (11,), pytest.approx(0.2))]  # gamma = Ts / est_tau
     a, s = design.arrays, design.summary
     np.testing.assert_array_equal(a["F"], pair.F)
     np.testing.assert_array_equal(a["N"], pair.N)
@@ -154,7 +155,7 @@ def test_a_nominal_box_without_room_for_the_faulty_trim_is_refused(raw8, monkeyp
     from fahv.errors import DesignError
 
     pair = _stored_pair()
-    monkeypatch.setattr(pmod, "design_pair", lambda case, veh, *_: (
+    monkeypatch.setattr(pmod, "design_pair", lambda case, veh, *_, **__: (
         pair, *nominal_box(case["eight_state"], veh.envelope)))  # fmt: skip
     r = copy.deepcopy(raw8)
     r["disturbance"]["samples"] = 40

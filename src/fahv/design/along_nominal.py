@@ -505,6 +505,75 @@ class OnsetPulse:
         return p, np.atleast_2d(J) - p @ self.G
 
 
+def onset_jumps(box: SchedulingBox, vehicle, trim_map, uncertainty: dict, rho_f: float,
+                Ts: float, n_sub: int, interior: int = 4096,
+                seed: int = 0) -> tuple[np.ndarray, int]:  # fmt: skip
+    """Jumps of the one-step residual at the onset of an elevator loss over a box.
+
+    J = f_p(x, (Phi, rho_f delta_e)) - f_p(x, (Phi, delta_e)): what a loss of 1 - rho_f
+    adds to the plant's step at the state x and applied input u of a box point, for the
+    dispersed vehicle p. Sampled at the box's 64 corners (q and the flexible states at
+    the trim's) with every one of the 2^P corners of the parameter box, then at
+    ``interior`` points inside with q and the flexible states anywhere in their ranges
+    and, with probability 1/2 each, a corner or an interior vehicle (seeded).
+
+    Parameters
+    ----------
+    box : SchedulingBox
+        States and applied inputs where a loss may start.
+    vehicle, trim_map
+        The nominal vehicle and its trim map.
+    uncertainty : dict[str, float]
+        Relative half-widths of the parameter box.
+    rho_f : float
+        Elevator effectiveness after the loss, in (0, 1].
+    Ts : float
+        Control period [s].
+    n_sub : int
+        RK4 sub-steps per period.
+    interior, seed : int
+        Interior samples and their seed.
+
+    Returns
+    -------
+    J : (64 2^P + interior, 9) ndarray
+        The jumps, corner samples first (state units per period).
+    n_corner : int
+        How many of them are corner samples (64 2^P).
+
+    Raises
+    ------
+    ValueError
+        If rho_f is not in (0, 1].
+    DesignError
+        If a plant step is not finite.
+    """
+    if not 0.0 < rho_f <= 1.0:
+        raise ValueError(f"onset_jumps: rho_f must be in (0, 1], got {rho_f}")
+    names = list(uncertainty)
+    corners = np.array(list(itertools.product((-1.0, 1.0), repeat=len(names))))
+    rng = np.random.default_rng(seed)
+    S = box.corners()
+    s_in = rng.uniform(box.lo, box.hi, (interior, 6))
+    f_in = np.where(rng.random((interior, 1)) < 0.5, corners[rng.integers(len(corners),
+                    size=interior)], rng.uniform(-1.0, 1.0, (interior, len(names))))  # fmt: skip
+    s_all = np.vstack([np.repeat(S, len(corners), 0), s_in])
+    f_all = np.vstack([np.tile(corners, (len(S), 1)), f_in])
+    X, U = box.points(trim_map, s_all)
+    other = rng.uniform(-1.0, 1.0, (len(s_all), 5)) * np.asarray(box.other_half, float)
+    other[: len(S) * len(corners)] = 0.0  # the corner points at the trim's q, eta
+    X[:, 4:9] += other
+    recs = params_records(
+        [perturb(vehicle.params, uncertainty, dict(zip(names, f, strict=True))) for f in f_all]
+    )
+    Uf = U.copy()
+    Uf[:, 1] *= rho_f
+    J = _one_step(X, Uf, recs, Ts, n_sub) - _one_step(X, U, recs, Ts, n_sub)
+    if not np.all(np.isfinite(J)):
+        raise DesignError("onset_jumps: a plant step is not finite; the box leaves the model")
+    return J, len(S) * len(corners)
+
+
 def onset_pulse(nominal: SchedulingBox, vehicle, trim_map, uncertainty: dict, rho_f: float,
                 Ts: float, n_sub: int, metric, g: int = 2, interior: int = 4096,
                 seed: int = 0) -> OnsetPulse:  # fmt: skip
@@ -553,31 +622,9 @@ def onset_pulse(nominal: SchedulingBox, vehicle, trim_map, uncertainty: dict, rh
     DesignError
         If a plant step is not finite.
     """
-    if not 0.0 < rho_f <= 1.0:
-        raise ValueError(f"onset_pulse: rho_f must be in (0, 1], got {rho_f}")
     if not 1 <= g <= 9:
         raise ValueError(f"onset_pulse: g must be in 1..9, got {g}")
-    names = list(uncertainty)
-    corners = np.array(list(itertools.product((-1.0, 1.0), repeat=len(names))))
-    rng = np.random.default_rng(seed)
-    S = nominal.corners()
-    s_in = rng.uniform(nominal.lo, nominal.hi, (interior, 6))
-    f_in = np.where(rng.random((interior, 1)) < 0.5, corners[rng.integers(len(corners),
-                    size=interior)], rng.uniform(-1.0, 1.0, (interior, len(names))))  # fmt: skip
-    s_all = np.vstack([np.repeat(S, len(corners), 0), s_in])
-    f_all = np.vstack([np.tile(corners, (len(S), 1)), f_in])
-    X, U = nominal.points(trim_map, s_all)
-    other = rng.uniform(-1.0, 1.0, (len(s_all), 5)) * np.asarray(nominal.other_half, float)
-    other[: len(S) * len(corners)] = 0.0  # the corner points at the trim's q, eta
-    X[:, 4:9] += other
-    recs = params_records(
-        [perturb(vehicle.params, uncertainty, dict(zip(names, f, strict=True))) for f in f_all]
-    )
-    Uf = U.copy()
-    Uf[:, 1] *= rho_f
-    J = _one_step(X, Uf, recs, Ts, n_sub) - _one_step(X, U, recs, Ts, n_sub)
-    if not np.all(np.isfinite(J)):
-        raise DesignError("onset_pulse: a plant step is not finite; the box leaves the model")
+    J, _ = onset_jumps(nominal, vehicle, trim_map, uncertainty, rho_f, Ts, n_sub, interior, seed)
     L = np.linalg.cholesky(np.asarray(metric, float))
     Jm = np.linalg.solve(L, J.T).T
     _, _, Vt = np.linalg.svd(Jm, full_matrices=False)

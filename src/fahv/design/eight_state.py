@@ -35,7 +35,7 @@ onset of a loss is not in W_8).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -44,6 +44,7 @@ from fahv.design.along_nominal import (
     NominalVertices,
     SchedulingBox,
     nominal_vertices,
+    onset_jumps,
 )
 from fahv.design.certificate import worst_level
 from fahv.errors import DesignError
@@ -60,7 +61,7 @@ ASSUMPTIONS = (
     "the ancillary gain is blind to e_h: u = v + F_8 e_8",
     "the nominal stays inside the nominal box (its h, V, attitude, input and q, flexible ranges)",
     "the disturbance estimate has converged: the onset of a loss and the estimate's lag "
-    "are not in W_8",
+    "are not in W_8 (bounded separately as a transient of the pair: the onset lines)",
 )
 
 
@@ -90,6 +91,8 @@ class EightStatePair:
         Largest one-step change of e_h by the tube's own dynamics [ft].
     w_h : float
         The h row's disturbance over the product set [ft].
+    onset : OnsetBound, optional
+        The onset of a loss as a transient of the pair (:func:`onset_bound`).
     """
 
     F8: np.ndarray
@@ -102,6 +105,7 @@ class EightStatePair:
     moves: int
     step: float
     w_h: float
+    onset: OnsetBound | None = None
 
     @property
     def F(self) -> np.ndarray:
@@ -159,6 +163,7 @@ class EightStatePair:
                 "other_half": box.other_half.tolist(),
             },  # fmt: skip
             "assumptions": list(ASSUMPTIONS),
+            "onset": None if self.onset is None else self.onset.summary(),
         }
 
 
@@ -284,6 +289,204 @@ def altitude_bound(nv: NominalVertices, A, B, F8, N8, moves: int) -> AltitudeBou
         raise DesignError(f"eight-state tube: the altitude bound H does not converge ({H:.4g} ft)")
     bound = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H_new
     return AltitudeBound(float(H_new), step, float(par[0] + interp[0]), bound)
+
+
+def pulse_gain(a: float, gamma: float, steps: int = 100_000) -> float:
+    """Peak over k of sum_{i<k} a^(k-1-i) (1 - gamma)^i: the error's largest norm per unit jump.
+
+    The recursion d_k+1 = a d_k + (1 - gamma)^k j, d_0 = 0, bounds the norm of the part of
+    the error driven by a jump j of the residual that the estimate removes at the rate
+    gamma per step, when every vertex's closed loop contracts the norm by at most a.
+
+    Parameters
+    ----------
+    a : float
+        Contraction of the closed loop in the norm, in [0, 1).
+    gamma : float
+        Estimator gain per step, in (0, 1] (1: the estimate knows the jump one step after).
+    steps : int
+        Steps searched for the peak (the sum decays after it).
+
+    Returns
+    -------
+    float
+        The peak (>= 1: the first step carries the whole jump).
+
+    Raises
+    ------
+    ValueError
+        If a or gamma is out of range.
+    """
+    if not 0.0 <= a < 1.0 or not 0.0 < gamma <= 1.0:
+        raise ValueError(f"pulse_gain: need 0 <= a < 1 and 0 < gamma <= 1, got {a}, {gamma}")
+    d, peak, b = 0.0, 0.0, 1.0
+    for _ in range(steps):
+        d = a * d + b
+        b *= 1.0 - gamma
+        if d < peak:
+            break
+        peak = d
+    return peak
+
+
+@dataclass(frozen=True)
+class OnsetBound:
+    """The onset of an elevator loss as a transient of a closed pair (:func:`onset_bound`).
+
+    Attributes
+    ----------
+    loss : float
+        The design's loss 1 - rho_min.
+    gamma : float
+        The case's estimator gain per step (Ts / est_tau).
+    contraction : float
+        a: largest factor by which a vertex's closed loop A_8 + B_8 F_8 maps Z_8's norm.
+    steady : float
+        c: the level the error holds at with the disturbance inside the bound (the largest
+        bound / W_8, at the altitude bound grown by the onset).
+    jump : float
+        j: the largest Z_8 norm of J_8 / rho_f at the design loss over the scheduling box
+        and every corner of the parameter box.
+    interior_ratio : float
+        The interior samples' largest norm over the corners' (<= 1: the corners hold it).
+    peak : float
+        c + j pulse_gain(a, gamma): the level bound at the design loss with the case's
+        estimate (certified when <= 1).
+    certified_loss, certified_loss_one_step : float
+        The largest loss whose level bound is <= 1 with the case's estimate, and with an
+        estimate that knows the loss one step after it acts (gamma = 1).
+    jump_h : float
+        [ft] largest |J_h| / rho_f at the design loss (e_h's share, added to H).
+    """
+
+    loss: float
+    gamma: float
+    contraction: float
+    steady: float
+    jump: float
+    interior_ratio: float
+    peak: float
+    certified_loss: float
+    certified_loss_one_step: float
+    jump_h: float
+
+    def summary(self) -> dict:
+        """JSON-ready record (the attributes)."""
+        return {k: float(v) for k, v in self.__dict__.items()}
+
+    def lines(self) -> list[str]:
+        """The design log's lines of the bound."""
+        ok = self.peak <= 1.0
+        return [
+            f"onset of a {100 * self.loss:.1f} % loss (item 3; from the error at its steady "
+            f"level {self.steady:.3f}, estimate gain {self.gamma:.3f} per step): first jump "
+            f"{self.jump:.3f} x Z_8 at the scheduling box's worst point (interior samples "
+            f"{self.interior_ratio:.3f} of the corners'), closed-loop contraction "
+            f"{self.contraction:.5f} per step, level bound {self.peak:.3f} "
+            + ("<= 1  OK" if ok else "> 1: NOT certified"),
+            f"largest loss whose onset keeps e in Z_8: {100 * self.certified_loss:.2f} % with "
+            f"the case's estimate, {100 * self.certified_loss_one_step:.2f} % with an estimate "
+            "that knows the loss one step after it acts (the first step alone, which no "
+            "estimate can remove)",
+        ]
+
+
+def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
+                uncertainty: dict, gamma: float, Ts: float, n_sub: int, *,
+                interior: int = 1024, iterations: int = 6) -> OnsetBound:  # fmt: skip
+    """Bound the onset of an elevator loss as a transient of the pair (item 3).
+
+    At the step a loss of 1 - rho_f starts, the plant moves by J = f_p(x, P u) - f_p(x, u)
+    more than the nominal (with the estimate of the step before) expects
+    (:func:`fahv.design.along_nominal.onset_jumps`); as the controller's command grows to
+    delta_e / rho_f the residual grows on to J / rho_f. The estimate removes what it has
+    seen at the rate gamma per step, so the estimate's error is a sum of such jumps, each
+    decaying as (1 - gamma)^k. The error dynamics are linear along any sequence of the
+    vertices (rho_f at both ends of [rho_min, 1] among them), so e = e_w + e_p: e_w,
+    driven by the disturbance inside the bound from the error at the onset, stays in
+    c Z_8 if it starts there (c Z_8 is RPI for c W_8); e_p, driven by the estimate's error
+    from 0, has the Z_8 norm at most j pulse_gain(a, gamma), j = max ||J_8 / rho_f||_Z_8
+    (the jumps arriving later only delay part of it). e stays in Z_8 if
+    c + j pulse_gain(a, gamma) <= 1. The altitude error takes |J_h| / rho_f per step on
+    top of (1), at most 1 / gamma of it between resets; the bound of c is taken at that H.
+
+    Parameters
+    ----------
+    nv : NominalVertices
+        The pair's vertex data over its scheduling box.
+    pair : EightStatePair
+        The closed pair (its loss is nv.rho_min).
+    vehicle, trim_map
+        The nominal vehicle and its trim map.
+    uncertainty : dict[str, float]
+        Relative half-widths of the parameter box.
+    gamma : float
+        The case's estimator gain per step, in (0, 1].
+    Ts : float
+        Control period [s].
+    n_sub : int
+        RK4 sub-steps per period.
+    interior : int
+        Interior samples of the jumps besides the corners.
+    iterations : int
+        Bisection steps for each certified loss.
+
+    Returns
+    -------
+    OnsetBound
+
+    Raises
+    ------
+    ValueError
+        If gamma is not in (0, 1].
+    DesignError
+        If a plant step is not finite.
+    """
+    if not 0.0 < gamma <= 1.0:
+        raise ValueError(f"onset_bound: gamma must be in (0, 1], got {gamma}")
+    A, B = nv.vertices()
+    A8, B8 = A[:, 1:, 1:], B[:, 1:, :]
+    L = np.linalg.cholesky(pair.N8)
+    a = float(np.linalg.norm(np.linalg.solve(L, A8 + B8 @ pair.F8) @ L, 2, axis=(1, 2)).max())
+
+    def jumps(loss: float):
+        J, n_c = onset_jumps(nv.box, vehicle, trim_map, uncertainty, 1.0 - loss, Ts, n_sub,
+                             interior)  # fmt: skip
+        J = J / (1.0 - loss)
+        norm = np.sqrt((np.linalg.solve(L, J[:, 1:].T) ** 2).sum(axis=0))
+        return norm, n_c, float(np.abs(J[:, 0]).max())
+
+    loss = 1.0 - nv.rho_min
+    norm, n_c, jump_h = jumps(loss)
+    j = float(norm.max())
+    H = pair.H + jump_h / gamma
+    par, interp = product_bound(nv, pair.F8, pair.N8, H)
+    bound = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H
+    c = float((bound / pair.W8).max())
+
+    def certified(g: float) -> float:
+        gain = pulse_gain(a, g)
+        if c + gain * j <= 1.0:
+            return loss
+        if c >= 1.0:
+            return 0.0
+        lo, hi = 0.0, loss
+        guess = 2.0 * loss * (1.0 - c) / (gain * j)  # twice the first-order loss: bracket
+        if guess < loss:
+            ok = c + gain * float(jumps(guess)[0].max()) <= 1.0
+            lo, hi = (guess, loss) if ok else (0.0, guess)
+        for _ in range(iterations):
+            mid = 0.5 * (lo + hi)
+            if c + gain * float(jumps(mid)[0].max()) <= 1.0:
+                lo = mid
+            else:
+                hi = mid
+        return lo
+
+    return OnsetBound(
+        loss, gamma, a, c, j, float(norm[n_c:].max() / norm[:n_c].max()) if len(norm) > n_c
+        else 0.0, c + pulse_gain(a, gamma) * j, certified(gamma), certified(1.0), jump_h,
+    )  # fmt: skip
 
 
 def box_shortfall(box: SchedulingBox, nominal: SchedulingBox, F8, N8, H: float) -> dict:
@@ -480,6 +683,7 @@ def design_pair(
     rho_min: float,
     room,
     log: Callable[[str], None] = print,
+    gamma: float | None = None,
 ) -> tuple[EightStatePair, SchedulingBox, SchedulingBox]:
     """The eight-state tube of a case (``tube.form: eight_state``), closed and checked.
 
@@ -503,6 +707,9 @@ def design_pair(
     room : (2,) array_like
         Input room of each row with the faulty trim (the tube objective's weights).
     log : callable
+    gamma : float, optional
+        The case's estimator gain per step: the onset of the design loss is then bounded
+        as a transient of the pair (:func:`onset_bound`, ``pair.onset``).
 
     Returns
     -------
@@ -531,6 +738,10 @@ def design_pair(
     pair = close_pair(nv, nominal, s["w0"] * w_max[1:], scale[:9], scale[9:], room, s["lam"],
                       case["mpc"]["M"], grow=s["grow"], iterations=s["iterations"],
                       w_ref=w_max, log=log)  # fmt: skip
+    if gamma is not None:
+        onset = onset_bound(nv, pair, vehicle, trim_map, unc, gamma, case["Ts"],
+                            case["plant_substeps"])  # fmt: skip
+        pair = replace(pair, onset=onset)
     return pair, nominal, box
 
 
@@ -558,6 +769,7 @@ def pair_report(pair: EightStatePair, nominal: SchedulingBox, box: SchedulingBox
         f"{np.degrees(sz[2]):.4f} deg, q {np.degrees(sz[3]):.4f} deg/s; tightening "
         f"{pair.tightening[0]:.4f} / {np.degrees(pair.tightening[1]):.3f} deg",
         "assumed, not certified: " + "; ".join(ASSUMPTIONS),
+        *([] if pair.onset is None else pair.onset.lines()),
     ]
 
 
