@@ -591,25 +591,12 @@ def onset_pulse(nominal: SchedulingBox, vehicle, trim_map, uncertainty: dict, rh
 
     Parameters
     ----------
-    nominal : SchedulingBox
-        Nominal states and applied inputs where a loss may start.
-    vehicle, trim_map
-        The nominal vehicle and its trim map.
-    uncertainty : dict[str, float]
-        Relative half-widths of the parameter box.
-    rho_f : float
-        Elevator effectiveness after the loss, in (0, 1].
-    Ts : float
-        Control period [s].
-    n_sub : int
-        RK4 sub-steps per period.
+    nominal, vehicle, trim_map, uncertainty, rho_f, Ts, n_sub, interior, seed
+        As ``box`` ... ``seed`` of :func:`onset_jumps` (``nominal``: where a loss may start).
     metric : (9, 9) ndarray
         Positive definite metric of the principal directions.
     g : int
         Generators.
-    interior : int
-        Interior samples.
-    seed : int
 
     Returns
     -------
