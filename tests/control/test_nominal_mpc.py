@@ -137,6 +137,44 @@ def test_estimate_starts_from_the_first_residual():
     np.testing.assert_allclose(est.update_residual(r2), r1 + 0.04, rtol=0, atol=1e-15)
 
 
+def test_estimate_takes_the_elevator_share_at_its_own_gain(design):
+    """With gamma_e = 1 along B's elevator column, a 24 % loss on the linear model is
+    known after one step: -u_d = (0, (rho_f - 1) delta_e) within 1 % from step 2 on, when
+    the isotropic filter (gamma 0.2) still misses 59 % of it; a residual orthogonal to b
+    in the metric is filtered at gamma alone; gamma_e without its scale or b is refused."""
+    mpc = _mpc(design)
+    mpc.schedule(85500.0, 7900.0)
+    A, B = mpc.A[:9, :9], mpc.B[:9]
+    Dx = design.arrays["Dx"][:9]
+    rho, de = 0.76, np.radians(14.0)
+    x, u = np.zeros(9), np.array([0.0, de])
+    fast = DisturbanceEstimator(1, 9, 0.2, 1.0, Dx)
+    slow = DisturbanceEstimator(1, 9, 0.2)
+    for est in (fast, slow):  # the first residual (no loss yet) initialises both at 0
+        est.update(A[None], B[None], x[None], u[None], (A @ x + B @ u)[None])
+    for _ in range(2):
+        x_next = A @ x + B @ np.array([0.0, rho * de])
+        for est in (fast, slow):
+            est.update(A[None], B[None], x[None], u[None], x_next[None])
+        x = x_next
+    loss_u = (rho - 1.0) * de
+    np.testing.assert_allclose((-mpc.Hu[:, :9] @ fast.d[0])[1], loss_u, rtol=1e-2)
+    assert (-mpc.Hu[:, :9] @ slow.d[0])[1] / loss_u == pytest.approx(1 - 0.8**2, abs=0.01)
+    b = B[:, 1]
+    o = np.zeros(9)
+    o[1] = 1.0  # V, then made orthogonal to b in the metric diag(Dx)^-2
+    o -= b * ((b / Dx**2) @ o) / ((b / Dx**2) @ b)
+    est = DisturbanceEstimator(1, 9, 0.2, 1.0, Dx)
+    est.update_residual(np.zeros((1, 9)), b[None])
+    np.testing.assert_allclose(est.update_residual(o[None], b[None])[0], 0.2 * o, atol=1e-12)
+    with pytest.raises(ValueError, match="gamma_e needs the elevator column"):
+        est.update_residual(o[None])
+    with pytest.raises(ValueError, match="scale"):
+        DisturbanceEstimator(1, 9, 0.2, 1.0)
+    with pytest.raises(ValueError, match="gamma_e"):
+        DisturbanceEstimator(1, 9, 0.2, 1.5, Dx)
+
+
 def test_a_held_trim_starts_without_the_estimates_transient(design):
     """Issue 20: a heavy vehicle (m + 10 %, c_e - 3 %, S - 1 %) starting at its own trim
     and commanded to hold it. The estimate starts from the first residual and the first

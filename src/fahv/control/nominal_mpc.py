@@ -104,6 +104,11 @@ MPC_SECTION_FIELDS = (
           "used but reported as not certified", unit="deg", lo=0.0, hi=10.0, default=0.0),
     Field("est_tau", "float", "time constant of the state-disturbance estimate (0: none)",
           unit="s", lo=0.0, hi=1e3, default=0.5),
+    Field("est_tau_elevator", "float", "time constant of the estimate along the elevator "
+          "column of the scheduled model's B (the direction a loss of effectiveness or an "
+          "elevator bias acts in; Ts: the share of the residual along it is taken in one "
+          "step); 0: est_tau in every direction (docs/control_design.md)", unit="s", lo=0.0,
+          hi=1e3, default=0.0),
     Field("du_max", "floats", "largest change of the nominal input (Phi, delta_e) at a move "
           "start: between consecutive moves of the plan and, at a re-plan, from the nominal "
           "input applied at the step before (0: no rate rows); bounds how fast the residual "
@@ -395,6 +400,13 @@ class DisturbanceEstimator:
     effectiveness (eq. 16), the mean of the modelling error. The nominal model then
     predicts with d, so the tube only has to hold what is left (docs/control_design.md).
 
+    With a gain ``gamma_e`` along the elevator column b of the scheduled model's B, the
+    share of r - d along b (the projection in the metric of ``scale``,
+    b (b' S r) / (b' S b), S = diag(scale)^-2) is filtered with gamma_e instead: a loss of
+    effectiveness or an elevator bias acts along b (eq. 15-16), so with gamma_e = 1 the
+    estimate knows it one step after the onset while the other directions keep the slow
+    filter (gamma = 1 in every direction made the loop unstable, docs/control_design.md).
+
     Parameters
     ----------
     n_runs : int
@@ -403,17 +415,31 @@ class DisturbanceEstimator:
         Measured states (9 for a CM design, 11 for the ECM).
     gamma : float
         Filter gain in (0, 1].
+    gamma_e : float, optional
+        Filter gain in (0, 1] along the elevator column (None: gamma in every direction).
+    scale : (p,) array_like, optional
+        State scale of the projection's metric (needed with ``gamma_e``).
 
     Raises
     ------
     ValueError
-        If gamma is not in (0, 1].
+        If a gain is not in (0, 1], or ``gamma_e`` comes without a positive ``scale`` of
+        length p.
     """
 
-    def __init__(self, n_runs: int, p: int, gamma: float) -> None:
+    def __init__(self, n_runs: int, p: int, gamma: float, gamma_e: float | None = None,
+                 scale=None) -> None:  # fmt: skip
         if not 0.0 < gamma <= 1.0:
             raise ValueError(f"estimator gain gamma must be in (0, 1], got {gamma}")
+        if gamma_e is not None:
+            if not 0.0 < gamma_e <= 1.0:
+                raise ValueError(f"estimator gain gamma_e must be in (0, 1], got {gamma_e}")
+            scale = np.asarray(scale, float) if scale is not None else np.zeros(0)
+            if scale.shape != (p,) or not np.all(scale > 0.0):
+                raise ValueError(f"estimator scale must be ({p},) and positive, got {scale}")
         self.gamma = float(gamma)
+        self.gamma_e = None if gamma_e is None else float(gamma_e)
+        self.scale = scale
         self.d = np.zeros((n_runs, p))
         #: False until the first residual: it initialises d (the filter's start).
         self.started = False
@@ -432,10 +458,13 @@ class DisturbanceEstimator:
             Commands of step k - 1 minus the scheduling trim input.
         """
         r = (dx - mv(A, np.ascontiguousarray(dx_prev))) - mv(B, np.ascontiguousarray(du_prev))
-        return self.update_residual(r)
+        return self.update_residual(r, np.asarray(B)[:, :, 1])
 
-    def update_residual(self, r: np.ndarray) -> np.ndarray:
+    def update_residual(self, r: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
         """Estimates d (B, p) after one step whose residual r (B, p) is given.
+
+        ``b`` (B, p) is each run's elevator column of the scheduled model, the direction
+        filtered with ``gamma_e`` (ignored without it; required with it).
 
         r is what the nominal model missed in the measured step (for the nonlinear
         nominal, x_k - f_0(x_{k-1}, u_{k-1}) with f_0 one period of the nominal CM).
@@ -447,7 +476,14 @@ class DisturbanceEstimator:
         drifted with it beyond the bounds its QP had enforced.
         """
         if self.started:
-            self.d = self.d + self.gamma * (r - self.d)
+            e = r - self.d
+            self.d = self.d + self.gamma * e
+            if self.gamma_e is not None:
+                if b is None:
+                    raise ValueError("estimator: gamma_e needs the elevator column b")
+                bs, es = b / self.scale, e / self.scale
+                coef = np.einsum("bi,bi->b", bs, es) / np.einsum("bi,bi->b", bs, bs)
+                self.d = self.d + (self.gamma_e - self.gamma) * coef[:, None] * b
         else:
             self.d = np.array(r, float, copy=True)
             self.started = True
@@ -1017,12 +1053,17 @@ class TrackingMPCNominal(NominalSource):
             nf = NotchFilter(*(p[f"notch.{k}"] for k in ("omega_z", "eps_z", "omega_p", "eps_p")))
             self.filter = DiscreteNotch(nf, p["Ts"], np.zeros(B))
             self.p_est = 11
-        est_tau = p["mpc.est_tau"]
+        est_tau, tau_e = p["mpc.est_tau"], p["mpc.est_tau_elevator"]
         pe = self.p_est
         self.has_est = est_tau > 0.0
         #: step of the first plan: 1 with an estimate (it starts from the first residual)
         self.k_first_plan = 1 if self.has_est else 0
-        self.est = DisturbanceEstimator(B, pe, min(1.0, p["Ts"] / est_tau) if self.has_est else 1.0)
+        self.est_args = (
+            min(1.0, p["Ts"] / est_tau) if self.has_est else 1.0,
+            min(1.0, p["Ts"] / tau_e) if self.has_est and tau_e > 0.0 else None,
+            np.asarray(p["Dx"], float)[:pe],
+        )
+        self.est = DisturbanceEstimator(B, pe, *self.est_args)
         self.command = CommandSchedule([Command.of_parameters(r) for r in runs])
         # per-run state of the fast step (stacked) and of the scheduled models
         self.XRS, self.URS, self.THS = np.empty((B, n)), np.empty((B, 2)), np.empty((B, 2))
@@ -1052,7 +1093,7 @@ class TrackingMPCNominal(NominalSource):
         #: residual, also with the nonlinear nominal (then a second filter; class docstring)
         self.est_ss = self.est
         if self.nominal_cm and self.has_est:
-            self.est_ss = DisturbanceEstimator(B, pe, self.est.gamma)
+            self.est_ss = DisturbanceEstimator(B, pe, *self.est_args)
         if self.nominal_cm:
             if n != 9:
                 raise RunError(
@@ -1167,7 +1208,8 @@ class TrackingMPCNominal(NominalSource):
                     np.asarray(u_prev, float) - self.URS, xm - self.XRS[:, : self.p_est],
                 )  # fmt: skip
                 if self.nominal_cm:  # the nominal CM's own residual, for its propagation
-                    self.est.update_residual(xm - self._nominal_step(self.prev, u_prev))
+                    self.est.update_residual(xm - self._nominal_step(self.prev, u_prev),
+                                             self.EB[:, :, 1])  # fmt: skip
             self.prev = xm.copy()
             self.has_prev = True
         h_c, V_c = self.command(t)

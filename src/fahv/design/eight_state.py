@@ -291,42 +291,64 @@ def altitude_bound(nv: NominalVertices, A, B, F8, N8, moves: int) -> AltitudeBou
     return AltitudeBound(float(H_new), step, float(par[0] + interp[0]), bound)
 
 
-def pulse_gain(a: float, gamma: float, steps: int = 100_000) -> float:
-    """Peak over k of sum_{i<k} a^(k-1-i) (1 - gamma)^i: the error's largest norm per unit jump.
+def pulse_peak(a: float, j0: float, parts, steps: int = 100_000) -> float:
+    """Peak of d_k+1 = a d_k + p_k, d_0 = 0: the error's largest norm after a jump.
 
-    The recursion d_k+1 = a d_k + (1 - gamma)^k j, d_0 = 0, bounds the norm of the part of
-    the error driven by a jump j of the residual that the estimate removes at the rate
-    gamma per step, when every vertex's closed loop contracts the norm by at most a.
+    p_0 = j0 is the jump's first step; after it p_k = sum_i j_i (1 - gamma_i)^k, the parts
+    of the jump each removed by the estimate at its own gain per step. d bounds the norm
+    of the part of the error the jump drives when every vertex's closed loop contracts
+    the norm by at most a. The sequence rises to its peak and then falls (p_k falls).
 
     Parameters
     ----------
     a : float
         Contraction of the closed loop in the norm, in [0, 1).
-    gamma : float
-        Estimator gain per step, in (0, 1] (1: the estimate knows the jump one step after).
+    j0 : float
+        Norm of the first step's jump (>= 0).
+    parts : sequence of (float, float)
+        (j_i, gamma_i): norm of a part of the jump (>= 0) and its estimator gain per
+        step, in (0, 1].
     steps : int
-        Steps searched for the peak (the sum decays after it).
+        Steps searched for the peak.
 
     Returns
     -------
     float
-        The peak (>= 1: the first step carries the whole jump).
+        The peak (>= j0).
 
     Raises
     ------
     ValueError
-        If a or gamma is out of range.
+        If a, a norm or a gain is out of range.
     """
-    if not 0.0 <= a < 1.0 or not 0.0 < gamma <= 1.0:
-        raise ValueError(f"pulse_gain: need 0 <= a < 1 and 0 < gamma <= 1, got {a}, {gamma}")
-    d, peak, b = 0.0, 0.0, 1.0
-    for _ in range(steps):
-        d = a * d + b
-        b *= 1.0 - gamma
+    parts = [(float(j), float(g)) for j, g in parts]
+    if not 0.0 <= a < 1.0 or j0 < 0.0 or any(j < 0.0 or not 0.0 < g <= 1.0 for j, g in parts):
+        raise ValueError(f"pulse_peak: need 0 <= a < 1, norms >= 0, gains in (0, 1]: got "
+                         f"{a}, {j0}, {parts}")  # fmt: skip
+    d, peak = float(j0), float(j0)
+    decay = [1.0 - g for _, g in parts]
+    for k in range(1, steps):
+        d = a * d + sum(j * dk**k for (j, _), dk in zip(parts, decay, strict=True))
         if d < peak:
             break
         peak = d
     return peak
+
+
+def pulse_gain(a: float, gamma: float, steps: int = 100_000) -> float:
+    """Peak over k of sum_{i<k} a^(k-1-i) (1 - gamma)^i: the error's largest norm per unit jump.
+
+    :func:`pulse_peak` of a unit jump removed at the rate gamma per step (>= 1: the first
+    step carries the whole jump).
+
+    Raises
+    ------
+    ValueError
+        If a is not in [0, 1) or gamma not in (0, 1].
+    """
+    if not 0.0 <= a < 1.0 or not 0.0 < gamma <= 1.0:
+        raise ValueError(f"pulse_gain: need 0 <= a < 1 and 0 < gamma <= 1, got {a}, {gamma}")
+    return pulse_peak(a, 1.0, [(1.0, gamma)], steps)
 
 
 @dataclass(frozen=True)
@@ -339,6 +361,9 @@ class OnsetBound:
         The design's loss 1 - rho_min.
     gamma : float
         The case's estimator gain per step (Ts / est_tau).
+    gamma_e : float
+        Its gain along the elevator column (Ts / est_tau_elevator; 0: none, gamma in every
+        direction).
     contraction : float
         a: largest factor by which a vertex's closed loop A_8 + B_8 F_8 maps Z_8's norm.
     steady : float
@@ -347,23 +372,30 @@ class OnsetBound:
     jump : float
         j: the largest Z_8 norm of J_8 / rho_f at the design loss over the scheduling box
         and every corner of the parameter box.
+    jump_elevator, jump_rest : float
+        With gamma_e: the largest Z_8 norms of the jump's share along the estimate's
+        elevator direction and of the rest, over the samples and the directions (0
+        without gamma_e).
     interior_ratio : float
         The interior samples' largest norm over the corners' (<= 1: the corners hold it).
     peak : float
-        c + j pulse_gain(a, gamma): the level bound at the design loss with the case's
-        estimate (certified when <= 1).
+        c + the jump's pulse peak (:func:`pulse_peak`): the level bound at the design loss
+        with the case's estimate (certified when <= 1).
     certified_loss, certified_loss_one_step : float
         The largest loss whose level bound is <= 1 with the case's estimate, and with an
-        estimate that knows the loss one step after it acts (gamma = 1).
+        estimate that knows the whole loss one step after it acts (c + j <= 1).
     jump_h : float
         [ft] largest |J_h| / rho_f at the design loss (e_h's share, added to H).
     """
 
     loss: float
     gamma: float
+    gamma_e: float
     contraction: float
     steady: float
     jump: float
+    jump_elevator: float
+    jump_rest: float
     interior_ratio: float
     peak: float
     certified_loss: float
@@ -377,22 +409,29 @@ class OnsetBound:
     def lines(self) -> list[str]:
         """The design log's lines of the bound."""
         ok = self.peak <= 1.0
+        gains = f"estimate gain {self.gamma:.3f} per step"
+        if self.gamma_e > 0.0:
+            gains += (
+                f", {self.gamma_e:.3f} along the elevator column (the jump's share along it "
+                f"{self.jump_elevator:.3f}, the rest {self.jump_rest:.3f} x Z_8)"
+            )
         return [
             f"onset of a {100 * self.loss:.1f} % loss (item 3; from the error at its steady "
-            f"level {self.steady:.3f}, estimate gain {self.gamma:.3f} per step): first jump "
+            f"level {self.steady:.3f}, {gains}): first jump "
             f"{self.jump:.3f} x Z_8 at the scheduling box's worst point (interior samples "
             f"{self.interior_ratio:.3f} of the corners'), closed-loop contraction "
             f"{self.contraction:.5f} per step, level bound {self.peak:.3f} "
             + ("<= 1  OK" if ok else "> 1: NOT certified"),
             f"largest loss whose onset keeps e in Z_8: {100 * self.certified_loss:.2f} % with "
             f"the case's estimate, {100 * self.certified_loss_one_step:.2f} % with an estimate "
-            "that knows the loss one step after it acts (the first step alone, which no "
+            "that knows the whole loss one step after it acts (the first step alone, which no "
             "estimate can remove)",
         ]
 
 
 def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
                 uncertainty: dict, gamma: float, Ts: float, n_sub: int, *,
+                gamma_e: float | None = None, directions=None, scale=None,
                 interior: int = 1024, iterations: int = 6) -> OnsetBound:  # fmt: skip
     """Bound the onset of an elevator loss as a transient of the pair (item 3).
 
@@ -405,10 +444,15 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     vertices (rho_f at both ends of [rho_min, 1] among them), so e = e_w + e_p: e_w,
     driven by the disturbance inside the bound from the error at the onset, stays in
     c Z_8 if it starts there (c Z_8 is RPI for c W_8); e_p, driven by the estimate's error
-    from 0, has the Z_8 norm at most j pulse_gain(a, gamma), j = max ||J_8 / rho_f||_Z_8
-    (the jumps arriving later only delay part of it). e stays in Z_8 if
-    c + j pulse_gain(a, gamma) <= 1. The altitude error takes |J_h| / rho_f per step on
-    top of (1), at most 1 / gamma of it between resets; the bound of c is taken at that H.
+    from 0, has the Z_8 norm at most pulse_peak(a, j, [(j, gamma)]),
+    j = max ||J_8 / rho_f||_Z_8 (the jumps arriving later only delay part of it). With a
+    gain gamma_e along the elevator column b (:class:`fahv.control.nominal_mpc.
+    DisturbanceEstimator`), the jump's share along b, P_b J, decays at gamma_e and the
+    rest at gamma: pulse_peak(a, j, [(j_b, gamma_e), (j_r, gamma)]) with j_b, j_r the
+    largest norms of P_b J and J - P_b J over the samples and the estimate's possible
+    directions b. e stays in Z_8 if c + that peak <= 1. The altitude error takes
+    |J_h| / rho_f per step on top of (1), at most 1 / gamma of it between resets; the
+    bound of c is taken at that H.
 
     Parameters
     ----------
@@ -426,6 +470,13 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
         Control period [s].
     n_sub : int
         RK4 sub-steps per period.
+    gamma_e : float, optional
+        The estimate's gain along the elevator column, in (0, 1].
+    directions : (D, 9) array_like, optional
+        With gamma_e: the elevator columns the estimate may project on (the scheduled
+        model's, e.g. its LPV vertices' B_i[:, 1]).
+    scale : (9,) array_like, optional
+        With gamma_e: the state scale of the estimate's projection metric.
     interior : int
         Interior samples of the jumps besides the corners.
     iterations : int
@@ -438,54 +489,80 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     Raises
     ------
     ValueError
-        If gamma is not in (0, 1].
+        If a gain is not in (0, 1], or gamma_e comes without directions (D, 9) and a
+        positive scale (9,).
     DesignError
         If a plant step is not finite.
     """
     if not 0.0 < gamma <= 1.0:
         raise ValueError(f"onset_bound: gamma must be in (0, 1], got {gamma}")
+    if gamma_e is not None:
+        directions = np.atleast_2d(np.asarray(directions, float))
+        scale = np.asarray(scale, float)
+        if not 0.0 < gamma_e <= 1.0 or directions.shape[1:] != (9,) or scale.shape != (9,) \
+                or not np.all(scale > 0.0):  # fmt: skip
+            raise ValueError(
+                f"onset_bound: gamma_e in (0, 1] needs directions (D, 9) and a positive scale "
+                f"(9,); got {gamma_e}, {directions.shape}, {scale.shape}"
+            )
     A, B = nv.vertices()
     A8, B8 = A[:, 1:, 1:], B[:, 1:, :]
     L = np.linalg.cholesky(pair.N8)
     a = float(np.linalg.norm(np.linalg.solve(L, A8 + B8 @ pair.F8) @ L, 2, axis=(1, 2)).max())
 
+    def z8(V):  # Z_8 norms of the e_8 parts of rows V (S, 9)
+        return np.sqrt((np.linalg.solve(L, V[:, 1:].T) ** 2).sum(axis=0))
+
     def jumps(loss: float):
         J, n_c = onset_jumps(nv.box, vehicle, trim_map, uncertainty, 1.0 - loss, Ts, n_sub,
                              interior)  # fmt: skip
         J = J / (1.0 - loss)
-        norm = np.sqrt((np.linalg.solve(L, J[:, 1:].T) ** 2).sum(axis=0))
-        return norm, n_c, float(np.abs(J[:, 0]).max())
+        norm, jb, jr = z8(J), 0.0, 0.0
+        if gamma_e is not None:
+            for b in directions:  # the share along b in the metric diag(scale)^-2
+                bs = b / scale**2
+                PJ = np.outer(J @ bs / (b @ bs), b)
+                jb, jr = max(jb, float(z8(PJ).max())), max(jr, float(z8(J - PJ).max()))
+        return norm, n_c, float(np.abs(J[:, 0]).max()), jb, jr
+
+    def peak(j, jb, jr, one_step=False):
+        if one_step:
+            return j
+        parts = [(j, gamma)] if gamma_e is None else [(jb, gamma_e), (jr, gamma)]
+        return pulse_peak(a, j, parts)
 
     loss = 1.0 - nv.rho_min
-    norm, n_c, jump_h = jumps(loss)
+    norm, n_c, jump_h, jb, jr = jumps(loss)
     j = float(norm.max())
     H = pair.H + jump_h / gamma
     par, interp = product_bound(nv, pair.F8, pair.N8, H)
     bound = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H
     c = float((bound / pair.W8).max())
 
-    def certified(g: float) -> float:
-        gain = pulse_gain(a, g)
-        if c + gain * j <= 1.0:
-            return loss
+    def certified(one_step: bool) -> float:
         if c >= 1.0:
             return 0.0
+        p = peak(j, jb, jr, one_step)
+        if c + p <= 1.0:
+            return loss
         lo, hi = 0.0, loss
-        guess = 2.0 * loss * (1.0 - c) / (gain * j)  # twice the first-order loss: bracket
+        guess = 2.0 * loss * (1.0 - c) / p  # twice the first-order loss: bracket
+
+        def ok(x):
+            n, _, _, xb, xr = jumps(x)
+            return c + peak(float(n.max()), xb, xr, one_step) <= 1.0
+
         if guess < loss:
-            ok = c + gain * float(jumps(guess)[0].max()) <= 1.0
-            lo, hi = (guess, loss) if ok else (0.0, guess)
+            lo, hi = (guess, loss) if ok(guess) else (0.0, guess)
         for _ in range(iterations):
             mid = 0.5 * (lo + hi)
-            if c + gain * float(jumps(mid)[0].max()) <= 1.0:
-                lo = mid
-            else:
-                hi = mid
+            lo, hi = (mid, hi) if ok(mid) else (lo, mid)
         return lo
 
     return OnsetBound(
-        loss, gamma, a, c, j, float(norm[n_c:].max() / norm[:n_c].max()) if len(norm) > n_c
-        else 0.0, c + pulse_gain(a, gamma) * j, certified(gamma), certified(1.0), jump_h,
+        loss, gamma, 0.0 if gamma_e is None else float(gamma_e), a, c, j, jb, jr,
+        float(norm[n_c:].max() / norm[:n_c].max()) if len(norm) > n_c else 0.0,
+        c + peak(j, jb, jr), certified(False), certified(True), jump_h,
     )  # fmt: skip
 
 
@@ -684,6 +761,7 @@ def design_pair(
     room,
     log: Callable[[str], None] = print,
     gamma: float | None = None,
+    **estimate,
 ) -> tuple[EightStatePair, SchedulingBox, SchedulingBox]:
     """The eight-state tube of a case (``tube.form: eight_state``), closed and checked.
 
@@ -710,6 +788,9 @@ def design_pair(
     gamma : float, optional
         The case's estimator gain per step: the onset of the design loss is then bounded
         as a transient of the pair (:func:`onset_bound`, ``pair.onset``).
+    **estimate
+        ``gamma_e``, ``directions``, ``scale`` of :func:`onset_bound` (the estimate's gain
+        along the elevator column).
 
     Returns
     -------
@@ -740,7 +821,7 @@ def design_pair(
                       w_ref=w_max, log=log)  # fmt: skip
     if gamma is not None:
         onset = onset_bound(nv, pair, vehicle, trim_map, unc, gamma, case["Ts"],
-                            case["plant_substeps"])  # fmt: skip
+                            case["plant_substeps"], **estimate)  # fmt: skip
         pair = replace(pair, onset=onset)
     return pair, nominal, box
 
