@@ -174,8 +174,15 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     if c["tube"]["form"] == "eight_state":  # the law runs on the eight-state tube
         cols = np.concatenate([tube.z_box, tube.tightening])  # the directions' column scale
         tau_e = c["mpc"]["est_tau_elevator"]  # the case check asks for an estimate
-        estimate = {} if tau_e <= 0.0 else {  # its gain along the elevator column
-            "gamma_e": min(1.0, Ts / tau_e), "directions": disc.B[:, :, 1], "scale": Dx}
+        estimate = (
+            {}
+            if tau_e <= 0.0
+            else {  # its gain along the elevator column
+                "gamma_e": min(1.0, Ts / tau_e),
+                "directions": disc.B[:, :, 1],
+                "scale": Dx,
+            }
+        )
         pair, es_nominal, es_box = design_pair(
             c, veh, tm, np.concatenate([Dx, Du]), W.w_max, cols, rho_f, room_f, log,
             gamma=min(1.0, Ts / c["mpc"]["est_tau"]), **estimate,
