@@ -139,9 +139,9 @@ def test_estimate_starts_from_the_first_residual():
 
 def test_estimate_takes_the_elevator_share_at_its_own_gain(design):
     """With gamma_e = 1 along B's elevator column, a 24 % loss on the linear model is
-    known after one step: -u_d = (0, (rho_f - 1) delta_e) within 1 % from step 2 on, when
-    the isotropic filter (gamma 0.2) still misses 59 % of it; a residual orthogonal to b
-    in the metric is filtered at gamma alone; gamma_e without its scale or b is refused."""
+    known at once: two steps after its onset -u_d = (0, (rho_f - 1) delta_e) within 1 %,
+    when the isotropic filter (gamma 0.2) has 36 % of it; a residual orthogonal to b in
+    the metric is filtered at gamma alone; gamma_e without its scale or b is refused."""
     mpc = _mpc(design)
     mpc.schedule(85500.0, 7900.0)
     A, B = mpc.A[:9, :9], mpc.B[:9]

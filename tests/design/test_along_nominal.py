@@ -374,7 +374,8 @@ def test_onset_bound_of_the_stored_pair_holds_along_switching_vertices(along, de
     assert 1.0 < peak <= ob.peak - ob.steady
     fast = es.onset_bound(nv, pair, veh, tm, dict(PAPER_UNCERTAINTY), 0.2, TS, N_SUB,
                           gamma_e=1.0, directions=design.arrays["B"][::5, :, 1],
-                          scale=design.arrays["Dx"], interior=256, iterations=2)  # fmt: skip
+                          projection_scale=design.arrays["Dx"], interior=256,
+                          iterations=2)  # fmt: skip
     print(fast.lines())
     assert fast.jump == ob.jump and fast.steady == ob.steady
     assert 2.10 < fast.jump_elevator < 2.25 and 0.31 < fast.jump_rest < 0.36

@@ -101,8 +101,9 @@ def test_design_runs_the_law_on_the_eight_state_pair(raw8, vehicle, monkeypatch)
     pair = _stored_pair()
     calls = []
 
-    def stored(case, veh, tm, scale, w_max, cols, rho, room, log, gamma):
-        calls.append((rho, np.asarray(scale).shape, np.asarray(cols).shape, gamma))
+    def stored(case, veh, tm, scale, w_max, cols, rho, room, log, gamma, **estimate):
+        calls.append((rho, np.asarray(scale).shape, np.asarray(cols).shape, gamma,
+                      estimate["gamma_e"], estimate["directions"].shape))  # fmt: skip
         return (pair, *nominal_box(case["eight_state"], veh.envelope))
 
     monkeypatch.setattr(pmod, "design_pair", stored)
@@ -111,7 +112,8 @@ def test_design_runs_the_law_on_the_eight_state_pair(raw8, vehicle, monkeypatch)
     r["certificate"] = {"schedules": 0}
     lines = []
     design = pmod.run_design(case_from_mapping(r, "quick8.yaml"), log=lines.append)
-    assert calls == [(0.76, (11,), (11,), pytest.approx(0.2))]  # gamma = Ts / est_tau
+    # the estimate's gains: Ts / est_tau, and 1 along the 20 LPV vertices' elevator columns
+    assert calls == [(0.76, (11,), (11,), pytest.approx(0.2), 1.0, (20, 9))]
     a, s = design.arrays, design.summary
     np.testing.assert_array_equal(a["F"], pair.F)
     np.testing.assert_array_equal(a["N"], pair.N)

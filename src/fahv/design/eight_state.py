@@ -431,7 +431,7 @@ class OnsetBound:
 
 def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
                 uncertainty: dict, gamma: float, Ts: float, n_sub: int, *,
-                gamma_e: float | None = None, directions=None, scale=None,
+                gamma_e: float | None = None, directions=None, projection_scale=None,
                 interior: int = 1024, iterations: int = 6) -> OnsetBound:  # fmt: skip
     """Bound the onset of an elevator loss as a transient of the pair (item 3).
 
@@ -475,8 +475,8 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     directions : (D, 9) array_like, optional
         With gamma_e: the elevator columns the estimate may project on (the scheduled
         model's, e.g. its LPV vertices' B_i[:, 1]).
-    scale : (9,) array_like, optional
-        With gamma_e: the state scale of the estimate's projection metric.
+    projection_scale : (9,) array_like, optional
+        With gamma_e: the state scale of the estimate's projection metric (its ``scale``).
     interior : int
         Interior samples of the jumps besides the corners.
     iterations : int
@@ -490,7 +490,7 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     ------
     ValueError
         If a gain is not in (0, 1], or gamma_e comes without directions (D, 9) and a
-        positive scale (9,).
+        positive projection_scale (9,).
     DesignError
         If a plant step is not finite.
     """
@@ -498,7 +498,7 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
         raise ValueError(f"onset_bound: gamma must be in (0, 1], got {gamma}")
     if gamma_e is not None:
         directions = np.atleast_2d(np.asarray(directions, float))
-        scale = np.asarray(scale, float)
+        scale = np.asarray(projection_scale, float)
         if not 0.0 < gamma_e <= 1.0 or directions.shape[1:] != (9,) or scale.shape != (9,) \
                 or not np.all(scale > 0.0):  # fmt: skip
             raise ValueError(
@@ -789,8 +789,8 @@ def design_pair(
         The case's estimator gain per step: the onset of the design loss is then bounded
         as a transient of the pair (:func:`onset_bound`, ``pair.onset``).
     **estimate
-        ``gamma_e``, ``directions``, ``scale`` of :func:`onset_bound` (the estimate's gain
-        along the elevator column).
+        ``gamma_e``, ``directions``, ``projection_scale`` of :func:`onset_bound` (the
+        estimate's gain along the elevator column).
 
     Returns
     -------

@@ -180,7 +180,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             else {  # its gain along the elevator column
                 "gamma_e": min(1.0, Ts / tau_e),
                 "directions": disc.B[:, :, 1],
-                "scale": Dx,
+                "projection_scale": Dx,
             }
         )
         pair, es_nominal, es_box = design_pair(
