@@ -309,21 +309,24 @@ def test_eight_state_bound_reproduces_the_stored_pair(along):
     np.testing.assert_allclose(np.degrees(pair.tightening[1]), 2.87, atol=0.005)
 
 
-def test_pulse_gain_is_the_peak_of_the_filtered_jump():
-    """pulse_gain is the peak over k of (a^k - b^k) / (a - b), b = 1 - gamma (the
-    recursion's closed form); 1 for an estimate that knows the jump after one step; out
-    of range refused."""
-    from fahv.design.eight_state import pulse_gain
+def test_pulse_peak_is_the_peak_of_the_filtered_jump():
+    """pulse_peak of a unit jump removed at gamma per step is the peak over k of
+    (a^k - b^k) / (a - b), b = 1 - gamma (the recursion's closed form); 1 for an estimate
+    that knows the jump after one step; out of range refused."""
+    from fahv.design.eight_state import pulse_peak
+
+    def gain(a, g):
+        return pulse_peak(a, 1.0, [(1.0, g)])
 
     k = np.arange(1, 20000)
     for a, g in ((0.9966, 0.2), (0.9, 0.2), (0.5, 0.05)):
         b = 1.0 - g
-        assert pulse_gain(a, g) == pytest.approx(((a**k - b**k) / (a - b)).max(), rel=1e-12)
-    assert pulse_gain(0.9966, 1.0) == 1.0
-    assert 4.6 < pulse_gain(0.9966, 0.2) < 5.0  # ~ 1 / gamma for a slow loop
+        assert gain(a, g) == pytest.approx(((a**k - b**k) / (a - b)).max(), rel=1e-12)
+    assert gain(0.9966, 1.0) == 1.0
+    assert 4.6 < gain(0.9966, 0.2) < 5.0  # ~ 1 / gamma for a slow loop
     for a, g in ((1.0, 0.2), (0.9, 0.0), (0.9, 1.5)):
-        with pytest.raises(ValueError, match="pulse_gain"):
-            pulse_gain(a, g)
+        with pytest.raises(ValueError, match="pulse_peak"):
+            gain(a, g)
 
 
 def test_onset_bound_of_the_stored_pair_holds_along_switching_vertices(along, design):
@@ -357,7 +360,7 @@ def test_onset_bound_of_the_stored_pair_holds_along_switching_vertices(along, de
     J, _ = onset_jumps(box, veh, tm, dict(PAPER_UNCERTAINTY), 1.0 - ob.certified_loss, TS,
                        N_SUB, interior=512, seed=7)  # fmt: skip
     j = np.sqrt((np.linalg.solve(L, J[:, 1:].T / (1.0 - ob.certified_loss)) ** 2).sum(0)).max()
-    assert ob.steady + es.pulse_gain(ob.contraction, 0.2) * j <= 1.0
+    assert ob.steady + es.pulse_peak(ob.contraction, j, [(j, 0.2)]) <= 1.0
     # the pulse part along switching vertices, in Z_8's norm
     J, _ = onset_jumps(box, veh, tm, dict(PAPER_UNCERTAINTY), 0.76, TS, N_SUB, interior=0)
     Jw = J[np.argmax(np.linalg.norm(np.linalg.solve(L, J[:, 1:].T), axis=0)), 1:] / 0.76

@@ -388,6 +388,55 @@ class QPLayout:
         return self.N_p * self.m + 3
 
 
+def estimator_gains(Ts: float, est_tau: float, est_tau_elevator: float = 0.0):
+    """Gains per step of the disturbance estimate (:class:`DisturbanceEstimator`).
+
+    Parameters
+    ----------
+    Ts : float
+        Control period [s].
+    est_tau : float
+        Time constant of the estimate [s] (``mpc.est_tau``; 0: no estimate).
+    est_tau_elevator : float
+        Time constant along the elevator column [s] (``mpc.est_tau_elevator``; 0: none).
+
+    Returns
+    -------
+    gamma : float
+        min(1, Ts / est_tau) (first-order filter, docs/control_design.md); 1 without an
+        estimate.
+    gamma_e : float or None
+        min(1, Ts / est_tau_elevator); None without it or without an estimate.
+    """
+    if est_tau <= 0.0:
+        return 1.0, None
+    return min(1.0, Ts / est_tau), (min(1.0, Ts / est_tau_elevator)
+                                    if est_tau_elevator > 0.0 else None)  # fmt: skip
+
+
+def elevator_share(v, b, scale) -> np.ndarray:
+    """Coefficient c of the share of v along b in the metric diag(scale)^-2: c b is it.
+
+    c = (b' S v) / (b' S b), S = diag(scale)^-2: the part of a residual (or of a jump of
+    it) that lies along the elevator column b of the model's B, the direction a loss of
+    effectiveness or a bias acts in (eq. 15-16).
+
+    Parameters
+    ----------
+    v, b : (..., p) array_like
+        Vectors and directions (broadcast against each other), state units.
+    scale : (p,) array_like
+        Positive state scale of the metric (the design scaling Dx).
+
+    Returns
+    -------
+    (...,) ndarray
+        c per vector (the projection is ``c[..., None] * b``).
+    """
+    bs, vs = b / scale, v / scale
+    return np.einsum("...i,...i->...", bs, vs) / np.einsum("...i,...i->...", bs, bs)
+
+
 class DisturbanceEstimator:
     """Constant additive state disturbance d (B, p) of the scheduled model, for B runs.
 
@@ -481,8 +530,7 @@ class DisturbanceEstimator:
             if self.gamma_e is not None:
                 if b is None:
                     raise ValueError("estimator: gamma_e needs the elevator column b")
-                bs, es = b / self.scale, e / self.scale
-                coef = np.einsum("bi,bi->b", bs, es) / np.einsum("bi,bi->b", bs, bs)
+                coef = elevator_share(e, b, self.scale)
                 self.d = self.d + (self.gamma_e - self.gamma) * coef[:, None] * b
         else:
             self.d = np.array(r, float, copy=True)
@@ -1058,11 +1106,7 @@ class TrackingMPCNominal(NominalSource):
         self.has_est = est_tau > 0.0
         #: step of the first plan: 1 with an estimate (it starts from the first residual)
         self.k_first_plan = 1 if self.has_est else 0
-        self.est_args = (
-            min(1.0, p["Ts"] / est_tau) if self.has_est else 1.0,
-            min(1.0, p["Ts"] / tau_e) if self.has_est and tau_e > 0.0 else None,
-            np.asarray(p["Dx"], float)[:pe],
-        )
+        self.est_args = (*estimator_gains(p["Ts"], est_tau, tau_e), np.asarray(p["Dx"], float)[:pe])
         self.est = DisturbanceEstimator(B, pe, *self.est_args)
         self.command = CommandSchedule([Command.of_parameters(r) for r in runs])
         # per-run state of the fast step (stacked) and of the scheduled models

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fahv.control.nominal_mpc import estimator_gains
 from fahv.errors import DesignError
 from fahv.model.vehicle import DELTA_E
 from fahv.plant.rk4 import params_records, rk4_cm
@@ -880,7 +881,7 @@ def certify_tube(case: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi,
          "docs/control_design.md)"
     )  # fmt: skip
     # onset of the design loss at the largest elevator of the domain, estimate's pulse
-    gamma = min(1.0, case["Ts"] / mpc["est_tau"]) if mpc.get("est_tau", 0) > 0 else 1.0
+    gamma, _ = estimator_gains(case["Ts"], mpc.get("est_tau", 0.0))
     J = fault_jump(
         vehicle, trim_map, float(dom.u_hi[1]), rho_min, case["Ts"], case["plant_substeps"]
     )

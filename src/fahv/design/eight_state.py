@@ -39,6 +39,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from fahv.control.nominal_mpc import elevator_share
 from fahv.design.along_nominal import (
     BOX_COORDINATES,
     NominalVertices,
@@ -298,6 +299,9 @@ def pulse_peak(a: float, j0: float, parts, steps: int = 100_000) -> float:
     of the jump each removed by the estimate at its own gain per step. d bounds the norm
     of the part of the error the jump drives when every vertex's closed loop contracts
     the norm by at most a. The sequence rises to its peak and then falls (p_k falls).
+    The norm recursion of the onset bound (:func:`onset_bound`; docs/control_design.md,
+    "The onset as a transient of the eight-state pair"). For one part (j, gamma) with
+    j0 = j, the peak per unit jump is max_k (a^k - b^k) / (a - b), b = 1 - gamma.
 
     Parameters
     ----------
@@ -333,22 +337,6 @@ def pulse_peak(a: float, j0: float, parts, steps: int = 100_000) -> float:
             break
         peak = d
     return peak
-
-
-def pulse_gain(a: float, gamma: float, steps: int = 100_000) -> float:
-    """Peak over k of sum_{i<k} a^(k-1-i) (1 - gamma)^i: the error's largest norm per unit jump.
-
-    :func:`pulse_peak` of a unit jump removed at the rate gamma per step (>= 1: the first
-    step carries the whole jump).
-
-    Raises
-    ------
-    ValueError
-        If a is not in [0, 1) or gamma not in (0, 1].
-    """
-    if not 0.0 <= a < 1.0 or not 0.0 < gamma <= 1.0:
-        raise ValueError(f"pulse_gain: need 0 <= a < 1 and 0 < gamma <= 1, got {a}, {gamma}")
-    return pulse_peak(a, 1.0, [(1.0, gamma)], steps)
 
 
 @dataclass(frozen=True)
@@ -519,9 +507,8 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
         J = J / (1.0 - loss)
         norm, jb, jr = z8(J), 0.0, 0.0
         if gamma_e is not None:
-            for b in directions:  # the share along b in the metric diag(scale)^-2
-                bs = b / scale**2
-                PJ = np.outer(J @ bs / (b @ bs), b)
+            for b in directions:  # the share along b, as the estimate takes it
+                PJ = elevator_share(J, b, scale)[:, None] * b
                 jb, jr = max(jb, float(z8(PJ).max())), max(jr, float(z8(J - PJ).max()))
         return norm, n_c, float(np.abs(J[:, 0]).max()), jb, jr
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from fahv.config.spec import defaults_text
 from fahv.control import LAWS, VARIANTS
-from fahv.control.nominal_mpc import attitude_bounds
+from fahv.control.nominal_mpc import attitude_bounds, estimator_gains
 from fahv.design.artefacts import Design, provenance
 from fahv.design.case import Case
 from fahv.design.certificate import certify_tube
@@ -173,19 +173,16 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     F, N, tightening, pair = tube.F, tube.N, tube.tightening, None
     if c["tube"]["form"] == "eight_state":  # the law runs on the eight-state tube
         cols = np.concatenate([tube.z_box, tube.tightening])  # the directions' column scale
-        tau_e = c["mpc"]["est_tau_elevator"]  # the case check asks for an estimate
+        # the case check asks for an estimate; its gain along the elevator column, if any
+        gamma, gamma_e = estimator_gains(Ts, c["mpc"]["est_tau"], c["mpc"]["est_tau_elevator"])
         estimate = (
             {}
-            if tau_e <= 0.0
-            else {  # its gain along the elevator column
-                "gamma_e": min(1.0, Ts / tau_e),
-                "directions": disc.B[:, :, 1],
-                "projection_scale": Dx,
-            }
+            if gamma_e is None
+            else {"gamma_e": gamma_e, "directions": disc.B[:, :, 1], "projection_scale": Dx}
         )
         pair, es_nominal, es_box = design_pair(
             c, veh, tm, np.concatenate([Dx, Du]), W.w_max, cols, rho_f, room_f, log,
-            gamma=min(1.0, Ts / c["mpc"]["est_tau"]), **estimate,
+            gamma=gamma, **estimate,
         )  # fmt: skip
         for line in pair_report(pair, es_nominal, es_box):
             log(line)
