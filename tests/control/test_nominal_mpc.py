@@ -531,3 +531,23 @@ def test_input_box_rows_bound_the_manoeuvre_part_of_the_input(design):
     with pytest.raises(ValueError, match="mpc.u_box"):
         input_box([0.1, 0.2, -1.0, 7.0])  # the trim itself outside
     assert input_box([0.0, 0.0, 0.0, 0.0]) is None
+
+
+@pytest.mark.parametrize("loss", [0.12, 0.24])
+def test_replan_rate_row_lets_the_input_follow_the_estimate_after_an_onset(design, loss):
+    """mpc.du_max with the elevator gain: a loss whose first faulty step is the one before
+    a re-plan (onset at 59.98 s, re-plan at step 3000). The re-plan's rate row is measured
+    from the last input with its estimate part moved to the estimate's new steady input,
+    so the plan follows the estimate as every other fast step does: the altitude stays
+    within 1 ft of the command after the onset (measured 0.06 / 0.14 ft) and every re-plan
+    is the QP's own. Measured from the last input as applied, the 12 % loss sent the
+    vehicle 31.9 ft above the command (the plan cancelled the estimate's jump) and the
+    24 % loss's re-plan was rejected (the shifted plan for one move)."""
+    ov = {"nominal_trajectory": {"mpc.nominal_model": "cm", "mpc.h_reset": True,
+                                 "mpc.du_max": [0.02, 0.2], "mpc.est_tau_elevator": 0.02,
+                                 "mpc.att_max": [0.4, 0.4]},
+          "fault_injector": {"t_onset": 59.98, "rho_f": 1.0 - loss}}  # fmt: skip
+    run = simulate(design, "tube_mpc", duration=75.0, overrides=ov)
+    after = run.t >= 59.98
+    assert np.max(np.abs(run.x[after, 0] - run.h_c[after])) <= 1.0
+    assert run.qp_counts.tolist() == [150, 0, 0, 0]

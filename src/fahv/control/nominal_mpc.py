@@ -1119,6 +1119,7 @@ class TrackingMPCNominal(NominalSource):
         self.TRX, self.TRU = np.empty((B, n)), np.empty((B, 2))
         self.PLAN = np.zeros((B, st.N_p, 2))
         self.U_NOM = np.zeros((B, 2))  # nominal input of the last fast step (rate rows)
+        self.U_D = np.zeros((B, 2))  # the estimate's steady input u_d in it
         self.moves_left = np.zeros(B, dtype=int)
         self.prev = np.zeros((B, pe))
         self.has_prev = False
@@ -1190,7 +1191,13 @@ class TrackingMPCNominal(NominalSource):
         else:
             x_d, u_d = np.zeros(self.n), np.zeros(2)
         args = (self.XN[b] - mpc.x_r_s - x_d, mpc.u_r_s + u_d, cmd, x_d)
-        u_prev = self.U_NOM[b] if self.k > 0 else None  # the rate rows' start (mpc.du_max)
+        # the rate rows' start (mpc.du_max): the input of the last fast step with its
+        # estimate part moved to the estimate's new steady input. u_d follows the estimate
+        # at every fast step, the rows bound the plan's part: measured from the last
+        # input as applied, the first re-plan after a loss's onset had to cancel the
+        # estimate's jump (a 10-14 % loss: the plan pitched up and the vehicle rose
+        # 15-34 ft; docs/control_design.md, "The re-plan's rate row")
+        u_prev = self.U_NOM[b] + (u_d - self.U_D[b]) if self.k > 0 else None
         y, why = mpc.solve(*args, u_prev=u_prev)
         recovered = False
         if y is None:  # recovery: the set point free on the trim map (no trust region)
@@ -1287,7 +1294,7 @@ class TrackingMPCNominal(NominalSource):
         zx = np.ascontiguousarray(z - x_s)
         u_dev = (u_s + mv(self.K, zx)) + self.PLAN[:, 0] * self.Du
         u_nom = (self.URS + u_d) + u_dev
-        self.U_NOM = u_nom
+        self.U_NOM, self.U_D = u_nom, u_d
         x_r, u_r = self.TRX.copy(), self.TRU + u_d
         w = mv(self.L_inv, zx)  # L^-1 (z - x_s): the level in E(Q) is w'w
         solves, fallback, terminal, recovered = self._counts
