@@ -108,7 +108,8 @@ def test_box_tube_infeasible_when_abs_radius_exceeds_one():
 def test_w_ref_solves_at_the_reference_scale_and_scales_back(tube):
     """With w_ref the LMI is the one for W at the reference size: a W 1000 times smaller
     gives the same F and Z / 1000 exactly (the homogeneity of the RPI condition), which
-    the fixed strictness margins of a direct solve at that scale do not."""
+    the fixed strictness margins of a direct solve at that scale do not. A support bound
+    (state_max) scales with it."""
     small = design_tube(A, B, W * 1e-3, ONE2, ONE1, np.array([1.0]), lam_grid=(0.8, 0.9, 0.95),
                         w_ref=W)  # fmt: skip
     assert np.array_equal(small.F, tube.F)
@@ -121,8 +122,17 @@ def test_w_ref_solves_at_the_reference_scale_and_scales_back(tube):
     # the flaw w_ref removes: a direct solve at this scale keeps a far larger tube
     # (measured 45x; 10x leaves room for solver versions)
     assert np.all(direct.tightening > 10 * small.tightening)
-    with pytest.raises(ValueError, match="w_ref and state_max"):
-        design_tube(A, B, W, ONE2, ONE1, np.array([1.0]), w_ref=W, state_max=[1.0, 1.0])
+    # a support bound scales with W: the bounded tube of W / 1000 is the bounded tube of W
+    # scaled by 1 / 1000, and the bound binds (first axis at 0.8 of the free tube's support)
+    sm = np.array([0.8 * np.sqrt(tube.N[0, 0]), np.inf])
+    lams = (0.8, 0.9, 0.95)
+    big = design_tube(A, B, W, ONE2, ONE1, np.array([1.0]), lam_grid=lams, state_max=sm)
+    small = design_tube(A, B, W * 1e-3, ONE2, ONE1, np.array([1.0]), lam_grid=lams,
+                        w_ref=W, state_max=sm * 1e-3)  # fmt: skip
+    assert np.sqrt(big.N[0, 0]) <= sm[0] * (1 + 1e-6)
+    assert np.sqrt(big.N[0, 0]) >= 0.99 * sm[0]
+    np.testing.assert_allclose(small.N, big.N * 1e-6, rtol=1e-9)
+    np.testing.assert_allclose(small.F, big.F, rtol=1e-9)
 
 
 def test_constraint_generation_gives_the_full_lmi_solution():

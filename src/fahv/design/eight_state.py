@@ -602,6 +602,7 @@ def close_pair(
     iterations: int = 6,
     w_ref=None,
     active: int = 96,
+    state_max=None,
     log: Callable[[str], None] = print,
 ) -> EightStatePair:
     """Iterate W_8 and Z_8 to a closed pair over the vertices ``nv`` (module docstring).
@@ -632,6 +633,11 @@ def close_pair(
         its eight entries after h are used.
     active : int
         Vertex blocks per round of constraint generation.
+    state_max : (8,) array_like, optional
+        Largest supports of Z_8 along e_8's axes (V, alpha, theta, ...; unscaled, inf: no
+        bound), e.g. 0.5 deg less the box's trim offset in alpha and theta, so that the
+        attitude requirement follows from the pair (docs/control_design.md, "Attitude by
+        construction"); passed to :func:`fahv.synthesis.feedback.design_tube`.
     log : callable
         Receives one line per iteration.
 
@@ -655,7 +661,7 @@ def close_pair(
     ratio = np.full(8, np.inf)
     for it in range(iterations):
         tube = design_tube(A8, B8, W8, np.asarray(state_scale, float)[1:], input_scale, room,
-                           (lam,), w_ref=w_ref8, active=active)  # fmt: skip
+                           (lam,), state_max=state_max, w_ref=w_ref8, active=active)  # fmt: skip
         F8, N8 = tube.F, tube.N
         ab = altitude_bound(nv, A, B, F8, N8, moves)
         ratio = ab.bound / W8

@@ -279,7 +279,7 @@ def design_tube(
         the pulses' |G_lj| with ``pulse``) and Z scaled back by s: a W far smaller or
         larger than w_ref would otherwise meet the fixed strictness margins of the LMI at
         another scale (measured: a W of 1/100 of the design's gave the tube of W / 10).
-        Not with ``state_max``.
+        With ``state_max`` the bound is scaled with W (s Z has s times Z's supports).
     active : int, optional
         Vertex blocks per round of constraint generation, for large vertex sets: the
         LMI is solved on a growing subset of the vertices until every block holds at
@@ -300,14 +300,13 @@ def design_tube(
         If no lam gives a feasible LMI or the certificate check fails.
     """
     if w_ref is not None:
-        if state_max is not None:
-            raise ValueError("design_tube: w_ref and state_max cannot be combined")
         reach = np.asarray(w_max, float)
         if pulse is not None:  # the pulse is scaled with W: size the two together
             reach = reach + np.abs(np.atleast_2d(np.asarray(pulse, float))).sum(axis=0)
         s = float(np.max(reach / np.asarray(w_ref, float)))
+        sm = None if state_max is None else np.asarray(state_max, float) / s
         t = design_tube(A, B, np.asarray(w_max, float) / s, Dx, Du, u_room, lam_grid,
-                        state_weight, active=active,
+                        state_weight, state_max=sm, active=active,
                         pulse=None if pulse is None else np.asarray(pulse, float) / s)  # fmt: skip
         tube = dataclasses.replace(
             t, N=t.N * s**2, mu=t.mu / s**2, w_max=np.asarray(w_max, float),
