@@ -41,6 +41,7 @@ from fahv.campaign.spec import Campaign
 from fahv.design.artefacts import load_design, save_design, stale_reason
 from fahv.design.pipeline import run_design
 from fahv.errors import CampaignError, DesignError
+from fahv.interrupt import deferred
 from fahv.loop.batch import simulate_batch
 from fahv.loop.simulate import RunResult
 from fahv.model.vehicle import ALPHA, THETA, H, V, load_vehicle
@@ -393,10 +394,11 @@ def run_campaign(
             rows = batch["rows"]
             for row in rows:
                 row["session"] = session
-            store.write_part(out, store.TRAJECTORIES, names[fut.key], batch["trajectories"])
-            store.write_part(out, store.RESULTS, names[fut.key], rows)
-            res.new += len(rows)
-            res.failed += sum(r["status"] != "ok" for r in rows)
+            with deferred():  # a stop waits until the batch is written and counted
+                store.write_part(out, store.TRAJECTORIES, names[fut.key], batch["trajectories"])
+                store.write_part(out, store.RESULTS, names[fut.key], rows)
+                res.new += len(rows)
+                res.failed += sum(r["status"] != "ok" for r in rows)
             bar.set_postfix(failed=res.failed, refresh=False)
             bar.update(len(rows))
             if on_batch is not None:

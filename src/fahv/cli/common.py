@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from fahv import interrupt
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import read_run
 
@@ -90,9 +91,11 @@ def to_json(obj) -> str:
 def stop_signals():
     """SIGINT and SIGTERM as one clean stop while a command runs.
 
-    The first SIGINT or SIGTERM raises ``KeyboardInterrupt`` in the main thread, so
-    a command finalises its run (the run writer closes with status ``interrupted``,
-    ``fahv sil`` forwards the stop to its graph); every further one only prints a note,
+    The first SIGINT or SIGTERM raises ``KeyboardInterrupt`` in the main thread (at
+    once, or at the end of a :func:`fahv.interrupt.deferred` section, such as a record
+    being written to a run file), so a command finalises its run (the run writer
+    closes with status ``interrupted``, ``fahv sil`` forwards the stop to its graph);
+    every further one only prints a note,
     so that a second Ctrl-C cannot cut the finalisation short. After a stop the
     signals stay ignored (the command is ending; a late Ctrl-C must not turn exit
     status 130 into a death by signal); otherwise the previous handlers are restored.
@@ -106,13 +109,14 @@ def stop_signals():
     def handler(signum, frame):
         seen.append(signum)
         if len(seen) == 1:
-            raise KeyboardInterrupt
+            interrupt.request()  # at once, or after the write it arrived in
         print("fahv: already stopping; finishing the run, please wait", file=sys.stderr)
 
     old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
+        interrupt.clear()  # a stop left pending by a failing section ends here
         for s, h in old.items():  # after a stop, the process is ending: ignore the rest
             signal.signal(s, signal.SIG_IGN if seen else h)
 

@@ -46,6 +46,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from fahv.errors import RunError
+from fahv.interrupt import deferred
 from fahv.loop import graph
 from fahv.loop.graph import TOPICS
 from fahv.loop.simulate import RunResult, run_result
@@ -287,8 +288,16 @@ class RunWriter:
             except OSError as exc:
                 raise RunError(f"parameter file of the run {params}: {exc}") from None
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._ts = typestore()
         self.Ts_ns = int(round(Ts * 1e9))
+        try:
+            with deferred():  # a stop while the file is set up is raised once it is whole
+                self._open(metadata, atts)
+        except KeyboardInterrupt:  # the caller never gets the writer: close it here
+            self.close("interrupted")
+            raise
+
+    def _open(self, metadata: dict, atts: dict) -> None:
+        self._ts = typestore()
         self._writer = _Bag(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
         self.metadata = {k: str(v) for k, v in metadata.items()}
         for key, value in self.metadata.items():
@@ -322,9 +331,14 @@ class RunWriter:
         return k * self.Ts_ns
 
     def write_raw(self, topic: str, k: int, data: bytes) -> None:
-        """Append serialised CDR bytes of step k on a loop topic."""
-        self._writer.write(self._conns[topic], self.log_time(k), bytes(data))
-        self.counts[topic] += 1
+        """Append serialised CDR bytes of step k on a loop topic.
+
+        A stop (:mod:`fahv.interrupt`) during the write is raised after it, so the
+        file never holds half a record.
+        """
+        with deferred():
+            self._writer.write(self._conns[topic], self.log_time(k), bytes(data))
+            self.counts[topic] += 1
 
     def write(self, topic: str, k: int, fields: dict) -> None:
         """Serialise a message dict (:mod:`fahv.loop.cores` field names) and append it."""
@@ -349,6 +363,10 @@ class RunWriter:
         """
         if self._closed:
             return
+        with deferred():  # a stop while closing: raised once the file is complete
+            self._close(status, attachments)
+
+    def _close(self, status: str, attachments: dict | None) -> None:
         self._closed = True
         self.set_metadata("status", status)
         self.set_metadata("steps_recorded", min(self.counts.values()))
