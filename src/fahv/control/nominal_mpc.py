@@ -266,25 +266,33 @@ class AttitudeBounds:
         Bounds the QP uses [rad]: ``certified`` by default, or the case's value.
     given : bool
         Whether the case gave the bound (``mpc.att_max`` > 0).
+    trim_offset : float
+        Largest attitude offset of a parameter-box corner's own trim from the nominal
+        trim [rad] (0: not known). The nominal must hold it at steady state; where it
+        exceeds the rows, the QP widens them to the plant's own trim (see
+        :meth:`TrackingMPCNominal._qp`), beyond what the certificate covers.
     """
 
     support: np.ndarray
     certified: np.ndarray
     used: np.ndarray
     given: bool
+    trim_offset: float = 0.0
 
     @property
     def is_certified(self) -> bool:
-        """True if the bounds used leave the tube's support inside the requirement."""
-        return bool(np.all(self.used <= self.certified + 1e-12))
+        """True if the rows keep nominal + tube within the requirement at every trim.
 
-    def report(self, trim_offset: float = 0.0) -> str:
-        """One line for the design log: support, certified and used bounds, what is left.
-
-        ``trim_offset`` [rad] is the largest trim attitude offset of a box corner from
-        the nominal trim (the nominal MPC must hold it at steady state).
+        The rows must leave the tube's support inside the requirement and hold every box
+        corner's own trim (so they are never widened at steady state).
         """
+        fits = np.all(self.used <= self.certified + 1e-12)
+        return bool(fits and np.all(self.trim_offset <= self.used + 1e-12))
+
+    def report(self) -> str:
+        """One line for the design log: support, certified and used bounds, what is left."""
         sup, cer, use = (np.degrees(v) for v in (self.support, self.certified, self.used))
+        trim_offset = self.trim_offset
         left = use - np.degrees(trim_offset)
         head = (
             f"attitude (requirement {ATTITUDE_BOUND_DEG} deg): support of tau Z "
@@ -299,13 +307,22 @@ class AttitudeBounds:
             )
         if self.is_certified:
             return head + ": attitude requirement follows from the certificate  OK"
+        if np.all(self.used <= self.certified + 1e-12):
+            return (
+                head + f": NOT certified (the box's trim offset exceeds the rows, which then "
+                f"widen to the plant's own trim; offset + support reaches "
+                f"{np.degrees(trim_offset) + sup[0]:.3f} / "
+                f"{np.degrees(trim_offset) + sup[1]:.3f} deg)"
+            )
         return (
             head + f": NOT certified (the case's mpc.att_max exceeds the certified bound; "
             f"nominal + support reaches {use[0] + sup[0]:.3f} / {use[1] + sup[1]:.3f} deg)"
         )
 
 
-def attitude_bounds(N, tau: float, att_max_deg: float = 0.0) -> AttitudeBounds:
+def attitude_bounds(
+    N, tau: float, att_max_deg: float = 0.0, trim_offset: float = 0.0
+) -> AttitudeBounds:
     """Bounds of the nominal QP's attitude rows from the tube and the requirement.
 
     The plant's attitude deviation from the set point's trim is the nominal one plus
@@ -322,6 +339,9 @@ def attitude_bounds(N, tau: float, att_max_deg: float = 0.0) -> AttitudeBounds:
         Adjustable factor (tube tau Z).
     att_max_deg : float
         The case's ``mpc.att_max`` [deg]; 0 uses the certified bound.
+    trim_offset : float
+        Largest attitude offset of a box corner's trim from the nominal trim [rad]
+        (:attr:`AttitudeBounds.trim_offset`; 0: not checked).
 
     Returns
     -------
@@ -345,7 +365,7 @@ def attitude_bounds(N, tau: float, att_max_deg: float = 0.0) -> AttitudeBounds:
             f"nominal bound within the requirement {ATTITUDE_BOUND_DEG} deg; give "
             "mpc.att_max (then reported as not certified) or shrink the tube"
         )
-    return AttitudeBounds(support, certified, used, given)
+    return AttitudeBounds(support, certified, used, given, float(trim_offset))
 
 
 @dataclass(frozen=True)
@@ -1338,9 +1358,9 @@ class TrackingMPCNominal(NominalSource):
         u_lo, u_hi = a["u_lo"], a["u_hi"]
         cmd = ctx.case["command"]
         mpc = ctx.case.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
-        att = attitude_bounds(a["N"], ctx.case["tube"]["tau"], mpc["att_max"])
         offset = float(a["att_trim_offset"]) if "att_trim_offset" in a else 0.0
-        ctx.log(att.report(offset))
+        att = attitude_bounds(a["N"], ctx.case["tube"]["tau"], mpc["att_max"], offset)
+        ctx.log(att.report())
         tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
         path = np.array([tm(cmd["h0"], cmd["V0"])[1], tm(cmd["h_c"], cmd["V_c"])[1]])
         cert = verify_terminal(a["A"], a["B"], a["K"], a["Q"], u_lo, u_hi, path)
