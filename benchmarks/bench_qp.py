@@ -22,7 +22,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=15000)
     args = ap.parse_args()
-    _, design, _ = load_or_design("offline_design/case1.yaml", None, None, io.StringIO().write)
+    _, design, _ = load_or_design(
+        "offline_design/case1_vertex.yaml", None, None, io.StringIO().write
+    )
     qp_times = []
     solve = nominal_mpc.TrackingMPC.solve
 

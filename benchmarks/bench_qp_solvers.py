@@ -43,7 +43,9 @@ def record(steps: int) -> list[tuple]:
             return daqp.solve(H, f, A, bu, bl, **kw)
 
     nominal_mpc._daqp = lambda: Recorder
-    _, design, _ = load_or_design("offline_design/case1.yaml", None, None, io.StringIO().write)
+    _, design, _ = load_or_design(
+        "offline_design/case1_vertex.yaml", None, None, io.StringIO().write
+    )
     simulate(design, "tube_mpc", duration=steps * design.case["Ts"])
     return qps
 

@@ -39,7 +39,9 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=15000)
     ap.add_argument("--batch", type=int, default=100)
     args = ap.parse_args()
-    _, design, _ = load_or_design("offline_design/case1.yaml", None, None, io.StringIO().write)
+    _, design, _ = load_or_design(
+        "offline_design/case1_vertex.yaml", None, None, io.StringIO().write
+    )
     law_t, core_t, steps = [], [], []
     law_step, core_step = RMPCLaw.step, ControllerCore.on_inputs
 

@@ -8,7 +8,7 @@ the trim), shifted along K parameter directions, with the fault vertices of rho_
 W bounds what they leave. Iterates W <- max(W, GROW bound) with the tube LMI (24)
 re-solved (constraint generation over the vertices) until the bound lies inside W.
 
-Usage (after `fahv design offline_design/case1.yaml`):
+Usage (after `fahv design offline_design/case1_vertex.yaml`):
     .venv/bin/python scripts/along_nominal_study.py [--k K] [--scale S] [--w0 F]
         [--grow G] [--iterations I] [--lam L] [--save FILE]
         [--integral X] [--eps E1,...,E9]
@@ -68,7 +68,7 @@ def case1_box(envelope, scale: float = 1.0) -> SchedulingBox:
 def case1_context():
     """Case 1's saved design: (arrays, case dict, vehicle, TP model, trim map)."""
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    d = load_design(ROOT / "offline_design" / "artefacts" / "case1")
+    d = load_design(ROOT / "offline_design" / "artefacts" / "case1_vertex")
     a, c = d.arrays, d.case
     veh = load_vehicle()
     tp = build_tp_model(veh, "cm", *c["vertices"], *c["samples"])

@@ -11,7 +11,7 @@ corner of the coefficient box) and W bounds only the rest. Prints per iteration 
 alpha extent of Z and bound / W per row; stops when the pair closes (bound <= W) or
 the tube LMI becomes infeasible.
 
-Usage (after `fahv design offline_design/case1.yaml`):
+Usage (after `fahv design offline_design/case1_vertex.yaml`):
     .venv/bin/python scripts/closure_study.py SCHEDULES DPHI DDELTA_E_DEG NOMINAL_SCALE \
         {nominal,box} W0_FRACTION [ITERATIONS] [--directions K]
 e.g. scripts/closure_study.py 1 0.1 3 1.0 box 1.0     (the MPC's ranges: diverges)
@@ -67,7 +67,7 @@ def main(argv):
     n_s, dphi, dde, nom_scale, veh_kind, w0 = argv[:6]
     iterations = int(argv[6]) if len(argv) > 6 else 12
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    d = load_design(ROOT / "offline_design" / "artefacts" / "case1")
+    d = load_design(ROOT / "offline_design" / "artefacts" / "case1_vertex")
     a, c = d.arrays, d.case
     veh = load_vehicle()
     r_h, r_V = c["vertices"]

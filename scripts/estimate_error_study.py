@@ -9,7 +9,7 @@ nominal_trajectory node filters it). The closed pair along the nominal
 full Case 1 runs for several ``mpc.du_max`` (rate rows on the nominal input), with
 settling and attitude, so that the rate a certified tube needs can be read off.
 
-Usage (after `fahv design offline_design/case1.yaml`):
+Usage (after `fahv design offline_design/case1_vertex.yaml`):
     .venv/bin/python scripts/estimate_error_study.py [--rates P:E,...] [--est-tau T,...]
 --rates: comma-separated Phi:delta_e[deg] pairs per move (0:0 no rate rows);
 --est-tau: the estimate's time constants [s]. Prints one line per run: settling h / V
@@ -63,7 +63,7 @@ def estimate_error(run, Ts: float, n_sub: int, est_tau: float) -> np.ndarray:
 def main():
     """Run Case 1 for each rate and estimate time constant of the command line."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--design", default=str(ROOT / "offline_design" / "artefacts" / "case1"))
+    ap.add_argument("--design", default=str(ROOT / "offline_design" / "artefacts" / "case1_vertex"))
     ap.add_argument("--rates", default="0:0,0.05:0.5,0.02:0.2,0.01:0.1")
     ap.add_argument("--est-tau", default="0.5")
     ap.add_argument("--duration", type=float, default=300.0)

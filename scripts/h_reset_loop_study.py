@@ -16,7 +16,7 @@ assumes, measured along the run:
 * the nominal's largest reach beyond the pair's nominal box, per coordinate, in units
   of the box's half-width (<= 0: inside).
 
-Usage (after `fahv design offline_design/case1.yaml`):
+Usage (after `fahv design offline_design/case1_vertex.yaml`):
     .venv/bin/python scripts/h_reset_loop_study.py [--rates P:E] [--losses L,...]
         [--onsets T,...] [--corners C] [--corner-ids I,...] [--duration S] [--no-reset]
         [--att-max DEG] [--pair FILE]
@@ -121,7 +121,7 @@ def main():
     ap.add_argument("--att-max", type=float, default=0.0)
     ap.add_argument("--pair", default=str(PAIR))
     o = ap.parse_args()
-    design = load_design(ROOT / "offline_design" / "artefacts" / "case1")
+    design = load_design(ROOT / "offline_design" / "artefacts" / "case1_vertex")
     a, veh = design.arrays, load_vehicle()
     tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
     pair = dict(np.load(o.pair))

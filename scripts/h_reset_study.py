@@ -17,7 +17,7 @@ the product set {|e_h| <= H} x Z_8, each support exact for the product. Iterates
 max(W_8, GROW bound) with the tube LMI re-solved until the bound lies inside W_8, then
 prints the exact worst one-step level of the eight-state tube.
 
-Usage (after `fahv design offline_design/case1.yaml`):
+Usage (after `fahv design offline_design/case1_vertex.yaml`):
     .venv/bin/python scripts/h_reset_study.py [--integral X] [--k K] [--w0 F]
         [--h-margin FT] [--iterations I]
 --save FILE writes the closed pair (and its boxes) for tests/design/test_along_nominal.py.

@@ -17,7 +17,7 @@ design's loss over the nominal box, the scale the onset needs with an estimate o
 gamma (and with a one-step estimate, gamma = 1), and the largest loss whose onset fits
 the largest scale that closes (first order in the loss).
 
-Usage (after `fahv design offline_design/case1.yaml`):
+Usage (after `fahv design offline_design/case1_vertex.yaml`):
     .venv/bin/python scripts/onset_scale_study.py [--pair FILE] [--scales 1,2,5,10,20]
         [--gamma 0.2] [--loss 0.24]
 About 90 s per scale.

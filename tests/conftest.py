@@ -12,7 +12,7 @@ from fahv.design.pipeline import run_design
 from fahv.model.tp_model import build_tp_model
 from fahv.model.vehicle import load_vehicle
 
-CASE1 = "offline_design/case1.yaml"
+CASE1 = "offline_design/case1_vertex.yaml"
 
 
 @pytest.fixture(scope="session")

@@ -11,10 +11,14 @@ from fahv.errors import CampaignError
 ROOT = Path(__file__).resolve().parents[2]
 
 
-@pytest.mark.parametrize("name", ["campaign_case1.yaml", "campaign_case2.yaml"])
-def test_example_campaign_files_validate(name):
+@pytest.mark.parametrize(
+    "name, case",
+    [("campaign_case1.yaml", "case1_vertex"), ("campaign_case2.yaml", "case2"),
+     ("campaign_case1_eight_state.yaml", "case1")],
+)  # fmt: skip
+def test_example_campaign_files_validate(name, case):
     c = load_campaign(ROOT / "offline_design" / name)
-    assert c.case.name == name.split("_")[1].split(".")[0]
+    assert c.case.name == case
     assert c.duration == 300.0
     assert set(c["variants"]) <= set(c.case["variants"])
 

@@ -62,4 +62,4 @@ def test_simulate_all_prints_a_progress_line_per_variant(quick_case, tmp_path, c
     assert list(table) == ["tube_mpc", "tube_mpc_no_notch", "tube_mpc_notch2",
                            "tube_mpc_paper", "rmpc"]  # fmt: skip
     for i, v in enumerate(table, 1):
-        assert f"[{i}/5] case1 {v}: done in" in out.err
+        assert f"[{i}/5] case1_vertex {v}: done in" in out.err

@@ -18,7 +18,7 @@ from fahv.runs.workspace import ROOT
 
 matplotlib.use("Agg")
 
-CASE1 = ROOT / "offline_design" / "case1.yaml"
+CASE1 = ROOT / "offline_design" / "case1_vertex.yaml"
 
 
 def test_metrics_table_is_aligned_whatever_the_row_names(design):
@@ -110,9 +110,9 @@ def test_design_for_another_vehicle_keeps_the_case_artefacts(tmp_path, monkeypat
     case = load_case(CASE1)
     packaged = artefact_dir(case, None, load_vehicle())
     other = artefact_dir(case, None, load_vehicle(heavy))
-    assert packaged.name == "case1"
-    assert other.name == f"case1@heavy-{load_vehicle(heavy).data_hash[:8]}"
-    assert other.parent == packaged.parent  # a sibling: saving it cannot replace case1/
+    assert packaged.name == "case1_vertex"
+    assert other.name == f"case1_vertex@heavy-{load_vehicle(heavy).data_hash[:8]}"
+    assert other.parent == packaged.parent  # a sibling: saving it cannot replace case1_vertex/
     written = []
     monkeypatch.setattr(cli_design, "design_case", lambda c, v, out, log: written.append(out))
     monkeypatch.chdir(tmp_path)

@@ -72,16 +72,16 @@ def _case(path, **changes):
 SCENARIOS = {
     # descending step inside the envelope, Case 1 fault
     "descending step": (
-        "offline_design/case1.yaml",
+        "offline_design/case1_vertex.yaml",
         {"command.h_c": 85100.0, "command.V_c": 7750.0},
     ),
     # 30 % loss of elevator effectiveness at 150 s
     "30 % loss at 150 s": (
-        "offline_design/case1.yaml",
+        "offline_design/case1_vertex.yaml",
         {"fault.rho_f": 0.7, "fault.t_onset": 150.0},
     ),
     # another draw of the uncertain parameters
-    "parameter seed 7": ("offline_design/case1.yaml", {"uncertainty.seed": 7}),
+    "parameter seed 7": ("offline_design/case1_vertex.yaml", {"uncertainty.seed": 7}),
     # Case 2: ramps, adjustable law tau = 0.8 on the ECM design
     "case 2": ("offline_design/case2.yaml", {}),
 }
@@ -110,7 +110,7 @@ def test_heavy_vehicle_with_a_large_loss_in_a_descent_ends_on_the_command():
     and no nominal update may use the terminal law away from it."""
     from fahv.campaign.draws import overrides
 
-    case = _case("offline_design/case1.yaml")
+    case = _case("offline_design/case1_vertex.yaml")
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     design = run_design(case, log=lambda *_: None)
     signs = {k: 0.0 for k in ("I_yy", "S", "z_T", "c_bar", "beta_1", "beta_3", "beta_5",

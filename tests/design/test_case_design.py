@@ -16,7 +16,7 @@ from fahv.runs.metrics import metrics
 
 
 def test_case_files_load():
-    for path in ("offline_design/case1.yaml", "offline_design/case2.yaml"):
+    for path in ("offline_design/case1_vertex.yaml", "offline_design/case2.yaml"):
         c = load_case(path)
         assert c["Ts"] == 0.02
     assert load_case("offline_design/case2.yaml")["tube"]["tau"] == 0.8
@@ -131,7 +131,7 @@ def test_defaulted_knobs_may_be_omitted(raw):
     d["tube"].pop("lam")
     c = case_from_mapping(d, "lean.yaml")
     full = case_from_mapping(raw, "full.yaml")
-    assert c.data == full.data  # case1.yaml sets every knob to its default
+    assert c.data == full.data  # case1_vertex.yaml sets every knob to its default
     assert c.defaults_used["disturbance.samples"] == 300
     assert c.defaults_used["rmpc.ellipsoids"] == 9
     assert set(c.defaults_used) >= {"samples", "trim_grid", "tube.lam", "nominal.lam"}

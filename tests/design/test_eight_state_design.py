@@ -16,7 +16,7 @@ from fahv.config.yamlio import load_yaml
 from fahv.design.case import case_from_mapping, load_case
 from fahv.errors import CaseError
 
-CASE = "offline_design/case1_eight_state.yaml"
+CASE = "offline_design/case1.yaml"
 PAIR = Path(__file__).resolve().parents[1] / "data" / "closed_tube_h_reset.npz"
 
 
@@ -30,7 +30,7 @@ def test_eight_state_case_sets_every_knob(raw8):
     c = load_case(CASE)
     assert c.defaults_used == {}
     assert c["tube"]["form"] == "eight_state" and c["eight_state"]["k"] == 5
-    plain = load_case("offline_design/case1.yaml")
+    plain = load_case("offline_design/case1_vertex.yaml")
     assert plain["tube"]["form"] == "vertices" and "eight_state" not in plain.data
 
 

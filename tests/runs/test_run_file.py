@@ -71,7 +71,7 @@ def test_the_file_holds_metadata_parameters_and_timestamps(run):
         atts = {a.name: a for a in reader.iter_attachments()}
     # written at the start (a file cut short keeps it) and again at the end
     assert [m.metadata["status"] for m in records] == ["running", "complete"]
-    assert records[-1].metadata["case"] == "case1"
+    assert records[-1].metadata["case"] == "case1_vertex"
     fault = content["fault_injector"]["ros__parameters"]
     assert records[-1].metadata["fault_rho_f"] == str(fault["rho_f"])
     assert yaml.safe_load(atts[PARAMS].data) == content
@@ -169,7 +169,7 @@ def test_runs_of_earlier_versions_still_open(design, tmp_path, capsys):
     with open(bag_paths(bag)[1], "rb") as f:
         assert list(make_reader(f).iter_attachments()) == []  # really the old layout
     rec = read_run(bag)
-    assert rec.metadata["status"] == "complete" and rec.metadata["case"] == "case1"
+    assert rec.metadata["status"] == "complete" and rec.metadata["case"] == "case1_vertex"
     assert rec.params() == content and run_params(bag) == content
     assert stored_metadata(bag)["design_hash"] == content["plant"]["ros__parameters"]["design_hash"]
     assert load_timestamps(rec.attachment(TIMESTAMPS_FILE))["/hsv/state"].shape == (10, 3)

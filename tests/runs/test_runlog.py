@@ -31,7 +31,7 @@ def test_round_trip_equals_the_simulation(recorded):
     assert not rec.truncated
     assert {t: rec.topics[t]["count"] for t in TOPICS} == dict.fromkeys(TOPICS, N)
     assert rec.metadata["status"] == "complete"
-    assert rec.metadata["case"] == "case1" and rec.metadata["source"] == "simulate"
+    assert rec.metadata["case"] == "case1_vertex" and rec.metadata["source"] == "simulate"
     back = run_result_of(rec)
     np.testing.assert_array_equal(back.x, run.x)
     np.testing.assert_array_equal(back.u, run.u)
