@@ -229,3 +229,25 @@ def test_simulate_overrides_node_parameters_and_names_unknown_nodes(design):
     np.testing.assert_array_equal(run.q_f, run.x[:, 4])  # no filter: q' = q
     with pytest.raises(RunError, match="override for node 'bogus'"):
         simulate(design, "tube_mpc", 0.1, overrides={"bogus": {"x": 1}})
+
+
+def test_paper_figures_take_the_paper_law_from_the_vertex_case(monkeypatch, tmp_path):
+    """Fig. 9, 10 and 12 draw the paper's law from case1_vertex (Case 1's certified design
+    has no such variant), labelled with its case; a missing run is left out."""
+    from fahv.runs import plots
+
+    drawn = {}
+
+    def fake_plot_group(group, sel, path, title):
+        drawn[path.name] = [label for label, _ in sel]
+        return path
+
+    monkeypatch.setattr(plots, "plot_group", fake_plot_group)
+    runs = {("case1", "tube_mpc"): 1, ("case1", "rmpc"): 2, ("case1_vertex", "tube_mpc_paper"): 3,
+            ("case1_vertex", "tube_mpc"): 4}  # fmt: skip
+    plots.paper_figures(runs, tmp_path)
+    paper = plots.LABELS["tube_mpc_paper"] + " (case1_vertex)"
+    assert drawn["fig09_case1_trajectory.png"] == [plots.LABELS["tube_mpc"], paper,
+                                                  plots.LABELS["rmpc"]]  # fmt: skip
+    assert paper not in drawn["fig11_case1_flexible.png"]
+    assert "fig14_case2_trajectory.png" not in drawn  # no Case 2 run

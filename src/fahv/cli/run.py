@@ -429,10 +429,18 @@ def add_parsers(sub) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_replay)
     p = sub.add_parser(
-        "paper-figures", help="simulate Cases 1 and 2 (all variants, recorded) and write Fig. 9-17"
+        "paper-figures",
+        help="simulate Cases 1 and 2 (all variants, recorded; the paper's law on "
+        "case1_vertex) and write Fig. 9-17",
     )
     p.add_argument(
-        "--cases", nargs="+", default=["offline_design/case1.yaml", "offline_design/case2.yaml"]
+        "--cases",
+        nargs="+",
+        default=[
+            "offline_design/case1.yaml",
+            "offline_design/case1_vertex.yaml",
+            "offline_design/case2.yaml",
+        ],
     )
     p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
     p.add_argument(

@@ -124,18 +124,20 @@ def _tube_axis(ax, runs) -> None:
                 transform=ax.transAxes, ha="right", va="top", fontsize=8)  # fmt: skip
 
 
-#: The paper's simulation figures: number -> (case, group, variants, title).
+#: The paper's simulation figures: number -> (case, group, variants, title). A variant
+#: written ``other_case/variant`` is that case's run (the paper's law runs on the vertex
+#: tube of ``case1_vertex``, Case 1's certified design has no such variant).
 PAPER_FIGURES = {
     9: (
         "case1",
         "trajectory",
-        ("tube_mpc", "tube_mpc_no_notch", "tube_mpc_paper", "rmpc"),
+        ("tube_mpc", "tube_mpc_no_notch", "case1_vertex/tube_mpc_paper", "rmpc"),
         "Fig. 9: trajectory, Case 1",
     ),
     10: (
         "case1",
         "attitude",
-        ("tube_mpc", "tube_mpc_no_notch", "tube_mpc_paper", "rmpc"),
+        ("tube_mpc", "tube_mpc_no_notch", "case1_vertex/tube_mpc_paper", "rmpc"),
         "Fig. 10: states, Case 1",
     ),
     11: (
@@ -147,7 +149,7 @@ PAPER_FIGURES = {
     12: (
         "case1",
         "inputs",
-        ("tube_mpc", "tube_mpc_no_notch", "tube_mpc_paper", "rmpc"),
+        ("tube_mpc", "tube_mpc_no_notch", "case1_vertex/tube_mpc_paper", "rmpc"),
         "Fig. 12: inputs, Case 1",
     ),
     13: (
@@ -177,10 +179,19 @@ LINESTYLES = ("-", (0, (5, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)))
 
 
 def paper_figures(runs: dict, out_dir: str | Path) -> list[Path]:
-    """Write Fig. 9-17 from ``{(case, variant): RunResult}``; skips a figure with no run."""
+    """Write Fig. 9-17 from ``{(case, variant): RunResult}``; skips a figure with no run.
+
+    A run missing from ``runs`` is left out of its figure; a run of another case than
+    the figure's is labelled with that case.
+    """
     out = []
     for num, (case, group, variants, title) in PAPER_FIGURES.items():
-        sel = [(LABELS.get(v, v), runs[(case, v)]) for v in variants if (case, v) in runs]
+        keys = [tuple(v.split("/")) if "/" in v else (case, v) for v in variants]
+        sel = [
+            (LABELS.get(v, v) + ("" if c == case else f" ({c})"), runs[(c, v)])
+            for c, v in keys
+            if (c, v) in runs
+        ]
         if sel:
             out.append(
                 plot_group(group, sel, Path(out_dir) / f"fig{num:02d}_{case}_{group}.png", title)
