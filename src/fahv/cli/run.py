@@ -74,6 +74,15 @@ class StepProgress:
         self.bar.close()
 
 
+#: Cases of ``fahv results`` and ``fahv paper-figures``: Case 1 (certified), the paper's
+#: vertex design of Case 1 (the paper's law), Case 2.
+DEFAULT_CASES = (
+    "offline_design/case1.yaml",
+    "offline_design/case1_vertex.yaml",
+    "offline_design/case2.yaml",
+)
+
+
 def _simulate_recorded(design, variant: str, duration, out_dir, live=None):
     """simulate() with a progress bar, recorded to ``out_dir/<run>/`` unless it is None.
 
@@ -436,11 +445,7 @@ def add_parsers(sub) -> None:
     p.add_argument(
         "--cases",
         nargs="+",
-        default=[
-            "offline_design/case1.yaml",
-            "offline_design/case1_vertex.yaml",
-            "offline_design/case2.yaml",
-        ],
+        default=list(DEFAULT_CASES),
     )
     p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
     p.add_argument(
@@ -458,11 +463,7 @@ def add_parsers(sub) -> None:
     p.add_argument(
         "--cases",
         nargs="+",
-        default=[
-            "offline_design/case1.yaml",
-            "offline_design/case1_vertex.yaml",
-            "offline_design/case2.yaml",
-        ],
+        default=list(DEFAULT_CASES),
     )
     p.add_argument("--write-reference", metavar="FILE", default=None,
                    help="write the metrics of every case and variant as JSON")  # fmt: skip
