@@ -87,6 +87,13 @@ def test_design_certificates_and_artefacts(design, tmp_path):
     # tightened room is positive and smaller than the room (eq. 30)
     assert np.all(design.arrays["u_n_max"] > 0)
     assert np.all(design.arrays["u_n_max"] < design.arrays["u_room"])
+    # the tube variants that feed q through a notch: their loops at the 40 fault vertices
+    loops = {loop["variant"]: loop for loop in s["tube"]["notch_in_loop"]}
+    assert set(loops) == {"tube_mpc", "tube_mpc_notch2", "tube_mpc_paper"}  # not no_notch
+    assert loops["tube_mpc_notch2"]["omega"] == pytest.approx(design.arrays["omega_flex"][1])
+    assert loops["tube_mpc"]["omega"] == pytest.approx(19.05)
+    assert all(0.9 < loop["rho"] < 1.1 and loop["certified"] is False for loop in loops.values())
+    assert len({loop["rho_q"] for loop in loops.values()}) == 1  # one gain, one certified loop
     out = save_design(design, tmp_path / "case1")
     back = load_design(out)
     assert back.summary["design_hash"] == design.summary["design_hash"]

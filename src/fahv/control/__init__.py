@@ -31,6 +31,7 @@ from fahv.control.base import (  # noqa: E402
     law_of,
     register_law,
     register_nominal,
+    variant_notch,
 )
 
 __all__ = [
@@ -44,6 +45,7 @@ __all__ = [
     "law_of",
     "register_law",
     "register_nominal",
+    "variant_notch",
 ]
 
 #: Environment variable naming plugin modules (comma-separated).

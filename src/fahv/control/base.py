@@ -243,6 +243,35 @@ class Variant:
     description: str = ""
 
 
+def variant_notch(case_notch, setting: str, omega_flex) -> dict | None:
+    """The notch filter (eq. 38) a variant runs with on the q feedback, or None.
+
+    Parameters
+    ----------
+    case_notch : mapping
+        The case's ``notch`` section (``enabled``, ``omega_z``, ``eps_z``, ``omega_p``,
+        ``eps_p``; rad/s and -).
+    setting : {"case", "off", "mode2"}
+        :attr:`Variant.notch`.
+    omega_flex : (2,) array_like
+        Flexible mode frequencies of the design [rad/s]; ``mode2`` centres the notch on
+        the second.
+
+    Returns
+    -------
+    dict or None
+        ``omega_z``, ``eps_z``, ``omega_p``, ``eps_p`` as floats; None when the notch is
+        off (case or variant).
+    """
+    if not case_notch["enabled"] or setting == "off":
+        return None
+    notch = {k: float(case_notch[k]) for k in ("omega_z", "eps_z", "omega_p", "eps_p")}
+    if setting == "mode2":
+        w2 = float(np.asarray(omega_flex, float)[1])
+        notch.update(omega_z=w2, omega_p=w2)
+    return notch
+
+
 #: Control laws by name.
 LAWS: Registry[type[ControlLaw]] = Registry("control law")
 #: Nominal parts by name.

@@ -280,14 +280,18 @@ class AttitudeBounds:
     trim_offset: float = 0.0
 
     @property
+    def rows_fit(self) -> bool:
+        """True if the rows leave the tube's support inside the requirement."""
+        return bool(np.all(self.used <= self.certified + 1e-12))
+
+    @property
     def is_certified(self) -> bool:
         """True if the rows keep nominal + tube within the requirement at every trim.
 
         The rows must leave the tube's support inside the requirement and hold every box
         corner's own trim (so they are never widened at steady state).
         """
-        fits = np.all(self.used <= self.certified + 1e-12)
-        return bool(fits and np.all(self.trim_offset <= self.used + 1e-12))
+        return self.rows_fit and bool(np.all(self.trim_offset <= self.used + 1e-12))
 
     def report(self) -> str:
         """One line for the design log: support, certified and used bounds, what is left."""
@@ -307,7 +311,7 @@ class AttitudeBounds:
             )
         if self.is_certified:
             return head + ": attitude requirement follows from the certificate  OK"
-        if np.all(self.used <= self.certified + 1e-12):
+        if self.rows_fit:
             return (
                 head + f": NOT certified (the box's trim offset exceeds the rows, which then "
                 f"widen to the plant's own trim; offset + support reaches "

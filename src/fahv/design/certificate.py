@@ -40,6 +40,7 @@ import numpy as np
 
 from fahv.control.nominal_mpc import estimator_gains
 from fahv.errors import DesignError
+from fahv.model.notch import DiscreteNotch
 from fahv.model.vehicle import DELTA_E
 from fahv.plant.rk4 import params_records, rk4_cm
 from fahv.plant.uncertainty import perturb
@@ -701,6 +702,117 @@ def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, lo: float = 0.5, hi: float =
 
 
 # -- onset of a fault and start of a run ----------------------------------------------
+@dataclass(frozen=True)
+class NotchLoop:
+    """The tube feedback through a variant's notch filter on q, at the design's vertices.
+
+    The RPI certificate (LMI 24, the exact level) is for e+ = (A_i + B_i F) e + w: the
+    gain acts on the measured q. A variant with the notch (eq. 38) on the q feedback
+    runs u = F e' with q' = notch(q) in e', which adds the filter's two states to the
+    loop. This is the loop's stability at every vertex with the filter in it: a
+    *necessary* condition for any tube to hold, not an RPI certificate of that loop.
+
+    Attributes
+    ----------
+    variant : str
+    omega, eps_p : float
+        Notch centre [rad/s] and pole damping [-].
+    rho : float
+        Largest spectral radius over the vertices of the loop with the filter.
+    rho_q : float
+        The same on the measured q (the loop the certificate is for).
+    vertex : int
+        Vertex of ``rho``.
+    """
+
+    variant: str
+    omega: float
+    eps_p: float
+    rho: float
+    rho_q: float
+    vertex: int
+
+    @property
+    def stable(self) -> bool:
+        """True if the loop with the filter is stable at every vertex."""
+        return self.rho < 1.0
+
+    def line(self) -> str:
+        """One line for the design log, with its verdict."""
+        head = (
+            f"variant {self.variant}: tube feedback through the notch on q (omega {self.omega:.2f} "
+            f"rad/s, eps_p {self.eps_p:g}): largest spectral radius over the vertices "
+            f"{self.rho:.6f} (on the measured q {self.rho_q:.6f})"
+        )
+        if self.stable:
+            return head + (
+                ": stable at every vertex (necessary only); the RPI certificate is for the "
+                "feedback on the measured q: NOT certified with the notch"
+            )
+        return head + f": UNSTABLE at vertex {self.vertex}: NOT certified with the notch"
+
+    def summary(self) -> dict:
+        """JSON-ready record (the attributes and ``stable``)."""
+        return {**self.__dict__, "stable": self.stable, "certified": False}
+
+
+def notch_loop(A, B, F, notch, Ts: float, iq: int, variant: str = "") -> NotchLoop:
+    """Stability of the tube loop with the notch filter on q at every vertex (:class:`NotchLoop`).
+
+    With the filter of :class:`fahv.model.notch.DiscreteNotch` in the coordinates
+    chi(k) = x_q(k) - B_d q(k) (a standard state space of the same recursion):
+    chi+ = A_d chi + (A_d B_d + B_d) q, q' = C_q chi + (C_q B_d + D_q) q. The loop
+    on the error, u = F e' (e' is e with q' - q_nominal for e_q), is::
+
+        [e; chi]+ = [[A_i + B_i F S, B_i F_q C_q], [b E_q, A_d]] [e; chi]
+
+    with S the identity but (C_q B_d + D_q) at (iq, iq). The notch's effect on the
+    nominal's own q is an exogenous signal and does not enter the spectral radius.
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+        Vertices of the tube's error dynamics (the fault vertices included).
+    F : (m, n) ndarray
+        Tube gain on e.
+    notch : fahv.model.notch.NotchFilter
+    Ts : float
+        Control period [s].
+    iq : int
+        Index of q in e.
+    variant : str
+        Name for the report.
+
+    Returns
+    -------
+    NotchLoop
+
+    Raises
+    ------
+    ValueError
+        If the shapes disagree or ``iq`` is out of range.
+    """
+    A, B, F = (np.asarray(v, float) for v in (A, B, F))
+    R, n, _ = A.shape
+    if B.shape[:2] != (R, n) or F.shape != (B.shape[2], n) or not 0 <= iq < n:
+        raise ValueError(f"notch_loop: shapes A {A.shape}, B {B.shape}, F {F.shape}, iq {iq}")
+    dn = DiscreteNotch(notch, Ts)
+    b = dn.A_d @ dn.B_d + dn.B_d
+    S = np.eye(n)
+    S[iq, iq] = dn.C_q @ dn.B_d + dn.D_q
+    Acl = np.zeros((R, n + 2, n + 2))
+    Acl[:, :n, :n] = A + B @ F @ S
+    Acl[:, :n, n:] = (B @ F[:, iq : iq + 1]) * dn.C_q[None, None, :]
+    Acl[:, n:, iq] = b
+    Acl[:, n:, n:] = dn.A_d
+    rho = np.abs(np.linalg.eigvals(Acl)).max(axis=1)
+    rho_q = np.abs(np.linalg.eigvals(A + B @ F)).max(axis=1)
+    k = int(np.argmax(rho))
+    return NotchLoop(variant, float(notch.omega_z), float(notch.eps_p), float(rho[k]),
+                     float(rho_q.max()), k)  # fmt: skip
+
+
 def onset_levels(lam, mu, w_base, pulse, gamma, n_steps, level0=1.0) -> np.ndarray:
     """Tube levels after a pulse in the estimate's error, from the S-procedure certificate.
 

@@ -47,7 +47,7 @@ from fahv.design.along_nominal import (
     nominal_vertices,
     onset_jumps,
 )
-from fahv.design.certificate import worst_level
+from fahv.design.certificate import NotchLoop, notch_loop, worst_level
 from fahv.errors import DesignError
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.synthesis.feedback import design_tube
@@ -94,6 +94,10 @@ class EightStatePair:
         The h row's disturbance over the product set [ft].
     onset : OnsetBound, optional
         The onset of a loss as a transient of the pair (:func:`onset_bound`).
+    notch_loops : tuple of NotchLoop
+        The tube variants that feed q through a notch, their loops at the pair's
+        vertices (:func:`fahv.design.certificate.notch_loop`); the RPI certificate is
+        for the feedback on the measured q.
     """
 
     F8: np.ndarray
@@ -107,6 +111,7 @@ class EightStatePair:
     step: float
     w_h: float
     onset: OnsetBound | None = None
+    notch_loops: tuple[NotchLoop, ...] = ()
 
     @property
     def F(self) -> np.ndarray:
@@ -165,6 +170,7 @@ class EightStatePair:
             },  # fmt: skip
             "assumptions": list(ASSUMPTIONS),
             "onset": None if self.onset is None else self.onset.summary(),
+            "notch_in_loop": [loop.summary() for loop in self.notch_loops],
         }
 
 
@@ -754,6 +760,7 @@ def design_pair(
     room,
     log: Callable[[str], None] = print,
     gamma: float | None = None,
+    notches=None,
     **estimate,
 ) -> tuple[EightStatePair, SchedulingBox, SchedulingBox]:
     """The eight-state tube of a case (``tube.form: eight_state``), closed and checked.
@@ -781,6 +788,10 @@ def design_pair(
     gamma : float, optional
         The case's estimator gain per step: the onset of the design loss is then bounded
         as a transient of the pair (:func:`onset_bound`, ``pair.onset``).
+    notches : dict, optional
+        ``{variant: NotchFilter}``: the tube variants that feed q through a notch; their
+        loops are checked at the pair's vertices (:func:`fahv.design.certificate.notch_loop`,
+        ``pair.notch_loops``).
     **estimate
         ``gamma_e``, ``directions``, ``projection_scale`` of :func:`onset_bound` (the
         estimate's gain along the elevator column).
@@ -816,6 +827,11 @@ def design_pair(
         onset = onset_bound(nv, pair, vehicle, trim_map, unc, gamma, case["Ts"],
                             case["plant_substeps"], **estimate)  # fmt: skip
         pair = replace(pair, onset=onset)
+    if notches:
+        A, B = nv.vertices()
+        loops = tuple(notch_loop(A[:, 1:, 1:], B[:, 1:, :], pair.F8, nf, case["Ts"], 3, v)
+                      for v, nf in notches.items())  # fmt: skip
+        pair = replace(pair, notch_loops=loops)
     return pair, nominal, box
 
 
@@ -844,6 +860,7 @@ def pair_report(pair: EightStatePair, nominal: SchedulingBox, box: SchedulingBox
         f"{pair.tightening[0]:.4f} / {np.degrees(pair.tightening[1]):.3f} deg",
         "assumed, not certified: " + "; ".join(ASSUMPTIONS),
         *([] if pair.onset is None else pair.onset.lines()),
+        *(loop.line() for loop in pair.notch_loops),
     ]
 
 

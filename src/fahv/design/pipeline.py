@@ -18,11 +18,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from fahv.config.spec import defaults_text
-from fahv.control import LAWS, VARIANTS
+from fahv.control import LAWS, VARIANTS, variant_notch
 from fahv.control.nominal_mpc import attitude_bounds, estimator_gains
 from fahv.design.artefacts import Design, provenance
 from fahv.design.case import Case
-from fahv.design.certificate import certify_tube
+from fahv.design.certificate import certify_tube, notch_loop
 from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
 from fahv.design.eight_state import design_pair, input_rows, pair_report
 from fahv.design.feasibility import box_coverage, fault_vertices, input_room
@@ -37,6 +37,31 @@ from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturbed_params
 from fahv.synthesis.feedback import design_tube, verify_tube
 from fahv.synthesis.nominal import design_nominal, verify_nominal
 from fahv.version import __version__
+
+
+def tube_notches(c: dict, omega_flex) -> dict[str, NotchFilter]:
+    """The notch filters the case's tube variants run on the q feedback, by variant name.
+
+    Parameters
+    ----------
+    c : dict
+        Validated case data (``variants``, ``notch``).
+    omega_flex : (2,) array_like
+        Flexible mode frequencies [rad/s] (``mode2`` notches).
+
+    Returns
+    -------
+    dict
+        ``{variant: NotchFilter}`` for every variant whose law has a tube and whose
+        notch is on (:func:`fahv.control.variant_notch`).
+    """
+    out = {}
+    for name in c["variants"]:
+        v = VARIANTS[name]
+        nt = variant_notch(c["notch"], v.notch, omega_flex)
+        if LAWS[v.law].has_tube and nt is not None:
+            out[name] = NotchFilter(**nt)
+    return out
 
 
 def _notch(case: Case) -> NotchFilter:
@@ -171,6 +196,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     x_start, _ = tm(cmd["h0"], cmd["V0"])
     x_end, _ = tm(cmd["h_c"], cmd["V_c"])
     F, N, tightening, pair = tube.F, tube.N, tube.tightening, None
+    notches = tube_notches(c, omega_flex) if kind != "ecm" else {}  # ECM: the filter is modelled
+    notch_loops = []
     if c["tube"]["form"] == "eight_state":  # the law runs on the eight-state tube
         cols = np.concatenate([tube.z_box, tube.tightening])  # the directions' column scale
         # the case check asks for an estimate; its gain along the elevator column, if any
@@ -182,11 +209,15 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         )
         pair, es_nominal, es_box = design_pair(
             c, veh, tm, np.concatenate([Dx, Du]), W.w_max, cols, rho_f, room_f, log,
-            gamma=gamma, **estimate,
+            gamma=gamma, notches=notches, **estimate,
         )  # fmt: skip
         for line in pair_report(pair, es_nominal, es_box):
             log(line)
         F, N, tightening = pair.F, pair.N, pair.tightening
+    else:
+        notch_loops = [notch_loop(Af, Bf, tau * F, nf, Ts, IQ, v) for v, nf in notches.items()]
+        for loop in notch_loops:
+            log(loop.line())
     u_n_max = room - tau * tightening
     log(
         f"tightened inputs (eq. 30{', 53 with tau = ' + str(tau) if tau < 1 else ''}): "
@@ -324,6 +355,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             "rho_f": rho_f,
             "row_room": room_f.tolist(),
             "loss_covered": coverage.summary(),
+            "notch_in_loop": [loop.summary() for loop in notch_loops],
         },
         "certificate": certificate,
         "nominal": {**cert, "s": nominal.s, "lam": nominal.lam},

@@ -22,7 +22,7 @@ import numpy as np
 
 from fahv.config import Field
 from fahv.config.spec import validate_flat
-from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
+from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS, variant_notch
 from fahv.design.case import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, TS
 from fahv.errors import ParameterError
 from fahv.loop.graph import CONTROLLER_NODES
@@ -246,11 +246,9 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     }
     cmd, f, nt = c["command"], c["fault"], c["notch"]
     x0 = np.asarray(a["x0"], float)
-    notch = {k: float(nt[k]) for k in ("omega_z", "eps_z", "omega_p", "eps_p")}
-    enabled = bool(nt["enabled"]) and v.notch != "off"
-    if v.notch == "mode2":
-        w2 = float(a["omega_flex"][1])
-        notch.update(omega_z=w2, omega_p=w2)
+    run_notch = variant_notch(nt, v.notch, a["omega_flex"])
+    enabled = run_notch is not None
+    notch = run_notch or {k: float(nt[k]) for k in ("omega_z", "eps_z", "omega_p", "eps_p")}
     x0_meas = x0.copy()
     if enabled:
         x0_meas[4] = 0.0  # the filter starts in steady state at q = 0 (trim)

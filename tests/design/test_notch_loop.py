@@ -1,0 +1,80 @@
+"""The tube loop with the notch filter on q (fahv.design.certificate.notch_loop)."""
+
+import numpy as np
+import pytest
+
+from fahv.design.certificate import notch_loop
+from fahv.model.notch import DiscreteNotch, NotchFilter
+
+NOTCH = NotchFilter(19.05, 0.02, 19.05, 0.5)
+TS = 0.02
+
+
+def _vertex(seed: int):
+    """A stable pitch-like vertex (n = 3: alpha, q, eta) and a gain."""
+    rng = np.random.default_rng(seed)
+    A = np.eye(3) + TS * np.array([[-1.0, 1.0, 0.0], [-4.0, -0.5, 2.0], [0.0, 0.0, -3.0]])
+    A = A + 1e-3 * rng.standard_normal((3, 3))
+    B = TS * np.array([[0.0], [-6.0], [1.0]])
+    F = np.array([[1.5, 0.8, 0.1]])
+    return A, B, F
+
+
+def test_the_loop_matrix_is_the_filter_running_in_the_loop():
+    """[e; chi] propagated by the loop matrix equals e with DiscreteNotch's q' fed back."""
+    A, B, F = _vertex(0)
+    iq, steps = 1, 60
+    loop = notch_loop(A[None], B[None], F, NOTCH, TS, iq)
+    # rebuild the matrix the way the docstring states it
+    dn = DiscreteNotch(NOTCH, TS)
+    S = np.eye(3)
+    S[iq, iq] = dn.C_q @ dn.B_d + dn.D_q
+    Acl = np.block([
+        [A + B @ F @ S, B @ F[:, [iq]] * dn.C_q[None, :]],
+        [np.outer(dn.A_d @ dn.B_d + dn.B_d, np.eye(3)[iq]), dn.A_d],
+    ])  # fmt: skip
+    assert loop.rho == pytest.approx(np.abs(np.linalg.eigvals(Acl)).max(), abs=1e-12)
+    # time domain: the filter object in the loop, from rest (chi(0) = 0)
+    e = np.array([0.01, -0.02, 0.005])
+    z = np.r_[e, 0.0, 0.0]
+    filt = DiscreteNotch(NOTCH, TS)
+    for _ in range(steps):
+        qf = filt.step(e[iq : iq + 1])[0]
+        ef = e.copy()
+        ef[iq] = qf
+        e = A @ e + B @ (F @ ef)
+        z = Acl @ z
+        np.testing.assert_allclose(z[:3], e, rtol=0, atol=1e-14)
+
+
+def test_an_all_pass_notch_leaves_the_loop_as_certified():
+    """eps_z = eps_p: the filter is 1, so the loop's radius is that on the measured q
+    (or the filter's own, whichever is larger)."""
+    A, B, F = _vertex(1)
+    flat = NotchFilter(19.05, 0.5, 19.05, 0.5)
+    loop = notch_loop(np.stack([A, 1.01 * A]), np.stack([B, B]), F, flat, TS, 1, "v")
+    rho_filter = np.abs(np.linalg.eigvals(DiscreteNotch(flat, TS).A_d)).max()
+    assert loop.rho == pytest.approx(max(loop.rho_q, rho_filter), abs=1e-9)
+    assert loop.stable and "stable at every vertex" in loop.line()
+    assert loop.summary()["certified"] is False
+
+
+def test_a_lagging_notch_can_destabilise_a_stable_vertex():
+    """A high-gain q loop stable on the measured q loses stability through the notch's lag
+    (the measured case of the attitude-bounded pair: 0.995 on q, 1.005 with eps_p 0.2)."""
+    A = np.eye(2) + TS * np.array([[0.0, 1.0], [0.0, 0.0]])
+    B = TS * np.array([[0.0], [1.0]])
+    F = np.array([[-400.0, -60.0]])  # |eig(A + B F)| < 1, a fast q loop
+    wide = NotchFilter(19.05, 0.02, 19.05, 2.0)
+    loop = notch_loop(A[None], B[None], F, wide, TS, 1, "fast")
+    assert loop.rho_q < 1.0
+    assert loop.rho > 1.0 and not loop.stable
+    assert "UNSTABLE at vertex 0" in loop.line()
+
+
+def test_shapes_are_checked():
+    A, B, F = _vertex(2)
+    with pytest.raises(ValueError, match="shapes"):
+        notch_loop(A[None], B[None], F[:, :2], NOTCH, TS, 1)
+    with pytest.raises(ValueError, match="iq 3"):
+        notch_loop(A[None], B[None], F, NOTCH, TS, 3)
