@@ -46,6 +46,13 @@ def test_eight_state_case_sets_every_knob(raw8):
         (lambda d: d["eight_state"].update(Phi=[1.0, 0.0]), "'eight_state.Phi' must be an incr"),
         (lambda d: d["eight_state"].update(reach=[0.1] * 8), "'eight_state.reach' must have 9"),
         (lambda d: d["tube"].update(form="ellipse"), "'tube.form'"),
+        (
+            lambda d: (
+                d["eight_state"].update(certify_attitude=True, attitude=0.6),
+                d["mpc"].update(att_max=0.5),
+            ),
+            "'eight_state.certify_attitude' needs",
+        ),
     ],
 )
 def test_eight_state_case_refuses_a_loop_it_is_not_closed_for(raw8, mutate, match):
@@ -53,6 +60,41 @@ def test_eight_state_case_refuses_a_loop_it_is_not_closed_for(raw8, mutate, matc
     mutate(d)
     with pytest.raises(CaseError, match=match):
         case_from_mapping(d, "bad.yaml")
+
+
+@pytest.mark.parametrize("certify", [True, False])
+def test_certify_attitude_bounds_the_supports_in_the_tube_lmi(raw8, vehicle, monkeypatch,
+                                                              certify):  # fmt: skip
+    """eight_state.certify_attitude: Z_8's alpha and theta supports bounded in the tube
+    LMI by the requirement less the QP's rows (0.5 - 0.35 = 0.15 deg), nothing else."""
+    import fahv.design.eight_state as es
+    from fahv.errors import DesignError
+
+    class Vertices:
+        J0 = np.zeros((64, 1))
+        n_vehicles = [1]
+
+    seen = {}
+
+    def closure(nv, nominal, W8, *args, state_max=None, **kw):
+        seen["state_max"] = state_max
+        raise DesignError("closure reached")
+
+    monkeypatch.setattr(es, "nominal_vertices", lambda *a, **k: Vertices())
+    monkeypatch.setattr(es, "close_pair", closure)
+    r = copy.deepcopy(raw8)
+    r["eight_state"]["certify_attitude"] = certify
+    r["mpc"]["att_max"] = 0.35
+    lines = []
+    with pytest.raises(DesignError, match="closure reached"):
+        es.design_pair(case_from_mapping(r, "att.yaml").data, vehicle, None, np.ones(11),
+                       np.ones(9), np.ones(11), 0.76, np.ones(2), log=lines.append)  # fmt: skip
+    if not certify:
+        assert seen["state_max"] is None
+        return
+    np.testing.assert_allclose(np.degrees(seen["state_max"][1:3]), 0.15, rtol=1e-12)
+    assert np.all(np.isinf(seen["state_max"][[0, 3, 4, 5, 6, 7]]))
+    assert "bounded to 0.150 deg" in lines[-1]
 
 
 def test_case_boxes_are_the_stored_pairs_within_rounding(vehicle):

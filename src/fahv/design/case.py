@@ -26,6 +26,7 @@ from fahv.config import Check, Field, Section, validate
 from fahv.config.spec import lookup
 from fahv.config.yamlio import load_yaml
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
+from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.errors import CaseError
 from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
 
@@ -101,6 +102,9 @@ EIGHT_STATE = (
           "theta [deg], Phi, delta_e [deg], q [deg/s], eta_1, eta_1_dot, eta_2, eta_2_dot; "
           "must hold the tube's supports (the design refuses it otherwise)", lo=0.0,
           length=9, default=(0.59, 0.554, 0.0772, 4.39, 0.886, 0.716, 9.48, 0.24, 5.655)),
+    Field("certify_attitude", "bool", "bound Z_8's supports in alpha and theta in the tube "
+          "LMI to the attitude requirement (0.5 deg, sec. 5.1) minus mpc.att_max, so that "
+          "the requirement follows from the pair with the QP's rows", default=False),
 )  # fmt: skip
 
 EIGHT_STATE_CHECKS = (
@@ -108,6 +112,10 @@ EIGHT_STATE_CHECKS = (
           "must be an increasing pair"),
     Check("delta_e", lambda r: r["eight_state"]["delta_e"][0] < r["eight_state"]["delta_e"][1],
           "must be an increasing pair"),
+    Check("certify_attitude", lambda r: not r["eight_state"]["certify_attitude"]
+          or ("mpc" in r and r["mpc"]["att_max"] < ATTITUDE_BOUND_DEG),
+          f"needs mpc.att_max below the requirement {ATTITUDE_BOUND_DEG} deg (the rest is "
+          "the tube's support)"),
 )  # fmt: skip
 
 

@@ -39,6 +39,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.control.nominal_mpc import elevator_share
 from fahv.design.along_nominal import (
     BOX_COORDINATES,
@@ -768,8 +769,8 @@ def design_pair(
     Parameters
     ----------
     case : dict
-        Validated case data (its ``eight_state``, ``uncertainty``, ``mpc.M``, ``Ts``,
-        ``plant_substeps``).
+        Validated case data (its ``eight_state``, ``uncertainty``, ``mpc.M``,
+        ``mpc.att_max``, ``Ts``, ``plant_substeps``).
     vehicle : fahv.model.vehicle.Vehicle
         The nominal vehicle.
     trim_map : fahv.model.trim.TrimMap
@@ -820,9 +821,16 @@ def design_pair(
         f"{sum(nv.n_vehicles)} vehicles for the residual")  # fmt: skip
     scale = np.asarray(scale, float)
     w_max = np.asarray(w_max, float)
+    state_max = None
+    if s["certify_attitude"]:  # supports in alpha, theta: the requirement less the rows
+        state_max = np.full(8, np.inf)
+        state_max[1:3] = np.radians(ATTITUDE_BOUND_DEG - case["mpc"]["att_max"])
+        log(f"eight-state tube: supports in alpha and theta bounded to "
+            f"{ATTITUDE_BOUND_DEG - case['mpc']['att_max']:.3f} deg (requirement "
+            f"{ATTITUDE_BOUND_DEG} deg less the QP's rows mpc.att_max)")  # fmt: skip
     pair = close_pair(nv, nominal, s["w0"] * w_max[1:], scale[:9], scale[9:], room, s["lam"],
                       case["mpc"]["M"], grow=s["grow"], iterations=s["iterations"],
-                      w_ref=w_max, log=log)  # fmt: skip
+                      w_ref=w_max, state_max=state_max, log=log)  # fmt: skip
     if gamma is not None:
         onset = onset_bound(nv, pair, vehicle, trim_map, unc, gamma, case["Ts"],
                             case["plant_substeps"], **estimate)  # fmt: skip
