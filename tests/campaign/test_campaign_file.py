@@ -15,7 +15,8 @@ ROOT = Path(__file__).resolve().parents[2]
     "name, case",
     [("campaign_case1.yaml", "case1_vertex"), ("campaign_case2.yaml", "case2"),
      ("campaign_case1_eight_state.yaml", "case1"),
-     ("campaign_case1_attitude.yaml", "case1_attitude")],
+     ("campaign_case1_attitude.yaml", "case1_attitude"),
+     ("campaign_envelope_attitude.yaml", "case1_attitude")],
 )  # fmt: skip
 def test_example_campaign_files_validate(name, case):
     c = load_campaign(ROOT / "offline_design" / name)
