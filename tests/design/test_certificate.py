@@ -263,3 +263,18 @@ def test_worst_level_bounds_the_nearly_hard_case_tightly():
     got = _max_on_ball(M, c)
     assert np.all(got >= brute - 1e-12), (got, brute)
     np.testing.assert_allclose(got, brute, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "a, w, factor",
+    [(0.5, 0.25, 2.0), (0.9, 1.0, 0.1), (0.999, 1.0, 0.001), (1.2, 0.1, 0.0)],
+)
+def test_rpi_margin_is_the_exact_factor_below_half_too(a, w, factor):
+    """e+ = a e + g w on Z = [-1, 1]: RPI iff |a| + g w <= 1, so g = (1 - a) / w; a loop
+    that expands Z without a disturbance gives 0. (The bisection once started at 0.5 and
+    reported 0.5 for any smaller factor.)"""
+    from fahv.design.certificate import rpi_margin
+
+    A, B, F, N = np.array([[[a]]]), np.zeros((1, 1, 1)), np.zeros((1, 1)), np.eye(1)
+    g = rpi_margin(A, B, F, N, np.array([w]))
+    assert g == pytest.approx(factor, abs=4.0 * 2.0**-30 + 1e-9)

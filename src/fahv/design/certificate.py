@@ -688,8 +688,21 @@ def worst_level(A, B, F, N, w_max, tau: float = 1.0, pulse=None):
     return best, where
 
 
-def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, lo: float = 0.5, hi: float = 4.0) -> float:
-    """Largest factor g such that the tube stays RPI for g W (bisection on worst_level)."""
+def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, hi: float = 4.0) -> float:
+    """Largest factor g in [0, hi] such that the tube stays RPI for g W.
+
+    Bisection on :func:`worst_level` (30 halvings of [0, hi], or of [0, 1] when the
+    tube is not RPI for W itself). Arguments as :func:`worst_level`.
+
+    Returns
+    -------
+    float
+        The factor (to 2^-30 of the interval); 0 if the tube is not invariant even
+        without a disturbance (some vertex's closed loop expands Z).
+    """
+    if worst_level(A, B, F, N, 0.0 * np.asarray(w_max, float), tau)[0] > 1.0:
+        return 0.0
+    lo = 0.0
     if worst_level(A, B, F, N, w_max, tau)[0] > 1.0:
         hi = 1.0
     for _ in range(30):
@@ -939,7 +952,8 @@ def certify_tube(case: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi,
     log(
         f"RPI check (exact): worst one-step level over {A.shape[0]} vertices x "
         f"{2**w.size} corners of W and all of Z = {level:.5f} (<= 1 required; margin "
-        f"{1 - level:.2e}); the tube stays RPI for W grown by up to {growth:.3f}x"
+        f"{1 - level:.2e}); the tube stays RPI for W scaled by up to {growth:.3f}x"
+        + ("  OK" if level <= 1.0 else f": NOT RPI for its own W (tau = {tau:g})")
     )
     out = {"rpi_level": level, "rpi_growth": growth, "certified": False}
     n_s = case["certificate"]["schedules"]
