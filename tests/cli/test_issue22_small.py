@@ -148,3 +148,23 @@ def test_fahv_sil_says_where_the_run_is_once_and_no_after_fault_metrics(quick_ca
     assert both.count("run written to") == 1, both
     assert "after fault" not in r.stdout
     assert "RMS eta_1_dot over the run (no fault in it)" in r.stdout
+
+
+@pytest.mark.ros
+def test_fahv_sil_json_writes_only_the_json_to_stdout(quick_case, tmp_path):
+    """`fahv sil --json`: stdout is one JSON document (the metrics per variant), as with
+    `fahv simulate --json`; the run's status lines go to stderr."""
+    import json
+
+    case_file, art = quick_case
+    r = subprocess.run(
+        [str(ROOT / ".venv" / "bin" / "fahv"), "sil", str(case_file), "--design", str(art),
+         "--duration", "1", "--out", str(tmp_path), "--quiet", "--json"],
+        cwd=ROOT, capture_output=True, text=True, timeout=240,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr[-2000:]
+    table = json.loads(r.stdout)
+    (metrics,) = table.values()
+    assert metrics["settling_time_h_s"] is None or metrics["settling_time_h_s"] >= 0.0
+    assert "status complete, 50 of 50 steps" in r.stderr
+    assert "logs in" in r.stderr

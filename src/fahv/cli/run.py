@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 import warnings
 from pathlib import Path
@@ -188,6 +189,8 @@ def cmd_sil(args) -> int:
     variant = args.variant or case["variants"][0]
     if args.write_params:
         return _write_params_only(args, design, variant)
+    # with --json, stdout holds the JSON only; the status lines go to stderr
+    status = functools.partial(print, file=sys.stderr if args.json else sys.stdout)
     res = run_sil(
         design,
         variant,
@@ -197,6 +200,7 @@ def cmd_sil(args) -> int:
         quiet=args.quiet,
         domain_id=args.domain_id,
         live_port=args.live,
+        log=status,
     )
     n_steps = int(round(res.simulated_s / case["Ts"]))
     if not res.bag.is_dir():
@@ -212,13 +216,13 @@ def cmd_sil(args) -> int:
         raise RunInterrupted(int(rec.metadata.get("steps_recorded", run.t.size)), n_steps, res.bag)
     ran_s = run.t.size * case["Ts"]  # what the graph simulated, not what was asked for
     rtf = f"{ran_s / res.wall_s:.2f}" if run.t.size and res.wall_s > 0 else "- (no step)"
-    print(
+    status(
         f"run {res.bag.name}: status {rec.metadata.get('status', '?')}, {run.t.size} of "
         f"{n_steps} steps, wall time {res.wall_s:.1f} s, real-time factor {rtf} (simulated "
         f"{ran_s:g} of {res.simulated_s:g} s)"
     )
     if rec.metadata.get("reason"):
-        print(f"reason: {rec.metadata['reason']}")
+        status(f"reason: {rec.metadata['reason']}")
     if run.t.size:
         table = {variant: metrics(run, vehicle.limits)}
         if args.json:
