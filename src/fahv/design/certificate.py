@@ -714,7 +714,7 @@ def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, hi: float = 4.0) -> float:
     return lo
 
 
-# -- onset of a fault and start of a run ----------------------------------------------
+# -- the notch filter in the tube's feedback ------------------------------------------
 @dataclass(frozen=True)
 class NotchLoop:
     """The tube feedback through a variant's notch filter on q, at the design's vertices.
@@ -826,6 +826,7 @@ def notch_loop(A, B, F, notch, Ts: float, iq: int, variant: str = "") -> NotchLo
                      float(rho_q.max()), k)  # fmt: skip
 
 
+# -- onset of a fault and start of a run ----------------------------------------------
 def onset_levels(lam, mu, w_base, pulse, gamma, n_steps, level0=1.0) -> np.ndarray:
     """Tube levels after a pulse in the estimate's error, from the S-procedure certificate.
 
