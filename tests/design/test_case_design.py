@@ -92,8 +92,14 @@ def test_design_certificates_and_artefacts(design, tmp_path):
     assert set(loops) == {"tube_mpc", "tube_mpc_notch2", "tube_mpc_paper"}  # not no_notch
     assert loops["tube_mpc_notch2"]["omega"] == pytest.approx(design.arrays["omega_flex"][1])
     assert loops["tube_mpc"]["omega"] == pytest.approx(19.05)
-    assert all(0.9 < loop["rho"] < 1.1 and loop["certified"] is False for loop in loops.values())
+    assert all(loop["certified"] is False for loop in loops.values())
     assert len({loop["rho_q"] for loop in loops.values()}) == 1  # one gain, one certified loop
+    # measured on this design: 0.993455 on q; the notch on mode 1 adds 1.8e-5, on mode 2
+    # 6.4e-6 (both stable); 1e-4 leaves room for the LMI solver's rounding, not for a
+    # loop the filter destabilises
+    for loop in loops.values():
+        assert loop["stable"] and loop["rho"] == pytest.approx(loop["rho_q"], abs=1e-4)
+    assert loops["tube_mpc"]["rho"] > loops["tube_mpc_notch2"]["rho"] > loops["tube_mpc"]["rho_q"]
     out = save_design(design, tmp_path / "case1")
     back = load_design(out)
     assert back.summary["design_hash"] == design.summary["design_hash"]

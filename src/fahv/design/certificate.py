@@ -772,8 +772,9 @@ class NotchLoop:
 def notch_loop(A, B, F, notch, Ts: float, iq: int, variant: str = "") -> NotchLoop:
     """Stability of the tube loop with the notch filter on q at every vertex (:class:`NotchLoop`).
 
-    With the filter of :class:`fahv.model.notch.DiscreteNotch` in the coordinates
-    chi(k) = x_q(k) - B_d q(k) (a standard state space of the same recursion):
+    The filter is eq. (38) in the state-space form of eq. (39), discretised as the
+    notch_filter node runs it (:class:`fahv.model.notch.DiscreteNotch`), in the
+    coordinates chi(k) = x_q(k) - B_d q(k) (a standard state space of the same recursion):
     chi+ = A_d chi + (A_d B_d + B_d) q, q' = C_q chi + (C_q B_d + D_q) q. The loop
     on the error, u = F e' (e' is e with q' - q_nominal for e_q), is::
 

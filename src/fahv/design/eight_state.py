@@ -837,7 +837,8 @@ def design_pair(
         pair = replace(pair, onset=onset)
     if notches:
         A, B = nv.vertices()
-        loops = tuple(notch_loop(A[:, 1:, 1:], B[:, 1:, :], pair.F8, nf, case["Ts"], 3, v)
+        iq = EIGHT_STATES.index("q")
+        loops = tuple(notch_loop(A[:, 1:, 1:], B[:, 1:, :], pair.F8, nf, case["Ts"], iq, v)
                       for v, nf in notches.items())  # fmt: skip
         pair = replace(pair, notch_loops=loops)
     return pair, nominal, box
