@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fahv.control.nominal_mpc import estimator_gains
+from fahv.design.feasibility import gain_vertices
 from fahv.errors import DesignError
 from fahv.model.notch import DiscreteNotch
 from fahv.model.vehicle import DELTA_E
@@ -931,6 +932,9 @@ def certify_tube(case: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi,
         Vertices of the tube certificate (fault vertices included).
     tube : fahv.synthesis.feedback.TubeDesign
     tau : float
+        Adjustable factor (eq. 48). The RPI check covers every gain tau' F, tau' in
+        [tau, 1] (:func:`fahv.design.feasibility.gain_vertices`); for tau < 1 it also
+        reports the factor g for which eq. (53)'s tau Z is RPI (W' = g W, eq. 47).
     u_lo, u_hi : (2,) ndarray
         Tightened nominal input limits (absolute).
     rho_min : float
@@ -944,20 +948,34 @@ def certify_tube(case: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi,
     -------
     dict
         Summary (JSON-able): ``certified`` (bool), per-row ``w_ratio`` and ``slack``,
-        ``rpi_level``, ``rpi_growth``, ``onset_level_max``, the domain.
+        ``rpi_level``, ``rpi_growth``, ``onset_level_max``, the domain; for tau < 1
+        ``rpi_level_tau`` (tau Z for W) and ``w_prime`` (g).
     """
     from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
     w = tube.w_max
-    level, (vi, corner) = worst_level(A, B, tube.F, tube.N, w, tau)
-    growth = rpi_margin(A, B, tube.F, tube.N, w, tau)
+    At, Bt = gain_vertices(A, B, tau)  # every gain tau' F, tau' in [tau, 1] (eq. 48)
+    level, (vi, corner) = worst_level(At, Bt, tube.F, tube.N, w)
+    growth = rpi_margin(At, Bt, tube.F, tube.N, w)
+    gains = f" with the gains tau' F, tau' in [{tau:g}, 1]" if tau < 1 else ""
     log(
-        f"RPI check (exact): worst one-step level over {A.shape[0]} vertices x "
+        f"RPI check (exact): worst one-step level over {At.shape[0]} vertices{gains} x "
         f"{2**w.size} corners of W and all of Z = {level:.5f} (<= 1 required; margin "
         f"{1 - level:.2e}); the tube stays RPI for W scaled by up to {growth:.3f}x"
-        + ("  OK" if level <= 1.0 else f": NOT RPI for its own W (tau = {tau:g})")
+        + ("  OK" if level <= 1.0 else ": NOT RPI for its own W")
     )
     out = {"rpi_level": level, "rpi_growth": growth, "certified": False}
+    if tau < 1:  # eq. (53)'s smaller tube tau Z: RPI for the incomplete set W' only
+        level_t = worst_level(A, B, tube.F, tube.N, w, tau)[0]
+        w_prime = rpi_margin(A, B, tube.F, tube.N, w, tau)
+        log(
+            f"adjustable tube tau Z with tau F (eq. 47-48, tau = {tau:g}): worst one-step "
+            f"level for W = {level_t:.5f}; RPI for W' = {w_prime:.3f} W (the incomplete "
+            f"disturbance set; >= tau by the LMI's tau vertices"
+            + ("  OK)" if w_prime >= tau * (1 - 1e-9) else ": NOT as designed)")
+            + f". For the whole W the error stays in Z and the input deviation in tau F Z"
+        )
+        out.update(rpi_level_tau=level_t, w_prime=w_prime)
     n_s = case["certificate"]["schedules"]
     if n_s == 0 or A.shape[1] != 9:
         why = (
@@ -974,8 +992,8 @@ def certify_tube(case: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi,
 
         mpc = {f.name: f.default for f in MPC_SECTION_FIELDS}
     nominal, notes = nominal_half_widths(mpc, x_default)
-    z_box = tau * tube.z_box
-    t = tau * tube.tightening
+    z_box = tube.z_box  # under the whole W the error stays in Z, also for tau < 1
+    t = tau * tube.tightening  # the input deviation tau F e, e in Z
     unc = {k: v * case["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
     dom = CertificateDomain(
         schedule_points(vehicle.envelope, n_s), nominal + z_box, nominal, u_lo - t, u_hi + t,

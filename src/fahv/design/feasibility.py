@@ -54,6 +54,33 @@ def fault_vertices(A: np.ndarray, B: np.ndarray, rho_f: float):
     return np.concatenate([A, A]), np.concatenate([B, Bf])
 
 
+def gain_vertices(A: np.ndarray, B: np.ndarray, tau: float):
+    """Vertices [A_i, B_i] and [A_i, tau B_i] of the adjustable gain tau F, eq. (48): (2R, ...).
+
+    A tube LMI (24) solved over both sets makes Z RPI for W under u = tau' F e for every
+    tau' in [tau, 1]: A_i + tau' B_i F is affine in tau', so the LMI, affine in the
+    closed loop, holds on the segment once it holds at its ends. ``tau`` = 1 returns
+    (A, B) unchanged.
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+    tau : float
+        Adjustable factor, 0 < tau <= 1.
+
+    Raises
+    ------
+    ValueError
+        If tau is not in (0, 1].
+    """
+    if not 0.0 < tau <= 1.0:
+        raise ValueError(f"tube.tau = {tau}: the adjustable factor must lie in (0, 1]")
+    if tau == 1.0:
+        return A, B
+    return np.concatenate([A, A]), np.concatenate([B, tau * B])
+
+
 @dataclass(frozen=True)
 class FeasibilityResult:
     """Outcome of :func:`tube_feasibility` for one fault treatment.

@@ -25,7 +25,7 @@ from fahv.design.case import Case
 from fahv.design.certificate import certify_tube, notch_loop
 from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
 from fahv.design.eight_state import design_pair, input_rows, pair_report
-from fahv.design.feasibility import box_coverage, fault_vertices, input_room
+from fahv.design.feasibility import box_coverage, fault_vertices, gain_vertices, input_room
 from fahv.errors import DesignError
 from fahv.model.linearize import classify_modes, linearize
 from fahv.model.notch import NotchFilter
@@ -180,14 +180,17 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             f"tube.rho_min / fault: with rho_f = {rho_f} the trim input of the faulty vehicle "
             f"leaves the input limits somewhere in the envelope (room {room_f})"
         )
-    tube = design_tube(Af, Bf, W.w_max, Dx, Du, room_f, tuple(c["tube"]["lam"]))
-    eigs = verify_tube(Af, Bf, tube, Dx, Du)
-    log(
-        f"certificate F, Z (LMI 24 + S-procedure, {Af.shape[0]} vertices incl. rho_f = "
-        f"{rho_f}): min eigenvalue {eigs.min():.3e} >= -1e-12 x the largest entry of each "
-        f"vertex matrix (tolerance), lam = {tube.lam}  OK"
-    )
     tau = c["tube"]["tau"]
+    # the adjustable law (eq. 48) feeds tau F e back: the LMI holds for every gain it uses
+    At, Bt = gain_vertices(Af, Bf, tau)
+    tube = design_tube(At, Bt, W.w_max, Dx, Du, room_f, tuple(c["tube"]["lam"]))
+    eigs = verify_tube(At, Bt, tube, Dx, Du)
+    log(
+        f"certificate F, Z (LMI 24 + S-procedure, {At.shape[0]} vertices incl. rho_f = "
+        f"{rho_f}{f' and the gains tau F, tau = {tau:g} (eq. 48)' if tau < 1 else ''}): min "
+        f"eigenvalue {eigs.min():.3e} >= -1e-12 x the largest entry of each vertex matrix "
+        f"(tolerance), lam = {tube.lam}  OK"
+    )
     cmd = c["command"]
     veh.envelope.check(cmd["h0"], cmd["V0"])
     veh.envelope.check(cmd["h_c"], cmd["V_c"])
