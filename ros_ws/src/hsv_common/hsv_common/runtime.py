@@ -39,6 +39,42 @@ EXIT_OK, EXIT_ERROR, EXIT_PARAM, EXIT_WATCHDOG, EXIT_SIGNAL, EXIT_FOREIGN = 0, 1
 #: 1 after the line ``TEARDOWN_MARK``; the runner reads that as a hung teardown, not a
 #: failure, when the node had closed with status 0.
 TEARDOWN_S = 10.0
+#: Longest a node's main thread may stay away from its spin loop, beyond its watchdog [s].
+#: Every callback returns within ``watchdog_s`` in a working graph (the peers' watchdogs
+#: fail the run otherwise); a main thread stuck in a C call (a DDS lock, seen once in CI:
+#: the plant never exited, with every peer done) is ended by the same C-level timer as
+#: the teardown: faulthandler dumps every thread's traceback and exits with status 1.
+HANG_S = 10.0
+
+
+class HangGuard:
+    """A C-level deadline on the main thread (faulthandler), re-armed from the spin loop.
+
+    ``arm(timeout)`` sets the deadline ``timeout`` seconds ahead; :meth:`beat` re-arms
+    the last timeout at most once per second (re-arming restarts faulthandler's
+    watchdog thread). When the deadline passes, every thread's traceback goes to stderr
+    and the process exits with status 1: a hung node ends, and says where it hung.
+    """
+
+    def __init__(self) -> None:
+        self.timeout = None
+        self.t_armed = -1e9
+
+    def arm(self, timeout: float) -> None:
+        """Deadline ``timeout`` seconds from now (replaces any earlier one)."""
+        self.timeout = float(timeout)
+        self.t_armed = time.monotonic()
+        faulthandler.dump_traceback_later(self.timeout, exit=True, file=sys.stderr)
+
+    def beat(self) -> None:
+        """Move the deadline ahead (at most once per second)."""
+        if self.timeout is not None and time.monotonic() - self.t_armed >= 1.0:
+            self.arm(self.timeout)
+
+    @staticmethod
+    def cancel() -> None:
+        """No deadline."""
+        faulthandler.cancel_dump_traceback_later()
 
 #: Parameter services cost every spin of every node (more entities in the wait set).
 START_PARAMETER_SERVICES = os.environ.get("HSV_PARAM_SERVICES", "0") == "1"
@@ -84,19 +120,26 @@ def end_reason(done: bool, status: int) -> str:
 
 
 def make_executor(message_info: bool = False):
-    """Executor of every node: rclpy's EventsExecutor unless ``HSV_EXECUTOR=single``.
+    """Executor of every node: rclpy's SingleThreadedExecutor unless ``HSV_EXECUTOR=events``.
 
-    ``message_info=True`` (the recorder: it keeps the DDS source timestamps) selects
-    the SingleThreadedExecutor, since the EventsExecutor of Jazzy cannot call a
-    subscription callback with its message info (SystemError, measured).
+    ``HSV_EXECUTOR=events`` selects rclpy's experimental EventsExecutor (a C++ event
+    queue) for the nodes that take no message info; it ran the Case 1 graph about 1.4x
+    faster on this 2-core machine (docs/sil.md), but it hung in a ring test
+    (docs/environment.md) and a plant on it once never exited in CI with every peer
+    done, so it is no longer the default. ``message_info=True`` (the recorder: it keeps
+    the DDS source timestamps) always takes the SingleThreadedExecutor: the Jazzy
+    EventsExecutor cannot call a subscription callback with its message info
+    (SystemError, measured).
 
-    The events executor (rclpy.experimental, C++ event queue) runs the Case 1 graph
-    about 1.4x faster than the SingleThreadedExecutor on this 2-core machine
-    (6.5 vs 9.3 ms per step, measured); docs/environment.md saw it hang in another test,
-    so the SIL integration tests (lockstep, kill, SIGINT, watchdog) run with it, and
-    ``HSV_EXECUTOR=single`` selects the classic executor.
+    Raises
+    ------
+    ParameterError
+        If ``HSV_EXECUTOR`` is neither ``single`` nor ``events``.
     """
-    if message_info or os.environ.get("HSV_EXECUTOR", "events") == "single":
+    kind = os.environ.get("HSV_EXECUTOR", "single")
+    if kind not in ("single", "events"):
+        raise ParameterError(f"HSV_EXECUTOR = {kind!r}: 'single' (default) or 'events'")
+    if message_info or kind == "single":
         return SingleThreadedExecutor()
     from rclpy.experimental.events_executor import EventsExecutor
 
@@ -137,12 +180,15 @@ def main(node_cls, args=None, linger_s: float = 10.0) -> int:
     status = EXIT_OK
     reason = ""
     name = node_cls.ROLE
+    guard = HangGuard()
     try:
         node = node_cls()
         name = node.get_name()
         ex = make_executor(getattr(node, "MESSAGE_INFO", False))
         ex.add_node(node)
+        guard.arm(max(getattr(node, "watchdog_s", HANG_S), HANG_S) + HANG_S)
         while not node.done and stop.signal is None:
+            guard.beat()
             ex.spin_once(timeout_sec=0.05)
             if stop.signal is None:  # a signal first: peers stopping by it are no failure
                 node.poll()
@@ -151,6 +197,7 @@ def main(node_cls, args=None, linger_s: float = 10.0) -> int:
             print(f"[{name}] {reason}", file=sys.stderr)
             status = EXIT_SIGNAL
         else:  # let reliable QoS deliver the last messages before the writers go away
+            guard.arm(linger_s + HANG_S)  # the linger, then close (< 3 s), then teardown
             t_end = time.monotonic() + linger_s
             while time.monotonic() < t_end and stop.signal is None and not all_acked(node):
                 ex.spin_once(timeout_sec=0.01)
@@ -180,9 +227,9 @@ def main(node_cls, args=None, linger_s: float = 10.0) -> int:
             finally:
                 print(f"[{name}] {TEARDOWN_MARK} {status}; DDS teardown", file=sys.stderr,
                       flush=True)  # fmt: skip
-                faulthandler.dump_traceback_later(TEARDOWN_S, exit=True, file=sys.stderr)
+                guard.arm(TEARDOWN_S)
                 node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
-        faulthandler.cancel_dump_traceback_later()
+        guard.cancel()
     return status
