@@ -3,8 +3,9 @@ offline_design/case1_vertex.yaml (the vertex tube, the quick design of CI; the c
 case1.yaml takes minutes to design), designed from scratch (or from a valid saved
 design) and simulated in process, against the checked-in reference
 tests/data/results_reference.json within the stated tolerances
-(fahv.runs.results.TOLERANCES). Regenerate with ``fahv results --cases
-offline_design/case1_vertex.yaml --write-reference tests/data/results_reference.json``."""
+(fahv.runs.results.TOLERANCES). Regenerate with ``fahv results --write-reference
+tests/data/results_reference.json`` (every case of the README's table; this test reads
+case1_vertex, ``fahv results --check`` every case)."""
 
 import io
 import math
