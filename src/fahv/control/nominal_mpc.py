@@ -100,7 +100,7 @@ MPC_SECTION_FIELDS = (
     Field("att_max", "float", "bound on the nominal |alpha - alpha_r|, |theta - theta_r| "
           "(from the nominal trim) at every fast step of the next two moves and at each later "
           "move; 0: the certified bound, the attitude requirement (0.5 deg) minus the "
-          "support of tau Z in alpha and theta (docs/control_design.md); a value above it is "
+          "support of Z in alpha and theta (docs/control_design.md); a value above it is "
           "used but reported as not certified", unit="deg", lo=0.0, hi=10.0, default=0.0),
     Field("est_tau", "float", "time constant of the state-disturbance estimate (0: none)",
           unit="s", lo=0.0, hi=1e3, default=0.5),
@@ -258,7 +258,7 @@ class AttitudeBounds:
     Attributes
     ----------
     support : (2,) ndarray
-        Support of the tube tau Z along alpha and theta, tau sqrt(N_jj) [rad].
+        Support of the tube Z along alpha and theta, sqrt(N_jj) [rad].
     certified : (2,) ndarray
         Requirement minus support [rad]: the largest nominal deviation for which
         nominal + tube stays within the requirement (may be negative).
@@ -299,7 +299,7 @@ class AttitudeBounds:
         trim_offset = self.trim_offset
         left = use - np.degrees(trim_offset)
         head = (
-            f"attitude (requirement {ATTITUDE_BOUND_DEG} deg): support of tau Z "
+            f"attitude (requirement {ATTITUDE_BOUND_DEG} deg): support of Z "
             f"{sup[0]:.3f} / {sup[1]:.3f} deg (alpha / theta), certified nominal bound "
             f"{cer[0]:.3f} / {cer[1]:.3f} deg; QP rows at {use[0]:.3f} / {use[1]:.3f} deg"
         )
@@ -324,23 +324,21 @@ class AttitudeBounds:
         )
 
 
-def attitude_bounds(
-    N, tau: float, att_max_deg: float = 0.0, trim_offset: float = 0.0
-) -> AttitudeBounds:
+def attitude_bounds(N, att_max_deg: float = 0.0, trim_offset: float = 0.0) -> AttitudeBounds:
     """Bounds of the nominal QP's attitude rows from the tube and the requirement.
 
     The plant's attitude deviation from the set point's trim is the nominal one plus
-    the tube error: |alpha - alpha_r| <= |alpha_n - alpha_r| + max_{e in tau Z} |e_alpha|,
-    and max_{tau Z} |e_j| = tau sqrt(N_jj) (Z = {e' N^-1 e <= 1}). With the nominal rows
-    at ATTITUDE_BOUND_DEG - tau sqrt(N_jj) the requirement of sec. 5.1 follows from
-    e in tau Z.
+    the tube error: |alpha - alpha_r| <= |alpha_n - alpha_r| + max_{e in Z} |e_alpha|,
+    and max_Z |e_j| = sqrt(N_jj) (Z = {e' N^-1 e <= 1}). With the nominal rows at
+    ATTITUDE_BOUND_DEG - sqrt(N_jj) the requirement of sec. 5.1 follows from e in Z.
+    The adjustable law (tau < 1) changes nothing here: for the whole W its error stays
+    in Z (the tube LMI covers every gain tau' F, tau' in [tau, 1]); eq. (53)'s smaller
+    tau Z holds only for the incomplete set W' of eq. (47).
 
     Parameters
     ----------
     N : (n, n) array_like
         Tube shape (state order h, V, alpha, theta, ...; rad).
-    tau : float
-        Adjustable factor (tube tau Z).
     att_max_deg : float
         The case's ``mpc.att_max`` [deg]; 0 uses the certified bound.
     trim_offset : float
@@ -358,13 +356,13 @@ def attitude_bounds(
         requirement and the case gives no bound).
     """
     N = np.asarray(N, float)
-    support = tau * np.sqrt(np.diag(N)[2:4])
+    support = np.sqrt(np.diag(N)[2:4])
     certified = np.radians(ATTITUDE_BOUND_DEG) - support
     given = att_max_deg > 0.0
     used = np.full(2, np.radians(att_max_deg)) if given else certified.copy()
     if np.any(used <= 0.0):
         raise DesignError(
-            f"attitude: the support of tau Z in alpha / theta, "
+            f"attitude: the support of Z in alpha / theta, "
             f"{np.degrees(support[0]):.3f} / {np.degrees(support[1]):.3f} deg, leaves no "
             f"nominal bound within the requirement {ATTITUDE_BOUND_DEG} deg; give "
             "mpc.att_max (then reported as not certified) or shrink the tube"
@@ -1346,7 +1344,7 @@ class TrackingMPCNominal(NominalSource):
         """Re-check the terminal ingredients; the attitude bounds of the QP.
 
         Returns ``att_max`` (2,) [rad], the bounds of the QP's attitude rows, and
-        ``att_support`` (2,) [rad], the support of tau Z in alpha and theta
+        ``att_support`` (2,) [rad], the support of Z in alpha and theta
         (:func:`attitude_bounds`).
 
         Raises
@@ -1363,7 +1361,7 @@ class TrackingMPCNominal(NominalSource):
         cmd = ctx.case["command"]
         mpc = ctx.case.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
         offset = float(a["att_trim_offset"]) if "att_trim_offset" in a else 0.0
-        att = attitude_bounds(a["N"], ctx.case["tube"]["tau"], mpc["att_max"], offset)
+        att = attitude_bounds(a["N"], mpc["att_max"], offset)
         ctx.log(att.report())
         tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
         path = np.array([tm(cmd["h0"], cmd["V0"])[1], tm(cmd["h_c"], cmd["V_c"])[1]])

@@ -268,7 +268,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     else:
         cert_case = c
         if "mpc" in c:  # the domain of the certificate: the attitude rows the QP will use
-            att = attitude_bounds(tube.N, tau, c["mpc"]["att_max"])
+            att = attitude_bounds(tube.N, c["mpc"]["att_max"])
             cert_case = {**c, "mpc": {**c["mpc"], "att_max": float(np.degrees(att.used.max()))}}
         certificate = certify_tube(
             cert_case,
