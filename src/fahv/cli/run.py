@@ -353,12 +353,27 @@ def cmd_results(args) -> int:
         results[case.name] = run_case(design, case["variants"], vehicle.limits, log)
     print(markdown_table(results))
     if args.write_reference:
-        print(f"reference written to {write_reference(results, args.write_reference)}")
+        # the cases run replace theirs; the reference's other cases are kept
+        out = Path(args.write_reference)
+        old = read_reference(out) if out.exists() else {}
+        kept = sorted(set(old) - set(results))
+        print(f"reference written to {write_reference({**old, **results}, out)}"
+              + (f" (kept from it, not run: {', '.join(kept)})" if kept else ""))  # fmt: skip
     if args.check:
-        bad = compare_reference(results, read_reference(args.check))
+        ref = read_reference(args.check)
+        checked = {c: v for c, v in ref.items() if c in results}
+        for c in sorted(set(results) - set(ref)):
+            print(f"note: {c} is not in {args.check}; not checked")
+        if set(ref) - set(results):
+            print(f"note: not run, not checked: {', '.join(sorted(set(ref) - set(results)))}")
+        if not checked:
+            print(f"{args.check}: none of the cases run is in the reference", file=sys.stderr)
+            return 1
+        bad = compare_reference(results, checked)
         for line in bad:
             print(f"differs: {line}")
-        print(f"{args.check}: {'within' if not bad else 'OUTSIDE'} the tolerances")
+        print(f"{args.check}: {'within' if not bad else 'OUTSIDE'} the tolerances "
+              f"({', '.join(sorted(checked))})")  # fmt: skip
         return 1 if bad else 0
     return 0
 

@@ -973,7 +973,7 @@ def certify_tube(case: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi,
             f"level for W = {level_t:.5f}; RPI for W' = {w_prime:.3f} W (the incomplete "
             f"disturbance set; >= tau by the LMI's tau vertices"
             + ("  OK)" if w_prime >= tau * (1 - 1e-9) else ": NOT as designed)")
-            + f". For the whole W the error stays in Z and the input deviation in tau F Z"
+            + ". For the whole W the error stays in Z and the input deviation in tau F Z"
         )
         out.update(rpi_level_tau=level_t, w_prime=w_prime)
     n_s = case["certificate"]["schedules"]

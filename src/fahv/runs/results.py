@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from pathlib import Path
 
@@ -174,7 +175,9 @@ def write_reference(results: dict, path: str | Path) -> Path:
 
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(clean(results), indent=1, sort_keys=True) + "\n")
+    tmp = p.with_name(p.name + ".part")  # a reference is replaced whole or not at all
+    tmp.write_text(json.dumps(clean(results), indent=1, sort_keys=True) + "\n")
+    os.replace(tmp, p)
     return p
 
 

@@ -76,6 +76,7 @@ class HangGuard:
         """No deadline."""
         faulthandler.cancel_dump_traceback_later()
 
+
 #: Parameter services cost every spin of every node (more entities in the wait set).
 START_PARAMETER_SERVICES = os.environ.get("HSV_PARAM_SERVICES", "0") == "1"
 
