@@ -33,7 +33,13 @@ from std_msgs.msg import String
 
 from fahv.loop.graph import GRAPH, STATUS_PERIOD_S, STATUS_TOPIC, producer_of
 from fahv.loop.peers import Peers, parse_status, status
-from hsv_common.runtime import STATUS_QOS, ForeignGraphError, WatchdogError
+from hsv_common.runtime import (
+    STATUS_QOS,
+    ForeignGraphError,
+    WatchdogError,
+    quiet_publisher,
+    quiet_subscription,
+)
 
 #: Wall time between two foreign-graph checks of a node [s].
 FOREIGN_CHECK_S = 1.0
@@ -82,8 +88,13 @@ class GraphStatus:
         self._held: str | None = None
         self._key: list = []
         self._lock = threading.Lock()
-        self._pub = node.create_publisher(String, STATUS_TOPIC, STATUS_QOS)
-        node.create_subscription(String, STATUS_TOPIC, self._on_status, STATUS_QOS)
+        self._pub = node.create_publisher(
+            String, STATUS_TOPIC, STATUS_QOS, event_callbacks=quiet_publisher()
+        )
+        node.create_subscription(
+            String, STATUS_TOPIC, self._on_status, STATUS_QOS,
+            event_callbacks=quiet_subscription(),
+        )  # fmt: skip
         self.publish()
         self._stop = threading.Event()
         self._beat = threading.Thread(target=self._heartbeat, name="status", daemon=True)

@@ -22,6 +22,7 @@ import time
 
 import rclpy
 from rclpy.duration import Duration
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -91,6 +92,21 @@ def qos_profile(q: graph.QoS) -> QoSProfile:
             DurabilityPolicy.TRANSIENT_LOCAL if q.transient_local else DurabilityPolicy.VOLATILE
         ),
     )
+
+
+def quiet_publisher() -> PublisherEventCallbacks:
+    """Event callbacks of a publisher without rclpy's default QoS-event handlers.
+
+    rclpy adds two handlers (incompatible QoS, incompatible type) to every publisher and
+    subscription, and the SingleThreadedExecutor polls each at every spin. The graph
+    checks its matches itself (GraphStatus), so the loop topics go without them.
+    """
+    return PublisherEventCallbacks(use_default_callbacks=False)
+
+
+def quiet_subscription() -> SubscriptionEventCallbacks:
+    """Event callbacks of a subscription without the default handlers (:func:`quiet_publisher`)."""
+    return SubscriptionEventCallbacks(use_default_callbacks=False)
 
 
 #: Loop topics (:data:`fahv.loop.graph.LOOP_QOS`).
