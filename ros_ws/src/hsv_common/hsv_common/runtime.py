@@ -214,7 +214,7 @@ def main(node_cls, args=None, linger_s: float = 10.0) -> int:
             print(f"[{name}] {reason}", file=sys.stderr)
             status = EXIT_SIGNAL
         else:  # let reliable QoS deliver the last messages before the writers go away
-            guard.arm(linger_s + HANG_S)  # the linger, then close (< 3 s), then teardown
+            guard.arm(linger_s + 2 * HANG_S)  # the linger, then close (the recorder's file)
             t_end = time.monotonic() + linger_s
             while time.monotonic() < t_end and stop.signal is None and not all_acked(node):
                 ex.spin_once(timeout_sec=0.01)
