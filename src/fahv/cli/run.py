@@ -364,8 +364,9 @@ def cmd_results(args) -> int:
         checked = {c: v for c, v in ref.items() if c in results}
         for c in sorted(set(results) - set(ref)):
             print(f"note: {c} is not in {args.check}; not checked")
-        if set(ref) - set(results):
-            print(f"note: not run, not checked: {', '.join(sorted(set(ref) - set(results)))}")
+        not_run = sorted(set(ref) - set(results))
+        if not_run:
+            print(f"note: not run, not checked: {', '.join(not_run)}")
         if not checked:
             print(f"{args.check}: none of the cases run is in the reference", file=sys.stderr)
             return 1

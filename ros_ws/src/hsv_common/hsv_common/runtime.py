@@ -42,9 +42,9 @@ EXIT_OK, EXIT_ERROR, EXIT_PARAM, EXIT_WATCHDOG, EXIT_SIGNAL, EXIT_FOREIGN = 0, 1
 TEARDOWN_S = 10.0
 #: Longest a node's main thread may stay away from its spin loop, beyond its watchdog [s].
 #: Every callback returns within ``watchdog_s`` in a working graph (the peers' watchdogs
-#: fail the run otherwise); a main thread stuck in a C call (a DDS lock, seen once in CI:
-#: the plant never exited, with every peer done) is ended by the same C-level timer as
-#: the teardown: faulthandler dumps every thread's traceback and exits with status 1.
+#: fail the run otherwise); a main thread stuck in a C call (seen once in CI, cause not
+#: found: the plant never exited, with every peer done) is ended by the same C-level
+#: timer as the teardown: faulthandler dumps every thread's traceback and exits with 1.
 HANG_S = 10.0
 
 
