@@ -34,7 +34,7 @@ Phi_p is one control period of the plant (RK4, the plant's own sub-steps).
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -45,6 +45,7 @@ from fahv.model.notch import DiscreteNotch
 from fahv.model.vehicle import DELTA_E
 from fahv.plant.rk4 import params_records, rk4_cm
 from fahv.plant.uncertainty import perturb
+from fahv.synthesis.feedback import invariant_ellipsoid
 
 #: Safety factor on the third-order remainder measured at the corners of the box.
 REMAINDER_FACTOR = 2.0
@@ -658,7 +659,7 @@ def worst_level(A, B, F, N, w_max, tau: float = 1.0, pulse=None):
     N : (n, n) ndarray
         Tube shape, Z = {e' N^-1 e <= 1}.
     w_max : (n,) ndarray
-        Half-widths of W.
+        Half-widths of W (a zero row: no disturbance there, one corner).
     tau : float
         Adjustable factor (eq. 54): the tube is tau Z, the gain tau F.
     pulse : (g, n) ndarray, optional
@@ -671,22 +672,52 @@ def worst_level(A, B, F, N, w_max, tau: float = 1.0, pulse=None):
     where : tuple
         (vertex index, corner of W (and of p) as signs (n + g,)).
     """
-    Ns = tau**2 * np.asarray(N, float)
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    Acl = A + B @ (tau * np.asarray(F, float))
+    lev, corner, signs = _levels(Acl, tau**2 * np.asarray(N, float), w_max, pulse)
+    i = int(np.argmax(lev))
+    return float(lev[i]), (i, signs[corner[i]])
+
+
+def vertex_levels(Acl, N, w_max, pulse=None) -> np.ndarray:
+    """Exact worst one-step level of each closed-loop vertex (:func:`worst_level`).
+
+    Parameters
+    ----------
+    Acl : (R, n, n) ndarray
+        Closed-loop vertices.
+    N : (n, n) ndarray
+        Shape of the set, {e' N^-1 e <= 1}.
+    w_max : (n,) array_like
+        Half-widths of W (a zero row: no disturbance there).
+    pulse : (g, n) ndarray, optional
+        Pulse generators, as in :func:`worst_level`.
+
+    Returns
+    -------
+    (R,) ndarray
+        max over e in the set and w in W of (A_cl,i e + w)' N^-1 (A_cl,i e + w).
+    """
+    return _levels(np.asarray(Acl, float), np.asarray(N, float), w_max, pulse)[0]
+
+
+def _levels(Acl, Ns, w_max, pulse):
     L = np.linalg.cholesky(Ns)
     Linv = np.linalg.inv(L)
     n = Ns.shape[0]
     G = np.zeros((0, n)) if pulse is None else np.atleast_2d(np.asarray(pulse, float))
-    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=n + len(G))))
-    C = (signs[:, :n] * np.asarray(w_max, float)[None, :] + signs[:, n:] @ G) @ Linv.T
-    best, where = -1.0, None
-    for i in range(A.shape[0]):
-        Acl = A[i] + B[i] @ (tau * F)
-        M = Linv @ Acl @ L
-        lev = _max_on_ball(M, C)
-        k = int(np.argmax(lev))
-        if lev[k] > best:
-            best, where = float(lev[k]), (i, signs[k])
-    return best, where
+    w_max = np.asarray(w_max, float)
+    free = np.r_[w_max != 0.0, np.ones(len(G), bool)]  # a zero half-width has one corner
+    signs = np.ones((2 ** int(free.sum()), n + len(G)))
+    signs[:, free] = np.array(list(itertools.product((-1.0, 1.0), repeat=int(free.sum()))))
+    C = (signs[:, :n] * w_max[None, :] + signs[:, n:] @ G) @ Linv.T
+    lev = np.empty(Acl.shape[0])
+    corner = np.empty(Acl.shape[0], int)
+    for i in range(Acl.shape[0]):
+        li = _max_on_ball(Linv @ Acl[i] @ L, C)
+        corner[i] = int(np.argmax(li))
+        lev[i] = li[corner[i]]
+    return lev, corner, signs
 
 
 def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, hi: float = 4.0) -> float:
@@ -737,6 +768,16 @@ class NotchLoop:
         The same on the measured q (the loop the certificate is for).
     vertex : int
         Vertex of ``rho``.
+    s : float or None
+        With an RPI certificate of the loop with the filter (:func:`notch_tube`): the
+        projection of its invariant ellipsoid on e lies in s Z (None: not sought).
+    level : float or None
+        That ellipsoid's exact worst one-step level over the vertices and the corners
+        of W (:func:`worst_level`).
+    supports : tuple of float or None
+        The input deviation's support over it, per input [-, rad] (through q').
+    tightening : tuple of float or None
+        The tightening the design applies, F Z's support per input [-, rad].
     """
 
     variant: str
@@ -745,11 +786,31 @@ class NotchLoop:
     rho: float
     rho_q: float
     vertex: int
+    s: float | None = None
+    level: float | None = None
+    supports: tuple[float, ...] | None = None
+    tightening: tuple[float, ...] | None = None
 
     @property
     def stable(self) -> bool:
         """True if the loop with the filter is stable at every vertex."""
         return self.rho < 1.0
+
+    @property
+    def certified(self) -> bool:
+        """True if the loop with the filter is certified (:func:`notch_tube`).
+
+        An ellipsoid of the loop with the filter is RPI for W (exact level <= 1),
+        projects into Z (s <= 1) and keeps the input deviation within the tightening:
+        every assumption the tube's W was bounded under then holds with the filter.
+        """
+        return (
+            self.s is not None
+            and self.s <= 1.0
+            and self.level <= 1.0
+            and all(a <= b * (1.0 + 1e-9) for a, b in zip(self.supports, self.tightening,
+                                                          strict=True))
+        )  # fmt: skip
 
     def line(self) -> str:
         """One line for the design log, with its verdict."""
@@ -758,16 +819,81 @@ class NotchLoop:
             f"rad/s, eps_p {self.eps_p:g}): largest spectral radius over the vertices "
             f"{self.rho:.6f} (on the measured q {self.rho_q:.6f})"
         )
-        if self.stable:
+        if not self.stable:
+            return head + f": UNSTABLE at vertex {self.vertex}: NOT certified with the notch"
+        if self.s is None:
             return head + (
                 ": stable at every vertex (necessary only); the RPI certificate is for the "
                 "feedback on the measured q: NOT certified with the notch"
             )
-        return head + f": UNSTABLE at vertex {self.vertex}: NOT certified with the notch"
+        sup = " / ".join(f"{v:.4f}" for v in self.supports)
+        tig = " / ".join(f"{v:.4f}" for v in self.tightening)
+        return head + (
+            f"; an ellipsoid of the loop with the filter's states, RPI for W: exact worst "
+            f"one-step level {self.level:.6f}, its projection on e inside {self.s:.4f} x Z, "
+            f"input support through q' {sup} (tightening {tig})"
+            + (": certified with the notch  OK" if self.certified
+               else ": NOT certified with the notch")
+        )  # fmt: skip
 
     def summary(self) -> dict:
-        """JSON-ready record (the attributes and ``stable``)."""
-        return {**self.__dict__, "stable": self.stable, "certified": False}
+        """JSON-ready record (the attributes, ``stable`` and ``certified``)."""
+        return {**self.__dict__, "stable": self.stable, "certified": self.certified}
+
+
+def notch_closed_loop(A, B, F, notch, Ts: float, iq: int) -> tuple[np.ndarray, np.ndarray]:
+    """The tube loop with the notch filter on q, in the states xi = [e; chi] (:func:`notch_loop`).
+
+    The filter is eq. (38) in the state-space form of eq. (39), discretised as the
+    notch_filter node runs it (:class:`fahv.model.notch.DiscreteNotch`), in the
+    coordinates chi(k) = x_q(k) - B_d q(k) (a standard state space of the same recursion):
+    chi+ = A_d chi + (A_d B_d + B_d) q, q' = C_q chi + (C_q B_d + D_q) q. With u = F e'
+    (e' is e with q' for e_q)::
+
+        xi+ = A_xi,i xi + [I; 0] w,   A_xi,i = [[A_i + B_i F S, B_i F_q C_q], [b E_q, A_d]],
+        u = K xi,                     K = [F S, F_q C_q],
+
+    with S the identity but (C_q B_d + D_q) at (iq, iq). The notch's effect on the
+    nominal's own q is an exogenous signal and enters neither.
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+        Vertices of the tube's error dynamics.
+    F : (m, n) ndarray
+        Tube gain on e.
+    notch : fahv.model.notch.NotchFilter
+    Ts : float
+        Control period [s].
+    iq : int
+        Index of q in e.
+
+    Returns
+    -------
+    A_xi : (R, n + 2, n + 2) ndarray
+    K : (m, n + 2) ndarray
+        The input deviation the loop applies, u - v = K xi.
+
+    Raises
+    ------
+    ValueError
+        If the shapes disagree or ``iq`` is out of range.
+    """
+    A, B, F = (np.asarray(v, float) for v in (A, B, F))
+    R, n, _ = A.shape
+    if B.shape[:2] != (R, n) or F.shape != (B.shape[2], n) or not 0 <= iq < n:
+        raise ValueError(f"notch_loop: shapes A {A.shape}, B {B.shape}, F {F.shape}, iq {iq}")
+    dn = DiscreteNotch(notch, Ts)
+    b = dn.A_d @ dn.B_d + dn.B_d
+    S = np.eye(n)
+    S[iq, iq] = dn.C_q @ dn.B_d + dn.D_q
+    K = np.hstack([F @ S, F[:, iq : iq + 1] * dn.C_q[None, :]])
+    Acl = np.zeros((R, n + 2, n + 2))
+    Acl[:, :n, :] = np.concatenate([A, np.zeros((R, n, 2))], axis=2) + B @ K
+    Acl[:, n:, iq] = b
+    Acl[:, n:, n:] = dn.A_d
+    return Acl, K
 
 
 def notch_loop(A, B, F, notch, Ts: float, iq: int, variant: str = "") -> NotchLoop:
@@ -808,24 +934,88 @@ def notch_loop(A, B, F, notch, Ts: float, iq: int, variant: str = "") -> NotchLo
     ValueError
         If the shapes disagree or ``iq`` is out of range.
     """
+    Acl, _ = notch_closed_loop(A, B, F, notch, Ts, iq)
     A, B, F = (np.asarray(v, float) for v in (A, B, F))
-    R, n, _ = A.shape
-    if B.shape[:2] != (R, n) or F.shape != (B.shape[2], n) or not 0 <= iq < n:
-        raise ValueError(f"notch_loop: shapes A {A.shape}, B {B.shape}, F {F.shape}, iq {iq}")
-    dn = DiscreteNotch(notch, Ts)
-    b = dn.A_d @ dn.B_d + dn.B_d
-    S = np.eye(n)
-    S[iq, iq] = dn.C_q @ dn.B_d + dn.D_q
-    Acl = np.zeros((R, n + 2, n + 2))
-    Acl[:, :n, :n] = A + B @ F @ S
-    Acl[:, :n, n:] = (B @ F[:, iq : iq + 1]) * dn.C_q[None, None, :]
-    Acl[:, n:, iq] = b
-    Acl[:, n:, n:] = dn.A_d
     rho = np.abs(np.linalg.eigvals(Acl)).max(axis=1)
     rho_q = np.abs(np.linalg.eigvals(A + B @ F)).max(axis=1)
     k = int(np.argmax(rho))
     return NotchLoop(variant, float(notch.omega_z), float(notch.eps_p), float(rho[k]),
                      float(rho_q.max()), k)  # fmt: skip
+
+
+def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
+               variant: str = "", active: int = 40) -> NotchLoop:  # fmt: skip
+    """The tube loop with the notch filter on q, certified RPI in its own states.
+
+    The loop of :func:`notch_closed_loop`, xi = [e; chi] with the filter's two states,
+    under u = F e' (q' = notch(q) in e'), is checked as it runs: an ellipsoid
+    E = {xi' P^-1 xi <= 1} RPI for the box W on e at every vertex is sought with the
+    S-procedure (:func:`fahv.synthesis.feedback.invariant_ellipsoid`), its projection on e
+    bounded by s Z and its input deviation K xi by F Z's support (the tightening of
+    eq. 30) per input. The solver's answer is then re-checked exactly: the worst
+    one-step level of E over every vertex and every corner of W (:func:`worst_level`).
+    If the level is at most 1, s at most 1 and the supports within the tightening, every
+    assumption W was bounded under (e in Z, the applied input within the tightening)
+    holds with the filter in the loop (:attr:`NotchLoop.certified`).
+
+    This is the loop the law runs only if the error's q is formed with the same filter
+    on the nominal's q as well (q' - q_n' = notch(q - q_n)). The law ``tube_mpc`` filters
+    the measured q alone, so its error also carries (notch - 1) q_n, a term of the
+    nominal's manoeuvre that this certificate does not cover.
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+        Vertices of the tube's error dynamics (unscaled).
+    F : (m, n) ndarray
+        Tube gain.
+    N : (n, n) ndarray
+        Tube shape, Z = {e' N^-1 e <= 1}.
+    w_max : (n,) array_like
+        Half-widths of W.
+    notch : fahv.model.notch.NotchFilter
+    Ts : float
+        Control period [s].
+    iq : int
+        Index of q in e.
+    lam : float
+        Contraction factor of the S-procedure certificate.
+    variant : str
+    active : int
+        Vertex blocks per round of constraint generation.
+
+    Returns
+    -------
+    NotchLoop
+        With ``s``, ``level``, ``supports`` and ``tightening`` set when an ellipsoid was
+        found (``s`` None if the loop is unstable or the LMI infeasible).
+
+    Raises
+    ------
+    ValueError
+        On inconsistent shapes.
+    DesignError
+        If the solver's ellipsoid fails the re-check of its LMI blocks.
+    """
+    loop = notch_loop(A, B, F, notch, Ts, iq, variant)
+    F, N = np.asarray(F, float), np.asarray(N, float)
+    tightening = tuple(np.sqrt(np.einsum("ij,jk,ik->i", F, N, F)).tolist())
+    if not loop.stable:
+        return replace(loop, tightening=tightening)
+    Acl, K = notch_closed_loop(A, B, F, notch, Ts, iq)
+    dn = DiscreteNotch(notch, Ts)
+    z = np.sqrt(np.diag(N))
+    gain = np.abs(np.linalg.solve(np.eye(2) - dn.A_d, dn.A_d @ dn.B_d + dn.B_d))
+    D = np.r_[z, (gain + 1e-3) * z[iq]]  # the filter's states at their steady size for q
+    w_xi = np.r_[np.asarray(w_max, float), 0.0, 0.0]
+    ell = invariant_ellipsoid(Acl, w_max, D, N, K, np.asarray(tightening),
+                              lambda P: vertex_levels(Acl, P, w_xi), lam, active)  # fmt: skip
+    if ell is None:
+        return replace(loop, tightening=tightening)
+    level = float(vertex_levels(Acl, ell.P, w_xi).max())
+    return replace(loop, s=ell.s, level=level, supports=tuple(ell.supports.tolist()),
+                   tightening=tightening)  # fmt: skip
 
 
 # -- onset of a fault and start of a run ----------------------------------------------

@@ -93,18 +93,7 @@ def _rpi_blocks(AN, lam, mu, N, G=None) -> np.ndarray:
     (S-procedure form of (A_cl e + w + G' p)' N^-1 (A_cl e + w + G' p) <= lam e' N^-1 e
     + sum_j mu_j w_j^2 + sum_l mu_p,l p_l^2, with the budget at most 1 - lam).
     """
-    R, n, _ = AN.shape
-    E = _generators(n, G)
-    k = E.shape[1]
-    blk = np.zeros((R, 2 * n + k, 2 * n + k))
-    blk[:, :n, :n] = lam * N
-    blk[:, n : n + k, n : n + k] = np.diag(mu)
-    blk[:, n : n + k, n + k :] = E.T
-    blk[:, n + k :, n : n + k] = E
-    blk[:, n + k :, :n] = AN
-    blk[:, :n, n + k :] = AN.transpose(0, 2, 1)
-    blk[:, n + k :, n + k :] = N
-    return blk
+    return _invariance_blocks(AN, lam, mu, N, _generators(AN.shape[1], G))
 
 
 def _generators(n: int, G) -> np.ndarray:
@@ -404,3 +393,165 @@ def box_tube(A, B, F, w_max, Dx, Du) -> BoxTubeResult:
     if any(np.any(a @ zs + ws > zs * (1 + 1e-9) + 1e-12) for a in absA):
         raise DesignError("certificate failed: box tube LP solution is not invariant")
     return BoxTubeResult(True, zs * Dx, rho)
+
+
+@dataclass(frozen=True)
+class InvariantEllipsoid:
+    """An ellipsoid RPI for a fixed closed loop and its box W (unscaled units).
+
+    Attributes
+    ----------
+    P : (n, n) ndarray
+        Shape of E = {xi : xi' P^-1 xi <= 1}.
+    s : float
+        Smallest factor with the projection of E on the first p states inside
+        s {e : e' S^-1 e <= 1} (S the ``shape`` it was bounded by): the largest eigenvalue
+        of S^-1/2 P_ee S^-1/2, square-rooted.
+    supports : (m,) ndarray
+        max over E of |(K xi)_j| = sqrt(K_j P K_j') (the input deviation's support).
+    n_blocks : int
+        Vertex blocks the last LMI solve held (constraint generation).
+    """
+
+    P: np.ndarray
+    s: float
+    supports: np.ndarray
+    n_blocks: int
+
+
+#: Share of the budget 1 - lam :func:`invariant_ellipsoid` leaves unused, so that its
+#: blocks, solved without a strict margin, leave room for the exact re-check.
+BUDGET_MARGIN = 4e-3
+
+
+def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float,
+                        active: int = 40) -> InvariantEllipsoid | None:  # fmt: skip
+    """Smallest ellipsoid RPI for a fixed closed loop whose projection lies in a given one.
+
+    The analysis form of the tube LMI (24) for a closed loop xi+ = A_cl,i xi + E w with
+    E = [I_p; 0] (the box W = {|w_j| <= w_max,j} acts on the first p states), in the
+    shape P of E = {xi' P^-1 xi <= 1}, with S-procedure multipliers mu_i per vertex::
+
+        [[lam P, 0, P A_cl,i'], [0, diag(mu_i), E'], [A_cl,i P, E, P]] >= 0,
+        sum_j mu_i,j w_j^2 <= (1 - lam) (1 - BUDGET_MARGIN)      every vertex i,
+        P_ee <= s^2 S,   K_j P K_j' <= support_max_j^2,
+
+    minimising s^2: E is RPI for W at every vertex, its projection on the first p states
+    lies in s {e' S^-1 e <= 1}, and the input deviation K xi stays within support_max.
+    Linear in (P, mu_i, s^2) for the fixed lam and loop. Solved in the coordinates xi / D
+    on a growing subset of the vertices (constraint generation: the ``active`` vertices
+    of largest spectral radius first, then per round at most ``active`` of those whose
+    exact level ``levels(P)`` exceeds 1, until none does: the result's exact level is
+    then at most 1 at every vertex). The blocks solved are re-checked
+    (:func:`require_psd`).
+
+    Parameters
+    ----------
+    Acl : (R, n, n) ndarray
+        Closed-loop vertices (unscaled).
+    w_max : (p,) array_like
+        Half-widths of W on the first p states (unscaled), p <= n.
+    D : (n,) array_like
+        State scaling (positive).
+    shape : (p, p) ndarray
+        S, the ellipsoid the projection is bounded by (unscaled).
+    K : (m, n) ndarray
+        Input map of the loop, u - v = K xi.
+    support_max : (m,) array_like
+        Largest support of K xi per row.
+    levels : callable
+        ``levels(P) -> (R,)``: the exact worst one-step level of each vertex for the
+        ellipsoid of shape P (unscaled), e.g.
+        :func:`fahv.design.certificate.vertex_levels`.
+    lam : float
+        Contraction factor in (0, 1).
+    active : int
+        Vertices added per round.
+
+    Returns
+    -------
+    InvariantEllipsoid or None
+        None if the LMI is infeasible (or the solver fails) on the vertices held.
+
+    Raises
+    ------
+    DesignError
+        If a returned solution fails the re-check of its blocks or budgets.
+    ValueError
+        On inconsistent shapes.
+    """
+    Acl = np.asarray(Acl, float)
+    R, n, _ = Acl.shape
+    ws, D = np.asarray(w_max, float), np.asarray(D, float)
+    p = ws.size
+    K = np.atleast_2d(np.asarray(K, float))
+    if Acl.shape[2] != n or D.shape != (n,) or p > n or np.shape(shape) != (p, p) \
+            or K.shape[1] != n or not 0.0 < lam < 1.0:  # fmt: skip
+        raise ValueError(
+            f"invariant_ellipsoid: shapes Acl {Acl.shape}, w_max {ws.shape}, D {D.shape}, "
+            f"shape {np.shape(shape)}, K {K.shape}, lam {lam}"
+        )
+    As = Acl / D[None, :, None] * D[None, None, :]
+    wss = ws / D[:p]
+    Ss = np.asarray(shape, float) / np.outer(D[:p], D[:p])
+    Ks = K * D[None, :]
+    tmax = np.asarray(support_max, float)
+    E = np.vstack([np.eye(p), np.zeros((n - p, p))])
+    budget = (1.0 - lam) * (1.0 - BUDGET_MARGIN)
+    rho = np.abs(np.linalg.eigvals(As)).max(axis=1)
+    chosen = np.sort(np.argsort(-rho)[:active])
+    while True:
+        P = cp.Variable((n, n), symmetric=True)
+        mu = cp.Variable((len(chosen), p), nonneg=True)
+        s2 = cp.Variable()
+        cons = [P >> LMI_MARGIN * np.eye(n), mu @ wss**2 <= budget, P[:p, :p] << s2 * Ss]
+        cons += [Ks[j] @ P @ Ks[j] <= tmax[j] ** 2 for j in range(K.shape[0])]
+        for r, i in enumerate(chosen):
+            AP = As[i] @ P
+            blk = cp.bmat([[lam * P, np.zeros((n, p)), AP.T],
+                           [np.zeros((p, n)), cp.diag(mu[r]), E.T],
+                           [AP, E, P]])  # fmt: skip
+            cons.append(0.5 * (blk + blk.T) >> 0)
+        prob = cp.Problem(cp.Minimize(s2), cons)
+        try:
+            prob.solve(solver=SDP_SOLVER)
+        except cp.error.SolverError:
+            return None
+        if prob.status not in ("optimal", "optimal_inaccurate"):
+            return None
+        Pv = 0.5 * (P.value + P.value.T)
+        P_un = Pv * np.outer(D, D)
+        lev = np.asarray(levels(P_un), float)
+        bad = np.setdiff1d(np.flatnonzero(lev > 1.0), chosen)
+        if bad.size == 0:
+            break
+        chosen = np.union1d(chosen, bad[np.argsort(-lev[bad])[:active]])
+    muv = np.maximum(mu.value, 0.0)
+    for r, i in enumerate(chosen):
+        blk = _invariance_blocks(As[i : i + 1] @ Pv, lam, muv[r], Pv, E)[0]
+        require_psd(blk, f"RPI LMI of the fixed loop at vertex {i}", rtol=1e-8)
+    if np.any(muv @ wss**2 > (1.0 - lam) * (1 + 1e-9)):
+        raise DesignError("certificate failed: sum mu w^2 of the fixed loop > 1 - lam")
+    L = np.linalg.cholesky(Ss)
+    Li = np.linalg.inv(L)
+    s = float(np.sqrt(np.linalg.eigvalsh(Li @ Pv[:p, :p] @ Li.T).max()))
+    supports = np.sqrt(np.einsum("ij,jk,ik->i", K, P_un, K))
+    return InvariantEllipsoid(P_un, s, supports, len(chosen))
+
+
+def _invariance_blocks(AP, lam, mu, P, E) -> np.ndarray:
+    """Blocks (R, 2n + p, 2n + p) [[lam P, 0, AP'], [0, diag(mu), E'], [AP, E, P]] (scaled).
+
+    AP (R, n, n) stacks A_cl,i P; E (n, p) maps the p generators of the disturbance.
+    """
+    R, n, _ = AP.shape
+    p = E.shape[1]
+    blk = np.zeros((R, 2 * n + p, 2 * n + p))
+    blk[:, :n, :n] = lam * P
+    blk[:, n : n + p, n : n + p] = np.diag(mu)
+    blk[:, n : n + p, n + p :] = E.T
+    blk[:, n + p :, n : n + p] = E
+    blk[:, n + p :, :n] = AP
+    blk[:, :n, n + p :] = AP.transpose(0, 2, 1)
+    blk[:, n + p :, n + p :] = P
+    return blk
