@@ -13,7 +13,13 @@ The vertices are the design's own: the design pipeline is run up to the pair's c
 
     python scripts/notch_certificate_study.py offline_design/case1.yaml 0.5 0.1
 
-Each eps_p takes 5-10 min (constraint generation on 4096 vertices, two cores).
+Each eps_p takes 1-10 min (constraint generation on 4096 vertices, two cores). With
+``--check`` the ellipsoids stored in scripts/data/notch_ellipsoids_case1.npz (found by
+exploratory solves, 2026-11-24) are re-checked exactly on the design's vertices instead
+(:func:`fahv.design.certificate.notch_certificate`); F_8, N_8 and W_8 then come from
+that file:
+
+    python scripts/notch_certificate_study.py offline_design/case1.yaml --check
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ import numpy as np
 
 import fahv.design.eight_state as es
 from fahv.design.case import load_case
-from fahv.design.certificate import notch_tube
+from fahv.design.certificate import notch_certificate, notch_tube
 from fahv.design.pipeline import run_design
 from fahv.model.notch import NotchFilter
 
@@ -57,9 +63,23 @@ def design_vertices(case) -> tuple[np.ndarray, np.ndarray]:
     raise RuntimeError("the design never reached the pair's closure (not an eight-state case?)")
 
 
+def check(case, A, B) -> None:
+    """Re-check the stored ellipsoids (module docstring) and print their lines."""
+    data = np.load(ROOT / "scripts" / "data" / "notch_ellipsoids_case1.npz")
+    n = case["notch"]
+    for key in sorted(k for k in data.files if k.startswith("P_eps_p_")):
+        nf = NotchFilter(n["omega_z"], n["eps_z"], n["omega_p"], float(key[8:]))
+        loop = notch_certificate(A[:, 1:, 1:], B[:, 1:, :], data["F8"], data["N8"], data["W8"],
+                                 nf, case["Ts"], 3, data[key], "tube_mpc")  # fmt: skip
+        print(f"stored {key}: {loop.line()}", flush=True)
+
+
 def main(argv: list[str]) -> int:
-    """Print the certificate line of each eps_p (argv: case file, then eps_p values)."""
+    """Print the certificate line of each eps_p (argv: case file, eps_p values or --check)."""
     case = load_case(argv[0])
+    if argv[1:] == ["--check"]:
+        check(case, *design_vertices(case))
+        return 0
     art = ROOT / "offline_design" / "artefacts" / case["name"]
     arrays = np.load(art / "design.npz")
     cert = json.loads((art / "design.json").read_text())["summary"]["certificate"]

@@ -770,7 +770,8 @@ class NotchLoop:
         Vertex of ``rho``.
     s : float or None
         With an RPI certificate of the loop with the filter (:func:`notch_tube`): the
-        projection of its invariant ellipsoid on e lies in s Z (None: not sought).
+        projection of its invariant ellipsoid on e lies in s Z (None: not sought; inf:
+        no ellipsoid found).
     level : float or None
         That ellipsoid's exact worst one-step level over the vertices and the corners
         of W (:func:`worst_level`).
@@ -806,6 +807,7 @@ class NotchLoop:
         """
         return (
             self.s is not None
+            and self.level is not None
             and self.s <= 1.0
             and self.level <= 1.0
             and all(a <= b * (1.0 + 1e-9) for a, b in zip(self.supports, self.tightening,
@@ -825,6 +827,11 @@ class NotchLoop:
             return head + (
                 ": stable at every vertex (necessary only); the RPI certificate is for the "
                 "feedback on the measured q: NOT certified with the notch"
+            )
+        if not np.isfinite(self.s):
+            return head + (
+                "; no ellipsoid of the loop with the filter's states RPI for W with its input "
+                "support within the tightening (LMI infeasible): NOT certified with the notch"
             )
         sup = " / ".join(f"{v:.4f}" for v in self.supports)
         tig = " / ".join(f"{v:.4f}" for v in self.tightening)
@@ -989,7 +996,7 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
     -------
     NotchLoop
         With ``s``, ``level``, ``supports`` and ``tightening`` set when an ellipsoid was
-        found (``s`` None if the loop is unstable or the LMI infeasible).
+        found (``s`` None if the loop is unstable, inf if the LMI is infeasible).
 
     Raises
     ------
@@ -1012,10 +1019,43 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
     ell = invariant_ellipsoid(Acl, w_max, D, N, K, np.asarray(tightening),
                               lambda P: vertex_levels(Acl, P, w_xi), lam, active)  # fmt: skip
     if ell is None:
-        return replace(loop, tightening=tightening)
-    level = float(vertex_levels(Acl, ell.P, w_xi).max())
-    return replace(loop, s=ell.s, level=level, supports=tuple(ell.supports.tolist()),
-                   tightening=tightening)  # fmt: skip
+        return replace(loop, s=float("inf"), tightening=tightening)
+    return notch_certificate(A, B, F, N, w_max, notch, Ts, iq, ell.P, variant)
+
+
+def notch_certificate(A, B, F, N, w_max, notch, Ts: float, iq: int, P,
+                      variant: str = "") -> NotchLoop:  # fmt: skip
+    """Re-check a given ellipsoid of the tube loop with the notch (:func:`notch_tube`).
+
+    Exact, whatever found P: the worst one-step level of E = {xi' P^-1 xi <= 1} over
+    every vertex of the loop in [e; chi] and every corner of W (:func:`vertex_levels`),
+    the factor s of its projection on e into Z, and its input support through q' against
+    F Z's (the tightening). Arguments as :func:`notch_tube`; ``P`` is (n + 2, n + 2) in
+    the coordinates of :func:`notch_closed_loop`.
+
+    Returns
+    -------
+    NotchLoop
+        ``certified`` if level <= 1, s <= 1 and every support within the tightening.
+
+    Raises
+    ------
+    ValueError
+        On inconsistent shapes (P included).
+    """
+    loop = notch_loop(A, B, F, notch, Ts, iq, variant)
+    F, N, P = (np.asarray(v, float) for v in (F, N, P))
+    n = N.shape[0]
+    if P.shape != (n + 2, n + 2):
+        raise ValueError(f"notch_certificate: P has shape {P.shape}, expected {(n + 2, n + 2)}")
+    Acl, K = notch_closed_loop(A, B, F, notch, Ts, iq)
+    level = float(vertex_levels(Acl, P, np.r_[np.asarray(w_max, float), 0.0, 0.0]).max())
+    Li = np.linalg.inv(np.linalg.cholesky(N))
+    s = float(np.sqrt(np.linalg.eigvalsh(Li @ P[:n, :n] @ Li.T).max()))
+    supports = np.sqrt(np.einsum("ij,jk,ik->i", K, P, K))
+    tightening = np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
+    return replace(loop, s=s, level=level, supports=tuple(supports.tolist()),
+                   tightening=tuple(tightening.tolist()))  # fmt: skip
 
 
 # -- onset of a fault and start of a run ----------------------------------------------
