@@ -145,3 +145,27 @@ def test_notch_tube_certifies_only_inside_z_and_the_tightening():
     small = notch_tube(A, B, F, _lyapunov_shape(A, B, F, 1e-9), w, NOTCH, TS, 1, 0.99, "v")
     assert not small.certified
     assert "NOT certified with the notch" in small.line()
+
+
+def test_notch_certificate_rechecks_a_given_ellipsoid():
+    """The exact re-check of a given P: a P grown by 10 % stays certified (E RPI implies
+    c E RPI for c >= 1 in a linear loop) with s and supports 10 % larger; a wrong shape
+    is refused."""
+    from fahv.design.certificate import notch_certificate, notch_closed_loop, vertex_levels
+    from fahv.synthesis.feedback import invariant_ellipsoid
+
+    A, B, F = _two_vertices()
+    w = np.array([1e-4, 2e-4, 1e-4])
+    N = _lyapunov_shape(A, B, F, 4e-4)
+    Acl, K = notch_closed_loop(A, B, F, NOTCH, TS, 1)
+    t = np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
+    ell = invariant_ellipsoid(Acl, w, np.r_[np.sqrt(np.diag(N)), 1e-3, 1e-3], N, K, t,
+                              lambda P: vertex_levels(Acl, P, np.r_[w, 0, 0]), 0.99)  # fmt: skip
+    same = notch_certificate(A, B, F, N, w, NOTCH, TS, 1, ell.P, "v")
+    grown = notch_certificate(A, B, F, N, w, NOTCH, TS, 1, 1.21 * ell.P, "v")
+    assert same.s == pytest.approx(ell.s, rel=1e-9) and same.level <= 1.0
+    assert grown.level <= same.level + 1e-12
+    assert grown.s == pytest.approx(1.1 * same.s, rel=1e-9)
+    np.testing.assert_allclose(grown.supports, 1.1 * np.asarray(same.supports), rtol=1e-9)
+    with pytest.raises(ValueError, match="P has shape"):
+        notch_certificate(A, B, F, N, w, NOTCH, TS, 1, np.eye(3))
