@@ -906,29 +906,13 @@ def notch_closed_loop(A, B, F, notch, Ts: float, iq: int) -> tuple[np.ndarray, n
 def notch_loop(A, B, F, notch, Ts: float, iq: int, variant: str = "") -> NotchLoop:
     """Stability of the tube loop with the notch filter on q at every vertex (:class:`NotchLoop`).
 
-    The filter is eq. (38) in the state-space form of eq. (39), discretised as the
-    notch_filter node runs it (:class:`fahv.model.notch.DiscreteNotch`), in the
-    coordinates chi(k) = x_q(k) - B_d q(k) (a standard state space of the same recursion):
-    chi+ = A_d chi + (A_d B_d + B_d) q, q' = C_q chi + (C_q B_d + D_q) q. The loop
-    on the error, u = F e' (e' is e with q' - q_nominal for e_q), is::
-
-        [e; chi]+ = [[A_i + B_i F S, B_i F_q C_q], [b E_q, A_d]] [e; chi]
-
-    with S the identity but (C_q B_d + D_q) at (iq, iq). The notch's effect on the
-    nominal's own q is an exogenous signal and does not enter the spectral radius.
+    The spectral radius of each vertex of :func:`notch_closed_loop`, next to the loop's
+    on the measured q (A_i + B_i F).
 
     Parameters
     ----------
-    A : (R, n, n) ndarray
-    B : (R, n, m) ndarray
-        Vertices of the tube's error dynamics (the fault vertices included).
-    F : (m, n) ndarray
-        Tube gain on e.
-    notch : fahv.model.notch.NotchFilter
-    Ts : float
-        Control period [s].
-    iq : int
-        Index of q in e.
+    A, B, F, notch, Ts, iq
+        As :func:`notch_closed_loop`.
     variant : str
         Name for the report.
 

@@ -154,6 +154,18 @@ def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
 LMI_MARGIN = 1e-5
 
 
+def _solved(prob: cp.Problem) -> bool:
+    """Solve an LMI problem; False if the solver fails or finds no (near-)optimal point.
+
+    "optimal_inaccurate" counts as solved: every caller re-checks its certificate.
+    """
+    try:
+        prob.solve(solver=SDP_SOLVER)
+    except cp.error.SolverError:
+        return False
+    return prob.status in ("optimal", "optimal_inaccurate")
+
+
 def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None):
     """Solve the tube LMI for one lam (scaled data); (value, lam, N, M, mu, blocks) or None.
 
@@ -203,11 +215,7 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None):
             cons.append(0.5 * (blk + blk.T) >> 0)
         obj = cp.Minimize(cp.sum(cp.multiply(t, 1.0 / room**2)) + sw @ cp.diag(N))
         prob = cp.Problem(obj, cons)
-        try:
-            prob.solve(solver=SDP_SOLVER)
-        except cp.error.SolverError:
-            return None
-        if prob.status not in ("optimal", "optimal_inaccurate"):
+        if not _solved(prob):
             return None
         if len(chosen) == R:
             return prob.value, lam, N.value, M.value, mu.value, R
@@ -513,11 +521,7 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
                            [AP, E, P]])  # fmt: skip
             cons.append(0.5 * (blk + blk.T) >> 0)
         prob = cp.Problem(cp.Minimize(s2), cons)
-        try:
-            prob.solve(solver=SDP_SOLVER)
-        except cp.error.SolverError:
-            return None
-        if prob.status not in ("optimal", "optimal_inaccurate"):
+        if not _solved(prob):
             return None
         Pv = 0.5 * (P.value + P.value.T)
         P_un = Pv * np.outer(D, D)
