@@ -433,24 +433,25 @@ BUDGET_MARGIN = 4e-3
 
 
 def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float,
-                        active: int = 40) -> InvariantEllipsoid | None:  # fmt: skip
+                        active: int = 40, add: int = 10) -> InvariantEllipsoid | None:  # fmt: skip
     """Smallest ellipsoid RPI for a fixed closed loop whose projection lies in a given one.
 
     The analysis form of the tube LMI (24) for a closed loop xi+ = A_cl,i xi + E w with
-    E = [I_p; 0] (the box W = {|w_j| <= w_max,j} acts on the first p states), in the
-    shape P of E = {xi' P^-1 xi <= 1}, with S-procedure multipliers mu_i per vertex::
+    E = [diag(w_max); 0] and w in the unit box (W = {|w_j| <= w_max,j} on the first p
+    states), in the shape P of E = {xi' P^-1 xi <= 1}, with S-procedure multipliers mu_i
+    per vertex::
 
         [[lam P, 0, P A_cl,i'], [0, diag(mu_i), E'], [A_cl,i P, E, P]] >= 0,
-        sum_j mu_i,j w_j^2 <= (1 - lam) (1 - BUDGET_MARGIN)      every vertex i,
+        sum_j mu_i,j <= (1 - lam) (1 - BUDGET_MARGIN)      every vertex i,
         P_ee <= s^2 S,   K_j P K_j' <= support_max_j^2,
 
     minimising s^2: E is RPI for W at every vertex, its projection on the first p states
     lies in s {e' S^-1 e <= 1}, and the input deviation K xi stays within support_max.
     Linear in (P, mu_i, s^2) for the fixed lam and loop. Solved in the coordinates xi / D
     on a growing subset of the vertices (constraint generation: the ``active`` vertices
-    of largest spectral radius first, then per round at most ``active`` of those whose
-    exact level ``levels(P)`` exceeds 1, until none does: the result's exact level is
-    then at most 1 at every vertex). The blocks solved are re-checked
+    of largest spectral radius first, then per round at most ``add`` of those whose
+    exact level ``levels(P)`` exceeds 1, the worst first, until none does: the result's
+    exact level is then at most 1 at every vertex). The blocks solved are re-checked
     (:func:`require_psd`).
 
     Parameters
@@ -474,6 +475,8 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     lam : float
         Contraction factor in (0, 1).
     active : int
+        Vertices of the first solve.
+    add : int
         Vertices added per round.
 
     Returns
@@ -504,7 +507,9 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     Ss = np.asarray(shape, float) / np.outer(D[:p], D[:p])
     Ks = K * D[None, :]
     tmax = np.asarray(support_max, float)
-    E = np.vstack([np.eye(p), np.zeros((n - p, p))])
+    # W as the unit box through E = [diag(w); 0]: multipliers of order 1 - lam (with the
+    # identity they were of order (1 - lam) / w^2, and the solves were less accurate)
+    E = np.vstack([np.diag(wss), np.zeros((n - p, p))])
     budget = (1.0 - lam) * (1.0 - BUDGET_MARGIN)
     rho = np.abs(np.linalg.eigvals(As)).max(axis=1)
     chosen = np.sort(np.argsort(-rho)[:active])
@@ -512,7 +517,7 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
         P = cp.Variable((n, n), symmetric=True)
         mu = cp.Variable((len(chosen), p), nonneg=True)
         s2 = cp.Variable()
-        cons = [P >> LMI_MARGIN * np.eye(n), mu @ wss**2 <= budget, P[:p, :p] << s2 * Ss]
+        cons = [P >> LMI_MARGIN * np.eye(n), cp.sum(mu, axis=1) <= budget, P[:p, :p] << s2 * Ss]
         cons += [Ks[j] @ P @ Ks[j] <= tmax[j] ** 2 for j in range(K.shape[0])]
         for r, i in enumerate(chosen):
             AP = As[i] @ P
@@ -529,12 +534,12 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
         bad = np.setdiff1d(np.flatnonzero(lev > 1.0), chosen)
         if bad.size == 0:
             break
-        chosen = np.union1d(chosen, bad[np.argsort(-lev[bad])[:active]])
+        chosen = np.union1d(chosen, bad[np.argsort(-lev[bad])[:add]])
     muv = np.maximum(mu.value, 0.0)
     for r, i in enumerate(chosen):
         blk = _invariance_blocks(As[i : i + 1] @ Pv, lam, muv[r], Pv, E)[0]
         require_psd(blk, f"RPI LMI of the fixed loop at vertex {i}", rtol=1e-8)
-    if np.any(muv @ wss**2 > (1.0 - lam) * (1 + 1e-9)):
+    if np.any(muv.sum(axis=1) > (1.0 - lam) * (1 + 1e-9)):
         raise DesignError("certificate failed: sum mu w^2 of the fixed loop > 1 - lam")
     L = np.linalg.cholesky(Ss)
     Li = np.linalg.inv(L)
