@@ -19,6 +19,8 @@ from fahv.control.nominal_mpc import TrackingMPCNominal
 from fahv.control.reference import ReferenceGovernor, mv, quad
 from fahv.errors import ParameterError
 from fahv.lanes import Lanes
+from fahv.model.notch import DiscreteNotch, NotchFilter
+from fahv.model.vehicle import IQ
 from fahv.msg import NominalTrajectory
 
 
@@ -53,16 +55,26 @@ class TubeMPC:
         self.tau = float(tau)
         self.tau_F = self.tau * self.F
 
-    def error(self, x: np.ndarray, ref: NominalTrajectory) -> np.ndarray:
-        """Tube errors e = x - x_r - x_n (B, n) for the states x (B, n)."""
-        return np.ascontiguousarray(np.asarray(x, float) - ref.x_r - ref.x_n)
+    def error(self, x: np.ndarray, ref: NominalTrajectory, q_ref=None) -> np.ndarray:
+        """Tube errors e = x - x_r - x_n (B, n) for the states x (B, n).
+
+        With ``q_ref`` (B,) [rad/s], the reference pitch rate that the error's q is taken
+        from in place of q_r + q_n (the filtered nominal q of :class:`TubeMPCLaw`).
+        """
+        e = np.asarray(x, float) - ref.x_r - ref.x_n
+        if q_ref is not None:
+            e[:, IQ] = np.asarray(x, float)[:, IQ] - q_ref
+        return np.ascontiguousarray(e)
 
     def tube_level(self, e: np.ndarray) -> np.ndarray:
         """Tube levels e' (tau^2 N)^-1 e (B,): <= 1 when e is inside the tube tau Z."""
         return quad(e, self.N_inv) / self.tau**2
 
-    def step(self, x: np.ndarray, ref: NominalTrajectory) -> tuple[np.ndarray, np.ndarray]:
+    def step(self, x: np.ndarray, ref: NominalTrajectory,
+             q_ref=None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """Commands u (B, 2) [Phi, delta_e rad] and errors e (B, n) for the states x (B, n).
+
+        ``q_ref`` as :meth:`error`.
 
         Raises
         ------
@@ -72,7 +84,7 @@ class TubeMPC:
         x = np.asarray(x, float)
         if x.ndim != 2 or x.shape[1] != self.F.shape[1] or not np.all(np.isfinite(x)):
             raise ValueError(f"controller states must be (B, {self.F.shape[1]}) finite values")
-        e = self.error(x, ref)
+        e = self.error(x, ref, q_ref)
         return (ref.u_r + ref.u_n) + mv(self.tau_F, e), e
 
 
@@ -115,10 +127,46 @@ class TubeMPCLaw(PaperTubeMPCLaw):
     Same ancillary law u = u_r + u_n + tau F (x - x_r - x_n); the nominal part is
     :class:`fahv.control.nominal_mpc.TrackingMPCNominal` (offline it re-checks the
     terminal ingredients against the tightened limits u_lo, u_hi of eq. 30).
+
+    The error's pitch rate is formed through the notch when the notch is on: the q of
+    the measured states is q' (the notch_filter node), and the nominal's q (x_r + x_n)
+    goes through a replica of the same filter, both from rest, so that
+
+        e'_q = notch(q) - notch(q_r + q_n) = notch(q - q_r - q_n),
+
+    the loop the notch certificate covers (:func:`fahv.design.certificate.notch_tube`,
+    xi = [e; chi]). Without the replica, e'_q would also carry (notch - 1)(q_r + q_n), a
+    term of the nominal's manoeuvre neither W nor the filter's certificate holds
+    (docs/control_design.md, "The notch loop certified in its own states"). The 11-state
+    ECM design feeds back the filter's states itself and is left as it is.
+
+    Raises
+    ------
+    ParameterError
+        As :class:`PaperTubeMPCLaw`.
     """
 
     name = "tube_mpc"
     nominal = TrackingMPCNominal
+
+    def __init__(self, p: dict, n_runs: int = 1) -> None:
+        super().__init__(p, n_runs)
+        self.q_filter = None
+        if p["notch.enabled"] and p["F"].shape[1] == 9:
+            nf = NotchFilter(*(p[f"notch.{k}"] for k in ("omega_z", "eps_z", "omega_p", "eps_p")))
+            self.q_filter = DiscreteNotch(nf, p["Ts"], np.zeros(n_runs))
+
+    def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
+        """Commands and tube status of step k (see :meth:`ControlLaw.step`).
+
+        With the notch on (9-state design), the error's q is q' less the filtered
+        nominal q (class docstring).
+        """
+        q_ref = None
+        if self.q_filter is not None:
+            q_ref = self.q_filter.step(ref.x_r[:, IQ] + ref.x_n[:, IQ])
+        u, e = self.tube.step(x, ref, q_ref)
+        return LawStep(u, e, self.tube.tube_level(e), no_lmi(e.shape[0]))
 
 
 register_law(PaperTubeMPCLaw)

@@ -754,8 +754,10 @@ class NotchLoop:
     The RPI certificate (LMI 24, the exact level) is for e+ = (A_i + B_i F) e + w: the
     gain acts on the measured q. A variant with the notch (eq. 38) on the q feedback
     runs u = F e' with q' = notch(q) in e', which adds the filter's two states to the
-    loop. This is the loop's stability at every vertex with the filter in it: a
-    *necessary* condition for any tube to hold, not an RPI certificate of that loop.
+    loop. Always: the loop's stability at every vertex with the filter in it, a
+    *necessary* condition for any tube to hold (:func:`notch_loop`). With
+    :func:`notch_tube` (or :func:`notch_certificate`): an RPI certificate of that loop in
+    its own states, ``s``, ``level`` and ``supports`` below.
 
     Attributes
     ----------
@@ -844,8 +846,15 @@ class NotchLoop:
         )  # fmt: skip
 
     def summary(self) -> dict:
-        """JSON-ready record (the attributes, ``stable`` and ``certified``)."""
-        return {**self.__dict__, "stable": self.stable, "certified": self.certified}
+        """JSON-ready record: the attributes, ``stable``, ``certified`` and ``ellipsoid``.
+
+        ``ellipsoid`` says whether one was sought and found ("not sought", "infeasible",
+        "found"); ``s`` is None unless one was found (strict JSON has no inf).
+        """
+        found = self.s is not None and np.isfinite(self.s)
+        state = "found" if found else ("not sought" if self.s is None else "infeasible")
+        return {**self.__dict__, "s": self.s if found else None, "ellipsoid": state,
+                "stable": self.stable, "certified": self.certified}  # fmt: skip
 
 
 def notch_closed_loop(A, B, F, notch, Ts: float, iq: int) -> tuple[np.ndarray, np.ndarray]:
@@ -925,13 +934,19 @@ def notch_loop(A, B, F, notch, Ts: float, iq: int, variant: str = "") -> NotchLo
     ValueError
         If the shapes disagree or ``iq`` is out of range.
     """
-    Acl, _ = notch_closed_loop(A, B, F, notch, Ts, iq)
+    return _notch_loop(A, B, F, notch, Ts, iq, variant)[0]
+
+
+def _notch_loop(A, B, F, notch, Ts, iq, variant):
+    """:func:`notch_loop` with the loop's A_xi and K of :func:`notch_closed_loop`."""
+    Acl, K = notch_closed_loop(A, B, F, notch, Ts, iq)
     A, B, F = (np.asarray(v, float) for v in (A, B, F))
     rho = np.abs(np.linalg.eigvals(Acl)).max(axis=1)
     rho_q = np.abs(np.linalg.eigvals(A + B @ F)).max(axis=1)
     k = int(np.argmax(rho))
-    return NotchLoop(variant, float(notch.omega_z), float(notch.eps_p), float(rho[k]),
+    loop = NotchLoop(variant, float(notch.omega_z), float(notch.eps_p), float(rho[k]),
                      float(rho_q.max()), k)  # fmt: skip
+    return loop, Acl, K
 
 
 def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
@@ -949,10 +964,10 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
     assumption W was bounded under (e in Z, the applied input within the tightening)
     holds with the filter in the loop (:attr:`NotchLoop.certified`).
 
-    This is the loop the law runs only if the error's q is formed with the same filter
-    on the nominal's q as well (q' - q_n' = notch(q - q_n)). The law ``tube_mpc`` filters
-    the measured q alone, so its error also carries (notch - 1) q_n, a term of the
-    nominal's manoeuvre that this certificate does not cover.
+    This is the loop the law runs because its error's q is formed with the same filter
+    on the nominal's q as well, q' - notch(q_r + q_n) = notch(q - q_r - q_n)
+    (:class:`fahv.control.tube_mpc.TubeMPCLaw`); with the measured q filtered alone the
+    error would also carry (notch - 1)(q_r + q_n), which this certificate does not cover.
 
     Parameters
     ----------
@@ -989,12 +1004,11 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
     DesignError
         If the solver's ellipsoid fails the re-check of its LMI blocks.
     """
-    loop = notch_loop(A, B, F, notch, Ts, iq, variant)
+    loop, Acl, K = _notch_loop(A, B, F, notch, Ts, iq, variant)
     F, N = np.asarray(F, float), np.asarray(N, float)
     tightening = tuple(np.sqrt(np.einsum("ij,jk,ik->i", F, N, F)).tolist())
     if not loop.stable:
         return replace(loop, tightening=tightening)
-    Acl, K = notch_closed_loop(A, B, F, notch, Ts, iq)
     dn = DiscreteNotch(notch, Ts)
     z = np.sqrt(np.diag(N))
     gain = np.abs(np.linalg.solve(np.eye(2) - dn.A_d, dn.A_d @ dn.B_d + dn.B_d))
@@ -1004,7 +1018,7 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
                               lambda P: vertex_levels(Acl, P, w_xi), lam, active)  # fmt: skip
     if ell is None:
         return replace(loop, s=float("inf"), tightening=tightening)
-    return notch_certificate(A, B, F, N, w_max, notch, Ts, iq, ell.P, variant)
+    return _recheck(loop, Acl, K, F, N, w_max, ell.P)
 
 
 def notch_certificate(A, B, F, N, w_max, notch, Ts: float, iq: int, P,
@@ -1027,12 +1041,16 @@ def notch_certificate(A, B, F, N, w_max, notch, Ts: float, iq: int, P,
     ValueError
         On inconsistent shapes (P included).
     """
-    loop = notch_loop(A, B, F, notch, Ts, iq, variant)
+    loop, Acl, K = _notch_loop(A, B, F, notch, Ts, iq, variant)
+    return _recheck(loop, Acl, K, F, N, w_max, P)
+
+
+def _recheck(loop, Acl, K, F, N, w_max, P) -> NotchLoop:
+    """The exact re-check of :func:`notch_certificate` on a built loop (A_xi, K)."""
     F, N, P = (np.asarray(v, float) for v in (F, N, P))
     n = N.shape[0]
     if P.shape != (n + 2, n + 2):
         raise ValueError(f"notch_certificate: P has shape {P.shape}, expected {(n + 2, n + 2)}")
-    Acl, K = notch_closed_loop(A, B, F, notch, Ts, iq)
     level = float(vertex_levels(Acl, P, np.r_[np.asarray(w_max, float), 0.0, 0.0]).max())
     Li = np.linalg.inv(np.linalg.cholesky(N))
     s = float(np.sqrt(np.linalg.eigvalsh(Li @ P[:n, :n] @ Li.T).max()))

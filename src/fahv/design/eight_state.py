@@ -48,7 +48,7 @@ from fahv.design.along_nominal import (
     nominal_vertices,
     onset_jumps,
 )
-from fahv.design.certificate import NotchLoop, notch_loop, worst_level
+from fahv.design.certificate import NotchLoop, notch_tube, worst_level
 from fahv.errors import DesignError
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.synthesis.feedback import design_tube
@@ -96,9 +96,8 @@ class EightStatePair:
     onset : OnsetBound, optional
         The onset of a loss as a transient of the pair (:func:`onset_bound`).
     notch_loops : tuple of NotchLoop
-        The tube variants that feed q through a notch, their loops at the pair's
-        vertices (:func:`fahv.design.certificate.notch_loop`); the RPI certificate is
-        for the feedback on the measured q.
+        The tube variants that feed q through a notch, their loops certified in their
+        own states at the pair's vertices (:func:`fahv.design.certificate.notch_tube`).
     """
 
     F8: np.ndarray
@@ -791,7 +790,8 @@ def design_pair(
         as a transient of the pair (:func:`onset_bound`, ``pair.onset``).
     notches : dict, optional
         ``{variant: NotchFilter}``: the tube variants that feed q through a notch; their
-        loops are checked at the pair's vertices (:func:`fahv.design.certificate.notch_loop`,
+        loops are certified in their own states at the pair's vertices
+        (:func:`fahv.design.certificate.notch_tube`, a few minutes each;
         ``pair.notch_loops``).
     **estimate
         ``gamma_e``, ``directions``, ``projection_scale`` of :func:`onset_bound` (the
@@ -838,7 +838,8 @@ def design_pair(
     if notches:
         A, B = nv.vertices()
         iq = EIGHT_STATES.index("q")
-        loops = tuple(notch_loop(A[:, 1:, 1:], B[:, 1:, :], pair.F8, nf, case["Ts"], iq, v)
+        loops = tuple(notch_tube(A[:, 1:, 1:], B[:, 1:, :], pair.F8, pair.N8, pair.W8, nf,
+                                 case["Ts"], iq, pair.lam, v)
                       for v, nf in notches.items())  # fmt: skip
         pair = replace(pair, notch_loops=loops)
     return pair, nominal, box

@@ -22,7 +22,7 @@ from fahv.control import LAWS, VARIANTS, variant_notch
 from fahv.control.nominal_mpc import attitude_bounds, estimator_gains
 from fahv.design.artefacts import Design, provenance
 from fahv.design.case import Case
-from fahv.design.certificate import certify_tube, notch_loop
+from fahv.design.certificate import certify_tube, notch_tube
 from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
 from fahv.design.eight_state import design_pair, input_rows, pair_report
 from fahv.design.feasibility import box_coverage, fault_vertices, gain_vertices, input_room
@@ -218,7 +218,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             log(line)
         F, N, tightening = pair.F, pair.N, pair.tightening
     else:
-        notch_loops = [notch_loop(Af, Bf, tau * F, nf, Ts, IQ, v) for v, nf in notches.items()]
+        notch_loops = [notch_tube(Af, Bf, tau * F, tau**2 * N, W.w_max, nf, Ts, IQ, tube.lam, v)
+                       for v, nf in notches.items()]  # fmt: skip
         for loop in notch_loops:
             log(loop.line())
     u_n_max = room - tau * tightening

@@ -63,6 +63,7 @@ def specs() -> dict[str, tuple[Field, ...]]:
               lo_open=True, equation="eq. (54)"),
         _matrix("F", "robust feedback gain F (2, n) (LMI 24)"),
         _matrix("N", "tube shape Z = {e: e' N^-1 e <= 1} (n, n) (eq. 25-28)"),
+        *_prefixed(NOTCH, "notch."),  # the notch on q, replicated on the nominal's q
         *(f for _, cls in LAWS.items() for f in cls.parameters),
     )  # fmt: skip
     out = {
@@ -257,7 +258,8 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     tau = float(c["tube"]["tau"]) if law.has_tube else 1.0
     fault = {"kind": f["kind"], "t_onset": float(f["t_onset"])}
     fault.update({p.name: f[p.name] for p in FAULTS[f["kind"]].parameters})
-    controller = {**common, "law": law.name, "tau": tau, **mat("F"), **mat("N")}
+    notch_values = {f"notch.{k}": val for k, val in {"enabled": enabled, **notch}.items()}
+    controller = {**common, "law": law.name, "tau": tau, **mat("F"), **mat("N"), **notch_values}
     for name, value in law.node_values(a, c).items():
         controller.update(flat_parameter(name, value))
     return {
@@ -278,7 +280,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
             "nominal": law.nominal.name,
             "level_max": float(c["nominal"]["level_max"]),
             **{k: _plain(v) for k, v in law.nominal.node_values(a, c).items()},
-            **{f"notch.{k}": val for k, val in {"enabled": enabled, **notch}.items()},
+            **notch_values,
             **mat("u_lo"),
             **mat("u_hi"),
             **mat("Dx"),
