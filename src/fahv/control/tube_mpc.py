@@ -148,6 +148,7 @@ class TubeMPCLaw(PaperTubeMPCLaw):
 
     name = "tube_mpc"
     nominal = TrackingMPCNominal
+    filters_nominal_q = True
 
     def __init__(self, p: dict, n_runs: int = 1) -> None:
         super().__init__(p, n_runs)

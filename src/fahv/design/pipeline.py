@@ -22,7 +22,7 @@ from fahv.control import LAWS, VARIANTS, variant_notch
 from fahv.control.nominal_mpc import attitude_bounds, estimator_gains
 from fahv.design.artefacts import Design, provenance
 from fahv.design.case import Case
-from fahv.design.certificate import certify_tube, notch_tube
+from fahv.design.certificate import certify_tube, notch_loop, notch_tube
 from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
 from fahv.design.eight_state import design_pair, input_rows, pair_report
 from fahv.design.feasibility import box_coverage, fault_vertices, gain_vertices, input_room
@@ -200,7 +200,14 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     x_end, _ = tm(cmd["h_c"], cmd["V_c"])
     F, N, tightening, pair = tube.F, tube.N, tube.tightening, None
     notches = tube_notches(c, omega_flex) if kind != "ecm" else {}  # ECM: the filter is modelled
-    notch_loops = []
+    # a law that filters the measured q alone runs a loop no certificate covers: only its
+    # stability is checked (notch_loop); the others are certified (notch_tube)
+    stable_only = {
+        v: nf for v, nf in notches.items() if not LAWS[VARIANTS[v].law].filters_nominal_q
+    }
+    notches = {v: nf for v, nf in notches.items() if v not in stable_only}
+    notch_loops = [notch_loop(Af, Bf, tau * tube.F, nf, Ts, IQ, v)
+                   for v, nf in stable_only.items()]  # fmt: skip
     if c["tube"]["form"] == "eight_state":  # the law runs on the eight-state tube
         cols = np.concatenate([tube.z_box, tube.tightening])  # the directions' column scale
         # the case check asks for an estimate; its gain along the elevator column, if any
@@ -218,10 +225,10 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             log(line)
         F, N, tightening = pair.F, pair.N, pair.tightening
     else:
-        notch_loops = [notch_tube(Af, Bf, tau * F, tau**2 * N, W.w_max, nf, Ts, IQ, tube.lam, v)
-                       for v, nf in notches.items()]  # fmt: skip
-        for loop in notch_loops:
-            log(loop.line())
+        notch_loops += [notch_tube(Af, Bf, tau * F, tau**2 * N, W.w_max, nf, Ts, IQ, tube.lam, v)
+                        for v, nf in notches.items()]  # fmt: skip
+    for loop in notch_loops:
+        log(loop.line())
     u_n_max = room - tau * tightening
     log(
         f"tightened inputs (eq. 30{', 53 with tau = ' + str(tau) if tau < 1 else ''}): "
