@@ -1,4 +1,5 @@
-"""The law ``tube_mpc`` forms its error's q through the notch: e'_q = notch(q - q_r - q_n).
+"""The law ``tube_mpc`` forms its error's q through the notch: e'_q = notch(q - q_r - q_n)
+(case key ``tube.filter_nominal_q``; without it the paper's q' - q_r - q_n).
 
 The notch_filter node filters the measured q; the law filters the nominal's q with a
 replica of the same filter, so that the error is the one the notch certificate covers
@@ -19,19 +20,21 @@ NOTCH = {"omega_z": 19.05, "eps_z": 0.02, "omega_p": 19.05, "eps_p": 0.1}
 TS, B, STEPS = 0.02, 3, 400
 
 
-def _params(enabled: bool) -> dict:
+def _params(enabled: bool, filtered: bool = True) -> dict:
     rng = np.random.default_rng(1)
     return {
         "Ts": TS, "law": "tube_mpc", "tau": 1.0,
         "F": rng.normal(size=(2, 9)), "N": np.diag(rng.uniform(0.5, 2.0, 9)),
         "notch.enabled": enabled, **{f"notch.{k}": v for k, v in NOTCH.items()},
+        "filter_nominal_q": filtered,
     }  # fmt: skip
 
 
-def _errors(enabled: bool):
-    """Errors of the law and the filter on q - q_r - q_n, over STEPS steps."""
+def _errors(enabled: bool, filtered: bool = True):
+    """Errors of the law and the expected ones, over STEPS steps: the filter on
+    q - q_r - q_n (``filtered``) or q' - q_r - q_n (the paper's error)."""
     rng = np.random.default_rng(2)
-    law = TubeMPCLaw(_params(enabled), n_runs=B)
+    law = TubeMPCLaw(_params(enabled, filtered), n_runs=B)
     nf = NotchFilter(*NOTCH.values())
     measured, difference = DiscreteNotch(nf, TS, np.zeros(B)), DiscreteNotch(nf, TS, np.zeros(B))
     out = []
@@ -45,14 +48,19 @@ def _errors(enabled: bool):
         step = law.step(k, x, ref, None)
         want = x - x_r - x_n
         dq = q - x_r[:, IQ] - x_n[:, IQ]
-        want[:, IQ] = difference.step(dq) if enabled else dq
+        if enabled and filtered:
+            want[:, IQ] = difference.step(dq)
+        elif enabled:
+            want[:, IQ] = x[:, IQ] - x_r[:, IQ] - x_n[:, IQ]  # q' less the raw nominal q
+        else:
+            want[:, IQ] = dq
         out.append((step.e, want))
     return out
 
 
-@pytest.mark.parametrize("enabled", [True, False])
-def test_the_error_is_the_filtered_difference(enabled):
-    for e, want in _errors(enabled):
+@pytest.mark.parametrize("enabled, filtered", [(True, True), (False, True), (True, False)])
+def test_the_error_is_the_filtered_difference(enabled, filtered):
+    for e, want in _errors(enabled, filtered):
         np.testing.assert_allclose(e, want, rtol=0.0, atol=1e-12)
 
 

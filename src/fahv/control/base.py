@@ -170,9 +170,10 @@ class ControlLaw:
     nominal: ClassVar[type[NominalSource]]
     #: False for a law without a tube (its tau is 1 and its tube level NaN).
     has_tube: ClassVar[bool] = True
-    #: True if the law forms its error's q through the notch (the nominal's q through a
-    #: replica of the filter), so that the design may certify the loop through the notch
-    #: (:func:`fahv.design.certificate.notch_tube`); False: the measured q alone is
+    #: True if the law can form its error's q through the notch (the nominal's q through
+    #: a replica of the filter, with the case key ``tube.filter_nominal_q``), so that the
+    #: design may certify the loop through the notch
+    #: (:func:`fahv.design.certificate.notch_tube`); otherwise the measured q alone is
     #: filtered and only the loop's stability is checked.
     filters_nominal_q: ClassVar[bool] = False
     #: Case-file section the law needs (required only when a variant uses the law).

@@ -128,7 +128,8 @@ class TubeMPCLaw(PaperTubeMPCLaw):
     :class:`fahv.control.nominal_mpc.TrackingMPCNominal` (offline it re-checks the
     terminal ingredients against the tightened limits u_lo, u_hi of eq. 30).
 
-    The error's pitch rate is formed through the notch when the notch is on: the q of
+    With ``filter_nominal_q`` (case key ``tube.filter_nominal_q``) the error's pitch
+    rate is formed through the notch when the notch is on: the q of
     the measured states is q' (the notch_filter node), and the nominal's q (x_r + x_n)
     goes through a replica of the same filter, both from rest, so that
 
@@ -153,15 +154,15 @@ class TubeMPCLaw(PaperTubeMPCLaw):
     def __init__(self, p: dict, n_runs: int = 1) -> None:
         super().__init__(p, n_runs)
         self.q_filter = None
-        if p["notch.enabled"] and p["F"].shape[1] == 9:
+        if p["filter_nominal_q"] and p["notch.enabled"] and p["F"].shape[1] == 9:
             nf = NotchFilter(*(p[f"notch.{k}"] for k in ("omega_z", "eps_z", "omega_p", "eps_p")))
             self.q_filter = DiscreteNotch(nf, p["Ts"], np.zeros(n_runs))
 
     def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
         """Commands and tube status of step k (see :meth:`ControlLaw.step`).
 
-        With the notch on (9-state design), the error's q is q' less the filtered
-        nominal q (class docstring).
+        With ``filter_nominal_q`` and the notch on (9-state design), the error's q is q'
+        less the filtered nominal q (class docstring).
         """
         q_ref = None
         if self.q_filter is not None:

@@ -207,6 +207,11 @@ def case_spec() -> Section:
                       "nominal's altitude reset, W_8 bounded over its own domain "
                       "(section eight_state; docs/control_design.md)",
                       choices=TUBE_FORMS, default="vertices", equation="LMI (24)"),
+                Field("filter_nominal_q", "bool", "law tube_mpc with the notch on: the "
+                      "error's q is q' - notch(q_r + q_n) = notch(q - q_r - q_n), the loop "
+                      "the design certifies in its own states (true), or q' - q_r - q_n as "
+                      "in the paper (false: only the loop's stability is checked)",
+                      default=False, equation="eq. (36), (38)"),
             ), "tube: F and Z"),
             Section("eight_state", EIGHT_STATE, "the eight-state tube along the nominal "
                     "(tube.form eight_state): its vertices, nominal box and closure",

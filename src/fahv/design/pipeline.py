@@ -202,8 +202,11 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     notches = tube_notches(c, omega_flex) if kind != "ecm" else {}  # ECM: the filter is modelled
     # a law that filters the measured q alone runs a loop no certificate covers: only its
     # stability is checked (notch_loop); the others are certified (notch_tube)
+    filtered = c["tube"]["filter_nominal_q"]
     stable_only = {
-        v: nf for v, nf in notches.items() if not LAWS[VARIANTS[v].law].filters_nominal_q
+        v: nf
+        for v, nf in notches.items()
+        if not (filtered and LAWS[VARIANTS[v].law].filters_nominal_q)
     }
     notches = {v: nf for v, nf in notches.items() if v not in stable_only}
     notch_loops = [notch_loop(Af, Bf, tau * tube.F, nf, Ts, IQ, v)

@@ -64,6 +64,9 @@ def specs() -> dict[str, tuple[Field, ...]]:
         _matrix("F", "robust feedback gain F (2, n) (LMI 24)"),
         _matrix("N", "tube shape Z = {e: e' N^-1 e <= 1} (n, n) (eq. 25-28)"),
         *_prefixed(NOTCH, "notch."),  # the notch on q, replicated on the nominal's q
+        Field("filter_nominal_q", "bool", "the error's q through the notch: the nominal's q "
+              "through a replica of the filter (case key tube.filter_nominal_q)",
+              default=False),
         *(f for _, cls in LAWS.items() for f in cls.parameters),
     )  # fmt: skip
     out = {
@@ -259,7 +262,15 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     fault = {"kind": f["kind"], "t_onset": float(f["t_onset"])}
     fault.update({p.name: f[p.name] for p in FAULTS[f["kind"]].parameters})
     notch_values = {f"notch.{k}": val for k, val in {"enabled": enabled, **notch}.items()}
-    controller = {**common, "law": law.name, "tau": tau, **mat("F"), **mat("N"), **notch_values}
+    controller = {
+        **common,
+        "law": law.name,
+        "tau": tau,
+        **mat("F"),
+        **mat("N"),
+        **notch_values,
+        "filter_nominal_q": bool(c["tube"]["filter_nominal_q"]),
+    }
     for name, value in law.node_values(a, c).items():
         controller.update(flat_parameter(name, value))
     return {
