@@ -61,9 +61,10 @@ class TubeMPC:
         With ``q_ref`` (B,) [rad/s], the reference pitch rate that the error's q is taken
         from in place of q_r + q_n (the filtered nominal q of :class:`TubeMPCLaw`).
         """
-        e = np.asarray(x, float) - ref.x_r - ref.x_n
+        x = np.asarray(x, float)
+        e = x - ref.x_r - ref.x_n
         if q_ref is not None:
-            e[:, IQ] = np.asarray(x, float)[:, IQ] - q_ref
+            e[:, IQ] = x[:, IQ] - q_ref
         return np.ascontiguousarray(e)
 
     def tube_level(self, e: np.ndarray) -> np.ndarray:

@@ -48,7 +48,7 @@ from fahv.design.along_nominal import (
     nominal_vertices,
     onset_jumps,
 )
-from fahv.design.certificate import NotchLoop, notch_tube, worst_level
+from fahv.design.certificate import NotchLoop, notch_loop, notch_tube, worst_level
 from fahv.errors import DesignError
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.synthesis.feedback import design_tube
@@ -761,6 +761,7 @@ def design_pair(
     log: Callable[[str], None] = print,
     gamma: float | None = None,
     notches=None,
+    stable_only=None,
     **estimate,
 ) -> tuple[EightStatePair, SchedulingBox, SchedulingBox]:
     """The eight-state tube of a case (``tube.form: eight_state``), closed and checked.
@@ -793,6 +794,10 @@ def design_pair(
         loops are certified in their own states at the pair's vertices
         (:func:`fahv.design.certificate.notch_tube`, a few minutes each;
         ``pair.notch_loops``).
+    stable_only : dict, optional
+        ``{variant: NotchFilter}``: notch variants whose error filters the measured q
+        alone; their loops with F_8 are checked for stability only
+        (:func:`fahv.design.certificate.notch_loop`, also in ``pair.notch_loops``).
     **estimate
         ``gamma_e``, ``directions``, ``projection_scale`` of :func:`onset_bound` (the
         estimate's gain along the elevator column).
@@ -835,12 +840,14 @@ def design_pair(
         onset = onset_bound(nv, pair, vehicle, trim_map, unc, gamma, case["Ts"],
                             case["plant_substeps"], **estimate)  # fmt: skip
         pair = replace(pair, onset=onset)
-    if notches:
+    if notches or stable_only:
         A, B = nv.vertices()
-        iq = EIGHT_STATES.index("q")
-        loops = tuple(notch_tube(A[:, 1:, 1:], B[:, 1:, :], pair.F8, pair.N8, pair.W8, nf,
-                                 case["Ts"], iq, pair.lam, v)
-                      for v, nf in notches.items())  # fmt: skip
+        A8, B8, iq = A[:, 1:, 1:], B[:, 1:, :], EIGHT_STATES.index("q")
+        loops = tuple(notch_loop(A8, B8, pair.F8, nf, case["Ts"], iq, v)
+                      for v, nf in (stable_only or {}).items())  # fmt: skip
+        loops += tuple(notch_tube(A8, B8, pair.F8, pair.N8, pair.W8, nf, case["Ts"], iq,
+                                  pair.lam, v)
+                       for v, nf in (notches or {}).items())  # fmt: skip
         pair = replace(pair, notch_loops=loops)
     return pair, nominal, box
 

@@ -209,8 +209,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         if not (filtered and LAWS[VARIANTS[v].law].filters_nominal_q)
     }
     notches = {v: nf for v, nf in notches.items() if v not in stable_only}
-    notch_loops = [notch_loop(Af, Bf, tau * tube.F, nf, Ts, IQ, v)
-                   for v, nf in stable_only.items()]  # fmt: skip
+    notch_loops = []
     if c["tube"]["form"] == "eight_state":  # the law runs on the eight-state tube
         cols = np.concatenate([tube.z_box, tube.tightening])  # the directions' column scale
         # the case check asks for an estimate; its gain along the elevator column, if any
@@ -222,16 +221,17 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         )
         pair, es_nominal, es_box = design_pair(
             c, veh, tm, np.concatenate([Dx, Du]), W.w_max, cols, rho_f, room_f, log,
-            gamma=gamma, notches=notches, **estimate,
+            gamma=gamma, notches=notches, stable_only=stable_only, **estimate,
         )  # fmt: skip
         for line in pair_report(pair, es_nominal, es_box):
             log(line)
         F, N, tightening = pair.F, pair.N, pair.tightening
     else:
+        notch_loops = [notch_loop(Af, Bf, tau * F, nf, Ts, IQ, v) for v, nf in stable_only.items()]
         notch_loops += [notch_tube(Af, Bf, tau * F, tau**2 * N, W.w_max, nf, Ts, IQ, tube.lam, v)
                         for v, nf in notches.items()]  # fmt: skip
-    for loop in notch_loops:
-        log(loop.line())
+        for loop in notch_loops:
+            log(loop.line())
     u_n_max = room - tau * tightening
     log(
         f"tightened inputs (eq. 30{', 53 with tau = ' + str(tau) if tau < 1 else ''}): "

@@ -542,7 +542,7 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
         blk = _invariance_blocks(As[i : i + 1] @ Pv, lam, muv[r], Pv, E)[0]
         require_psd(blk, f"RPI LMI of the fixed loop at vertex {i}", rtol=1e-6)
     if np.any(muv.sum(axis=1) > (1.0 - lam) * (1 + 1e-9)):
-        raise DesignError("certificate failed: sum mu w^2 of the fixed loop > 1 - lam")
+        raise DesignError("certificate failed: sum mu of the fixed loop > 1 - lam (W: unit box)")
     L = np.linalg.cholesky(Ss)
     Li = np.linalg.inv(L)
     s = float(np.sqrt(np.linalg.eigvalsh(Li @ Pv[:p, :p] @ Li.T).max()))
