@@ -63,3 +63,32 @@ def test_simulate_all_prints_a_progress_line_per_variant(quick_case, tmp_path, c
                            "tube_mpc_paper", "rmpc"]  # fmt: skip
     for i, v in enumerate(table, 1):
         assert f"[{i}/5] case1_vertex {v}: done in" in out.err
+
+
+def test_a_stop_at_the_end_of_a_steps_last_write_reports_the_files_count(
+    design, tmp_path, monkeypatch
+):
+    """A stop deferred to the end of a write (fahv.interrupt) is raised after the file
+    counted the step but before the progress bar did: the message's step count is the
+    finalised file's (the race CI once hit: file 3944, message 3943)."""
+    import pytest
+
+    from fahv.cli import run as run_cli
+    from fahv.errors import RunInterrupted
+    from fahv.runs.bag import RunWriter, read_run
+
+    real = RunWriter.write_raw
+    last = run_cli.StepProgress.LAST_TOPIC
+
+    def write_raw(self, topic, k, data):
+        real(self, topic, k, data)
+        if topic == last and k == 6:  # step 6 is in the file, then the stop arrives
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(RunWriter, "write_raw", write_raw)
+    with pytest.raises(RunInterrupted) as info:
+        run_cli._simulate_recorded(design, "tube_mpc", 1.0, tmp_path)
+    assert info.value.step == 7
+    rec = read_run(info.value.run)
+    assert rec.metadata["status"] == "interrupted"
+    assert int(rec.metadata["steps_recorded"]) == 7

@@ -110,7 +110,11 @@ def _simulate_recorded(design, variant: str, duration, out_dir, live=None):
             progress.writer = writer
             run = simulate(design, variant, duration, writer=progress)
     except KeyboardInterrupt:
-        raise RunInterrupted(progress.k, n_steps, bag) from None
+        # The finalised file's count, not the bar's: a stop deferred to the end of a
+        # write is raised after the file counted that step but before the bar did.
+        w = progress.writer
+        k = progress.k if w is None else int(w.metadata.get("steps_recorded", progress.k))
+        raise RunInterrupted(k, n_steps, bag) from None
     finally:
         progress.close()
     print(f"{desc}: run written to {bag}")
