@@ -195,3 +195,24 @@ def test_docs_key_table_is_the_declaration():
     text = (Path(__file__).resolve().parents[2] / "docs" / "configuration.md").read_text()
     table = text.split("<!-- case-keys -->\n")[1].split("\n<!-- /case-keys -->")[0]
     assert table == markdown(case_spec())
+
+
+def test_notch_variants_are_certified_only_where_the_law_filters_the_nominal_q():
+    """case1.yaml (tube.filter_nominal_q true): both notch variants of law tube_mpc are
+    certified in the loop's own states; the paper's law, which filters the measured q
+    alone, only has its stability checked, whatever the key; with the key false (the
+    paper's vertex case) every notch variant is checked for stability only."""
+    from fahv.design.pipeline import notch_checks, tube_notches
+
+    case = load_case("offline_design/case1.yaml")
+    c = copy.deepcopy(dict(case.data))
+    c["variants"] = [*c["variants"], "tube_mpc_paper"]
+    notches = tube_notches(c, (19.05, 49.0))
+    assert list(notches) == ["tube_mpc", "tube_mpc_notch2", "tube_mpc_paper"]
+    assert notches["tube_mpc_notch2"].omega_z == pytest.approx(49.0, abs=1e-12)
+    certified, stable_only = notch_checks(c, notches)
+    assert list(certified) == ["tube_mpc", "tube_mpc_notch2"]
+    assert list(stable_only) == ["tube_mpc_paper"]
+    c["tube"] = {**c["tube"], "filter_nominal_q": False}
+    certified, stable_only = notch_checks(c, notches)
+    assert certified == {} and list(stable_only) == list(notches)

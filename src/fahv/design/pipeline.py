@@ -64,6 +64,35 @@ def tube_notches(c: dict, omega_flex) -> dict[str, NotchFilter]:
     return out
 
 
+def notch_checks(c: dict, notches: dict) -> tuple[dict, dict]:
+    """Split the tube's notch variants into those certified and those checked for stability.
+
+    A law that forms its error's q with the same filter on the nominal's q as on the
+    measured one (``LAWS[law].filters_nominal_q`` with the case key
+    ``tube.filter_nominal_q`` true) runs the loop :func:`fahv.design.certificate.notch_tube`
+    certifies in its own states, [e; chi]. Any other notch variant filters the measured q
+    alone: its error also carries (notch - 1)(q_r + q_n), which no certificate covers, so
+    only its stability is checked (:func:`fahv.design.certificate.notch_loop`).
+
+    Parameters
+    ----------
+    c : dict
+        Validated case data (``tube.filter_nominal_q``).
+    notches : dict
+        ``{variant: NotchFilter}`` (:func:`tube_notches`).
+
+    Returns
+    -------
+    certified, stable_only : dict, dict
+        The two parts of ``notches``, in its order.
+    """
+    filtered = bool(c["tube"]["filter_nominal_q"])
+    certified = {
+        v: nf for v, nf in notches.items() if filtered and LAWS[VARIANTS[v].law].filters_nominal_q
+    }
+    return certified, {v: nf for v, nf in notches.items() if v not in certified}
+
+
 def _notch(case: Case) -> NotchFilter:
     n = case["notch"]
     return NotchFilter(n["omega_z"], n["eps_z"], n["omega_p"], n["eps_p"])
@@ -199,16 +228,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     x_start, _ = tm(cmd["h0"], cmd["V0"])
     x_end, _ = tm(cmd["h_c"], cmd["V_c"])
     F, N, tightening, pair = tube.F, tube.N, tube.tightening, None
-    notches = tube_notches(c, omega_flex) if kind != "ecm" else {}  # ECM: the filter is modelled
-    # a law that filters the measured q alone runs a loop no certificate covers: only its
-    # stability is checked (notch_loop); the others are certified (notch_tube)
-    filtered = c["tube"]["filter_nominal_q"]
-    stable_only = {
-        v: nf
-        for v, nf in notches.items()
-        if not (filtered and LAWS[VARIANTS[v].law].filters_nominal_q)
-    }
-    notches = {v: nf for v, nf in notches.items() if v not in stable_only}
+    # ECM: the filter is modelled; otherwise certified (notch_tube) or stability (notch_loop)
+    notches, stable_only = notch_checks(c, tube_notches(c, omega_flex) if kind != "ecm" else {})
     notch_loops = []
     if c["tube"]["form"] == "eight_state":  # the law runs on the eight-state tube
         cols = np.concatenate([tube.z_box, tube.tightening])  # the directions' column scale
