@@ -87,6 +87,7 @@ def sample_disturbance(
     progress=None,
     notch=None,
     constant: str = "bounded",
+    states=None,
 ) -> DisturbanceSet:
     """Bound W by sampling, eq. (13)-(19).
 
@@ -121,6 +122,10 @@ def sample_disturbance(
     constant : {"bounded", "estimated"}
         Whether W keeps the constant part Delta_0 of the parameter error (module
         docstring) or leaves it to an online estimate.
+    states : callable, optional
+        ``states(rng) -> (n,)``: draws a state deviation x (unscaled) in place of the
+        uniform draw in ``dev_box`` (which then only sets the length check), e.g. on
+        an ellipsoid for a study of the tube's domain.
 
     Returns
     -------
@@ -156,7 +161,7 @@ def sample_disturbance(
         Vc = rng.uniform(env.V_min, env.V_max)
         tr = trim(vehicle, hc, Vc)
         x_r = tr.x_r_ecm if kind == "ecm" else tr.x_r
-        x = rng.uniform(-1, 1, n) * dev_box
+        x = rng.uniform(-1, 1, n) * dev_box if states is None else np.asarray(states(rng), float)
         xs = x_r + x
         # keep the scheduling point inside the envelope
         xs[0] = np.clip(xs[0], env.h_min, env.h_max)
