@@ -16,10 +16,15 @@ gain is therefore free: this study searches it with P, by alternation, on the pa
   (A_cl(F) = A_0 + B_0 F T is affine in F: :func:`notch_closed_loop`'s structure);
 - the ellipsoid step: F fixed, :func:`fahv.synthesis.feedback.invariant_ellipsoid` at a
   lam just above the gain step's (the smallest s, constraint generation over all
-  vertices),
+  vertices; the input supports left free there, bounded in the gain step by the
+  larger of the tightening and the round's own),
 
 starting from a notch whose loop has an ellipsoid (eps_p 0.05, s 1.25) and raising eps_p
-towards the case's 0.1 once s <= 1. Every result is re-checked exactly
+towards the case's 0.1 once s <= 1. Measured on case1_attitude.yaml's pair with
+eps_p 0.05 (2026-11-25): s 1.2512, 1.2284, 1.2171 in the first three rounds (3-4 min
+each), far from 1; stopped there. (Minimising the multiple c of a fixed P instead, at a
+fixed lam, was infeasible at the ellipsoid's lam: its exact level <= 1 does not make the
+S-procedure hold at every vertex.) Every result is re-checked exactly
 (:func:`fahv.design.certificate.notch_certificate`). Not in the design: the altitude
 bound H, the onset bound and the nominal's terminal set use F_8, and would be redone.
 
@@ -116,7 +121,8 @@ def main(argv: list[str]) -> int:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 levels = lambda P, Acl=Acl, w=w_xi: vertex_levels(Acl, P, w)  # noqa: E731
-                ell = invariant_ellipsoid(Acl, W8, D, N8, K, tight, levels, lam)
+                # supports free here (the gain step bounds them): the smallest s
+                ell = invariant_ellipsoid(Acl, W8, D, N8, K, 100.0 * tight, levels, lam)
             if ell is None:
                 print(f"eps_p {eps_p} round {k}: no ellipsoid at lam {lam:.5f}", flush=True)
                 break
@@ -135,7 +141,9 @@ def main(argv: list[str]) -> int:
             chosen = np.union1d(np.argsort(-rho)[:30], np.argsort(-lev)[:30])
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                got = gain_step(A, B, F, ell.P, W8, tight, D, chosen, nf, case["Ts"])
+                # supports not above the design's tightening, nor above this round's
+                cap = np.maximum(tight, np.asarray(chk.supports))
+                got = gain_step(A, B, F, ell.P, W8, cap, D, chosen, nf, case["Ts"])
             if got is None:
                 print(f"eps_p {eps_p} round {k}: gain step infeasible", flush=True)
                 break
