@@ -67,3 +67,7 @@ def test_drawn_states_replace_the_box_and_scale_the_model_error(vehicle, tp_cm, 
     model = wset.parts["model"]
     assert np.all(at_trim.parts["model"][2:5] < model[2:5])  # alpha, theta, q
     assert np.all(wide.parts["model"][2:5] > model[2:5])
+    with pytest.raises(ValueError, match="the draw must be 9 finite values"):
+        run(lambda rng: 0.0)
+    with pytest.raises(ValueError, match="the draw must be 9 finite values"):
+        run(lambda rng: np.full(9, np.nan))

@@ -135,7 +135,8 @@ def sample_disturbance(
     Raises
     ------
     ValueError
-        If margin < 1, dev_box has the wrong length or ``constant`` is unknown.
+        If margin < 1, dev_box has the wrong length, ``constant`` is unknown or a
+        ``states`` draw is not n finite values.
     """
     if margin < 1.0:
         raise ValueError(f"disturbance margin must be >= 1, got {margin}")
@@ -162,6 +163,8 @@ def sample_disturbance(
         tr = trim(vehicle, hc, Vc)
         x_r = tr.x_r_ecm if kind == "ecm" else tr.x_r
         x = rng.uniform(-1, 1, n) * dev_box if states is None else np.asarray(states(rng), float)
+        if x.shape != (n,) or not np.all(np.isfinite(x)):
+            raise ValueError(f"disturbance states: the draw must be {n} finite values, got {x!r}")
         xs = x_r + x
         # keep the scheduling point inside the envelope
         xs[0] = np.clip(xs[0], env.h_min, env.h_max)
