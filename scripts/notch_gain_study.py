@@ -59,12 +59,9 @@ IQ = 3  # q in the eight states
 def gain_step(A, B, F, P, W, tight, D, chosen, notch, Ts):
     """The smallest lam over F at fixed P (scaled by D); (F, lam) or None."""
     R, n, _ = A.shape
-    Acl0, K0 = notch_closed_loop(A, B, np.zeros_like(F), notch, Ts, IQ)
-    # T: u = F T xi (K = F T); from the loop built with F = I-columns
-    dn = DiscreteNotch(notch, Ts)
-    S = np.eye(n)
-    S[IQ, IQ] = float(dn.C_q @ dn.B_d + dn.D_q)
-    T = np.hstack([S, np.outer(np.eye(n)[IQ], dn.C_q)])
+    Acl0, _ = notch_closed_loop(A, B, np.zeros_like(F), notch, Ts, IQ)
+    # u = F T xi: the loop's input map K = F T, with F the identity, is T
+    _, T = notch_closed_loop(A[:1], np.zeros((1, n, n)), np.eye(n), notch, Ts, IQ)
     nx = n + 2
     Ps = P / np.outer(D, D)
     As = Acl0 / D[None, :, None] * D[None, None, :]

@@ -46,14 +46,9 @@ def _errors(enabled: bool, filtered: bool = True):
             x[:, IQ] = measured.step(q)  # the notch_filter node's q'
         ref = SimpleNamespace(x_r=x_r, x_n=x_n, u_r=np.zeros((B, 2)), u_n=np.zeros((B, 2)))
         step = law.step(k, x, ref, None)
-        want = x - x_r - x_n
-        dq = q - x_r[:, IQ] - x_n[:, IQ]
+        want = x - x_r - x_n  # q' (q without the notch) less the raw nominal q: the paper's
         if enabled and filtered:
-            want[:, IQ] = difference.step(dq)
-        elif enabled:
-            want[:, IQ] = x[:, IQ] - x_r[:, IQ] - x_n[:, IQ]  # q' less the raw nominal q
-        else:
-            want[:, IQ] = dq
+            want[:, IQ] = difference.step(q - x_r[:, IQ] - x_n[:, IQ])
         out.append((step.e, want))
     return out
 
