@@ -36,10 +36,10 @@ from pathlib import Path
 import numpy as np
 
 from fahv.design.case import case_from_mapping
-from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
+from fahv.design.disturbance import DEFAULT_DU_BOX, deviation_box, sample_disturbance
 from fahv.model.notch import NotchFilter
 from fahv.model.tp_model import build_tp_model
-from fahv.model.vehicle import load_vehicle
+from fahv.model.vehicle import IQ, load_vehicle
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
 ROWS = ("h", "V", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot",
@@ -62,7 +62,7 @@ def main(argv: list[str]) -> int:
     r_h, r_V = case["vertices"]
     n_h, n_V = case["samples"]
     tp = build_tp_model(veh, "ecm", r_h, r_V, n_h, n_V, notch)
-    dev_w = np.concatenate([DEFAULT_DEV_BOX, 2.0 * notch.state_scale(tp.state_scale[4])])
+    dev_w = deviation_box(notch, tp.state_scale[IQ])
     L = np.linalg.cholesky(N)
 
     def in_z(rng):  # on Z's boundary or uniform inside it, alternately

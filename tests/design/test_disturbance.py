@@ -71,3 +71,22 @@ def test_drawn_states_replace_the_box_and_scale_the_model_error(vehicle, tp_cm, 
         run(lambda rng: 0.0)
     with pytest.raises(ValueError, match="the draw must be 9 finite values"):
         run(lambda rng: np.full(9, np.nan))
+
+
+def test_deviation_box_appends_the_notch_states_for_the_ecm_only():
+    from fahv.design.disturbance import deviation_box
+    from fahv.model.notch import NotchFilter
+
+    cm = deviation_box()
+    np.testing.assert_array_equal(cm, DEFAULT_DEV_BOX)
+    cm[0] = 0.0  # a copy: the module's box is untouched
+    assert DEFAULT_DEV_BOX[0] == 600.0
+    nf = NotchFilter(20.0, 0.0, 25.0, 0.5)
+    ecm = deviation_box(nf, 0.05)
+    assert ecm.shape == (11,)
+    np.testing.assert_array_equal(ecm[:9], DEFAULT_DEV_BOX)
+    # twice the filter's steady states for q = 0.05 rad/s: q / omega_p, q / omega_p^2
+    np.testing.assert_allclose(ecm[9:], [2 * 0.05 / 25.0, 2 * 0.05 / 625.0], rtol=1e-12)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="q_scale"):
+            deviation_box(nf, bad)

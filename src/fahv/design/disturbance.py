@@ -44,6 +44,38 @@ DEFAULT_DEV_BOX = np.array(
 DEFAULT_DU_BOX = np.array([0.1, np.radians(3.0)])
 
 
+def deviation_box(notch=None, q_scale: float = 1.0) -> np.ndarray:
+    """Half-widths of the state deviations :func:`sample_disturbance` draws for a model.
+
+    ``DEFAULT_DEV_BOX`` for the CM and DM (9 states). For the ECM (``notch`` given) the
+    notch filter's two states follow, at twice their steady size for a q of ``q_scale``
+    (:meth:`fahv.model.notch.NotchFilter.state_scale`).
+
+    Parameters
+    ----------
+    notch : fahv.model.notch.NotchFilter or None
+        The filter the ECM carries, or None for the CM / DM.
+    q_scale : float
+        Scale of q [rad/s] the filter's states are sized for (the TP model's state scale
+        of q).
+
+    Returns
+    -------
+    (9,) or (11,) ndarray
+        Deviation half-widths, units of x (h ft, V ft/s, angles rad, ...).
+
+    Raises
+    ------
+    ValueError
+        If ``q_scale`` is not a positive finite number.
+    """
+    if notch is None:
+        return DEFAULT_DEV_BOX.copy()
+    if not (np.isfinite(q_scale) and q_scale > 0.0):
+        raise ValueError(f"deviation_box: q_scale must be positive and finite, got {q_scale}")
+    return np.concatenate([DEFAULT_DEV_BOX, 2.0 * np.asarray(notch.state_scale(q_scale), float)])
+
+
 @dataclass(frozen=True)
 class DisturbanceSet:
     """Box W = {|Delta_j| <= w_max_j}, eq. (19), and its parts.

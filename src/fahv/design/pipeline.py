@@ -23,7 +23,12 @@ from fahv.control.nominal_mpc import attitude_bounds, estimator_gains
 from fahv.design.artefacts import Design, provenance
 from fahv.design.case import Case
 from fahv.design.certificate import certify_tube, notch_loop, notch_tube
-from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
+from fahv.design.disturbance import (
+    DEFAULT_DEV_BOX,
+    DEFAULT_DU_BOX,
+    deviation_box,
+    sample_disturbance,
+)
 from fahv.design.eight_state import design_pair, input_rows, pair_report
 from fahv.design.feasibility import box_coverage, fault_vertices, gain_vertices, input_room
 from fahv.errors import DesignError
@@ -174,9 +179,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     lin = linearize(veh, c["command"]["h0"], c["command"]["V0"], "cm")
     modes = {m.name: m.wn for m in classify_modes(lin.A, veh.params.omega_1, veh.params.omega_2)}
     omega_flex = np.array([modes["flexible 1"], modes["flexible 2"]])
-    dev_box = DEFAULT_DEV_BOX
-    if kind == "ecm":
-        dev_box = np.concatenate([DEFAULT_DEV_BOX, 2.0 * notch.state_scale(Dx[IQ])])
+    dev_box = deviation_box(notch if kind == "ecm" else None, Dx[IQ])
     d = c["disturbance"]
     unc = {k: v * c["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
     W = sample_disturbance(
