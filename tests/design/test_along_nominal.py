@@ -309,6 +309,38 @@ def test_eight_state_bound_reproduces_the_stored_pair(along):
     np.testing.assert_allclose(np.degrees(pair.tightening[1]), 2.87, atol=0.005)
 
 
+def test_a_loops_joint_shape_replaces_the_pairs_in_the_altitude_and_row_bounds(along):
+    """The bounds take the joint shape of (e_8, u - v) a loop keeps: given the pair's own
+    (F_8 Z_8, built as a loop with two filter states that do not reach the input) they
+    are the pair's to 1e-9; a shape four times as large doubles the step of (1) and every
+    support of the product set; a malformed shape is refused naming it."""
+    import fahv.design.eight_state as es
+
+    d, *_, nv = along
+    if "H" not in d:
+        pytest.skip("a nine-state pair: no altitude bound")
+    A, B = nv.vertices()
+    F8, N8, moves = d["F"], d["N"], int(d["moves"])
+    ab = es.altitude_bound(nv, A, B, F8, N8, moves)
+    # [e_8; chi] with u - v = [F_8, 0] xi over E(blkdiag(N_8, I)): the pair's set
+    J = np.vstack([np.hstack([np.eye(8), np.zeros((8, 2))]), np.hstack([F8, np.zeros((2, 2))])])
+    P = np.block([[N8, np.zeros((8, 2))], [np.zeros((2, 8)), np.eye(2)]])
+    C = J @ P @ J.T
+    np.testing.assert_allclose(C, es.pair_shape(F8, N8), rtol=1e-12, atol=0.0)
+    same = es.altitude_bound(nv, A, B, F8, N8, moves, joint=C)
+    assert same.H == pytest.approx(ab.H, rel=1e-9)
+    np.testing.assert_allclose(same.bound, ab.bound, rtol=1e-9)
+    big = es.altitude_bound(nv, A, B, F8, N8, moves, joint=4.0 * C)
+    assert big.step == pytest.approx(2.0 * ab.step, rel=1e-12)
+    s_lo, s_oth = es.product_supports(F8, N8, ab.H)
+    b_lo, b_oth = es.product_supports(F8, N8, ab.H, 4.0 * C)
+    np.testing.assert_allclose(b_lo[1:], 2.0 * s_lo[1:], rtol=1e-12)
+    np.testing.assert_allclose(b_oth, 2.0 * s_oth, rtol=1e-12)
+    assert np.all(big.bound > ab.bound)
+    with pytest.raises(ValueError, match="joint shape"):
+        es.product_supports(F8, N8, ab.H, C[:9, :9])
+
+
 def test_pulse_peak_is_the_peak_of_the_filtered_jump():
     """pulse_peak of a unit jump removed at gamma per step is the peak over k of
     (a^k - b^k) / (a - b), b = 1 - gamma (the recursion's closed form); 1 for an estimate

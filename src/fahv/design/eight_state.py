@@ -174,7 +174,49 @@ class EightStatePair:
         }
 
 
-def product_supports(F8, N8, H: float) -> tuple[np.ndarray, np.ndarray]:
+def pair_shape(F8, N8) -> np.ndarray:
+    """Joint shape (10, 10) of (e_8, u - v) over Z_8 under u - v = F_8 e_8: [I; F_8] N_8 [I; F_8]'.
+
+    The set {(e_8, F_8 e_8) : e_8 in Z_8} is the degenerate ellipsoid of this shape: the
+    support of r'(e_8, u - v) over it is sqrt(r' C r). A loop whose input deviation is
+    not F_8 e_8 (the tube loop through the notch filter, u - v = K xi over an ellipsoid
+    E(P) of xi = [e_8; chi]) has its own joint shape, [[I, 0], K] P [[I, 0], K]' (the
+    ``joint`` argument of :func:`product_supports`, :func:`product_bound`,
+    :func:`altitude_bound`).
+
+    Parameters
+    ----------
+    F8 : (2, 8) array_like
+    N8 : (8, 8) array_like
+
+    Returns
+    -------
+    (10, 10) ndarray
+        Rows and columns V ... eta_2_dot, then Phi [-] and delta_e [rad].
+
+    Raises
+    ------
+    ValueError
+        If the shapes are not (2, 8) and (8, 8).
+    """
+    F8, N8 = np.asarray(F8, float), np.asarray(N8, float)
+    if F8.shape != (2, 8) or N8.shape != (8, 8):
+        raise ValueError(f"pair_shape: F8 {F8.shape}, N8 {N8.shape}; expected (2, 8), (8, 8)")
+    J = np.vstack([np.eye(8), F8])
+    return J @ N8 @ J.T
+
+
+def _joint(F8, N8, joint) -> np.ndarray:
+    """The joint shape of the pair, or ``joint`` checked as a (10, 10) finite matrix."""
+    if joint is None:
+        return pair_shape(F8, N8)
+    C = np.asarray(joint, float)
+    if C.shape != (10, 10) or not np.all(np.isfinite(C)):
+        raise ValueError(f"joint shape must be (10, 10) finite values, got {C.shape}")
+    return 0.5 * (C + C.T)
+
+
+def product_supports(F8, N8, H: float, joint=None) -> tuple[np.ndarray, np.ndarray]:
     """Supports of the product set {|e_h| <= H} x Z_8 in the scheduling box's coordinates.
 
     Parameters
@@ -183,6 +225,8 @@ def product_supports(F8, N8, H: float) -> tuple[np.ndarray, np.ndarray]:
     N8 : (8, 8) array_like
     H : float
         Altitude error bound [ft].
+    joint : (10, 10) array_like, optional
+        Joint shape of (e_8, u - v) in place of the pair's (:func:`pair_shape`).
 
     Returns
     -------
@@ -190,14 +234,19 @@ def product_supports(F8, N8, H: float) -> tuple[np.ndarray, np.ndarray]:
         h [ft], V [ft/s], alpha, theta [rad], then F_8 Z_8 in Phi [-] and delta_e [rad].
     s_oth : (5,) ndarray
         q [rad/s] and the flexible states.
+
+    Raises
+    ------
+    ValueError
+        On a malformed ``joint`` or pair.
     """
-    F8, N8 = np.asarray(F8, float), np.asarray(N8, float)
-    sZ8 = np.sqrt(np.diag(N8))
-    sF = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
-    return np.concatenate([[H], sZ8[:3], sF]), sZ8[3:]
+    s = np.sqrt(np.maximum(np.diag(_joint(F8, N8, joint)), 0.0))
+    return np.concatenate([[H], s[:3], s[8:]]), s[3:8]
 
 
-def product_bound(nv: NominalVertices, F8, N8, H: float) -> tuple[np.ndarray, np.ndarray]:
+def product_bound(
+    nv: NominalVertices, F8, N8, H: float, joint=None
+) -> tuple[np.ndarray, np.ndarray]:
     """Parameter and interpolation parts (9,), (9,) of the disturbance over the product set.
 
     The parameter part is, per row, the largest support over {|e_h| <= H} x Z_8 of each
@@ -219,17 +268,16 @@ def product_bound(nv: NominalVertices, F8, N8, H: float) -> tuple[np.ndarray, np
     parameters, interpolation : (9,) ndarray
         In state units per period, rows h ... eta_2_dot.
     """
-    F8, N8 = np.asarray(F8, float), np.asarray(N8, float)
-    F9 = np.hstack([np.zeros((2, 1)), F8])
+    C = _joint(F8, N8, joint)
     par = np.zeros(9)
     for rho in (nv.rho_min, 1.0):
-        MP = np.vstack([np.eye(9), np.array([1.0, rho])[:, None] * F9])
-        R = nv.residual @ MP  # (64, C, 9, 9)
+        S = np.r_[np.ones(9), rho]  # (e_8, u - v) -> (e_8, P (u - v)), P = diag(1, rho_f)
+        R = nv.residual  # (64, C, 9, 11) on (e_h, e_8, u - v)
         sup = np.abs(R[..., 0]) * H + np.sqrt(
-            np.einsum("scij,jk,scik->sci", R[..., 1:], N8, R[..., 1:])
+            np.einsum("scij,jk,scik->sci", R[..., 1:], S[:, None] * C * S[None, :], R[..., 1:])
         )
         par = np.maximum(par, sup.max(axis=(0, 1)))
-    s_lo, s_oth = product_supports(F8, N8, H)  # (h, V, alpha, theta, F Z), (q, flexible)
+    s_lo, s_oth = product_supports(F8, N8, H, C)  # (h, V, alpha, theta, F Z), (q, flexible)
     interp = nv.interp @ np.concatenate([s_lo[:4], s_oth, s_lo[4:]])
     return par, interp
 
@@ -257,7 +305,7 @@ class AltitudeBound:
     bound: np.ndarray
 
 
-def altitude_bound(nv: NominalVertices, A, B, F8, N8, moves: int) -> AltitudeBound:
+def altitude_bound(nv: NominalVertices, A, B, F8, N8, moves: int, joint=None) -> AltitudeBound:
     """Solve (1) for H and bound the eight rows' disturbance over the product set.
 
     Parameters
@@ -270,6 +318,9 @@ def altitude_bound(nv: NominalVertices, A, B, F8, N8, moves: int) -> AltitudeBou
     N8 : (8, 8) array_like
     moves : int
         Fast steps between the nominal's altitude resets.
+    joint : (10, 10) array_like, optional
+        Joint shape of (e_8, u - v) in place of the pair's (:func:`pair_shape`): the
+        step of (1) is then the support of a_h,8 e_8 + b_h (u - v) over it.
 
     Returns
     -------
@@ -282,12 +333,12 @@ def altitude_bound(nv: NominalVertices, A, B, F8, N8, moves: int) -> AltitudeBou
         H as fast as the reset allows).
     """
     A, B = np.asarray(A, float), np.asarray(B, float)
-    F8, N8 = np.asarray(F8, float), np.asarray(N8, float)
-    c = A[:, 0, 1:] + B[:, 0] @ F8  # (R, 8)
-    step = float(np.sqrt(np.einsum("ri,ij,rj->r", c, N8, c)).max())
+    C = _joint(F8, N8, joint)
+    c = np.concatenate([A[:, 0, 1:], B[:, 0]], axis=1)  # (R, 10) on (e_8, u - v)
+    step = float(np.sqrt(np.einsum("ri,ij,rj->r", c, C, c)).max())
     H = moves * step
     for _ in range(100):
-        par, interp = product_bound(nv, F8, N8, H)
+        par, interp = product_bound(nv, F8, N8, H, C)
         H_new = moves * (step + par[0] + interp[0])
         if abs(H_new - H) <= 1e-12 * H_new:
             break
