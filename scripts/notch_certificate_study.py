@@ -42,25 +42,30 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 class _Captured(Exception):
-    def __init__(self, A, B):
+    def __init__(self, nv, nominal):
         super().__init__("vertices captured")
-        self.A, self.B = A, B
+        self.nv, self.nominal = nv, nominal
 
 
-def design_vertices(case) -> tuple[np.ndarray, np.ndarray]:
-    """The (A, B) vertices (R, 9, 9), (R, 9, 2) the case's pair is closed over."""
+def design_nominal_vertices(case) -> tuple[es.NominalVertices, es.SchedulingBox]:
+    """The vertex data and the nominal box the case's pair is closed over (design run up to it)."""
 
-    def capture(nv, *args, **kwargs):
-        raise _Captured(*nv.vertices())
+    def capture(nv, nominal, *args, **kwargs):
+        raise _Captured(nv, nominal)
 
     closure, es.close_pair = es.close_pair, capture
     try:
         run_design(case, log=lambda line: None)
     except _Captured as got:
-        return got.A, got.B
+        return got.nv, got.nominal
     finally:
         es.close_pair = closure
     raise RuntimeError("the design never reached the pair's closure (not an eight-state case?)")
+
+
+def design_vertices(case) -> tuple[np.ndarray, np.ndarray]:
+    """The (A, B) vertices (R, 9, 9), (R, 9, 2) the case's pair is closed over."""
+    return design_nominal_vertices(case)[0].vertices()
 
 
 def check(case, A, B) -> None:

@@ -1,37 +1,50 @@
-"""A tube gain whose loop through the notch keeps an attitude-bounded Z_8 (item 5).
+"""A tube gain designed with the notch in the loop: item 5 and the certified notch together.
 
 `case1_attitude.yaml`'s pair bounds Z_8's attitude supports (item 5), but its gain F_8
 does not tolerate the notch's lag: the loop through the notch of eps_p 0.1 has no
 invariant ellipsoid (docs/control_design.md, "The attitude-certified pair through the
 certified notch"). The certificate the notch law needs
-(:func:`fahv.design.certificate.notch_tube`) asks only that an ellipsoid E(P) of the loop
-in [e_8; chi] be RPI for W_8 with its projection inside Z_8 (s <= 1) and its input
-support within the tightening: every assumption W_8 was bounded under then holds. The
-gain is therefore free: this study searches it with P, by alternation, on the pair's own
-4096 vertices,
+(:func:`fahv.design.certificate.notch_certificate`) asks only that an ellipsoid E(P) of
+the loop in xi = [e_8; chi] be RPI for W_8 at every vertex, with its projection inside
+Z_8 (s <= 1) and its input support within F_8 Z_8's (the tightening). The gain on
+e' = (e_8 with q' for q) is therefore free. It is a static output feedback of the loop,
+u - v = F T xi (:func:`fahv.design.certificate.notch_closed_loop`), which is not convex
+in (F, P) jointly. This study designs it by a sequence of convex steps:
 
-- the gain step: P fixed, (F, mu, lam) with the smallest lam such that the RPI blocks
-  [[lam P, 0, P A_cl(F)'], [0, diag(mu), E'], [A_cl(F) P, E, P]] >= 0 hold at the
-  active vertices, sum mu <= 1 - lam and K P K' <= tightening^2 per input
-  (A_cl(F) = A_0 + B_0 F T is affine in F: :func:`notch_closed_loop`'s structure);
-- the ellipsoid step: F fixed, :func:`fahv.synthesis.feedback.invariant_ellipsoid` at a
-  lam just above the gain step's (the smallest s, constraint generation over all
-  vertices; the input supports left free there, bounded in the gain step by the
-  larger of the tightening and the round's own),
+- the RPI condition in its dilated form (de Oliveira, Bernussou & Geromel 1999, for
+  discrete time), with a slack G in place of P where the loop acts::
 
-starting from a notch whose loop has an ellipsoid (eps_p 0.05, s 1.25) and raising eps_p
-towards the case's 0.1 once s <= 1. Measured on case1_attitude.yaml's pair with
-eps_p 0.05 (2026-11-25): s 1.2512, 1.2284, 1.2171 in the first three rounds (3-4 min
-each), far from 1; stopped there. (Minimising the multiple c of a fixed P instead, at a
-fixed lam, was infeasible at the ellipsoid's lam: its exact level <= 1 does not make the
-S-procedure hold at every vertex.) Every result is re-checked exactly
-(:func:`fahv.design.certificate.notch_certificate`). Not in the design: the altitude
-bound H, the onset bound and the nominal's terminal set use F_8, and would be redone.
+      [[lam (G + G' - P), 0, (A_i G + B_i F T G)'], [0, diag(mu_i), E'],
+       [A_i G + B_i F T G, E, P]] >= 0,   sum mu_i <= 1 - lam,
 
-    python scripts/notch_gain_study.py CASE ARTEFACTS [ROUNDS]
+  which implies the S-procedure condition of E(P) (G' P^-1 G >= G + G' - P);
+- the output structure on the slack (Crusius & Trofino 1999): T G = M T makes
+  F T G = Y T with Y = F M, so the block is linear in (P, G, M, Y, mu); F = Y M^-1;
+- in coordinates whitened by the last ellipsoid P_0, where G = P = P_0 with M = I,
+  F = F_0 is feasible: each step starts from the last certificate and can only improve
+  the objective, the factor gamma with the projection inside gamma Z_8 and the input
+  supports ([[gamma^2 t_j^2, Y_j T], [T' Y_j', G + G' - P]] >= 0) within gamma times
+  the tightening;
+- constraint generation over the 4096 vertices (the worst of the exact levels added),
+  and every result re-checked exactly (:func:`notch_certificate`: the worst one-step
+  level over every vertex and every corner of W_8, s, the supports);
+- continuation in the notch's pole damping eps_p: the first start is the pair's F_8 at
+  a shallow notch whose loop has an ellipsoid (eps_p 0.05), each certified gain starts
+  the next eps_p.
 
-CASE is an eight-state case with ``eight_state.certify_attitude: true``, ARTEFACTS the
-folder of its design (design.npz, design.json).
+A certified loop keeps e_8 in Z_8 and the applied input within the tightening, but its
+input deviation is K xi, not F_8 e_8, so W_8's bound over the product set is recomputed
+for the loop's own joint set of (e_8, u - v), [[I, 0], K] P [[I, 0], K]'
+(:func:`fahv.design.eight_state.altitude_bound` with ``joint``): the loop is closed on
+its own assumptions if that bound lies inside W_8. The attitude requirement then
+follows as for the pair (the projection lies in Z_8). Not redone here: the onset bound
+(item 3, not certified either way) uses F_8's loop.
+
+    python scripts/notch_gain_study.py CASE ARTEFACTS [EPS_P ...]
+
+CASE is an eight-state case, ARTEFACTS the folder of its design (design.npz,
+design.json); EPS_P the notch dampings in order (default 0.05 0.07 0.1). Each certified
+gain is saved to ARTEFACTS/notch_gain_eps_p_<eps_p>.npz (F, P, the joint shape C).
 """
 
 from __future__ import annotations
@@ -46,113 +59,175 @@ import cvxpy as cp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from notch_certificate_study import design_vertices  # noqa: E402
+from notch_certificate_study import design_nominal_vertices  # noqa: E402
 
+import fahv.design.eight_state as es  # noqa: E402
 from fahv.design.case import load_case  # noqa: E402
 from fahv.design.certificate import notch_certificate, notch_closed_loop, vertex_levels  # noqa: E402
 from fahv.model.notch import DiscreteNotch, NotchFilter  # noqa: E402
-from fahv.synthesis.feedback import SDP_SOLVER, invariant_ellipsoid  # noqa: E402
+from fahv.synthesis.feedback import BUDGET_MARGIN, SDP_SOLVER, invariant_ellipsoid  # noqa: E402
 
 IQ = 3  # q in the eight states
+LAM = 0.995  # contraction factor of the S-procedure, as the design's notch certificate
 
 
-def gain_step(A, B, F, P, W, tight, D, chosen, notch, Ts):
-    """The smallest lam over F at fixed P (scaled by D); (F, lam) or None."""
-    R, n, _ = A.shape
-    Acl0, _ = notch_closed_loop(A, B, np.zeros_like(F), notch, Ts, IQ)
-    # u = F T xi: the loop's input map K = F T, with F the identity, is T
-    _, T = notch_closed_loop(A[:1], np.zeros((1, n, n)), np.eye(n), notch, Ts, IQ)
-    nx = n + 2
-    Ps = P / np.outer(D, D)
-    As = Acl0 / D[None, :, None] * D[None, None, :]
-    Bs = np.concatenate([B, np.zeros((R, 2, B.shape[2]))], axis=1) / D[None, :, None]
-    Ts_ = T * D[None, :]
-    ws = W / D[:n]
-    E = np.vstack([np.diag(ws), np.zeros((2, n))])
-    Fv = cp.Variable(F.shape)
-    lam = cp.Variable()
+def joint_step(A0, B0, T, P0, W8, N8, tight, chosen):
+    """One convex step around the ellipsoid P0 (module docstring): (F, P, gamma) or None.
+
+    A0 (R, 10, 10) and B0 (R, 10, 2) are the loop's vertices without feedback, T (8, 10)
+    its output map; P0 (10, 10) the last ellipsoid; only the ``chosen`` vertices held.
+    """
+    n, nx = T.shape
+    m = B0.shape[2]
+    L = np.linalg.cholesky(0.5 * (P0 + P0.T))
+    Li = np.linalg.inv(L)
+    Aw, Bw, Tw = Li[None] @ A0 @ L[None], Li[None] @ B0, T @ L
+    E = Li @ np.vstack([np.diag(W8), np.zeros((nx - n, n))])
+    Ni = np.linalg.inv(np.linalg.cholesky(N8))
+    P = cp.Variable((nx, nx), symmetric=True)
+    G = cp.Variable((nx, nx))
+    M = cp.Variable((n, n))
+    Y = cp.Variable((m, n))
+    g2 = cp.Variable()
     mu = cp.Variable((len(chosen), n), nonneg=True)
-    M = Ts_ @ Ps @ Ts_.T
-    Lm = np.linalg.cholesky(0.5 * (M + M.T) + 1e-12 * np.eye(n))
-    cons = [cp.sum(mu, axis=1) <= 1.0 - lam, lam <= 0.9999]
-    cons += [cp.norm(Lm.T @ Fv[j]) <= tight[j] for j in range(F.shape[0])]
-    for r, i in enumerate(chosen):
-        AP = As[i] @ Ps + Bs[i] @ Fv @ Ts_ @ Ps
-        blk = cp.bmat([[lam * Ps, np.zeros((nx, n)), AP.T],
-                       [np.zeros((n, nx)), cp.diag(mu[r]), E.T],
-                       [AP, E, Ps]])  # fmt: skip
+    GG = G + G.T - P
+    proj = Ni @ L[:n] @ P @ L[:n].T @ Ni.T
+    cons = [P >> 1e-9 * np.eye(nx), Tw @ G == M @ Tw, 0.5 * (proj + proj.T) << g2 * np.eye(n),
+            cp.sum(mu, axis=1) <= (1.0 - LAM) * (1.0 - BUDGET_MARGIN)]  # fmt: skip
+    for j in range(m):
+        row = cp.reshape(Y[j] @ Tw, (1, nx), order="C")
+        blk = cp.bmat([[cp.reshape(g2 * tight[j] ** 2, (1, 1), order="C"), row], [row.T, GG]])
         cons.append(0.5 * (blk + blk.T) >> 0)
-    prob = cp.Problem(cp.Minimize(lam), cons)
+    for r, i in enumerate(chosen):
+        AG = Aw[i] @ G + Bw[i] @ Y @ Tw
+        blk = cp.bmat([[LAM * GG, np.zeros((nx, n)), AG.T],
+                       [np.zeros((n, nx)), cp.diag(mu[r]), E.T],
+                       [AG, E, P]])  # fmt: skip
+        cons.append(0.5 * (blk + blk.T) >> 0)
+    prob = cp.Problem(cp.Minimize(g2), cons)
     try:
         prob.solve(solver=SDP_SOLVER)
     except cp.error.SolverError:
         return None
     if prob.status not in ("optimal", "optimal_inaccurate"):
         return None
-    return np.asarray(Fv.value), float(lam.value)
+    F = Y.value @ np.linalg.inv(M.value)
+    return F, L @ (0.5 * (P.value + P.value.T)) @ L.T, float(np.sqrt(g2.value))
+
+
+def certified(chk, tight) -> bool:
+    """The design's own conditions: level <= 1, s <= 1, supports within F_8 Z_8's."""
+    return chk.level <= 1.0 and chk.s <= 1.0 and bool(np.all(np.asarray(chk.supports) <= tight))
+
+
+def describe(chk, tight) -> str:
+    """s, level and supports against F_8 Z_8's tightening (not the new gain's own)."""
+    return (f"s {chk.s:.4f}, level {chk.level:.6f}, input supports {chk.supports[0]:.4f} / "
+            f"{np.degrees(chk.supports[1]):.3f} deg (tightening {tight[0]:.4f} / "
+            f"{np.degrees(tight[1]):.3f} deg), spectral radius {chk.rho:.6f}: "
+            + ("certified" if certified(chk, tight) else "NOT certified"))  # fmt: skip
+
+
+def design_gain(A, B, F, N8, W8, tight, nf, Ts, rounds=8):
+    """Start from F's ellipsoid at this notch, then joint steps; (F, P, check) or None."""
+    dn = DiscreteNotch(nf, Ts)
+    z = np.sqrt(np.diag(N8))
+    gain = np.abs(np.linalg.solve(np.eye(2) - dn.A_d, dn.A_d @ dn.B_d + dn.B_d))
+    D = np.r_[z, (gain + 1e-3) * z[IQ]]  # as notch_tube scales the filter's states
+    w_xi = np.r_[W8, 0.0, 0.0]
+    Acl, K = notch_closed_loop(A, B, F, nf, Ts, IQ)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ell = invariant_ellipsoid(Acl, W8, D, N8, K, 100.0 * tight,
+                                  lambda P: vertex_levels(Acl, P, w_xi), LAM)  # fmt: skip
+    if ell is None:
+        print(f"  eps_p {nf.eps_p}: no ellipsoid for the start gain", flush=True)
+        return None
+    P = ell.P
+    chk = notch_certificate(A, B, F, N8, W8, nf, Ts, IQ, P, "study")
+    print(f"  start (the previous gain): {describe(chk, tight)}", flush=True)
+    A0, _ = notch_closed_loop(A, B, np.zeros_like(F), nf, Ts, IQ)
+    B0 = np.concatenate([B, np.zeros((B.shape[0], 2, B.shape[2]))], axis=1)
+    _, T = notch_closed_loop(A[:1], np.zeros((1,) + A.shape[1:]), np.eye(A.shape[1]), nf, Ts, IQ)
+    best = np.inf
+    for k in range(rounds):
+        if certified(chk, tight):
+            return F, P, chk
+        t0 = time.perf_counter()
+        Acl, _ = notch_closed_loop(A, B, F, nf, Ts, IQ)
+        rho = np.abs(np.linalg.eigvals(Acl)).max(axis=1)
+        lev = vertex_levels(Acl, P, w_xi)
+        chosen = np.union1d(np.argsort(-rho)[:20], np.argsort(-lev)[:20])
+        while True:  # constraint generation: the exact level, not the LMI, decides
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                got = joint_step(A0, B0, T, P, W8, N8, tight, chosen)
+            if got is None:
+                print(f"  round {k}: the step's LMI failed on {len(chosen)} vertices", flush=True)
+                return None
+            Fn, Pn, g = got
+            levn = vertex_levels(notch_closed_loop(A, B, Fn, nf, Ts, IQ)[0], Pn, w_xi)
+            bad = np.setdiff1d(np.flatnonzero(levn > 1.0), chosen)
+            if bad.size == 0:
+                break
+            chosen = np.union1d(chosen, bad[np.argsort(-levn[bad])[:40]])
+        F, P = Fn, Pn
+        chk = notch_certificate(A, B, F, N8, W8, nf, Ts, IQ, P, "study")
+        print(f"  round {k} ({len(chosen)} vertices held, gamma {g:.4f}, "
+              f"{time.perf_counter() - t0:.0f} s): {describe(chk, tight)}", flush=True)  # fmt: skip
+        if g > best - 1e-3:
+            break  # stalled
+        best = g
+    return (F, P, chk) if certified(chk, tight) else None
+
+
+def joint_shape(F, P, nf, Ts, n=8) -> np.ndarray:
+    """The loop's joint shape of (e_8, u - v) over E(P): [[I, 0], K] P [[I, 0], K]'."""
+    _, K = notch_closed_loop(np.zeros((1, n, n)), np.zeros((1, n, 2)), F, nf, Ts, IQ)
+    J = np.vstack([np.hstack([np.eye(n), np.zeros((n, 2))]), K])
+    return J @ P @ J.T
 
 
 def main(argv: list[str]) -> int:
-    """Alternate the gain and ellipsoid steps; print each round's exact re-check."""
+    """Design and check a notch gain for each eps_p in turn; print the closure."""
     case = load_case(argv[0])
     art = Path(argv[1])
-    rounds = int(argv[2]) if len(argv) > 2 else 6
+    eps_list = [float(v) for v in argv[2:]] or [0.05, 0.07, 0.1]
     arrays = np.load(art / "design.npz")
     cert = json.loads((art / "design.json").read_text())["summary"]["certificate"]
-    F, N8, W8 = arrays["F"][:, 1:], arrays["N"][1:, 1:], np.asarray(cert["W_8"])
-    A, B = design_vertices(case)
-    A, B = A[:, 1:, 1:], B[:, 1:, :]
-    tight = np.sqrt(np.einsum("ij,jk,ik->i", F, N8, F))
+    F8, N8, W8 = arrays["F"][:, 1:], arrays["N"][1:, 1:], np.asarray(cert["W_8"])
+    t0 = time.perf_counter()
+    nv, _ = design_nominal_vertices(case)
+    A, B = nv.vertices()
+    A8, B8 = A[:, 1:, 1:], B[:, 1:, :]
+    moves = case["mpc"]["M"]
+    print(f"{A.shape[0]} vertices of {case['name']} [{time.perf_counter() - t0:.0f} s]")
+    tight = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
+    own = es.altitude_bound(nv, A, B, F8, N8, moves)
+    print(f"the pair's own loop (F_8 on the measured q): H {own.H:.3f} ft, bound / W_8 "
+          + " ".join(f"{v:.3f}" for v in own.bound / W8))  # fmt: skip
     n = case["notch"]
-    z = np.sqrt(np.diag(N8))
-    lam = 0.995
-    for eps_p in (0.05, 0.07, 0.1):
+    F = F8
+    for eps_p in eps_list:
+        t0 = time.perf_counter()
         nf = NotchFilter(n["omega_z"], n["eps_z"], n["omega_p"], eps_p)
-        dn = DiscreteNotch(nf, case["Ts"])
-        gain = np.abs(np.linalg.solve(np.eye(2) - dn.A_d, dn.A_d @ dn.B_d + dn.B_d))
-        D = np.r_[z, (gain + 1e-3) * z[IQ]]
-        w_xi = np.r_[W8, 0.0, 0.0]
-        for k in range(rounds):
-            t0 = time.perf_counter()
-            Acl, K = notch_closed_loop(A, B, F, nf, case["Ts"], IQ)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                levels = lambda P, Acl=Acl, w=w_xi: vertex_levels(Acl, P, w)  # noqa: E731
-                # supports free here (the gain step bounds them): the smallest s
-                ell = invariant_ellipsoid(Acl, W8, D, N8, K, 100.0 * tight, levels, lam)
-            if ell is None:
-                print(f"eps_p {eps_p} round {k}: no ellipsoid at lam {lam:.5f}", flush=True)
-                break
-            chk = notch_certificate(A, B, F, N8, W8, nf, case["Ts"], IQ, ell.P, "study")
-            # against the design's tightening (F_8 Z_8's), not the new gain's
-            ok = chk.level <= 1.0 and chk.s <= 1.0 and np.all(np.asarray(chk.supports) <= tight)
-            print(f"eps_p {eps_p} round {k}: lam {lam:.5f}, s {chk.s:.4f}, level "
-                  f"{chk.level:.6f}, supports {chk.supports[0]:.4f} / {chk.supports[1]:.4f} "
-                  f"(tightening {tight[0]:.4f} / {tight[1]:.4f}), certified {ok} "
-                  f"[{time.perf_counter() - t0:.0f} s]", flush=True)  # fmt: skip
-            if ok:
-                np.savez(art / f"notch_gain_eps_p_{eps_p}.npz", F8=F, P=ell.P)
-                break
-            rho = np.abs(np.linalg.eigvals(Acl)).max(axis=1)
-            lev = vertex_levels(Acl, ell.P, w_xi)
-            chosen = np.union1d(np.argsort(-rho)[:30], np.argsort(-lev)[:30])
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                # supports not above the design's tightening, nor above this round's
-                cap = np.maximum(tight, np.asarray(chk.supports))
-                got = gain_step(A, B, F, ell.P, W8, cap, D, chosen, nf, case["Ts"])
-            if got is None:
-                print(f"eps_p {eps_p} round {k}: gain step infeasible", flush=True)
-                break
-            F, lam_f = got
-            lam = min(0.999, max(lam_f + 1e-4, 0.99))
-            print(f"  gain step: lam {lam_f:.5f} on {len(chosen)} vertices; F changed by "
-                  f"{np.abs(F - arrays['F'][:, 1:]).max():.3g}", flush=True)  # fmt: skip
-        else:
-            print(f"eps_p {eps_p}: not certified in {rounds} rounds")
+        print(f"eps_p {eps_p}:", flush=True)
+        got = design_gain(A8, B8, F, N8, W8, tight, nf, case["Ts"])
+        if got is None:
+            print(f"eps_p {eps_p}: NOT certified [{time.perf_counter() - t0:.0f} s]")
             return 1
-        if ell is None:
-            return 1
+        F, P, chk = got
+        C = joint_shape(F, P, nf, case["Ts"])
+        ab = es.altitude_bound(nv, A, B, F8, N8, moves, joint=C)
+        ratio = ab.bound / W8
+        att = np.degrees(np.sqrt(np.diag(P)[1:3]))
+        print(f"eps_p {eps_p}: [{time.perf_counter() - t0:.0f} s] {describe(chk, tight)}; "
+              f"alpha / theta supports {att[0]:.3f} / {att[1]:.3f} deg (Z_8: "
+              f"{np.degrees(np.sqrt(N8[1, 1])):.3f} / {np.degrees(np.sqrt(N8[2, 2])):.3f}); "
+              f"W_8 over the loop's own set: H {ab.H:.3f} ft, bound / W_8 "
+              + " ".join(f"{v:.3f}" for v in ratio)
+              + f": {'closed' if np.all(ratio <= 1.0) else 'NOT closed'}", flush=True)  # fmt: skip
+        np.savez(art / f"notch_gain_eps_p_{eps_p}.npz", F=F, P=P, C=C, F8=F8, N8=N8, W8=W8)
     return 0
 
 
