@@ -231,7 +231,8 @@ def product_supports(F8, N8, H: float, joint=None) -> tuple[np.ndarray, np.ndarr
     Returns
     -------
     s_lo : (6,) ndarray
-        h [ft], V [ft/s], alpha, theta [rad], then F_8 Z_8 in Phi [-] and delta_e [rad].
+        h [ft], V [ft/s], alpha, theta [rad], then the input deviation in Phi [-] and
+        delta_e [rad] (F_8 Z_8 for the pair).
     s_oth : (5,) ndarray
         q [rad/s] and the flexible states.
 
@@ -254,7 +255,8 @@ def product_bound(
     applied to [e; P F e], P = diag(1, rho_f), at every box corner, for rho_f at both
     ends of [rho_min, 1] (exact for the product set: |r_h| H plus the ellipsoid's
     support). The interpolation part is the elementwise remainder bound times the
-    product set's supports in e and F e.
+    product set's supports in e and F e. With ``joint`` the set of (e_8, u - v) is the
+    ellipsoid of that shape in place of {(e_8, F_8 e_8) : e_8 in Z_8}.
 
     Parameters
     ----------
@@ -267,6 +269,11 @@ def product_bound(
     -------
     parameters, interpolation : (9,) ndarray
         In state units per period, rows h ... eta_2_dot.
+
+    Raises
+    ------
+    ValueError
+        On a malformed ``joint`` or pair.
     """
     C = _joint(F8, N8, joint)
     par = np.zeros(9)
@@ -331,6 +338,8 @@ def altitude_bound(nv: NominalVertices, A, B, F8, N8, moves: int, joint=None) ->
     DesignError
         If the iteration for H does not converge (the h row's own disturbance grows with
         H as fast as the reset allows).
+    ValueError
+        On a malformed ``joint`` or pair.
     """
     A, B = np.asarray(A, float), np.asarray(B, float)
     C = _joint(F8, N8, joint)
