@@ -40,11 +40,12 @@ its own assumptions if that bound lies inside W_8. The attitude requirement then
 follows as for the pair (the projection lies in Z_8). Not redone here: the onset bound
 (item 3, not certified either way) uses F_8's loop.
 
-    python scripts/notch_gain_study.py CASE ARTEFACTS [EPS_P ...]
+    python scripts/notch_gain_study.py CASE ARTEFACTS [--from EPS_P0] [EPS_P ...]
 
 CASE is an eight-state case, ARTEFACTS the folder of its design (design.npz,
 design.json); EPS_P the notch dampings in order (default 0.05 0.07 0.1). Each certified
-gain is saved to ARTEFACTS/notch_gain_eps_p_<eps_p>.npz (F, P, the joint shape C).
+gain is saved to ARTEFACTS/notch_gain_eps_p_<eps_p>.npz (F, P, the joint shape C);
+``--from EPS_P0`` starts from the gain saved for EPS_P0 instead of F_8.
 """
 
 from __future__ import annotations
@@ -192,7 +193,12 @@ def main(argv: list[str]) -> int:
     """Design and check a notch gain for each eps_p in turn; print the closure."""
     case = load_case(argv[0])
     art = Path(argv[1])
-    eps_list = [float(v) for v in argv[2:]] or [0.05, 0.07, 0.1]
+    rest = argv[2:]
+    start = None
+    if rest[:1] == ["--from"]:  # resume from a gain this study saved
+        start = np.load(art / f"notch_gain_eps_p_{float(rest[1])}.npz")["F"]
+        rest = rest[2:]
+    eps_list = [float(v) for v in rest] or [0.05, 0.07, 0.1]
     arrays = np.load(art / "design.npz")
     cert = json.loads((art / "design.json").read_text())["summary"]["certificate"]
     F8, N8, W8 = arrays["F"][:, 1:], arrays["N"][1:, 1:], np.asarray(cert["W_8"])
@@ -207,7 +213,7 @@ def main(argv: list[str]) -> int:
     print(f"the pair's own loop (F_8 on the measured q): H {own.H:.3f} ft, bound / W_8 "
           + " ".join(f"{v:.3f}" for v in own.bound / W8))  # fmt: skip
     n = case["notch"]
-    F = F8
+    F = F8 if start is None else start
     for eps_p in eps_list:
         t0 = time.perf_counter()
         nf = NotchFilter(n["omega_z"], n["eps_z"], n["omega_p"], eps_p)

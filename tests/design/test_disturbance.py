@@ -74,6 +74,9 @@ def test_drawn_states_replace_the_box_and_scale_the_model_error(vehicle, tp_cm, 
 
 
 def test_deviation_box_appends_the_notch_states_for_the_ecm_only():
+    """The CM / DM box is a copy of DEFAULT_DEV_BOX; the ECM's appends twice the filter's
+    steady states for the given q scale; a q scale that is not positive and finite is
+    refused naming it."""
     from fahv.design.disturbance import deviation_box
     from fahv.model.notch import NotchFilter
 
