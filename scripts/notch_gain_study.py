@@ -64,8 +64,13 @@ from notch_certificate_study import design_nominal_vertices  # noqa: E402
 
 import fahv.design.eight_state as es  # noqa: E402
 from fahv.design.case import load_case  # noqa: E402
-from fahv.design.certificate import notch_certificate, notch_closed_loop, vertex_levels  # noqa: E402
-from fahv.model.notch import DiscreteNotch, NotchFilter  # noqa: E402
+from fahv.design.certificate import (  # noqa: E402
+    notch_certificate,
+    notch_closed_loop,
+    notch_loop_scale,
+    vertex_levels,
+)
+from fahv.model.notch import NotchFilter  # noqa: E402
 from fahv.synthesis.feedback import BUDGET_MARGIN, SDP_SOLVER, invariant_ellipsoid  # noqa: E402
 
 IQ = 3  # q in the eight states
@@ -131,10 +136,7 @@ def describe(chk, tight) -> str:
 
 def design_gain(A, B, F, N8, W8, tight, nf, Ts, rounds=8):
     """Start from F's ellipsoid at this notch, then joint steps; (F, P, check) or None."""
-    dn = DiscreteNotch(nf, Ts)
-    z = np.sqrt(np.diag(N8))
-    gain = np.abs(np.linalg.solve(np.eye(2) - dn.A_d, dn.A_d @ dn.B_d + dn.B_d))
-    D = np.r_[z, (gain + 1e-3) * z[IQ]]  # as notch_tube scales the filter's states
+    D = notch_loop_scale(N8, nf, Ts, IQ)  # as notch_tube scales the loop's states
     w_xi = np.r_[W8, 0.0, 0.0]
     Acl, K = notch_closed_loop(A, B, F, nf, Ts, IQ)
     with warnings.catch_warnings():

@@ -949,6 +949,34 @@ def _notch_loop(A, B, F, notch, Ts, iq, variant):
     return loop, Acl, K
 
 
+def notch_loop_scale(N, notch, Ts: float, iq: int) -> np.ndarray:
+    """Scaling (n + 2,) of the loop's states xi = [e; chi] for its LMIs (:func:`notch_tube`).
+
+    e by Z's supports sqrt(diag N); the filter's two states chi at their steady size for a
+    constant q of Z's q support, |(I - A_d)^-1 (A_d B_d + B_d)| (plus 1e-3, so that
+    neither is zero), in the coordinates of :func:`notch_closed_loop`.
+
+    Parameters
+    ----------
+    N : (n, n) ndarray
+        Tube shape, Z = {e' N^-1 e <= 1}.
+    notch : fahv.model.notch.NotchFilter
+    Ts : float
+        Control period [s].
+    iq : int
+        Index of q in e.
+
+    Returns
+    -------
+    (n + 2,) ndarray
+        Positive scale, units of e then of the filter's states.
+    """
+    dn = DiscreteNotch(notch, Ts)
+    z = np.sqrt(np.diag(np.asarray(N, float)))
+    gain = np.abs(np.linalg.solve(np.eye(2) - dn.A_d, dn.A_d @ dn.B_d + dn.B_d))
+    return np.r_[z, (gain + 1e-3) * z[iq]]
+
+
 def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
                variant: str = "", active: int = 40) -> NotchLoop:  # fmt: skip
     """The tube loop with the notch filter on q, certified RPI in its own states.
@@ -1009,10 +1037,7 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
     tightening = tuple(np.sqrt(np.einsum("ij,jk,ik->i", F, N, F)).tolist())
     if not loop.stable:
         return replace(loop, tightening=tightening)
-    dn = DiscreteNotch(notch, Ts)
-    z = np.sqrt(np.diag(N))
-    gain = np.abs(np.linalg.solve(np.eye(2) - dn.A_d, dn.A_d @ dn.B_d + dn.B_d))
-    D = np.r_[z, (gain + 1e-3) * z[iq]]  # the filter's states at their steady size for q
+    D = notch_loop_scale(N, notch, Ts, iq)
     w_xi = np.r_[np.asarray(w_max, float), 0.0, 0.0]
     ell = invariant_ellipsoid(Acl, w_max, D, N, K, np.asarray(tightening),
                               lambda P: vertex_levels(Acl, P, w_xi), lam, active)  # fmt: skip
