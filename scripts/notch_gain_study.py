@@ -9,7 +9,9 @@ the loop in xi = [e_8; chi] be RPI for W_8 at every vertex, with its projection 
 Z_8 (s <= 1) and its input support within F_8 Z_8's (the tightening). The gain on
 e' = (e_8 with q' for q) is therefore free. It is a static output feedback of the loop,
 u - v = F T xi (:func:`fahv.design.certificate.notch_closed_loop`), which is not convex
-in (F, P) jointly. This study designs it by a sequence of convex steps:
+in (F, P) jointly. The design kernel :func:`fahv.design.certificate.notch_gain` (with
+:func:`fahv.synthesis.feedback.output_feedback_step`; ``fahv design`` runs it with
+``eight_state.notch_gain: designed``) takes a sequence of convex steps:
 
 - the RPI condition in its dilated form (de Oliveira, Bernussou & Geromel 1999, for
   discrete time), with a slack G in place of P where the loop acts::
@@ -40,6 +42,10 @@ its own assumptions if that bound lies inside W_8. The attitude requirement then
 follows as for the pair (the projection lies in Z_8). Not redone here: the onset bound
 (item 3, not certified either way) uses F_8's loop.
 
+This study runs the kernel on a designed pair's artefacts for a list of notches, each
+as the last step of the continuation from the gain before it, to find how far the
+certified range reaches:
+
     python scripts/notch_gain_study.py CASE ARTEFACTS [--from EPS_P0] [EPS_P ...]
 
 CASE is an eight-state case, ARTEFACTS the folder of its design (design.npz,
@@ -56,7 +62,6 @@ import time
 import warnings
 from pathlib import Path
 
-import cvxpy as cp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -64,131 +69,11 @@ from notch_certificate_study import design_nominal_vertices  # noqa: E402
 
 import fahv.design.eight_state as es  # noqa: E402
 from fahv.design.case import load_case  # noqa: E402
-from fahv.design.certificate import (  # noqa: E402
-    notch_certificate,
-    notch_closed_loop,
-    notch_loop_scale,
-    vertex_levels,
-)
+from fahv.design.certificate import notch_gain  # noqa: E402
 from fahv.model.notch import NotchFilter  # noqa: E402
-from fahv.synthesis.feedback import BUDGET_MARGIN, SDP_SOLVER, invariant_ellipsoid  # noqa: E402
 
 IQ = 3  # q in the eight states
 LAM = 0.995  # contraction factor of the S-procedure, as the design's notch certificate
-
-
-def joint_step(A0, B0, T, P0, W8, N8, tight, chosen):
-    """One convex step around the ellipsoid P0 (module docstring): (F, P, gamma) or None.
-
-    A0 (R, 10, 10) and B0 (R, 10, 2) are the loop's vertices without feedback, T (8, 10)
-    its output map; P0 (10, 10) the last ellipsoid; only the ``chosen`` vertices held.
-    """
-    n, nx = T.shape
-    m = B0.shape[2]
-    L = np.linalg.cholesky(0.5 * (P0 + P0.T))
-    Li = np.linalg.inv(L)
-    Aw, Bw, Tw = Li[None] @ A0 @ L[None], Li[None] @ B0, T @ L
-    E = Li @ np.vstack([np.diag(W8), np.zeros((nx - n, n))])
-    Ni = np.linalg.inv(np.linalg.cholesky(N8))
-    P = cp.Variable((nx, nx), symmetric=True)
-    G = cp.Variable((nx, nx))
-    M = cp.Variable((n, n))
-    Y = cp.Variable((m, n))
-    g2 = cp.Variable()
-    mu = cp.Variable((len(chosen), n), nonneg=True)
-    GG = G + G.T - P
-    proj = Ni @ L[:n] @ P @ L[:n].T @ Ni.T
-    cons = [P >> 1e-9 * np.eye(nx), Tw @ G == M @ Tw, 0.5 * (proj + proj.T) << g2 * np.eye(n),
-            cp.sum(mu, axis=1) <= (1.0 - LAM) * (1.0 - BUDGET_MARGIN)]  # fmt: skip
-    for j in range(m):
-        row = cp.reshape(Y[j] @ Tw, (1, nx), order="C")
-        blk = cp.bmat([[cp.reshape(g2 * tight[j] ** 2, (1, 1), order="C"), row], [row.T, GG]])
-        cons.append(0.5 * (blk + blk.T) >> 0)
-    for r, i in enumerate(chosen):
-        AG = Aw[i] @ G + Bw[i] @ Y @ Tw
-        blk = cp.bmat([[LAM * GG, np.zeros((nx, n)), AG.T],
-                       [np.zeros((n, nx)), cp.diag(mu[r]), E.T],
-                       [AG, E, P]])  # fmt: skip
-        cons.append(0.5 * (blk + blk.T) >> 0)
-    prob = cp.Problem(cp.Minimize(g2), cons)
-    try:
-        prob.solve(solver=SDP_SOLVER)
-    except cp.error.SolverError:
-        return None
-    if prob.status not in ("optimal", "optimal_inaccurate"):
-        return None
-    F = Y.value @ np.linalg.inv(M.value)
-    return F, L @ (0.5 * (P.value + P.value.T)) @ L.T, float(np.sqrt(g2.value))
-
-
-def certified(chk, tight) -> bool:
-    """The design's own conditions: level <= 1, s <= 1, supports within F_8 Z_8's."""
-    return chk.level <= 1.0 and chk.s <= 1.0 and bool(np.all(np.asarray(chk.supports) <= tight))
-
-
-def describe(chk, tight) -> str:
-    """s, level and supports against F_8 Z_8's tightening (not the new gain's own)."""
-    return (f"s {chk.s:.4f}, level {chk.level:.6f}, input supports {chk.supports[0]:.4f} / "
-            f"{np.degrees(chk.supports[1]):.3f} deg (tightening {tight[0]:.4f} / "
-            f"{np.degrees(tight[1]):.3f} deg), spectral radius {chk.rho:.6f}: "
-            + ("certified" if certified(chk, tight) else "NOT certified"))  # fmt: skip
-
-
-def design_gain(A, B, F, N8, W8, tight, nf, Ts, rounds=8):
-    """Start from F's ellipsoid at this notch, then joint steps; (F, P, check) or None."""
-    D = notch_loop_scale(N8, nf, Ts, IQ)  # as notch_tube scales the loop's states
-    w_xi = np.r_[W8, 0.0, 0.0]
-    Acl, K = notch_closed_loop(A, B, F, nf, Ts, IQ)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        ell = invariant_ellipsoid(Acl, W8, D, N8, K, 100.0 * tight,
-                                  lambda P: vertex_levels(Acl, P, w_xi), LAM)  # fmt: skip
-    if ell is None:
-        print(f"  eps_p {nf.eps_p}: no ellipsoid for the start gain", flush=True)
-        return None
-    P = ell.P
-    chk = notch_certificate(A, B, F, N8, W8, nf, Ts, IQ, P, "study")
-    print(f"  start (the previous gain): {describe(chk, tight)}", flush=True)
-    A0, _ = notch_closed_loop(A, B, np.zeros_like(F), nf, Ts, IQ)
-    B0 = np.concatenate([B, np.zeros((B.shape[0], 2, B.shape[2]))], axis=1)
-    _, T = notch_closed_loop(A[:1], np.zeros((1,) + A.shape[1:]), np.eye(A.shape[1]), nf, Ts, IQ)
-    best = np.inf
-    for k in range(rounds):
-        if certified(chk, tight):
-            return F, P, chk
-        t0 = time.perf_counter()
-        Acl, _ = notch_closed_loop(A, B, F, nf, Ts, IQ)
-        rho = np.abs(np.linalg.eigvals(Acl)).max(axis=1)
-        lev = vertex_levels(Acl, P, w_xi)
-        chosen = np.union1d(np.argsort(-rho)[:20], np.argsort(-lev)[:20])
-        while True:  # constraint generation: the exact level, not the LMI, decides
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                got = joint_step(A0, B0, T, P, W8, N8, tight, chosen)
-            if got is None:
-                print(f"  round {k}: the step's LMI failed on {len(chosen)} vertices", flush=True)
-                return None
-            Fn, Pn, g = got
-            levn = vertex_levels(notch_closed_loop(A, B, Fn, nf, Ts, IQ)[0], Pn, w_xi)
-            bad = np.setdiff1d(np.flatnonzero(levn > 1.0), chosen)
-            if bad.size == 0:
-                break
-            chosen = np.union1d(chosen, bad[np.argsort(-levn[bad])[:40]])
-        F, P = Fn, Pn
-        chk = notch_certificate(A, B, F, N8, W8, nf, Ts, IQ, P, "study")
-        print(f"  round {k} ({len(chosen)} vertices held, gamma {g:.4f}, "
-              f"{time.perf_counter() - t0:.0f} s): {describe(chk, tight)}", flush=True)  # fmt: skip
-        if g > best - 1e-3:
-            break  # stalled
-        best = g
-    return (F, P, chk) if certified(chk, tight) else None
-
-
-def joint_shape(F, P, nf, Ts, n=8) -> np.ndarray:
-    """The loop's joint shape of (e_8, u - v) over E(P): [[I, 0], K] P [[I, 0], K]'."""
-    _, K = notch_closed_loop(np.zeros((1, n, n)), np.zeros((1, n, 2)), F, nf, Ts, IQ)
-    J = np.vstack([np.hstack([np.eye(n), np.zeros((n, 2))]), K])
-    return J @ P @ J.T
 
 
 def main(argv: list[str]) -> int:
@@ -210,26 +95,30 @@ def main(argv: list[str]) -> int:
     A8, B8 = A[:, 1:, 1:], B[:, 1:, :]
     moves = case["mpc"]["M"]
     print(f"{A.shape[0]} vertices of {case['name']} [{time.perf_counter() - t0:.0f} s]")
-    tight = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
     own = es.altitude_bound(nv, A, B, F8, N8, moves)
     print(f"the pair's own loop (F_8 on the measured q): H {own.H:.3f} ft, bound / W_8 "
           + " ".join(f"{v:.3f}" for v in own.bound / W8))  # fmt: skip
     n = case["notch"]
+    tight = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
     F = F8 if start is None else start
     for eps_p in eps_list:
         t0 = time.perf_counter()
         nf = NotchFilter(n["omega_z"], n["eps_z"], n["omega_p"], eps_p)
         print(f"eps_p {eps_p}:", flush=True)
-        got = design_gain(A8, B8, F, N8, W8, tight, nf, case["Ts"])
-        if got is None:
+        # the pair's tightening, F_8 Z_8's, is kept whatever gain F starts the step
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            got = notch_gain(A8, B8, F, N8, W8, nf, case["Ts"], IQ, LAM, tightening=tight,
+                             log=lambda line: print("  " + line, flush=True))  # fmt: skip
+        if got is None or not got.loop.certified:
             print(f"eps_p {eps_p}: NOT certified [{time.perf_counter() - t0:.0f} s]")
             return 1
-        F, P, chk = got
-        C = joint_shape(F, P, nf, case["Ts"])
+        F, P = got.F, got.P
+        C = got.joint(nf, case["Ts"], IQ)
         ab = es.altitude_bound(nv, A, B, F8, N8, moves, joint=C)
         ratio = ab.bound / W8
         att = np.degrees(np.sqrt(np.diag(P)[1:3]))
-        print(f"eps_p {eps_p}: [{time.perf_counter() - t0:.0f} s] {describe(chk, tight)}; "
+        print(f"eps_p {eps_p}: [{time.perf_counter() - t0:.0f} s] {got.loop.line()}; "
               f"alpha / theta supports {att[0]:.3f} / {att[1]:.3f} deg (Z_8: "
               f"{np.degrees(np.sqrt(N8[1, 1])):.3f} / {np.degrees(np.sqrt(N8[2, 2])):.3f}); "
               f"W_8 over the loop's own set: H {ab.H:.3f} ft, bound / W_8 "

@@ -66,3 +66,24 @@ def test_variants(design):
     assert np.asarray(rmpc["rmpc"]["rmpc_K"]).size == N * 18
     with pytest.raises(ParameterError, match="variant 'pid'"):
         node_parameters(design, "pid")
+
+
+def test_a_variant_runs_the_gain_designed_for_its_notch_loop(design):
+    """``F_<variant>`` in the design (eight_state.notch_gain: designed) replaces F for that
+    variant's controller only; the other variants keep the tube's F."""
+    import dataclasses
+
+    from fahv.design.artefacts import variant_gain_key
+
+    first, *others = design.case["variants"]
+    own = 1.5 * np.asarray(design.arrays["F"])
+    with_gain = dataclasses.replace(design, arrays={**design.arrays, variant_gain_key(first): own})
+    p = node_parameters(with_gain, first)
+    node = next(n for n in p if "F" in p[n])
+    np.testing.assert_array_equal(validate(node, p[node])["F"], own)
+    for v in others:
+        q = node_parameters(with_gain, v)
+        for n in q:
+            if "F" in q[n]:
+                np.testing.assert_array_equal(validate(n, q[n])["F"], design.arrays["F"])
+    assert others, "the test design has one variant: nothing shows the other variants keep F"

@@ -39,7 +39,9 @@ class Design:
         ``trim_u`` (Nh, NV, 2); ``rmpc_A``, ``rmpc_B`` (DM vertices), ``rmpc_Q``,
         ``rmpc_P``, ``rmpc_K``, ``rmpc_gamma``, ``rmpc_z``, ``rmpc_Ds``, ``rmpc_d`` (the
         RMPC's nested ellipsoids, gains, cost bounds, design states, scales, step);
-        ``omega_flex`` (2,) flexible-mode frequencies at the initial trim [rad/s].
+        ``omega_flex`` (2,) flexible-mode frequencies at the initial trim [rad/s];
+        ``F_<variant>`` (2, n), a gain designed for that variant's loop through the notch
+        (:func:`variant_gain_key`), which the variant runs in place of ``F``.
     summary : dict
         Scalars: certificates, W breakdown, plant parameters, hash.
     """
@@ -174,3 +176,13 @@ def stale_reason(design: Design, case, vehicle) -> str | None:
         if old.get(key) != new[key]:
             return f"the {what} changed since the design"
     return None
+
+
+def variant_gain_key(variant: str) -> str:
+    """Array name of the gain a variant runs in place of ``F`` (``F_<variant>``), if designed.
+
+    Written by the design for a variant whose loop through the notch has its own certified
+    gain (``eight_state.notch_gain: designed``); read by
+    :func:`fahv.loop.params.node_parameters`. Raises nothing.
+    """
+    return f"F_{variant}"

@@ -105,6 +105,14 @@ EIGHT_STATE = (
     Field("certify_attitude", "bool", "bound Z_8's supports in alpha and theta in the tube "
           "LMI to the attitude requirement (0.5 deg, sec. 5.1) minus mpc.att_max, so that "
           "the requirement follows from the pair with the QP's rows", default=False),
+    Field("notch_gain", "str", "gain of the tube variants that run through the certified "
+          "notch (tube.filter_nominal_q): the pair's F_8 ('tube') or a gain designed for the "
+          "loop with the filter's states, certified with the pair's Z_8 and tightening and "
+          "W_8 re-bounded over its own set ('designed'; docs/control_design.md)",
+          choices=("tube", "designed"), default="tube"),
+    Field("notch_continuation", "floats", "notch pole dampings eps_p the designed gain "
+          "passes through before notch.eps_p, increasing (the first from F_8's ellipsoid)",
+          lo=0.0, hi=1.0, lo_open=True, default=(0.05,)),
 )  # fmt: skip
 
 EIGHT_STATE_CHECKS = (
@@ -116,6 +124,14 @@ EIGHT_STATE_CHECKS = (
           or ("mpc" in r and r["mpc"]["att_max"] < ATTITUDE_BOUND_DEG),
           f"needs mpc.att_max below the requirement {ATTITUDE_BOUND_DEG} deg (the rest is "
           "the tube's support)"),
+    Check("notch_continuation", lambda r: r["eight_state"]["notch_gain"] != "designed" or (
+          all(b > a for a, b in zip(r["eight_state"]["notch_continuation"],
+                                    [*r["eight_state"]["notch_continuation"][1:],
+                                     r["notch"]["eps_p"]], strict=True))),
+          "must increase to below notch.eps_p"),
+    Check("notch_gain", lambda r: r["eight_state"]["notch_gain"] != "designed" or (
+          r["notch"]["enabled"] and r["tube"]["filter_nominal_q"]),
+          "'designed' needs notch.enabled and tube.filter_nominal_q (the certified loop)"),
 )  # fmt: skip
 
 

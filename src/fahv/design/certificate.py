@@ -45,7 +45,7 @@ from fahv.model.notch import DiscreteNotch
 from fahv.model.vehicle import DELTA_E
 from fahv.plant.rk4 import params_records, rk4_cm
 from fahv.plant.uncertainty import perturb
-from fahv.synthesis.feedback import invariant_ellipsoid
+from fahv.synthesis.feedback import invariant_ellipsoid, output_feedback_step
 
 #: Safety factor on the third-order remainder measured at the corners of the box.
 REMAINDER_FACTOR = 2.0
@@ -781,6 +781,14 @@ class NotchLoop:
         The input deviation's support over it, per input [-, rad] (through q').
     tightening : tuple of float or None
         The tightening the design applies, F Z's support per input [-, rad].
+    designed : bool
+        True if the loop runs a gain designed for it (:func:`notch_gain`), not the tube's.
+    w_ratio : tuple of float or None
+        With a designed gain: the closure of the loop on W's assumptions, every entry
+        <= 1 (:func:`fahv.design.eight_state.designed_notch_loop`: the loop's altitude
+        bound over the pair's H, then the one-step disturbance bound over the loop's own
+        set of (e, u - v) per row of W as a fraction of W); None: not bounded, the tube's
+        own closure applies.
     """
 
     variant: str
@@ -793,6 +801,8 @@ class NotchLoop:
     level: float | None = None
     supports: tuple[float, ...] | None = None
     tightening: tuple[float, ...] | None = None
+    designed: bool = False
+    w_ratio: tuple[float, ...] | None = None
 
     @property
     def stable(self) -> bool:
@@ -814,6 +824,7 @@ class NotchLoop:
             and self.level <= 1.0
             and all(a <= b * (1.0 + 1e-9) for a, b in zip(self.supports, self.tightening,
                                                           strict=True))
+            and (self.w_ratio is None or max(self.w_ratio) <= 1.0)
         )  # fmt: skip
 
     def line(self) -> str:
@@ -837,10 +848,16 @@ class NotchLoop:
             )
         sup = " / ".join(f"{v:.4f}" for v in self.supports)
         tig = " / ".join(f"{v:.4f}" for v in self.tightening)
+        closed = ""
+        if self.w_ratio is not None:
+            closed = (f", over the loop's own set of (e, u - v): H / the pair's "
+                      f"{self.w_ratio[0]:.3f}, W's bound / W per row "
+                      + " ".join(f"{v:.3f}" for v in self.w_ratio[1:]))  # fmt: skip
         return head + (
-            f"; an ellipsoid of the loop with the filter's states, RPI for W: exact worst "
+            ("; with the gain designed for the loop" if self.designed else "")
+            + f"; an ellipsoid of the loop with the filter's states, RPI for W: exact worst "
             f"one-step level {self.level:.6f}, its projection on e inside {self.s:.4f} x Z, "
-            f"input support through q' {sup} (tightening {tig})"
+            f"input support through q' {sup} (tightening {tig}){closed}"
             + (": certified with the notch  OK" if self.certified
                else ": NOT certified with the notch")
         )  # fmt: skip
@@ -1047,14 +1064,16 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
 
 
 def notch_certificate(A, B, F, N, w_max, notch, Ts: float, iq: int, P,
-                      variant: str = "") -> NotchLoop:  # fmt: skip
+                      variant: str = "", tightening=None) -> NotchLoop:  # fmt: skip
     """Re-check a given ellipsoid of the tube loop with the notch (:func:`notch_tube`).
 
     Exact, whatever found P: the worst one-step level of E = {xi' P^-1 xi <= 1} over
     every vertex of the loop in [e; chi] and every corner of W (:func:`vertex_levels`),
     the factor s of its projection on e into Z, and its input support through q' against
     F Z's (the tightening). Arguments as :func:`notch_tube`; ``P`` is (n + 2, n + 2) in
-    the coordinates of :func:`notch_closed_loop`.
+    the coordinates of :func:`notch_closed_loop`. ``tightening`` (m,), if given, is the
+    tightening the supports are compared with in place of F Z's: for a gain designed
+    for the loop (:func:`notch_gain`) it is the pair's, which the nominal QP applies.
 
     Returns
     -------
@@ -1067,10 +1086,173 @@ def notch_certificate(A, B, F, N, w_max, notch, Ts: float, iq: int, P,
         On inconsistent shapes (P included).
     """
     loop, Acl, K = _notch_loop(A, B, F, notch, Ts, iq, variant)
-    return _recheck(loop, Acl, K, F, N, w_max, P)
+    return _recheck(loop, Acl, K, F, N, w_max, P, tightening)
 
 
-def _recheck(loop, Acl, K, F, N, w_max, P) -> NotchLoop:
+@dataclass(frozen=True)
+class NotchGain:
+    """A tube gain designed for the loop through the notch and its check (:func:`notch_gain`).
+
+    Attributes
+    ----------
+    F : (m, n) ndarray
+        Gain on e' (e with q' = notch(q) for q) [(-, rad) per state unit].
+    P : (n + 2, n + 2) ndarray
+        Its ellipsoid in xi = [e; chi] (coordinates of :func:`notch_closed_loop`).
+    loop : NotchLoop
+        The exact re-check at the case's notch (:func:`notch_certificate` against the
+        tightening the design applies), ``designed`` set.
+    steps : tuple of (float, float)
+        (eps_p, gamma) of every convex step taken, in order.
+    """
+
+    F: np.ndarray
+    P: np.ndarray
+    loop: NotchLoop
+    steps: tuple[tuple[float, float], ...]
+
+    def joint(self, notch, Ts: float, iq: int) -> np.ndarray:
+        """Shape (n + m, n + m) of (e, u - v) over E(P): [[I, 0], K] P [[I, 0], K]'.
+
+        ``notch``, ``Ts``, ``iq`` as :func:`notch_closed_loop` (the case's notch).
+        """
+        m, n = self.F.shape
+        _, K = notch_closed_loop(np.zeros((1, n, n)), np.zeros((1, n, m)), self.F, notch, Ts, iq)
+        J = np.vstack([np.hstack([np.eye(n), np.zeros((n, 2))]), K])
+        return J @ self.P @ J.T
+
+
+def notch_gain(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
+               continuation=(), rounds: int = 8, variant: str = "", tightening=None,
+               log=print) -> NotchGain | None:  # fmt: skip
+    """Design the tube gain of the loop through the notch on q together with its certificate.
+
+    :func:`notch_tube` certifies the loop u = F e' for the tube's own F; a gain that
+    tolerates the filter's lag less well than the loop needs (the eight-state pair with
+    its attitude supports bounded: spectral radius above 1 through deep notches) has no
+    such certificate. Every assumption the tube was bounded under holds for any gain
+    whose loop has an ellipsoid RPI for W with its projection in Z and its input
+    support within the tightening the nominal QP applies: the gain on e' is free. It is
+    a static output feedback of the loop in xi = [e; chi], u - v = F T xi, designed by
+    convex steps in (F, P) (:func:`fahv.synthesis.feedback.output_feedback_step`: the
+    dilated RPI condition, the output structure on the slack, whitened by the last
+    ellipsoid), in continuation over the notch's pole damping: from ``F``'s own ellipsoid
+    at the first eps_p of ``continuation`` (one is sought with a 100 x looser input
+    support bound), each certified gain starts the next, the case's ``notch.eps_p``
+    last. Each eps_p is stepped until the exact re-check (:func:`notch_certificate`:
+    level over every vertex and corner of W, s, the supports against the tightening)
+    certifies it, or gamma gains less than 1e-3 (stalled), or ``rounds`` steps; each
+    eps_p before the case's must end certified. A start certified as it is is kept
+    (steps that only shrink the ellipsoid were measured not to carry a gain further).
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+        Vertices of the tube's error dynamics (unscaled).
+    F : (m, n) ndarray
+        The gain the continuation starts from (the tube's).
+    N : (n, n) ndarray
+        Tube shape, Z = {e' N^-1 e <= 1}.
+    w_max : (n,) array_like
+        Half-widths of W.
+    notch : fahv.model.notch.NotchFilter
+        The case's notch (its eps_p is the last of the continuation).
+    Ts : float
+        Control period [s].
+    iq : int
+        Index of q in e.
+    lam : float
+        Contraction factor of the S-procedure.
+    continuation : sequence of float
+        Pole dampings eps_p before the case's, increasing, each below it.
+    rounds : int
+        Most convex steps per eps_p.
+    variant : str
+    tightening : (m,) array_like, optional
+        The tightening the nominal QP applies, which the loop's input supports must keep
+        within; default F Z's support (the tube's, when ``F`` is the tube's gain).
+    log : callable
+        One line per step.
+
+    Returns
+    -------
+    NotchGain or None
+        The last gain reached at the case's eps_p with its re-check (``loop.certified``
+        says whether it is certified); None if an earlier eps_p of the continuation was
+        not certified or no start ellipsoid exists.
+
+    Raises
+    ------
+    ValueError
+        On inconsistent shapes, or a continuation that is not increasing below the
+        case's eps_p.
+    DesignError
+        If a solve's slack is singular (:func:`output_feedback_step`).
+    """
+    A, B, F, N = (np.asarray(v, float) for v in (A, B, F, N))
+    path = [float(v) for v in continuation] + [float(notch.eps_p)]
+    if any(b <= a for a, b in zip(path, path[1:], strict=False)) or path[0] <= 0.0:
+        raise ValueError(f"notch_gain: continuation {list(continuation)} must increase "
+                         f"from above 0 to below the case's eps_p {notch.eps_p}")  # fmt: skip
+    w = np.asarray(w_max, float)
+    tight = (
+        np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
+        if tightening is None
+        else np.asarray(tightening, float)
+    )
+    w_xi = np.r_[w, 0.0, 0.0]
+    R, n, m = B.shape
+    B0 = np.concatenate([B, np.zeros((R, 2, m))], axis=1)
+    steps: list[tuple[float, float]] = []
+    loop = None
+    for eps_p in path:
+        nf = replace(notch, eps_p=eps_p)
+        _, T = notch_closed_loop(A[:1], np.zeros((1, n, n)), np.eye(n), nf, Ts, iq)
+        A0, _ = notch_closed_loop(A, B, np.zeros_like(F), nf, Ts, iq)
+        Acl, K = notch_closed_loop(A, B, F, nf, Ts, iq)
+        ell = invariant_ellipsoid(Acl, w, notch_loop_scale(N, nf, Ts, iq), N, K, 100.0 * tight,
+                                  lambda P, Acl=Acl: vertex_levels(Acl, P, w_xi), lam)  # fmt: skip
+        if ell is None:
+            log(f"variant {variant}: notch gain at eps_p {eps_p:g}: no ellipsoid for the start "
+                "gain: NOT designed")  # fmt: skip
+            return None
+        P = ell.P
+        loop = replace(notch_certificate(A, B, F, N, w, nf, Ts, iq, P, variant, tight),
+                       designed=True)  # fmt: skip
+        best = np.inf
+        last = eps_p == path[-1]
+        for _ in range(rounds):
+            if loop.certified:
+                break
+            got = output_feedback_step(
+                A0, B0, T, w, F, P, N, tight,
+                lambda Fk, Pk, nf=nf: vertex_levels(notch_closed_loop(A, B, Fk, nf, Ts, iq)[0],
+                                                    Pk, w_xi),
+                lam,
+            )  # fmt: skip
+            if got is None:
+                log(f"variant {variant}: notch gain at eps_p {eps_p:g}: the step's LMI failed")
+                break
+            F, P = got.F, got.P
+            steps.append((eps_p, got.gamma))
+            loop = replace(notch_certificate(A, B, F, N, w, nf, Ts, iq, P, variant, tight),
+                           designed=True)  # fmt: skip
+            log(f"variant {variant}: notch gain at eps_p {eps_p:g}: step gamma {got.gamma:.4f} "
+                f"({got.n_blocks} vertices held): s {loop.s:.4f}, level {loop.level:.6f}, "
+                f"supports " + " / ".join(f"{v:.4f}" for v in loop.supports)
+                + (" certified" if loop.certified else ""))  # fmt: skip
+            if got.gamma > best - 1e-3:
+                break  # stalled
+            best = got.gamma
+        if not loop.certified and not last:
+            log(f"variant {variant}: notch gain at eps_p {eps_p:g} NOT certified: the "
+                "continuation stops")  # fmt: skip
+            return None
+    return NotchGain(F, P, loop, tuple(steps))
+
+
+def _recheck(loop, Acl, K, F, N, w_max, P, tightening=None) -> NotchLoop:
     """The exact re-check of :func:`notch_certificate` on a built loop (A_xi, K)."""
     F, N, P = (np.asarray(v, float) for v in (F, N, P))
     n = N.shape[0]
@@ -1080,7 +1262,13 @@ def _recheck(loop, Acl, K, F, N, w_max, P) -> NotchLoop:
     Li = np.linalg.inv(np.linalg.cholesky(N))
     s = float(np.sqrt(np.linalg.eigvalsh(Li @ P[:n, :n] @ Li.T).max()))
     supports = np.sqrt(np.einsum("ij,jk,ik->i", K, P, K))
-    tightening = np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
+    if tightening is None:
+        tightening = np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
+    tightening = np.asarray(tightening, float)
+    if tightening.shape != supports.shape:
+        raise ValueError(
+            f"notch_certificate: tightening has shape {tightening.shape}, expected {supports.shape}"
+        )
     return replace(loop, s=s, level=level, supports=tuple(supports.tolist()),
                    tightening=tuple(tightening.tolist()))  # fmt: skip
 

@@ -35,7 +35,7 @@ onset of a loss is not in W_8).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -48,7 +48,7 @@ from fahv.design.along_nominal import (
     nominal_vertices,
     onset_jumps,
 )
-from fahv.design.certificate import NotchLoop, notch_loop, notch_tube, worst_level
+from fahv.design.certificate import NotchLoop, notch_gain, notch_loop, notch_tube, worst_level
 from fahv.errors import DesignError
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.synthesis.feedback import design_tube
@@ -98,6 +98,10 @@ class EightStatePair:
     notch_loops : tuple of NotchLoop
         The tube variants that feed q through a notch, their loops certified in their
         own states at the pair's vertices (:func:`fahv.design.certificate.notch_tube`).
+    notch_gains : dict
+        ``{variant: (2, 8) ndarray}``: the gains designed for those loops and certified
+        (``eight_state.notch_gain: designed``, :func:`fahv.design.certificate.notch_gain`);
+        such a variant runs its own gain in place of F_8.
     """
 
     F8: np.ndarray
@@ -112,6 +116,7 @@ class EightStatePair:
     w_h: float
     onset: OnsetBound | None = None
     notch_loops: tuple[NotchLoop, ...] = ()
+    notch_gains: dict = field(default_factory=dict)
 
     @property
     def F(self) -> np.ndarray:
@@ -905,11 +910,79 @@ def design_pair(
         A8, B8, iq = A[:, 1:, 1:], B[:, 1:, :], EIGHT_STATES.index("q")
         loops = tuple(notch_loop(A8, B8, pair.F8, nf, case["Ts"], iq, v)
                       for v, nf in (stable_only or {}).items())  # fmt: skip
-        loops += tuple(notch_tube(A8, B8, pair.F8, pair.N8, pair.W8, nf, case["Ts"], iq,
-                                  pair.lam, v)
-                       for v, nf in (notches or {}).items())  # fmt: skip
-        pair = replace(pair, notch_loops=loops)
+        gains = {}
+        for v, nf in (notches or {}).items():
+            loop = notch_tube(A8, B8, pair.F8, pair.N8, pair.W8, nf, case["Ts"], iq, pair.lam, v)
+            if s["notch_gain"] == "designed" and not loop.certified:
+                log(f"{loop.line()}; a gain is designed for this loop (eight_state.notch_gain)")
+                loop, gain = designed_notch_loop(
+                    nv, A, B, pair, nf, case["Ts"], v, s["notch_continuation"], log
+                ) or (loop, None)
+                if gain is not None:
+                    gains[v] = gain
+            loops += (loop,)
+        pair = replace(pair, notch_loops=loops, notch_gains=gains)
     return pair, nominal, box
+
+
+def designed_notch_loop(
+    nv: NominalVertices,
+    A,
+    B,
+    pair: EightStatePair,
+    notch,
+    Ts: float,
+    variant: str,
+    continuation=(),
+    log: Callable[[str], None] = print,
+):
+    """A gain designed for the pair's loop through the notch, closed on W_8 (or None).
+
+    The loop u - v = F e' through the notch (:func:`fahv.design.certificate.notch_gain`,
+    from F_8, with the pair's Z_8 and tightening) keeps e_8 in Z_8 and the applied input
+    within the tightening, but its input deviation is K xi, not F_8 e_8: W_8's bound over
+    the product set is therefore recomputed for the loop's own joint set of (e_8, u - v)
+    (:func:`altitude_bound` with ``joint``); the loop is closed if its altitude bound is
+    at most the pair's H (the scheduling box holds that) and its bound lies inside W_8
+    (``NotchLoop.w_ratio`` = (H / the pair's H, bound / W_8), every entry <= 1).
+
+    Parameters
+    ----------
+    nv : NominalVertices
+    A, B : (R, 9, 9), (R, 9, 2) ndarray
+        The pair's vertices (``nv.vertices()``).
+    pair : EightStatePair
+    notch : fahv.model.notch.NotchFilter
+    Ts : float
+        Control period [s].
+    variant : str
+    continuation : sequence of float
+        ``eight_state.notch_continuation``.
+    log : callable
+
+    Returns
+    -------
+    (NotchLoop, (2, 8) ndarray or None) or None
+        The loop's re-check with ``w_ratio`` and the gain if certified (None if not); None
+        if no gain was reached at the case's eps_p.
+
+    Raises
+    ------
+    DesignError
+        As :func:`fahv.design.certificate.notch_gain`.
+    """
+    iq = EIGHT_STATES.index("q")
+    got = notch_gain(A[:, 1:, 1:], B[:, 1:, :], pair.F8, pair.N8, pair.W8, notch, Ts, iq,
+                     pair.lam, continuation, variant=variant, log=log)  # fmt: skip
+    if got is None:
+        return None
+    ab = altitude_bound(nv, A, B, pair.F8, pair.N8, pair.moves, joint=got.joint(notch, Ts, iq))
+    # h first: the scheduling box was checked to hold |e_h| <= H, the loop's H must not exceed it
+    loop = replace(got.loop, w_ratio=tuple([ab.H / pair.H, *(ab.bound / pair.W8).tolist()]))
+    log(f"variant {variant}: the designed gain's loop: H {ab.H:.3f} ft (the pair's "
+        f"{pair.H:.3f} ft), W_8's bound over its own set / W_8 "
+        + " ".join(f"{v:.3f}" for v in loop.w_ratio[1:]))  # fmt: skip
+    return loop, (got.F if loop.certified else None)
 
 
 def pair_report(pair: EightStatePair, nominal: SchedulingBox, box: SchedulingBox) -> list[str]:

@@ -20,7 +20,7 @@ import numpy as np
 from fahv.config.spec import defaults_text
 from fahv.control import LAWS, VARIANTS, variant_notch
 from fahv.control.nominal_mpc import attitude_bounds, estimator_gains
-from fahv.design.artefacts import Design, provenance
+from fahv.design.artefacts import Design, provenance, variant_gain_key
 from fahv.design.case import Case
 from fahv.design.certificate import certify_tube, notch_loop, notch_tube
 from fahv.design.disturbance import (
@@ -368,6 +368,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     }
     if pair is not None:  # the QP's rows on the manoeuvre part of the input (mpc.u_box)
         arrays["u_box"] = u_box
+        for v, F8v in pair.notch_gains.items():  # a gain designed for a variant's notch loop
+            arrays[variant_gain_key(v)] = np.hstack([np.zeros((2, 1)), F8v])
     # largest trim attitude offset of a parameter-box corner from the nominal trim
     arrays["att_trim_offset"] = np.array(coverage.alpha_offset_max)
     arrays["x0"] = np.asarray(x_start[:9], float)  # plant initial state: trim at (h0, V0)

@@ -23,6 +23,7 @@ import numpy as np
 from fahv.config import Field
 from fahv.config.spec import validate_flat
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS, variant_notch
+from fahv.design.artefacts import variant_gain_key
 from fahv.design.case import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, TS
 from fahv.errors import ParameterError
 from fahv.loop.graph import CONTROLLER_NODES
@@ -214,8 +215,9 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     variant : str, optional
         A variant of the case (:data:`fahv.control.VARIANTS`; default: the case's
         first). The variant gives the law (its controller node, the nominal node's
-        mode, the law's own parameters) and the notch setting: as in the case,
-        off, or centred on flexible mode 2.
+        mode, the law's own parameters), the notch setting (as in the case, off, or
+        centred on flexible mode 2) and the gain F: the design's ``F_<variant>`` if it
+        designed one for the variant's loop through the notch, else ``F``.
     watchdog_s : float
         Wall-clock watchdog of every node [s].
 
@@ -266,7 +268,8 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         **common,
         "law": law.name,
         "tau": tau,
-        **mat("F"),
+        # the variant's own gain if the design made one for its loop through the notch
+        **flat_parameter("F", np.asarray(a.get(variant_gain_key(variant), a["F"]), float)),
         **mat("N"),
         **notch_values,
         "filter_nominal_q": bool(c["tube"]["filter_nominal_q"]),

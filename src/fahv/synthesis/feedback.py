@@ -550,6 +550,159 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     return InvariantEllipsoid(P_un, s, supports, len(chosen))
 
 
+@dataclass(frozen=True)
+class OutputFeedbackStep:
+    """One convex step of :func:`output_feedback_step` (unscaled units).
+
+    Attributes
+    ----------
+    F : (m, p_y) ndarray
+        Static output-feedback gain, u - v = F T xi.
+    P : (n, n) ndarray
+        Ellipsoid E = {xi : xi' P^-1 xi <= 1} RPI for the loop with F at every vertex
+        (exact level <= 1, checked by the ``levels`` callable at every vertex).
+    gamma : float
+        The step's objective: the projection of E lies in gamma S and the input supports
+        within gamma ``support_max`` (as solved; the caller re-checks both exactly).
+    n_blocks : int
+        Vertex blocks the last solve held (constraint generation).
+    """
+
+    F: np.ndarray
+    P: np.ndarray
+    gamma: float
+    n_blocks: int
+
+
+def output_feedback_step(A0, B0, T, w_max, F0, P0, shape, support_max, levels, lam: float,
+                         active: int = 20, add: int = 40) -> OutputFeedbackStep | None:  # fmt: skip
+    """One convex step of a static output-feedback gain and its RPI ellipsoid, together.
+
+    For the loop xi+ = (A0_i + B0_i F T) xi + E w, E = [diag(w_max); 0], w in the unit
+    box, the RPI condition of :func:`invariant_ellipsoid` is bilinear in (F, P). This
+    step uses its dilated form (de Oliveira, Bernussou & Geromel 1999, discrete time),
+    with a slack G in place of P where the loop acts::
+
+        [[lam (G + G' - P), 0, (A0_i G + B0_i Y T)'], [0, diag(mu_i), E'],
+         [A0_i G + B0_i Y T, E, P]] >= 0,       sum_j mu_i,j <= (1 - lam)(1 - BUDGET_MARGIN),
+
+    which implies the S-procedure condition of E(P) (G' P^-1 G >= G + G' - P), and the
+    output structure on the slack (Crusius & Trofino 1999): T G = M T makes
+    F T G = F M T = Y T, so every block is linear in (P, G, M, Y, mu) and F = Y M^-1.
+    The input supports are bounded through the same slack,
+    [[gamma^2 t_j^2, Y_j T], [T' Y_j', G + G' - P]] >= 0, and the projection on the
+    first p states by P_pp <= gamma^2 S; gamma^2 is minimised.
+
+    Solved in the coordinates whitened by the last ellipsoid P0 (xi = L z, P0 = L L'),
+    where (G, P, M, Y) = (P0, P0, I, F0) is feasible whenever P0 is RPI for F0: the step
+    starts from the last certificate and can only lower gamma (without the whitening
+    cond(M) reached 4e6 on the notch loop; without the slack the steps stalled). The
+    vertices are held by constraint generation: the ``active`` worst of the start (by
+    spectral radius and by exact level) first, then per round at most ``add`` of those
+    whose exact level ``levels(F, P)`` exceeds 1, until none does; that exact level over
+    every vertex, not the solver's status, is what the result is accepted on.
+
+    Parameters
+    ----------
+    A0 : (R, n, n) ndarray
+    B0 : (R, n, m) ndarray
+        Vertices of the loop without the feedback (unscaled).
+    T : (p_y, n) ndarray
+        Output map: the gain acts on y = T xi.
+    w_max : (p,) array_like
+        Half-widths of W on the first p states, p <= n.
+    F0 : (m, p_y) ndarray
+        The last gain, for which P0 is RPI.
+    P0 : (n, n) ndarray
+        The last ellipsoid (positive definite).
+    shape : (p, p) ndarray
+        S, the ellipsoid the projection is bounded by.
+    support_max : (m,) array_like
+        t_j, the input deviation's support bound per row.
+    levels : callable
+        ``levels(F, P) -> (R,)``: the exact worst one-step level of every vertex of the
+        loop with gain F for the ellipsoid of shape P (e.g. built on
+        :func:`fahv.design.certificate.vertex_levels`).
+    lam : float
+        Contraction factor in (0, 1).
+    active, add : int
+        Constraint generation: vertices of the first solve per criterion, and per round.
+
+    Returns
+    -------
+    OutputFeedbackStep or None
+        None if the LMI is infeasible or the solver fails on the vertices held.
+
+    Raises
+    ------
+    ValueError
+        On inconsistent shapes or lam outside (0, 1).
+    DesignError
+        If the solved slack's block M is singular (F = Y M^-1 undefined).
+    """
+    A0, B0, T, F0, P0 = (np.asarray(v, float) for v in (A0, B0, T, F0, P0))
+    R, n, _ = A0.shape
+    m, py = B0.shape[2], T.shape[0]
+    ws = np.asarray(w_max, float)
+    p = ws.size
+    tmax = np.asarray(support_max, float)
+    if (A0.shape[2] != n or B0.shape[:2] != (R, n) or T.shape[1] != n or F0.shape != (m, py)
+            or P0.shape != (n, n) or np.shape(shape) != (p, p) or p > n or tmax.shape != (m,)
+            or not 0.0 < lam < 1.0):  # fmt: skip
+        raise ValueError(
+            f"output_feedback_step: shapes A0 {A0.shape}, B0 {B0.shape}, T {T.shape}, F0 "
+            f"{F0.shape}, P0 {P0.shape}, w_max {ws.shape}, shape {np.shape(shape)}, "
+            f"support_max {tmax.shape}, lam {lam}"
+        )
+    L = np.linalg.cholesky(0.5 * (P0 + P0.T))
+    Li = np.linalg.inv(L)
+    Aw, Bw, Tw = Li[None] @ A0 @ L[None], Li[None] @ B0, T @ L
+    E = Li @ np.vstack([np.diag(ws), np.zeros((n - p, p))])
+    Si = np.linalg.inv(np.linalg.cholesky(np.asarray(shape, float)))
+    Acl0 = A0 + B0 @ F0 @ T
+    rho = np.abs(np.linalg.eigvals(Acl0)).max(axis=1)
+    chosen = np.union1d(np.argsort(-rho)[:active], np.argsort(-np.asarray(levels(F0, P0)))[:active])
+    budget = (1.0 - lam) * (1.0 - BUDGET_MARGIN)
+    while True:
+        P = cp.Variable((n, n), symmetric=True)
+        G = cp.Variable((n, n))
+        M = cp.Variable((py, py))
+        Y = cp.Variable((m, py))
+        g2 = cp.Variable()
+        mu = cp.Variable((len(chosen), p), nonneg=True)
+        GG = G + G.T - P
+        proj = Si @ L[:p] @ P @ L[:p].T @ Si.T
+        cons = [P >> LMI_MARGIN * np.eye(n), Tw @ G == M @ Tw,
+                0.5 * (proj + proj.T) << g2 * np.eye(p), cp.sum(mu, axis=1) <= budget]  # fmt: skip
+        for j in range(m):
+            row = cp.reshape(Y[j] @ Tw, (1, n), order="C")
+            blk = cp.bmat([[cp.reshape(g2 * tmax[j] ** 2, (1, 1), order="C"), row], [row.T, GG]])
+            cons.append(0.5 * (blk + blk.T) >> 0)
+        for r, i in enumerate(chosen):
+            AG = Aw[i] @ G + Bw[i] @ Y @ Tw
+            blk = cp.bmat([[lam * GG, np.zeros((n, p)), AG.T],
+                           [np.zeros((p, n)), cp.diag(mu[r]), E.T],
+                           [AG, E, P]])  # fmt: skip
+            cons.append(0.5 * (blk + blk.T) >> 0)
+        prob = cp.Problem(cp.Minimize(g2), cons)
+        if not _solved(prob):
+            return None
+        Mv = M.value
+        if not np.all(np.isfinite(Mv)) or np.linalg.cond(Mv) > 1e12:
+            raise DesignError(
+                f"output_feedback_step: the slack's output block M is singular (cond "
+                f"{np.linalg.cond(Mv):.2e}): F = Y M^-1 is not defined"
+            )
+        F = Y.value @ np.linalg.inv(Mv)
+        Pn = L @ (0.5 * (P.value + P.value.T)) @ L.T
+        lev = np.asarray(levels(F, Pn), float)
+        bad = np.setdiff1d(np.flatnonzero(lev > 1.0), chosen)
+        if bad.size == 0:
+            break
+        chosen = np.union1d(chosen, bad[np.argsort(-lev[bad])[:add]])
+    return OutputFeedbackStep(F, Pn, float(np.sqrt(max(g2.value, 0.0))), len(chosen))
+
+
 def _invariance_blocks(AP, lam, mu, P, E) -> np.ndarray:
     """Blocks (R, 2n + p, 2n + p) [[lam P, 0, AP'], [0, diag(mu), E'], [AP, E, P]] (scaled).
 
