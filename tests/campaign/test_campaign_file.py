@@ -16,7 +16,9 @@ ROOT = Path(__file__).resolve().parents[2]
     [("campaign_case1.yaml", "case1_vertex"), ("campaign_case2.yaml", "case2"),
      ("campaign_case1_eight_state.yaml", "case1"),
      ("campaign_case1_attitude.yaml", "case1_attitude"),
-     ("campaign_envelope_attitude.yaml", "case1_attitude")],
+     ("campaign_envelope_attitude.yaml", "case1_attitude"),
+     ("campaign_case1_attitude_notch.yaml", "case1_attitude_notch"),
+     ("campaign_envelope_attitude_notch.yaml", "case1_attitude_notch")],
 )  # fmt: skip
 def test_example_campaign_files_validate(name, case):
     c = load_campaign(ROOT / "offline_design" / name)
