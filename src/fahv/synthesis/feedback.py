@@ -432,6 +432,20 @@ class InvariantEllipsoid:
 BUDGET_MARGIN = 4e-3
 
 
+def _s_procedure_block(top, AX, E, mu, P):
+    """The cvxpy block [[top, 0, AX'], [0, diag(mu), E'], [AX, E, P]], symmetrised.
+
+    The S-procedure form of the RPI condition for a box W (LMI 24 in analysis form):
+    ``top`` is lam P (:func:`invariant_ellipsoid`) or lam (G + G' - P) in the dilated
+    form (:func:`output_feedback_step`); AX (n, n) the closed loop times P or G; E (n, p).
+    """
+    n, p = E.shape
+    blk = cp.bmat([[top, np.zeros((n, p)), AX.T],
+                   [np.zeros((p, n)), cp.diag(mu), E.T],
+                   [AX, E, P]])  # fmt: skip
+    return 0.5 * (blk + blk.T)
+
+
 def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float,
                         active: int = 40, add: int = 10) -> InvariantEllipsoid | None:  # fmt: skip
     """Smallest ellipsoid RPI for a fixed closed loop whose projection lies in a given one.
@@ -521,12 +535,8 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
         s2 = cp.Variable()
         cons = [P >> LMI_MARGIN * np.eye(n), cp.sum(mu, axis=1) <= budget, P[:p, :p] << s2 * Ss]
         cons += [Ks[j] @ P @ Ks[j] <= tmax[j] ** 2 for j in range(K.shape[0])]
-        for r, i in enumerate(chosen):
-            AP = As[i] @ P
-            blk = cp.bmat([[lam * P, np.zeros((n, p)), AP.T],
-                           [np.zeros((p, n)), cp.diag(mu[r]), E.T],
-                           [AP, E, P]])  # fmt: skip
-            cons.append(0.5 * (blk + blk.T) >> 0)
+        cons += [_s_procedure_block(lam * P, As[i] @ P, E, mu[r], P) >> 0
+                 for r, i in enumerate(chosen)]  # fmt: skip
         prob = cp.Problem(cp.Minimize(s2), cons)
         if not _solved(prob):
             return None
@@ -678,12 +688,8 @@ def output_feedback_step(A0, B0, T, w_max, F0, P0, shape, support_max, levels, l
             row = cp.reshape(Y[j] @ Tw, (1, n), order="C")
             blk = cp.bmat([[cp.reshape(g2 * tmax[j] ** 2, (1, 1), order="C"), row], [row.T, GG]])
             cons.append(0.5 * (blk + blk.T) >> 0)
-        for r, i in enumerate(chosen):
-            AG = Aw[i] @ G + Bw[i] @ Y @ Tw
-            blk = cp.bmat([[lam * GG, np.zeros((n, p)), AG.T],
-                           [np.zeros((p, n)), cp.diag(mu[r]), E.T],
-                           [AG, E, P]])  # fmt: skip
-            cons.append(0.5 * (blk + blk.T) >> 0)
+        cons += [_s_procedure_block(lam * GG, Aw[i] @ G + Bw[i] @ Y @ Tw, E, mu[r], P) >> 0
+                 for r, i in enumerate(chosen)]  # fmt: skip
         prob = cp.Problem(cp.Minimize(g2), cons)
         if not _solved(prob):
             return None
