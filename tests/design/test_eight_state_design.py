@@ -53,6 +53,15 @@ def test_eight_state_case_sets_every_knob(raw8):
             ),
             "'eight_state.certify_attitude' needs",
         ),
+        (lambda d: d["eight_state"].update(notch_gain="designed", notch_continuation=[0.1]),
+         "'eight_state.notch_continuation' must increase to below notch.eps_p"),
+        (lambda d: d["eight_state"].update(notch_gain="designed",
+                                           notch_continuation=[0.06, 0.05]),
+         "'eight_state.notch_continuation' must increase"),
+        (lambda d: (d["eight_state"].update(notch_gain="designed"),
+                    d["tube"].update(filter_nominal_q=False)),
+         "'eight_state.notch_gain' 'designed' needs notch.enabled and tube.filter_nominal_q"),
+        (lambda d: d["eight_state"].update(notch_gain="mine"), "'eight_state.notch_gain'"),
     ],
 )
 def test_eight_state_case_refuses_a_loop_it_is_not_closed_for(raw8, mutate, match):
@@ -210,3 +219,71 @@ def test_a_nominal_box_without_room_for_the_faulty_trim_is_refused(raw8, monkeyp
     print(err.value)
     need = float(re.search(r"delta_e -([\d.]+)\.\.\+[\d.]+ deg", str(err.value)).group(1))
     assert 1.0 < need < 1.02  # the lightest corner's trim, with the remainder between points
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_a_designed_notch_gain_is_used_only_when_certified_and_closed(raw8, vehicle, monkeypatch,
+                                                                       closed):  # fmt: skip
+    """eight_state.notch_gain: designed. F_8's loop through the notch is checked first;
+    when it is not certified, a gain is designed (notch_gain) and W_8 bounded again over
+    the loop's own set (altitude_bound with the loop's joint shape). The variant gets the
+    gain only if that bound lies inside W_8 and its H within the pair's; otherwise it
+    keeps F_8 and F_8's verdict, and the log says so."""
+    import fahv.design.eight_state as es
+    from fahv.design.certificate import NotchGain, NotchLoop
+    from fahv.model.notch import NotchFilter
+
+    pair = _stored_pair()
+    R = 4
+
+    class Vertices:
+        J0 = np.zeros((64, 1))
+        n_vehicles = [1]
+
+        def vertices(self):
+            return np.tile(np.eye(9), (R, 1, 1)), np.zeros((R, 9, 2))
+
+    base = NotchLoop("tube_mpc", 19.05, 0.1, 0.9991, 0.995, 0, float("inf"), None, None,
+                     tuple(pair.tightening.tolist()))  # fmt: skip
+    good = NotchLoop("tube_mpc", 19.05, 0.1, 0.9990, 0.995, 0, 0.99, 0.9999,
+                     tuple((0.99 * pair.tightening).tolist()), tuple(pair.tightening.tolist()),
+                     designed=True)  # fmt: skip
+    F_new = 1.1 * pair.F8
+    seen = {}
+
+    def gain(A, B, F, N, w, nf, Ts, iq, lam, continuation, variant, log):
+        seen["gain"] = (A.shape, F is pair.F8, continuation, nf.eps_p, iq)
+        return NotchGain(F_new, np.eye(10), good, ((0.05, 0.98), (0.1, 0.99)))
+
+    class Bound:
+        H = pair.H * (0.99 if closed else 1.0)
+        bound = pair.W8 * (0.97 if closed else 1.02)
+
+    def altitude(nv, A, B, F8, N8, moves, joint=None):
+        seen["joint"] = joint.shape
+        return Bound()
+
+    monkeypatch.setattr(es, "nominal_vertices", lambda *a, **k: Vertices())
+    monkeypatch.setattr(es, "close_pair", lambda *a, **k: pair)
+    monkeypatch.setattr(es, "notch_tube", lambda *a, **k: base)
+    monkeypatch.setattr(es, "notch_gain", gain)
+    monkeypatch.setattr(es, "altitude_bound", altitude)
+    r = copy.deepcopy(raw8)
+    r["eight_state"].update(notch_gain="designed", notch_continuation=[0.05])
+    lines = []
+    got, _, _ = es.design_pair(case_from_mapping(r, "gain.yaml").data, vehicle, None,
+                               np.ones(11), np.ones(9), np.ones(11), 0.76, np.ones(2),
+                               log=lines.append, notches={"tube_mpc": NotchFilter(
+                                   19.05, 0.02, 19.05, 0.1)})  # fmt: skip
+    assert seen["gain"] == ((R, 8, 8), True, [0.05], 0.1, 3)
+    assert seen["joint"] == (10, 10)
+    (loop,) = got.notch_loops
+    if closed:
+        assert got.notch_gains.keys() == {"tube_mpc"}
+        np.testing.assert_array_equal(got.notch_gains["tube_mpc"], F_new)
+        assert loop.designed and loop.certified
+        np.testing.assert_allclose(loop.w_ratio, [0.99] + [0.97] * 8, rtol=1e-12)
+    else:
+        assert got.notch_gains == {}
+        assert loop is base and not loop.certified
+        assert "the variant runs F_8" in lines[-1]

@@ -915,11 +915,11 @@ def design_pair(
             loop = notch_tube(A8, B8, pair.F8, pair.N8, pair.W8, nf, case["Ts"], iq, pair.lam, v)
             if s["notch_gain"] == "designed" and not loop.certified:
                 log(f"{loop.line()}; a gain is designed for this loop (eight_state.notch_gain)")
-                loop, gain = designed_notch_loop(
+                got = designed_notch_loop(
                     nv, A, B, pair, nf, case["Ts"], v, s["notch_continuation"], log
-                ) or (loop, None)
-                if gain is not None:
-                    gains[v] = gain
+                )
+                if got is not None:
+                    loop, gains[v] = got
             loops += (loop,)
         pair = replace(pair, notch_loops=loops, notch_gains=gains)
     return pair, nominal, box
@@ -962,9 +962,9 @@ def designed_notch_loop(
 
     Returns
     -------
-    (NotchLoop, (2, 8) ndarray or None) or None
-        The loop's re-check with ``w_ratio`` and the gain if certified (None if not); None
-        if no gain was reached at the case's eps_p.
+    (NotchLoop, (2, 8) ndarray) or None
+        The certified loop's re-check (``designed``, ``w_ratio``) and its gain; None if no
+        gain was certified and closed at the case's eps_p (the variant keeps F_8).
 
     Raises
     ------
@@ -981,8 +981,12 @@ def designed_notch_loop(
     loop = replace(got.loop, w_ratio=tuple([ab.H / pair.H, *(ab.bound / pair.W8).tolist()]))
     log(f"variant {variant}: the designed gain's loop: H {ab.H:.3f} ft (the pair's "
         f"{pair.H:.3f} ft), W_8's bound over its own set / W_8 "
-        + " ".join(f"{v:.3f}" for v in loop.w_ratio[1:]))  # fmt: skip
-    return loop, (got.F if loop.certified else None)
+        + " ".join(f"{v:.3f}" for v in loop.w_ratio[1:])
+        + "; the onset lines are F_8's loop's, none is computed for this gain")  # fmt: skip
+    if not loop.certified:  # the variant keeps F_8 (and its own loop's verdict)
+        log(f"{loop.line()}; the variant runs F_8")
+        return None
+    return loop, got.F
 
 
 def pair_report(pair: EightStatePair, nominal: SchedulingBox, box: SchedulingBox) -> list[str]:
