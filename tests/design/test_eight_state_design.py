@@ -53,14 +53,23 @@ def test_eight_state_case_sets_every_knob(raw8):
             ),
             "'eight_state.certify_attitude' needs",
         ),
-        (lambda d: d["eight_state"].update(notch_gain="designed", notch_continuation=[0.1]),
-         "'eight_state.notch_continuation' must increase to below notch.eps_p"),
-        (lambda d: d["eight_state"].update(notch_gain="designed",
-                                           notch_continuation=[0.06, 0.05]),
-         "'eight_state.notch_continuation' must increase"),
-        (lambda d: (d["eight_state"].update(notch_gain="designed"),
-                    d["tube"].update(filter_nominal_q=False)),
-         "'eight_state.notch_gain' 'designed' needs notch.enabled and tube.filter_nominal_q"),
+        (
+            lambda d: d["eight_state"].update(notch_gain="designed", notch_continuation=[0.1]),
+            "'eight_state.notch_continuation' must increase to below notch.eps_p",
+        ),
+        (
+            lambda d: d["eight_state"].update(
+                notch_gain="designed", notch_continuation=[0.06, 0.05]
+            ),
+            "'eight_state.notch_continuation' must increase",
+        ),
+        (
+            lambda d: (
+                d["eight_state"].update(notch_gain="designed"),
+                d["tube"].update(filter_nominal_q=False),
+            ),
+            "'eight_state.notch_gain' 'designed' needs notch.enabled and tube.filter_nominal_q",
+        ),
         (lambda d: d["eight_state"].update(notch_gain="mine"), "'eight_state.notch_gain'"),
     ],
 )
