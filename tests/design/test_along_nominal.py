@@ -370,7 +370,8 @@ def test_onset_bound_of_the_stored_pair_holds_along_switching_vertices(along, de
     is 2.1-2.2 x Z_8 and the rest 0.33-0.34, and 1.1-1.8 % is certified. Independently:
     the pulse train (1 - gamma)^k J of the worst jump, propagated along random switching
     sequences of the 4096 closed-loop vertices, stays within the bound's pulse part in
-    Z_8's norm."""
+    Z_8's norm. The jump's norm is made by the second bending mode's rate and q: V, alpha and
+    theta alone take 0.099 x Z_8."""
     import fahv.design.eight_state as es
     from fahv.design.along_nominal import onset_jumps
 
@@ -388,6 +389,15 @@ def test_onset_bound_of_the_stored_pair_holds_along_switching_vertices(along, de
     assert 0.99 < ob.contraction < np.sqrt(pair.lam)  # LMI (24) bounds it by sqrt(lam)
     assert 0.80 < ob.steady < 1.0 and ob.peak > 1.0
     assert 0.003 < ob.certified_loss < 0.007 and 0.015 < ob.certified_loss_one_step < 0.03
+    # which states make the norm: the second bending mode's rate (1.475 x its support) and q
+    # (0.588); V, alpha, theta alone 0.099 x Z_8 (scripts/onset_jump_study.py, 1024 samples)
+    share = dict(zip(es.EIGHT_STATES, ob.jump_share, strict=True))
+    assert share["eta_2_dot"] == pytest.approx(-1.475, abs=0.02)
+    assert share["q"] == pytest.approx(0.588, abs=0.01)
+    assert max(abs(share[k]) for k in ("V", "alpha", "theta")) < 0.06
+    assert ob.jump_rigid == pytest.approx(0.099, abs=0.005)
+    assert ob.jump_rigid_q == pytest.approx(1.112, abs=0.02)
+    assert ob.summary()["jump_share"] == list(ob.jump_share)
     L = np.linalg.cholesky(pair.N8)
     J, _ = onset_jumps(box, veh, tm, dict(PAPER_UNCERTAINTY), 1.0 - ob.certified_loss, TS,
                        N_SUB, interior=512, seed=7)  # fmt: skip

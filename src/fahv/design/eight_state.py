@@ -445,6 +445,15 @@ class OnsetBound:
         estimate that knows the whole loss one step after it acts (c + j <= 1).
     jump_h : float
         [ft] largest |J_h| / rho_f at the design loss (e_h's share, added to H).
+    jump_share : tuple of 8 floats
+        The jump of largest Z_8 norm, state by state (V, alpha, theta, q, eta_1,
+        eta_1_dot, eta_2, eta_2_dot) as a signed multiple of Z_8's support in that state:
+        which states make the norm.
+    jump_rigid : float
+        The largest Z_8 norm of the jumps with q and the bending modes left out: what the
+        requirement states V, alpha and theta receive.
+    jump_rigid_q : float
+        The same with only the bending modes left out (V, alpha, theta and q).
     """
 
     loss: float
@@ -460,10 +469,14 @@ class OnsetBound:
     certified_loss: float
     certified_loss_one_step: float
     jump_h: float
+    jump_share: tuple = (float("nan"),) * 8
+    jump_rigid: float = float("nan")
+    jump_rigid_q: float = float("nan")
 
     def summary(self) -> dict:
-        """JSON-ready record (the attributes)."""
-        return {k: float(v) for k, v in self.__dict__.items()}
+        """JSON-ready record (the attributes; ``jump_share`` as a list)."""
+        return {k: [float(x) for x in v] if isinstance(v, tuple) else float(v)
+                for k, v in self.__dict__.items()}  # fmt: skip
 
     def lines(self) -> list[str]:
         """The design log's lines of the bound."""
@@ -485,6 +498,10 @@ class OnsetBound:
             f"the case's estimate, {100 * self.certified_loss_one_step:.2f} % with an estimate "
             "that knows the whole loss one step after it acts (the first step alone, which no "
             "estimate can remove)",
+            "the first jump state by state, x Z_8's support: "
+            + ", ".join(f"{n} {v:+.3f}" for n, v in zip(EIGHT_STATES, self.jump_share, strict=True))
+            + f"; its Z_8 norm without the bending modes {self.jump_rigid_q:.3f}, without q and "
+            f"them (V, alpha, theta alone) {self.jump_rigid:.3f}",
         ]
 
 
@@ -572,7 +589,7 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     def z8(V):  # Z_8 norms of the e_8 parts of rows V (S, 9)
         return np.sqrt((np.linalg.solve(L, V[:, 1:].T) ** 2).sum(axis=0))
 
-    def jumps(loss: float):
+    def jumps(loss: float, full: bool = False):
         J, n_c = onset_jumps(nv.box, vehicle, trim_map, uncertainty, 1.0 - loss, Ts, n_sub,
                              interior)  # fmt: skip
         J = J / (1.0 - loss)
@@ -581,7 +598,8 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
             for b in directions:  # the share along b, as the estimate takes it
                 PJ = elevator_share(J, b, scale)[:, None] * b
                 jb, jr = max(jb, float(z8(PJ).max())), max(jr, float(z8(J - PJ).max()))
-        return norm, n_c, float(np.abs(J[:, 0]).max()), jb, jr
+        out = norm, n_c, float(np.abs(J[:, 0]).max()), jb, jr
+        return (*out, J) if full else out
 
     def peak(j, jb, jr, one_step=False):
         if one_step:
@@ -590,8 +608,14 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
         return pulse_peak(a, j, parts)
 
     loss = 1.0 - nv.rho_min
-    norm, n_c, jump_h, jb, jr = jumps(loss)
+    norm, n_c, jump_h, jb, jr, J = jumps(loss, full=True)
     j = float(norm.max())
+    share = tuple(float(v) for v in J[int(norm.argmax()), 1:] / np.sqrt(np.diag(pair.N8)))
+    rigid = J.copy()
+    rigid[:, 5:] = 0.0  # the bending modes (J's columns 5-8; column 0 is h)
+    rigid_q = float(z8(rigid).max())
+    rigid[:, 4] = 0.0  # and q
+    rigid = float(z8(rigid).max())
     H = pair.H + jump_h / gamma
     par, interp = product_bound(nv, pair.F8, pair.N8, H)
     bound = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H
@@ -620,7 +644,7 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     return OnsetBound(
         loss, gamma, 0.0 if gamma_e is None else float(gamma_e), a, c, j, jb, jr,
         float(norm[n_c:].max() / norm[:n_c].max()) if len(norm) > n_c else 0.0,
-        c + peak(j, jb, jr), certified(False), certified(True), jump_h,
+        c + peak(j, jb, jr), certified(False), certified(True), jump_h, share, rigid, rigid_q,
     )  # fmt: skip
 
 
