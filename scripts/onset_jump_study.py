@@ -68,6 +68,15 @@ def main(path: Path, loss: float, sequences: int) -> None:
     print("  at that point, per state, as a multiple of Z_8's support:")
     for name, v, s in zip(NAMES, J8[i], support, strict=True):
         print(f"    {name:>10}: {v / s:+.3f}   (jump {v:+.3e}, support {s:.3e})")
+    tightening = np.sqrt(np.diag(d["F"] @ d["N"] @ d["F"].T))
+    print("  the tube's answer to it one step later, F_8 J_8, as a multiple of the tightening "
+          "(support of F_8 Z_8) per input (Phi, delta_e):")  # fmt: skip
+    for label, idx in (("all of it", slice(0, 8)), ("through q", slice(3, 4)),
+                       ("through the bending modes", slice(4, 8))):  # fmt: skip
+        part = np.zeros(8)
+        part[idx] = J8[i, idx]
+        print(f"    {label}: {np.array2string(d['F'] @ part / tightening, precision=3)}")
+    print(f"    (tightening {tightening[0]:.4f} / {np.degrees(tightening[1]):.2f} deg)")
     print("  largest Z_8 norm over all jumps with a group of states left out:")
     for label, idx in GROUPS.items():
         Jd = J8.copy()
