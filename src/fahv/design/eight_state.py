@@ -469,9 +469,9 @@ class OnsetBound:
     certified_loss: float
     certified_loss_one_step: float
     jump_h: float
-    jump_share: tuple = (float("nan"),) * 8
-    jump_rigid: float = float("nan")
-    jump_rigid_q: float = float("nan")
+    jump_share: tuple[float, ...]
+    jump_rigid: float
+    jump_rigid_q: float
 
     def summary(self) -> dict:
         """JSON-ready record (the attributes; ``jump_share`` as a list)."""
@@ -611,11 +611,11 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     norm, n_c, jump_h, jb, jr, J = jumps(loss, full=True)
     j = float(norm.max())
     share = tuple(float(v) for v in J[int(norm.argmax()), 1:] / np.sqrt(np.diag(pair.N8)))
-    rigid = J.copy()
-    rigid[:, 5:] = 0.0  # the bending modes (J's columns 5-8; column 0 is h)
-    rigid_q = float(z8(rigid).max())
-    rigid[:, 4] = 0.0  # and q
-    rigid = float(z8(rigid).max())
+    J_rigid = J.copy()
+    J_rigid[:, 5:] = 0.0  # the bending modes (J's columns 5-8; column 0 is h)
+    rigid_q = float(z8(J_rigid).max())
+    J_rigid[:, 4] = 0.0  # and q
+    rigid = float(z8(J_rigid).max())
     H = pair.H + jump_h / gamma
     par, interp = product_bound(nv, pair.F8, pair.N8, H)
     bound = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H
