@@ -555,3 +555,51 @@ def test_replan_rate_row_lets_the_input_follow_the_estimate_after_an_onset(desig
     after = run.t >= 59.98
     assert np.max(np.abs(run.x[after, 0] - run.h_c[after])) <= 1.0
     assert run.qp_counts.tolist() == [150, 0, 0, 0]
+
+
+def _states_of_plan(mpc, y, z0):
+    """The plan's absolute nominal h [ft], V [ft/s] at every fast step after each move's
+    start (N_p, M, 2), propagated step by step on the scheduled model: x_r_s + Gx delta +
+    zeta."""
+    s, ly, n = mpc.s, mpc.layout, mpc.n
+    delta = y[ly.delta]
+    AK = mpc.A + mpc.B @ mpc.K
+    E = (mpc.A - np.eye(n)) @ mpc.Gx + mpc.B @ mpc.Gu
+    zeta = z0 - mpc.Gx @ delta
+    hv = np.empty((s.N_p, s.M, 2))
+    for j in range(s.N_p):
+        cj = y[ly.move(j)] * mpc.Du
+        for i in range(s.M):
+            zeta = AK @ zeta + mpc.B @ cj + E @ delta
+            hv[j, i] = mpc.x_r_s[:2] + mpc.Gx[:2] @ delta + zeta[:2]
+    return hv
+
+
+def test_range_rows_keep_the_set_point_and_the_prediction_in_the_nominal_range(design):
+    """mpc.hv_box (the eight-state tube's nominal h, V range): with a command beyond the
+    range the artificial set point stops at its edge (normal and recovery QP), and the
+    predicted h, V stay inside at every fast step of the first two moves and at every move
+    start; without the rows the same QP plans beyond it."""
+    from fahv.control.nominal_mpc import range_box
+
+    c, cmd, free, z0, y0, _ = _free_climb_plan(design)
+    hv_free = _states_of_plan(free, y0, z0)
+    top = c["h0"] + 100.0  # the range ends 100 ft above the start, 500 ft below the command
+    assert hv_free[:, :, 0].max() > top + 50.0  # the free plan climbs through it
+    box = range_box([84000.0, top, 7700.0, c["V0"] + 60.0])
+    mpc = _mpc(design, hv_box=box)
+    mpc.schedule(c["h0"], c["V0"])
+    for recover in (False, True):
+        y, why = mpc.solve(z0, mpc.u_r_s, cmd, recover=recover)
+        assert why == "ok"
+        h_s, V_s = mpc.theta_s + y[mpc.layout.delta] * mpc.theta_scale
+        assert h_s <= top + 1e-3 and V_s <= c["V0"] + 60.0 + 1e-3
+        hv = _states_of_plan(mpc, y, z0)
+        checked = np.concatenate([hv[:2].reshape(-1, 2), hv[2:, -1]])  # the rows' steps
+        tol = np.array([1e-3, 1e-3])
+        assert np.all(checked <= box[1] + tol) and np.all(checked >= box[0] - tol)
+        assert checked[:, 0].max() > top - 5.0  # it climbs to the edge
+    assert mpc.A_c.shape[0] == free.A_c.shape[0] + free.Att_y.shape[0]  # one row per attitude row
+    with pytest.raises(ValueError, match="mpc.hv_box"):
+        range_box([86000.0, 85000.0, 7700.0, 8300.0])
+    assert range_box([0.0, 0.0, 0.0, 0.0]) is None

@@ -14,7 +14,7 @@ import pytest
 
 from fahv.config.yamlio import load_yaml
 from fahv.design.case import case_from_mapping, load_case
-from fahv.errors import CaseError
+from fahv.errors import CaseError, DesignError
 
 CASE = "offline_design/case1.yaml"
 PAIR = Path(__file__).resolve().parents[1] / "data" / "closed_tube_h_reset.npz"
@@ -118,15 +118,21 @@ def test_certify_attitude_bounds_the_supports_in_the_tube_lmi(raw8, vehicle, mon
 def test_case_boxes_are_the_stored_pairs_within_rounding(vehicle):
     """The case's nominal box is the stored pair's (V margin 4.98 for 4.978 ft/s) except
     the lower ends of Phi and delta_e (-0.2 and -3 deg for -0.12 and -1 deg: room for
-    decelerations and descents below the corners' trims), and its scheduling box holds
-    the stored one, larger by at most 0.3 % of a reach except there."""
+    decelerations and descents below the corners' trims) and h (the envelope less 5 ft,
+    the stored pair's less 150 ft: h enters only the box's containment check, H = 2.6
+    ft), and its scheduling box holds the stored one, larger by at most 0.3 % of a reach
+    except there."""
     from fahv.design.eight_state import nominal_box
 
     d = dict(np.load(PAIR))
     nominal, box = nominal_box(load_case(CASE)["eight_state"], vehicle.envelope)
-    np.testing.assert_allclose(nominal.lo[:4], d["nominal_lo"][:4], rtol=0, atol=0.0025)
+    env = vehicle.envelope
+    np.testing.assert_allclose([nominal.lo[0], nominal.hi[0]], [env.h_min + 5.0, env.h_max - 5.0])
+    np.testing.assert_allclose([d["nominal_lo"][0], d["nominal_hi"][0]],
+                               [env.h_min + 150.0, env.h_max - 150.0])  # fmt: skip
+    np.testing.assert_allclose(nominal.lo[1:4], d["nominal_lo"][1:4], rtol=0, atol=0.0025)
     np.testing.assert_allclose(nominal.lo[4:], [-0.2, np.radians(-3.0)], rtol=1e-12)
-    np.testing.assert_allclose(nominal.hi, d["nominal_hi"], rtol=0, atol=0.0025)
+    np.testing.assert_allclose(nominal.hi[1:], d["nominal_hi"][1:], rtol=0, atol=0.0025)
     np.testing.assert_allclose(nominal.other_half, d["nominal_other_half"], rtol=1e-9)
     reach_lo, reach_hi = d["nominal_lo"] - d["lo"], d["hi"] - d["nominal_hi"]
     assert np.all(box.lo <= d["lo"]) and np.all(box.hi >= d["hi"])
@@ -193,7 +199,12 @@ def test_design_runs_the_law_on_the_eight_state_pair(raw8, vehicle, monkeypatch)
     np.testing.assert_allclose(a["u_box"][:, 0], [-0.2 + 0.0348, 1.1 - 0.0404], atol=1e-4)
     np.testing.assert_allclose(np.degrees(a["u_box"][:, 1]), [-3.0 + 1.007, 7.0 - 1.100],
                                atol=1e-3)  # fmt: skip
+    # the nominal's h, V range (mpc.hv_box): the envelope less h_margin 5 ft, V_margin 4.98
+    np.testing.assert_allclose(a["hv_box"], [[85005.0, 7704.98], [86495.0, 8295.02]], rtol=1e-12)
+    assert any(line.startswith("nominal range (mpc.hv_box): h 85005..86495 ft") for line in lines)
     params = node_parameters(design)
+    np.testing.assert_allclose(params["nominal_trajectory"]["mpc.hv_box"],
+                               [85005.0, 86495.0, 7704.98, 8295.02], rtol=1e-12)  # fmt: skip
     assert np.asarray(params["tube_mpc"]["F"]).size == 18
     np.testing.assert_allclose(params["nominal_trajectory"]["mpc.u_box"],
                                [-0.1652, 1.0596, -1.993, 5.900], atol=1e-3)  # fmt: skip
@@ -296,3 +307,20 @@ def test_a_designed_notch_gain_is_used_only_when_certified_and_closed(raw8, vehi
         assert got.notch_gains == {}
         assert loop is base and not loop.certified
         assert "the variant runs F_8" in lines[-1]
+
+
+def test_design_refuses_a_command_outside_the_nominal_range(raw8, vehicle):
+    """The pair is certified for a nominal inside the envelope less h_margin / V_margin:
+    a case commanded beyond that range is refused before any design work, naming the
+    point and the range; the range is what the QP gets as mpc.hv_box."""
+    from fahv.design.pipeline import command_range
+
+    c = load_case(CASE)
+    np.testing.assert_allclose(command_range(c, vehicle.envelope),
+                               [[85005.0, 7704.98], [86495.0, 8295.02]], rtol=1e-12)  # fmt: skip
+    r = copy.deepcopy(raw8)
+    r["command"]["h_c"] = 86498.0  # inside the envelope, 3 ft beyond the range
+    bad = case_from_mapping(r, "beyond.yaml")
+    with pytest.raises(DesignError, match=r"the command \(86498.0 ft, 8150.0 ft/s\) lies outside "
+                       r"the nominal range .* h 85005..86495 ft"):  # fmt: skip
+        command_range(bad, vehicle.envelope)

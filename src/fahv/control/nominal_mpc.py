@@ -170,6 +170,12 @@ class MPCSettings:
         ``fine_moves`` moves: the eight-state tube's nominal box less the box corners'
         trim offsets (the plant applies its own trim at steady state, whatever its loss
         or bias; :mod:`fahv.design.eight_state`); None (``mpc.u_box`` all 0): no rows.
+    hv_box : (2, 2) ndarray or None
+        [[h lo, V lo], [h hi, V hi]] [ft, ft/s]: the nominal's altitude and speed range
+        the design assumed (the eight-state tube's nominal box, the envelope less
+        ``eight_state.h_margin`` / ``V_margin``): the artificial set point stays in it
+        (the recovery's too) and rows keep the predicted nominal in it at the attitude
+        rows' steps; None (``mpc.hv_box`` all 0): the set point anywhere on the trim map.
     """
 
     M: int
@@ -185,6 +191,7 @@ class MPCSettings:
     du_max: np.ndarray = dataclasses.field(default_factory=lambda: np.full(2, math.inf))
     h_reset: bool = False
     u_box: np.ndarray | None = None
+    hv_box: np.ndarray | None = None
 
     @property
     def has_rate_rows(self) -> bool:
@@ -205,6 +212,7 @@ class MPCSettings:
             du_max=rate_limits(m.get("du_max", (0.0, 0.0))),
             h_reset=bool(m.get("h_reset", False)),
             u_box=input_box(m.get("u_box", (0.0, 0.0, 0.0, 0.0))),
+            hv_box=range_box(m.get("hv_box", (0.0, 0.0, 0.0, 0.0))),
         )  # fmt: skip
 
 
@@ -230,6 +238,29 @@ def input_box(u_box) -> np.ndarray | None:
     if not (v[0] < 0.0 < v[1] and v[2] < 0.0 < v[3]):
         raise ValueError(f"mpc.u_box needs lo < 0 < hi for Phi and delta_e, got {u_box!r}")
     return np.array([[v[0], np.radians(v[2])], [v[1], np.radians(v[3])]])
+
+
+def range_box(hv_box) -> np.ndarray | None:
+    """``mpc.hv_box`` (h lo, h hi [ft], V lo, V hi [ft/s]; all 0: none) as bounds.
+
+    Returns
+    -------
+    (2, 2) ndarray or None
+        [[h lo, V lo], [h hi, V hi]]; None for all zeros.
+
+    Raises
+    ------
+    ValueError
+        If it is not four finite numbers with lo < hi for h and V.
+    """
+    v = np.asarray(hv_box, float)
+    if v.shape != (4,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"mpc.hv_box must be four finite numbers, got {hv_box!r}")
+    if np.all(v == 0.0):
+        return None
+    if not (v[0] < v[1] and v[2] < v[3]):
+        raise ValueError(f"mpc.hv_box needs h lo < h hi and V lo < V hi, got {hv_box!r}")
+    return np.array([[v[0], v[2]], [v[1], v[3]]])
 
 
 def rate_limits(du_max) -> np.ndarray:
@@ -790,6 +821,14 @@ class TrackingMPC:
         att_z = [Zz[:, 2:4].reshape(-1, n) for _, Zz in fine] + [S[1:, 2:4].reshape(-1, n)]
         self.Att_y = np.concatenate(att_y)
         self.Att_z = np.concatenate(att_z)
+        # the same steps' absolute h (0) and V (1), x_r_s + Gx delta + zeta: the nominal
+        # box's range (hv_box)
+        hv_y = np.concatenate([Zy[:, 0:2] for Zy, _ in fine] + [C[1:, 0:2]])  # (., 2, ny)
+        hv_y[:, :, ly.delta] += Gx[0:2]
+        self.Hv_y = hv_y.reshape(-1, ny)
+        self.Hv_z = np.concatenate(
+            [Zz[:, 0:2].reshape(-1, n) for _, Zz in fine] + [S[1:, 0:2].reshape(-1, n)]
+        )  # fmt: skip
         self.Tb_y = self.L_inv @ C[N_p]  # terminal box rows, (n, ny)
         self.Tb_z = self.L_inv @ S[N_p]
         if s.has_rate_rows:
@@ -871,6 +910,8 @@ class TrackingMPC:
         A_s1 = (G + kcol) / self.Du[:, None]
         A_s2 = (G - kcol) / self.Du[:, None]
         rows = [A_u, A_t1, A_t2, A_s1, A_s2, self.Att_y]
+        if self.s.hv_box is not None:  # the nominal's h and V inside the design's range
+            rows.append(self.Hv_y)
         if self.s.has_rate_rows:  # the jumps between moves (the re-plan's: the first input rows)
             rows.append(self.Rate_y)
         # inputs at the fast steps inside the first fine_moves moves
@@ -891,8 +932,14 @@ class TrackingMPC:
         V_lo = (tm.V_grid[0] - self.theta_s[1]) / self.theta_scale[1]
         V_hi = (tm.V_grid[-1] - self.theta_s[1]) / self.theta_scale[1]
         d0, d1 = ly.delta.start, ly.delta.start + 1
+        if s.hv_box is not None:  # the set point inside the design's nominal range too
+            h_lo = max(h_lo, (s.hv_box[0, 0] - self.theta_s[0]) / self.theta_scale[0])
+            h_hi = min(h_hi, (s.hv_box[1, 0] - self.theta_s[0]) / self.theta_scale[0])
+            V_lo = max(V_lo, (s.hv_box[0, 1] - self.theta_s[1]) / self.theta_scale[1])
+            V_hi = min(V_hi, (s.hv_box[1, 1] - self.theta_s[1]) / self.theta_scale[1])
         lo_b[ly.alpha], hi_b[ly.alpha] = 0.0, 1.0
-        # recovery (solve(recover=True)): the set point anywhere on the trim map
+        # recovery (solve(recover=True)): the set point anywhere on the trim map (inside
+        # hv_box, if given)
         self._lo_b_rec, self._hi_b_rec = lo_b.copy(), hi_b.copy()
         self._lo_b_rec[d0], self._hi_b_rec[d0] = h_lo, h_hi
         self._lo_b_rec[d1], self._hi_b_rec[d1] = V_lo, V_hi
@@ -983,6 +1030,12 @@ class TrackingMPC:
         bl = np.concatenate(
             [lo_b, lo_u, self._no_lo_t, self._no_lo_u, s_lo, (att_lo - att).reshape(-1)]
         )  # fmt: skip
+        if s.hv_box is not None:  # widened to hold the start (the reset h may lie outside)
+            hv = (self.Hv_z @ z0).reshape(-1, 2) + self.x_r_s[:2]
+            h0 = z0[:2] + self.x_r_s[:2]
+            hv_lo, hv_hi = np.minimum(s.hv_box[0], h0), np.maximum(s.hv_box[1], h0)
+            bu = np.concatenate([bu, (hv_hi - hv).reshape(-1)])
+            bl = np.concatenate([bl, (hv_lo - hv).reshape(-1)])
         if s.has_rate_rows:
             rz = self.Rate_z @ z0
             bu = np.concatenate([bu, self._rate_scaled - rz])
@@ -1386,6 +1439,11 @@ class TrackingMPCNominal(NominalSource):
             for k, v in mpc.items()
         }
         out["mpc.att_max"] = [float(v) for v in np.degrees(arrays["att_max"])]
+        hv = arrays.get("hv_box")  # (2, 2) [[h lo, V lo], [h hi, V hi]] of the design
+        out["mpc.hv_box"] = (
+            [0.0] * 4 if hv is None
+            else [float(hv[0, 0]), float(hv[1, 0]), float(hv[0, 1]), float(hv[1, 1])]
+        )  # fmt: skip
         box = arrays.get("u_box")  # (2, 2) [[Phi lo, de lo], [Phi hi, de hi]] of the design
         out["mpc.u_box"] = (
             [0.0] * 4 if box is None
@@ -1412,12 +1470,21 @@ U_BOX_PARAMETER = Field(
     default=(0.0, 0.0, 0.0, 0.0),
 )  # fmt: skip
 
+#: Node parameter ``mpc.hv_box``: the nominal box's h and V ranges the design assumed.
+HV_BOX_PARAMETER = Field(
+    "mpc.hv_box", "floats", "the nominal's altitude and speed range: h lo, h hi [ft], V lo, "
+    "V hi [ft/s], from the design's nominal box (tube.form eight_state: the envelope less "
+    "eight_state.h_margin, V_margin); the set point stays in it and rows keep the predicted "
+    "nominal in it; all 0: none", lo=0.0, hi=1e6, length=4, default=(0.0, 0.0, 0.0, 0.0),
+)  # fmt: skip
+
 #: Node parameters of the nominal MPC: its case section's keys under ``mpc.`` (``att_max``
-#: as the design's bounds) and the design's ``mpc.u_box``.
+#: as the design's bounds) and the design's ``mpc.u_box`` and ``mpc.hv_box``.
 TrackingMPCNominal.parameters = (
     *(
         ATT_MAX_PARAMETER if f.name == "att_max" else dataclasses.replace(f, name=f"mpc.{f.name}")
         for f in MPC_SECTION_FIELDS
     ),
     U_BOX_PARAMETER,
+    HV_BOX_PARAMETER,
 )

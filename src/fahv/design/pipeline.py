@@ -29,7 +29,7 @@ from fahv.design.disturbance import (
     deviation_box,
     sample_disturbance,
 )
-from fahv.design.eight_state import design_pair, input_rows, pair_report
+from fahv.design.eight_state import design_pair, input_rows, nominal_box, pair_report
 from fahv.design.feasibility import box_coverage, fault_vertices, gain_vertices, input_room
 from fahv.errors import DesignError
 from fahv.model.linearize import classify_modes, linearize
@@ -243,6 +243,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             if gamma_e is None
             else {"gamma_e": gamma_e, "directions": disc.B[:, :, 1], "projection_scale": Dx}
         )
+        hv_box = command_range(c, veh.envelope)  # before the design: a clear error first
         pair, es_nominal, es_box = design_pair(
             c, veh, tm, np.concatenate([Dx, Du]), W.w_max, cols, rho_f, room_f, log,
             gamma=gamma, notches=notches, stable_only=stable_only, **estimate,
@@ -298,6 +299,11 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             f"{u_box[0, 0]:+.4f}..{u_box[1, 0]:+.4f}, delta_e {np.degrees(u_box[0, 1]):+.3f}.."
             f"{np.degrees(u_box[1, 1]):+.3f} deg (mpc.u_box; a loss scales the applied part "
             "towards 0)"
+        )
+        log(
+            f"nominal range (mpc.hv_box): h {hv_box[0, 0]:.0f}..{hv_box[1, 0]:.0f} ft, V "
+            f"{hv_box[0, 1]:.2f}..{hv_box[1, 1]:.2f} ft/s: the QP keeps its set point and its "
+            "predicted h, V in it (the pair's nominal box)"
         )
         certificate = pair.summary(es_nominal, es_box)  # W_8 over the pair's own domain
     else:
@@ -368,6 +374,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     }
     if pair is not None:  # the QP's rows on the manoeuvre part of the input (mpc.u_box)
         arrays["u_box"] = u_box
+        arrays["hv_box"] = hv_box
         for v, F8v in pair.notch_gains.items():  # a gain designed for a variant's notch loop
             arrays[variant_gain_key(v)] = np.hstack([np.zeros((2, 1)), F8v])
     # largest trim attitude offset of a parameter-box corner from the nominal trim
@@ -404,3 +411,41 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     design = Design(c, arrays, summary)
     design.summary["design_hash"] = design.content_hash()
     return design
+
+
+def command_range(case: dict, envelope) -> np.ndarray:
+    """The eight-state tube's nominal h, V range, checked against the case's command.
+
+    The pair is certified for a nominal inside its nominal box (the envelope less
+    ``eight_state.h_margin`` / ``V_margin``, :func:`fahv.design.eight_state.nominal_box`);
+    the QP keeps its set point and prediction in that range (``mpc.hv_box``).
+
+    Parameters
+    ----------
+    case : dict
+        The validated case (its ``eight_state`` and ``command`` sections).
+    envelope : fahv.model.vehicle.Envelope
+
+    Returns
+    -------
+    (2, 2) ndarray
+        [[h lo, V lo], [h hi, V hi]] [ft, ft/s].
+
+    Raises
+    ------
+    DesignError
+        If the initial point or the command lies outside it (names which and the range).
+    """
+    nominal, _ = nominal_box(case["eight_state"], envelope)
+    hv_box = np.array([nominal.lo[:2], nominal.hi[:2]])
+    cmd = case["command"]
+    for what, h, V in (("initial point", cmd["h0"], cmd["V0"]),
+                       ("command", cmd["h_c"], cmd["V_c"])):  # fmt: skip
+        if not (hv_box[0, 0] <= h <= hv_box[1, 0] and hv_box[0, 1] <= V <= hv_box[1, 1]):
+            raise DesignError(
+                f"command: the {what} ({h} ft, {V} ft/s) lies outside the nominal range the "
+                f"tube is certified for, h {hv_box[0, 0]:.0f}..{hv_box[1, 0]:.0f} ft, V "
+                f"{hv_box[0, 1]:.2f}..{hv_box[1, 1]:.2f} ft/s (the envelope less "
+                "eight_state.h_margin / V_margin)"
+            )
+    return hv_box
