@@ -82,10 +82,12 @@ EIGHT_STATE = (
           hi=2.0, default=1.05),
     Field("iterations", "int", "most W_8-Z_8 iterations", lo=1, hi=50, default=6),
     Field("h_margin", "float", "nominal box: the nominal's h range is the envelope's shrunk "
-          "by this on each side (the scheduling box spans the envelope)", unit="ft",
-          lo=0.0, default=150.0),
+          "by this on each side (the scheduling box spans the envelope; at least the altitude "
+          "bound H); the QP keeps its set point and prediction in it (mpc.hv_box) and the "
+          "case's command must lie in it", unit="ft", lo=0.0, default=5.0),
     Field("V_margin", "float", "nominal box: the nominal's V range is the envelope's shrunk "
-          "by this on each side", unit="ft/s", lo=0.0, default=4.98),
+          "by this on each side (at least Z_8's V support; mpc.hv_box as h_margin)",
+          unit="ft/s", lo=0.0, default=4.98),
     Field("attitude", "float", "nominal box: half-width of the nominal's alpha and theta "
           "deviation from the trim at its own (h, V); at least mpc.att_max", unit="deg",
           lo=0.0, lo_open=True, hi=5.0, default=0.4),
