@@ -324,3 +324,28 @@ def test_design_refuses_a_command_outside_the_nominal_range(raw8, vehicle):
     with pytest.raises(DesignError, match=r"the command \(86498.0 ft, 8150.0 ft/s\) lies outside "
                        r"the nominal range .* h 85005..86495 ft"):  # fmt: skip
         command_range(bad, vehicle.envelope)
+
+
+def test_certified_range_is_the_box_less_the_tube_and_holds_the_nominal_box():
+    """certified_range: the scheduling box shrunk by the product set's supports (H in h,
+    Z_8's in the states, F_8 Z_8's in the inputs); on the stored pair it holds the nominal
+    box in every coordinate (the containment check), alpha by 0.25 deg to spare, and the
+    design log's line names it."""
+    from fahv.design.along_nominal import SchedulingBox
+    from fahv.design.eight_state import certified_range, product_supports, range_lines
+
+    d = dict(np.load(PAIR))
+    box = SchedulingBox(d["lo"], d["hi"], d["other_half"])
+    nominal = SchedulingBox(d["nominal_lo"], d["nominal_hi"], d["nominal_other_half"])
+    cert = certified_range(box, d["F"], d["N"], float(d["H"]))
+    s_lo, s_oth = product_supports(d["F"], d["N"], float(d["H"]))
+    np.testing.assert_allclose(cert.hi - cert.lo, box.hi - box.lo - 2.0 * s_lo, rtol=1e-12)
+    np.testing.assert_allclose(box.other_half - cert.other_half, s_oth, rtol=1e-12)
+    assert np.all(cert.lo <= nominal.lo) and np.all(cert.hi >= nominal.hi)
+    assert np.all(cert.other_half >= nominal.other_half)
+    assert np.degrees(cert.hi[2] - nominal.hi[2]) == pytest.approx(0.25, abs=0.02)
+    assert float(d["H"]) == pytest.approx(box.hi[0] - cert.hi[0], abs=1e-9)
+    (line,) = range_lines(cert, nominal)
+    assert line.startswith("the certificate covers a nominal anywhere in the scheduling box")
+    with pytest.raises(ValueError, match="scheduling box"):
+        certified_range(box, d["F"], 100.0 * d["N"], float(d["H"]))  # a tube wider than the box

@@ -147,8 +147,10 @@ class EightStatePair:
     def summary(self, nominal: SchedulingBox, box: SchedulingBox) -> dict:
         """JSON-ready record of the pair for the design summary (``certificate``).
 
-        Units as the attributes; the boxes in their coordinates (:data:`BOX_COORDINATES`).
+        Units as the attributes; the boxes in their coordinates (:data:`BOX_COORDINATES`);
+        ``certified_range`` is :func:`certified_range` of the scheduling box.
         """
+        cert = certified_range(box, self.F8, self.N8, self.H)
         return {
             "form": "eight_state",
             "states": list(EIGHT_STATES),
@@ -172,6 +174,11 @@ class EightStatePair:
                 "lo": box.lo.tolist(),
                 "hi": box.hi.tolist(),
                 "other_half": box.other_half.tolist(),
+            },  # fmt: skip
+            "certified_range": {
+                "lo": cert.lo.tolist(),
+                "hi": cert.hi.tolist(),
+                "other_half": cert.other_half.tolist(),
             },  # fmt: skip
             "assumptions": list(ASSUMPTIONS),
             "onset": None if self.onset is None else self.onset.summary(),
@@ -663,6 +670,43 @@ def box_shortfall(box: SchedulingBox, nominal: SchedulingBox, F8, N8, H: float) 
     return {n: float(-v) for n, v in zip(names, reach, strict=True) if v < 0}
 
 
+def certified_range(box: SchedulingBox, F8, N8, H: float) -> SchedulingBox:
+    """The nominal points the pair's certificate covers: the scheduling box less the tube.
+
+    The vertices and W_8's bound hold for every segment from a nominal point to the plant
+    inside the scheduling box (the integral form, :mod:`fahv.design.along_nominal` (2)),
+    so the certificate needs the nominal inside the box shrunk by the product set's
+    supports (H in h, Z_8's in the states, F_8 Z_8's in the inputs); the nominal box of
+    the case is a part of it (:func:`box_shortfall` checks that).
+
+    Parameters
+    ----------
+    box : SchedulingBox
+        The scheduling box (coordinates :data:`BOX_COORDINATES`, then q and the
+        flexible states as half-widths).
+    F8, N8, H
+        The pair and its altitude bound, as in :func:`product_supports`.
+
+    Returns
+    -------
+    SchedulingBox
+        The certified nominal range in the same coordinates.
+
+    Raises
+    ------
+    ValueError
+        If the tube does not fit inside the box in some coordinate (an empty range).
+    """
+    s_lo, s_oth = product_supports(F8, N8, H)
+    lo, hi, oth = box.lo + s_lo, box.hi - s_lo, box.other_half - s_oth
+    if np.any(lo > hi) or np.any(oth < 0.0):
+        raise ValueError(
+            "certified range: the tube does not fit inside the scheduling box (supports "
+            f"{s_lo.tolist()}, {s_oth.tolist()})"
+        )
+    return SchedulingBox(lo, hi, oth)
+
+
 def box_for(h_range, nominal: SchedulingBox, F8, N8, H: float, scale: float) -> SchedulingBox:
     """The scheduling box holding ``nominal`` plus 1.01 ``scale`` times the product set.
 
@@ -1033,12 +1077,30 @@ def pair_report(pair: EightStatePair, nominal: SchedulingBox, box: SchedulingBox
         f"{pair.step:.4f} ft, w_h {pair.w_h:.4f} ft)",
         f"scheduling box holds the nominal box plus the tube: smallest reach "
         f"{room[worst]:.2f} x the tube's support ({names[worst]})  OK",
+        *range_lines(certified_range(box, pair.F8, pair.N8, pair.H), nominal),
         f"Z_8 supports: V {sz[0]:.3f} ft/s, alpha {np.degrees(sz[1]):.4f} deg, theta "
         f"{np.degrees(sz[2]):.4f} deg, q {np.degrees(sz[3]):.4f} deg/s; tightening "
         f"{pair.tightening[0]:.4f} / {np.degrees(pair.tightening[1]):.3f} deg",
         "assumed, not certified: " + "; ".join(ASSUMPTIONS),
         *([] if pair.onset is None else pair.onset.lines()),
         *(loop.line() for loop in pair.notch_loops),
+    ]
+
+
+def range_lines(cert: SchedulingBox, nominal: SchedulingBox) -> list[str]:
+    """The design log's line of the certified nominal range (:func:`certified_range`)."""
+    deg = np.degrees
+    o = cert.other_half
+    return [
+        f"the certificate covers a nominal anywhere in the scheduling box less the tube: h "
+        f"{cert.lo[0]:.0f}..{cert.hi[0]:.0f} ft, V {cert.lo[1]:.2f}..{cert.hi[1]:.2f} ft/s, "
+        f"alpha {deg(cert.lo[2]):+.3f}..{deg(cert.hi[2]):+.3f} deg and theta "
+        f"{deg(cert.lo[3]):+.3f}..{deg(cert.hi[3]):+.3f} deg from the trim at its own (h, V), "
+        f"applied Phi {cert.lo[4]:+.4f}..{cert.hi[4]:+.4f} and delta_e "
+        f"{deg(cert.lo[5]):+.3f}..{deg(cert.hi[5]):+.3f} deg from the trim's, |q| <= "
+        f"{deg(o[0]):.3f} deg/s, |eta_1|, |eta_1_dot|, |eta_2|, |eta_2_dot| <= {o[1]:.3f}, "
+        f"{o[2]:.3f}, {o[3]:.3f}, {o[4]:.3f} from the trim's (the case's nominal box, "
+        f"e.g. alpha +/-{deg(nominal.hi[2]):.3f} deg, is the part the QP's rows keep)"
     ]
 
 
