@@ -15,7 +15,8 @@ ROW = {
 def test_a_run_meeting_every_requirement_passes_all():
     v = verdicts(ROW, REQ)
     assert set(v) == {k for k, _ in REQUIREMENTS}
-    assert all(v.values())
+    assert all(x for k, x in v.items() if k != "nominal_range")
+    assert v["nominal_range"] is None  # no certified range given
 
 
 def test_one_miss_fails_all_and_not_applicable_is_not_a_miss():
@@ -27,3 +28,34 @@ def test_one_miss_fails_all_and_not_applicable_is_not_a_miss():
     assert no_tube["tube"] is None and no_tube["all"] is True
     gone = verdicts({"status": "failed", "alpha_err_max_deg": None}, REQ)  # no metrics
     assert gone["completes"] is False and gone["all"] is False
+
+
+def test_nominal_range_is_checked_against_the_certified_range_and_not_in_all():
+    """"nominal_range": the run's nominal (its h, V range and largest deviations from the
+    nominal trim at its own (h, V)) inside the design's certified range; not applicable
+    without a range or without the nominal's metrics, and never part of "all"."""
+    import numpy as np
+
+    cert = {  # case1.yaml's certified range (the design's summary), rounded
+        "lo": [85003.0, 7703.07, np.radians(-0.650), np.radians(-0.635), -0.21, -0.078],
+        "hi": [86497.0, 8296.93, np.radians(0.650), np.radians(0.635), 1.11, 0.148],
+        "other_half": [np.radians(1.002), 0.766, 6.479, 0.394, 5.080],
+    }
+    nominal = {  # Case 1's run (main job): alpha 0.416 deg from its own trim
+        "nominal_h_min_ft": 85499.98, "nominal_h_max_ft": 86111.80,
+        "nominal_V_min_fps": 7900.0, "nominal_V_max_fps": 8150.0,
+        "nominal_alpha_dev_max_deg": 0.416, "nominal_theta_dev_max_deg": 0.352,
+        "nominal_q_dev_max_degps": 0.140, "nominal_eta_1_dev_max": 0.370,
+        "nominal_eta_1_dot_dev_max": 0.232, "nominal_eta_2_dev_max": 0.119,
+        "nominal_eta_2_dot_dev_max": 0.165,
+    }  # fmt: skip
+    row = {**ROW, **nominal}
+    assert verdicts(row, REQ, cert)["nominal_range"] is True
+    assert verdicts(row, REQ)["nominal_range"] is None  # no certified range: n/a
+    assert verdicts(ROW, REQ, cert)["nominal_range"] is None  # no nominal: n/a
+    for key, value in (("nominal_alpha_dev_max_deg", 0.651), ("nominal_V_min_fps", 7703.0),
+                       ("nominal_q_dev_max_degps", 1.003), ("nominal_eta_2_dev_max", 0.395),
+                       ("nominal_h_max_ft", 86497.5)):  # fmt: skip
+        v = verdicts({**row, key: value}, REQ, cert)
+        assert v["nominal_range"] is False, key
+        assert v["all"] is True  # the requirements alone

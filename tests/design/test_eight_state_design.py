@@ -218,6 +218,19 @@ def test_design_runs_the_law_on_the_eight_state_pair(raw8, vehicle, monkeypatch)
     assert m["tube_error_h_max_ft"] <= pair.H
     assert np.all(np.abs(e[25::25, 0]) <= 1e-6)  # the reset: e_h = 0 at each re-plan
     assert run.x[-1, 0] > 85500.0 + 1.0  # climbing
+    # the nominal's range and its deviation from the trim at its own (h, V): it starts
+    # on the trim, climbs inside the QP's range rows, and its attitude stays inside the
+    # certified range (the scheduling box less the tube) the design stores
+    from fahv.runs.metrics import nominal_deviation
+
+    dev = nominal_deviation(run)
+    assert np.abs(dev[0]).max() <= 1e-6
+    assert 85499.9 <= m["nominal_h_min_ft"] and m["nominal_h_max_ft"] <= 86495.0
+    assert run.x[-1, 0] + 20.0 > m["nominal_h_max_ft"] > run.x[-1, 0] - 20.0
+    cert = s["certificate"]["certified_range"]
+    assert 0.2 < m["nominal_alpha_dev_max_deg"] < np.degrees(cert["hi"][2])
+    assert m["nominal_q_dev_max_degps"] < np.degrees(cert["other_half"][0])
+    print("nominal:", {k: round(v, 4) for k, v in m.items() if k.startswith("nominal_")})
 
 
 def test_a_nominal_box_without_room_for_the_faulty_trim_is_refused(raw8, monkeypatch):

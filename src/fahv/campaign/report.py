@@ -25,6 +25,7 @@ confidence C, ``beta.ppf(C, k + 1, n - k)``; for k = 0 it is the zero-failure bo
 
 from __future__ import annotations
 
+import json
 import math
 from collections import Counter
 from dataclasses import dataclass
@@ -47,6 +48,24 @@ REQUIREMENTS = (
     ("final_h", "final |h - h_c| <= {h_final_ft:g} ft"),
     ("final_V", "final |V - V_c| <= {V_final_fps:g} ft/s"),
     ("all", "every requirement at once"),
+    (
+        "nominal_range",
+        "nominal inside the range the tube's certificate covers (its "
+        'assumption, not in "every requirement")',
+    ),
+)
+
+#: The nominal's largest deviations "nominal_range" checks: (metric key, the certified
+#: range's field and index, metric in degrees). Attitude against ``lo``/``hi`` (its
+#: smaller side), q and the flexible states against ``other_half``.
+_NOMINAL_DEV = (
+    ("nominal_alpha_dev_max_deg", "lohi", 2, True),
+    ("nominal_theta_dev_max_deg", "lohi", 3, True),
+    ("nominal_q_dev_max_degps", "other_half", 0, True),
+    ("nominal_eta_1_dev_max", "other_half", 1, False),
+    ("nominal_eta_1_dot_dev_max", "other_half", 2, False),
+    ("nominal_eta_2_dev_max", "other_half", 3, False),
+    ("nominal_eta_2_dot_dev_max", "other_half", 4, False),
 )
 
 #: Metrics of the worst-run tables and histograms: (column, label, how it is made
@@ -84,14 +103,50 @@ def _num(row: dict, key: str) -> float:
     return math.nan if v is None else float(v)
 
 
-def verdicts(row: dict, req: dict) -> dict[str, bool | None]:
-    """Pass (True), fail (False) or not applicable (None) of each requirement for one run."""
+def verdicts(row: dict, req: dict, certified: dict | None = None) -> dict[str, bool | None]:
+    """Pass (True), fail (False) or not applicable (None) of each requirement for one run.
+
+    ``certified`` is the design's certified nominal range (``certificate.certified_range``
+    of an eight-state design's summary, :func:`fahv.design.eight_state.certified_range`):
+    "nominal_range" checks the run's nominal against it (None without it, or for a run
+    without a nominal). It is the tube's assumption, not one of the requirements "all"
+    combines.
+    """
     has = row.get("alpha_err_max_deg") is not None
     if not has:
-        return {k: (False if k != "tube" else None) for k, _ in REQUIREMENTS}
+        return {k: (False if k not in ("tube", "nominal_range") else None)
+                for k, _ in REQUIREMENTS}  # fmt: skip
     out = _each(row, req)
     out["all"] = all(v for v in out.values() if v is not None)
+    out["nominal_range"] = nominal_in_range(row, certified)
     return out
+
+
+def nominal_in_range(row: dict, certified: dict | None) -> bool | None:
+    """The run's nominal inside the certified range (h, V, attitude, q, flexible states).
+
+    Parameters
+    ----------
+    row : dict
+        A dataset row (:func:`fahv.runs.metrics.metrics`' nominal keys).
+    certified : dict or None
+        ``{"lo": (6,), "hi": (6,), "other_half": (5,)}`` in the scheduling box's
+        coordinates (h ft, V ft/s, alpha, theta rad, Phi, delta_e; q rad/s, flexible).
+
+    Returns
+    -------
+    bool or None
+        None without a range or without the nominal's metrics.
+    """
+    if certified is None or row.get("nominal_h_min_ft") is None:
+        return None
+    lo, hi, oth = (np.asarray(certified[k], float) for k in ("lo", "hi", "other_half"))
+    ok = lo[0] <= _num(row, "nominal_h_min_ft") and _num(row, "nominal_h_max_ft") <= hi[0]
+    ok &= lo[1] <= _num(row, "nominal_V_min_fps") and _num(row, "nominal_V_max_fps") <= hi[1]
+    for key, field, i, degrees in _NOMINAL_DEV:
+        bound = min(-lo[i], hi[i]) if field == "lohi" else oth[i]
+        ok &= bool(_num(row, key) <= (np.degrees(bound) if degrees else bound))
+    return bool(ok)
 
 
 def _each(row: dict, req: dict) -> dict[str, bool | None]:
@@ -154,6 +209,18 @@ def _fmt(v) -> str:
     return str(v)
 
 
+def _certified_range(out: Path) -> dict | None:
+    """The certified nominal range of the campaign's saved design.
+
+    None if the design is not an eight-state one or the folder holds no saved design.
+    """
+    try:
+        summary = json.loads((out / "design" / "design.json").read_text())["summary"]
+    except (OSError, ValueError, KeyError):
+        return None
+    return (summary.get("certificate") or {}).get("certified_range")
+
+
 def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Report:
     """Read a campaign folder's dataset and write its report (``DIR/report/``).
 
@@ -208,7 +275,8 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
     head = "| requirement | " + " | ".join(data["variants"]) + " |"
     lines += [head, "|---|" + "---|" * len(data["variants"])]
     per_variant = {v: [r for r in rows if r["variant"] == v] for v in data["variants"]}
-    verd = {v: [verdicts(r, req) for r in rs] for v, rs in per_variant.items()}
+    certified = _certified_range(out)
+    verd = {v: [verdicts(r, req, certified) for r in rs] for v, rs in per_variant.items()}
     for key, desc in REQUIREMENTS:
         cells = []
         for v in data["variants"]:

@@ -10,7 +10,7 @@ import numpy as np
 from fahv.control.base import ATTITUDE_BOUND_DEG as _ATTITUDE_BOUND_DEG
 from fahv.errors import RunError
 from fahv.loop.simulate import LMI_COUNTS, QP_COUNTS, RunResult
-from fahv.model.trim import TRIM_TOL, trim_batch
+from fahv.model.trim import TRIM_TOL, trim_batch, trim_map
 from fahv.model.vehicle import ALPHA, ETA1, ETA1_DOT, ETA2, ETA2_DOT, THETA, H, V, load_vehicle
 
 #: Tracking counts as settled when |h - h_c| <= 10 ft and |V - V_c| <= 2 ft/s.
@@ -35,6 +35,49 @@ def _settling_time(t, err, tol, t_from):
 @functools.lru_cache(maxsize=4)
 def _vehicle(path: str):
     return load_vehicle(path or None)
+
+
+@functools.lru_cache(maxsize=4)
+def _trim_map(path: str):
+    return trim_map(_vehicle(path))
+
+
+#: The nominal's states whose deviation from the nominal vehicle's trim at its own (h, V)
+#: :func:`nominal_deviation` measures (the eight-state tube's nominal box coordinates).
+NOMINAL_STATES = ("alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
+
+#: Metric keys of the nominal's largest |deviation| per state of :data:`NOMINAL_STATES`.
+NOMINAL_KEYS = (
+    "nominal_alpha_dev_max_deg", "nominal_theta_dev_max_deg", "nominal_q_dev_max_degps",
+    "nominal_eta_1_dev_max", "nominal_eta_1_dot_dev_max", "nominal_eta_2_dev_max",
+    "nominal_eta_2_dot_dev_max",
+)  # fmt: skip
+
+
+def nominal_deviation(run: RunResult) -> np.ndarray:
+    """The nominal's deviation from the nominal vehicle's trim at its own (h, V) (N, 7).
+
+    The nominal state is x_r + x_n (the reference's trim plus the nominal deviation the
+    nominal_trajectory node publishes); the trim is the packaged (or the run's) vehicle
+    file's nominal vehicle, trimmed on a 13 x 13 grid over the envelope and interpolated
+    (:func:`fahv.model.trim.trim_map`) at the nominal's (h, V), clipped to the envelope.
+    Columns :data:`NOMINAL_STATES` [rad, rad, rad/s, -, 1/s, -, 1/s]: the coordinates
+    of the eight-state tube's nominal box, whose range the certificate assumes
+    (:func:`fahv.design.eight_state.certified_range`).
+
+    Raises
+    ------
+    RunError
+        If the run holds no step.
+    """
+    if run.t.size == 0:
+        raise RunError("the run holds no complete step: no nominal deviation")
+    xn = run.x_r[:, :9] + run.x_n[:, :9]
+    env = _vehicle(run.info.get("vehicle_file", "")).envelope
+    x_t, _ = _trim_map(run.info.get("vehicle_file", "")).at(
+        np.clip(xn[:, H], env.h_min, env.h_max), np.clip(xn[:, V], env.V_min, env.V_max)
+    )
+    return xn[:, ALPHA:] - np.asarray(x_t, float)[:, ALPHA:9]
 
 
 def own_trim_attitude(run: RunResult) -> np.ndarray | None:
@@ -97,6 +140,11 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     sec. 5.1 as the project measures it); ``alpha_err_own_trim_max_deg`` and
     ``theta_err_own_trim_max_deg`` are against the dispersed vehicle's own trim at the
     same point (:func:`own_trim_attitude`; only for runs that carry their parameters).
+    For runs with a tube (finite tube level) :data:`NOMINAL_KEYS` (deg, deg, deg/s for
+    alpha, theta, q) are the nominal's largest deviations from the nominal vehicle's
+    trim at its own (h, V) (:func:`nominal_deviation`) and ``nominal_h_min_ft`` ...
+    ``nominal_V_max_fps`` its range: what the tube's certificate assumes of the nominal
+    (the campaign report checks them against the design's certified range).
     Tracking errors are against the case command. Flexible RMS values are over
     t >= t_fault (the whole run without fault); ``t_fault_s`` is the onset within the
     run (NaN: no fault within the run, so the "after fault" values are over the whole
@@ -130,6 +178,16 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
         d = np.degrees(np.abs(x[:, ALPHA : THETA + 1] - own))
         own_m = {"alpha_err_own_trim_max_deg": float(d[:, 0].max()),
                  "theta_err_own_trim_max_deg": float(d[:, 1].max())}  # fmt: skip
+    nom_m = {}
+    if np.all(np.isfinite(lvl)):  # a tube, so a nominal: its range (the tube's assumption)
+        dev = np.abs(nominal_deviation(run)).max(axis=0)
+        dev[:3] = np.degrees(dev[:3])
+        nom_m = {k: float(v) for k, v in zip(NOMINAL_KEYS, dev, strict=True)}
+        hn, Vn = run.x_r[:, H] + run.x_n[:, H], run.x_r[:, V] + run.x_n[:, V]
+        nom_m |= {
+            "nominal_h_min_ft": float(hn.min()), "nominal_h_max_ft": float(hn.max()),
+            "nominal_V_min_fps": float(Vn.min()), "nominal_V_max_fps": float(Vn.max()),
+        }  # fmt: skip
     lmi = {f"rmpc_lmi_{c}": int(v) for c, v in zip(LMI_COUNTS, run.lmi_counts, strict=True)}
     qp = {f"nominal_qp_{c}": int(v) for c, v in zip(QP_COUNTS, run.qp_counts, strict=True)}
     return {
@@ -164,6 +222,7 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
         "tube_error_h_max_ft": float(np.abs(x[:, H] - run.x_r[:, H] - run.x_n[:, H]).max())
         if np.all(np.isfinite(lvl))
         else math.nan,
+        **nom_m,
         **(lmi if run.lmi_counts.any() else {}),
         **(qp if run.qp_counts.any() else {}),
     }
