@@ -31,7 +31,7 @@ def test_one_miss_fails_all_and_not_applicable_is_not_a_miss():
 
 
 def test_nominal_range_is_checked_against_the_certified_range_and_not_in_all():
-    """"nominal_range": the run's nominal (its h, V range and largest deviations from the
+    """ "nominal_range": the run's nominal (its h, V range and largest deviations from the
     nominal trim at its own (h, V)) inside the design's certified range; not applicable
     without a range or without the nominal's metrics, and never part of "all"."""
     import numpy as np
