@@ -363,11 +363,14 @@ def test_pulse_peak_is_the_peak_of_the_filtered_jump():
 
 def test_onset_bound_of_the_stored_pair_holds_along_switching_vertices(along, design):
     """The onset of a loss on the stored eight-state pair (item 3): the first jump of a
-    24 % loss is 2.13 x Z_8 (the box's worst point, the corners hold it); the certified
-    loss is 0.3-0.7 % with the case's estimate (gamma 0.2) and 1.5-3 % with a one-step
-    one, and at it the level bound is <= 1 with fresh jumps. With the estimate's gain 1
-    along B's elevator column (4 of the LPV vertices' columns) the jump's share along it
-    is 2.1-2.2 x Z_8 and the rest 0.33-0.34, and 1.1-1.8 % is certified. Independently:
+    24 % loss is 2.13 x Z_8 (the box's worst point, the corners hold it). The error's
+    steady set is c Z_8 with c = 0.85, but the ellipsoid RPI for the bound itself (whose
+    rows are 0.28-0.85 of W_8) lies in 0.50 Z_8 (re-checked exactly), and the bound starts
+    from it: the certified loss is 1.3-1.7 % with the case's estimate (gamma 0.2) and
+    5.5-7 % with a one-step one, and at it the level bound is <= 1 with fresh jumps. With
+    the estimate's gain 1 along B's elevator column (4 of the LPV vertices' columns) the
+    jump's share along it is 2.1-2.2 x Z_8 and the rest 0.32-0.34, and 3.5-5 % is
+    certified (4.6 % with 4 bisection steps). Independently:
     the pulse train (1 - gamma)^k J of the worst jump, propagated along random switching
     sequences of the 4096 closed-loop vertices, stays within the bound's pulse part in
     Z_8's norm. The jump's norm is made by the second bending mode's rate and q: V, alpha and
@@ -388,7 +391,8 @@ def test_onset_bound_of_the_stored_pair_holds_along_switching_vertices(along, de
     assert ob.jump == pytest.approx(2.13, abs=0.03) and ob.interior_ratio <= 1.0
     assert 0.99 < ob.contraction < np.sqrt(pair.lam)  # LMI (24) bounds it by sqrt(lam)
     assert 0.80 < ob.steady < 1.0 and ob.peak > 1.0
-    assert 0.003 < ob.certified_loss < 0.007 and 0.015 < ob.certified_loss_one_step < 0.03
+    assert ob.steady_shaped == pytest.approx(0.50, abs=0.02) and ob.level0 == ob.steady_shaped
+    assert 0.013 < ob.certified_loss < 0.017 and 0.055 < ob.certified_loss_one_step < 0.07
     # which states make the norm: the second bending mode's rate (1.475 x its support) and q
     # (0.588); V, alpha, theta alone 0.099 x Z_8 (scripts/onset_jump_study.py, 1024 samples)
     share = dict(zip(es.EIGHT_STATES, ob.jump_share, strict=True))
@@ -402,7 +406,7 @@ def test_onset_bound_of_the_stored_pair_holds_along_switching_vertices(along, de
     J, _ = onset_jumps(box, veh, tm, dict(PAPER_UNCERTAINTY), 1.0 - ob.certified_loss, TS,
                        N_SUB, interior=512, seed=7)  # fmt: skip
     j = np.sqrt((np.linalg.solve(L, J[:, 1:].T / (1.0 - ob.certified_loss)) ** 2).sum(0)).max()
-    assert ob.steady + es.pulse_peak(ob.contraction, j, [(j, 0.2)]) <= 1.0
+    assert ob.level0 + es.pulse_peak(ob.contraction, j, [(j, 0.2)]) <= 1.0
     # the pulse part along switching vertices, in Z_8's norm
     J, _ = onset_jumps(box, veh, tm, dict(PAPER_UNCERTAINTY), 0.76, TS, N_SUB, interior=0)
     Jw = J[np.argmax(np.linalg.norm(np.linalg.solve(L, J[:, 1:].T), axis=0)), 1:] / 0.76
@@ -415,13 +419,13 @@ def test_onset_bound_of_the_stored_pair_holds_along_switching_vertices(along, de
             e = Acl[i] @ e + b * Jw
             b *= 0.8
             peak = max(peak, float(np.linalg.norm(np.linalg.solve(L, e))))
-    print(f"pulse part: simulated {peak:.3f}, bound {ob.peak - ob.steady:.3f}")
-    assert 1.0 < peak <= ob.peak - ob.steady
+    print(f"pulse part: simulated {peak:.3f}, bound {ob.peak - ob.level0:.3f}")
+    assert 1.0 < peak <= ob.peak - ob.level0
     fast = es.onset_bound(nv, pair, veh, tm, dict(PAPER_UNCERTAINTY), 0.2, TS, N_SUB,
                           gamma_e=1.0, directions=design.arrays["B"][::5, :, 1],
                           projection_scale=design.arrays["Dx"], interior=256,
-                          iterations=2)  # fmt: skip
+                          iterations=2, steady_shaped=ob.steady_shaped)  # fmt: skip
     print(fast.lines())
     assert fast.jump == ob.jump and fast.steady == ob.steady
     assert 2.10 < fast.jump_elevator < 2.25 and 0.31 < fast.jump_rest < 0.36
-    assert 0.011 < fast.certified_loss < 0.018 and fast.peak < ob.peak / 2
+    assert 0.035 < fast.certified_loss < 0.05 and fast.peak < ob.peak / 2  # 2 bisection steps

@@ -48,10 +48,17 @@ from fahv.design.along_nominal import (
     nominal_vertices,
     onset_jumps,
 )
-from fahv.design.certificate import NotchLoop, notch_gain, notch_loop, notch_tube, worst_level
+from fahv.design.certificate import (
+    NotchLoop,
+    notch_gain,
+    notch_loop,
+    notch_tube,
+    vertex_levels,
+    worst_level,
+)
 from fahv.errors import DesignError
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
-from fahv.synthesis.feedback import design_tube
+from fahv.synthesis.feedback import design_tube, invariant_ellipsoid
 
 #: The states of the tube, after h (the design's state order without its first entry).
 EIGHT_STATES = ("V", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
@@ -434,7 +441,12 @@ class OnsetBound:
         a: largest factor by which a vertex's closed loop A_8 + B_8 F_8 maps Z_8's norm.
     steady : float
         c: the level the error holds at with the disturbance inside the bound (the largest
-        bound / W_8, at the altitude bound grown by the onset).
+        bound / W_8, at the altitude bound grown by the onset): c Z_8 is RPI for c W_8.
+    steady_shaped : float
+        c_w: the same for an ellipsoid shaped for the bound itself (:func:`steady_set`):
+        the Z_8 radius of the smallest ellipsoid RPI for the bound's own box at every
+        vertex, exactly re-checked (inf if none is found). The level the bound starts
+        from is min(c, c_w) (:attr:`level0`).
     jump : float
         j: the largest Z_8 norm of J_8 / rho_f at the design loss over the scheduling box
         and every corner of the parameter box.
@@ -445,11 +457,12 @@ class OnsetBound:
     interior_ratio : float
         The interior samples' largest norm over the corners' (<= 1: the corners hold it).
     peak : float
-        c + the jump's pulse peak (:func:`pulse_peak`): the level bound at the design loss
-        with the case's estimate (certified when <= 1).
+        min(c, c_w) + the jump's pulse peak (:func:`pulse_peak`): the level bound at the
+        design loss with the case's estimate (certified when <= 1).
     certified_loss, certified_loss_one_step : float
         The largest loss whose level bound is <= 1 with the case's estimate, and with an
-        estimate that knows the whole loss one step after it acts (c + j <= 1).
+        estimate that knows the whole loss one step after it acts (min(c, c_w) + j <= 1:
+        the ceiling of any analysis that keeps e in Z_8 from that steady set).
     jump_h : float
         [ft] largest |J_h| / rho_f at the design loss (e_h's share, added to H).
     jump_share : tuple of 8 floats
@@ -468,6 +481,7 @@ class OnsetBound:
     gamma_e: float
     contraction: float
     steady: float
+    steady_shaped: float
     jump: float
     jump_elevator: float
     jump_rest: float
@@ -479,6 +493,11 @@ class OnsetBound:
     jump_share: tuple[float, ...]
     jump_rigid: float
     jump_rigid_q: float
+
+    @property
+    def level0(self) -> float:
+        """The steady level the bound starts from, min(c, c_w)."""
+        return min(self.steady, self.steady_shaped)
 
     def summary(self) -> dict:
         """JSON-ready record (the attributes; ``jump_share`` as a list)."""
@@ -496,7 +515,8 @@ class OnsetBound:
             )
         return [
             f"onset of a {100 * self.loss:.1f} % loss (item 3; from the error at its steady "
-            f"level {self.steady:.3f}, {gains}): first jump "
+            f"level {self.level0:.3f} (c Z_8, c = {self.steady:.3f}; the ellipsoid RPI for the "
+            f"bound itself lies in {self.steady_shaped:.3f} Z_8), {gains}): first jump "
             f"{self.jump:.3f} x Z_8 at the scheduling box's worst point (interior samples "
             f"{self.interior_ratio:.3f} of the corners'), closed-loop contraction "
             f"{self.contraction:.5f} per step, level bound {self.peak:.3f} "
@@ -512,10 +532,57 @@ class OnsetBound:
         ]
 
 
+def steady_set(Acl8, N8, F8, bound, lam: float) -> tuple[float, np.ndarray | None]:
+    """The error's steady set shaped for the disturbance bound itself (the onset bound's c_w).
+
+    Before an onset the error is driven by a disturbance inside the pair's bound (per row,
+    ``bound`` <= W_8) from e = 0. c Z_8 (c = the largest bound / W_8) is RPI for it, but
+    the bound's rows are far from uniform (V 0.85-0.88 of W_8, the others 0.28-0.55), so
+    a smaller set is: the smallest ellipsoid E(P) RPI for the box ``bound`` at every
+    closed-loop vertex with its projection in s Z_8, s minimised
+    (:func:`fahv.synthesis.feedback.invariant_ellipsoid`, the analysis form of LMI (24),
+    constraint generation over the vertices). Accepted only on the exact re-check, the
+    worst one-step level over every vertex and every corner of the box at most 1
+    (:func:`fahv.design.certificate.vertex_levels`); s is then the largest eigenvalue of
+    N_8^-1/2 P N_8^-1/2, square-rooted.
+
+    Parameters
+    ----------
+    Acl8 : (R, 8, 8) ndarray
+        Closed-loop vertices A_8 + B_8 F_8.
+    N8 : (8, 8) ndarray
+        Z_8's shape.
+    F8 : (2, 8) ndarray
+        The tube gain (its supports over E(P) are kept within F_8 Z_8's).
+    bound : (8,) array_like
+        The disturbance bound per row (state units per period).
+    lam : float
+        Contraction factor of the S-procedure, in (0, 1).
+
+    Returns
+    -------
+    c_w : float
+        s (inf if no ellipsoid is found or the exact re-check fails).
+    P : (8, 8) ndarray or None
+        The ellipsoid's shape.
+    """
+    Acl8, N8, F8 = (np.asarray(v, float) for v in (Acl8, N8, F8))
+    bound = np.asarray(bound, float)
+    tightening = np.sqrt(np.einsum("ij,jk,ik->i", F8, N8, F8))
+    ell = invariant_ellipsoid(Acl8, bound, np.sqrt(np.diag(N8)), N8, F8, tightening,
+                              lambda P: vertex_levels(Acl8, P, bound), lam)  # fmt: skip
+    if ell is None or float(vertex_levels(Acl8, ell.P, bound).max()) > 1.0:
+        return float("inf"), None
+    L = np.linalg.cholesky(N8)
+    s = np.sqrt(np.linalg.eigvalsh(np.linalg.solve(L, np.linalg.solve(L, ell.P).T)).max())
+    return float(s), ell.P
+
+
 def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
                 uncertainty: dict, gamma: float, Ts: float, n_sub: int, *,
                 gamma_e: float | None = None, directions=None, projection_scale=None,
-                interior: int = 1024, iterations: int = 6) -> OnsetBound:  # fmt: skip
+                interior: int = 1024, iterations: int = 6,
+                steady_shaped: float | None = None) -> OnsetBound:  # fmt: skip
     """Bound the onset of an elevator loss as a transient of the pair (item 3).
 
     At the step a loss of 1 - rho_f starts, the plant moves by J = f_p(x, P u) - f_p(x, u)
@@ -535,7 +602,9 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     largest norms of P_b J and J - P_b J over the samples and the estimate's possible
     directions b. e stays in Z_8 if c + that peak <= 1. The altitude error takes
     |J_h| / rho_f per step on top of (1), at most 1 / gamma of it between resets; the
-    bound of c is taken at that H.
+    bound of c is taken at that H. e_w also stays in the ellipsoid RPI for that bound
+    itself, which lies in c_w Z_8 (:func:`steady_set`); the bound starts from
+    min(c, c_w).
 
     Parameters
     ----------
@@ -564,6 +633,9 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
         Interior samples of the jumps besides the corners.
     iterations : int
         Bisection steps for each certified loss.
+    steady_shaped : float, optional
+        c_w when already computed for this pair and bound (:func:`steady_set`, a
+        minute or two over 4096 vertices); computed here by default.
 
     Returns
     -------
@@ -627,19 +699,23 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     par, interp = product_bound(nv, pair.F8, pair.N8, H)
     bound = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H
     c = float((bound / pair.W8).max())
+    if steady_shaped is None:
+        steady_shaped, _ = steady_set(A8 + B8 @ pair.F8, pair.N8, pair.F8, bound, pair.lam)
+    c_s = float(steady_shaped)
+    c0 = min(c, c_s)  # the steady level the bound starts from
 
     def certified(one_step: bool) -> float:
-        if c >= 1.0:
+        if c0 >= 1.0:
             return 0.0
         p = peak(j, jb, jr, one_step)
-        if c + p <= 1.0:
+        if c0 + p <= 1.0:
             return loss
         lo, hi = 0.0, loss
-        guess = 2.0 * loss * (1.0 - c) / p  # twice the first-order loss: bracket
+        guess = 2.0 * loss * (1.0 - c0) / p  # twice the first-order loss: bracket
 
         def ok(x):
             n, _, _, xb, xr = jumps(x)
-            return c + peak(float(n.max()), xb, xr, one_step) <= 1.0
+            return c0 + peak(float(n.max()), xb, xr, one_step) <= 1.0
 
         if guess < loss:
             lo, hi = (guess, loss) if ok(guess) else (0.0, guess)
@@ -649,9 +725,9 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
         return lo
 
     return OnsetBound(
-        loss, gamma, 0.0 if gamma_e is None else float(gamma_e), a, c, j, jb, jr,
+        loss, gamma, 0.0 if gamma_e is None else float(gamma_e), a, c, c_s, j, jb, jr,
         float(norm[n_c:].max() / norm[:n_c].max()) if len(norm) > n_c else 0.0,
-        c + peak(j, jb, jr), certified(False), certified(True), jump_h, share, rigid, rigid_q,
+        c0 + peak(j, jb, jr), certified(False), certified(True), jump_h, share, rigid, rigid_q,
     )  # fmt: skip
 
 
