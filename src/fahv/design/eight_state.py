@@ -28,7 +28,8 @@ corners of W_8 (:func:`fahv.design.certificate.worst_level`).
 
 What the pair assumes besides the vertices' own assumptions (stated by
 :data:`ASSUMPTIONS`): the nominal resets its altitude every ``moves`` fast steps; the
-nominal stays inside the nominal box; the disturbance estimate has converged (the
+nominal stays inside the certified range (the scheduling box less the tube,
+:func:`certified_range`); the disturbance estimate has converged (the
 onset of a loss is not in W_8).
 """
 
@@ -68,7 +69,10 @@ ASSUMPTIONS = (
     "the nominal resets its altitude to the measured one every `moves` fast steps "
     "(mpc.h_reset, M = moves), so |e_h| <= H between resets",
     "the ancillary gain is blind to e_h: u = v + F_8 e_8",
-    "the nominal stays inside the nominal box (its h, V, attitude, input and q, flexible ranges)",
+    "the nominal stays inside the certified range (the scheduling box less the tube: "
+    "certified_range); the QP's rows keep its h, V, attitude (from the set point's trim) and "
+    "inputs in the nominal box, its q, flexible states and own-trim attitude are measured per "
+    "run (metrics nominal_*, the campaign report's range line)",
     "the disturbance estimate has converged: the onset of a loss and the estimate's lag "
     "are not in W_8 (bounded separately as a transient of the pair: the onset lines)",
 )
