@@ -821,14 +821,14 @@ class TrackingMPC:
         att_z = [Zz[:, 2:4].reshape(-1, n) for _, Zz in fine] + [S[1:, 2:4].reshape(-1, n)]
         self.Att_y = np.concatenate(att_y)
         self.Att_z = np.concatenate(att_z)
-        # the same steps' absolute h (0) and V (1), x_r_s + Gx delta + zeta: the nominal
-        # box's range (hv_box)
-        hv_y = np.concatenate([Zy[:, 0:2] for Zy, _ in fine] + [C[1:, 0:2]])  # (., 2, ny)
-        hv_y[:, :, ly.delta] += Gx[0:2]
-        self.Hv_y = hv_y.reshape(-1, ny)
-        self.Hv_z = np.concatenate(
-            [Zz[:, 0:2].reshape(-1, n) for _, Zz in fine] + [S[1:, 0:2].reshape(-1, n)]
-        )  # fmt: skip
+        if s.hv_box is not None:  # the same steps' absolute h (0) and V (1), x_r_s + Gx
+            # delta + zeta: the nominal box's range
+            hv_y = np.concatenate([Zy[:, 0:2] for Zy, _ in fine] + [C[1:, 0:2]])  # (., 2, ny)
+            hv_y[:, :, ly.delta] += Gx[0:2]
+            self.Hv_y = hv_y.reshape(-1, ny)
+            self.Hv_z = np.concatenate(
+                [Zz[:, 0:2].reshape(-1, n) for _, Zz in fine] + [S[1:, 0:2].reshape(-1, n)]
+            )  # fmt: skip
         self.Tb_y = self.L_inv @ C[N_p]  # terminal box rows, (n, ny)
         self.Tb_z = self.L_inv @ S[N_p]
         if s.has_rate_rows:
