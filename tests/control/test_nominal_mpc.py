@@ -603,3 +603,57 @@ def test_range_rows_keep_the_set_point_and_the_prediction_in_the_nominal_range(d
     with pytest.raises(ValueError, match="mpc.hv_box"):
         range_box([86000.0, 85000.0, 7700.0, 8300.0])
     assert range_box([0.0, 0.0, 0.0, 0.0]) is None
+
+
+def _own_trim_states_of_plan(mpc, y, z0, x_d):
+    """The plan's alpha .. eta_2_dot at every fast step (N_p, M, 7) as deviations from the
+    nominal vehicle's trim at the plan's own (h, V), from the (nonlinear) trim map:
+    X = x_r_s + x_d + Gx delta + zeta, propagated step by step on the scheduled model."""
+    s, ly, n = mpc.s, mpc.layout, mpc.n
+    delta = y[ly.delta]
+    AK = mpc.A + mpc.B @ mpc.K
+    E = (mpc.A - np.eye(n)) @ mpc.Gx + mpc.B @ mpc.Gu
+    zeta = z0 - mpc.Gx @ delta
+    out = np.empty((s.N_p, s.M, 7))
+    for j in range(s.N_p):
+        cj = y[ly.move(j)] * mpc.Du
+        for i in range(s.M):
+            zeta = AK @ zeta + mpc.B @ cj + E @ delta
+            X = mpc.x_r_s + x_d + mpc.Gx @ delta + zeta
+            x_t, _ = mpc.trim_map.at(np.array([X[0]]), np.array([X[1]]))
+            out[j, i] = X[2:9] - np.asarray(x_t)[0, 2:9]
+    return out
+
+
+def test_state_range_rows_keep_the_prediction_in_the_certified_range(design):
+    """mpc.x_box (the range the eight-state certificate covers, from the trim at the
+    nominal's own (h, V)): with |q| <= 0.3 deg/s and alpha within -0.2 .. +0.25 deg, the
+    Case 1 climb's plan keeps q and alpha inside at every fast step of the first two moves
+    and at every move start, with an estimate's shift x_d in it; the linearised trim (its
+    slope at the scheduling point) agrees with the trim map to 2e-3 deg over the plan.
+    Without the rows the same QP plans 0.63 deg/s and -0.30 deg (measured)."""
+    from fahv.control.nominal_mpc import X_BOX_STATES, state_box
+
+    c, cmd, free, z0, y0, _ = _free_climb_plan(design)
+    own_free = _own_trim_states_of_plan(free, y0, z0, np.zeros(free.n))
+    assert np.degrees(np.abs(own_free[..., 2]).max()) > 0.45
+    assert np.degrees(own_free[..., 0].min()) < -0.25
+    lo = [-0.2, -1.0, -0.3, -5.0, -50.0, -5.0, -50.0]
+    hi = [0.25, 1.0, 0.3, 5.0, 50.0, 5.0, 50.0]
+    box = state_box(lo + hi)
+    mpc = _mpc(design, x_box=box)
+    mpc.schedule(c["h0"], c["V0"])
+    x_d = np.zeros(mpc.n)
+    x_d[2:4] = np.radians(-0.05)  # an estimate's shift: the vehicle's own trim 0.05 deg lower
+    y, why = mpc.solve(z0, mpc.u_r_s, cmd, x_off=x_d)
+    assert why == "ok"
+    assert mpc.A_c.shape[0] == free.A_c.shape[0] + 7 * free.Att_y.shape[0] // 2
+    own = _own_trim_states_of_plan(mpc, y, z0, x_d)
+    checked = np.concatenate([own[:2].reshape(-1, 7), own[2:, -1]])  # the rows' steps
+    tol = np.array([np.radians(2e-3), np.radians(2e-3), 1e-9, 1e-9, 1e-9, 1e-9, 1e-9])
+    assert np.all(checked <= box[1] + tol) and np.all(checked >= box[0] - tol)
+    assert np.degrees(np.abs(checked[:, 2]).max()) > 0.3 - 1e-3  # the q row binds
+    with pytest.raises(ValueError, match="mpc.x_box"):
+        state_box([0.1] + lo[1:] + hi)  # the trim itself outside
+    assert state_box([0.0] * 14) is None
+    assert len(X_BOX_STATES) == 7

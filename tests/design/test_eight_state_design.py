@@ -206,6 +206,17 @@ def test_design_runs_the_law_on_the_eight_state_pair(raw8, vehicle, monkeypatch)
     np.testing.assert_allclose(params["nominal_trajectory"]["mpc.hv_box"],
                                [85005.0, 86495.0, 7704.98, 8295.02], rtol=1e-12)  # fmt: skip
     assert np.asarray(params["tube_mpc"]["F"]).size == 18
+    # the range the certificate covers (the scheduling box less the tube) as rows of the
+    # QP on the nominal's other states (mpc.x_box): alpha +/-0.65 deg, |q| <= 1.0 deg/s
+    # from the trim at its own (h, V) (measured on case1.yaml's own pair: 0.650, 1.002)
+    xb = a["x_box"]
+    np.testing.assert_allclose(xb[0], -xb[1], rtol=1e-12)
+    assert np.degrees(xb[1, 0]) == pytest.approx(0.65, abs=0.02)
+    assert np.degrees(xb[1, 2]) == pytest.approx(1.0, abs=0.05)
+    assert any(line.startswith("nominal state range (mpc.x_box): alpha -0.6") for line in lines)
+    xp = np.asarray(params["nominal_trajectory"]["mpc.x_box"]).reshape(2, 7)
+    np.testing.assert_allclose(np.radians(xp[:, :3]), xb[:, :3], rtol=1e-12)
+    np.testing.assert_allclose(xp[:, 3:], xb[:, 3:], rtol=1e-12)
     np.testing.assert_allclose(params["nominal_trajectory"]["mpc.u_box"],
                                [-0.1652, 1.0596, -1.993, 5.900], atol=1e-3)  # fmt: skip
     run = simulate(design, "tube_mpc", duration=20.0)

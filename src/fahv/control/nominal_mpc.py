@@ -176,6 +176,14 @@ class MPCSettings:
         ``eight_state.h_margin`` / ``V_margin``): the artificial set point stays in it
         (the recovery's too) and rows keep the predicted nominal in it at the attitude
         rows' steps; None (``mpc.hv_box`` all 0): the set point anywhere on the trim map.
+    x_box : (2, 7) ndarray or None
+        [lo, hi] of the nominal's alpha, theta [rad], q [rad/s], eta_1, eta_1_dot [1/s],
+        eta_2, eta_2_dot [1/s] as deviations from the nominal vehicle's trim at the
+        nominal's own (h, V): the range the tube's certificate covers
+        (:func:`fahv.design.eight_state.certified_range`). Rows keep the predicted nominal
+        in it at the attitude rows' steps, with the trim at its own (h, V) linearised at
+        the scheduling point (``T = Gx[2:9] Gx[0:2]^-1``), widened only to hold the start;
+        None (``mpc.x_box`` all 0): no rows.
     """
 
     M: int
@@ -192,6 +200,7 @@ class MPCSettings:
     h_reset: bool = False
     u_box: np.ndarray | None = None
     hv_box: np.ndarray | None = None
+    x_box: np.ndarray | None = None
 
     @property
     def has_rate_rows(self) -> bool:
@@ -213,6 +222,7 @@ class MPCSettings:
             h_reset=bool(m.get("h_reset", False)),
             u_box=input_box(m.get("u_box", (0.0, 0.0, 0.0, 0.0))),
             hv_box=range_box(m.get("hv_box", (0.0, 0.0, 0.0, 0.0))),
+            x_box=state_box(m.get("x_box", (0.0,) * 14)),
         )  # fmt: skip
 
 
@@ -261,6 +271,43 @@ def range_box(hv_box) -> np.ndarray | None:
     if not (v[0] < v[1] and v[2] < v[3]):
         raise ValueError(f"mpc.hv_box needs h lo < h hi and V lo < V hi, got {hv_box!r}")
     return np.array([[v[0], v[2]], [v[1], v[3]]])
+
+
+#: States of ``mpc.x_box`` (design order 2..8) and their node-parameter units.
+X_BOX_STATES = ("alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
+#: Factor from the node parameter's units (deg, deg, deg/s, -, 1/s, -, 1/s) to the state's.
+X_BOX_TO_STATE = np.array([math.radians(1.0)] * 3 + [1.0] * 4)
+
+
+def state_box(x_box) -> np.ndarray | None:
+    """``mpc.x_box`` (7 lows then 7 highs; all 0: none) as the QP's state range rows.
+
+    The values are the nominal's alpha, theta [deg], q [deg/s], eta_1, eta_1_dot [1/s],
+    eta_2, eta_2_dot [1/s] as deviations from the nominal vehicle's trim at its own
+    (h, V) (:data:`X_BOX_STATES`).
+
+    Returns
+    -------
+    (2, 7) ndarray or None
+        [lo, hi] in the states' units (rad, rad/s, ...); None for all zeros.
+
+    Raises
+    ------
+    ValueError
+        If it is not 14 finite numbers with lo < 0 < hi for every state (the trim
+        itself must lie inside).
+    """
+    v = np.asarray(x_box, float)
+    if v.shape != (14,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"mpc.x_box must be 14 finite numbers (7 lows, 7 highs), got {x_box!r}")
+    if np.all(v == 0.0):
+        return None
+    box = v.reshape(2, 7)
+    if not (np.all(box[0] < 0.0) and np.all(box[1] > 0.0)):
+        raise ValueError(
+            f"mpc.x_box needs lo < 0 < hi for every state {X_BOX_STATES}, got {x_box!r}"
+        )
+    return box * X_BOX_TO_STATE
 
 
 def rate_limits(du_max) -> np.ndarray:
@@ -829,6 +876,16 @@ class TrackingMPC:
             self.Hv_z = np.concatenate(
                 [Zz[:, 0:2].reshape(-1, n) for _, Zz in fine] + [S[1:, 0:2].reshape(-1, n)]
             )  # fmt: skip
+        if s.x_box is not None:  # the same steps' states 2..8 from the trim at the nominal's
+            # own (h, V), linearised: zeta[2:9] - T zeta[0:2] (the set point's delta cancels,
+            # Gx[2:9] = T Gx[0:2]); plus the estimate's shift x_d in solve()
+            self.T_own = Gx[2:9] @ np.linalg.inv(Gx[0:2])  # (7, 2) trim slope per ft, ft/s
+            xb_y = [Zy[:, 2:9] - self.T_own @ Zy[:, 0:2] for Zy, _ in fine]
+            xb_z = [Zz[:, 2:9] - self.T_own @ Zz[:, 0:2] for _, Zz in fine]
+            xb_y.append(C[1:, 2:9] - self.T_own @ C[1:, 0:2])
+            xb_z.append(S[1:, 2:9] - self.T_own @ S[1:, 0:2])
+            self.Xb_y = np.concatenate(xb_y).reshape(-1, ny)
+            self.Xb_z = np.concatenate(xb_z).reshape(-1, n)
         self.Tb_y = self.L_inv @ C[N_p]  # terminal box rows, (n, ny)
         self.Tb_z = self.L_inv @ S[N_p]
         if s.has_rate_rows:
@@ -912,6 +969,8 @@ class TrackingMPC:
         rows = [A_u, A_t1, A_t2, A_s1, A_s2, self.Att_y]
         if self.s.hv_box is not None:  # the nominal's h and V inside the design's range
             rows.append(self.Hv_y)
+        if self.s.x_box is not None:  # its other states inside the certified range
+            rows.append(self.Xb_y)
         if self.s.has_rate_rows:  # the jumps between moves (the re-plan's: the first input rows)
             rows.append(self.Rate_y)
         # inputs at the fast steps inside the first fine_moves moves
@@ -1036,6 +1095,13 @@ class TrackingMPC:
             hv_lo, hv_hi = np.minimum(s.hv_box[0], h0), np.maximum(s.hv_box[1], h0)
             bu = np.concatenate([bu, (hv_hi - hv).reshape(-1)])
             bl = np.concatenate([bl, (hv_lo - hv).reshape(-1)])
+        if s.x_box is not None:  # from the trim at the nominal's own (h, V), with x_d
+            xd = np.zeros(7) if x_off is None else np.asarray(x_off, float)[2:9]
+            start = z0[2:9] - self.T_own @ z0[0:2] + xd  # widened to hold the start
+            xb_lo, xb_hi = np.minimum(s.x_box[0], start), np.maximum(s.x_box[1], start)
+            xb = (self.Xb_z @ z0).reshape(-1, 7) + xd
+            bu = np.concatenate([bu, (xb_hi - xb).reshape(-1)])
+            bl = np.concatenate([bl, (xb_lo - xb).reshape(-1)])
         if s.has_rate_rows:
             rz = self.Rate_z @ z0
             bu = np.concatenate([bu, self._rate_scaled - rz])
@@ -1439,6 +1505,10 @@ class TrackingMPCNominal(NominalSource):
             for k, v in mpc.items()
         }
         out["mpc.att_max"] = [float(v) for v in np.degrees(arrays["att_max"])]
+        xb = arrays.get("x_box")  # (2, 7) [lo, hi] of the certified range (states 2..8)
+        out["mpc.x_box"] = (
+            [0.0] * 14 if xb is None else [float(v) for v in (xb / X_BOX_TO_STATE).reshape(-1)]
+        )  # fmt: skip
         hv = arrays.get("hv_box")  # (2, 2) [[h lo, V lo], [h hi, V hi]] of the design
         out["mpc.hv_box"] = (
             [0.0] * 4 if hv is None
@@ -1478,8 +1548,17 @@ HV_BOX_PARAMETER = Field(
     "nominal in it; all 0: none", lo=0.0, hi=1e6, length=4, default=(0.0, 0.0, 0.0, 0.0),
 )  # fmt: skip
 
+#: Node parameter ``mpc.x_box``: the range of the nominal's other states the certificate covers.
+X_BOX_PARAMETER = Field(
+    "mpc.x_box", "floats", "the range the tube's certificate covers for the nominal's alpha, "
+    "theta [deg], q [deg/s], eta_1, eta_1_dot, eta_2, eta_2_dot (from the nominal vehicle's "
+    "trim at the nominal's own h, V): 7 lows then 7 highs, from the design (tube.form "
+    "eight_state: the scheduling box less the tube); rows keep the predicted nominal in it; "
+    "all 0: none", lo=-1e3, hi=1e3, length=14, default=(0.0,) * 14,
+)  # fmt: skip
+
 #: Node parameters of the nominal MPC: its case section's keys under ``mpc.`` (``att_max``
-#: as the design's bounds) and the design's ``mpc.u_box`` and ``mpc.hv_box``.
+#: as the design's bounds) and the design's ``mpc.u_box``, ``mpc.hv_box`` and ``mpc.x_box``.
 TrackingMPCNominal.parameters = (
     *(
         ATT_MAX_PARAMETER if f.name == "att_max" else dataclasses.replace(f, name=f"mpc.{f.name}")
@@ -1487,4 +1566,5 @@ TrackingMPCNominal.parameters = (
     ),
     U_BOX_PARAMETER,
     HV_BOX_PARAMETER,
+    X_BOX_PARAMETER,
 )

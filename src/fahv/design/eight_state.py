@@ -1221,3 +1221,37 @@ def input_rows(trim_offsets, nominal: SchedulingBox) -> np.ndarray:
             f"{np.degrees(off_hi[1]):+.3f} deg from the nominal trim): widen the box"
         )
     return room
+
+
+def state_rows(cert: SchedulingBox) -> np.ndarray:
+    """Rows of the QP on the nominal's states besides h, V and the inputs (``mpc.x_box``).
+
+    The certificate covers a nominal inside the certified range (:func:`certified_range`):
+    its alpha and theta between the range's bounds and q and the bending modes within its
+    half-widths, all from the nominal vehicle's trim at the nominal's own (h, V). The QP
+    keeps its prediction there (:class:`fahv.control.nominal_mpc.MPCSettings`, ``x_box``),
+    so the assumption holds by construction instead of being measured per run.
+
+    Parameters
+    ----------
+    cert : SchedulingBox
+        The certified range.
+
+    Returns
+    -------
+    (2, 7) ndarray
+        [lo, hi] of alpha, theta [rad], q [rad/s], eta_1, eta_1_dot [1/s], eta_2,
+        eta_2_dot [1/s].
+
+    Raises
+    ------
+    DesignError
+        If the range does not hold the trim (lo < 0 < hi fails for a state).
+    """
+    box = np.array([np.r_[cert.lo[2:4], -cert.other_half], np.r_[cert.hi[2:4], cert.other_half]])
+    if not (np.all(box[0] < 0.0) and np.all(box[1] > 0.0)):
+        raise DesignError(
+            f"certified range: it does not hold the trim in every state (lo {box[0].tolist()}, "
+            f"hi {box[1].tolist()}): the tube fills the scheduling box"
+        )
+    return box

@@ -29,7 +29,14 @@ from fahv.design.disturbance import (
     deviation_box,
     sample_disturbance,
 )
-from fahv.design.eight_state import design_pair, input_rows, nominal_box, pair_report
+from fahv.design.eight_state import (
+    certified_range,
+    design_pair,
+    input_rows,
+    nominal_box,
+    pair_report,
+    state_rows,
+)
 from fahv.design.feasibility import box_coverage, fault_vertices, gain_vertices, input_room
 from fahv.errors import DesignError
 from fahv.model.linearize import classify_modes, linearize
@@ -305,6 +312,16 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             f"{hv_box[0, 1]:.2f}..{hv_box[1, 1]:.2f} ft/s: the QP keeps its set point and its "
             "predicted h, V in it (the pair's nominal box)"
         )
+        x_box = state_rows(certified_range(es_box, pair.F8, pair.N8, pair.H))
+        xd = np.degrees(x_box[:, :3])
+        log(
+            f"nominal state range (mpc.x_box): alpha {xd[0, 0]:+.3f}..{xd[1, 0]:+.3f} deg, theta "
+            f"{xd[0, 1]:+.3f}..{xd[1, 1]:+.3f} deg, |q| <= {xd[1, 2]:.3f} deg/s, |eta_1|, "
+            f"|eta_1_dot|, |eta_2|, |eta_2_dot| <= "
+            + ", ".join(f"{v:.3f}" for v in x_box[1, 3:])
+            + " from the trim at the nominal's own (h, V): the QP keeps its prediction in it "
+            "(the range the certificate covers)"
+        )
         certificate = pair.summary(es_nominal, es_box)  # W_8 over the pair's own domain
     else:
         cert_case = c
@@ -375,6 +392,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     if pair is not None:  # the QP's rows on the manoeuvre part of the input (mpc.u_box)
         arrays["u_box"] = u_box
         arrays["hv_box"] = hv_box
+        arrays["x_box"] = x_box
         for v, F8v in pair.notch_gains.items():  # a gain designed for a variant's notch loop
             arrays[variant_gain_key(v)] = np.hstack([np.zeros((2, 1)), F8v])
     # largest trim attitude offset of a parameter-box corner from the nominal trim
