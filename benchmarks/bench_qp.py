@@ -1,9 +1,11 @@
 """Nominal MPC QP and whole in-process step of Case 1 (tube_mpc): median, p99, max.
 
-Run: .venv/bin/python benchmarks/bench_qp.py [--steps 15000]
+Run: .venv/bin/python benchmarks/bench_qp.py [--steps 15000] [--case CASE] [--x-box-both]
 Prints the time of every nominal QP (DAQP) and of every in-process loop step of
 ``fahv.loop.simulate.simulate`` (plant, notch, nominal MPC, controller, fault injector,
-and the step's messages kept in memory) over a Case 1 run.
+and the step's messages kept in memory) over a Case 1 run. ``--x-box-both`` runs the
+case twice in one session, with the design's state range rows (``mpc.x_box``) and
+without them (the parameter set to zeros), to compare the QP's cost of those rows.
 """
 
 import argparse
@@ -21,16 +23,26 @@ def main() -> None:
     """Run Case 1 with timers around the QP and the step; print the figures."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=15000)
+    ap.add_argument("--case", default="offline_design/case1_vertex.yaml")
+    ap.add_argument("--x-box-both", action="store_true")
     args = ap.parse_args()
-    _, design, _ = load_or_design(
-        "offline_design/case1_vertex.yaml", None, None, io.StringIO().write
-    )
+    _, design, _ = load_or_design(args.case, None, None, io.StringIO().write)
+    runs = [("", None)]
+    if args.x_box_both:
+        off = {"nominal_trajectory": {"mpc.x_box": [0.0] * 14}}
+        runs = [("with mpc.x_box: ", None), ("without mpc.x_box: ", off)]
+    for label, ov in runs:
+        _bench(design, args.steps, label, ov)
+
+
+def _bench(design, steps_n: int, label: str, overrides) -> None:
+    """One timed run of ``steps_n`` steps with node-parameter ``overrides``; prints it."""
     qp_times = []
     solve = nominal_mpc.TrackingMPC.solve
 
-    def timed(self, *a):
+    def timed(self, *a, **kw):
         t0 = time.perf_counter()
-        out = solve(self, *a)
+        out = solve(self, *a, **kw)
         qp_times.append(time.perf_counter() - t0)
         return out
 
@@ -46,14 +58,18 @@ def main() -> None:
             t0 = t1
 
     nominal_mpc.TrackingMPC.solve = timed
-    run = simulate(design, "tube_mpc", duration=args.steps * design.case["Ts"], progress=step_timer)
+    try:
+        run = simulate(design, "tube_mpc", duration=steps_n * design.case["Ts"],
+                       progress=step_timer, overrides=overrides)  # fmt: skip
+    finally:
+        nominal_mpc.TrackingMPC.solve = solve
     for name, t in (("nominal QP (build + solve + check)", qp_times), ("whole step", steps)):
         t = np.array(t) * 1e3
         print(
-            f"{name:36s} n={t.size:6d}  median {np.median(t):.3f} ms  "
+            f"{label}{name:36s} n={t.size:6d}  median {np.median(t):.3f} ms  "
             f"p99 {np.percentile(t, 99):.3f} ms  max {t.max():.3f} ms"
         )
-    print(f"QP counters (accepted, shifted plan, terminal law): {run.qp_counts.tolist()}")
+    print(f"{label}QP counters (accepted, shifted plan, terminal law): {run.qp_counts.tolist()}")
 
 
 if __name__ == "__main__":

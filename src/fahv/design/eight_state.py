@@ -71,8 +71,10 @@ ASSUMPTIONS = (
     "the ancillary gain is blind to e_h: u = v + F_8 e_8",
     "the nominal stays inside the certified range (the scheduling box less the tube: "
     "certified_range); the QP's rows keep its h, V, attitude (from the set point's trim) and "
-    "inputs in the nominal box, its q, flexible states and own-trim attitude are measured per "
-    "run (metrics nominal_*, the campaign report's range line)",
+    "inputs in the nominal box, and its alpha, theta, q and flexible states in the certified "
+    "range from the trim at its own (h, V) (mpc.x_box; the trim's slope linearised at the "
+    "scheduling point, the remainder measured per run: metrics nominal_*, the campaign "
+    "report's range line)",
     "the disturbance estimate has converged: the onset of a loss and the estimate's lag "
     "are not in W_8 (bounded separately as a transient of the pair: the onset lines)",
 )
