@@ -73,14 +73,15 @@ class LockstepNode(Node):
         self.buf = {t: {} for t in self.inputs}
         self.stale = 0
         self.pubs = {
-            t: self.create_publisher(
-                msg_type_of(t), t, LOOP_QOS, event_callbacks=quiet_publisher()
-            )
+            t: self.create_publisher(msg_type_of(t), t, LOOP_QOS, event_callbacks=quiet_publisher())
             for t in self.outputs
         }
         self.subs = {
             t: self.create_subscription(
-                msg_type_of(t), t, lambda m, t=t: self._receive(t, m), LOOP_QOS,
+                msg_type_of(t),
+                t,
+                lambda m, t=t: self._receive(t, m),
+                LOOP_QOS,
                 event_callbacks=quiet_subscription(),
             )  # fmt: skip
             for t in self.inputs
