@@ -557,22 +557,27 @@ def test_replan_rate_row_lets_the_input_follow_the_estimate_after_an_onset(desig
     assert run.qp_counts.tolist() == [150, 0, 0, 0]
 
 
-def _states_of_plan(mpc, y, z0):
-    """The plan's absolute nominal h [ft], V [ft/s] at every fast step after each move's
-    start (N_p, M, 2), propagated step by step on the scheduled model: x_r_s + Gx delta +
-    zeta."""
+def _plan_states(mpc, y, z0):
+    """The plan's absolute nominal state at every fast step after each move's start
+    (N_p, M, n), propagated step by step on the scheduled model: x_r_s + Gx delta + zeta
+    (without the estimate's shift)."""
     s, ly, n = mpc.s, mpc.layout, mpc.n
     delta = y[ly.delta]
     AK = mpc.A + mpc.B @ mpc.K
     E = (mpc.A - np.eye(n)) @ mpc.Gx + mpc.B @ mpc.Gu
     zeta = z0 - mpc.Gx @ delta
-    hv = np.empty((s.N_p, s.M, 2))
+    x = np.empty((s.N_p, s.M, n))
     for j in range(s.N_p):
         cj = y[ly.move(j)] * mpc.Du
         for i in range(s.M):
             zeta = AK @ zeta + mpc.B @ cj + E @ delta
-            hv[j, i] = mpc.x_r_s[:2] + mpc.Gx[:2] @ delta + zeta[:2]
-    return hv
+            x[j, i] = mpc.x_r_s + mpc.Gx @ delta + zeta
+    return x
+
+
+def _states_of_plan(mpc, y, z0):
+    """The plan's absolute nominal h [ft], V [ft/s] at every fast step (N_p, M, 2)."""
+    return _plan_states(mpc, y, z0)[..., :2]
 
 
 def test_range_rows_keep_the_set_point_and_the_prediction_in_the_nominal_range(design):
@@ -607,22 +612,12 @@ def test_range_rows_keep_the_set_point_and_the_prediction_in_the_nominal_range(d
 
 def _own_trim_states_of_plan(mpc, y, z0, x_d):
     """The plan's alpha .. eta_2_dot at every fast step (N_p, M, 7) as deviations from the
-    nominal vehicle's trim at the plan's own (h, V), from the (nonlinear) trim map:
-    X = x_r_s + x_d + Gx delta + zeta, propagated step by step on the scheduled model."""
-    s, ly, n = mpc.s, mpc.layout, mpc.n
-    delta = y[ly.delta]
-    AK = mpc.A + mpc.B @ mpc.K
-    E = (mpc.A - np.eye(n)) @ mpc.Gx + mpc.B @ mpc.Gu
-    zeta = z0 - mpc.Gx @ delta
-    out = np.empty((s.N_p, s.M, 7))
-    for j in range(s.N_p):
-        cj = y[ly.move(j)] * mpc.Du
-        for i in range(s.M):
-            zeta = AK @ zeta + mpc.B @ cj + E @ delta
-            X = mpc.x_r_s + x_d + mpc.Gx @ delta + zeta
-            x_t, _ = mpc.trim_map.at(np.array([X[0]]), np.array([X[1]]))
-            out[j, i] = X[2:9] - np.asarray(x_t)[0, 2:9]
-    return out
+    nominal vehicle's trim at the plan's own (h, V), from the (nonlinear) trim map, with
+    the estimate's shift x_d: X = x_r_s + x_d + Gx delta + zeta."""
+    X = _plan_states(mpc, y, z0) + x_d
+    flat = X.reshape(-1, X.shape[-1])
+    x_t, _ = mpc.trim_map.at(flat[:, 0], flat[:, 1])
+    return (flat[:, 2:9] - np.asarray(x_t)[:, 2:9]).reshape(*X.shape[:2], 7)
 
 
 def test_state_range_rows_keep_the_prediction_in_the_certified_range(design):

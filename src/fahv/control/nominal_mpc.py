@@ -226,6 +226,20 @@ class MPCSettings:
         )  # fmt: skip
 
 
+def _box_values(value, n: int, name: str) -> np.ndarray | None:
+    """A box node parameter ``name`` as (n,) finite floats; None if all are 0 (no rows).
+
+    Raises
+    ------
+    ValueError
+        If it is not n finite numbers (names the parameter and the value).
+    """
+    v = np.asarray(value, float)
+    if v.shape != (n,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be {n} finite numbers, got {value!r}")
+    return None if np.all(v == 0.0) else v
+
+
 def input_box(u_box) -> np.ndarray | None:
     """``mpc.u_box`` (Phi lo, Phi hi, delta_e lo, delta_e hi [deg]; all 0: none) as rows.
 
@@ -240,10 +254,8 @@ def input_box(u_box) -> np.ndarray | None:
         If it is not four finite numbers with lo < 0 < hi for both inputs (the trim
         itself must lie inside).
     """
-    v = np.asarray(u_box, float)
-    if v.shape != (4,) or not np.all(np.isfinite(v)):
-        raise ValueError(f"mpc.u_box must be four finite numbers, got {u_box!r}")
-    if np.all(v == 0.0):
+    v = _box_values(u_box, 4, "mpc.u_box")
+    if v is None:
         return None
     if not (v[0] < 0.0 < v[1] and v[2] < 0.0 < v[3]):
         raise ValueError(f"mpc.u_box needs lo < 0 < hi for Phi and delta_e, got {u_box!r}")
@@ -263,10 +275,8 @@ def range_box(hv_box) -> np.ndarray | None:
     ValueError
         If it is not four finite numbers with lo < hi for h and V.
     """
-    v = np.asarray(hv_box, float)
-    if v.shape != (4,) or not np.all(np.isfinite(v)):
-        raise ValueError(f"mpc.hv_box must be four finite numbers, got {hv_box!r}")
-    if np.all(v == 0.0):
+    v = _box_values(hv_box, 4, "mpc.hv_box")
+    if v is None:
         return None
     if not (v[0] < v[1] and v[2] < v[3]):
         raise ValueError(f"mpc.hv_box needs h lo < h hi and V lo < V hi, got {hv_box!r}")
@@ -297,10 +307,8 @@ def state_box(x_box) -> np.ndarray | None:
         If it is not 14 finite numbers with lo < 0 < hi for every state (the trim
         itself must lie inside).
     """
-    v = np.asarray(x_box, float)
-    if v.shape != (14,) or not np.all(np.isfinite(v)):
-        raise ValueError(f"mpc.x_box must be 14 finite numbers (7 lows, 7 highs), got {x_box!r}")
-    if np.all(v == 0.0):
+    v = _box_values(x_box, 14, "mpc.x_box (7 lows, 7 highs)")
+    if v is None:
         return None
     box = v.reshape(2, 7)
     if not (np.all(box[0] < 0.0) and np.all(box[1] > 0.0)):
