@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     veh = _vehicle(design.summary.get("provenance", {}).get("vehicle_file", ""))
     limit = float(data["requirements"]["settling_s"])
     duration = float(man["duration"])
-    base = [float(v) for v in design.arrays["att_max"] * 180.0 / np.pi]
+    base = [float(v) for v in np.degrees(design.arrays["att_max"])]
     print(f"design rows alpha / theta {base[0]:.3f} / {base[1]:.3f} deg")
     if a.trace is not None:
         for rows in [None, *a.rows]:

@@ -651,4 +651,7 @@ def test_state_range_rows_keep_the_prediction_in_the_certified_range(design):
     with pytest.raises(ValueError, match="mpc.x_box"):
         state_box([0.1] + lo[1:] + hi)  # the trim itself outside
     assert state_box([0.0] * 14) is None
-    assert len(X_BOX_STATES) == 7
+    # units: alpha, theta, q from deg (deg/s) to rad (rad/s), the bending modes as given
+    assert X_BOX_STATES[2] == "q"
+    np.testing.assert_allclose(box[:, 2], np.radians([-0.3, 0.3]), rtol=1e-15)
+    np.testing.assert_allclose(box[:, 4], [-50.0, 50.0], rtol=1e-15)
