@@ -5,7 +5,7 @@ Each scenario is designed (small W sample, as every test design) and simulated f
 Requirements (sec. 5.1 and docs/control_design.md): |h - h_c| <= 10 ft and
 |V - V_c| <= 2 ft/s within 60 s of the end of the command and held until the fault;
 back within the same bounds within 60 s of the fault and held to the end; attitude
-error within 0.5 deg; no command beyond the input limits; the tube error inside tau Z.
+error within 0.5 deg; no command beyond the input limits; the tube error inside Z.
 """
 
 import copy
@@ -39,7 +39,7 @@ def requirements(run, case) -> dict:
 
     The settling windows are specific to these requirements; attitude, input limits and
     the tube level come from :func:`fahv.runs.metrics.metrics` (the level is already
-    e' (tau^2 N)^-1 e, <= 1 inside tau Z).
+    e' N^-1 e, <= 1 inside Z, the set the design certifies also for tau < 1).
     """
     c = case.data
     t = run.t

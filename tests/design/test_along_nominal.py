@@ -341,6 +341,55 @@ def test_a_loops_joint_shape_replaces_the_pairs_in_the_altitude_and_row_bounds(a
         es.product_supports(F8, N8, ab.H, C[:9, :9])
 
 
+def test_the_adjustable_gain_is_covered_at_both_ends_of_its_segment(along):
+    """Eq. (48) in the eight-state bounds: with nv.tau = 0.8 the vertices are [A_i, B_i]
+    and [A_i, 0.8 B_i]; the parameter part of the row bound is the larger of its values
+    for the gains F_8 and 0.8 F_8, and no gain tau' F_8 on a grid of [0.8, 1] exceeds it
+    (each support is convex in tau'), while the interpolation part keeps F_8 Z_8's
+    supports; the altitude step over the doubled vertices covers every tau' too."""
+    from dataclasses import replace
+
+    import fahv.design.eight_state as es
+
+    d, *_, nv = along
+    if "H" not in d:
+        pytest.skip("a nine-state pair: no altitude bound")
+    F8, N8, H, tau = d["F"], d["N"], float(d["H"]), 0.8
+    nv_t = replace(nv, tau=tau)
+    A, B = nv.vertices()
+    At, Bt = nv_t.vertices()
+    R = A.shape[0]
+    assert At.shape[0] == 2 * R
+    np.testing.assert_array_equal(At[R:], A)
+    np.testing.assert_allclose(Bt[R:], tau * B, rtol=0.0, atol=0.0)
+    par_t, interp_t = es.product_bound(nv_t, F8, N8, H)
+    par_1, interp_1 = es.product_bound(nv, F8, N8, H)
+    par_tau, _ = es.product_bound(nv, tau * F8, N8, H)
+    np.testing.assert_allclose(par_t, np.maximum(par_1, par_tau), rtol=1e-12)
+    np.testing.assert_allclose(interp_t, interp_1, rtol=1e-12)
+    grid = [es.product_bound(nv, g * F8, N8, H)[0] for g in np.linspace(tau, 1.0, 9)]
+    assert np.all(np.max(grid, axis=0) <= par_t * (1.0 + 1e-12))
+    # on this pair the whole gain binds in every row; a residual whose input part cancels
+    # the gain's part of e (R_u F_8 = -R_e Pi, Pi = N_8 F_8' (F_8 N_8 F_8')^-1 F_8, the
+    # projection orthogonal in Z_8's metric: the support falls with tau') makes the
+    # smaller gain bind, and the bound follows it
+    assert np.all(par_tau <= par_1)
+    Rs = nv.residual.copy()
+    Rs[..., 9:] = -Rs[..., 1:9] @ (N8 @ F8.T @ np.linalg.inv(F8 @ N8 @ F8.T))
+    nv_c, nv_ct = replace(nv, residual=Rs), replace(nv_t, residual=Rs)
+    par_c1 = es.product_bound(nv_c, F8, N8, H)[0]
+    par_ct = es.product_bound(nv_c, tau * F8, N8, H)[0]
+    assert np.all(par_ct > par_c1)
+    np.testing.assert_allclose(es.product_bound(nv_ct, F8, N8, H)[0], par_ct, rtol=1e-12)
+    c = np.concatenate([At[:, 0, 1:], Bt[:, 0]], axis=1)
+    C = es.pair_shape(F8, N8)
+    step_t = np.sqrt(np.einsum("ri,ij,rj->r", c, C, c)).max()
+    for g in np.linspace(tau, 1.0, 9):
+        cg = np.concatenate([A[:, 0, 1:], B[:, 0]], axis=1)
+        Cg = es.pair_shape(g * F8, N8)
+        assert np.sqrt(np.einsum("ri,ij,rj->r", cg, Cg, cg)).max() <= step_t * (1.0 + 1e-12)
+
+
 def test_pulse_peak_is_the_peak_of_the_filtered_jump():
     """pulse_peak of a unit jump removed at gamma per step is the peak over k of
     (a^k - b^k) / (a - b), b = 1 - gamma (the recursion's closed form); 1 for an estimate

@@ -42,7 +42,10 @@ def test_eight_state_case_sets_every_knob(raw8):
         (lambda d: d["mpc"].update(est_tau=0.0), "'tube.form' eight_state needs"),
         (lambda d: d["mpc"].update(att_max=0.45), "'tube.form' eight_state needs"),
         (lambda d: d["mpc"].update(att_max=0.0), "'tube.form' eight_state needs"),
-        (lambda d: d["tube"].update(tau=0.8), "'tube.form' eight_state needs"),
+        (
+            lambda d: d.update(design_model="ecm", variants=["tube_mpc"]),
+            "'tube.form' eight_state needs",
+        ),
         (lambda d: d["eight_state"].update(Phi=[1.0, 0.0]), "'eight_state.Phi' must be an incr"),
         (lambda d: d["eight_state"].update(reach=[0.1] * 8), "'eight_state.reach' must have 9"),
         (lambda d: d["tube"].update(form="ellipse"), "'tube.form'"),

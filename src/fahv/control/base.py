@@ -123,7 +123,7 @@ class LawStep:
     e : (B, n) ndarray
         Tube error x - x_r - x_n (or x - x_r without a tube).
     level : (B,) ndarray
-        e' (tau^2 N)^-1 e (<= 1 inside the tube; NaN without a tube).
+        e' N^-1 e (<= 1 inside the tube Z; NaN without a tube).
     lmi : (B, 3) int ndarray
         Online LMI solves, certified fallbacks and rejected solves so far (zeros
         for laws without online LMIs).

@@ -7,7 +7,12 @@
   K of LMIs (33)-(35) and the incremental reference governor
   (:class:`fahv.control.reference.ReferenceGovernor`).
 
-With tau < 1 (the 11-state ECM design of Case 2) either is the adjustable law, eq. (54).
+With tau < 1 (Case 2) either is the adjustable law, eq. (54): the feedback is tau F e,
+and the design (:mod:`fahv.design.pipeline`) solves the tube LMI over the gains tau' F,
+tau' in [tau, 1] (eq. 48), so that Z is RPI for the whole W under it and the input
+deviation tau F e stays in tau F Z, the tightening of eq. (53). The tube level is
+therefore measured in Z, the set the certificate covers (the paper's smaller tube tau Z
+holds only for a part W' of W, eq. 47).
 """
 
 from __future__ import annotations
@@ -17,7 +22,6 @@ import numpy as np
 from fahv.control.base import ControlLaw, LawStep, Variant, no_lmi, register_law
 from fahv.control.nominal_mpc import TrackingMPCNominal
 from fahv.control.reference import ReferenceGovernor, mv, quad
-from fahv.errors import ParameterError
 from fahv.lanes import Lanes
 from fahv.model.notch import DiscreteNotch, NotchFilter
 from fahv.model.vehicle import IQ
@@ -36,7 +40,7 @@ class TubeMPC:
     N : (n, n) ndarray
         Tube shape Z = {e : e' N^-1 e <= 1}.
     tau : float
-        Adjustable factor in (0, 1] (1 for the baseline law); the tube is tau Z.
+        Adjustable factor in (0, 1] (1 for the baseline law); the feedback is tau F e.
 
     Raises
     ------
@@ -68,8 +72,8 @@ class TubeMPC:
         return np.ascontiguousarray(e)
 
     def tube_level(self, e: np.ndarray) -> np.ndarray:
-        """Tube levels e' (tau^2 N)^-1 e (B,): <= 1 when e is inside the tube tau Z."""
-        return quad(e, self.N_inv) / self.tau**2
+        """Tube levels e' N^-1 e (B,): <= 1 when e is inside Z (also for tau < 1, module doc)."""
+        return quad(e, self.N_inv)
 
     def step(self, x: np.ndarray, ref: NominalTrajectory,
              q_ref=None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
@@ -94,12 +98,7 @@ class PaperTubeMPCLaw(ControlLaw):
 
     The nominal part (x_r, u_r, x_n, u_n) comes from the nominal_trajectory node
     (:class:`~fahv.control.reference.ReferenceGovernor`); the law adds the ancillary
-    feedback F on the tube error and reports the tube level e' (tau^2 N)^-1 e.
-
-    Raises
-    ------
-    ParameterError
-        If tau < 1 (adjustable law) with a design other than the 11-state ECM.
+    feedback tau F on the tube error and reports the tube level e' N^-1 e.
     """
 
     name = "tube_mpc_paper"
@@ -108,12 +107,6 @@ class PaperTubeMPCLaw(ControlLaw):
 
     def __init__(self, p: dict, n_runs: int = 1) -> None:
         super().__init__(p, n_runs)
-        n = p["F"].shape[1]
-        if p["tau"] < 1.0 and n != 11:
-            raise ParameterError(
-                f"tube_mpc: parameter 'tau' = {p['tau']} (adjustable law, eq. 54) needs the "
-                f"11-state ECM design (F has n = {n})"
-            )
         self.tube = TubeMPC(p["F"], p["N"], p["tau"])
 
     def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
@@ -142,10 +135,6 @@ class TubeMPCLaw(PaperTubeMPCLaw):
     (docs/control_design.md, "The notch loop certified in its own states"). The 11-state
     ECM design feeds back the filter's states itself and is left as it is.
 
-    Raises
-    ------
-    ParameterError
-        As :class:`PaperTubeMPCLaw`.
     """
 
     name = "tube_mpc"

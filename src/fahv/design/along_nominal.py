@@ -66,6 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fahv.design.certificate import REMAINDER_FACTOR, _one_step, _stencil, _taylor, jacobians
+from fahv.design.feasibility import gain_vertices
 from fahv.errors import DesignError
 from fahv.plant.rk4 import params_records
 from fahv.plant.uncertainty import perturb
@@ -153,6 +154,10 @@ class NominalVertices:
     rho_min : float
     n_vehicles : tuple of int
         Corners of the parameter box and interior vehicles in ``residual``.
+    tau : float
+        Smallest factor of the ancillary gain tau' F the vertices cover, tau' in [tau, 1]
+        (1: the baseline law, eq. 36; below 1: the adjustable law, eq. 48). Set it with
+        :func:`dataclasses.replace`.
     """
 
     box: SchedulingBox
@@ -165,16 +170,23 @@ class NominalVertices:
     hessians: np.ndarray
     rho_min: float
     n_vehicles: tuple
+    tau: float = 1.0
 
     def vertices(self) -> tuple[np.ndarray, np.ndarray]:
-        """(A, B) vertex arrays (64 2^k 2, 9, 9), (64 2^k 2, 9, 2) of the tube LMI (24)."""
+        """(A, B) vertex arrays (R, 9, 9), (R, 9, 2) of the tube LMI (24).
+
+        R = 64 2^k 2 (box corners, parameter directions, rho_f at both ends of
+        [rho_min, 1]); with ``tau`` < 1 twice that, [A_i, B_i] and [A_i, tau B_i]
+        (:func:`fahv.design.feasibility.gain_vertices`, eq. 48): every closed loop
+        A_i + tau' B_i F with tau' in [tau, 1] is a convex combination of them.
+        """
         As, Bs = [], []
         for rho in (self.rho_min, 1.0):
             for c in itertools.product(*zip(self.c_lo, self.c_hi, strict=True)):
                 Jv = self.J0 + np.tensordot(np.asarray(c, float), self.dirs, 1)[None]
                 As.append(Jv[:, :, :9])
                 Bs.append(Jv[:, :, 9:] * np.array([1.0, rho]))
-        return np.concatenate(As), np.concatenate(Bs)
+        return gain_vertices(np.concatenate(As), np.concatenate(Bs), self.tau)
 
 
 def nominal_vertices(

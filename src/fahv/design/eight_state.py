@@ -35,6 +35,7 @@ onset of a loss is not in W_8).
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -281,7 +282,10 @@ def product_bound(
     ends of [rho_min, 1] (exact for the product set: |r_h| H plus the ellipsoid's
     support). The interpolation part is the elementwise remainder bound times the
     product set's supports in e and F e. With ``joint`` the set of (e_8, u - v) is the
-    ellipsoid of that shape in place of {(e_8, F_8 e_8) : e_8 in Z_8}.
+    ellipsoid of that shape in place of {(e_8, F_8 e_8) : e_8 in Z_8}. Without it and
+    with ``nv.tau`` < 1 (the adjustable law, eq. 48), u - v = tau' F_8 e_8 for any
+    tau' in [tau, 1]: the parameter part is the larger of its values at the two ends
+    (each support is convex in tau'), and F_8 Z_8 holds every tau' F_8 Z_8.
 
     Parameters
     ----------
@@ -301,12 +305,15 @@ def product_bound(
         On a malformed ``joint`` or pair.
     """
     C = _joint(F8, N8, joint)
+    # the adjustable law's gains tau' F, tau' in [nv.tau, 1]: each support is the square
+    # root of a convex quadratic in tau', so its largest value is at an end of the segment
+    shapes = [C] if joint is not None or nv.tau == 1.0 else [C, _joint(nv.tau * F8, N8, None)]
     par = np.zeros(9)
-    for rho in (nv.rho_min, 1.0):
+    R = nv.residual  # (64, C, 9, 11) on (e_h, e_8, u - v)
+    for rho, Cg in itertools.product((nv.rho_min, 1.0), shapes):
         S = np.r_[np.ones(9), rho]  # (e_8, u - v) -> (e_8, P (u - v)), P = diag(1, rho_f)
-        R = nv.residual  # (64, C, 9, 11) on (e_h, e_8, u - v)
         sup = np.abs(R[..., 0]) * H + np.sqrt(
-            np.einsum("scij,jk,scik->sci", R[..., 1:], S[:, None] * C * S[None, :], R[..., 1:])
+            np.einsum("scij,jk,scik->sci", R[..., 1:], S[:, None] * Cg * S[None, :], R[..., 1:])
         )
         par = np.maximum(par, sup.max(axis=(0, 1)))
     s_lo, s_oth = product_supports(F8, N8, H, C)  # (h, V, alpha, theta, F Z), (q, flexible)
@@ -1035,10 +1042,13 @@ def design_pair(
     nv = nominal_vertices(box, vehicle, trim_map, unc, rho_min, case["Ts"],
                           case["plant_substeps"], scale, s["k"], w_max, col_scale,
                           hessians=False)  # fmt: skip
-    n_vert = nv.J0.shape[0] * 2 ** s["k"] * 2
+    tau = float(case["tube"]["tau"])
+    nv = replace(nv, tau=tau)  # the adjustable law's gains tau' F, tau' in [tau, 1] (eq. 48)
+    n_vert = nv.J0.shape[0] * 2 ** s["k"] * 2 * (2 if tau < 1.0 else 1)
     log(f"eight-state tube: {n_vert} vertices along the nominal (64 scheduling-box corners x "
-        f"2^{s['k']} parameter directions x rho_f in {{{rho_min:g}, 1}}), "
-        f"{sum(nv.n_vehicles)} vehicles for the residual")  # fmt: skip
+        f"2^{s['k']} parameter directions x rho_f in {{{rho_min:g}, 1}}"
+        + (f" x the gains tau' F_8 at tau' = {tau:g} and 1 (eq. 48)" if tau < 1.0 else "")
+        + f"), {sum(nv.n_vehicles)} vehicles for the residual")  # fmt: skip
     scale = np.asarray(scale, float)
     w_max = np.asarray(w_max, float)
     state_max = None

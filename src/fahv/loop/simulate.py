@@ -70,7 +70,7 @@ class RunResult:
     h_c, V_c : (N,) ndarray
         Case command [ft, ft/s]; ``h_g``, ``V_g`` the governed reference.
     tube_level : (N,) ndarray
-        e' (tau^2 N)^-1 e (<= 1 inside the tube; NaN for the RMPC).
+        e' N^-1 e (<= 1 inside the tube Z; NaN for the RMPC).
     fault_active : (N,) bool ndarray
         Fault applied at the step.
     lmi_counts : (3,) int ndarray

@@ -270,16 +270,16 @@ class ControlCommand(LoopMessage):
 
 @dataclass(frozen=True)
 class TubeStatus(LoopMessage):
-    """Tube error e = x - x_r - x_n of step k against the invariant set tau Z."""
+    """Tube error e = x - x_r - x_n of step k against the invariant set Z."""
 
     HEADER: ClassVar[tuple[str, ...]] = (
-        "Tube of step k: error e = x - x_r - x_n against the invariant set tau Z (eq. 25-28, 53).",
+        "Tube of step k: error e = x - x_r - x_n against the invariant set Z (eq. 25-28, 53).",
     )
     k: int = _f("int64", _STEP_K)
     t: float = _f("float64", _STEP_T)
     law: tuple = _f("string", "control law of the run (registry name, e.g. tube_mpc, rmpc)")
     tau: np.ndarray = _f("float64", "adjustable factor (1 for eq. 36, < 1 for eq. 54)")
-    level: np.ndarray = _f("float64", "e' (tau^2 N)^-1 e, <= 1 inside the tube; NaN for rmpc")
+    level: np.ndarray = _f("float64", "e' N^-1 e, <= 1 inside the tube Z; NaN for rmpc")
     inside: np.ndarray = _f("bool", "level <= 1")
     e: np.ndarray = _f("float64[]", "tube error, design-model order")
     lmi_solves: np.ndarray = _f(

@@ -53,7 +53,7 @@ GROUPS = {
         [("Phi [-]", lambda r: r.u[:, 0]), ("delta_e [deg]", lambda r: np.degrees(r.u[:, 1]))],
     ),
     "tube": (
-        "Tube error against Z: e' (tau^2 N)^-1 e (<= 1 inside)",
+        "Tube error against Z: e' N^-1 e (<= 1 inside)",
         [("tube level", lambda r: r.tube_level)],
     ),
 }
