@@ -69,3 +69,23 @@ def test_without_the_replica_the_error_would_differ():
         q, qn = rng.normal(size=1), rng.normal(size=1)
         worst = max(worst, float(np.abs((a.step(q) - qn) - b.step(q - qn)).max()))
     assert worst > 0.1
+
+
+def test_the_adjustable_law_feeds_tau_F_e_back_and_measures_the_level_in_Z():
+    """Eq. (54) on a nine-state design: u = u_r + u_n + tau F e with tau = 0.8, and the
+    level e' N^-1 e, the set the design certifies for the whole W (the paper's tau Z
+    holds only for W' of eq. 47); a tau outside (0, 1] is refused."""
+    rng = np.random.default_rng(4)
+    p = {**_params(False), "tau": 0.8}
+    law = TubeMPCLaw(p, n_runs=B)
+    for k in range(5):
+        x, x_r, x_n = (rng.normal(size=(B, 9)) for _ in range(3))
+        u_r, u_n = rng.normal(size=(B, 2)), rng.normal(size=(B, 2))
+        ref = SimpleNamespace(x_r=x_r, x_n=x_n, u_r=u_r, u_n=u_n)
+        step = law.step(k, x, ref, None)
+        e = x - x_r - x_n
+        np.testing.assert_allclose(step.u, u_r + u_n + e @ (0.8 * p["F"]).T, rtol=1e-12)
+        want = np.einsum("bi,ij,bj->b", e, np.linalg.inv(p["N"]), e)
+        np.testing.assert_allclose(step.level, want, rtol=1e-12)
+    with pytest.raises(ValueError, match="tau must be in"):
+        TubeMPCLaw({**p, "tau": 0.0}, n_runs=B)

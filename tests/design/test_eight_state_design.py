@@ -247,6 +247,40 @@ def test_design_runs_the_law_on_the_eight_state_pair(raw8, vehicle, monkeypatch)
     print("nominal:", {k: round(v, 4) for k, v in m.items() if k.startswith("nominal_")})
 
 
+def test_the_adjustable_law_runs_tau_F_8_and_tightens_by_tau_F_8_Z_8(raw8, vehicle, monkeypatch):
+    """tube.tau 0.8 on the eight-state form (eq. 47-54): the pair is asked for the gains
+    tau' F_8 of [0.8, 1], the inputs are tightened by 0.8 F_8 Z_8 (eq. 53), the node
+    takes tau, and 10 s of the loop keep the level inside Z. The stored pair stands in
+    for the closure (closed for the gain F_8 alone: plumbing only; the law's 0.8 F e and
+    its level in Z: tests/control/test_tube_mpc_law.py)."""
+    import fahv.design.pipeline as pmod
+    from fahv.design.eight_state import nominal_box
+    from fahv.loop.params import node_parameters
+    from fahv.loop.simulate import simulate
+
+    pair = _stored_pair()
+    taus = []
+
+    def stored(case, veh, tm, scale, w_max, cols, rho, room, log, gamma, **estimate):
+        taus.append(case["tube"]["tau"])
+        return (pair, *nominal_box(case["eight_state"], veh.envelope))
+
+    monkeypatch.setattr(pmod, "design_pair", stored)
+    r = copy.deepcopy(raw8)
+    r["disturbance"]["samples"] = 40
+    r["certificate"] = {"schedules": 0}
+    r["tube"]["tau"] = 0.8
+    design = pmod.run_design(case_from_mapping(r, "quick8_tau.yaml"), log=lambda *_: None)
+    assert taus == [0.8]
+    a, lim = design.arrays, vehicle.limits
+    np.testing.assert_allclose(a["u_lo"], lim.u_min + 0.8 * pair.tightening, rtol=1e-12)
+    np.testing.assert_allclose(a["u_hi"], lim.u_max - 0.8 * pair.tightening, rtol=1e-12)
+    assert node_parameters(design)["tube_mpc"]["tau"] == 0.8
+    run = simulate(design, "tube_mpc", duration=10.0)
+    print(f"tau 0.8, 10 s: largest level in Z {run.tube_level.max():.4f}")
+    assert 0.0 < run.tube_level.max() < 1.0
+
+
 def test_a_nominal_box_without_room_for_the_faulty_trim_is_refused(raw8, monkeypatch):
     """delta_e down to -0.9 deg from the nominal trim: the lightest corner trims 1.007 deg
     below it, which leaves no room to manoeuvre; the design says so, naming the range."""
