@@ -31,9 +31,23 @@ PAIRS = (
 @pytest.fixture(scope="module", params=PAIRS)
 def along(design, request):
     """A stored closed pair, its scheduling box and its vertex data rebuilt here."""
+    return _rebuilt(design, request.param)
+
+
+@pytest.fixture(scope="module")
+def along_tau(design):
+    """case2_eight_state.yaml's pair (the adjustable law, tau = 0.8: the vertices cover
+    the gains tau' F_8, tau' in [0.8, 1]), as ``along``."""
+    from dataclasses import replace
+
+    d, veh, tm, box, scale, nv = _rebuilt(design, "closed_tube_h_reset_tau.npz")
+    return d, veh, tm, box, scale, replace(nv, tau=float(d["tau"]))
+
+
+def _rebuilt(design, name):
     from fahv.model.tp_model import build_tp_model
 
-    d = dict(np.load(DATA / request.param))
+    d = dict(np.load(DATA / name))
     a = design.arrays
     veh = load_vehicle()
     tp = build_tp_model(veh, "cm", 4, 5, 21, 21)
@@ -116,8 +130,11 @@ def _check_true_errors(d, veh, tm, box, scale, nv):
     """The sampling check of :func:`test_along_nominal_disturbance_lies_inside_W`; for a
     pair with h outside the tube (``H`` in ``d``), e = (e_h, e_8) with |e_h| <= H and e_8
     in Z_8, F blind to e_h: rows 1-8 of w (with J_theta's h column times e_h, which W_8
-    holds) lie inside W_8, and one step's change of e_h is at most H / moves."""
+    holds) lie inside W_8, and one step's change of e_h is at most H / moves. For a pair
+    of the adjustable law (``tau`` in ``d``) the input deviation is tau' P F e, a third of
+    the samples at tau' = tau, a third at 1, the rest uniform between."""
     W, F, N, rho_min = d["W"], d["F"], d["N"], float(d["rho_min"])
+    tau = float(d.get("tau", 1.0))
     h_out = "H" in d
     if h_out:  # the tube on the eight states after h; e_h in [-H, H]
         F = np.hstack([np.zeros((2, 1)), F])
@@ -170,6 +187,10 @@ def _check_true_errors(d, veh, tm, box, scale, nv):
                                            rng.uniform(-1.0, 1.0, n))  # fmt: skip
             e = np.column_stack([e_h, e])
         du = (e @ F.T) * np.stack([np.ones(n), rho], axis=1)  # P F e
+        if tau < 1.0:  # the adjustable law's gain tau' F: at both ends and between them
+            g = rng.uniform(tau, 1.0, n)
+            g[0::3], g[1::3] = tau, 1.0
+            du *= g[:, None]
         J_th = np.zeros((n, 9, 11))
         for sigma, weight in nodes:  # J_theta at each node of the segment
             Xs, Us = X + sigma * e, U + sigma * du
@@ -210,6 +231,27 @@ def _check_true_errors(d, veh, tm, box, scale, nv):
     assert n_done == 100_000
     assert np.all(ratio <= 1.0), ratio
     assert np.all(ratio >= 0.05), ratio  # the samples reach into W: the test is not vacuous
+
+
+def test_the_adjustable_pair_reproduces_its_bound_and_holds_W_8_on_100000_samples(along_tau):
+    """Item 7 for case2_eight_state.yaml (tau = 0.8): its vertex data rebuilt here (8192
+    vertices, the gains tau' F_8 at 0.8 and 1) reproduce the design's altitude bound H and
+    row bound (to 1e-6), inside W_8 with the V row's slack of 3.0 %; and 100 000 true
+    one-step errors of the perturbed nonlinear CM, every box corner at both rho_f ends,
+    e on the boundary of Z_8 and inside, gains tau' anywhere in [0.8, 1], lie inside W_8
+    (the check of test_along_nominal_disturbance_lies_inside_W)."""
+    import fahv.design.eight_state as es
+
+    d, *_, nv = along_tau
+    A, B = nv.vertices()
+    assert A.shape[0] == 8192
+    ab = es.altitude_bound(nv, A, B, d["F"], d["N"], int(d["moves"]))
+    print(f"H {ab.H:.4f} ft (stored {float(d['H']):.4f}); bound / W_8 "
+          + " ".join(f"{v:.3f}" for v in ab.bound / d["W"]))
+    assert ab.H == pytest.approx(float(d["H"]), rel=1e-6)
+    np.testing.assert_allclose(ab.bound, d["bound"], rtol=1e-6)
+    assert 0.025 < (1.0 - ab.bound / d["W"]).min() < 0.035
+    _check_true_errors(*along_tau)
 
 
 def test_integral_form_refuses_a_box_that_does_not_hold_nominal_plus_Z():
