@@ -61,6 +61,10 @@ def test_eight_state_case_sets_every_knob(raw8):
             "'eight_state.notch_continuation' must increase to below notch.eps_p",
         ),
         (
+            lambda d: (d["eight_state"].update(notch_gain="designed"), d["tube"].update(tau=0.8)),
+            "'eight_state.notch_gain' 'designed' needs tube.tau 1",
+        ),
+        (
             lambda d: d["eight_state"].update(
                 notch_gain="designed", notch_continuation=[0.06, 0.05]
             ),

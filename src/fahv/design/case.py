@@ -134,6 +134,10 @@ EIGHT_STATE_CHECKS = (
     Check("notch_gain", lambda r: r["eight_state"]["notch_gain"] != "designed" or (
           r["notch"]["enabled"] and r["tube"]["filter_nominal_q"]),
           "'designed' needs notch.enabled and tube.filter_nominal_q (the certified loop)"),
+    Check("notch_gain", lambda r: r["eight_state"]["notch_gain"] != "designed"
+          or r["tube"]["tau"] == 1.0,
+          "'designed' needs tube.tau 1 (the designed gain's certificate covers that gain "
+          "alone, not the adjustable law's tau' K)"),
 )  # fmt: skip
 
 
