@@ -1043,7 +1043,8 @@ def design_pair(
                           case["plant_substeps"], scale, s["k"], w_max, col_scale,
                           hessians=False)  # fmt: skip
     tau = float(case["tube"]["tau"])
-    nv = replace(nv, tau=tau)  # the adjustable law's gains tau' F, tau' in [tau, 1] (eq. 48)
+    if tau < 1.0:  # the adjustable law's gains tau' F, tau' in [tau, 1] (eq. 48)
+        nv = replace(nv, tau=tau)
     n_vert = nv.J0.shape[0] * 2 ** s["k"] * 2 * (2 if tau < 1.0 else 1)
     log(f"eight-state tube: {n_vert} vertices along the nominal (64 scheduling-box corners x "
         f"2^{s['k']} parameter directions x rho_f in {{{rho_min:g}, 1}}"
