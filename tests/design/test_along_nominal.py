@@ -401,7 +401,7 @@ def test_the_adjustable_gain_is_covered_at_both_ends_of_its_segment(along):
     A, B = nv.vertices()
     At, Bt = nv_t.vertices()
     R = A.shape[0]
-    assert At.shape[0] == 2 * R
+    assert At.shape[0] == 2 * R == nv_t.n_vertices and R == nv.n_vertices
     np.testing.assert_array_equal(At[R:], A)
     np.testing.assert_allclose(Bt[R:], tau * B, rtol=0.0, atol=0.0)
     par_t, interp_t = es.product_bound(nv_t, F8, N8, H)
@@ -423,11 +423,13 @@ def test_the_adjustable_gain_is_covered_at_both_ends_of_its_segment(along):
     par_ct = es.product_bound(nv_c, tau * F8, N8, H)[0]
     assert np.all(par_ct > par_c1)
     np.testing.assert_allclose(es.product_bound(nv_ct, F8, N8, H)[0], par_ct, rtol=1e-12)
+    with pytest.raises(ValueError, match="joint shape covers its own gain"):
+        es.product_bound(nv_t, F8, N8, H, es.pair_shape(F8, N8))
     c = np.concatenate([At[:, 0, 1:], Bt[:, 0]], axis=1)
     C = es.pair_shape(F8, N8)
     step_t = np.sqrt(np.einsum("ri,ij,rj->r", c, C, c)).max()
+    cg = np.concatenate([A[:, 0, 1:], B[:, 0]], axis=1)
     for g in np.linspace(tau, 1.0, 9):
-        cg = np.concatenate([A[:, 0, 1:], B[:, 0]], axis=1)
         Cg = es.pair_shape(g * F8, N8)
         assert np.sqrt(np.einsum("ri,ij,rj->r", cg, Cg, cg)).max() <= step_t * (1.0 + 1e-12)
 

@@ -98,6 +98,7 @@ def test_certify_attitude_bounds_the_supports_in_the_tube_lmi(raw8, vehicle, mon
     class Vertices:
         J0 = np.zeros((64, 1))
         n_vehicles = [1]
+        n_vertices = 4096
 
     seen = {}
 
@@ -324,6 +325,7 @@ def test_a_designed_notch_gain_is_used_only_when_certified_and_closed(raw8, vehi
     class Vertices:
         J0 = np.zeros((64, 1))
         n_vehicles = [1]
+        n_vertices = 4096
 
         def vertices(self):
             return np.tile(np.eye(9), (R, 1, 1)), np.zeros((R, 9, 2))

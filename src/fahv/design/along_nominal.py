@@ -172,6 +172,11 @@ class NominalVertices:
     n_vehicles: tuple
     tau: float = 1.0
 
+    @property
+    def n_vertices(self) -> int:
+        """R, the number of vertices :meth:`vertices` returns (without building them)."""
+        return self.J0.shape[0] * 2 ** len(self.c_lo) * 2 * (2 if self.tau < 1.0 else 1)
+
     def vertices(self) -> tuple[np.ndarray, np.ndarray]:
         """(A, B) vertex arrays (R, 9, 9), (R, 9, 2) of the tube LMI (24).
 

@@ -302,12 +302,17 @@ def product_bound(
     Raises
     ------
     ValueError
-        On a malformed ``joint`` or pair.
+        On a malformed ``joint`` or pair, or a ``joint`` with ``nv.tau`` < 1.
     """
     C = _joint(F8, N8, joint)
+    if joint is not None and nv.tau < 1.0:
+        raise ValueError(
+            f"product_bound: a loop's joint shape covers its own gain, not the adjustable "
+            f"law's tau' in [{nv.tau:g}, 1]"
+        )
     # the adjustable law's gains tau' F, tau' in [nv.tau, 1]: each support is the square
     # root of a convex quadratic in tau', so its largest value is at an end of the segment
-    shapes = [C] if joint is not None or nv.tau == 1.0 else [C, _joint(nv.tau * F8, N8, None)]
+    shapes = [C] if nv.tau == 1.0 else [C, _joint(nv.tau * F8, N8, None)]
     par = np.zeros(9)
     R = nv.residual  # (64, C, 9, 11) on (e_h, e_8, u - v)
     for rho, Cg in itertools.product((nv.rho_min, 1.0), shapes):
@@ -379,7 +384,7 @@ def altitude_bound(nv: NominalVertices, A, B, F8, N8, moves: int, joint=None) ->
     step = float(np.sqrt(np.einsum("ri,ij,rj->r", c, C, c)).max())
     H = moves * step
     for _ in range(100):
-        par, interp = product_bound(nv, F8, N8, H, C)
+        par, interp = product_bound(nv, F8, N8, H, joint)  # joint None: the gains of nv.tau
         H_new = moves * (step + par[0] + interp[0])
         if abs(H_new - H) <= 1e-12 * H_new:
             break
@@ -1045,9 +1050,8 @@ def design_pair(
     tau = float(case["tube"]["tau"])
     if tau < 1.0:  # the adjustable law's gains tau' F, tau' in [tau, 1] (eq. 48)
         nv = replace(nv, tau=tau)
-    n_vert = nv.J0.shape[0] * 2 ** s["k"] * 2 * (2 if tau < 1.0 else 1)
-    log(f"eight-state tube: {n_vert} vertices along the nominal (64 scheduling-box corners x "
-        f"2^{s['k']} parameter directions x rho_f in {{{rho_min:g}, 1}}"
+    log(f"eight-state tube: {nv.n_vertices} vertices along the nominal (64 scheduling-box "
+        f"corners x 2^{s['k']} parameter directions x rho_f in {{{rho_min:g}, 1}}"
         + (f" x the gains tau' F_8 at tau' = {tau:g} and 1 (eq. 48)" if tau < 1.0 else "")
         + f"), {sum(nv.n_vehicles)} vehicles for the residual")  # fmt: skip
     scale = np.asarray(scale, float)
