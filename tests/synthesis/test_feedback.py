@@ -200,3 +200,35 @@ def test_pulse_multiplier_is_rechecked(pulse_tube):
                     ONE2, ONE1)  # fmt: skip
     with pytest.raises(DesignError, match="certificate failed"):
         verify_tube(A, B, dataclasses.replace(pulse_tube, pulse=3.0 * PULSE), ONE2, ONE1)
+
+
+def test_contained_points_shape_the_tube(tube):
+    """With ``contain`` Z holds the given points (a jump 4 times the free tube's support
+    along the second state, and a diagonal one): each lies at level <= 1 of the new Z, at
+    most its strictness margin inside for the one that binds; the free tube holds
+    neither; the new Z is still RPI for W (verify_tube's blocks). Constraint generation
+    over 200 points (5 active) gives the full solve's tube."""
+    from fahv.design.certificate import worst_level
+
+    s = np.sqrt(np.diag(tube.N))
+    pts = np.array([[0.0, 4.0 * s[1]], [2.0 * s[0], -2.0 * s[1]]])
+    free = np.einsum("si,si->s", pts, np.linalg.solve(tube.N, pts.T).T)
+    assert free.min() > 1.5
+    big = design_tube(A, B, W, ONE2, ONE1, np.array([1.0]), lam_grid=(0.8, 0.9, 0.95),
+                      contain=pts)  # fmt: skip
+    inside = np.einsum("si,si->s", pts, np.linalg.solve(big.N, pts.T).T)
+    assert inside.max() <= 1.0 + 1e-6 and inside.max() >= 0.99
+    assert big.min_eigs.min() >= -1e-9
+    level, _ = worst_level(A, B, big.F, big.N, W)
+    assert level <= 1.0
+    # many points, few held at a time: the same tube as with all of them
+    rng = np.random.default_rng(7)
+    cloud = np.vstack([pts, rng.uniform(-1.0, 1.0, (198, 2)) * np.abs(pts).max(axis=0)])
+    gen = design_tube(A, B, W, ONE2, ONE1, np.array([1.0]), lam_grid=(0.8, 0.9, 0.95),
+                      contain=cloud, active=5)  # fmt: skip
+    full = design_tube(A, B, W, ONE2, ONE1, np.array([1.0]), lam_grid=(0.8, 0.9, 0.95),
+                       contain=cloud)  # fmt: skip
+    np.testing.assert_allclose(gen.tightening, full.tightening, rtol=1e-3)
+    with_ref = design_tube(A, B, W * 1e-3, ONE2, ONE1, np.array([1.0]),
+                           lam_grid=(0.8, 0.9, 0.95), w_ref=W, contain=pts * 1e-3)  # fmt: skip
+    np.testing.assert_allclose(with_ref.N, big.N * 1e-6, rtol=1e-9)

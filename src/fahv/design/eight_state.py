@@ -600,7 +600,7 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
                 uncertainty: dict, gamma: float, Ts: float, n_sub: int, *,
                 gamma_e: float | None = None, directions=None, projection_scale=None,
                 interior: int = 1024, iterations: int = 6,
-                steady_shaped: float | None = None) -> OnsetBound:  # fmt: skip
+                steady_shaped: float | None = None, steady_lams=None) -> OnsetBound:  # fmt: skip
     """Bound the onset of an elevator loss as a transient of the pair (item 3).
 
     At the step a loss of 1 - rho_f starts, the plant moves by J = f_p(x, P u) - f_p(x, u)
@@ -654,6 +654,9 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     steady_shaped : float, optional
         c_w when already computed for this pair and bound (:func:`steady_set`, a
         minute or two over 4096 vertices); computed here by default.
+    steady_lams : sequence of float, optional
+        Contraction factors tried for that ellipsoid (the smallest c_w is kept; a minute
+        or two each); default: the pair's lam alone.
 
     Returns
     -------
@@ -718,7 +721,8 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     bound = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H
     c = float((bound / pair.W8).max())
     if steady_shaped is None:
-        steady_shaped, _ = steady_set(A8 + B8 @ pair.F8, pair.N8, pair.F8, bound, pair.lam)
+        steady_shaped = min(steady_set(A8 + B8 @ pair.F8, pair.N8, pair.F8, bound, lam)[0]
+                            for lam in (steady_lams or (pair.lam,)))  # fmt: skip
     c_s = float(steady_shaped)
     c0 = min(c, c_s)  # the steady level the bound starts from
 
@@ -836,6 +840,7 @@ def close_pair(
     w_ref=None,
     active: int = 96,
     state_max=None,
+    contain=None,
     log: Callable[[str], None] = print,
 ) -> EightStatePair:
     """Iterate W_8 and Z_8 to a closed pair over the vertices ``nv`` (module docstring).
@@ -871,6 +876,9 @@ def close_pair(
         bound), e.g. 0.5 deg less the box's trim offset in alpha and theta, so that the
         attitude requirement follows from the pair (docs/control_design.md, "Attitude by
         construction"); passed to :func:`fahv.synthesis.feedback.design_tube`.
+    contain : (S, 8) array_like, optional
+        Errors Z_8 must contain (``contain`` of :func:`fahv.synthesis.feedback.design_tube`),
+        e.g. the onset's jumps over the level they may use.
     log : callable
         Receives one line per iteration.
 
@@ -894,7 +902,8 @@ def close_pair(
     ratio = np.full(8, np.inf)
     for it in range(iterations):
         tube = design_tube(A8, B8, W8, np.asarray(state_scale, float)[1:], input_scale, room,
-                           (lam,), state_max=state_max, w_ref=w_ref8, active=active)  # fmt: skip
+                           (lam,), state_max=state_max, w_ref=w_ref8, active=active,
+                           contain=contain)  # fmt: skip
         F8, N8 = tube.F, tube.N
         ab = altitude_bound(nv, A, B, F8, N8, moves)
         ratio = ab.bound / W8

@@ -166,7 +166,7 @@ def _solved(prob: cp.Problem) -> bool:
     return prob.status in ("optimal", "optimal_inaccurate")
 
 
-def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None):
+def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None, Ps=None):
     """Solve the tube LMI for one lam (scaled data); (value, lam, N, M, mu, blocks) or None.
 
     With ``active`` (an int) the vertex blocks are generated: the LMI is solved with
@@ -176,7 +176,9 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None):
     The blocks solved hold with the full margin ``LMI_MARGIN``, the ones left out with
     at least half of it, so the result is the full LMI's optimum up to that margin (not
     exactly); :func:`verify_tube` re-checks every one of the R blocks either way. ``Gs`` (g, n):
-    pulse generators (scaled), the last g multipliers of the returned mu.
+    pulse generators (scaled), the last g multipliers of the returned mu. ``Ps`` (S, n):
+    points Z must contain (scaled), p' N^-1 p <= 1, entered as [[1, p'], [p, N]] >= 0 and
+    generated like the vertex blocks (the ``active`` largest first, then the violated).
     """
     R, n, m = Bs.shape
     E = _generators(n, Gs)
@@ -187,6 +189,9 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None):
         norms = np.linalg.norm(As.reshape(R, -1), axis=1)
         norms = norms + np.linalg.norm(Bs.reshape(R, -1), axis=1)
         chosen = np.sort(np.argsort(-norms)[:active])
+    held = np.zeros(0, int)
+    if Ps is not None and len(Ps):
+        held = np.sort(np.argsort(-np.linalg.norm(Ps, axis=1))[: active or len(Ps)])
     while True:
         N = cp.Variable((n, n), symmetric=True)
         M = cp.Variable((m, n))
@@ -208,6 +213,10 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None):
                 ]
             )
             cons.append(0.5 * (blk + blk.T) >> LMI_MARGIN * np.eye(2 * n + k))
+        for s in held:
+            p = Ps[s][:, None]
+            blk = cp.bmat([[np.ones((1, 1)), p.T], [p, N]])
+            cons.append(0.5 * (blk + blk.T) >> 0)
         for j in range(m):
             blk = cp.bmat(
                 [[cp.reshape(t[j], (1, 1), order="F"), M[j : j + 1, :]], [M[j : j + 1, :].T, N]]
@@ -217,14 +226,22 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None):
         prob = cp.Problem(obj, cons)
         if not _solved(prob):
             return None
-        if len(chosen) == R:
-            return prob.value, lam, N.value, M.value, mu.value, R
         Nv = 0.5 * (N.value + N.value.T)
+        out = held.size
+        if out:
+            inside = np.einsum("si,si->s", Ps, np.linalg.solve(Nv, Ps.T).T)
+            out = np.setdiff1d(np.flatnonzero(inside > 1.0 + 1e-7), held)
+            held = np.union1d(held, out[np.argsort(-inside[out])[: active or out.size]])
+            out = out.size
+        if len(chosen) == R:
+            if not out:
+                return prob.value, lam, N.value, M.value, mu.value, R
+            continue
         blocks = _rpi_blocks(As @ Nv + Bs @ M.value, lam, np.maximum(mu.value, 0.0), Nv, Gs)
         eig = np.linalg.eigvalsh(blocks)[:, 0]
         bad = np.flatnonzero(eig < 0.5 * LMI_MARGIN)
         bad = np.setdiff1d(bad, chosen)
-        if bad.size == 0:
+        if bad.size == 0 and not out:
             return prob.value, lam, N.value, M.value, mu.value, len(chosen)
         worst = bad[np.argsort(eig[bad])[:active]]
         chosen = np.union1d(chosen, worst)
@@ -243,6 +260,7 @@ def design_tube(
     w_ref=None,
     active=None,
     pulse=None,
+    contain=None,
 ) -> TubeDesign:
     """Design F and the ellipsoidal RPI tube Z for the box W = {|w| <= w_max}.
 
@@ -285,6 +303,12 @@ def design_tube(
         Pulse generators G (unscaled): Z is made RPI for w + G' p, |w| <= w_max,
         |p_l| <= 1 (module docstring), e.g. the one-step jumps of the residual at the
         onset of a loss.
+    contain : (S, n) array_like, optional
+        Points Z must contain (unscaled), e' N^-1 e <= 1 for each row, entered as
+        [[1, e'], [e, N]] >= 0 (linear in N) and generated like the vertex blocks; e.g.
+        the one-step jumps of a loss's onset over the level they may use, so that the
+        error stays in Z through the onset (:func:`fahv.design.eight_state.close_pair`).
+        Re-checked exactly.
 
     Returns
     -------
@@ -304,7 +328,9 @@ def design_tube(
         sm = None if state_max is None else np.asarray(state_max, float) / s
         t = design_tube(A, B, np.asarray(w_max, float) / s, Dx, Du, u_room, lam_grid,
                         state_weight, state_max=sm, active=active,
-                        pulse=None if pulse is None else np.asarray(pulse, float) / s)  # fmt: skip
+                        pulse=None if pulse is None else np.asarray(pulse, float) / s,
+                        contain=None if contain is None else np.asarray(contain, float) / s,
+                        )  # fmt: skip
         tube = dataclasses.replace(
             t, N=t.N * s**2, mu=t.mu / s**2, w_max=np.asarray(w_max, float),
             tightening=t.tightening * s, z_box=t.z_box * s,
@@ -317,9 +343,10 @@ def design_tube(
     room = np.asarray(u_room, float) / Du
     sw = np.ones(n) * 1e-3 if state_weight is None else np.asarray(state_weight, float)
     Gs = None if pulse is None else np.atleast_2d(np.asarray(pulse, float)) / Dx[None, :]
+    Ps = None if contain is None else np.atleast_2d(np.asarray(contain, float)) / Dx[None, :]
     best = None
     for lam in lam_grid:
-        sol = _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs)
+        sol = _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs, Ps)
         if sol is not None and (best is None or sol[0] < best[0]):
             best = sol
     if best is None:
@@ -351,6 +378,13 @@ def design_tube(
         mu_pulse=None if Gs is None else mus[n:],
     )
     eigs = verify_tube(A, B, tube, Dx, Du)
+    if Ps is not None:
+        inside = np.einsum("si,si->s", Ps, np.linalg.solve(Ns, Ps.T).T)
+        if inside.max() > 1.0 + 1e-6:
+            raise DesignError(
+                f"certificate failed: point {int(inside.argmax())} of `contain` lies at level "
+                f"{np.sqrt(inside.max()):.6g} > 1 of Z"
+            )
     if state_max is not None:
         over = tube.z_box > np.asarray(state_max, float)
         if over.any():
