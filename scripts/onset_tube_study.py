@@ -26,7 +26,7 @@ import numpy as np
 
 from fahv.control.nominal_mpc import estimator_gains
 from fahv.design.along_nominal import SchedulingBox, nominal_vertices, onset_jumps
-from fahv.design.eight_state import EightStatePair, close_pair, onset_bound
+from fahv.design.eight_state import EIGHT_STATES, EightStatePair, close_pair, onset_bound
 from fahv.design.feasibility import input_room
 from fahv.errors import DesignError
 from fahv.model.tp_model import build_tp_model
@@ -35,24 +35,18 @@ from fahv.model.vehicle import load_vehicle
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
 TS, N_SUB = 0.02, 5  # case1.yaml's period and RK4 sub-steps
-NAMES = ("V", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
-
-
-def supports(F, N):
-    """Z's supports per state and F Z's per input."""
-    return np.sqrt(np.diag(N)), np.sqrt(np.einsum("ij,jk,ik->i", F, N, F))
 
 
 def report(label, pair, ref_pair):
     """One block of lines: tightening, supports / the stored pair's."""
-    sz, tf = supports(pair.F8, pair.N8)
-    rz, rt = supports(ref_pair.F8, ref_pair.N8)
+    sz, tf = np.sqrt(np.diag(pair.N8)), pair.tightening
+    rz, rt = np.sqrt(np.diag(ref_pair.N8)), ref_pair.tightening
     print(f"  {label}: tightening {tf[0]:.4f} / {np.degrees(tf[1]):.3f} deg "
           f"(stored pair {rt[0]:.4f} / {np.degrees(rt[1]):.3f} deg); alpha support "
           f"{np.degrees(sz[1]):.3f} deg; W_8 / stored W_8 "
           + " ".join(f"{v:.2f}" for v in pair.W8 / ref_pair.W8), flush=True)  # fmt: skip
     print("    supports / the stored pair's: "
-          + ", ".join(f"{n} {v:.2f}" for n, v in zip(NAMES, sz / rz, strict=True)),
+          + ", ".join(f"{n} {v:.2f}" for n, v in zip(EIGHT_STATES, sz / rz, strict=True)),
           flush=True)  # fmt: skip
 
 

@@ -134,7 +134,6 @@ class TubeMPCLaw(PaperTubeMPCLaw):
     term of the nominal's manoeuvre neither W nor the filter's certificate holds
     (docs/control_design.md, "The notch loop certified in its own states"). The 11-state
     ECM design feeds back the filter's states itself and is left as it is.
-
     """
 
     name = "tube_mpc"

@@ -166,6 +166,11 @@ def _solved(prob: cp.Problem) -> bool:
     return prob.status in ("optimal", "optimal_inaccurate")
 
 
+def _levels(P: np.ndarray, N: np.ndarray) -> np.ndarray:
+    """Squared levels p' N^-1 p (S,) of the rows of P (S, n) in Z = {e' N^-1 e <= 1}."""
+    return np.einsum("si,si->s", P, np.linalg.solve(N, P.T).T)
+
+
 def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None, Ps=None):
     """Solve the tube LMI for one lam (scaled data); (value, lam, N, M, mu, blocks) or None.
 
@@ -227,21 +232,21 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None, Ps
         if not _solved(prob):
             return None
         Nv = 0.5 * (N.value + N.value.T)
-        out = held.size
-        if out:
-            inside = np.einsum("si,si->s", Ps, np.linalg.solve(Nv, Ps.T).T)
-            out = np.setdiff1d(np.flatnonzero(inside > 1.0 + 1e-7), held)
-            held = np.union1d(held, out[np.argsort(-inside[out])[: active or out.size]])
-            out = out.size
+        outside = np.zeros(0, int)  # points Z must contain that it does not yet
+        if held.size:
+            level = _levels(Ps, Nv)
+            outside = np.setdiff1d(np.flatnonzero(level > 1.0 + 1e-7), held)
+            add = outside[np.argsort(-level[outside])[: active or outside.size]]
+            held = np.union1d(held, add)
         if len(chosen) == R:
-            if not out:
+            if outside.size == 0:
                 return prob.value, lam, N.value, M.value, mu.value, R
             continue
         blocks = _rpi_blocks(As @ Nv + Bs @ M.value, lam, np.maximum(mu.value, 0.0), Nv, Gs)
         eig = np.linalg.eigvalsh(blocks)[:, 0]
         bad = np.flatnonzero(eig < 0.5 * LMI_MARGIN)
         bad = np.setdiff1d(bad, chosen)
-        if bad.size == 0 and not out:
+        if bad.size == 0 and outside.size == 0:
             return prob.value, lam, N.value, M.value, mu.value, len(chosen)
         worst = bad[np.argsort(eig[bad])[:active]]
         chosen = np.union1d(chosen, worst)
@@ -379,7 +384,7 @@ def design_tube(
     )
     eigs = verify_tube(A, B, tube, Dx, Du)
     if Ps is not None:
-        inside = np.einsum("si,si->s", Ps, np.linalg.solve(Ns, Ps.T).T)
+        inside = _levels(Ps, Ns)
         if inside.max() > 1.0 + 1e-6:
             raise DesignError(
                 f"certificate failed: point {int(inside.argmax())} of `contain` lies at level "
