@@ -9,8 +9,8 @@ from fahv.design.along_nominal import SchedulingBox, jacobians, nominal_vertices
 from fahv.design.certificate import worst_level
 from fahv.model.trim import TrimMap
 from fahv.model.vehicle import load_vehicle
-from fahv.plant.rk4 import params_records, rk4_cm
-from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturb
+from fahv.plant.rk4 import params_records, perturbed_records, rk4_cm
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 TS, N_SUB = 0.02, 5
@@ -171,10 +171,7 @@ def _check_true_errors(d, veh, tm, box, scale, nv):
             s = nominal.lo + rng.random((n, 6)) * (nominal.hi - nominal.lo)
             edge = rng.random(n) < 0.25
             s[edge] = S_corners[rng.integers(0, 64, edge.sum())]
-        recs = params_records(
-            [perturb(veh.params, dict(PAPER_UNCERTAINTY), dict(zip(names, f, strict=True)))
-             for f in frac]
-        )  # fmt: skip
+        recs = perturbed_records(veh.params, PAPER_UNCERTAINTY, frac)
         X, U = nominal.points(tm, s)
         X[:, 4:9] += rng.uniform(-1, 1, (n, 5)) * nominal.other_half
         m = N.shape[0]

@@ -102,3 +102,37 @@ def test_fault_injector_of_mixed_kinds_acts_per_run():
         LossOfEffectiveness(0.0)
     with pytest.raises(ConfigError, match="unknown fault kind 'melted'"):
         make_fault("melted", 0.0, {})
+
+
+def test_perturbed_records_are_perturb_vectorised_to_the_bit():
+    """perturbed_records over the 1024 corners and 300 interior fractions of the sec. 5.1
+    box gives exactly the records of perturb (the same arithmetic); a wrong shape, NaN,
+    a fraction outside [-1, 1] or an unknown parameter is refused, named."""
+    import itertools
+
+    from fahv.model.vehicle import load_vehicle
+    from fahv.plant.rk4 import params_records, perturbed_records
+    from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturb
+
+    vp = load_vehicle().params
+    names = list(PAPER_UNCERTAINTY)
+    corners = np.array(list(itertools.product((-1.0, 1.0), repeat=len(names))))
+    inner = np.random.default_rng(5).uniform(-1.0, 1.0, (300, len(names)))
+    signs = np.vstack([corners, inner])
+    got = perturbed_records(vp, PAPER_UNCERTAINTY, signs)
+    ref = params_records([perturb(vp, PAPER_UNCERTAINTY, dict(zip(names, s, strict=True)))
+                          for s in signs])  # fmt: skip
+    assert got.shape == (1324,)
+    for f in ref.dtype.names:
+        assert np.array_equal(got[f], ref[f]), f
+    assert got["m"].max() == pytest.approx(vp.m * 1.1, rel=1e-15)
+    with pytest.raises(ValueError, match=r"signs must be \(B, 10\)"):
+        perturbed_records(vp, PAPER_UNCERTAINTY, signs[:, :9])
+    bad = signs[:2].copy()
+    bad[1, 3] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        perturbed_records(vp, PAPER_UNCERTAINTY, bad)
+    with pytest.raises(ValueError, match=r"\[-1, 1\]"):
+        perturbed_records(vp, PAPER_UNCERTAINTY, 1.5 * signs[:2])
+    with pytest.raises(ValueError, match="unknown parameter 'mass'"):
+        perturbed_records(vp, {"mass": 0.1}, np.zeros((1, 1)))

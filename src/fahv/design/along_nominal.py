@@ -68,8 +68,7 @@ import numpy as np
 from fahv.design.certificate import REMAINDER_FACTOR, _one_step, _stencil, _taylor, jacobians
 from fahv.design.feasibility import gain_vertices
 from fahv.errors import DesignError
-from fahv.plant.rk4 import params_records
-from fahv.plant.uncertainty import perturb
+from fahv.plant.rk4 import params_records, perturbed_records
 
 #: Widening of the parameter coefficients' range (fraction of its width, each side).
 COEF_MARGIN = 0.01
@@ -260,9 +259,7 @@ def nominal_vertices(
     corners = np.array(list(itertools.product((-1.0, 1.0), repeat=len(names))))
     inner = np.random.default_rng(seed).uniform(-1.0, 1.0, (interior, len(names)))
     fractions = np.vstack([corners, inner])
-    recs = params_records(
-        [perturb(vehicle.params, uncertainty, dict(zip(names, f, strict=True))) for f in fractions]
-    )
+    recs = perturbed_records(vehicle.params, uncertainty, fractions)
     r0 = params_records([vehicle.params])
     S = box.corners()
     X, U = box.points(trim_map, S)
@@ -580,9 +577,7 @@ def onset_jumps(box: SchedulingBox, vehicle, trim_map, uncertainty: dict, rho_f:
     other = rng.uniform(-1.0, 1.0, (len(s_all), 5)) * np.asarray(box.other_half, float)
     other[: len(S) * len(corners)] = 0.0  # the corner points at the trim's q, eta
     X[:, 4:9] += other
-    recs = params_records(
-        [perturb(vehicle.params, uncertainty, dict(zip(names, f, strict=True))) for f in f_all]
-    )
+    recs = perturbed_records(vehicle.params, uncertainty, f_all)
     Uf = U.copy()
     Uf[:, 1] *= rho_f
     J = _one_step(X, Uf, recs, Ts, n_sub) - _one_step(X, U, recs, Ts, n_sub)

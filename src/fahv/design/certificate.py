@@ -33,6 +33,7 @@ Phi_p is one control period of the plant (RK4, the plant's own sub-steps).
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass, field, replace
 
@@ -43,8 +44,7 @@ from fahv.design.feasibility import gain_vertices
 from fahv.errors import DesignError
 from fahv.model.notch import DiscreteNotch
 from fahv.model.vehicle import DELTA_E
-from fahv.plant.rk4 import params_records, rk4_cm
-from fahv.plant.uncertainty import perturb
+from fahv.plant.rk4 import params_records, perturbed_records, rk4_cm
 from fahv.synthesis.feedback import invariant_ellipsoid, output_feedback_step
 
 #: Safety factor on the third-order remainder measured at the corners of the box.
@@ -260,12 +260,8 @@ def bound_disturbance(
         raise DesignError(
             f"certificate domain: bound implemented for the 9-state CM/DM design model, got {n}"
         )
-    names = list(domain.uncertainty)
     corners = domain.corners()
-    recs_all = params_records(
-        [perturb(vehicle.params, domain.uncertainty, dict(zip(names, s, strict=True)))
-         for s in corners]
-    )  # fmt: skip
+    recs_all = perturbed_records(vehicle.params, domain.uncertainty, corners)
     quad = np.zeros(n)
     best = [None] * n  # (quadratic bound, schedule index, corner index, rho)
     n_eval = 0
@@ -331,7 +327,7 @@ def bound_disturbance(
     worst = [
         {
             "schedule": domain.schedules[b[0]].tolist(),
-            "corner": dict(zip(names, corners[b[1]].tolist(), strict=True)),
+            "corner": dict(zip(domain.uncertainty, corners[b[1]].tolist(), strict=True)),
             "rho_f": b[2],
         }
         for b in best
@@ -374,13 +370,9 @@ def disturbance_at(
         coefficient box (the vertices would not cover it).
     """
     disc = tp.discretize(domain.Ts)
-    names = list(domain.uncertainty)
     x_rs, u_rs = trim_map(*schedule)
     A_s, B_s = _scheduled(disc, tp, *schedule)
-    recs = params_records(
-        [perturb(vehicle.params, domain.uncertainty, dict(zip(names, s, strict=True)))
-         for s in signs]
-    )  # fmt: skip
+    recs = perturbed_records(vehicle.params, domain.uncertainty, signs)
     lin = None
     if directions is not None:
         lin = directions.carried(vehicle, trim_map, schedule, recs, Ts=domain.Ts,
@@ -542,10 +534,8 @@ def parameter_directions(
     corners = np.array(list(itertools.product((-1.0, 1.0), repeat=len(names))))
     if not 0 <= k <= len(corners):
         raise ValueError(f"parameter directions: k must be in [0, {len(corners)}], got {k}")
-    recs = params_records(
-        [vehicle.params]
-        + [perturb(vehicle.params, uncertainty, dict(zip(names, s, strict=True))) for s in corners]
-    )
+    recs = np.concatenate([params_records([vehicle.params]),
+                           perturbed_records(vehicle.params, uncertainty, corners)])  # fmt: skip
     sc = np.concatenate([Dx, Du])
     rs = np.asarray(Dx if row_scale is None else row_scale, float)
     schedules = np.atleast_2d(np.asarray(schedules, float))
@@ -621,25 +611,61 @@ def _max_on_ball(M: np.ndarray, c: np.ndarray) -> np.ndarray:
     case the fill left the ball and overstated a level by 4e-3 (measured).
     """
     s, V = np.linalg.eigh(M.T @ M)
-    b = (c @ M) @ V  # (L, n): components of M'c in the eigenbasis
-    smax = s[-1]
+    b = np.ascontiguousarray((c @ M) @ V)  # (L, n): components of M'c in the eigenbasis
     cc = np.einsum("li,li->l", c, c)
+    return _dual_kernel()(s, b, cc, 200)
 
-    def norm2(lam):
-        return np.sum(b**2 / (lam[:, None] - s[None, :]) ** 2, axis=1)
 
-    lo = np.full(len(c), smax)
-    hi = smax + np.sqrt(np.sum(b**2, axis=1)) + 1.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            big = norm2(mid) > 1.0
-        lo = np.where(big, mid, lo)
-        hi = np.where(big, hi, mid)
-    gap = hi[:, None] - s[None, :]  # >= 0; 0 only along the top eigenvector in the hard case
-    with np.errstate(divide="ignore", invalid="ignore"):
-        terms = np.where(b == 0.0, 0.0, b**2 / gap)
-    return cc + hi + terms.sum(axis=1)
+@functools.cache
+def _dual_kernel():
+    """:func:`_dual_bound` compiled by numba (cached on disk), built at its first use.
+
+    The bisection is up to 200 steps for each of L rows: in numpy, its per-call overhead
+    made it 70 % of an onset bound's time (benchmarks/bench_certificate.py).
+    """
+    import numba
+
+    return numba.njit(cache=True, error_model="numpy")(_dual_bound)
+
+
+def _dual_bound(s, b, cc, steps):  # pragma: no cover - compiled
+    """The dual bound of :func:`_max_on_ball` per row, in the eigenbasis of M'M.
+
+    s (n,) ascending eigenvalues, b (L, n) the rows' M'c in that basis, cc (L,) |c_l|^2,
+    ``steps`` bisection halvings at most; returns (L,) upper bounds of the maxima. The
+    bisection stops where no float lies between its ends (about 55 halvings): from there
+    each further step leaves lo and hi as they are, so the result is that of all
+    ``steps`` halvings, bit for bit.
+    """
+    n_rows, n = b.shape
+    smax = s[n - 1]
+    out = np.empty(n_rows)
+    for r in range(n_rows):
+        bb = 0.0
+        for j in range(n):
+            bb += b[r, j] * b[r, j]
+        lo = smax
+        hi = smax + np.sqrt(bb) + 1.0
+        for _ in range(steps):
+            mid = 0.5 * (lo + hi)
+            norm2 = 0.0  # |(mid I - G)^-1 b|^2, the secular function
+            for j in range(n):
+                d = mid - s[j]
+                norm2 += b[r, j] * b[r, j] / (d * d)
+            last = mid == lo or mid == hi  # no float between them: every later step is void
+            if norm2 > 1.0:
+                lo = mid
+            else:
+                hi = mid
+            if last:
+                break
+        # >= 0 gaps; 0 only along the top eigenvector in the hard case, where b_j = 0
+        total = cc[r] + hi
+        for j in range(n):
+            if b[r, j] != 0.0:
+                total += b[r, j] * b[r, j] / (hi - s[j])
+        out[r] = total
+    return out
 
 
 def worst_level(A, B, F, N, w_max, tau: float = 1.0, pulse=None):

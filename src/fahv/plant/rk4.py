@@ -74,6 +74,45 @@ def params_records(params) -> np.ndarray:
     return rec
 
 
+def perturbed_records(params: VehicleParams, uncertainty: dict, signs) -> np.ndarray:
+    """Records (B,) of B vehicles of the uncertainty box: p (1 + s_bp rel_p) (sec. 5.1).
+
+    The vectorised form of :func:`fahv.plant.uncertainty.perturb` over many vehicles,
+    with the same arithmetic (the same bits).
+
+    Parameters
+    ----------
+    params : VehicleParams
+        The nominal vehicle's parameters.
+    uncertainty : dict[str, float]
+        Relative half-widths rel_p of the box, by parameter name (P entries).
+    signs : (B, P) array_like
+        Fractions s_bp in [-1, 1], columns in the order of ``uncertainty``.
+
+    Returns
+    -------
+    (B,) ndarray of PARAMS_DTYPE
+
+    Raises
+    ------
+    ValueError
+        If a name is not a parameter, ``signs`` is not (B, P), or a fraction is NaN or
+        outside [-1, 1].
+    """
+    names = list(uncertainty)
+    signs = np.asarray(signs, float)
+    if signs.ndim != 2 or signs.shape[1] != len(names):
+        raise ValueError(f"uncertainty: signs must be (B, {len(names)}), got {signs.shape}")
+    if not np.all(np.abs(signs) <= 1.0):
+        raise ValueError("uncertainty: every sign/fraction must be in [-1, 1] (NaN refused)")
+    out = np.repeat(params_records([params]), len(signs))
+    for j, name in enumerate(names):
+        if name not in PARAMS_DTYPE.names:
+            raise ValueError(f"uncertainty: unknown parameter '{name}'")
+        out[name] = out[name] * (1.0 + signs[:, j] * float(uncertainty[name]))
+    return out
+
+
 @numba.njit(cache=True)
 def rk4_cm(X, U, P, Ts, n_sub):  # pragma: no cover - compiled
     """Integrate the CM over Ts for B vehicles, inputs held (ZOH), n_sub RK4 steps each.
