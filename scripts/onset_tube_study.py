@@ -1,6 +1,8 @@
 """A tube shaped for the onset's jump: Z_8 designed to contain the first step of a loss.
 
 Usage: python scripts/onset_tube_study.py [--pair PAIR.npz] [--loss L] [--kappa K ...]
+                                          [--attitude-support DEG] [--grow-box 6 x D]
+                                          [--grow-other 5 x D]
 
 Item 3's bound (`fahv.design.eight_state.onset_bound`) keeps e in Z_8 through the onset
 if min(c, c_w) + the jump's pulse peak <= 1. On the closed pairs the first jump of a 24 %
@@ -67,11 +69,26 @@ def main() -> None:
         help="added to the box's half-widths in q [rad/s] and the flexible states",
     )
     ap.add_argument(
+        "--grow-box",
+        type=float,
+        nargs=6,
+        default=[0.0] * 6,
+        help="taken from the box's lower and added to its upper ends in h, V, alpha, theta, "
+        "Phi, delta_e [ft, ft/s, rad, rad, -, rad]",
+    )
+    ap.add_argument(
         "--steady-lams",
         type=float,
         nargs="+",
         default=[0.995, 0.993, 0.998],
         help="contraction factors tried for the steady set (the onset bound's c_w)",
+    )
+    ap.add_argument(
+        "--attitude-support",
+        type=float,
+        default=None,
+        metavar="DEG",
+        help="bound Z_8's supports in alpha and theta too (item 5: 0.5 deg less mpc.att_max)",
     )
     ap.add_argument("--no-reference", action="store_true", help="skip the stored pair's bound")
     o = ap.parse_args()
@@ -79,7 +96,8 @@ def main() -> None:
     d = dict(np.load(o.pair))
     veh, unc = load_vehicle(), dict(PAPER_UNCERTAINTY)
     tm = trim_map(veh, 13, 13)
-    box = SchedulingBox(d["lo"], d["hi"], d["other_half"] + np.asarray(o.grow_other))
+    g = np.asarray(o.grow_box)
+    box = SchedulingBox(d["lo"] - g, d["hi"] + g, d["other_half"] + np.asarray(o.grow_other))
     nominal = SchedulingBox(d["nominal_lo"], d["nominal_hi"], d["nominal_other_half"])
     tp = build_tp_model(veh, "cm", 4, 5, 21, 21)
     scale = np.concatenate([tp.state_scale, tp.input_scale])
@@ -100,12 +118,16 @@ def main() -> None:
     J8 = J[:, 1:] / (1.0 - o.loss)
     print(f"{len(J8)} jumps at a {100 * o.loss:.0f} % loss ({time.perf_counter() - t0:.0f} s)",
           flush=True)  # fmt: skip
+    state_max = None
+    if o.attitude_support is not None:  # as eight_state_pair does for certify_attitude
+        state_max = np.full(8, np.inf)
+        state_max[1:3] = np.radians(o.attitude_support)
     for kappa in o.kappa:
         print(f"kappa {kappa}: every jump inside {kappa} Z_8", flush=True)
         try:
             pair = close_pair(nv, nominal, d["W"], scale[:9], scale[9:], room, float(d["lam"]),
                               int(d["moves"]), iterations=o.iterations, w_ref=d["w_design"],
-                              contain=J8 / kappa,
+                              contain=J8 / kappa, state_max=state_max,
                               log=lambda s: print("  " + s, flush=True))  # fmt: skip
         except DesignError as exc:
             print(f"  not closed: {exc} ({time.perf_counter() - t0:.0f} s)", flush=True)

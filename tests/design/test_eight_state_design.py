@@ -123,6 +123,48 @@ def test_certify_attitude_bounds_the_supports_in_the_tube_lmi(raw8, vehicle, mon
     assert "bounded to 0.150 deg" in lines[-1]
 
 
+@pytest.mark.parametrize("kappa", [0.0, 2.5])
+def test_onset_in_tube_asks_the_tube_lmi_to_hold_the_onset_jumps(raw8, vehicle, monkeypatch,
+                                                                 kappa):  # fmt: skip
+    """eight_state.onset_in_tube kappa: the closure gets the first jumps of the design's
+    loss over the scheduling box, J / rho_min, as points Z_8 must hold in kappa Z_8
+    (``contain`` = J / rho_min / kappa, h's column dropped), from onset_jumps at rho_min
+    with 1024 interior points; 0 asks nothing."""
+    import fahv.design.eight_state as es
+    from fahv.errors import DesignError
+
+    class Vertices:
+        J0 = np.zeros((64, 1))
+        n_vehicles = [1]
+        n_vertices = 4096
+
+    seen, J = {}, np.arange(27.0).reshape(3, 9)
+
+    def jumps(box, veh, tm, unc, rho_f, Ts, n_sub, interior):
+        seen["jumps"] = (rho_f, Ts, n_sub, interior)
+        return J, 2
+
+    def closure(nv, nominal, W8, *args, contain=None, **kw):
+        seen["contain"] = contain
+        raise DesignError("closure reached")
+
+    monkeypatch.setattr(es, "nominal_vertices", lambda *a, **k: Vertices())
+    monkeypatch.setattr(es, "onset_jumps", jumps)
+    monkeypatch.setattr(es, "close_pair", closure)
+    r = copy.deepcopy(raw8)
+    r["eight_state"]["onset_in_tube"] = kappa
+    lines = []
+    with pytest.raises(DesignError, match="closure reached"):
+        es.design_pair(case_from_mapping(r, "onset.yaml").data, vehicle, None, np.ones(11),
+                       np.ones(9), np.ones(11), 0.76, np.ones(2), log=lines.append)  # fmt: skip
+    if kappa == 0.0:
+        assert seen["contain"] is None and "jumps" not in seen
+        return
+    assert seen["jumps"] == (0.76, r["Ts"], r.get("plant_substeps", 5), 1024)
+    np.testing.assert_allclose(seen["contain"], J[:, 1:] / 0.76 / 2.5, rtol=1e-15)
+    assert "first jumps of a 24.0 % loss at 3 box points held in 2.5 Z_8" in lines[-1]
+
+
 def test_case_boxes_are_the_stored_pairs_within_rounding(vehicle):
     """The case's nominal box is the stored pair's (V margin 4.98 for 4.978 ft/s) except
     the lower ends of Phi and delta_e (-0.2 and -3 deg for -0.12 and -1 deg: room for

@@ -107,6 +107,11 @@ EIGHT_STATE = (
     Field("certify_attitude", "bool", "bound Z_8's supports in alpha and theta in the tube "
           "LMI to the attitude requirement (0.5 deg, sec. 5.1) minus mpc.att_max, so that "
           "the requirement follows from the pair with the QP's rows", default=False),
+    Field("onset_in_tube", "float", "kappa: the tube LMI makes Z_8 hold every first jump "
+          "J / rho_min of the design's loss 1 - rho_min over the scheduling box (its 64 x "
+          "2^P corners and 1024 interior points) in kappa Z_8, so that item 3's onset bound "
+          "starts from room along the elevator's column (docs/control_design.md, 'A tube "
+          "shaped for the onset's jump'); 0: not imposed", lo=0.0, default=0.0),
     Field("notch_gain", "str", "gain of the tube variants that run through the certified "
           "notch (tube.filter_nominal_q): the pair's F_8 ('tube') or a gain designed for the "
           "loop with the filter's states, certified with the pair's Z_8 and tightening and "

@@ -1072,9 +1072,18 @@ def design_pair(
         log(f"eight-state tube: supports in alpha and theta bounded to "
             f"{ATTITUDE_BOUND_DEG - case['mpc']['att_max']:.3f} deg (requirement "
             f"{ATTITUDE_BOUND_DEG} deg less the QP's rows mpc.att_max)")  # fmt: skip
+    contain = None
+    if s["onset_in_tube"] > 0.0:  # the onset's first jumps J / rho_f in kappa Z_8 (item 3)
+        J, _ = onset_jumps(box, vehicle, trim_map, unc, rho_min, case["Ts"],
+                           case["plant_substeps"], interior=1024)  # fmt: skip
+        contain = J[:, 1:] / rho_min / s["onset_in_tube"]
+        log(f"eight-state tube: the first jumps of a {100 * (1 - rho_min):.1f} % loss at "
+            f"{len(J)} box points held in {s['onset_in_tube']:g} Z_8 (eight_state."
+            f"onset_in_tube)")  # fmt: skip
     pair = close_pair(nv, nominal, s["w0"] * w_max[1:], scale[:9], scale[9:], room, s["lam"],
                       case["mpc"]["M"], grow=s["grow"], iterations=s["iterations"],
-                      w_ref=w_max, state_max=state_max, log=log)  # fmt: skip
+                      w_ref=w_max, state_max=state_max, contain=contain,
+                      log=log)  # fmt: skip
     if gamma is not None:
         onset = onset_bound(nv, pair, vehicle, trim_map, unc, gamma, case["Ts"],
                             case["plant_substeps"], **estimate)  # fmt: skip
