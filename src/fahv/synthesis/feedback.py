@@ -182,8 +182,9 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None, Ps
     at least half of it, so the result is the full LMI's optimum up to that margin (not
     exactly); :func:`verify_tube` re-checks every one of the R blocks either way. ``Gs`` (g, n):
     pulse generators (scaled), the last g multipliers of the returned mu. ``Ps`` (S, n):
-    points Z must contain (scaled), p' N^-1 p <= 1, entered as [[1, p'], [p, N]] >= 0 and
-    generated like the vertex blocks (the ``active`` largest first, then the violated).
+    points Z must contain (scaled), p' N^-1 p <= 1, entered as [[1 - 1e-5, p'], [p, N]] >= 0
+    (a margin for the solver's accuracy, as the budget's) and generated like the vertex
+    blocks (the ``active`` largest first, then the violated).
     """
     R, n, m = Bs.shape
     E = _generators(n, Gs)
@@ -218,9 +219,9 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None, Ps
                 ]
             )
             cons.append(0.5 * (blk + blk.T) >> LMI_MARGIN * np.eye(2 * n + k))
-        for s in held:
+        for s in held:  # p' N^-1 p <= 1 - 1e-5: room for the solver's accuracy
             p = Ps[s][:, None]
-            blk = cp.bmat([[np.ones((1, 1)), p.T], [p, N]])
+            blk = cp.bmat([[np.full((1, 1), 1.0 - 1e-5), p.T], [p, N]])
             cons.append(0.5 * (blk + blk.T) >> 0)
         for j in range(m):
             blk = cp.bmat(
