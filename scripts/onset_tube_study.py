@@ -1,6 +1,7 @@
 """A tube shaped for the onset's jump: Z_8 designed to contain the first step of a loss.
 
 Usage: python scripts/onset_tube_study.py [--pair PAIR.npz] [--loss L] [--kappa K ...]
+                                          [--k K] [--w-scale S]
                                           [--attitude-support DEG] [--grow-box 6 x D]
                                           [--grow-other 5 x D]
 
@@ -61,6 +62,9 @@ def main() -> None:
     ap.add_argument("--kappa", type=float, nargs="+", default=[1.0, 0.5])
     ap.add_argument("--iterations", type=int, default=4)
     ap.add_argument("--interior", type=int, default=256)
+    ap.add_argument("--k", type=int, default=None, help="parameter directions (the pair's)")
+    ap.add_argument("--w-scale", type=float, default=1.0,
+                    help="the closure starts from this multiple of the stored W_8")  # fmt: skip
     ap.add_argument(
         "--grow-other",
         type=float,
@@ -102,7 +106,8 @@ def main() -> None:
     tp = build_tp_model(veh, "cm", 4, 5, 21, 21)
     scale = np.concatenate([tp.state_scale, tp.input_scale])
     rho = float(d["rho_min"])
-    nv = nominal_vertices(box, veh, tm, unc, rho, TS, N_SUB, scale, int(d["k"]),
+    nv = nominal_vertices(box, veh, tm, unc, rho, TS, N_SUB, scale,
+                          int(d["k"]) if o.k is None else o.k,
                           d["w_design"], d["col_scale"], hessians=False)  # fmt: skip
     room = input_room(veh, rho_f=rho)
     ref = EightStatePair(d["F"], d["N"], d["W"], float(d["H"]), float(d["lam"]), d["bound"],
@@ -125,9 +130,9 @@ def main() -> None:
     for kappa in o.kappa:
         print(f"kappa {kappa}: every jump inside {kappa} Z_8", flush=True)
         try:
-            pair = close_pair(nv, nominal, d["W"], scale[:9], scale[9:], room, float(d["lam"]),
-                              int(d["moves"]), iterations=o.iterations, w_ref=d["w_design"],
-                              contain=J8 / kappa, state_max=state_max,
+            pair = close_pair(nv, nominal, o.w_scale * d["W"], scale[:9], scale[9:], room,
+                              float(d["lam"]), int(d["moves"]), iterations=o.iterations,
+                              w_ref=d["w_design"], contain=J8 / kappa, state_max=state_max,
                               log=lambda s: print("  " + s, flush=True))  # fmt: skip
         except DesignError as exc:
             print(f"  not closed: {exc} ({time.perf_counter() - t0:.0f} s)", flush=True)
