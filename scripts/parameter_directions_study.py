@@ -15,7 +15,7 @@ set), then re-closes the pair on the stored scheduling box from W_8 = S x the st
 (:func:`fahv.design.eight_state.close_pair`, optionally with Z_8's supports in alpha and
 theta bounded, item 5) and prints the design's onset bound for it (item 3).
 
-docs/control_design.md, "More parameter directions (measured 2026-11-25, stop 50)".
+docs/control_design.md, "Seven parameter directions: item 5 certified on case1.yaml".
 """
 
 import argparse

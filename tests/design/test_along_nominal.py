@@ -19,12 +19,16 @@ TS, N_SUB = 0.02, 5
 #: The stored closed pairs: form (1), the Jacobian at the nominal point and a second-order
 #: part in W; form (2), the integral form (no second-order part, the segment in the box);
 #: form (2) with a part of W kept for the disturbance estimate's error (``eps``); form (2)
-#: with h outside the tube (eight states, |e_h| <= H by the nominal's reset, ``H``).
+#: with h outside the tube (eight states, |e_h| <= H by the nominal's reset, ``H``); and
+#: case1.yaml's own pair as ``fahv design`` closes it (k = 7 parameter directions, 16384
+#: vertices, the attitude supports bounded and the onset's jumps held; exported from the
+#: design by scripts/export_pair.py).
 PAIRS = (
     "closed_tube_along_nominal.npz",
     "closed_tube_integral.npz",
     "closed_tube_integral_estimate.npz",
     "closed_tube_h_reset.npz",
+    "closed_tube_case1.npz",
 )
 
 
@@ -75,8 +79,8 @@ def test_scheduling_box_rejects_bad_bounds():
 def test_along_nominal_pair_is_rpi_at_every_vertex(along):
     """Exact worst one-step level of the stored tube over its vertices (64 box corners x
     2^k parameter-direction corners x rho_f at both ends: 1024 for k = 3, 2048 for k = 4,
-    4096 for k = 5; the eight states after h for the pair with h outside the tube) and the
-    corners of W: at most 1 (printed with its margin)."""
+    4096 for k = 5, 16384 for k = 7; the eight states after h for the pair with h outside
+    the tube) and the corners of W: at most 1 (printed with its margin)."""
     d, *_, nv = along
     A, B = nv.vertices()
     assert A.shape[0] == 64 * 2 ** int(d["k"]) * 2
@@ -227,7 +231,10 @@ def _check_true_errors(d, veh, tm, box, scale, nv):
           np.round(excess / (nv.c_hi - nv.c_lo), 5))  # fmt: skip
     assert n_done == 100_000
     assert np.all(ratio <= 1.0), ratio
-    assert np.all(ratio >= 0.05), ratio  # the samples reach into W: the test is not vacuous
+    # the samples reach into W, so the test is not vacuous: a tenth of W in the largest row
+    # and 2 % in every row (the stored pairs: 5-86 %; case1.yaml's pair of k = 7, whose W_8
+    # keeps 34-71 % of design slack: 5-14 %)
+    assert ratio.max() >= 0.1 and ratio.min() >= 0.02, ratio
 
 
 def test_the_adjustable_pair_reproduces_its_bound_and_holds_W_8_on_100000_samples(along_tau):
@@ -331,7 +338,9 @@ def test_eight_state_bound_reproduces_the_stored_pair(along):
     assert ab.H == pytest.approx(float(d["H"]), rel=1e-6)
     np.testing.assert_allclose(ab.bound, d["bound"], rtol=1e-6)
     assert np.all(ab.bound <= d["W"])
-    assert 0.14 < (1.0 - ab.bound / d["W"]).min() < 0.16  # the V row's slack, 15 %
+    # the V row's slack: 15 % on the stored pair (k = 5), 34 % on case1.yaml's (k = 7)
+    slack = {5: 0.15, 7: 0.339}[int(d["k"])]
+    assert (1.0 - ab.bound / d["W"]).min() == pytest.approx(slack, abs=0.01)
     nominal = SchedulingBox(d["nominal_lo"], d["nominal_hi"], d["nominal_other_half"])
     assert es.box_shortfall(nv.box, nominal, d["F"], d["N"], ab.H) == {}
     s_lo, _ = es.product_supports(d["F"], d["N"], ab.H)
@@ -345,7 +354,9 @@ def test_eight_state_bound_reproduces_the_stored_pair(along):
                              int(d["moves"]), ab.step, ab.w_h)  # fmt: skip
     assert pair.F.shape == (2, 9) and np.all(pair.F[:, 0] == 0.0)
     assert pair.N[0, 0] == pytest.approx(ab.H**2) and np.all(pair.N[0, 1:] == 0.0)
-    np.testing.assert_allclose(np.degrees(pair.tightening[1]), 2.87, atol=0.005)
+    # the elevator tightening: 2.87 deg (k = 5), 3.444 deg (case1.yaml's, the jumps in Z_8)
+    np.testing.assert_allclose(np.degrees(pair.tightening[1]), {5: 2.87, 7: 3.444}[int(d["k"])],
+                               atol=0.005)  # fmt: skip
 
 
 def test_a_loops_joint_shape_replaces_the_pairs_in_the_altitude_and_row_bounds(along):
@@ -471,6 +482,8 @@ def test_onset_bound_of_the_stored_pair_holds_along_switching_vertices(along, de
     d, veh, tm, box, _, nv = along
     if "H" not in d:
         pytest.skip("a nine-state pair: no altitude bound")
+    if "level" in d:  # a design's exported pair: `fahv design` prints its onset lines
+        pytest.skip("the figures below are the stored h-out pair's")
     A, B = nv.vertices()
     ab = es.altitude_bound(nv, A, B, d["F"], d["N"], int(d["moves"]))
     pair = es.EightStatePair(d["F"], d["N"], d["W"], ab.H, float(d["lam"]), ab.bound,

@@ -29,7 +29,7 @@ def raw8():
 def test_eight_state_case_sets_every_knob(raw8):
     c = load_case(CASE)
     assert c.defaults_used == {}
-    assert c["tube"]["form"] == "eight_state" and c["eight_state"]["k"] == 5
+    assert c["tube"]["form"] == "eight_state" and c["eight_state"]["k"] == 7
     plain = load_case("offline_design/case1_vertex.yaml")
     assert plain["tube"]["form"] == "vertices" and "eight_state" not in plain.data
 
@@ -110,6 +110,7 @@ def test_certify_attitude_bounds_the_supports_in_the_tube_lmi(raw8, vehicle, mon
     monkeypatch.setattr(es, "close_pair", closure)
     r = copy.deepcopy(raw8)
     r["eight_state"]["certify_attitude"] = certify
+    r["eight_state"]["onset_in_tube"] = 0.0  # the attitude bound alone (the jumps: below)
     r["mpc"]["att_max"] = 0.35
     lines = []
     with pytest.raises(DesignError, match="closure reached"):
@@ -398,7 +399,7 @@ def test_a_designed_notch_gain_is_used_only_when_certified_and_closed(raw8, vehi
     monkeypatch.setattr(es, "notch_gain", gain)
     monkeypatch.setattr(es, "altitude_bound", altitude)
     r = copy.deepcopy(raw8)
-    r["eight_state"].update(notch_gain="designed", notch_continuation=[0.05])
+    r["eight_state"].update(notch_gain="designed", notch_continuation=[0.05], onset_in_tube=0.0)
     lines = []
     got, _, _ = es.design_pair(case_from_mapping(r, "gain.yaml").data, vehicle, None,
                                np.ones(11), np.ones(9), np.ones(11), 0.76, np.ones(2),

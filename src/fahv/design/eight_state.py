@@ -65,6 +65,11 @@ from fahv.synthesis.feedback import design_tube, invariant_ellipsoid
 #: The states of the tube, after h (the design's state order without its first entry).
 EIGHT_STATES = ("V", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
 
+#: Contraction factors tried for the onset bound's steady set (:func:`steady_set`): the
+#: smallest ellipsoid RPI for the bound at one factor may not exist at another (on
+#: case1.yaml's pair of 16384 vertices none at 0.995, 0.408 Z_8 at 0.993; docs).
+STEADY_LAMS = (0.995, 0.993, 0.998)
+
 #: What a pair of :func:`close_pair` assumes beyond the vertices' own assumptions.
 ASSUMPTIONS = (
     "the nominal resets its altitude to the measured one every `moves` fast steps "
@@ -1085,8 +1090,9 @@ def design_pair(
                       w_ref=w_max, state_max=state_max, contain=contain,
                       log=log)  # fmt: skip
     if gamma is not None:
+        lams = tuple(dict.fromkeys((pair.lam, *STEADY_LAMS)))
         onset = onset_bound(nv, pair, vehicle, trim_map, unc, gamma, case["Ts"],
-                            case["plant_substeps"], **estimate)  # fmt: skip
+                            case["plant_substeps"], steady_lams=lams, **estimate)  # fmt: skip
         pair = replace(pair, onset=onset)
     if notches or stable_only:
         A, B = nv.vertices()

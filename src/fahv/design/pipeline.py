@@ -323,6 +323,9 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
             "(the range the certificate covers)"
         )
         certificate = pair.summary(es_nominal, es_box)  # W_8 over the pair's own domain
+        # the parameter directions' column scale: with the summary, the pair's vertex data
+        # can be rebuilt and its certificate re-checked independently (scripts/export_pair.py)
+        certificate["col_scale"] = cols.tolist()
     else:
         cert_case = c
         if "mpc" in c:  # the domain of the certificate: the attitude rows the QP will use
