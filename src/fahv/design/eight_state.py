@@ -67,7 +67,7 @@ EIGHT_STATES = ("V", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_
 
 #: Contraction factors tried for the onset bound's steady set (:func:`steady_set`): the
 #: smallest ellipsoid RPI for the bound at one factor may not exist at another (on
-#: case1.yaml's pair of 16384 vertices none at 0.995, 0.408 Z_8 at 0.993; docs).
+#: case1.yaml's pair of 16384 vertices: none at 0.995, 0.419 Z_8 at one of the others; docs).
 STEADY_LAMS = (0.995, 0.993, 0.998)
 
 #: What a pair of :func:`close_pair` assumes beyond the vertices' own assumptions.
