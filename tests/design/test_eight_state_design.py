@@ -459,3 +459,21 @@ def test_certified_range_is_the_box_less_the_tube_and_holds_the_nominal_box():
     assert line.startswith("the certificate covers a nominal anywhere in the scheduling box")
     with pytest.raises(ValueError, match="scheduling box"):
         certified_range(box, d["F"], 100.0 * d["N"], float(d["H"]))  # a tube wider than the box
+
+
+def test_the_exported_pair_is_the_one_case1_designs(vehicle):
+    """tests/data/closed_tube_case1.npz (the item-7 test's pair, written by
+    scripts/export_pair.py from `fahv design offline_design/case1.yaml`) belongs to the
+    case as it stands: the same parameter directions and loss, and its nominal and
+    scheduling boxes are the case's to 1e-12 (a changed case file must be designed and
+    exported again)."""
+    from fahv.design.eight_state import nominal_box
+
+    d = dict(np.load(PAIR.parent / "closed_tube_case1.npz"))
+    c = load_case(CASE)
+    assert int(d["k"]) == c["eight_state"]["k"] and float(d["rho_min"]) == c["tube"]["rho_min"]
+    nominal, box = nominal_box(c["eight_state"], vehicle.envelope)
+    for got, want in ((nominal, "nominal_"), (box, "")):
+        np.testing.assert_allclose(got.lo, d[want + "lo"], rtol=1e-12)
+        np.testing.assert_allclose(got.hi, d[want + "hi"], rtol=1e-12)
+        np.testing.assert_allclose(got.other_half, d[want + "other_half"], rtol=1e-12)
