@@ -497,6 +497,13 @@ class OnsetBound:
         requirement states V, alpha and theta receive.
     jump_rigid_q : float
         The same with only the bending modes left out (V, alpha, theta and q).
+    witness : OnsetWitness or None
+        The lower bound at the design's loss (:func:`onset_witness`; None: not computed).
+    ceiling : float
+        With ``witness``: the smallest loss found whose lower bound exceeds 1, bisected
+        between ``certified_loss`` and the design's loss (an upper bound of what any
+        analysis on the pair's assumptions can certify); the design's loss when its own
+        lower bound is at most 1; nan without ``witness``.
     """
 
     loss: float
@@ -516,6 +523,8 @@ class OnsetBound:
     jump_share: tuple[float, ...]
     jump_rigid: float
     jump_rigid_q: float
+    witness: OnsetWitness | None = None
+    ceiling: float = float("nan")
 
     @property
     def level0(self) -> float:
@@ -524,8 +533,12 @@ class OnsetBound:
 
     def summary(self) -> dict:
         """JSON-ready record (the attributes; ``jump_share`` as a list)."""
-        return {k: [float(x) for x in v] if isinstance(v, tuple) else float(v)
-                for k, v in self.__dict__.items()}  # fmt: skip
+        out = {k: [float(x) for x in v] if isinstance(v, tuple) else float(v)
+               for k, v in self.__dict__.items() if k != "witness"}  # fmt: skip
+        if self.witness is not None:
+            out["witness"] = {k: float(v) if isinstance(v, float) else int(v)
+                              for k, v in self.witness.__dict__.items()}  # fmt: skip
+        return out
 
     def lines(self) -> list[str]:
         """The design log's lines of the bound."""
@@ -552,7 +565,22 @@ class OnsetBound:
             + ", ".join(f"{n} {v:+.3f}" for n, v in zip(EIGHT_STATES, self.jump_share, strict=True))
             + f"; its Z_8 norm without the bending modes {self.jump_rigid_q:.3f}, without q and "
             f"them (V, alpha, theta alone) {self.jump_rigid:.3f}",
-        ]
+        ] + ([] if self.witness is None else [self.witness_line()])
+
+    def witness_line(self) -> str:
+        """The design log's line of the lower bound (requires ``witness``)."""
+        w = self.witness
+        refuted = w.level > 1.0
+        return (
+            f"onset lower bound (one vertex held, w inside the bound for {w.pre_steps} steps, "
+            f"a jump sample, the estimate's most favourable elevator direction; re-simulated): "
+            f"level {w.level:.3f} at the {100 * self.loss:.1f} % loss, {w.step} steps after "
+            f"the onset (its onset part {w.pulse:.3f}) "
+            + ("> 1: no analysis on the pair's assumptions certifies this loss; the smallest "
+               f"loss so refuted {100 * self.ceiling:.2f} % (certified "
+               f"{100 * self.certified_loss:.2f} %)" if refuted else
+               "<= 1: not refuted")
+        )  # fmt: skip
 
 
 def steady_set(Acl8, N8, F8, bound, lam: float) -> tuple[float, np.ndarray | None]:
@@ -601,11 +629,186 @@ def steady_set(Acl8, N8, F8, bound, lam: float) -> tuple[float, np.ndarray | Non
     return float(s), ell.P
 
 
+@dataclass(frozen=True)
+class OnsetWitness:
+    """An onset scenario inside a pair's own assumptions that leaves Z_8 (or comes closest).
+
+    A lower bound of what any analysis of the onset on the pair's assumptions can
+    certify (:func:`onset_witness`): one closed-loop vertex held throughout, a
+    disturbance sequence inside the bound's box, one nonlinear jump sample and the
+    estimate's most favourable elevator direction. ``level`` is the Z_8 norm of the
+    error that sequence reaches, re-simulated step by step.
+
+    Attributes
+    ----------
+    level : float
+        The Z_8 norm reached (> 1: no certificate on these assumptions keeps e in Z_8).
+    vertex, sample, direction : int
+        Indices of the vertex, the jump sample and the estimate's direction (-1: none).
+    step : int
+        Steps after the onset at which the level is reached (0: the onset's own step).
+    pre_steps : int
+        Steps of the disturbance sequence before that.
+    pulse : float
+        The Z_8 norm the onset's part alone reaches at that step (the rest is the
+        disturbance sequence's).
+    """
+
+    level: float
+    vertex: int
+    sample: int
+    direction: int
+    step: int
+    pre_steps: int
+    pulse: float
+
+
+def onset_witness(Acl8, N8, bound, J, gamma: float, *, gamma_e: float | None = None,
+                  directions=None, projection_scale=None, top: int = 6, steps: int = 60,
+                  pre_steps: int = 3000, candidates: int = 50) -> OnsetWitness:  # fmt: skip
+    """The worst onset of a loss the pair's own assumptions allow, found explicitly.
+
+    The onset bound (:func:`onset_bound`) is an upper bound; this is the matching lower
+    bound. Its model is the bound's own: e = e_w + e_p along any vertex sequence, e_w
+    driven by w in the box ``bound``, e_p from 0 by the jump J at the onset's step and
+    then by what the estimate has not yet removed, p_k = (1 - gamma_e)^k J_b +
+    (1 - gamma)^k J_r (J_b = the share of J along the estimate's elevator direction b,
+    J_r the rest; p_k = (1 - gamma)^k J without gamma_e). Held at one vertex A, e_p is
+    computed exactly for each of the ``top`` jumps of largest Z_8 norm and every
+    direction b, for ``steps`` steps; at its largest Z_8 norm, at step k with direction
+    z = N_8^-1 e_p / ||e_p||, the disturbance w_(k-1-t) = sign(z' A^t) * bound for
+    t < ``pre_steps`` (the last ``pre_steps`` steps up to k) adds sum_t |z' A^t| . bound
+    to z' e. The direction b is taken as the most favourable (the smallest worst level
+    over the vertices), so the result holds whichever elevator column the estimate
+    projects on. The winning scenario is re-simulated step by step from e = 0 and its
+    level returned: every ingredient (vertex, jump sample, w inside the box, the
+    estimate's model) is one the certificate must cover, so a level above 1 shows that
+    no analysis on these assumptions keeps e in Z_8 at this loss.
+
+    Parameters
+    ----------
+    Acl8 : (R, 8, 8) ndarray
+        Closed-loop vertices A_8 + B_8 F_8.
+    N8 : (8, 8) ndarray
+        Z_8's shape.
+    bound : (8,) array_like
+        Half-widths of the disturbance box (state units per period).
+    J : (S, 9) ndarray
+        Jump samples J / rho_f, h first (state units per period), e.g. from
+        :func:`fahv.design.along_nominal.onset_jumps`; the estimate's share is taken of
+        all nine rows, as it computes it, and the error of the last eight.
+    gamma : float
+        The estimate's gain per step, in (0, 1].
+    gamma_e, directions, projection_scale
+        As :func:`onset_bound` (directions (D, 9), scale (9,)).
+    top : int
+        Jump samples tried (largest Z_8 norm first).
+    steps : int
+        Steps after the onset searched for the peak.
+    pre_steps : int
+        Length of the disturbance sequence.
+    candidates : int
+        Vertices (largest onset part first) given the disturbance sequence.
+
+    Returns
+    -------
+    OnsetWitness
+
+    Raises
+    ------
+    ValueError
+        On inconsistent shapes or gains out of range.
+    DesignError
+        If the re-simulated level falls short of the constructed one (a defect).
+    """
+    Acl8, N8, J = (np.asarray(v, float) for v in (Acl8, N8, J))
+    bound = np.asarray(bound, float)
+    R = Acl8.shape[0]
+    if Acl8.shape[1:] != (8, 8) or N8.shape != (8, 8) or bound.shape != (8,) \
+            or J.ndim != 2 or J.shape[1] != 9 or not 0.0 < gamma <= 1.0:  # fmt: skip
+        raise ValueError(f"onset_witness: shapes Acl8 {Acl8.shape}, N8 {N8.shape}, bound "
+                         f"{bound.shape}, J {J.shape}; gamma {gamma}")  # fmt: skip
+    J8 = J[:, 1:]
+    if gamma_e is None:
+        shares = np.zeros((1, len(J8), 8))  # no elevator part: p_k = (1 - gamma)^k J
+        g_e = 1.0
+    else:
+        directions = np.atleast_2d(np.asarray(directions, float))
+        scale = np.asarray(projection_scale, float)
+        if not 0.0 < gamma_e <= 1.0 or directions.shape[1:] != (9,) or scale.shape != (9,):
+            raise ValueError(f"onset_witness: gamma_e {gamma_e}, directions "
+                             f"{directions.shape}, projection_scale {scale.shape}")  # fmt: skip
+        shares = np.stack([elevator_share(J, b, scale)[:, None] * b[1:] for b in directions])
+        g_e = float(gamma_e)
+    Ninv = np.linalg.inv(N8)
+
+    def norm(X):
+        return np.sqrt(np.einsum("...i,ij,...j->...", X, Ninv, X))
+
+    def pulse_run(s, Jb):  # e_p over steps at every vertex for the directions' shares Jb (D, 8)
+        Jr = J8[s] - Jb
+        e = np.broadcast_to(J8[s], (len(Jb), R, 8)).copy()
+        best, e_best = norm(e), e.copy()
+        k_best = np.zeros(best.shape, int)
+        for k in range(1, steps):
+            p = (1.0 - g_e) ** k * Jb + (1.0 - gamma) ** k * Jr
+            e = np.einsum("rij,drj->dri", Acl8, e) + p[:, None, :]
+            n = norm(e)
+            up = n > best
+            best, k_best = np.where(up, n, best), np.where(up, k, k_best)
+            e_best[up] = e[up]
+        return best, k_best, e_best
+
+    AT = np.transpose(Acl8, (0, 2, 1))
+    found = None
+    for s in np.argsort(-norm(J8))[:top]:
+        best, k_best, e_best = pulse_run(s, shares[:, s])
+        levels = []
+        for d in range(len(best)):  # the sequence's share for the best candidates
+            cand = np.argsort(-best[d])[:candidates]
+            z = np.einsum("ij,rj->ri", Ninv, e_best[d, cand]) / best[d, cand][:, None]
+            v, reach = z.copy(), np.zeros(len(cand))
+            for _ in range(pre_steps):
+                reach += np.abs(v) @ bound
+                v = np.einsum("rij,rj->ri", AT[cand], v)
+            i = int(np.argmax(best[d, cand] + reach))
+            levels.append((float(best[d, cand[i]] + reach[i]), int(cand[i])))
+        d = int(np.argmin([lv for lv, _ in levels]))  # the estimate's most favourable b
+        if found is None or levels[d][0] > found[0]:
+            found = (levels[d][0], int(s), d, levels[d][1])
+    level, s, d, r = found
+    A = Acl8[r]
+    Jb = shares[d, s]
+    _, k_best, e_best = pulse_run(s, Jb[None])
+    k = int(k_best[0, r])
+    z = Ninv @ e_best[0, r] / norm(e_best[0, r])
+    # re-simulate: w at the t-th step before the target is sign(z' A^t) * bound
+    signs, v = [], z.copy()
+    for _ in range(pre_steps):
+        signs.append(np.sign(v))
+        v = A.T @ v
+    e = np.zeros(8)
+    for t in range(pre_steps - 1, -1, -1):  # steps pre_steps - 1 ... 0 before the target
+        e = A @ e + signs[t] * bound
+        m = k - t  # this step's index after the onset (0: the onset's own step)
+        if m == 0:
+            e = e + J8[s]
+        elif m > 0:
+            e = e + (1.0 - g_e) ** m * Jb + (1.0 - gamma) ** m * (J8[s] - Jb)
+    simulated = float(norm(e))
+    if simulated < level * (1.0 - 1e-9) or not np.isfinite(simulated):
+        raise DesignError(f"onset_witness: the re-simulated level {simulated:.6f} falls short "
+                          f"of the constructed {level:.6f}")  # fmt: skip
+    return OnsetWitness(simulated, r, s, d if gamma_e is not None else -1, k, pre_steps,
+                        float(norm(e_best[0, r])))  # fmt: skip
+
+
 def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
                 uncertainty: dict, gamma: float, Ts: float, n_sub: int, *,
                 gamma_e: float | None = None, directions=None, projection_scale=None,
                 interior: int = 1024, iterations: int = 6,
-                steady_shaped: float | None = None, steady_lams=None) -> OnsetBound:  # fmt: skip
+                steady_shaped: float | None = None, steady_lams=None,
+                witness_iterations: int = 4) -> OnsetBound:  # fmt: skip
     """Bound the onset of an elevator loss as a transient of the pair (item 3).
 
     At the step a loss of 1 - rho_f starts, the plant moves by J = f_p(x, P u) - f_p(x, u)
@@ -628,6 +831,12 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     bound of c is taken at that H. e_w also stays in the ellipsoid RPI for that bound
     itself, which lies in c_w Z_8 (:func:`steady_set`); the bound starts from
     min(c, c_w).
+
+    The bound is an upper one. Its matching lower bound (:func:`onset_witness`) builds
+    the worst onset the same model allows at one vertex held throughout, re-simulated: if
+    its level exceeds 1 at the design's loss, no analysis on the pair's assumptions
+    certifies that loss, and the smallest loss it so refutes is bisected (``ceiling``):
+    the loss certifiable on this pair lies between ``certified_loss`` and it.
 
     Parameters
     ----------
@@ -662,6 +871,10 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
     steady_lams : sequence of float, optional
         Contraction factors tried for that ellipsoid (the smallest c_w is kept; a minute
         or two each); default: the pair's lam alone.
+    witness_iterations : int
+        Bisection steps for the smallest loss the lower bound refutes
+        (:func:`onset_witness` at the design's loss, then between the certified loss and
+        it; half a minute each over 16384 vertices); 0: no lower bound.
 
     Returns
     -------
@@ -751,10 +964,25 @@ def onset_bound(nv: NominalVertices, pair: EightStatePair, vehicle, trim_map,
             lo, hi = (mid, hi) if ok(mid) else (lo, mid)
         return lo
 
+    est = {} if gamma_e is None else {"gamma_e": gamma_e, "directions": directions,
+                                       "projection_scale": scale}  # fmt: skip
+
+    def witness(J_x):
+        return onset_witness(A8 + B8 @ pair.F8, pair.N8, bound, J_x, gamma, **est)
+
+    cert, cert_one_step = certified(False), certified(True)
+    found = witness(J) if witness_iterations > 0 else None
+    ceiling = float("nan") if found is None else loss
+    if found is not None and found.level > 1.0:  # the smallest loss the scenario refutes
+        lo, ceiling = cert, loss
+        for _ in range(witness_iterations):
+            mid = 0.5 * (lo + ceiling)
+            lo, ceiling = (lo, mid) if witness(jumps(mid, full=True)[-1]).level > 1.0 \
+                else (mid, ceiling)  # fmt: skip
     return OnsetBound(
         loss, gamma, 0.0 if gamma_e is None else float(gamma_e), a, c, c_s, j, jb, jr,
         float(norm[n_c:].max() / norm[:n_c].max()) if len(norm) > n_c else 0.0,
-        c0 + peak(j, jb, jr), certified(False), certified(True), jump_h, share, rigid, rigid_q,
+        c0 + peak(j, jb, jr), cert, cert_one_step, jump_h, share, rigid, rigid_q, found, ceiling,
     )  # fmt: skip
 
 
