@@ -250,8 +250,10 @@ def test_the_adjustable_pair_reproduces_its_bound_and_holds_W_8_on_100000_sample
     A, B = nv.vertices()
     assert A.shape[0] == 8192
     ab = es.altitude_bound(nv, A, B, d["F"], d["N"], int(d["moves"]))
-    print(f"H {ab.H:.4f} ft (stored {float(d['H']):.4f}); bound / W_8 "
-          + " ".join(f"{v:.3f}" for v in ab.bound / d["W"]))
+    print(
+        f"H {ab.H:.4f} ft (stored {float(d['H']):.4f}); bound / W_8 "
+        + " ".join(f"{v:.3f}" for v in ab.bound / d["W"])
+    )
     assert ab.H == pytest.approx(float(d["H"]), rel=1e-6)
     np.testing.assert_allclose(ab.bound, d["bound"], rtol=1e-6)
     assert 0.025 < (1.0 - ab.bound / d["W"]).min() < 0.035
