@@ -613,7 +613,7 @@ def test_no_analysis_on_case1s_pair_certifies_the_onset_of_its_24_percent_loss(a
         par, interp = es.product_bound(nv, d["F"], d["N"], H)
         bound = par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H
         assert np.all(bound <= d["W"])  # the disturbance inside W_8 (item 1)
-        w = es.onset_witness(Acl, d["N"], bound, J, gamma, **est)
+        w = es.onset_witness(Acl, d["N"], bound, J, gamma, steps=20, **est)  # peak at 3
         levels[loss] = w
     w24, w20 = levels[0.24], levels[0.20]
     print(w24, w20)
