@@ -688,9 +688,9 @@ def onset_witness(Acl8, N8, bound, J, gamma: float, *, gamma_e: float | None = N
     Parameters
     ----------
     Acl8 : (R, 8, 8) ndarray
-        Closed-loop vertices A_8 + B_8 F_8.
+        The pair's closed-loop vertices A_8 + B_8 F_8, each a candidate to hold.
     N8 : (8, 8) ndarray
-        Z_8's shape.
+        Z_8's shape: the level reported is the Z_8 norm sqrt(e' N8^-1 e).
     bound : (8,) array_like
         Half-widths of the disturbance box (state units per period).
     J : (S, 9) ndarray
