@@ -466,6 +466,7 @@ def test_onset_witness_matches_the_closed_form_of_a_diagonal_loop():
     assert w.pulse == pytest.approx(0.5, rel=1e-12)
     assert w.level == pytest.approx(np.hypot(0.3 + s, 0.4 + s), rel=1e-9)
     assert w.level >= 0.5 + 1.4 * s  # z' e, the level the construction promises
+    assert w.level_any_column == pytest.approx(0.5 + 1.4 * s, rel=1e-9)  # z' e itself
     w = es.onset_witness(A[1:], np.eye(8), np.zeros(8), J, 0.5, pre_steps=T, top=1)
     k = np.arange(60)
     part = np.array([a**n + sum(a ** (n - i) * 0.5**i for i in range(1, n + 1)) for n in k])
@@ -534,6 +535,7 @@ def test_onset_bound_of_the_stored_pair_holds_along_switching_vertices(along, de
     # and the loss it refutes lies between the certified one and the design's
     w = ob.witness
     assert ob.jump <= w.level <= ob.peak and w.level >= w.pulse
+    assert ob.jump <= w.level_any_column <= w.level
     assert ob.certified_loss < ob.ceiling <= ob.loss
     assert ob.summary()["witness"]["level"] == w.level and ob.lines()[-1].startswith("onset low")
     assert ob.jump == pytest.approx(2.13, abs=0.03) and ob.interior_ratio <= 1.0
@@ -619,4 +621,5 @@ def test_no_analysis_on_case1s_pair_certifies_the_onset_of_its_24_percent_loss(a
     print(w24, w20)
     assert 1.15 < w24.level < 1.25 and w24.pulse == pytest.approx(1.13, abs=0.03)
     assert 0 < w24.step < 10 and w24.direction >= 0
+    assert 1.0 < w24.level_any_column <= w24.level  # refuted whichever column is used
     assert 0.90 < w20.level < 1.0
