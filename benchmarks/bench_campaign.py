@@ -47,7 +47,7 @@ def line(what, runs, seconds, duration):
 def case1_runs(batch: int):
     """The Case 1 design and the overrides of the campaign's first ``batch`` runs."""
     c = load_campaign(ROOT / "offline_design" / "campaign_case1.yaml")
-    design = load_design(ROOT / "offline_design" / "artefacts" / "case1_vertex")
+    design = load_design(ROOT / "offline_design" / "designs" / "cm_paper")
     return design, [
         overrides(draw(c.data, design.case, i), design, "tube_mpc") for i in range(batch)
     ]

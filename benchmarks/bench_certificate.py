@@ -1,17 +1,18 @@
-"""Wall time of the tube certificate's kernels on a stored eight-state pair.
+"""Wall time of the tube certificate's kernels on a stored eight-state tube set.
 
-The pair of tests/data/closed_tube_h_reset.npz (the box case1.yaml reproduces), its
-4096 closed-loop vertices rebuilt here. Three figures, each the best of REPEAT calls:
+The tube set of tests/data/closed_tube_h_reset.npz (k = 5, on the box the certified
+design reproduces), its 4096 closed-loop vertices rebuilt here. Three figures, each the
+best of REPEAT calls:
 
 - the exact worst one-step level of every vertex over Z_8 and the 256 corners of W_8
   (``vertex_levels``: one trust-region dual per vertex and corner, the check behind
-  every RPI certificate, the steady set of item 3 and the notch loops);
+  every RPI certificate, the onset's steady set and the notch loops);
 - the onset jumps of a 24 % loss over the box's 64 corners x 1024 parameter corners plus
   256 interior points (``onset_jumps``: the parameter records, two plant steps each);
 - one onset bound of the design (``onset_bound``, interior 256, 4 bisection steps).
 
-The machine is shared: the figures move with its load (compare old and new code in one
-session, one after the other).
+The machine is shared: the figures move with its load (compare two versions of the code
+one right after the other).
 
 Usage: .venv/bin/python benchmarks/bench_certificate.py [REPEAT]   (default 3)
 """
@@ -23,13 +24,16 @@ from pathlib import Path
 
 import numpy as np
 
-from fahv.design.along_nominal import SchedulingBox, nominal_vertices, onset_jumps
-from fahv.design.certificate import vertex_levels
-from fahv.design.eight_state import EightStatePair, altitude_bound, onset_bound
+from fahv.design.domain import SchedulingBox
+from fahv.design.one_step_bound import altitude_bound
+from fahv.design.onset import onset_bound, onset_jumps
+from fahv.design.tube_set import TubeSet
+from fahv.design.vertices import nominal_vertices
 from fahv.model.tp_model import build_tp_model
 from fahv.model.trim import trim_map
 from fahv.model.vehicle import load_vehicle
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.synthesis.rpi_level import vertex_levels
 
 ROOT = Path(__file__).resolve().parents[1]
 TS, N_SUB = 0.02, 5  # case1.yaml's period and RK4 sub-steps
@@ -56,22 +60,26 @@ def main() -> None:
     box = SchedulingBox(d["lo"], d["hi"], d["other_half"])
     scale = np.concatenate([tp.state_scale, tp.input_scale])
     nv = nominal_vertices(box, veh, tm, unc, float(d["rho_min"]), TS, N_SUB, scale,
-                          int(d["k"]), d["w_design"], d["col_scale"], hessians=False)  # fmt: skip
+                          int(d["k"]), d["w_design"], d["col_scale"])  # fmt: skip
     A, B = nv.vertices()
     Acl = A[:, 1:, 1:] + B[:, 1:, :] @ d["F"]
     vertex_levels(Acl[:2], d["N"], d["W"])  # compile (or load) the kernel first
     t, lev = best(lambda: vertex_levels(Acl, d["N"], d["W"]), repeat)
-    print(f"vertex_levels: {len(Acl)} vertices x 256 corners of W_8 in {t:.2f} s "
-          f"({t / len(Acl) * 1e3:.2f} ms per vertex); worst level {lev.max():.6f}")
+    print(
+        f"vertex_levels: {len(Acl)} vertices x 256 corners of W_8 in {t:.2f} s "
+        f"({t / len(Acl) * 1e3:.2f} ms per vertex); worst level {lev.max():.6f}"
+    )
     t, (J, n_c) = best(lambda: onset_jumps(box, veh, tm, unc, 0.76, TS, N_SUB, 256), repeat)
     print(f"onset_jumps: {len(J)} jumps ({n_c} at corners) in {t:.2f} s")
     ab = altitude_bound(nv, A, B, d["F"], d["N"], int(d["moves"]))
-    pair = EightStatePair(d["F"], d["N"], d["W"], ab.H, float(d["lam"]), ab.bound, 0.0,
-                          int(d["moves"]), ab.step, ab.w_h)  # fmt: skip
-    t, ob = best(lambda: onset_bound(nv, pair, veh, tm, unc, 0.2, TS, N_SUB, interior=256,
+    tube_set = TubeSet(d["F"], d["N"], d["W"], ab.H, float(d["lam"]), ab.bound, 0.0,
+                       int(d["moves"]), ab.step, ab.w_h)  # fmt: skip
+    t, ob = best(lambda: onset_bound(nv, tube_set, veh, tm, unc, 0.2, TS, N_SUB, interior=256,
                                      iterations=4), 1)  # fmt: skip
-    print(f"onset_bound: {t:.1f} s; certified loss {100 * ob.certified_loss:.2f} %, "
-          f"steady set {ob.steady_shaped:.3f} Z_8")
+    print(
+        f"onset_bound: {t:.1f} s; certified loss {100 * ob.certified_loss:.2f} %, "
+        f"steady set {ob.steady_shaped:.3f} Z_8"
+    )
 
 
 if __name__ == "__main__":

@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from fahv.cli.design import load_or_design
-from fahv.control import nominal_mpc
+from fahv.control.mpc import tracking
 from fahv.loop.simulate import simulate
 
 
@@ -23,7 +23,7 @@ def main() -> None:
     """Run Case 1 with timers around the QP and the step; print the figures."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=15000)
-    ap.add_argument("--case", default="offline_design/case1_vertex.yaml")
+    ap.add_argument("--case", default="offline_design/scenarios/case1_paper.yaml")
     ap.add_argument("--x-box-both", action="store_true")
     args = ap.parse_args()
     _, design, _ = load_or_design(args.case, None, None, io.StringIO().write)
@@ -38,7 +38,7 @@ def main() -> None:
 def _bench(design, steps_n: int, label: str, overrides) -> None:
     """One timed run of ``steps_n`` steps with node-parameter ``overrides``; prints it."""
     qp_times = []
-    solve = nominal_mpc.TrackingMPC.solve
+    solve = tracking.TrackingMPC.solve
 
     def timed(self, *a, **kw):
         t0 = time.perf_counter()
@@ -57,12 +57,12 @@ def _bench(design, steps_n: int, label: str, overrides) -> None:
             steps.append(t1 - t0)
             t0 = t1
 
-    nominal_mpc.TrackingMPC.solve = timed
+    tracking.TrackingMPC.solve = timed
     try:
         run = simulate(design, "tube_mpc", duration=steps_n * design.case["Ts"],
                        progress=step_timer, overrides=overrides)  # fmt: skip
     finally:
-        nominal_mpc.TrackingMPC.solve = solve
+        tracking.TrackingMPC.solve = solve
     for name, t in (("nominal QP (build + solve + check)", qp_times), ("whole step", steps)):
         t = np.array(t) * 1e3
         print(

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from fahv.cli.design import load_or_design
-from fahv.control import nominal_mpc
+from fahv.control.mpc import tracking
 from fahv.loop.simulate import simulate
 
 BIG = 1e29  # |bound| >= BIG: no bound (DAQP's convention in the MPC)
@@ -36,15 +36,40 @@ def record(steps: int) -> list[tuple]:
 
     qps = []
 
-    class Recorder:
-        @staticmethod
-        def solve(H, f, A, bu, bl, **kw):
-            qps.append((H, f.copy(), A, bu.copy(), bl.copy()))
-            return daqp.solve(H, f, A, bu, bl, **kw)
+    class RecordingModel:
+        """A DAQP workspace that records the QP of each solve (the MPC's calls only)."""
 
-    nominal_mpc._daqp = lambda: Recorder
+        def __init__(self):
+            self.model, self.qp = daqp.Model(), None
+
+        @property
+        def settings(self):
+            return self.model.settings
+
+        @settings.setter
+        def settings(self, value):
+            self.model.settings = value
+
+        def setup(self, H, f, A, bu, bl, **kw):
+            self.qp = (H, f.copy(), A, bu.copy(), bl.copy())
+            return self.model.setup(H, f, A, bu, bl, **kw)
+
+        def update(self, f, bupper, blower):
+            self.qp = (self.qp[0], f.copy(), self.qp[2], bupper.copy(), blower.copy())
+            return self.model.update(f=f, bupper=bupper, blower=blower)
+
+        def solve(self):
+            qps.append(self.qp)
+            return self.model.solve()
+
+    class Recorder:
+        """Stands for the ``daqp`` module in :func:`fahv.control.mpc.tracking.daqp_module`."""
+
+        Model = RecordingModel
+
+    tracking.daqp_module = lambda: Recorder
     _, design, _ = load_or_design(
-        "offline_design/case1_vertex.yaml", None, None, io.StringIO().write
+        "offline_design/scenarios/case1_paper.yaml", None, None, io.StringIO().write
     )
     simulate(design, "tube_mpc", duration=steps * design.case["Ts"])
     return qps

@@ -8,7 +8,7 @@ alone on the run's recorded states, each step timed in 5 passes and the minimum 
 batch of B runs (per run). Prints median, p99 and max.
 
 Run: .venv/bin/python benchmarks/bench_rmpc_step.py [--steps 15000] [--batch 100]
-Target: law step p99 <= 0.2 ms (issue 21). Time it on a quiet machine.
+Target: law step p99 <= 0.2 ms. Time it on a quiet machine.
 """
 
 import argparse
@@ -40,7 +40,7 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=100)
     args = ap.parse_args()
     _, design, _ = load_or_design(
-        "offline_design/case1_vertex.yaml", None, None, io.StringIO().write
+        "offline_design/scenarios/case1_paper.yaml", None, None, io.StringIO().write
     )
     law_t, core_t, steps = [], [], []
     law_step, core_step = RMPCLaw.step, ControllerCore.on_inputs

@@ -14,7 +14,7 @@ from fahv.design.artefacts import load_design
 from fahv.loop.cores import build_core
 from fahv.loop.params import node_parameters
 
-art = sys.argv[1] if len(sys.argv) > 1 else "offline_design/artefacts/case1_vertex"
+art = sys.argv[1] if len(sys.argv) > 1 else "offline_design/designs/cm_paper"
 n = int(sys.argv[2]) if len(sys.argv) > 2 else 2000
 p = node_parameters(load_design(art))
 names = ("plant", "notch_filter", "nominal_trajectory", "tube_mpc", "fault_injector")

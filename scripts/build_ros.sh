@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Build the ROS 2 workspace (ros_ws/) with colcon from the ROS 2 Jazzy wheels in .venv
-# (docs/environment.md). Idempotent: colcon rebuilds only what changed. Needs scripts/setup.sh.
+# (docs/reference/environment.md). Idempotent: colcon rebuilds only what changed. Needs scripts/setup.sh.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here/ros_ws"

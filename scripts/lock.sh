@@ -4,7 +4,7 @@
 # extras dev and ros resolved by pip, then `pip freeze`). scripts/setup.sh installs with
 # `-c constraints.txt`, so a new release on PyPI cannot move a regression reference
 # (tests/data/results_reference.json) until this script is run and the references are
-# regenerated (docs/environment.md, "Pinned dependencies").
+# regenerated (docs/reference/environment.md, "Pinned dependencies").
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"

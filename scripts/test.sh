@@ -10,3 +10,4 @@ PYTHONPATH="$(printf '%s:' "$here"/ros_ws/src/hsv_*)" .venv/bin/lint-imports
 # on every core, one test file per worker at a time (module fixtures computed once);
 # "-n 0" after the command runs the suite in one process
 .venv/bin/python -m pytest -n auto --dist loadfile "$@"
+bash scripts/docs.sh  # the documentation site, strict (site/)

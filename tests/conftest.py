@@ -1,4 +1,5 @@
 import copy
+import json
 import os
 import subprocess
 import warnings
@@ -6,13 +7,13 @@ import warnings
 import pytest
 import yaml
 
-from fahv.config.yamlio import load_yaml
 from fahv.design.case import case_from_mapping
 from fahv.design.pipeline import run_design
 from fahv.model.tp_model import build_tp_model
 from fahv.model.vehicle import load_vehicle
 
-CASE1 = "offline_design/case1_vertex.yaml"
+#: The paper's Case 1 design with its scenario: the quick design of the tests.
+SCENARIO = "offline_design/scenarios/case1_paper.yaml"
 
 
 @pytest.fixture(scope="session")
@@ -26,17 +27,24 @@ def tp_cm(vehicle):
     return build_tp_model(vehicle, "cm", 4, 5, 11, 11)
 
 
+def plain(data):
+    """A validated mapping as plain YAML/JSON data (tuples as lists)."""
+    return json.loads(json.dumps(data))
+
+
 @pytest.fixture(scope="session")
 def raw():
-    with open(CASE1) as fh:
-        return load_yaml(fh.read())
+    """The whole case of scenario case1_paper (its design's entries with its own)."""
+    from fahv.design.scenario import load_scenario
+
+    return plain(load_scenario(SCENARIO).case.data)
 
 
 def quick(raw, **changes):
     """Case 1 with a small W sample (CI) and the given top-level changes."""
     d = copy.deepcopy(raw)
     d["disturbance"]["samples"] = 40
-    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_certificate.py
+    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_one_step_bound.py
     d.update(changes)
     return case_from_mapping(d, "quick.yaml")
 
@@ -79,18 +87,53 @@ def design(raw, tmp_path_factory, worker_id):
 def quick_case(design, raw, tmp_path_factory):
     """The test design as a case file plus its saved artefacts, for the `fahv` command:
     (case file, artefact folder) to pass as ``fahv simulate|sil CASE --design DIR``."""
-    from fahv.design.artefacts import save_design
-    from fahv.loop.params import node_parameters, parameter_file
 
     folder = tmp_path_factory.mktemp("case")
-    d = copy.deepcopy(raw)
-    d["disturbance"]["samples"] = 40
-    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_certificate.py
-    case_file = folder / "quick.yaml"
-    case_file.write_text(yaml.safe_dump(d, sort_keys=False))
-    params = yaml.safe_dump(parameter_file(node_parameters(design)), sort_keys=False)
-    save_design(design, folder / "artefacts", {"params.yaml": params})
-    return case_file, folder / "artefacts"
+    return store_quick(design, folder)
+
+
+@pytest.fixture(scope="session")
+def store_as_files():
+    """:func:`store_quick`, for the test folders that need their own copy."""
+    return store_quick
+
+
+def store_quick(design, folder):
+    """Store a test design as ``fahv`` finds it: design file, stored design, scenario file.
+
+    ``design`` is a design made from a whole case (:func:`quick`); its design part is
+    written to ``folder/designs/quick.yaml``, its arrays stored beside it as that design
+    file's design, and the case's scenario to ``folder/scenarios/quick.yaml``. Returns
+    (scenario file, artefact folder) to pass as ``fahv simulate|sil SCENARIO --design DIR``.
+    """
+    from fahv.design.artefacts import Design, save_design
+    from fahv.design.case import SCENARIO_KEYS, case_from_mapping, load_design_file
+    from fahv.design.pipeline import design_part
+
+    c = design.case
+    dpart = design_part(case_from_mapping(c, "quick.yaml"))
+    (folder / "designs").mkdir(parents=True, exist_ok=True)
+    (folder / "scenarios").mkdir(parents=True, exist_ok=True)
+    dfile = folder / "designs" / "quick.yaml"
+    dfile.write_text(yaml.safe_dump(plain({**dpart.data, "name": "quick"}), sort_keys=False))
+    summary = {
+        k: v
+        for k, v in design.summary.items()
+        if k not in ("plant_params", "scenario_hash", "content_hash")
+    }
+    summary["provenance"] = {
+        **summary["provenance"],
+        "design_file": str(dfile),
+        "design_file_hash": load_design_file(dfile).content_hash(),
+    }
+    stored = Design(load_design_file(dfile).data, dict(design.arrays), summary)
+    stored.summary["design_hash"] = stored.content_hash()
+    save_design(stored, folder / "designs" / "quick")
+    scen = {k: c[k] for k in SCENARIO_KEYS}
+    scen["design"] = "quick"
+    sfile = folder / "scenarios" / "quick.yaml"
+    sfile.write_text(yaml.safe_dump(plain(scen), sort_keys=False))
+    return sfile, folder / "designs" / "quick"
 
 
 @pytest.fixture(scope="session")

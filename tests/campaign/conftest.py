@@ -3,24 +3,18 @@ import copy
 import pytest
 import yaml
 
-from fahv.design.artefacts import save_design
-
 
 @pytest.fixture(scope="session")
-def mc_dir(tmp_path_factory, raw, design):
-    """A folder with the quick Case 1 (small W sample) and its saved design next to it."""
+def mc_dir(tmp_path_factory, design, store_as_files):
+    """A folder with the quick Case 1 design stored as `fahv` finds it, and its scenario."""
     d = tmp_path_factory.mktemp("mc")
-    data = copy.deepcopy(raw)
-    data["disturbance"]["samples"] = 40  # as the session design (conftest.quick)
-    data["certificate"] = {"schedules": 0}  # checked in tests/design/test_certificate.py
-    (d / "case1.yaml").write_text(yaml.safe_dump(data))
-    save_design(design, d / "artefacts" / design.case["name"])
+    store_as_files(design, d)
     return d
 
 
 BASE = {
     "name": "t",
-    "case": "case1.yaml",
+    "scenario": "scenarios/quick.yaml",
     "seed": 11,
     "runs": 12,
     "variants": ["tube_mpc"],
@@ -30,7 +24,7 @@ BASE = {
         "uncertainty": {"method": "uniform"},
         "fault": {
             "kinds": ["loss_of_effectiveness", "bias", "dropout"],
-            "loss": [0.0, 0.3],
+            "loss": [0.0, 0.24],
             "bias_deg": [-2.0, 2.0],
             "onset": [1.0, 4.0],
         },

@@ -181,7 +181,7 @@ def test_rerun_reproduces_the_metrics_exactly(reference, tmp_path):
 
 
 def test_rerun_metadata_and_topics_agree_on_the_run_s_own_fault(reference, tmp_path):
-    """Issue 22: the metadata said the case file's fault (rho_f 0.9 at 100 s) while the
+    """The metadata once said the case file's fault (rho_f 0.9 at 100 s) while the
     fault topic showed the run's own; now both are the run's, with its dispersed values."""
     c, out = reference
     index = 2
@@ -222,7 +222,7 @@ def test_report_numbers(reference):
 
 
 def test_report_command_prints_a_summary_and_the_path(reference, capsys):
-    """Issue 22: the whole report went to stdout; now a short summary and the file."""
+    """The command prints a short summary and the report file, not the whole report."""
     from fahv.cli import main
 
     c, out = reference
@@ -329,4 +329,4 @@ def test_sessions_are_recorded_in_the_manifest(reference):
     sessions = store.read_manifest(out)["sessions"]
     assert [(s["session"], s["new"], s["failed"]) for s in sessions] == [(1, 12, 0)]
     assert sessions[0]["engine"] == "LocalCluster(2)" and sessions[0]["wall_s"] > 0
-    assert "Session 1 (LocalCluster(2)): 12 runs (0 failed) in" in make_report(out, False).text
+    assert "Part 1 (LocalCluster(2)): 12 runs (0 failed) in" in make_report(out, False).text

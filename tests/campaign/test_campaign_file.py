@@ -12,23 +12,27 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize(
-    "name, case",
-    [("campaign_case1.yaml", "case1_vertex"), ("campaign_case2.yaml", "case2"),
-     ("campaign_case1_eight_state.yaml", "case1"),
-     ("campaign_case1_attitude.yaml", "case1_attitude"),
-     ("campaign_envelope_attitude.yaml", "case1_attitude"),
-     ("campaign_case1_attitude_notch.yaml", "case1_attitude_notch"),
-     ("campaign_envelope_attitude_notch.yaml", "case1_attitude_notch")],
+    "name, scenario",
+    [("case1.yaml", "case1"), ("envelope.yaml", "case1"), ("case1_paper.yaml", "case1_paper"),
+     ("paired.yaml", "case1_paper"), ("case2.yaml", "case2")],
 )  # fmt: skip
-def test_example_campaign_files_validate(name, case):
-    c = load_campaign(ROOT / "offline_design" / name)
-    assert c.case.name == case
+def test_shipped_campaign_files_validate(name, scenario):
+    c = load_campaign(ROOT / "offline_design" / "campaigns" / name)
+    assert c.case.name == scenario
     assert c.duration == 300.0
     assert set(c["variants"]) <= set(c.case["variants"])
 
 
-def test_the_case1_example_is_the_issue_campaign():
-    c = load_campaign(ROOT / "offline_design" / "campaign_case1.yaml")
+def test_a_campaign_runs_around_another_scenario():
+    """--scenario: the same dispersions around another scenario (and its design)."""
+    c = load_campaign(ROOT / "offline_design" / "campaigns" / "case1.yaml", scenario="case1_paper")
+    assert c.case.name == "case1_paper" and c.case["tube"]["form"] == "vertices"
+    base = load_campaign(ROOT / "offline_design" / "campaigns" / "case1.yaml")
+    assert c["dispersions"] == base["dispersions"] and c.content_hash() != base.content_hash()
+
+
+def test_the_paper_design_campaign_draws_losses_beyond_its_range():
+    c = load_campaign(ROOT / "offline_design" / "campaigns" / "case1_paper.yaml")
     assert c["runs"] == 1000
     f = c["dispersions"]["fault"]
     assert f["kinds"] == ["loss_of_effectiveness"] and f["loss"] == [0.0, 0.3]
@@ -38,6 +42,7 @@ def test_the_case1_example_is_the_issue_campaign():
         "parameters": ["m", "I_yy", "S", "z_T", "c_bar", "c_e", "beta_1", "beta_3", "beta_5",
                        "beta_7"],
     }  # fmt: skip
+    assert any("fault range" in w for w in c.warnings)
 
 
 def _edit(write_campaign, tmp_name, edit):
@@ -69,7 +74,7 @@ def _edit(write_campaign, tmp_name, edit):
         (lambda d: d.update(variants=["tube_mpc", "nope"]), "variants", "must be one of"),
         (lambda d: d.update(runs=0), "runs", "must be in [1, 1e+06]"),
         (lambda d: d.pop("seed"), "seed", "missing key"),
-        (lambda d: d.update(case="nope.yaml"), "case", "does not load"),
+        (lambda d: d.update(scenario="nope.yaml"), "scenario", "does not load"),
     ],
 )  # fmt: skip
 def test_bad_campaign_files_fail_naming_the_key(write_campaign, edit, key, words):
@@ -96,19 +101,19 @@ def test_cli_names_the_key_and_exits_2(write_campaign, capsys):
 
 
 def test_docs_key_table_is_the_declaration():
-    text = (ROOT / "docs" / "campaigns.md").read_text()
+    text = (ROOT / "docs" / "reference" / "configuration.md").read_text()
     table = text.split("<!-- campaign-keys -->\n")[1].split("\n<!-- /campaign-keys -->")[0]
     assert table == markdown(campaign_spec())
 
 
 def test_fault_onsets_beyond_the_run_are_warned(write_campaign, capsys, monkeypatch):
-    """Issue 22: onsets drawn after the run's end used to pass silently (no fault then)."""
+    """Onsets drawn after the run's end are warned (those runs have no fault)."""
     assert load_campaign(write_campaign("onset_ok")).warnings == []  # onset [1, 4], 6 s runs
     c = load_campaign(
         write_campaign(
             "onset_late",
             duration=6.0,
-            fault={"kinds": ["loss_of_effectiveness"], "loss": [0.0, 0.3], "onset": [2.0, 10.0]},
+            fault={"kinds": ["loss_of_effectiveness"], "loss": [0.0, 0.24], "onset": [2.0, 10.0]},
         )
     )
     [w] = c.warnings
@@ -116,7 +121,7 @@ def test_fault_onsets_beyond_the_run_are_warned(write_campaign, capsys, monkeypa
     assert "50 % of the runs end before their fault" in w  # (10 - 6) / (10 - 2)
     # the case's own onset (100 s) with 6 s runs and no dispersed onset
     c = load_campaign(write_campaign("case_onset", fault={"kinds": ["loss_of_effectiveness"]}))
-    assert c.warnings and "the case's fault onset 100 s" in c.warnings[0]
+    assert c.warnings and "the scenario's fault onset 100 s" in c.warnings[0]
     assert "100 % of the runs" in c.warnings[0]
     # the command prints it before it starts
     import fahv.cli.campaign as cli

@@ -23,7 +23,7 @@ def test_sil_rerun_reproduces_the_campaign_row(write_campaign, tmp_path):
     assert rec.metadata["source"] == "sil" and rec.metadata["status"] == "complete"
     row = store.read_rows(out)[1]
     assert row["index"] == 1
-    # named after the campaign run; its metadata says the run's own fault (issue 22)
+    # named after the campaign run; its metadata says the run's own fault
     assert r.bag.name.startswith("sil_1_tube_mpc_rerun_sil_")
     fs = rec.records["/hsv/fault_status"][-1]
     assert rec.metadata["fault_kind"] == fs["kind"] == row["fault.kind"]

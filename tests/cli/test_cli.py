@@ -3,6 +3,7 @@
 import json
 
 from fahv.cli import main
+from fahv.runs.writer import RunWriter
 
 
 def test_trim_json(capsys):
@@ -62,7 +63,7 @@ def test_simulate_all_prints_a_progress_line_per_variant(quick_case, tmp_path, c
     assert list(table) == ["tube_mpc", "tube_mpc_no_notch", "tube_mpc_notch2",
                            "tube_mpc_paper", "rmpc"]  # fmt: skip
     for i, v in enumerate(table, 1):
-        assert f"[{i}/5] case1_vertex {v}: done in" in out.err
+        assert f"[{i}/5] case1_paper {v}: done in" in out.err
 
 
 def test_a_stop_at_the_end_of_a_steps_last_write_reports_the_files_count(
@@ -75,7 +76,7 @@ def test_a_stop_at_the_end_of_a_steps_last_write_reports_the_files_count(
 
     from fahv.cli import run as run_cli
     from fahv.errors import RunInterrupted
-    from fahv.runs.bag import RunWriter, read_run
+    from fahv.runs.bag import read_run
 
     real = RunWriter.write_raw
     last = run_cli.StepProgress.LAST_TOPIC

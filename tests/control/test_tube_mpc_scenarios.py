@@ -2,7 +2,7 @@
 
 Each scenario is designed (small W sample, as every test design) and simulated for
 300 s in process; the node graph computes the same numbers (tests/runs/test_sil.py).
-Requirements (sec. 5.1 and docs/control_design.md): |h - h_c| <= 10 ft and
+Requirements (sec. 5.1 and docs/theory/certificate.md): |h - h_c| <= 10 ft and
 |V - V_c| <= 2 ft/s within 60 s of the end of the command and held until the fault;
 back within the same bounds within 60 s of the fault and held to the end; attitude
 error within 0.5 deg; no command beyond the input limits; the tube error inside Z.
@@ -14,8 +14,7 @@ import warnings
 import numpy as np
 import pytest
 
-from fahv.config.yamlio import load_yaml
-from fahv.design.case import case_from_mapping
+from fahv.design.case import case_data, case_from_mapping
 from fahv.design.pipeline import run_design
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
@@ -57,11 +56,10 @@ def requirements(run, case) -> dict:
 
 
 def _case(path, **changes):
-    with open(path) as fh:
-        d = load_yaml(fh.read())
+    d = case_data(path)
     d = copy.deepcopy(d)
     d["disturbance"]["samples"] = 40
-    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_certificate.py
+    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_one_step_bound.py
     d["variants"] = ["tube_mpc"]  # the law under test (no baseline design: CI time)
     for key, value in changes.items():
         section, name = key.split(".")
@@ -72,18 +70,18 @@ def _case(path, **changes):
 SCENARIOS = {
     # descending step inside the envelope, Case 1 fault
     "descending step": (
-        "offline_design/case1_vertex.yaml",
+        "offline_design/scenarios/case1_paper.yaml",
         {"command.h_c": 85100.0, "command.V_c": 7750.0},
     ),
     # 30 % loss of elevator effectiveness at 150 s
     "30 % loss at 150 s": (
-        "offline_design/case1_vertex.yaml",
+        "offline_design/scenarios/case1_paper.yaml",
         {"fault.rho_f": 0.7, "fault.t_onset": 150.0},
     ),
     # another draw of the uncertain parameters
-    "parameter seed 7": ("offline_design/case1_vertex.yaml", {"uncertainty.seed": 7}),
+    "parameter seed 7": ("offline_design/scenarios/case1_paper.yaml", {"uncertainty.seed": 7}),
     # Case 2: ramps, adjustable law tau = 0.8 on the ECM design
-    "case 2": ("offline_design/case2.yaml", {}),
+    "case 2": ("offline_design/scenarios/case2.yaml", {}),
 }
 
 
@@ -103,14 +101,14 @@ def test_tube_mpc_meets_the_requirements(name):
 
 
 def test_heavy_vehicle_with_a_large_loss_in_a_descent_ends_on_the_command():
-    """Issue 20, item 6: the run that sat on the terminal law (heavy vehicle with the weaker
-    c_e, 29.8 % loss 4 s into a descent from 86000 ft, 8200 ft/s to 85200 ft, 8300 ft/s;
-    before: 556 of 600 nominal updates on the terminal law, 29 ft/s short at 300 s). Its
+    """A run that can sit on the terminal law (heavy vehicle with the weaker c_e, 29.8 %
+    loss 4 s into a descent from 86000 ft, 8200 ft/s to 85200 ft, 8300 ft/s; a nominal
+    that used the terminal law away from the command ended 29 ft/s short at 300 s). Its
     faulty trim at the command fits the tightened limits, so it must end on the command,
     and no nominal update may use the terminal law away from it."""
     from fahv.campaign.draws import overrides
 
-    case = _case("offline_design/case1_vertex.yaml")
+    case = _case("offline_design/scenarios/case1_paper.yaml")
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     design = run_design(case, log=lambda *_: None)
     signs = {k: 0.0 for k in ("I_yy", "S", "z_T", "c_bar", "beta_1", "beta_3", "beta_5",

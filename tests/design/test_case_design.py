@@ -1,4 +1,4 @@
-"""Case files, the offline design of a case and its artefacts, and a short closed loop."""
+"""Design and scenario files, the offline design and its artefacts, and a short closed loop."""
 
 import copy
 import json
@@ -16,11 +16,14 @@ from fahv.model.vehicle import load_vehicle
 from fahv.runs.metrics import metrics
 
 
-def test_case_files_load():
-    for path in ("offline_design/case1_vertex.yaml", "offline_design/case2.yaml"):
+def test_scenario_files_load():
+    for path in (
+        "offline_design/scenarios/case1_paper.yaml",
+        "offline_design/scenarios/case2.yaml",
+    ):
         c = load_case(path)
         assert c["Ts"] == 0.02
-    assert load_case("offline_design/case2.yaml")["tube"]["tau"] == 0.8
+    assert load_case("offline_design/scenarios/case2.yaml")["tube"]["tau"] == 0.8
 
 
 @pytest.mark.parametrize(
@@ -93,7 +96,7 @@ def test_design_certificates_and_artefacts(design, tmp_path):
     assert set(loops) == {"tube_mpc", "tube_mpc_notch2", "tube_mpc_paper"}  # not no_notch
     assert loops["tube_mpc_notch2"]["omega"] == pytest.approx(design.arrays["omega_flex"][1])
     assert loops["tube_mpc"]["omega"] == pytest.approx(19.05)
-    # case1_vertex runs the paper's error (tube.filter_nominal_q false): no certificate
+    # cm_paper runs the paper's error (tube.filter_nominal_q false): no certificate
     # covers a loop that filters the measured q alone, so none is sought
     assert all(loop["certified"] is False for loop in loops.values())
     assert len({loop["rho_q"] for loop in loops.values()}) == 1  # one gain, one certified loop
@@ -126,7 +129,7 @@ def test_ros_parameter_file(design):
     # the controller can replicate the notch on the nominal's q: the notch_filter node's filter
     for k in ("enabled", "omega_z", "eps_z", "omega_p", "eps_p"):
         assert tm[f"notch.{k}"] == p["notch_filter"][k] == p["nominal_trajectory"][f"notch.{k}"]
-    assert tm["filter_nominal_q"] is False  # case1_vertex: the paper's error
+    assert tm["filter_nominal_q"] is False  # cm_paper: the paper's error
 
 
 def test_short_closed_loop(design):
@@ -153,7 +156,7 @@ def test_defaulted_knobs_may_be_omitted(raw):
     d["tube"].pop("lam")
     c = case_from_mapping(d, "lean.yaml")
     full = case_from_mapping(raw, "full.yaml")
-    assert c.data == full.data  # case1_vertex.yaml sets every knob to its default
+    assert c.data == full.data  # the whole case sets every knob (defaults filled in)
     assert c.defaults_used["disturbance.samples"] == 300
     assert c.defaults_used["rmpc.ellipsoids"] == 9
     assert set(c.defaults_used) >= {"samples", "trim_grid", "tube.lam", "nominal.lam"}
@@ -169,12 +172,12 @@ def test_section_only_required_when_used(raw):
 
 
 def test_tightening_is_smaller_than_the_symmetric_paper_design(design, raw, make_case):
-    """Issue 12: W without the constant part and row weights from the binding side give a
-    smaller tightening in both rows than the paper's W with the symmetric room (Case 1),
-    although they certify losses up to 24 % (Case 1's rho_min 0.76) instead of 10 %."""
+    """W without the constant part and row weights from the binding side give a smaller
+    tightening in both rows than the paper's W with the symmetric room (Case 1), although
+    they certify losses up to 24 % (Case 1's rho_min 0.76) instead of 10 %."""
     paper = make_case(
         disturbance={**raw["disturbance"], "samples": 40, "constant": "bounded"},
-        tube={**raw["tube"], "rho_min": 1.0},  # the case fault's rho_f = 0.9 only
+        tube={**raw["tube"], "rho_min": 0.9},  # the paper: the case fault's rho_f = 0.9 only
     )
     old = run_design(paper, log=lambda *_: None).summary["tube"]
     new = design.summary["tube"]
@@ -186,25 +189,25 @@ def test_tightening_is_smaller_than_the_symmetric_paper_design(design, raw, make
     assert t_new[1] < 0.9 * t_old[1], (t_old, t_new)
 
 
-def test_docs_key_table_is_the_declaration():
+def test_docs_key_tables_are_the_declarations():
     from pathlib import Path
 
     from fahv.config.spec import markdown
-    from fahv.design.case import case_spec
+    from fahv.design.case import design_spec, scenario_spec
 
-    text = (Path(__file__).resolve().parents[2] / "docs" / "configuration.md").read_text()
-    table = text.split("<!-- case-keys -->\n")[1].split("\n<!-- /case-keys -->")[0]
-    assert table == markdown(case_spec())
+    text = (Path(__file__).resolve().parents[2] / "docs/reference/configuration.md").read_text()
+    for n, spec in (("design-keys", design_spec), ("scenario-keys", scenario_spec)):
+        assert text.split(f"<!-- {n} -->\n")[1].split(f"\n<!-- /{n} -->")[0] == markdown(spec())
 
 
 def test_notch_variants_are_certified_only_where_the_law_filters_the_nominal_q():
-    """case1.yaml (tube.filter_nominal_q true): both notch variants of law tube_mpc are
+    """cm_certified (tube.filter_nominal_q true): both notch variants of law tube_mpc are
     certified in the loop's own states; the paper's law, which filters the measured q
     alone, only has its stability checked, whatever the key; with the key false (the
     paper's vertex case) every notch variant is checked for stability only."""
     from fahv.design.pipeline import notch_checks, tube_notches
 
-    case = load_case("offline_design/case1.yaml")
+    case = load_case("offline_design/scenarios/case1.yaml")
     c = copy.deepcopy(dict(case.data))
     c["variants"] = [*c["variants"], "tube_mpc_paper"]
     notches = tube_notches(c, (19.05, 49.0))

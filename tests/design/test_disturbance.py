@@ -50,29 +50,6 @@ def test_seeded_and_reproducible(vehicle, tp_cm, wset):
         _sample(vehicle, tp_cm, margin=0.5)
 
 
-def test_drawn_states_replace_the_box_and_scale_the_model_error(vehicle, tp_cm, wset):
-    """``states`` draws the state deviations: the trim itself (x = 0) leaves a smaller
-    model error than the box W was sampled over, and states twice the box's corners a
-    larger one."""
-
-    def draw(scale):
-        return lambda rng: scale * DEFAULT_DEV_BOX * rng.choice([-1.0, 1.0], DEFAULT_DEV_BOX.size)
-
-    def run(states):
-        return sample_disturbance(vehicle, tp_cm, 0.02, PAPER_UNCERTAINTY, 0.9,
-                                  DEFAULT_DEV_BOX, DEFAULT_DU_BOX, 25, seed=0, margin=1.2,
-                                  states=states)  # fmt: skip
-
-    at_trim, wide = run(lambda rng: np.zeros(9)), run(draw(2.0))
-    model = wset.parts["model"]
-    assert np.all(at_trim.parts["model"][2:5] < model[2:5])  # alpha, theta, q
-    assert np.all(wide.parts["model"][2:5] > model[2:5])
-    with pytest.raises(ValueError, match="the draw must be 9 finite values"):
-        run(lambda rng: 0.0)
-    with pytest.raises(ValueError, match="the draw must be 9 finite values"):
-        run(lambda rng: np.full(9, np.nan))
-
-
 def test_deviation_box_appends_the_notch_states_for_the_ecm_only():
     """The CM / DM box is a copy of DEFAULT_DEV_BOX; the ECM's appends twice the filter's
     steady states for the given q scale; a q scale that is not positive and finite is

@@ -112,15 +112,13 @@ def design_case2():
     import copy
     import warnings
 
-    from fahv.config.yamlio import load_yaml
-    from fahv.design.case import case_from_mapping
+    from fahv.design.case import case_data, case_from_mapping
     from fahv.design.pipeline import run_design
 
-    with open("offline_design/case2.yaml") as fh:
-        raw = load_yaml(fh.read())
+    raw = case_data("offline_design/scenarios/case2.yaml")
     d = copy.deepcopy(raw)
     d["disturbance"]["samples"] = 40
-    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_certificate.py
+    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_one_step_bound.py
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     return run_design(case_from_mapping(d, "quick2.yaml"), log=lambda *_: None)
 

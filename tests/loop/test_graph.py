@@ -12,7 +12,7 @@ from fahv.loop.graph import (
     replay_topics,
 )
 
-DOCS = Path(__file__).resolve().parents[2] / "docs" / "architecture.md"
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "reference" / "architecture.md"
 
 
 def test_docs_show_the_node_table():

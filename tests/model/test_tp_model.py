@@ -45,7 +45,7 @@ def test_case1_approximation_error(tp_case1, vehicle):
         return lm.A, lm.B
 
     err = approximation_error(tp_case1, sample, offgrid_points(tp_case1, 30, seed=1))
-    # measured 3.8e-7 (docs/modelling.md); the bound leaves a 25x margin
+    # measured 3.8e-7 (docs/theory/model.md); the bound leaves a 25x margin
     assert err["max_rel"] < 1e-5
     assert err["mean_rel"] <= err["max_rel"]
 

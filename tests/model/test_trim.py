@@ -1,4 +1,4 @@
-"""Trim against the numbers of docs/vehicle_data.md / issue 2 (Parker 2007 rigid curve fit)."""
+"""Trim against the numbers of the vehicle data (Parker 2007 rigid curve fit)."""
 
 import numpy as np
 import pytest
@@ -14,7 +14,7 @@ from fahv.model.trim import TRIM_TOL, trim, trim_grid
 )
 def test_trim_matches_published_rigid_trim(vehicle, model, h, V, alpha_deg, de_deg, Phi):
     tp = trim(vehicle, h, V, model)
-    # tolerances of issue 2: 0.01 deg, 0.05 deg, 0.002
+    # tolerances: 0.01 deg, 0.05 deg, 0.002
     assert np.degrees(tp.alpha) == pytest.approx(alpha_deg, abs=0.01)
     assert np.degrees(tp.delta_e) == pytest.approx(de_deg, abs=0.05)
     assert tp.Phi == pytest.approx(Phi, abs=0.002)

@@ -18,9 +18,11 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from fahv.loop.graph import TOPICS
-from fahv.runs.bag import decode, iter_raw, read_run
+from fahv.runs.bag import iter_raw, read_run
 from fahv.runs.live import schema_text
+from fahv.runs.messages import decode
 from fahv.runs.workspace import ROOT
+from fahv.runs.writer import RunWriter
 
 pytestmark = pytest.mark.ros  # runs the built node graph
 
@@ -126,7 +128,6 @@ def test_simulate_live_serves_the_in_process_run(design, tmp_path):
 
     from fahv.cli.run import StepProgress
     from fahv.loop.simulate import simulate
-    from fahv.runs.bag import RunWriter
     from fahv.runs.live import LiveView
 
     view = LiveView(0, 0.02)

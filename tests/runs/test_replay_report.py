@@ -1,4 +1,4 @@
-"""Replay that reports (issue 22): a graph started by hand with `ros2 run` records a run
+"""Replay that reports: a graph started by hand with `ros2 run` records a run
 whose file holds its parameter file, so `fahv replay` works on it (renamed or bare too),
 says whether every captured output equals the recorded one, and writes a run that the
 other tools accept."""

@@ -1,4 +1,4 @@
-"""A run file stands alone (issue 22): metadata, the parameter file of every node and the
+"""A run file stands alone: metadata, the parameter file of every node and the
 recorder's timestamps live in the .mcap, so a renamed folder, a copy and the bare file
 open in every tool; runs written by earlier versions (sidecar files) still open."""
 
@@ -18,21 +18,19 @@ from fahv.loop.graph import TOPICS
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import (
-    LOOP_QOS,
     PARAMS,
     RUN_RECORD,
-    RunWriter,
     bag_paths,
-    encode,
     read_run,
     run_params,
     run_result_of,
     stored_metadata,
-    typestore,
 )
 from fahv.runs.latency import TIMESTAMPS_FILE, load_timestamps, run_latencies, save_timestamps
+from fahv.runs.messages import LOOP_QOS, encode, typestore
 from fahv.runs.metrics import metrics
 from fahv.runs.sil import recorder_metadata, run_parameter_file
+from fahv.runs.writer import RunWriter
 
 T, N = 2.0, 100
 
@@ -71,7 +69,7 @@ def test_the_file_holds_metadata_parameters_and_timestamps(run):
         atts = {a.name: a for a in reader.iter_attachments()}
     # written at the start (a file cut short keeps it) and again at the end
     assert [m.metadata["status"] for m in records] == ["running", "complete"]
-    assert records[-1].metadata["case"] == "case1_vertex"
+    assert records[-1].metadata["case"] == "case1_paper"
     fault = content["fault_injector"]["ros__parameters"]
     assert records[-1].metadata["fault_rho_f"] == str(fault["rho_f"])
     assert yaml.safe_load(atts[PARAMS].data) == content
@@ -169,7 +167,7 @@ def test_runs_of_earlier_versions_still_open(design, tmp_path, capsys):
     with open(bag_paths(bag)[1], "rb") as f:
         assert list(make_reader(f).iter_attachments()) == []  # really the old layout
     rec = read_run(bag)
-    assert rec.metadata["status"] == "complete" and rec.metadata["case"] == "case1_vertex"
+    assert rec.metadata["status"] == "complete" and rec.metadata["case"] == "case1_paper"
     assert rec.params() == content and run_params(bag) == content
     assert stored_metadata(bag)["design_hash"] == content["plant"]["ros__parameters"]["design_hash"]
     assert load_timestamps(rec.attachment(TIMESTAMPS_FILE))["/hsv/state"].shape == (10, 3)

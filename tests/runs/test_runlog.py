@@ -10,9 +10,10 @@ from fahv.errors import RunError
 from fahv.loop.graph import QOS_DEPTH, STATE_FIELDS, TOPICS
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
-from fahv.runs.bag import RunWriter, TruncatedRunWarning, bag_paths, read_run, run_result_of
+from fahv.runs.bag import TruncatedRunWarning, bag_paths, read_run, run_result_of
 from fahv.runs.metrics import metrics
 from fahv.runs.sil import run_metadata
+from fahv.runs.writer import RunWriter
 
 N = 150  # 3 s at Ts = 0.02
 
@@ -31,7 +32,7 @@ def test_round_trip_equals_the_simulation(recorded):
     assert not rec.truncated
     assert {t: rec.topics[t]["count"] for t in TOPICS} == dict.fromkeys(TOPICS, N)
     assert rec.metadata["status"] == "complete"
-    assert rec.metadata["case"] == "case1_vertex" and rec.metadata["source"] == "simulate"
+    assert rec.metadata["case"] == "case1_paper" and rec.metadata["source"] == "simulate"
     back = run_result_of(rec)
     np.testing.assert_array_equal(back.x, run.x)
     np.testing.assert_array_equal(back.u, run.u)

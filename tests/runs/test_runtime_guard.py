@@ -45,7 +45,7 @@ from hsv_common.runtime import make_executor
 from fahv.errors import ParameterError
 rclpy.init()
 print(type(make_executor()).__name__)
-os.environ["HSV_EXECUTOR"] = "events"
+os.environ["HSV_EXECUTOR"] = "single"
 print(type(make_executor()).__name__, type(make_executor(message_info=True)).__name__)
 os.environ["HSV_EXECUTOR"] = "fast"
 try:
@@ -82,11 +82,11 @@ def test_a_beating_loop_is_not_ended_and_cancel_removes_the_deadline():
     assert r.stdout.strip() == "done"
 
 
-def test_the_executor_is_the_single_threaded_one_unless_asked():
+def test_the_executor_is_the_events_executor_unless_asked():
     ensure_built()
     r, _ = _run(EXECUTOR)
     assert r.returncode == 0, r.stderr[-2000:]
     lines = r.stdout.strip().splitlines()
-    assert lines[0] == "SingleThreadedExecutor"
-    assert lines[1] == "EventsExecutor SingleThreadedExecutor"
+    assert lines[0] == "EventsExecutor"
+    assert lines[1] == "SingleThreadedExecutor SingleThreadedExecutor"
     assert lines[2].startswith("error: HSV_EXECUTOR = 'fast'"), lines

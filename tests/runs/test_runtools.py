@@ -16,11 +16,12 @@ from fahv.loop.graph import STATE_FIELDS, TOPICS
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import ALPHA, load_vehicle
 from fahv.msg import MSG_DIR
-from fahv.runs.bag import RunWriter, bag_paths, read_run
+from fahv.runs.bag import bag_paths, read_run
 from fahv.runs.metrics import metrics
 from fahv.runs.sil import run_metadata, write_run_params
 from fahv.runs.tools import compare, export_run, field_units, summarize, topic_table
 from fahv.runs.workspace import ROOT
+from fahv.runs.writer import RunWriter
 
 T, N = 2.0, 100
 LAYOUT = ROOT / "ros_ws" / "src" / "hsv_bringup" / "config" / "foxglove_layout.json"
@@ -232,7 +233,7 @@ def test_simulate_overrides_node_parameters_and_names_unknown_nodes(design):
 
 
 def test_paper_figures_take_the_paper_law_from_the_vertex_case(monkeypatch, tmp_path):
-    """Fig. 9, 10 and 12 draw the paper's law from case1_vertex (Case 1's certified design
+    """Fig. 9, 10 and 12 draw the paper's law from case1_paper (Case 1's certified design
     has no such variant), labelled with its case; a missing run is left out."""
     from fahv.runs import plots
 
@@ -243,10 +244,10 @@ def test_paper_figures_take_the_paper_law_from_the_vertex_case(monkeypatch, tmp_
         return path
 
     monkeypatch.setattr(plots, "plot_group", fake_plot_group)
-    runs = {("case1", "tube_mpc"): 1, ("case1", "rmpc"): 2, ("case1_vertex", "tube_mpc_paper"): 3,
-            ("case1_vertex", "tube_mpc"): 4}  # fmt: skip
+    runs = {("case1", "tube_mpc"): 1, ("case1", "rmpc"): 2, ("case1_paper", "tube_mpc_paper"): 3,
+            ("case1_paper", "tube_mpc"): 4}  # fmt: skip
     plots.paper_figures(runs, tmp_path)
-    paper = plots.LABELS["tube_mpc_paper"] + " (case1_vertex)"
+    paper = plots.LABELS["tube_mpc_paper"] + " (case1_paper)"
     assert drawn["fig09_case1_trajectory.png"] == [plots.LABELS["tube_mpc"], paper,
                                                   plots.LABELS["rmpc"]]  # fmt: skip
     assert paper not in drawn["fig11_case1_flexible.png"]

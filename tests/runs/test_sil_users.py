@@ -1,4 +1,4 @@
-"""The SIL graph as users run it (issue 14): several graphs at once with the same exported
+"""The SIL graph as users run it: several graphs at once with the same exported
 ROS_DOMAIN_ID, a foreign graph in the domain, Ctrl-C on `fahv sil`, and the graph started
 node by node with `ros2 run` after `source ros_ws/install/setup.bash`."""
 
@@ -19,6 +19,7 @@ from fahv.runs.bag import read_run, run_result_of
 from fahv.runs.latency import run_latencies
 from fahv.runs.sil import run_sil
 from fahv.runs.workspace import ROOT, ros_env
+from fahv.runs.writer import RunWriter
 
 pytestmark = pytest.mark.ros  # every test here runs the built node graph
 
@@ -194,7 +195,6 @@ def test_graph_started_node_by_node_with_ros2_run(design, quick_case, tmp_path):
 
 
 def test_ros2_standin_bag_info_is_fahv_inspect(design, tmp_path):
-    from fahv.runs.bag import RunWriter
 
     bag = tmp_path / "sim"
     with RunWriter(bag, {"case": "case1", "variant": "tube_mpc", "source": "simulate"}, 0.02) as w:

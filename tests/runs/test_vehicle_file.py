@@ -40,14 +40,24 @@ def test_vehicle_changes_design_hash_and_provenance(design, heavy_design, heavy,
     assert prov["vehicle_file"] == str(heavy.resolve())
     assert prov["vehicle_hash"] != design.summary["provenance"]["vehicle_hash"]
     assert design.summary["provenance"]["vehicle_file"] == ""  # the packaged file
-    # a saved design is stale for another vehicle, and for a changed case
+    # a saved design is stale for another vehicle and for a changed design part, not for
+    # a changed scenario
+    from fahv.design.pipeline import design_part
+
     save_design(design, tmp_path / "d")
     back = load_design(tmp_path / "d")
-    c = case_from_mapping(design.case, "quick.yaml")
+    c = design_part(case_from_mapping(design.case, "quick.yaml"))
     assert stale_reason(back, c, load_vehicle()) is None
-    assert stale_reason(back, c, load_vehicle(heavy)) == "the vehicle file changed since the design"
-    c2 = case_from_mapping({**design.case, "duration": 299.0}, "quick.yaml")
-    assert stale_reason(back, c2, load_vehicle()) == "the case file changed since the design"
+    assert stale_reason(back, c, load_vehicle(heavy)) == (
+        "the vehicle file changed since the design was made"
+    )
+    longer = design_part(case_from_mapping({**design.case, "duration": 299.0}, "quick.yaml"))
+    assert stale_reason(back, longer, load_vehicle()) is None  # a scenario key
+    margin = {**design.case["disturbance"], "margin": 1.3}
+    c2 = design_part(case_from_mapping({**design.case, "disturbance": margin}, "quick.yaml"))
+    assert stale_reason(back, c2, load_vehicle()) == (
+        "the design file quick.yaml changed since the design was made"
+    )
 
 
 def test_vehicle_changes_the_simulated_trajectory(design, heavy_design):

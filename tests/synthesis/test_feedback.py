@@ -8,6 +8,7 @@ import pytest
 
 from fahv.errors import DesignError
 from fahv.synthesis.feedback import box_tube, design_tube, verify_tube
+from fahv.synthesis.rpi_level import worst_level
 
 # two-vertex unstable discrete system, 2 states, 1 input
 A = np.array([[[1.05, 0.1], [0.0, 0.98]], [[1.02, 0.12], [0.02, 0.95]]])
@@ -167,8 +168,6 @@ def test_pulse_generators_enter_the_certificate(tube, pulse_tube):
     """With a pulse generator G the tube is RPI for W + {G' p, |p| <= 1}: the exact worst
     level over the vertices, the corners of W and p = +/-1 is at most 1, and its budget
     holds the pulse's multiplier; the tube designed for W alone is not RPI for it."""
-    from fahv.design.certificate import worst_level
-
     level, where = worst_level(A, B, pulse_tube.F, pulse_tube.N, W, pulse=PULSE)
     assert level <= 1.0 and level > 0.9  # the LMI leaves at most its strictness margin
     assert len(where[1]) == 3
@@ -208,8 +207,6 @@ def test_contained_points_shape_the_tube(tube):
     most its strictness margin inside for the one that binds; the free tube holds
     neither; the new Z is still RPI for W (verify_tube's blocks). Constraint generation
     over 200 points (5 active) gives the full solve's tube."""
-    from fahv.design.certificate import worst_level
-
     s = np.sqrt(np.diag(tube.N))
     pts = np.array([[0.0, 4.0 * s[1]], [2.0 * s[0], -2.0 * s[1]]])
     free = np.einsum("si,si->s", pts, np.linalg.solve(tube.N, pts.T).T)

@@ -179,7 +179,7 @@ def overrides(values: dict, design, variant: str) -> dict:
         perturbed, the others nominal) and ``x0`` of the initial trim;
         ``fault_injector``: kind, onset and size; ``nominal_trajectory``: the command
         and its initial state. Groups that are not dispersed are left out, so the
-        run keeps the case's values (its seeded parameter draw, fault, command,
+        run keeps the scenario's values (its seeded parameter draw, fault, command,
         start).
     """
     ov: dict = {}

@@ -3,7 +3,7 @@
 The engine is Dask distributed: by default an embedded ``LocalCluster`` (one
 single-threaded worker process per core, started and stopped here); with a scheduler
 address, an existing cluster (``dask scheduler`` and ``dask worker ADDRESS`` started
-elsewhere, docs/campaigns.md). There is no pool, queue or retry logic of our own:
+elsewhere, docs/guide/campaigns.md). There is no pool, queue or retry logic of our own:
 tasks go to ``Client.submit`` and come back through ``as_completed``; a worker that
 dies takes its task with it and the scheduler runs it again elsewhere; an exception
 inside a task is retried by Dask (``retries``).
@@ -24,6 +24,7 @@ the interruptions (only ``wall_s`` and ``session`` differ).
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os
@@ -38,8 +39,8 @@ import numpy as np
 from fahv.campaign import store
 from fahv.campaign.draws import _vehicle, draw, overrides, run_seed
 from fahv.campaign.spec import Campaign
-from fahv.design.artefacts import load_design, save_design, stale_reason
-from fahv.design.pipeline import run_design
+from fahv.design.artefacts import load_design, save_design
+from fahv.design.store import load_or_design
 from fahv.errors import CampaignError, DesignError
 from fahv.interrupt import deferred
 from fahv.loop.batch import simulate_batch
@@ -213,8 +214,8 @@ def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=p
     """Create or check the campaign folder and return its design.
 
     The design is the one saved in ``out_dir/design`` (a resumed campaign must keep
-    it), else a valid saved design of the case (``offline_design/artefacts/<case>``
-    next to the case file), else a new one (:func:`fahv.design.pipeline.run_design`).
+    it), else the stored, verified design of the campaign's scenario with the
+    scenario's arrays (:func:`fahv.design.store.load_or_design`; nothing is designed).
 
     Raises
     ------
@@ -239,22 +240,17 @@ def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=p
         )
     out.mkdir(parents=True, exist_ok=True)
     design = None
-    for cand in (out / "design", campaign.case.path.parent / "artefacts" / campaign.case.name):
-        try:
-            d = load_design(cand)
-        except DesignError:
-            continue
-        reason = stale_reason(d, campaign.case, veh)
-        if reason is None:
-            design = d
-            if cand != out / "design":
-                save_design(d, out / "design")
-            break
-        if cand == out / "design" and done:
-            raise CampaignError(f"{out}: {reason}; its runs cannot be completed, use another --out")
-    if design is None:
-        log(f"designing {campaign.case.name} for the campaign")
-        design = run_design(campaign.case, veh, log=lambda *_: None)
+    try:
+        design = load_design(out / "design")
+    except DesignError:
+        pass
+    same = design is not None and _same(design.case, campaign.case.data)
+    if design is not None and done and not same:
+        raise CampaignError(f"{out}: its design belongs to another scenario content; its runs "
+                            "cannot be completed, use another --out")  # fmt: skip
+    if not same:
+        design = load_or_design(campaign.case.path, None, veh.source_file if not veh.packaged
+                                else None, log=log, allow_uncertified=True)[1]  # fmt: skip
         save_design(design, out / "design")
     if man is None:
         store.write_manifest(
@@ -274,6 +270,13 @@ def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=p
     return design
 
 
+def _same(a: dict, b: dict) -> bool:
+    def norm(x):
+        return json.dumps(x, sort_keys=True, default=list)
+
+    return norm(a) == norm(b)
+
+
 def batches(campaign: Campaign, done: set) -> list[tuple[str, list[int]]]:
     """(variant, indices) of every batch still to run.
 
@@ -291,8 +294,33 @@ def batches(campaign: Campaign, done: set) -> list[tuple[str, list[int]]]:
     return out
 
 
-def _client(scheduler: str | None, workers: int | None):
-    """A Dask client: of the cluster at ``scheduler``, or of a new LocalCluster."""
+#: HTTP address of a LocalCluster without dashboard: a free port of this host. The
+#: scheduler always serves HTTP (health and metrics routes); on Dask's default port
+#: 8787 every campaign started beside another cluster would warn that it is in use.
+NO_DASHBOARD = "127.0.0.1:0"
+
+
+def dask_client(scheduler: str | None = None, workers: int | None = None,
+                dashboard: str | None = None):  # fmt: skip
+    """A Dask client: of the cluster at ``scheduler``, or of a new LocalCluster.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:8786``).
+    workers : int, optional
+        Worker processes of the LocalCluster (one thread each; default: the cores).
+    dashboard : str, optional
+        Address of the LocalCluster's dashboard (``":8787"``, ``"127.0.0.1:0"``);
+        default: no dashboard, the scheduler's HTTP server on :data:`NO_DASHBOARD`.
+        Ignored with ``scheduler`` (that cluster serves its own).
+
+    Returns
+    -------
+    (distributed.Client, distributed.LocalCluster or None)
+        The client and the cluster started here (None with ``scheduler``); the
+        caller closes both.
+    """
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
@@ -302,7 +330,8 @@ def _client(scheduler: str | None, workers: int | None):
         threads_per_worker=1,
         processes=True,
         silence_logs=logging.ERROR,
-        dashboard_address=None,
+        dashboard_address=dashboard or NO_DASHBOARD,
+        scheduler_kwargs={"dashboard": dashboard is not None},
     )
     return Client(cluster), cluster
 
@@ -317,8 +346,12 @@ def run_campaign(
     on_batch: Callable | None = None,
     vehicle=None,
     log=print,
+    dashboard: str | None = None,
 ) -> Outcome:
     """Run (or complete) a campaign on Dask, writing each finished batch to ``out_dir``.
+
+    One concept, kept whole: the Dask client's lifetime, the interruption and the
+    manifest update are one try/finally around the batches.
 
     Parameters
     ----------
@@ -339,7 +372,10 @@ def run_campaign(
         kill a worker).
     vehicle : fahv.model.vehicle.Vehicle, optional
     log : callable
-        Receives progress lines.
+        Receives progress lines (and the dashboard's address).
+    dashboard : str, optional
+        Address of the LocalCluster's Dask dashboard (e.g. ``":8787"``); default none
+        (:func:`dask_client`).
 
     Returns
     -------
@@ -363,7 +399,9 @@ def run_campaign(
         return res
     session = store.next_session(out)
     t0 = time.perf_counter()
-    client, cluster = _client(scheduler, workers)
+    client, cluster = dask_client(scheduler, workers, dashboard)
+    if cluster is not None and dashboard is not None:
+        log(f"Dask dashboard: {client.dashboard_link}")
     bar = tqdm(total=total, initial=len(done), unit="run", desc=campaign.name,
                disable=not progress, smoothing=0.05)  # fmt: skip
     futures = []

@@ -107,7 +107,7 @@ def verdicts(row: dict, req: dict, certified: dict | None = None) -> dict[str, b
     """Pass (True), fail (False) or not applicable (None) of each requirement for one run.
 
     ``certified`` is the design's certified nominal range (``certificate.certified_range``
-    of an eight-state design's summary, :func:`fahv.design.eight_state.certified_range`):
+    of an eight-state design's summary, :func:`fahv.design.domain.certified_range`):
     "nominal_range" checks the run's nominal against it (None without it, or for a run
     without a nominal). It is the tube's assumption, not one of the requirements "all"
     combines.
@@ -250,17 +250,57 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
     cols = scatter_columns(data)
     shown = cols + (["fault.kind"] if "fault.kind" in (rows[0] if rows else {}) else [])
     conf = req["confidence"]
-    lines = [
+    per_variant = {v: [r for r in rows if r["variant"] == v] for v in data["variants"]}
+    lines = header_lines(man, rows)
+    table, rate_lines = pass_rate_lines(data, per_variant, _certified_range(out))
+    lines += rate_lines
+    reasons = Counter(r["reason"].split(" at t =")[0] for r in rows if r["status"] != "ok")
+    if reasons:
+        lines += ["", "Failed runs by reason:", ""]
+        lines += [f"- {n} x {reason}" for reason, n in reasons.most_common()]
+    paired = []
+    for b in data["variants"][1:]:  # every other variant against the first, run by run
+        a = data["variants"][0]
+        res = paired_stats(rows, a, b, conf)
+        paired.append((a, b, res))
+        lines += [""] + paired_text(res, a, b)
+        if res["completion"]["both"] < res["completion"]["n"]:  # also with envelope exits
+            lines += [""] + paired_text(paired_stats(rows, a, b, conf, completed=False), a, b)
+    lines += worst_lines(data, per_variant, shown, worst)
+    figs: list[Path] = []
+    if figures and rows:
+        figs = draw_figures(out, data, per_variant, cols)
+        if paired:
+            import matplotlib
+
+            matplotlib.use("Agg")
+            import matplotlib.pyplot as plt
+
+            for a, b, res in paired:
+                figs += paired_figures(res, a, b, out / "report", plt)
+        lines += ["## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figs]
+    text = "\n".join(lines) + "\n"
+    rep = out / "report"
+    rep.mkdir(exist_ok=True)
+    (rep / "report.md").write_text(text)
+    return Report(text, table, figs, len(rows))
+
+
+def header_lines(man: dict, rows: list[dict]) -> list[str]:
+    """The report's title, dataset line and one line per part of the campaign run."""
+    data = man["campaign"]
+    conf = data["requirements"]["confidence"]
+    return [
         f"# Campaign {man['name']}",
         "",
         f"{len(rows)} of {data['runs'] * len(data['variants'])} runs in the dataset "
         f"({data['runs']} samples x variants {', '.join(data['variants'])}); seed "
-        f"{data['seed']}, case {man['case']['name']}, {man['duration']:g} s per run, design "
-        f"{man['design_hash']}. Wall time summed over the runs (worker time): "
+        f"{data['seed']}, scenario {man['case']['name']}, {man['duration']:g} s per run, "
+        f"design {man['design_hash']}. Wall time summed over the runs (worker time): "
         f"{sum(_num(r, 'wall_s') for r in rows):.0f} s.",
         "",
         *[
-            f"Session {x['session']} ({x['engine']}): {x['new']} runs ({x['failed']} failed) "
+            f"Part {x['session']} ({x['engine']}): {x['new']} runs ({x['failed']} failed) "
             f"in {x['wall_s']:.0f} s wall time"
             + (", interrupted" if x["interrupted"] else "")
             + (f", {x['errors']} tasks lost" if x["errors"] else "")
@@ -271,11 +311,22 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
         f"## Pass rate per requirement (failure-probability bound at C = {conf:g})",
         "",
     ]
+
+
+def pass_rate_lines(data: dict, per_variant: dict, certified) -> tuple[dict, list[str]]:
+    """The pass-rate table per requirement and variant, and the runs stuck off the command.
+
+    Returns
+    -------
+    table : dict
+        ``{variant: {requirement: (passed, runs, failure-probability bound)}}``.
+    lines : list of str
+    """
+    req = data["requirements"]
+    conf = req["confidence"]
     table: dict = {}
-    head = "| requirement | " + " | ".join(data["variants"]) + " |"
-    lines += [head, "|---|" + "---|" * len(data["variants"])]
-    per_variant = {v: [r for r in rows if r["variant"] == v] for v in data["variants"]}
-    certified = _certified_range(out)
+    lines = ["| requirement | " + " | ".join(data["variants"]) + " |",
+             "|---|" + "---|" * len(data["variants"])]  # fmt: skip
     verd = {v: [verdicts(r, req, certified) for r in rs] for v, rs in per_variant.items()}
     for key, desc in REQUIREMENTS:
         cells = []
@@ -301,19 +352,12 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
                 + (f": runs {', '.join(map(str, stuck[:20]))}" if stuck else "")
                 + ".",
             ]
-    reasons = Counter(r["reason"].split(" at t =")[0] for r in rows if r["status"] != "ok")
-    if reasons:
-        lines += ["", "Failed runs by reason:", ""]
-        lines += [f"- {n} x {reason}" for reason, n in reasons.most_common()]
-    paired = []
-    for b in data["variants"][1:]:  # every other variant against the first, run by run
-        a = data["variants"][0]
-        res = paired_stats(rows, a, b, conf)
-        paired.append((a, b, res))
-        lines += [""] + paired_text(res, a, b)
-        if res["completion"]["both"] < res["completion"]["n"]:  # also with envelope exits
-            lines += [""] + paired_text(paired_stats(rows, a, b, conf, completed=False), a, b)
-    lines += ["", f"## Worst {worst} runs per metric", ""]
+    return table, lines
+
+
+def worst_lines(data: dict, per_variant: dict, shown: list[str], worst: int) -> list[str]:
+    """The tables of the ``worst`` runs per metric and variant."""
+    lines = ["", f"## Worst {worst} runs per metric", ""]
     for key, label, worse, _ in WORST_METRICS:
         for v in data["variants"]:
             rs = [r for r in per_variant[v] if r.get(key) is not None]
@@ -332,23 +376,7 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
                 vals = " | ".join(_fmt(r.get(c)) for c in shown)
                 lines.append(f"| {r['index']} | {_fmt(worse(_num(r, key)))} | {vals} |")
             lines.append("")
-    figs: list[Path] = []
-    if figures and rows:
-        figs = draw_figures(out, data, per_variant, cols)
-        if paired:
-            import matplotlib
-
-            matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
-
-            for a, b, res in paired:
-                figs += paired_figures(res, a, b, out / "report", plt)
-        lines += ["## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figs]
-    text = "\n".join(lines) + "\n"
-    rep = out / "report"
-    rep.mkdir(exist_ok=True)
-    (rep / "report.md").write_text(text)
-    return Report(text, table, figs, len(rows))
+    return lines
 
 
 def draw_figures(out: Path, data: dict, per_variant: dict, cols: list[str]) -> list[Path]:

@@ -4,7 +4,7 @@ Run ``i`` of variant ``v`` is rebuilt from the campaign folder alone: the campai
 data in ``campaign.json`` gives its dispersed values (:func:`fahv.campaign.draws.draw`,
 a function of (seed, i)), ``design/`` the design it ran with. In process it goes
 through :func:`fahv.loop.simulate.simulate` with the run's overrides, recorded by
-:class:`fahv.runs.bag.RunWriter`; the batched simulator of the campaign gives the same
+:class:`fahv.runs.writer.RunWriter`; the batched simulator of the campaign gives the same
 bits, so the metrics equal the recorded row exactly. With ``sil=True`` the same
 parameters go through the ROS 2 node graph (:func:`fahv.runs.sil.run_sil`). The run
 file records the run's own values: its fault in the run metadata (``fault_*``), the
@@ -28,10 +28,11 @@ from fahv.campaign.draws import _vehicle, draw, overrides
 from fahv.design.artefacts import load_design
 from fahv.errors import CampaignError, RunError
 from fahv.loop.simulate import simulate, simulate_parameters
-from fahv.runs.bag import PARAMS, RunWriter, read_run, run_result_of, start_metadata
+from fahv.runs.bag import PARAMS, read_run, run_result_of, start_metadata
 from fahv.runs.metrics import metrics
 from fahv.runs.sil import recorder_metadata, run_graph, run_parameter_file, run_sil
 from fahv.runs.tools import run_vehicle
+from fahv.runs.writer import RunWriter
 
 
 @dataclass

@@ -1,13 +1,13 @@
-"""Campaign files: a case file, its dispersions, the variants, the requirements.
+"""Campaign files: a scenario, its dispersions, the variants, the requirements.
 
 Declared once in the configuration language (:mod:`fahv.config`), validated once by
 :func:`load_campaign`; every error names the file and the dotted key, e.g.
 ``mc.yaml: key 'dispersions.fault.loss' must be in [0, 1), got 1.2``. A range is a
 list ``[low, high]`` (uniform draw, ``low == high`` fixes the value); an absent range
-leaves the case's value. The generated key table is in docs/campaigns.md.
+leaves the scenario's value. The generated key table is in docs/reference/configuration.md.
 
 Checks beyond the field ranges (made here, with the case and the vehicle at hand):
-``low <= high``; the variants are among the case's; every fault kind drawn has its
+``low <= high``; the variants are among the scenario's; every fault kind drawn has its
 size and onset (from the campaign or the case); initial trims and commanded points
 stay inside the vehicle's flight envelope for every value of their ranges.
 """
@@ -23,7 +23,8 @@ from pathlib import Path
 from fahv.config import Check, Field, Section, validate
 from fahv.config.yamlio import load_yaml
 from fahv.control import VARIANTS
-from fahv.design.case import Case, load_case
+from fahv.design.case import Case
+from fahv.design.scenario import load_scenario
 from fahv.errors import CampaignError, CaseError
 from fahv.model.vehicle import load_vehicle
 from fahv.plant.faults import FAULTS
@@ -46,12 +47,15 @@ def _ordered(section: str, key: str) -> Check:
 
 
 def campaign_spec() -> Section:
-    """The campaign-file declaration (fault kinds and variants from their registries)."""
+    """The campaign-file declaration (fault kinds and variants from their registries).
+
+    One declaration, kept whole: the file's schema reads top to bottom as the file does.
+    """
     uncertainty = Section(
         "uncertainty",
         (
             Field("method", "str", "uniform in the box, its corners (index bits), a Latin "
-                  "hypercube over the campaign (scipy.stats.qmc), or none (the case's draw)",
+                  "hypercube over the campaign (scipy.stats.qmc), or none (the scenario's draw)",
                   choices=METHODS, default="uniform"),
             Field("scale", "float", "fraction of the sec. 5.1 uncertainty box", lo=0.0, hi=1.0,
                   default=1.0),
@@ -70,7 +74,7 @@ def campaign_spec() -> Section:
                    hi_open=True, equation="eq. (15)"),
             _range("bias_deg", "elevator bias range", "deg", lo=-30.0, hi=30.0),
         ),
-        "actuator fault of the plant (the design keeps the case's fault)",
+        "actuator fault of the plant (the design keeps the scenario's fault)",
         checks=(_ordered("fault", "onset"), _ordered("fault", "loss"),
                 _ordered("fault", "bias_deg")),
     )  # fmt: skip
@@ -116,14 +120,15 @@ def campaign_spec() -> Section:
         (
             Field("name", "str", "campaign name (default folder campaigns/<name>)"),
             Field("description", "str", "what the campaign is", default=""),
-            Field("case", "str", "case file, relative to the campaign file"),
+            Field("scenario", "str", "scenario file, relative to the campaign file (or a "
+                  "name in offline_design/scenarios/); fahv campaign --scenario overrides it"),
             Field("seed", "int", "campaign seed: run i draws from SeedSequence(seed, "
                   "spawn_key=(i, stream))", lo=0),
             Field("runs", "int", "number of dispersed samples (each run with every variant)",
                   lo=1, hi=1_000_000),
-            Field("variants", "strs", "variants run on every sample (among the case's)",
+            Field("variants", "strs", "variants run on every sample (among the scenario's)",
                   choices=VARIANTS.names),
-            Field("duration", "float", "simulated time of each run (0: the case's)", unit="s",
+            Field("duration", "float", "simulated time of each run (0: the scenario's)", unit="s",
                   lo=0.0, default=0.0),
             Field("batch_size", "int", "runs per Dask task (simulated together)", lo=1,
                   hi=10_000, default=50),
@@ -164,17 +169,17 @@ class Campaign:
 
     @property
     def duration(self) -> float:
-        """Simulated time of each run [s] (the case's when the file says 0)."""
+        """Simulated time of each run [s] (the scenario's when the file says 0)."""
         return float(self.data["duration"] or self.case["duration"])
 
     @property
     def warnings(self) -> list[str]:
         """What the campaign does that its author may not expect (``fahv campaign`` prints it).
 
-        Fault onsets drawn (or the case's onset) beyond the run's duration: those runs
+        Fault onsets drawn (or the scenario's onset) beyond the run's duration: those runs
         end before their fault, i.e. without one.
         """
-        out = []
+        out = self._beyond_design()
         f, cf, d = self.data["dispersions"]["fault"], self.case["fault"], self.duration
         kinds = f["kinds"] or [cf["kind"]]
         if all(k == "none" for k in kinds):
@@ -185,12 +190,54 @@ class Campaign:
             where = (
                 f"dispersions.fault.onset [{lo:g}, {hi:g}] s"
                 if f["onset"]
-                else f"the case's fault onset {lo:g} s"
+                else f"the scenario's fault onset {lo:g} s"
             )
             out.append(
                 f"{self.path}: {where} reaches beyond the run's duration {d:g} s: "
                 f"{100.0 * share:.0f} % of the runs end before their fault (no fault in them)"
             )
+        return out
+
+    def _beyond_design(self) -> list[str]:
+        """Draws beyond the fault range and nominal range the scenario's design certifies."""
+        out = []
+        rho_min = float(self.case["tube"]["rho_min"])
+        f = self.data["dispersions"]["fault"]
+        if "loss_of_effectiveness" in (f["kinds"] or [self.case["fault"]["kind"]]) and f["loss"]:
+            if f["loss"][1] > 1.0 - rho_min + 1e-12:
+                out.append(
+                    f"{self.path}: dispersions.fault.loss {list(f['loss'])} reaches beyond the "
+                    f"design's fault range (losses up to {100 * (1 - rho_min):.0f} %, "
+                    f"tube.rho_min {rho_min:g}): those runs are not covered by its certificate"
+                )
+        if self.case["tube"]["form"] == "eight_state":
+            out += self._beyond_nominal_range()
+        return out
+
+    def _beyond_nominal_range(self) -> list[str]:
+        """Initial points and commands drawn beyond the eight-state tube's nominal range."""
+        from fahv.design.domain import nominal_box
+
+        nominal, _ = nominal_box(self.case["eight_state"], load_vehicle().envelope)
+        lo, hi = nominal.lo[:2], nominal.hi[:2]
+        cmd, d = self.case["command"], self.data["dispersions"]
+        h0 = d["initial"]["h0"] or [cmd["h0"]] * 2
+        V0 = d["initial"]["V0"] or [cmd["V0"]] * 2
+        h_c = [h0[0] + d["command"]["dh"][0], h0[1] + d["command"]["dh"][1]] if d["command"][
+            "dh"] else [cmd["h_c"]] * 2  # fmt: skip
+        V_c = [V0[0] + d["command"]["dV"][0], V0[1] + d["command"]["dV"][1]] if d["command"][
+            "dV"] else [cmd["V_c"]] * 2  # fmt: skip
+        out = []
+        for what, (a, b), i, unit in (("initial h0", h0, 0, "ft"), ("initial V0", V0, 1, "ft/s"),
+                                      ("commanded h_c", h_c, 0, "ft"),
+                                      ("commanded V_c", V_c, 1, "ft/s")):  # fmt: skip
+            if min(a, b) < lo[i] - 1e-9 or max(a, b) > hi[i] + 1e-9:
+                out.append(
+                    f"{self.path}: the {what} drawn in [{min(a, b):g}, {max(a, b):g}] {unit} "
+                    f"reaches beyond the nominal range the design certifies, [{lo[i]:g}, "
+                    f"{hi[i]:g}] {unit}: such runs are not covered by its certificate (the QP "
+                    "keeps the set point on the range's edge)"
+                )
         return out
 
     def content_hash(self) -> str:
@@ -220,10 +267,12 @@ def check_campaign(data: dict, case: Case, source: str, vehicle=None) -> None:
     f, cf = data["dispersions"]["fault"], case["fault"]
     kinds = f["kinds"] or [cf["kind"]]
     if any(k != "none" for k in kinds) and not f["onset"] and not math.isfinite(cf["t_onset"]):
-        raise _fail(source, "dispersions.fault.onset", "is needed: the case's fault has no onset")
+        raise _fail(
+            source, "dispersions.fault.onset", "is needed: the scenario's fault has no onset"
+        )
     for kind, key in (("loss_of_effectiveness", "loss"), ("bias", "bias_deg")):
         if kind in kinds and not f[key] and cf["kind"] != kind:
-            msg = f"is needed for fault kind '{kind}' (the case's fault is '{cf['kind']}')"
+            msg = f"is needed for fault kind '{kind}' (the scenario's fault is '{cf['kind']}')"
             raise _fail(source, f"dispersions.fault.{key}", msg)
     env, cmd = veh.envelope, case["command"]
     init, dc = data["dispersions"]["initial"], data["dispersions"]["command"]
@@ -256,10 +305,10 @@ def campaign_from_mapping(data, source: str = "<mapping>", case: Case | None = N
     source : str
         Name used in messages.
     case : Case, optional
-        The case, when already loaded (otherwise read from ``data['case']`` relative
-        to ``base``).
+        The scenario's case, when already loaded (otherwise that of the scenario file
+        ``data['scenario']``, relative to ``base``).
     base : Path, optional
-        Folder the case path is relative to (the campaign file's folder).
+        Folder the scenario path is relative to (the campaign file's folder).
     vehicle : fahv.model.vehicle.Vehicle, optional
         For the envelope checks (the packaged vehicle by default).
 
@@ -267,22 +316,33 @@ def campaign_from_mapping(data, source: str = "<mapping>", case: Case | None = N
     ------
     CampaignError
         Naming the source and the dotted key (unknown key, out of range, wrong
-        type, missing, cross-check); a case file that does not load is reported under
-        the key ``case``.
+        type, missing, cross-check); a scenario that does not load is reported under
+        the key ``scenario``.
     """
     v = validate(campaign_spec(), data, source, CampaignError)
     if case is None:
-        path = Path(base or ".") / v.values["case"]
+        path = scenario_path(v.values["scenario"], base)
         try:
-            case = load_case(path)
+            case = load_scenario(path).case
         except CaseError as exc:
-            raise _fail(source, "case", f"names a case that does not load: {exc}") from None
+            raise _fail(source, "scenario", f"names a scenario that does not load: {exc}") from None
     check_campaign(v.values, case, source, vehicle)
     return Campaign(Path(source), v.values, case)
 
 
-def load_campaign(path: str | Path, vehicle=None) -> Campaign:
-    """Read and validate a campaign file (and its case file).
+def scenario_path(name: str, base: Path | None = None) -> Path:
+    """A campaign's scenario: a path relative to ``base``, or a name in scenarios/."""
+    p = Path(base or ".") / name
+    if not p.suffix and not p.is_file():
+        p = Path("offline_design") / "scenarios" / f"{name}.yaml"
+    return p
+
+
+def load_campaign(path: str | Path, vehicle=None, scenario: str | None = None) -> Campaign:
+    """Read and validate a campaign file (and its scenario file).
+
+    ``scenario`` (a path or a name in offline_design/scenarios/) replaces the file's
+    own ``scenario``: the same dispersions around another scenario or design.
 
     Raises
     ------
@@ -296,4 +356,9 @@ def load_campaign(path: str | Path, vehicle=None) -> Campaign:
         data = load_yaml(p.read_text())
     except Exception as exc:  # yaml errors carry the line number
         raise CampaignError(f"{p}: not a valid YAML file: {exc}") from None
+    if scenario is not None and isinstance(data, dict):
+        data = {
+            **data,
+            "scenario": str(Path(scenario).resolve()) if Path(scenario).suffix else scenario,
+        }
     return campaign_from_mapping(data, str(p), base=p.parent, vehicle=vehicle)

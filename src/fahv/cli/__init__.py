@@ -6,17 +6,19 @@ Subcommands::
     fahv tp        TP model transformation report (singular values, error)
     fahv figures   modelling figures (paper Fig. 2, 3, 4, 5, 8) as PNG
     fahv tube      tube feasibility study (W by source, F, Z, input room)
-    fahv design    offline design of a case file: certified artefacts + ROS parameters
-    fahv simulate  in-process closed loop of a case: metrics table per variant
-    fahv sil       the ROS 2 node graph of a case in lockstep, recorded to MCAP
+    fahv design    offline synthesis of a design file: certified artefacts
+    fahv verify    re-check every certificate of a stored design (no solver)
+    fahv simulate  in-process closed loop of a scenario: metrics table per variant
+    fahv sil       the ROS 2 node graph of a scenario in lockstep, recorded to MCAP
     fahv plot      paper-style figures of recorded runs, overlaid
     fahv paper-figures   Fig. 9-17 of the paper from Cases 1 and 2
-    fahv results   every variant of Cases 1 and 2: the README's results tables, reference
+    fahv results   every variant of Cases 1 and 2: the README's results table, reference
     fahv inspect   topics, metadata, step anomalies and metrics of a run
     fahv export    one CSV / Parquet table per topic, with units
     fahv compare   metrics of two runs side by side
     fahv replay    republish a run over DDS, e.g. into a fresh tube_mpc node
     fahv campaign  Monte Carlo campaign on Dask; campaign report DIR; campaign rerun DIR INDEX
+    fahv index     index of offline_design/ from the files' descriptions
 
 Every command that uses the vehicle takes ``--vehicle FILE``. Errors name the
 input at fault and exit with status 2 (bad input) or 1 (failure). Ctrl-C or SIGTERM
@@ -29,7 +31,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fahv.cli import campaign, design, inspect, modelling, run
+from fahv.cli import campaign, design, index, inspect, modelling, run
 from fahv.cli.common import stop_signals
 from fahv.errors import FahvError, RunInterrupted
 
@@ -42,7 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="fahv", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="command", required=True)
 
-    for group in (modelling, design, run, inspect, campaign):
+    for group in (modelling, design, run, inspect, campaign, index):
         group.add_parsers(sub)
     return ap
 

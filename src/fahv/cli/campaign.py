@@ -2,7 +2,8 @@
 
 ::
 
-    fahv campaign CAMPAIGN.yaml [--out DIR] [--scheduler ADDRESS] [--workers N] [--resume]
+    fahv campaign CAMPAIGN.yaml [--scenario S] [--out DIR] [--scheduler ADDRESS] [--workers N]
+                  [--resume] [--dashboard [ADDRESS]]
     fahv campaign report DIR [--no-figures]
     fahv campaign rerun DIR INDEX [--variant V] [--sil] [--out BAGS]
     fahv campaign rerun RUN [--sil] [--out BAGS]
@@ -36,7 +37,7 @@ def _err(line: str) -> None:
 def cmd_run(args) -> int:
     """Run (or ``--resume``) a campaign file; print the report's summary and path at the end."""
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    campaign = load_campaign(args.target)
+    campaign = load_campaign(args.target, scenario=args.scenario)
     for line in campaign.warnings:
         _err(f"warning: {line}")
     out = Path(args.out) if args.out else ROOT / "campaigns" / campaign.name
@@ -48,6 +49,7 @@ def cmd_run(args) -> int:
         resume=args.resume,
         progress=not args.quiet,
         log=_err,
+        dashboard=args.dashboard,
     )
     _err(
         f"campaign {campaign.name}: {res.new} runs this session ({res.failed} failed), "
@@ -153,7 +155,21 @@ def add_parsers(sub) -> None:
         default=None,
         help="LocalCluster worker processes (default: the cores)",
     )
+    p.add_argument(
+        "--scenario",
+        default=None,
+        help="run the campaign's dispersions around this scenario (file or name) "
+        "instead of the one the campaign file names",
+    )
     p.add_argument("--resume", action="store_true", help="complete the missing runs of DIR")
+    p.add_argument(
+        "--dashboard",
+        nargs="?",
+        const=":8787",
+        default=None,
+        metavar="ADDRESS",
+        help="serve the LocalCluster's Dask dashboard (default address :8787)",
+    )
     p.add_argument("--no-report", action="store_true", help="no report at the end")
     p.add_argument("--no-figures", action="store_true", help="report: tables only")
     p.add_argument("--variant", default=None, help="rerun: variant (default the first)")

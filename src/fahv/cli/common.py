@@ -9,7 +9,6 @@ import signal
 import sys
 import threading
 import warnings
-from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
@@ -42,22 +41,6 @@ def shape_arg(s: str) -> tuple[int, int]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected AxB (e.g. 4x5), got {s!r}") from None
     return a, b
-
-
-def artefact_dir(case, out, vehicle=None) -> Path:
-    """Artefact folder of a case and vehicle.
-
-    ``out`` if given; else ``offline_design/artefacts/<case name>`` for the packaged
-    vehicle and ``offline_design/artefacts/<case name>@<vehicle file stem>-<data hash>``
-    for another vehicle file, so designs for several vehicles do not overwrite each
-    other (a run without ``--vehicle`` keeps its design).
-    """
-    if out:
-        return Path(out)
-    name = case.name
-    if vehicle is not None and not vehicle.packaged:
-        name = f"{name}@{Path(vehicle.source_file).stem}-{vehicle.data_hash[:8]}"
-    return Path("offline_design") / "artefacts" / name
 
 
 def read_run_warned(path):

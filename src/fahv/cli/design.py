@@ -1,24 +1,27 @@
-"""``fahv design``: a case file to certified artefacts and the ROS 2 parameter file."""
+"""``fahv design`` (synthesis of a design file) and ``fahv verify`` (its re-check)."""
 
 from __future__ import annotations
 
 import sys
+import time
 import warnings
 from pathlib import Path
 
-import yaml
-
-from fahv.cli.common import add_vehicle_option, artefact_dir, progress, vehicle_of
-from fahv.design.artefacts import load_design, save_design, stale_reason
-from fahv.design.case import load_case
+from fahv.cli.common import add_vehicle_option, progress, vehicle_of
+from fahv.design.artefacts import save_design
+from fahv.design.case import load_design_file, read_yaml_file
 from fahv.design.pipeline import run_design
-from fahv.errors import DesignError
-from fahv.loop.params import node_parameters, parameter_file
-from fahv.model.vehicle import load_vehicle
+from fahv.design.scenario import load_scenario
+from fahv.design.store import design_dir, stored_design
+from fahv.design.verify import require_verified, verify
+from fahv.errors import CaseError, DesignError
 
 
 def design_case(case, vehicle, out_dir: Path, log=print):
-    """Design ``case`` for ``vehicle`` and save it with its ROS 2 parameter file.
+    """Design a design file's case for ``vehicle`` and store it with its certificate lines.
+
+    Writes ``design.npz``, ``design.json`` and ``certificate.txt`` (every line the
+    design printed) into ``out_dir`` atomically.
 
     Returns
     -------
@@ -30,71 +33,90 @@ def design_case(case, vehicle, out_dir: Path, log=print):
         If a certificate fails (nothing is written then).
     """
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+    lines: list[str] = []
+    t0 = time.monotonic()
+
+    def both(line: str) -> None:
+        lines.append(line)
+        log(f"[{time.monotonic() - t0:6.0f} s] {line}")
 
     def bar(it):
         return progress(it, desc="sample W", leave=False)
 
-    design = run_design(case, vehicle, progress=bar, log=log)
-    params = yaml.safe_dump(parameter_file(node_parameters(design)), sort_keys=False, width=120)
-    save_design(design, out_dir, {"params.yaml": params})
+    design = run_design(case, vehicle, progress=bar, log=both)
+    design.summary["design_time_s"] = round(time.monotonic() - t0, 1)  # not in the hash
+    save_design(design, out_dir, {"certificate.txt": "\n".join(lines) + "\n"})
     return design
 
 
 def cmd_design(args) -> int:
-    """Offline design of a case: print every certificate, write the artefacts."""
-    case = load_case(args.case)
+    """Offline synthesis of a design file: print every certificate, write the artefacts."""
+    case = load_design_file(args.design)
     vehicle = vehicle_of(args)
-    out = artefact_dir(case, args.out, vehicle)
+    out = design_dir(case.path, case.name, args.out, vehicle)
     design = design_case(case, vehicle, out)
     prov = design.summary["provenance"]
     print(
-        f"design hash {design.summary['design_hash']} (case {prov['case_hash']}, vehicle "
-        f"{prov['vehicle_file'] or 'packaged'} {prov['vehicle_hash']}, code {prov['code_hash']});"
-        f" artefacts written to {out}/"
+        f"design hash {design.summary['design_hash']} (design file {prov['design_file_hash']}, "
+        f"vehicle {prov['vehicle_file'] or 'packaged'} {prov['vehicle_hash']}, code "
+        f"{prov['code_hash']}); artefacts written to {out}/"
     )
     return 0
 
 
-def _stderr(line: str) -> None:
-    print(line, file=sys.stderr)
+def resolve_design_file(path: str | Path) -> Path:
+    """The design file of ``path``: a design file, a scenario file, or a design name.
 
-
-def load_or_design(case_path, design_dir, vehicle_file=None, log=_stderr):
-    """The valid design of a case file for a vehicle, designed first if missing or stale.
-
-    A saved design is reused only if its provenance matches the case content, the
-    vehicle file and the design code (:func:`fahv.design.artefacts.stale_reason`).
-
-    The design report goes to ``log`` (stderr by default, so that ``--json`` output
-    on stdout stays machine-readable).
-
-    Returns
-    -------
-    (Case, Design, Vehicle)
+    Raises
+    ------
+    CaseError
+        If ``path`` is none of them.
     """
-    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    case = load_case(case_path)
-    vehicle = load_vehicle(vehicle_file)
-    out = artefact_dir(case, design_dir, vehicle)
+    p = Path(path)
+    if not p.suffix:  # a name
+        for d in (Path("offline_design") / "designs", Path("offline_design") / "scenarios"):
+            if (d / f"{p}.yaml").is_file():
+                p = d / f"{p}.yaml"
+                break
+        else:
+            raise CaseError(f"no design or scenario named {path!r} in offline_design/")
+    data = read_yaml_file(p, "design or scenario file")
+    if isinstance(data, dict) and "design" in data and "design_step" not in data:
+        return load_scenario(p).design_file
+    return p
+
+
+def cmd_verify(args) -> int:
+    """Re-check every certificate of a stored design; exit 1 naming what fails."""
+    vehicle = vehicle_of(args)
+    design_file = resolve_design_file(args.design)
+    _, design, folder = stored_design(design_file, args.design_dir, vehicle)
+    print(f"design {design.summary.get('design_name', folder.name)} ({folder}), hash "
+          f"{design.summary['design_hash']}")  # fmt: skip
+    t0 = time.monotonic()
+    results = verify(design, vehicle)
     try:
-        design = load_design(out)
-        reason = stale_reason(design, case, vehicle)
+        require_verified(results, str(folder))
     except DesignError as exc:
-        reason = str(exc)
-    if reason is not None:
-        log(f"no valid design in {out} ({reason}); designing first")
-        design = design_case(case, vehicle, out, log=log)
-    return case, design, vehicle
+        print(f"fahv verify: {exc}", file=sys.stderr)
+        return 1
+    print(f"verified: {len(results)} certificates hold ({time.monotonic() - t0:.1f} s)")
+    return 0
 
 
 def add_parsers(sub) -> None:
     """Add the parsers of this command group."""
-    p = sub.add_parser("design", help="offline design of a case: artefacts + ROS parameters")
-    p.add_argument("case", help="case file, e.g. offline_design/case1.yaml")
+    p = sub.add_parser("design", help="offline synthesis of a design file: certified artefacts")
+    p.add_argument("design", help="design file, e.g. offline_design/designs/cm_certified.yaml")
     p.add_argument(
         "--out",
         default=None,
-        help="artefact folder (offline_design/artefacts/NAME, NAME@VEHICLE-HASH with --vehicle)",
+        help="artefact folder (default: beside the design file, named after it)",
     )
     add_vehicle_option(p)
     p.set_defaults(func=cmd_design)
+    p = sub.add_parser("verify", help="re-check every certificate of a stored design")
+    p.add_argument("design", help="design or scenario: a file, or a name in offline_design/")
+    p.add_argument("--design-dir", default=None, help="artefact folder of the stored design")
+    add_vehicle_option(p)
+    p.set_defaults(func=cmd_verify)

@@ -7,7 +7,7 @@ from pathlib import Path
 from fahv.cli.common import read_run_warned, to_json
 from fahv.errors import FahvError
 from fahv.runs.bag import bag_paths, run_result_of
-from fahv.runs.plots import GROUPS, plot_group
+from fahv.runs.plots import GROUPS, plot_group, run_labels
 from fahv.runs.tools import (
     compare,
     export_run,
@@ -60,16 +60,16 @@ def cmd_compare(args) -> int:
 
 def cmd_plot(args) -> int:
     """Paper-style figures of one or several recorded runs, overlaid."""
-    runs = []
+    recs, results = [], []
     for path in args.runs:
         rec = read_run_warned(path)
         run = run_result_of(rec)
         if run.t.size == 0:
             raise FahvError(f"{path}: no complete step of the loop topics to plot")
-        label = (
-            f"{rec.metadata.get('variant', Path(path).name)} ({rec.metadata.get('source', '?')})"
-        )
-        runs.append((label, run))
+        recs.append(rec)
+        results.append(run)
+    labels = run_labels(args.runs, [r.metadata.get("variant") for r in recs])
+    runs = list(zip(labels, results, strict=True))
     out = Path(args.out)
     for group in GROUPS:
         if group == "flexible_rates":

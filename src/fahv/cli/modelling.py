@@ -304,7 +304,7 @@ def add_parsers(sub) -> None:
     )
     p.add_argument(
         "--case",
-        default="offline_design/case1.yaml",
+        default="offline_design/scenarios/case1.yaml",
         help="case whose design effectiveness is the default of --rho-f",
     )
     p.add_argument("--samples-w", type=int, default=300, help="samples bounding W")

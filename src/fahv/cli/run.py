@@ -8,12 +8,13 @@ import warnings
 from pathlib import Path
 
 from fahv.cli.common import add_vehicle_option, progress, read_run_warned, to_json
-from fahv.cli.design import load_or_design
+from fahv.design.store import load_or_design
 from fahv.errors import FahvError, RunInterrupted
 from fahv.loop.graph import NODES, TOPICS, graph_nodes
 from fahv.loop.params import controller_node
 from fahv.loop.simulate import simulate
-from fahv.runs.bag import RunWriter, encode, read_run, run_result_of, stored_metadata
+from fahv.runs.bag import read_run, run_result_of, stored_metadata
+from fahv.runs.messages import encode
 from fahv.runs.metrics import metrics
 from fahv.runs.plots import paper_figures
 from fahv.runs.replay import run_replay
@@ -26,6 +27,7 @@ from fahv.runs.sil import (
 )
 from fahv.runs.tools import format_metrics
 from fahv.runs.workspace import ROOT
+from fahv.runs.writer import RunWriter
 
 
 class StepProgress:
@@ -42,7 +44,7 @@ class StepProgress:
         Label of the bar.
     n_steps : int
         Steps of the run.
-    writer : fahv.runs.bag.RunWriter, optional
+    writer : fahv.runs.writer.RunWriter, optional
         Receives every message.
     live : fahv.runs.live.LiveView, optional
         Serves every message (the same CDR bytes) to Foxglove.
@@ -78,9 +80,9 @@ class StepProgress:
 #: Cases of ``fahv results`` and ``fahv paper-figures``: Case 1 (certified), the paper's
 #: vertex design of Case 1 (the paper's law), Case 2.
 DEFAULT_CASES = (
-    "offline_design/case1.yaml",
-    "offline_design/case1_vertex.yaml",
-    "offline_design/case2.yaml",
+    "offline_design/scenarios/case1.yaml",
+    "offline_design/scenarios/case1_paper.yaml",
+    "offline_design/scenarios/case2.yaml",
 )
 
 
@@ -150,7 +152,9 @@ def cmd_simulate(args) -> int:
     """In-process closed loop of a case; records each variant to bags/, prints metrics."""
     import time
 
-    case, design, vehicle = load_or_design(args.case, args.design, args.vehicle)
+    case, design, vehicle = load_or_design(
+        args.case, args.design, args.vehicle, allow_uncertified=args.allow_uncertified
+    )
     variants = selected_variants(case, args.variant)
     limits = vehicle.limits
     table = {}
@@ -189,7 +193,9 @@ def _live_view(port: int | None, Ts: float):
 
 def cmd_sil(args) -> int:
     """Run a case through the ROS 2 node graph, recorded to MCAP; metrics of the run."""
-    case, design, vehicle = load_or_design(args.case, args.design, args.vehicle)
+    case, design, vehicle = load_or_design(
+        args.case, args.design, args.vehicle, allow_uncertified=args.allow_uncertified
+    )
     variant = args.variant or case["variants"][0]
     if args.write_params:
         return _write_params_only(args, design, variant)
@@ -324,6 +330,19 @@ def cmd_paper_figures(args) -> int:
     return 0
 
 
+def _add_design_options(p) -> None:
+    p.add_argument(
+        "--design",
+        default=None,
+        help="artefact folder of the stored design (default: beside its design file)",
+    )
+    p.add_argument(
+        "--allow-uncertified",
+        action="store_true",
+        help="run a scenario beyond the design's certified range, with a warning",
+    )
+
+
 def _add_live_option(p) -> None:
     from fahv.runs.live import DEFAULT_PORT
 
@@ -384,10 +403,15 @@ def cmd_results(args) -> int:
 
 
 def add_parsers(sub) -> None:
-    """Add the parsers of this command group."""
-    p = sub.add_parser("simulate", help="in-process closed loop of a case, metrics table")
-    p.add_argument("case", help="case file")
-    p.add_argument("--design", default=None, help="artefact folder (designed if missing)")
+    """Add the parsers of this command group.
+
+    One declaration, kept whole: the options of each command read as its usage.
+    """
+    p = sub.add_parser("simulate", help="in-process closed loop of a scenario, metrics table")
+    p.add_argument(
+        "case", metavar="scenario", help="scenario file, e.g. offline_design/scenarios/case1.yaml"
+    )
+    _add_design_options(p)
     p.add_argument(
         "--variant",
         nargs="+",
@@ -403,12 +427,12 @@ def add_parsers(sub) -> None:
     add_vehicle_option(p)
     p.set_defaults(func=cmd_simulate)
     p = sub.add_parser(
-        "sil", help="the ROS 2 node graph of a case in lockstep, recorded to bags/<run>/ (MCAP)"
+        "sil", help="the ROS 2 node graph of a scenario in lockstep, recorded to bags/<run>/ (MCAP)"
     )
-    p.add_argument("case", help="case file, e.g. offline_design/case1.yaml")
     p.add_argument(
-        "--design", default=None, help="artefact folder (default offline_design/artefacts/NAME)"
+        "case", metavar="scenario", help="scenario file, e.g. offline_design/scenarios/case1.yaml"
     )
+    _add_design_options(p)
     p.add_argument("--variant", default=None, help="variant (default: the case's first)")
     p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
     p.add_argument("--out", default=None, help="folder of the recorded runs (default bags/)")
@@ -464,7 +488,7 @@ def add_parsers(sub) -> None:
     p = sub.add_parser(
         "paper-figures",
         help="simulate Cases 1 and 2 (all variants, recorded; the paper's law on "
-        "case1_vertex) and write Fig. 9-17",
+        "case1_paper) and write Fig. 9-17",
     )
     p.add_argument(
         "--cases",
@@ -482,7 +506,7 @@ def add_parsers(sub) -> None:
         "results",
         help="every variant of Case 1 (certified and the paper's vertex design) and Case 2 "
         "in process: the README's results tables; write or check a metrics reference "
-        "(tests/data/results_reference.json holds case1_vertex's)",
+        "(tests/data/results_reference.json)",
     )
     p.add_argument(
         "--cases",

@@ -15,7 +15,7 @@ import os
 
 # isort: off
 from fahv.control import reference  # noqa: F401  (registry entries: governor, command)
-from fahv.control import nominal_mpc  # noqa: F401  (registry entry: mpc)
+from fahv.control.mpc import nominal_source  # noqa: F401  (registry entry: mpc)
 from fahv.control import tube_mpc  # noqa: F401  (registry entries)
 from fahv.control import rmpc  # noqa: F401  (registry entry)
 

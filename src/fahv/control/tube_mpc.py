@@ -1,7 +1,7 @@
 """Tube-MPC control laws: ancillary law eq. (36) / (54) around two kinds of nominal part.
 
 * ``tube_mpc`` (default): the nominal part is the online tracking MPC of
-  :mod:`fahv.control.nominal_mpc` (a QP in the nominal_trajectory node, on the
+  :mod:`fahv.control.mpc` (a QP in the nominal_trajectory node, on the
   asymmetric tightened input set, with a state-disturbance estimate).
 * ``tube_mpc_paper``: the paper's law as published, nominal u_n = K x_n with the offline
   K of LMIs (33)-(35) and the incremental reference governor
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from fahv.control.base import ControlLaw, LawStep, Variant, no_lmi, register_law
-from fahv.control.nominal_mpc import TrackingMPCNominal
+from fahv.control.mpc.nominal_source import TrackingMPCNominal
 from fahv.control.reference import ReferenceGovernor, mv, quad
 from fahv.lanes import Lanes
 from fahv.model.notch import DiscreteNotch, NotchFilter
@@ -119,7 +119,7 @@ class TubeMPCLaw(PaperTubeMPCLaw):
     """Tube-MPC with an online nominal tracking MPC (QP), eq. (36)/(54) as ancillary law.
 
     Same ancillary law u = u_r + u_n + tau F (x - x_r - x_n); the nominal part is
-    :class:`fahv.control.nominal_mpc.TrackingMPCNominal` (offline it re-checks the
+    :class:`fahv.control.mpc.nominal_source.TrackingMPCNominal` (offline it re-checks the
     terminal ingredients against the tightened limits u_lo, u_hi of eq. 30).
 
     With ``filter_nominal_q`` (case key ``tube.filter_nominal_q``) the error's pitch
@@ -129,10 +129,10 @@ class TubeMPCLaw(PaperTubeMPCLaw):
 
         e'_q = notch(q) - notch(q_r + q_n) = notch(q - q_r - q_n),
 
-    the loop the notch certificate covers (:func:`fahv.design.certificate.notch_tube`,
+    the loop the notch certificate covers (:func:`fahv.design.notch_loop.notch_tube`,
     xi = [e; chi]). Without the replica, e'_q would also carry (notch - 1)(q_r + q_n), a
     term of the nominal's manoeuvre neither W nor the filter's certificate holds
-    (docs/control_design.md, "The notch loop certified in its own states"). The 11-state
+    (docs/theory/notch.md, "The notch loop certified in its own states"). The 11-state
     ECM design feeds back the filter's states itself and is left as it is.
     """
 

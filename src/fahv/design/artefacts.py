@@ -1,9 +1,11 @@
-"""Design artefacts: the certified arrays of one case, their provenance, saving and loading.
+"""Design artefacts: the certified arrays of one design, their provenance, saving and loading.
 
-A design records where it came from (:func:`provenance`): the case content hash, the
-vehicle data file and its hash, and the hash of the library code the design depends
-on. :func:`stale_reason` compares a saved design with the current inputs, so a design
-whose case, vehicle file or code changed is redone, never reused.
+A design records where it came from (:func:`provenance`): the design file and its
+content hash, the vehicle data file and its hash, and the version and hash of the library
+code that made it. :func:`stale_reason` compares a stored design with its design file and
+vehicle, so a design whose inputs changed is refused (with the command that re-makes it),
+never used. Whether the current code still certifies a stored design is what
+``fahv verify`` re-checks (:mod:`fahv.design.verify`).
 """
 
 from __future__ import annotations
@@ -25,12 +27,13 @@ from fahv.model.vehicle import VehicleParams
 
 @dataclass
 class Design:
-    """Artefacts of one case (unscaled units unless stated).
+    """Artefacts of one design (unscaled units unless stated).
 
     Attributes
     ----------
     case : dict
-        The validated case data.
+        The validated design file data; for a run, the scenario's case
+        (:func:`fahv.design.scenario.scenario_design`).
     arrays : dict[str, ndarray]
         ``A``, ``B`` (R, n, n/m) discrete nominal vertices; ``h_grid``, ``V_grid``,
         ``W_h``, ``W_V`` TP weighting functions; ``Dx``, ``Du`` scales; ``w_max`` (n,)
@@ -56,7 +59,7 @@ class Design:
         return self.arrays["A"].shape[1]
 
     def content_hash(self) -> str:
-        """sha256 over the case data, the provenance and every array (16 hex characters)."""
+        """sha256 over the design data, the provenance and every array (16 hex characters)."""
         h = hashlib.sha256(json.dumps(self.case, sort_keys=True, default=str).encode())
         h.update(json.dumps(self.summary.get("provenance", {}), sort_keys=True).encode())
         for k in sorted(self.arrays):
@@ -115,13 +118,46 @@ def load_design(out_dir: str | Path) -> Design:
     except (OSError, ValueError, KeyError) as exc:
         raise DesignError(f"design artefacts in {out} are missing or unreadable: {exc}") from None
     design = Design(meta["case"], arrays, meta["summary"])
-    if design.content_hash() != meta["summary"].get("design_hash"):
+    # a run's design (a stored design with a scenario's arrays) keeps the stored design's
+    # hash as its identity and records its own content's beside it
+    expected = meta["summary"].get("content_hash", meta["summary"].get("design_hash"))
+    if design.content_hash() != expected:
         raise DesignError(f"design artefacts in {out} do not match their hash: re-run fahv design")
     return design
 
 
 #: Library packages a design depends on (their source is hashed into the provenance).
 DESIGN_PACKAGES = ("config", "synthesis", "model", "plant", "control", "design")
+
+
+def save_arrays(arrays: dict, path: str | Path) -> Path:
+    """Write ``{name: array}`` to ``path`` (.npz) atomically (a temporary file renamed)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".npz", dir=path.parent)
+    os.close(fd)
+    try:
+        np.savez(tmp, **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def load_arrays(path: str | Path) -> dict:
+    """The arrays of a .npz file written by :func:`save_arrays`.
+
+    Raises
+    ------
+    DesignError
+        If the file is missing or unreadable (naming it).
+    """
+    try:
+        with np.load(path) as z:
+            return {k: z[k] for k in z.files}
+    except (OSError, ValueError) as exc:
+        raise DesignError(f"{path}: missing or unreadable arrays: {exc}") from None
 
 
 def code_hash() -> str:
@@ -135,11 +171,12 @@ def code_hash() -> str:
 
 
 def provenance(case, vehicle) -> dict:
-    """Where a design comes from: case hash, vehicle file and hash, code version and hash.
+    """Where a design comes from: design file and hash, vehicle file and hash, code.
 
     Parameters
     ----------
     case : fahv.design.case.Case
+        The validated design file.
     vehicle : fahv.model.vehicle.Vehicle
         The vehicle the design is made for (its ``source_file`` is recorded).
     """
@@ -147,8 +184,8 @@ def provenance(case, vehicle) -> dict:
 
     vfile = "" if vehicle.packaged else str(Path(vehicle.source_file).resolve())
     return {
-        "case_file": str(case.path),
-        "case_hash": case.content_hash(),
+        "design_file": str(case.path),
+        "design_file_hash": case.content_hash(),
         "vehicle_file": vfile,
         "vehicle_name": vehicle.name,
         "vehicle_hash": vehicle.data_hash,
@@ -159,22 +196,26 @@ def provenance(case, vehicle) -> dict:
 
 
 def stale_reason(design: Design, case, vehicle) -> str | None:
-    """Why a saved design cannot be reused for (case, vehicle); None if it can.
+    """Why a stored design does not belong to (design file, vehicle); None if it does.
 
-    Compares the case hash, the vehicle file hash and the code hash of the design's
-    provenance with the current ones.
+    Compares the design file's content hash and the vehicle file's hash with those in the
+    design's provenance. A change of the library code is not a reason by itself: ``fahv
+    verify`` re-checks every certificate of the stored arrays with the current code.
+
+    Parameters
+    ----------
+    design : Design
+    case : fahv.design.case.Case
+        The validated design file.
+    vehicle : fahv.model.vehicle.Vehicle
     """
     old = design.summary.get("provenance")
     if not old:
         return "the design has no provenance record"
-    new = provenance(case, vehicle)
-    for key, what in (
-        ("case_hash", "case file"),
-        ("vehicle_hash", "vehicle file"),
-        ("code_hash", "design code"),
-    ):
-        if old.get(key) != new[key]:
-            return f"the {what} changed since the design"
+    if old.get("design_file_hash") != case.content_hash():
+        return f"the design file {case.path} changed since the design was made"
+    if old.get("vehicle_hash") != vehicle.data_hash:
+        return "the vehicle file changed since the design was made"
     return None
 
 

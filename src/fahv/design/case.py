@@ -1,14 +1,18 @@
-"""Case files (``offline_design/*.yaml``): the scenario and design choices of one case.
+"""Design, scenario and case schemas: what a design certifies and what a scenario flies.
 
-The schema is declared once in the configuration language (:mod:`fahv.config`):
-:func:`case_spec` assembles it from the fields below, the fault kinds of
-:data:`fahv.plant.faults.FAULTS` and the sections of the control laws of
-:data:`fahv.control.LAWS` (a law's section is required only when a listed variant
-uses the law). The physics and the scenario (Ts, duration, command, fault,
-uncertainty, notch, design model) must be given; numerical knobs (sample counts,
-seeds, margins, trim grid, LMI factors) have defaults, and the defaults a case used
-are reported by the design. The node parameters of the SIL graph reuse the same
-fields (:mod:`fahv.loop.params`), so a range is written once.
+A **design file** (:func:`design_spec`, ``offline_design/designs/<name>.yaml``) holds what
+``fahv design`` synthesises and certifies: design model, uncertainty box, fault range,
+tube, nominal MPC, notch and baseline settings. A **scenario file**
+(:func:`scenario_spec`, ``offline_design/scenarios/<name>.yaml``) names a design and holds
+one thing to fly on it: command, fault instance, simulated vehicle draw, duration,
+variants. The **case** (:func:`case_spec`) is the two together, what the loop runs on.
+
+Each schema is declared once in the configuration language (:mod:`fahv.config`), with
+the fault kinds of :data:`fahv.plant.faults.FAULTS` and the sections of the control laws
+of :data:`fahv.control.LAWS` (a law's section is required only when a listed variant
+uses the law). Numerical knobs (sample counts, seeds, margins, trim grid, LMI factors)
+have defaults, and the defaults a design used are reported by it. The node parameters of
+the SIL graph reuse the same fields (:mod:`fahv.loop.params`), so a range is written once.
 
 Loading fails with :class:`fahv.errors.CaseError` naming the file and the dotted key.
 """
@@ -68,9 +72,9 @@ def _eight_state(root) -> bool:
     return lookup(root, "tube.form") == "eight_state"
 
 
-#: The eight-state tube (:mod:`fahv.design.eight_state`): vertex data, the nominal box
+#: The eight-state tube (:mod:`fahv.design.tube_set_design`): vertex data, the nominal box
 #: (the ranges of the nominal the certificate covers), the scheduling box beyond it and
-#: the W_8-Z_8 iteration. Defaults: the pair of docs/control_design.md.
+#: the W_8-Z_8 iteration. Defaults: the pair of docs/theory/certificate.md.
 EIGHT_STATE = (
     Field("k", "int", "parameter directions the vertices carry (64 box corners x 2^k x 2 "
           "rho_f vertices)", lo=1, hi=8, default=5),
@@ -109,13 +113,13 @@ EIGHT_STATE = (
           "the requirement follows from the pair with the QP's rows", default=False),
     Field("onset_in_tube", "float", "kappa: the tube LMI makes Z_8 hold every first jump "
           "J / rho_min of the design's loss 1 - rho_min over the scheduling box (its 64 x "
-          "2^P corners and 1024 interior points) in kappa Z_8, so that item 3's onset bound "
-          "starts from room along the elevator's column (docs/control_design.md, 'A tube "
+          "2^P corners and 1024 interior points) in kappa Z_8, so that the onset bound "
+          "starts from room along the elevator's column (docs/theory/certificate.md, 'A tube "
           "shaped for the onset's jump'); 0: not imposed", lo=0.0, default=0.0),
     Field("notch_gain", "str", "gain of the tube variants that run through the certified "
           "notch (tube.filter_nominal_q): the pair's F_8 ('tube') or a gain designed for the "
           "loop with the filter's states, certified with the pair's Z_8 and tightening and "
-          "W_8 re-bounded over its own set ('designed'; docs/control_design.md)",
+          "W_8 re-bounded over its own set ('designed'; docs/theory/certificate.md)",
           choices=("tube", "designed"), default="tube"),
     Field("notch_continuation", "floats", "notch pole dampings eps_p the designed gain "
           "passes through before notch.eps_p, increasing (the first from F_8's ellipsoid)",
@@ -174,105 +178,202 @@ def fault_section() -> Section:
     return Section("fault", (FAULT_KIND, T_ONSET, *fault_fields()), "actuator fault (eq. 15 ...)")
 
 
-def case_spec() -> Section:
-    """The whole case-file declaration, with the registered fault kinds and laws."""
-    law_sections = tuple(
+#: The design step: the design point where the flexible modes are linearised (h0, V0) and
+#: the reference step (to h_c, V_c) that sizes the nominal ellipsoid E(Q) (eq. 33) and the
+#: baseline's ellipsoids. A scenario may fly any other command inside the certified range.
+DESIGN_STEP = (
+    Field("h0", "float", "design point altitude (flexible modes linearised here)", unit="ft",
+          lo=0.0, hi=2e5),
+    Field("V0", "float", "design point velocity", unit="ft/s", lo=0.0, hi=2e4),
+    Field("h_c", "float", "altitude of the reference step that sizes E(Q)", unit="ft",
+          lo=0.0, hi=2e5, equation="eq. (33)"),
+    Field("V_c", "float", "velocity of the reference step that sizes E(Q)", unit="ft/s",
+          lo=0.0, hi=2e4, equation="eq. (33)"),
+)  # fmt: skip
+
+#: Top-level keys a scenario sets; everything else of a case comes from its design.
+SCENARIO_KEYS = ("name", "description", "command", "fault", "uncertainty", "duration", "variants")
+
+
+def _law_sections() -> tuple:
+    return tuple(
         cls.section
         for _, cls in (*NOMINAL_SOURCES.items(), *LAWS.items())
         if cls.section is not None
     )
+
+
+def _design_items() -> tuple:
+    """Entries of a design that a scenario does not change (validated in both specs)."""
+    return (
+        Field("design_model", "str", "LPV design model: CM (Case 1) or codesigned ECM "
+              "(Case 2)", choices=("cm", "ecm"), equation="eq. (1-3) / (40)"),
+        Field("vertices", "ints", "TP vertices of the design model (h, V)", lo=1, length=2,
+              equation="eq. (11)"),
+        Field("samples", "ints", "TP sampling grid over the envelope (h, V)", lo=4,
+              length=2, default=(21, 21), equation="eq. (11)"),
+        TS,
+        PLANT_SUBSTEPS,
+        Field("trim_grid", "ints", "trim map grid (h, V), bicubic interpolation", lo=4,
+              length=2, default=(13, 13)),
+        Section("notch", NOTCH, "notch filter on q", checks=(
+            Check("omega_z", lambda r: r["notch"]["omega_z"] < math.pi / r["Ts"],
+                  "must be below the Nyquist frequency pi/Ts"),
+            Check("omega_p", lambda r: r["notch"]["omega_p"] < math.pi / r["Ts"],
+                  "must be below the Nyquist frequency pi/Ts"),
+        )),
+        Section("disturbance", (
+            Field("samples", "int", "samples bounding W", lo=10, default=300,
+                  equation="eq. (13-19)"),
+            Field("seed", "int", "seed of the W samples", lo=0, default=0),
+            Field("margin", "float", "factor on the sampled W", lo=1.0, default=1.2),
+            Field("constant", "str", "constant part of the parameter error: in W "
+                  "(bounded, the paper) or left to the online estimate of tube_mpc "
+                  "(estimated)", choices=("bounded", "estimated"), default="estimated",
+                  equation="eq. (13)"),
+        ), "disturbance set W by sampling"),
+        Section("tube", (
+            Field("lam", "floats", "contraction factors tried in the tube LMI", lo=0.0,
+                  hi=1.0, lo_open=True, hi_open=True, default=(0.98, 0.99, 0.995),
+                  equation="LMI (24)"),
+            Field("tau", "float", "adjustable factor tau (1: eq. 36)", lo=0.0, hi=1.0,
+                  lo_open=True, default=1.0, equation="eq. (53-54)"),
+            Field("rho_min", "float", "smallest elevator effectiveness the tube covers "
+                  "(the fault range of the design: every loss up to 1 - rho_min)", lo=0.0,
+                  hi=1.0, lo_open=True, default=1.0, equation="eq. (15)"),
+            Field("form", "str", "the tube the law runs on: 'vertices', Z over the TP "
+                  "vertices for the sampled W (the paper), or 'eight_state', Z_8 along "
+                  "the nominal on the eight states after h with |e_h| bounded by the "
+                  "nominal's altitude reset, W_8 bounded over its own domain "
+                  "(section eight_state)",
+                  choices=TUBE_FORMS, default="vertices", equation="LMI (24)"),
+            Field("filter_nominal_q", "bool", "law tube_mpc with the notch on: the "
+                  "error's q is q' - notch(q_r + q_n) = notch(q - q_r - q_n), the loop "
+                  "the design certifies in its own states (true), or q' - q_r - q_n as "
+                  "in the paper (false: only the loop's stability is checked)",
+                  default=False, equation="eq. (36), (38)"),
+        ), "tube: F and Z"),
+        Section("eight_state", EIGHT_STATE, "the eight-state tube along the nominal "
+                "(tube.form eight_state): its vertices, nominal box and closure",
+                when=_eight_state, when_text="tube.form is eight_state",
+                checks=EIGHT_STATE_CHECKS),
+        Section("certificate", (
+            Field("schedules", "int", "scheduling points of the domain check of W: 0 "
+                  "skips it, 1 the envelope centre, 3 centre and two opposite corners, "
+                  "9 a 3 x 3 grid", lo=0, hi=9, default=3),
+        ), "the tube certificate checked over its own domain",
+            checks=(Check("schedules", lambda r: r["certificate"]["schedules"] in (0, 1, 3, 9),
+                          "must be 0, 1, 3 or 9"),)),
+        Section("nominal", (
+            Field("lam", "float", "decay factor of (34')", lo=0.0, hi=1.0, lo_open=True,
+                  hi_open=True, default=0.9995, equation="LMI (34)"),
+            Field("level_max", "float", "governor bound on x_n' Q^-1 x_n", lo=0.0, hi=1.0,
+                  lo_open=True, default=0.999),
+        ), "nominal gain K and its ellipsoid"),
+        *_law_sections(),
+    )  # fmt: skip
+
+
+def _design_checks() -> tuple:
+    return (
+        Check("notch.enabled", lambda r: r["design_model"] != "ecm" or r["notch"]["enabled"],
+              "must be true for design_model ecm"),
+        Check("variants", lambda r: r["design_model"] != "ecm"
+              or set(r["variants"]) <= {"tube_mpc"}, "an ECM design runs only 'tube_mpc'"),
+        Check("tube.form", _eight_state_needs, "eight_state needs design_model cm "
+              "and the loop it is closed for: mpc.nominal_model cm, mpc.h_reset "
+              "true, mpc.est_tau > 0, 0 < mpc.att_max <= eight_state.attitude"),
+    )  # fmt: skip
+
+
+def _variants(what: str) -> Field:
+    return Field("variants", "strs", what, choices=VARIANTS.names)
+
+
+def _command_section() -> Section:
+    return Section("command", COMMAND, "altitude and velocity command (sec. 5.1)", checks=(
+        Check("t_ramp", lambda r: r["command"]["kind"] != "ramp"
+              or r["command"]["t_ramp"] > 0.0, "must be > 0 for a ramp"),
+    ))  # fmt: skip
+
+
+def case_spec() -> Section:
+    """The whole case: a design's entries with one scenario's (what the loop runs on).
+
+    A case is never written by hand: :func:`fahv.design.scenario.load_scenario` forms it
+    from a scenario file and the design it names, and validates it against this spec.
+    """
     return Section(
         "",
         (
-            Field("name", "str", "case name (artefact folder and run names)"),
-            Field("description", "str", "what the case is", default=""),
-            Field("design_model", "str", "LPV design model: CM (Case 1) or codesigned ECM "
-                  "(Case 2)", choices=("cm", "ecm"), equation="eq. (1-3) / (40)"),
-            Field("vertices", "ints", "TP vertices of the design model (h, V)", lo=1, length=2,
-                  equation="eq. (11)"),
-            Field("samples", "ints", "TP sampling grid over the envelope (h, V)", lo=4,
-                  length=2, default=(21, 21), equation="eq. (11)"),
-            TS,
+            Field("name", "str", "scenario name (run names)"),
+            Field("description", "str", "what the scenario is", default=""),
+            *_design_items(),
             DURATION,
-            PLANT_SUBSTEPS,
-            Field("trim_grid", "ints", "trim map grid (h, V), bicubic interpolation", lo=4,
-                  length=2, default=(13, 13)),
-            Section("notch", NOTCH, "notch filter on q", checks=(
-                Check("omega_z", lambda r: r["notch"]["omega_z"] < math.pi / r["Ts"],
-                      "must be below the Nyquist frequency pi/Ts"),
-                Check("omega_p", lambda r: r["notch"]["omega_p"] < math.pi / r["Ts"],
-                      "must be below the Nyquist frequency pi/Ts"),
-            )),
-            Section("command", COMMAND, "altitude and velocity command (sec. 5.1)", checks=(
-                Check("t_ramp", lambda r: r["command"]["kind"] != "ramp"
-                      or r["command"]["t_ramp"] > 0.0, "must be > 0 for a ramp"),
-            )),
+            _command_section(),
             fault_section(),
             Section("uncertainty", UNCERTAINTY, "plant parameters p (1 + s_p scale rel_p)"),
-            Section("disturbance", (
-                Field("samples", "int", "samples bounding W", lo=10, default=300,
-                      equation="eq. (13-19)"),
-                Field("seed", "int", "seed of the W samples", lo=0, default=0),
-                Field("margin", "float", "factor on the sampled W", lo=1.0, default=1.2),
-                Field("constant", "str", "constant part of the parameter error: in W "
-                      "(bounded, the paper) or left to the online estimate of tube_mpc "
-                      "(estimated)", choices=("bounded", "estimated"), default="estimated",
-                      equation="eq. (13)"),
-            ), "disturbance set W by sampling"),
-            Section("tube", (
-                Field("lam", "floats", "contraction factors tried in the tube LMI", lo=0.0,
-                      hi=1.0, lo_open=True, hi_open=True, default=(0.98, 0.99, 0.995),
-                      equation="LMI (24)"),
-                Field("tau", "float", "adjustable factor tau (1: eq. 36)", lo=0.0, hi=1.0,
-                      lo_open=True, default=1.0, equation="eq. (53-54)"),
-                Field("rho_min", "float", "smallest elevator effectiveness the tube covers "
-                      "(fault vertices, with the case fault's if smaller)", lo=0.0, hi=1.0,
-                      lo_open=True, default=1.0, equation="eq. (15)"),
-                Field("form", "str", "the tube the law runs on: 'vertices', Z over the TP "
-                      "vertices for the sampled W (the paper), or 'eight_state', Z_8 along "
-                      "the nominal on the eight states after h with |e_h| bounded by the "
-                      "nominal's altitude reset, W_8 bounded over its own domain "
-                      "(section eight_state; docs/control_design.md)",
-                      choices=TUBE_FORMS, default="vertices", equation="LMI (24)"),
-                Field("filter_nominal_q", "bool", "law tube_mpc with the notch on: the "
-                      "error's q is q' - notch(q_r + q_n) = notch(q - q_r - q_n), the loop "
-                      "the design certifies in its own states (true), or q' - q_r - q_n as "
-                      "in the paper (false: only the loop's stability is checked)",
-                      default=False, equation="eq. (36), (38)"),
-            ), "tube: F and Z"),
-            Section("eight_state", EIGHT_STATE, "the eight-state tube along the nominal "
-                    "(tube.form eight_state): its vertices, nominal box and closure",
-                    when=_eight_state, when_text="tube.form is eight_state",
-                    checks=EIGHT_STATE_CHECKS),
-            Section("certificate", (
-                Field("schedules", "int", "scheduling points of the domain check of W: 0 "
-                      "skips it, 1 the envelope centre, 3 centre and two opposite corners, "
-                      "9 a 3 x 3 grid", lo=0, hi=9, default=3),
-            ), "the tube certificate checked over its own domain (docs/control_design.md)",
-                checks=(Check("schedules", lambda r: r["certificate"]["schedules"] in (0, 1, 3, 9),
-                              "must be 0, 1, 3 or 9"),)),
-            Section("nominal", (
-                Field("lam", "float", "decay factor of (34')", lo=0.0, hi=1.0, lo_open=True,
-                      hi_open=True, default=0.9995, equation="LMI (34)"),
-                Field("level_max", "float", "governor bound on x_n' Q^-1 x_n", lo=0.0, hi=1.0,
-                      lo_open=True, default=0.999),
-            ), "nominal gain K and its ellipsoid"),
-            *law_sections,
-            Field("variants", "strs", "variants to run (law + notch setting)",
-                  choices=VARIANTS.names),
+            _variants("variants to run (law + notch setting)"),
         ),
-        "case file",
+        "case",
         checks=(
             Check("duration", lambda r: r["duration"] >= 10 * r["Ts"], "must be >= 10 Ts"),
-            Check("notch.enabled", lambda r: r["design_model"] != "ecm" or r["notch"]["enabled"],
-                  "must be true for design_model ecm"),
-            Check("variants", lambda r: r["design_model"] != "ecm"
-                  or set(r["variants"]) <= {"tube_mpc"}, "an ECM case runs only 'tube_mpc'"),
-            Check("tube.form", _eight_state_needs, "eight_state needs design_model cm "
-                  "and the loop it is closed for: mpc.nominal_model cm, mpc.h_reset "
-                  "true, mpc.est_tau > 0, 0 < mpc.att_max <= eight_state.attitude"),
+            *_design_checks(),
         ),
-    )  # fmt: skip
+    )
+
+
+def design_spec() -> Section:
+    """A design file (``offline_design/designs/<name>.yaml``): what ``fahv design`` certifies.
+
+    The vehicle's envelope and uncertainty box (``uncertainty.scale``), the fault range
+    (``tube.rho_min``), the design model, tube, nominal MPC, notch and baseline settings,
+    the design step, and the variants whose offline parts it prepares. Nothing of a
+    scenario (command, fault instance, vehicle draw, duration) enters it.
+    """
+    return Section(
+        "",
+        (
+            Field("name", "str", "design name (its artefact folder)"),
+            Field("description", "str", "what the design is and certifies", default=""),
+            *_design_items(),
+            Section("design_step", DESIGN_STEP, "design point and reference step"),
+            Section(
+                "uncertainty",
+                (UNCERTAINTY[1],),
+                "the uncertainty box the design covers: this fraction of the sec. 5.1 box",
+            ),
+            _variants("variants whose offline parts the design prepares"),
+        ),
+        "design file",
+        checks=_design_checks(),
+    )
+
+
+def scenario_spec() -> Section:
+    """A scenario file (``offline_design/scenarios/<name>.yaml``): one thing to fly on a design."""
+    return Section(
+        "",
+        (
+            Field("name", "str", "scenario name (run names)"),
+            Field("description", "str", "what the scenario is", default=""),
+            Field(
+                "design",
+                "str",
+                "name of the design it runs on (offline_design/designs/<design>.yaml)",
+            ),
+            DURATION,
+            _command_section(),
+            fault_section(),
+            Section(
+                "uncertainty",
+                UNCERTAINTY,
+                "the simulated vehicle: plant parameters p (1 + s_p scale rel_p), s_p ~ U(-1, 1)",
+            ),
+            _variants("variants to run (a subset of the design's; empty: the design's)"),
+        ),
+        "scenario file",
+    )
 
 
 @dataclass(frozen=True)
@@ -299,7 +400,7 @@ class Case:
 
     @property
     def name(self) -> str:
-        """Case name (used for artefact folders and run files)."""
+        """Name of the design, scenario or case (artefact folders and run files)."""
         return self.data["name"]
 
     def content_hash(self) -> str:
@@ -308,31 +409,61 @@ class Case:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def case_from_mapping(data: Any, path: str = "<mapping>") -> Case:
-    """Validate a case mapping against :func:`case_spec` and return a :class:`Case`.
+def case_from_mapping(data: Any, path: str = "<mapping>", spec: Section | None = None) -> Case:
+    """Validate a mapping against ``spec`` (:func:`case_spec` by default) as a :class:`Case`.
 
     Raises
     ------
     CaseError
         Naming the file, the dotted key and the value at fault.
     """
-    v = validate(case_spec(), data, path, CaseError)
+    v = validate(case_spec() if spec is None else spec, data, path, CaseError)
     return Case(Path(path), v.values, v.defaults_used)
 
 
-def load_case(path: str | Path) -> Case:
-    """Read and validate a case file.
+def read_yaml_file(path: str | Path, what: str) -> Any:
+    """The YAML content of a file.
+
+    Raises
+    ------
+    CaseError
+        If the file is missing or is not YAML (naming the file, ``what`` it should be).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise CaseError(f"{what} not found: {p}")
+    try:
+        return load_yaml(p.read_text())
+    except Exception as exc:  # yaml errors carry the line number
+        raise CaseError(f"{p}: not a valid YAML file: {exc}") from None
+
+
+def load_design_file(path: str | Path) -> Case:
+    """Read and validate a design file (:func:`design_spec`).
 
     Raises
     ------
     CaseError
         If the file is missing, is not YAML, or does not validate (naming the key).
     """
-    p = Path(path)
-    if not p.is_file():
-        raise CaseError(f"case file not found: {p}")
-    try:
-        data = load_yaml(p.read_text())
-    except Exception as exc:  # yaml errors carry the line number
-        raise CaseError(f"{p}: not a valid YAML file: {exc}") from None
-    return case_from_mapping(data, str(p))
+    return case_from_mapping(read_yaml_file(path, "design file"), str(path), design_spec())
+
+
+def load_case(path: str | Path) -> Case:
+    """The whole case of a scenario file: its design's entries with its own.
+
+    See :func:`fahv.design.scenario.load_scenario`.
+
+    Raises
+    ------
+    CaseError
+        If the scenario or its design file is missing or does not validate.
+    """
+    from fahv.design.scenario import load_scenario
+
+    return load_scenario(path).case
+
+
+def case_data(path: str | Path) -> dict:
+    """The whole case of a scenario file as plain data (lists, not tuples), to modify."""
+    return json.loads(json.dumps(load_case(path).data))

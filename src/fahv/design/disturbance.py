@@ -14,7 +14,7 @@ conditions, deviations, inputs, parameter corners and fault states, times a stat
 margin. Each source is also bounded alone, to show which dominates.
 
 Constant part. For a law that estimates a constant state disturbance online
-(:class:`fahv.control.nominal_mpc.DisturbanceEstimator`, law ``tube_mpc``), the part of
+(:class:`fahv.control.mpc.estimator.DisturbanceEstimator`, law ``tube_mpc``), the part of
 the parameter error that does not depend on the deviation -- its value at the sample's
 trim point, Delta_0 = f_p(x_r, u_r) - f(x_r, u_r) over one step -- is taken out of the
 nominal model's error by the estimate, so W (``constant="estimated"``) bounds
@@ -36,7 +36,7 @@ from fahv.plant.uncertainty import perturb
 
 #: Half-widths of the state deviations sampled for W (h ft, V ft/s, alpha rad, theta rad,
 #: q rad/s, eta_1, eta_1_dot, eta_2, eta_2_dot): the Case 1 step (600 ft, 250 ft/s) and a
-#: few scale units of the attitude and flexible states (docs/control_design.md).
+#: few scale units of the attitude and flexible states (docs/theory/certificate.md).
 DEFAULT_DEV_BOX = np.array(
     [600.0, 250.0, np.radians(1.0), np.radians(1.0), np.radians(2.0), 0.5, 5.0, 0.05, 1.0]
 )
@@ -119,7 +119,6 @@ def sample_disturbance(
     progress=None,
     notch=None,
     constant: str = "bounded",
-    states=None,
 ) -> DisturbanceSet:
     """Bound W by sampling, eq. (13)-(19).
 
@@ -154,10 +153,6 @@ def sample_disturbance(
     constant : {"bounded", "estimated"}
         Whether W keeps the constant part Delta_0 of the parameter error (module
         docstring) or leaves it to an online estimate.
-    states : callable, optional
-        ``states(rng) -> (n,)``: draws a state deviation x (unscaled) in place of the
-        uniform draw in ``dev_box`` (which then only sets the length check), e.g. on
-        an ellipsoid for a study of the tube's domain.
 
     Returns
     -------
@@ -167,8 +162,8 @@ def sample_disturbance(
     Raises
     ------
     ValueError
-        If margin < 1, dev_box has the wrong length, ``constant`` is unknown or a
-        ``states`` draw is not n finite values.
+        If margin < 1, dev_box has the wrong length or is not finite, or ``constant``
+        is unknown.
     """
     if margin < 1.0:
         raise ValueError(f"disturbance margin must be >= 1, got {margin}")
@@ -177,8 +172,8 @@ def sample_disturbance(
     kind = "ecm" if tp.kind == "ecm" else "cm"
     n = tp.A_vertices.shape[1]
     dev_box = np.asarray(dev_box, float)
-    if dev_box.shape != (n,):
-        raise ValueError(f"disturbance dev_box must have {n} entries, got {dev_box.shape}")
+    if dev_box.shape != (n,) or not np.all(np.isfinite(dev_box)):
+        raise ValueError(f"disturbance dev_box must have {n} finite entries, got {dev_box!r}")
     rng = np.random.default_rng(seed)
     env = vehicle.envelope
     disc = tp.discretize(Ts)
@@ -194,9 +189,7 @@ def sample_disturbance(
         Vc = rng.uniform(env.V_min, env.V_max)
         tr = trim(vehicle, hc, Vc)
         x_r = tr.x_r_ecm if kind == "ecm" else tr.x_r
-        x = rng.uniform(-1, 1, n) * dev_box if states is None else np.asarray(states(rng), float)
-        if x.shape != (n,) or not np.all(np.isfinite(x)):
-            raise ValueError(f"disturbance states: the draw must be {n} finite values, got {x!r}")
+        x = rng.uniform(-1, 1, n) * dev_box
         xs = x_r + x
         # keep the scheduling point inside the envelope
         xs[0] = np.clip(xs[0], env.h_min, env.h_max)

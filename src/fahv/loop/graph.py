@@ -7,7 +7,7 @@ One control step k (t_k = k Ts) flows through the nodes in this order::
 
 :data:`NODES` is the only description of the graph: the ROS nodes take their topics
 from it, the SIL runner its executables and start order, the recorder its topics,
-:func:`fahv.loop.simulate.simulate` its call order, and ``docs/architecture.md`` its
+:func:`fahv.loop.simulate.simulate` its call order, and ``docs/reference/architecture.md`` its
 table (:func:`markdown_table`, checked by a test).
 """
 
@@ -193,7 +193,7 @@ def replay_topics(nodes) -> tuple[list[str], list[str]]:
 
 
 def markdown_table() -> str:
-    """The node table as Markdown (the table of ``docs/architecture.md``)."""
+    """The node table as Markdown (the table of ``docs/reference/architecture.md``)."""
     rows = ["| node | package | consumes | produces | does |", "|---|---|---|---|---|"]
     for n in NODES.values():
         cons = (
@@ -224,7 +224,7 @@ def clock_msg(k: int, Ts: float) -> dict:
 def registry_tables() -> str:
     """The registries of laws, nominal parts, variants and fault kinds as Markdown.
 
-    The tables of ``docs/architecture.md`` (checked by a test), generated from
+    The tables of ``docs/reference/architecture.md`` (checked by a test), generated from
     :data:`fahv.control.LAWS`, :data:`fahv.control.NOMINAL_SOURCES`,
     :data:`fahv.control.VARIANTS` and :data:`fahv.plant.faults.FAULTS`.
     """

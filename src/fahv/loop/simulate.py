@@ -1,6 +1,6 @@
 """In-process closed loop: the node computations of the SIL graph, called in its order.
 
-One step k (t_k = k Ts), the order of the node graph (docs/architecture.md), each line one
+One step k (t_k = k Ts), the order of the node graph (docs/reference/architecture.md), each line one
 ``*Core`` of :mod:`fahv.loop.cores` built from that node's parameters
 (:func:`fahv.loop.params.node_parameters`), for B runs at once::
 
@@ -12,7 +12,7 @@ One step k (t_k = k Ts), the order of the node graph (docs/architecture.md), eac
     plant.advance(u_f,k): integrate [t_k, t_k+1], saturated u_f,k held (ZOH).
 
 :func:`simulate` runs one run (B = 1) and can write every message to a run file
-(:class:`fahv.runs.bag.RunWriter`) with the topics and types of the SIL recorder; the
+(:class:`fahv.runs.writer.RunWriter`) with the topics and types of the SIL recorder; the
 campaign engine runs batches of runs through the same :class:`Loop`
 (:func:`fahv.loop.batch.simulate_batch`). :class:`History` turns the messages of
 either kind of run, simulated or recorded, into :class:`RunResult` arrays.
@@ -337,7 +337,7 @@ def simulate(
         Simulated time [s]; the case duration by default.
     progress : callable, optional
         Iterable wrapper (tqdm).
-    writer : fahv.runs.bag.RunWriter, optional
+    writer : fahv.runs.writer.RunWriter, optional
         Receives every message of every step (the SIL graph's topics): ``write(topic,
         k, msg)`` with a :class:`fahv.msg.LoopMessage` of one run (the Clock as fields).
     overrides : dict, optional

@@ -29,7 +29,7 @@ def density(h, vp: VehicleParams):
     """Air density rho(h) [slug/ft^3], eq. (3) with the exponent (h - h_0)/h_s.
 
     The paper prints ``exp(-h-h_s/h_0)``; the exponential model of Parker et al.
-    2007 is ``rho_0 exp(-(h - h_0)/h_s)`` (docs/vehicle_data.md).
+    2007 is ``rho_0 exp(-(h - h_0)/h_s)`` (docs/reference/vehicle_data.md).
     """
     return vp.rho_0 * np.exp(-(h - vp.h_0) / vp.h_s)
 

@@ -29,7 +29,7 @@ class LinearModel:
     u_r : (2,) ndarray
         Trim input.
     h, V : float
-        Scheduling variables p = [h, V] [ft, ft/s].
+        Scheduling variables p = ``[h, V]`` in ft, ft/s.
     kind : str
         "dm", "cm" or "ecm".
     """

@@ -10,7 +10,7 @@ per-sample state update used by the simulator and the notch_filter node.
 
 python-control (which imports matplotlib) is imported where it is used, not with
 this module: every node of the SIL graph imports this module, and only the filter
-construction needs it (start-up time of the graph, docs/sil.md).
+construction needs it (start-up time of the graph, docs/guide/sil.md).
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ non-negative and summing to 1 everywhere in the envelope.
 
 scipy.signal and scipy.optimize are imported by the design-time functions that use
 them, not with this module, which every node of the SIL graph imports (the online
-LPV weights need neither; start-up time of the graph, docs/sil.md).
+LPV weights need neither; start-up time of the graph, docs/guide/sil.md).
 """
 
 from __future__ import annotations

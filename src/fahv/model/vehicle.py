@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -225,7 +226,8 @@ class Vehicle:
     name : str
         Vehicle name from the file.
     data_hash : str
-        sha256 of the file's text (16 hex characters; "" when built from a mapping).
+        sha256 of the vehicle's numbers (:func:`physics_hash`; "" when built from a
+        mapping).
     """
 
     params: VehicleParams
@@ -395,8 +397,26 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
         data = load_yaml(text)
     except yaml.YAMLError as exc:
         raise VehicleDataError(f"{name}: not valid YAML: {exc}") from None
-    digest = hashlib.sha256(text.encode()).hexdigest()[:16]
-    return dataclasses.replace(vehicle_from_mapping(data, name), data_hash=digest)
+    vehicle = vehicle_from_mapping(data, name)
+    return dataclasses.replace(vehicle, data_hash=physics_hash(vehicle))
+
+
+def physics_hash(vehicle: Vehicle) -> str:
+    """sha256 of the numbers that define a vehicle (16 hex characters).
+
+    Its parameters, envelope, input limits and scales, rounded to nothing: every bit of
+    every value. Comments, provenance notes and layout of the file do not enter, so a
+    design stays valid when only the file's notes change. Raises nothing.
+    """
+    numbers = {
+        "params": dataclasses.asdict(vehicle.params),
+        "envelope": dataclasses.asdict(vehicle.envelope),
+        "limits": dataclasses.asdict(vehicle.limits),
+        "state_scale": [float(v).hex() for v in vehicle.state_scale],
+        "input_scale": [float(v).hex() for v in vehicle.input_scale],
+    }
+    text = json.dumps(numbers, sort_keys=True, default=lambda v: float(v).hex())
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 # ---------------------------------------------------------------------------------

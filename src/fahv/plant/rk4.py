@@ -14,7 +14,7 @@ Numerics
     numpy; sin and cos give numpy's bits, but ``exp`` (air density, eq. 3) is the C
     library's, which differs from numpy's vectorised exp on AVX-512 machines by at
     most one unit in the last place in about 5 % of arguments. That is the whole
-    difference between this kernel and the numpy model (docs/architecture.md states
+    difference between this kernel and the numpy model (docs/reference/architecture.md states
     the resulting tolerance on closed-loop results).
 
 Cache

@@ -99,7 +99,10 @@ def load_timestamps(source: str | Path | bytes | None) -> dict[str, np.ndarray] 
         The attachment's bytes (:func:`timestamps_npz`), or a run folder of an earlier
         version holding ``timestamps.npz``.
 
-    Returns None when there are no (readable) timestamps.
+    Returns
+    -------
+    dict or None
+        ``{topic: timestamps}``; None when there are no (readable) timestamps.
     """
     if source is None:
         return None

@@ -1,8 +1,9 @@
 """Paper-style figures of closed-loop runs (Yang et al. 2022, Fig. 9-17).
 
 Each function takes runs as ``[(label, RunResult), ...]`` (from ``fahv simulate``,
-``fahv sil`` or a recorded file, :func:`fahv.runs.bag.run_result_of`), overlays them with
-a legend and writes one figure (PNG or PDF by the suffix). Drawing is matplotlib
+``fahv sil`` or a recorded file, :func:`fahv.runs.bag.run_result_of`; the labels of
+recorded runs from :func:`run_labels`), overlays them with a legend and writes one
+figure (PNG or PDF by the suffix). Drawing is matplotlib
 (Agg). Time in s, angles in deg.
 """
 
@@ -59,18 +60,22 @@ GROUPS = {
 }
 
 
-def plot_group(group: str, runs: list, path: str | Path, title: str | None = None) -> Path:
-    """Write one figure group (:data:`GROUPS`) of several runs overlaid.
+def group_figure(group: str, runs: list, title: str | None = None):
+    """The figure of one group (:data:`GROUPS`) with several runs overlaid.
 
     Parameters
     ----------
     group : str
         Key of :data:`GROUPS`.
     runs : list of (str, RunResult)
-    path : path
-        Output file (.png or .pdf).
+        Legend label and run, in drawing order (labels from :func:`run_labels`).
     title : str, optional
         Figure title (default: the group's).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel per quantity of the group; the caller saves and closes it.
 
     Raises
     ------
@@ -99,11 +104,86 @@ def plot_group(group: str, runs: list, path: str | Path, title: str | None = Non
     axes[-1].set_xlabel("t [s]")
     fig.suptitle(title or default_title)
     fig.tight_layout()
+    return fig
+
+
+def plot_group(group: str, runs: list, path: str | Path, title: str | None = None) -> Path:
+    """Write one figure group (:data:`GROUPS`) of several runs overlaid.
+
+    Parameters
+    ----------
+    group : str
+        Key of :data:`GROUPS`.
+    runs : list of (str, RunResult)
+    path : path
+        Output file (.png or .pdf).
+    title : str, optional
+        Figure title (default: the group's).
+
+    Returns
+    -------
+    Path
+        The file written.
+
+    Raises
+    ------
+    KeyError
+        On an unknown group.
+    ValueError
+        If there is no run.
+    """
+    fig = group_figure(group, runs, title)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def run_name(path: str | Path) -> str:
+    """Name of a recorded run: its folder's name, or its .mcap file's name without suffix."""
+    p = Path(path)
+    return p.stem if p.suffix == ".mcap" else p.resolve().name
+
+
+def run_labels(paths, variants) -> list[str]:
+    """Legend labels that tell overlaid recorded runs apart.
+
+    Each run is labelled with its name (:func:`run_name`), followed by its variant
+    in parentheses when the runs are not all of one variant. Runs of the same name
+    are told apart by their parent folders, a run given twice by its position
+    (``[2]``).
+
+    Parameters
+    ----------
+    paths : sequence of path
+        Run folders or .mcap files, in drawing order.
+    variants : sequence of str or None
+        Variant of each run (run metadata ``variant``; None when unknown).
+
+    Returns
+    -------
+    list of str
+        One distinct label per run, in the order of ``paths``.
+
+    Raises
+    ------
+    ValueError
+        If ``paths`` and ``variants`` differ in length.
+    """
+    paths, variants = [Path(p) for p in paths], list(variants)
+    if len(paths) != len(variants):
+        raise ValueError(f"{len(paths)} runs but {len(variants)} variants")
+    where = [p.resolve() for p in paths]
+    names = [run_name(p) for p in paths]
+    # one name, several runs (<dir>/run and <other dir>/run): the parent folder tells
+    clash = {n for n in names if len({w for w, m in zip(where, names, strict=True) if m == n}) > 1}
+    names = [f"{w.parent.name}/{n}" if n in clash else n
+             for w, n in zip(where, names, strict=True)]  # fmt: skip
+    if len(set(variants)) > 1:
+        names = [n if v is None else f"{n} ({v})" for n, v in zip(names, variants, strict=True)]
+    return [n if names.count(n) == 1 else f"{n} [{names[:i].count(n) + 1}]"
+            for i, n in enumerate(names)]  # fmt: skip
 
 
 def _tube_axis(ax, runs) -> None:
@@ -126,18 +206,18 @@ def _tube_axis(ax, runs) -> None:
 
 #: The paper's simulation figures: number -> (case, group, variants, title). A variant
 #: written ``other_case/variant`` is that case's run (the paper's law runs on the vertex
-#: tube of ``case1_vertex``, Case 1's certified design has no such variant).
+#: tube of ``case1_paper``, Case 1's certified design has no such variant).
 PAPER_FIGURES = {
     9: (
         "case1",
         "trajectory",
-        ("tube_mpc", "tube_mpc_no_notch", "case1_vertex/tube_mpc_paper", "rmpc"),
+        ("tube_mpc", "tube_mpc_no_notch", "case1_paper/tube_mpc_paper", "rmpc"),
         "Fig. 9: trajectory, Case 1",
     ),
     10: (
         "case1",
         "attitude",
-        ("tube_mpc", "tube_mpc_no_notch", "case1_vertex/tube_mpc_paper", "rmpc"),
+        ("tube_mpc", "tube_mpc_no_notch", "case1_paper/tube_mpc_paper", "rmpc"),
         "Fig. 10: states, Case 1",
     ),
     11: (
@@ -149,7 +229,7 @@ PAPER_FIGURES = {
     12: (
         "case1",
         "inputs",
-        ("tube_mpc", "tube_mpc_no_notch", "case1_vertex/tube_mpc_paper", "rmpc"),
+        ("tube_mpc", "tube_mpc_no_notch", "case1_paper/tube_mpc_paper", "rmpc"),
         "Fig. 12: inputs, Case 1",
     ),
     13: (

@@ -5,6 +5,10 @@ nodes and captures their outputs in lockstep; its output run holds the captured
 topics and, for every other loop topic, the recorded messages, so it is a complete
 run (metrics, ``fahv compare``). :func:`compare_outputs` then says whether every
 captured message equals the recorded one, byte for byte.
+
+Only complete steps are replayed (:func:`recorded_steps`): a recording cut short (its
+recorder killed) may hold the last steps on some topics only, and a node under test
+cannot answer a step whose inputs were never recorded.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,17 +24,106 @@ import numpy as np
 import yaml
 
 from fahv.errors import RunError
+from fahv.loop.graph import TOPICS
 from fahv.runs.bag import (
     END_KEYS,
     PARAMS,
-    decode,
+    TruncatedRunWarning,
     iter_raw,
     run_attachments,
     run_params,
     stored_metadata,
 )
+from fahv.runs.messages import decode
 from fahv.runs.sil import _runner, reserve_run, run_runner
 from fahv.runs.workspace import WS, ensure_built, ros_env
+
+
+@dataclass
+class RecordedSteps:
+    """Steps of a recorded run as a replay sees them (:func:`recorded_steps`).
+
+    Attributes
+    ----------
+    complete : int
+        Steps 0 .. complete - 1 hold a message on every topic in ``topics``.
+    recorded : int
+        Steps with a message on any loop topic.
+    topics : list of str
+        Topics a step needs.
+    missing : list of str
+        Topics without a message at step ``complete`` (empty when every step is complete).
+    file_truncated : bool
+        The file ends before its summary (the recorder was killed).
+    """
+
+    complete: int
+    recorded: int
+    topics: list
+    missing: list = field(default_factory=list)
+    file_truncated: bool = False
+
+    @property
+    def truncated(self) -> bool:
+        """Some recorded step is not complete: only ``complete`` steps can be replayed."""
+        return self.complete < self.recorded
+
+    def summary(self, name: str) -> str:
+        """One line on what of recording ``name`` can be replayed."""
+        cut = " (the file ends before its summary)" if self.file_truncated else ""
+        if not self.truncated:
+            return f"{name}: {self.complete} complete steps{cut}"
+        return (
+            f"{name}: recording truncated at step {self.complete}{cut}: step {self.complete} "
+            f"has no {', '.join(self.missing)}; replaying the {self.complete} complete steps "
+            f"of {self.recorded} recorded"
+        )
+
+
+def recorded_steps(run: str | Path, topics=None) -> RecordedSteps:
+    """Count the complete steps of a recorded run: those with every needed topic.
+
+    A step is the set of loop messages of one log time (as the ``replay`` node groups
+    them), numbered in time order; it is complete when each needed topic has a
+    message at that time. The count stops at the first step that is not.
+
+    Parameters
+    ----------
+    run : path
+        Bag folder or .mcap file (a file cut short is read up to its last complete chunk).
+    topics : sequence of str, optional
+        Topics a step needs (the replayed inputs and the captured outputs); those the
+        run does not hold at all are left out (the replay reports them). Default: every
+        loop topic the run holds.
+
+    Returns
+    -------
+    RecordedSteps
+
+    Raises
+    ------
+    RunError
+        If the file is missing or not an MCAP file.
+    """
+    times: dict[str, set] = {}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", TruncatedRunWarning)
+        for topic, _, log_ns, _ in iter_raw(run, list(TOPICS)):
+            times.setdefault(topic, set()).add(log_ns)
+    cut = False
+    for w in caught:  # the truncation is reported in the result, other warnings pass on
+        if issubclass(w.category, TruncatedRunWarning):
+            cut = True
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    needed = [t for t in topics if t in times] if topics else list(times)
+    steps = sorted(set().union(*times.values()))
+    complete = next(
+        (i for i, ns in enumerate(steps) if any(ns not in times[t] for t in needed)), len(steps)
+    )
+    at = steps[complete] if complete < len(steps) else None
+    missing = [t for t in needed if at is not None and at not in times[t]]
+    return RecordedSteps(complete, len(steps), needed, missing, cut)
 
 
 @dataclass
@@ -47,12 +141,16 @@ class OutputCheck:
     first_difference : str
         The first difference in step order ("" when none): topic, step, and the first
         field that differs with both values, or the message that is missing.
+    truncated_at : int or None
+        The step at which the recording is truncated (its later steps were neither
+        replayed nor compared); None for a complete recording.
     """
 
     topics: list
     compared: int
     equal: int
     first_difference: str = ""
+    truncated_at: int | None = None
 
     @property
     def identical(self) -> bool:
@@ -62,14 +160,17 @@ class OutputCheck:
     def summary(self) -> str:
         """One line: ``outputs identical: ...`` or ``outputs differ: ...``."""
         where = ", ".join(self.topics)
+        cut = "" if self.truncated_at is None else (
+            f" (recording truncated at step {self.truncated_at}: later steps not compared)"
+        )  # fmt: skip
         if self.identical:
             return (
                 f"outputs identical: {self.equal} of {self.compared} messages on {where} "
-                "equal the recorded ones byte for byte"
+                f"equal the recorded ones byte for byte{cut}"
             )
         return (
             f"outputs differ: {self.compared - self.equal} of {self.compared} messages on "
-            f"{where} are not the recorded ones; first: {self.first_difference or '-'}"
+            f"{where} are not the recorded ones; first: {self.first_difference or '-'}{cut}"
         )
 
 
@@ -156,6 +257,8 @@ class ReplayRun:
     outputs : OutputCheck or None
         The captured outputs against the recorded ones (None without captured topics
         or when the replay did not finish).
+    recorded : RecordedSteps or None
+        The complete steps of the replayed run (:func:`recorded_steps`).
     """
 
     out: Path | None
@@ -164,11 +267,50 @@ class ReplayRun:
     log_dir: Path
     interrupted: bool = False
     outputs: OutputCheck | None = field(default=None)
+    recorded: RecordedSteps | None = field(default=None)
 
 
 def _ros_list(values) -> list[str]:
     """A string-array parameter; [""] stands for empty (a YAML [] has no type)."""
     return list(values) or [""]
+
+
+def _node_parameters(mcap: Path, nodes, params, steps: int) -> dict:
+    """Parameter file sections of the nodes under test: the run's, for ``steps`` steps.
+
+    From ``params`` (a parameter file) if given, else from the run file.
+
+    Raises
+    ------
+    RunError
+        If the parameter file is unreadable or has no section for a node.
+    """
+    if not nodes:
+        return {}
+    if params is not None:
+        try:
+            recorded = yaml.safe_load(Path(params).read_text())
+        except (OSError, yaml.YAMLError) as exc:
+            raise RunError(f"parameter file {params}: {exc}") from None
+        source = str(params)
+    else:
+        recorded, source = run_params(mcap), f"{mcap} ({PARAMS})"
+        if recorded is None:
+            raise RunError(
+                f"{mcap} holds no node parameters (a run of an earlier version started "
+                "by hand): pass the parameter file it was started with, --params FILE"
+            )
+    if not isinstance(recorded, dict):
+        raise RunError(f"{source} is not a ROS 2 parameter file")
+    content = {}
+    for n in nodes:
+        if n not in recorded:
+            raise RunError(f"{source} has no parameters for node '{n}'")
+        p = dict(recorded[n]["ros__parameters"])
+        if steps:
+            p["duration"] = steps * float(p["Ts"])
+        content[n] = {"ros__parameters": p}
+    return content
 
 
 def run_replay(
@@ -205,13 +347,16 @@ def run_replay(
     rate : float
         1: recorded timing, r: r times faster, 0: as fast as possible.
     steps : int
-        Steps to replay (0: all); the nodes under test run that many steps.
+        Steps to replay (0: all); the nodes under test run that many steps. Never more
+        than the complete steps of the run (:func:`recorded_steps`): of a truncated
+        recording, the steps before the truncation, which ``log`` names.
     watchdog_s : float
         Wall-clock watchdog of every node [s].
     quiet : bool
         No progress lines.
     log : callable
-        Receives the line naming the log folder.
+        Receives the line naming the log folder, and the one naming the step at which
+        a truncated recording ends.
     params : path, optional
         Parameter file of the nodes under test, for a run recorded without one (runs of
         earlier versions started by hand); by default the one in the run file.
@@ -225,8 +370,8 @@ def run_replay(
     Raises
     ------
     RunError
-        If the run is missing, a node is unknown, no parameters are known for a node
-        under test, or the workspace cannot be built.
+        If the run is missing, holds no complete step, a node is unknown, no parameters
+        are known for a node under test, or the workspace cannot be built.
     """
     from fahv.loop.graph import replay_topics
     from fahv.runs.bag import bag_paths
@@ -238,30 +383,14 @@ def run_replay(
     if topics is None:
         topics = inputs if nodes else []  # []: the replay node takes every loop topic
     topics, capture = list(topics), list(outputs if capture is None else capture)
-    content = {}
-    if nodes:
-        if params is not None:
-            try:
-                recorded = yaml.safe_load(Path(params).read_text())
-            except (OSError, yaml.YAMLError) as exc:
-                raise RunError(f"parameter file {params}: {exc}") from None
-            source = str(params)
-        else:
-            recorded, source = run_params(mcap), f"{mcap} ({PARAMS})"
-            if recorded is None:
-                raise RunError(
-                    f"{mcap} holds no node parameters (a run of an earlier version started "
-                    "by hand): pass the parameter file it was started with, --params FILE"
-                )
-        if not isinstance(recorded, dict):
-            raise RunError(f"{source} is not a ROS 2 parameter file")
-        for n in nodes:
-            if n not in recorded:
-                raise RunError(f"{source} has no parameters for node '{n}'")
-            p = dict(recorded[n]["ros__parameters"])
-            if steps:
-                p["duration"] = steps * float(p["Ts"])
-            content[n] = {"ros__parameters": p}
+    have = recorded_steps(mcap, [*topics, *capture] if topics else None)
+    if have.complete == 0:
+        raise RunError(f"{mcap} holds no complete step of {have.topics}: nothing to replay")
+    capped = have.truncated and not 0 < steps <= have.complete
+    if capped:
+        log(have.summary(mcap.name))
+        steps = have.complete
+    content = _node_parameters(mcap, nodes, params, steps)
     meta = {k: v for k, v in stored_metadata(mcap).items() if k not in END_KEYS}
     meta.pop("source", None)
     ensure_built(log=log)
@@ -294,10 +423,13 @@ def run_replay(
     t0 = time.monotonic()
     rc, interrupted = run_runner(cmd, env)
     res = ReplayRun(
-        None if out is None else Path(out), rc, time.monotonic() - t0, work, interrupted
-    )
+        None if out is None else Path(out), rc, time.monotonic() - t0, work, interrupted,
+        recorded=have,
+    )  # fmt: skip
     if rc == 0 and capture and res.out is not None and res.out.exists():
         res.outputs = compare_outputs(mcap, res.out, capture, steps)
+        if capped:
+            res.outputs.truncated_at = have.complete
     return res
 
 

@@ -37,7 +37,7 @@ from fahv.version import code_version
 #: every message carries and reads no clock, so the nodes need no ROS time; with
 #: ``use_sim_time`` each node subscribes to ``/clock`` and wakes up once more per step,
 #: just when the notch filter and the nominal trajectory need the CPU (about 12 % of
-#: the step on this 2-core machine, docs/sil.md). The plant still publishes ``/clock``
+#: the step on this 2-core machine, docs/guide/sil.md). The plant still publishes ``/clock``
 #: for the recorder and for tools.
 USE_SIM_TIME = False
 
@@ -77,6 +77,10 @@ def fault_metadata(fault_params: dict) -> dict:
     return {f"fault_{k}": fault_params[k] for k in keys if k in fault_params}
 
 
+#: The design provenance a run's metadata carries.
+PROVENANCE_KEYS = ("design_file", "design_file_hash", "vehicle_file", "vehicle_hash", "code_hash")
+
+
 def run_metadata(
     design, variant: str, source: str, duration: float, nodes: dict | None = None
 ) -> dict:
@@ -113,16 +117,14 @@ def run_metadata(
     return {
         "case": c["name"],
         "variant": variant,
+        "design": design.summary.get("design_name", ""),
         "design_hash": design.summary["design_hash"],
+        "scenario_hash": design.summary.get("scenario_hash", ""),
         "code_version": code_version(),
         "source": source,
         "Ts": c["Ts"],
         "duration": duration,
-        **{
-            k: prov[k]
-            for k in ("case_file", "case_hash", "vehicle_file", "vehicle_hash", "code_hash")
-            if k in prov
-        },
+        **{k: prov[k] for k in PROVENANCE_KEYS if k in prov},
         **fault,
         **{f"plant_params.{k}": float(v) for k, v in params.items()},
     }
@@ -192,9 +194,6 @@ def run_parameter_file(
         The recorder serves the live view on this port (0: any free port; None: no
         live view, :mod:`fahv.runs.live`).
 
-    Every node gets ``graph_nodes`` and ``run_id`` (the run folder's name: it tells
-    this graph's nodes from another graph's in the same ROS domain).
-
     Returns
     -------
     dict
@@ -205,6 +204,11 @@ def run_parameter_file(
     ------
     RunError
         On an override for a node that is not in the run.
+
+    Notes
+    -----
+    Every node gets ``graph_nodes`` and ``run_id`` (the run folder's name: it tells
+    this graph's nodes from another graph's in the same ROS domain).
     """
     nodes = node_parameters(design, variant, watchdog_s=watchdog_s)
     if duration is not None:

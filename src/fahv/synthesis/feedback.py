@@ -19,7 +19,7 @@ rate lam < 1, so F stabilises every vertex.
 
 Pulse generators. A disturbance that is not a box, w + G' p with |p_l| <= 1 (G (g, n):
 the onset of an elevator loss, whose one-step jump of the residual lies along a few
-directions, docs/control_design.md), enters the same way: the middle block becomes
+directions, docs/theory/certificate.md), enters the same way: the middle block becomes
 diag(mu, mu_p), its off-diagonal block [I, G'], and the budget
 sum_j mu_j w_j^2 + sum_l mu_p,l <= 1 - lam.
 """
@@ -33,7 +33,13 @@ import cvxpy as cp
 import numpy as np
 
 from fahv.errors import DesignError
-from fahv.synthesis.lmi import SDP_SOLVER, require_psd, scale_vertices
+from fahv.synthesis.lmi import (
+    LMI_MARGIN,
+    invariance_blocks,
+    require_psd,
+    scale_vertices,
+    solve_lmi,
+)
 
 
 @dataclass(frozen=True)
@@ -93,7 +99,7 @@ def _rpi_blocks(AN, lam, mu, N, G=None) -> np.ndarray:
     (S-procedure form of (A_cl e + w + G' p)' N^-1 (A_cl e + w + G' p) <= lam e' N^-1 e
     + sum_j mu_j w_j^2 + sum_l mu_p,l p_l^2, with the budget at most 1 - lam).
     """
-    return _invariance_blocks(AN, lam, mu, N, _generators(AN.shape[1], G))
+    return invariance_blocks(AN, lam, mu, N, _generators(AN.shape[1], G))
 
 
 def _generators(n: int, G) -> np.ndarray:
@@ -149,23 +155,6 @@ def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
     )
 
 
-#: Strict margin of the RPI LMI blocks (scaled units), so that the solver's tolerance
-#: cannot break the re-check.
-LMI_MARGIN = 1e-5
-
-
-def _solved(prob: cp.Problem) -> bool:
-    """Solve an LMI problem; False if the solver fails or finds no (near-)optimal point.
-
-    "optimal_inaccurate" counts as solved: every caller re-checks its certificate.
-    """
-    try:
-        prob.solve(solver=SDP_SOLVER)
-    except cp.error.SolverError:
-        return False
-    return prob.status in ("optimal", "optimal_inaccurate")
-
-
 def _levels(P: np.ndarray, N: np.ndarray) -> np.ndarray:
     """Squared levels p' N^-1 p (S,) of the rows of P (S, n) in Z = {e' N^-1 e <= 1}."""
     return np.einsum("si,si->s", P, np.linalg.solve(N, P.T).T)
@@ -176,7 +165,7 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None, Ps
 
     With ``active`` (an int) the vertex blocks are generated: the LMI is solved with
     the ``active`` vertices of largest open-loop norm, every block is then evaluated at
-    the solution, and the worst violated blocks (at most ``active`` per round) are
+    the solution, and the worst violated blocks (at most ``active`` per pass) are
     added until every block holds with half the strict margin (constraint generation).
     The blocks solved hold with the full margin ``LMI_MARGIN``, the ones left out with
     at least half of it, so the result is the full LMI's optimum up to that margin (not
@@ -230,7 +219,7 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None, Ps
             cons.append(0.5 * (blk + blk.T) >> 0)
         obj = cp.Minimize(cp.sum(cp.multiply(t, 1.0 / room**2)) + sw @ cp.diag(N))
         prob = cp.Problem(obj, cons)
-        if not _solved(prob):
+        if not solve_lmi(prob):
             return None
         Nv = 0.5 * (N.value + N.value.T)
         outside = np.zeros(0, int)  # points Z must contain that it does not yet
@@ -270,6 +259,9 @@ def design_tube(
 ) -> TubeDesign:
     """Design F and the ellipsoidal RPI tube Z for the box W = {|w| <= w_max}.
 
+    One concept, kept whole: the constraint-generation loop and the re-check of every
+    vertex after it are one algorithm.
+
     Parameters
     ----------
     A : (R, n, n) ndarray
@@ -302,7 +294,7 @@ def design_tube(
         another scale (measured: a W of 1/100 of the design's gave the tube of W / 10).
         With ``state_max`` the bound is scaled with W (s Z has s times Z's supports).
     active : int, optional
-        Vertex blocks per round of constraint generation, for large vertex sets: the
+        Vertex blocks per pass of constraint generation, for large vertex sets: the
         LMI is solved on a growing subset of the vertices until every block holds at
         the solution (:func:`_solve_rpi_lmi`); None: all blocks at once.
     pulse : (g, n) array_like, optional
@@ -313,7 +305,7 @@ def design_tube(
         Points Z must contain (unscaled), e' N^-1 e <= 1 for each row, entered as
         [[1, e'], [e, N]] >= 0 (linear in N) and generated like the vertex blocks; e.g.
         the one-step jumps of a loss's onset over the level they may use, so that the
-        error stays in Z through the onset (:func:`fahv.design.eight_state.close_pair`).
+        error stays in Z through the onset (:func:`fahv.design.closure.close_tube_set`).
         Re-checked exactly.
 
     Returns
@@ -441,327 +433,3 @@ def box_tube(A, B, F, w_max, Dx, Du) -> BoxTubeResult:
     if any(np.any(a @ zs + ws > zs * (1 + 1e-9) + 1e-12) for a in absA):
         raise DesignError("certificate failed: box tube LP solution is not invariant")
     return BoxTubeResult(True, zs * Dx, rho)
-
-
-@dataclass(frozen=True)
-class InvariantEllipsoid:
-    """An ellipsoid RPI for a fixed closed loop and its box W (unscaled units).
-
-    Attributes
-    ----------
-    P : (n, n) ndarray
-        Shape of E = {xi : xi' P^-1 xi <= 1}.
-    s : float
-        Smallest factor with the projection of E on the first p states inside
-        s {e : e' S^-1 e <= 1} (S the ``shape`` it was bounded by): the largest eigenvalue
-        of S^-1/2 P_ee S^-1/2, square-rooted.
-    supports : (m,) ndarray
-        max over E of |(K xi)_j| = sqrt(K_j P K_j') (the input deviation's support).
-    n_blocks : int
-        Vertex blocks the last LMI solve held (constraint generation).
-    """
-
-    P: np.ndarray
-    s: float
-    supports: np.ndarray
-    n_blocks: int
-
-
-#: Share of the budget 1 - lam :func:`invariant_ellipsoid` leaves unused, so that its
-#: blocks, solved without a strict margin, leave room for the exact re-check.
-BUDGET_MARGIN = 4e-3
-
-
-def _s_procedure_block(top, AX, E, mu, P):
-    """The cvxpy block [[top, 0, AX'], [0, diag(mu), E'], [AX, E, P]], symmetrised.
-
-    The S-procedure form of the RPI condition for a box W (LMI 24 in analysis form):
-    ``top`` is lam P (:func:`invariant_ellipsoid`) or lam (G + G' - P) in the dilated
-    form (:func:`output_feedback_step`); AX (n, n) the closed loop times P or G; E (n, p).
-    """
-    n, p = E.shape
-    blk = cp.bmat([[top, np.zeros((n, p)), AX.T],
-                   [np.zeros((p, n)), cp.diag(mu), E.T],
-                   [AX, E, P]])  # fmt: skip
-    return 0.5 * (blk + blk.T)
-
-
-def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float,
-                        active: int = 40, add: int = 10) -> InvariantEllipsoid | None:  # fmt: skip
-    """Smallest ellipsoid RPI for a fixed closed loop whose projection lies in a given one.
-
-    The analysis form of the tube LMI (24) for a closed loop xi+ = A_cl,i xi + E w with
-    E = [diag(w_max); 0] and w in the unit box (W = {|w_j| <= w_max,j} on the first p
-    states), in the shape P of E = {xi' P^-1 xi <= 1}, with S-procedure multipliers mu_i
-    per vertex::
-
-        [[lam P, 0, P A_cl,i'], [0, diag(mu_i), E'], [A_cl,i P, E, P]] >= 0,
-        sum_j mu_i,j <= (1 - lam) (1 - BUDGET_MARGIN)      every vertex i,
-        P_ee <= s^2 S,   K_j P K_j' <= support_max_j^2,
-
-    minimising s^2: E is RPI for W at every vertex, its projection on the first p states
-    lies in s {e' S^-1 e <= 1}, and the input deviation K xi stays within support_max.
-    Linear in (P, mu_i, s^2) for the fixed lam and loop. Solved in the coordinates xi / D
-    on a growing subset of the vertices (constraint generation: the ``active`` vertices
-    of largest spectral radius first, then per round at most ``add`` of those whose
-    exact level ``levels(P)`` exceeds 1, the worst first, until none does: the result's
-    exact level is then at most 1 at every vertex: that exact level, not the LMI, is the
-    certificate). The blocks solved are re-checked (:func:`require_psd`) to the
-    solver's accuracy, 1e-6 of their largest entry (a strict margin of 1e-5 in the LMI
-    made case1.yaml's certified loop infeasible: its multipliers are of order 1e-4).
-
-    Parameters
-    ----------
-    Acl : (R, n, n) ndarray
-        Closed-loop vertices (unscaled).
-    w_max : (p,) array_like
-        Half-widths of W on the first p states (unscaled), p <= n.
-    D : (n,) array_like
-        State scaling (positive).
-    shape : (p, p) ndarray
-        S, the ellipsoid the projection is bounded by (unscaled).
-    K : (m, n) ndarray
-        Input map of the loop, u - v = K xi.
-    support_max : (m,) array_like
-        Largest support of K xi per row.
-    levels : callable
-        ``levels(P) -> (R,)``: the exact worst one-step level of each vertex for the
-        ellipsoid of shape P (unscaled), e.g.
-        :func:`fahv.design.certificate.vertex_levels`.
-    lam : float
-        Contraction factor in (0, 1).
-    active : int
-        Vertices of the first solve.
-    add : int
-        Vertices added per round.
-
-    Returns
-    -------
-    InvariantEllipsoid or None
-        None if the LMI is infeasible (or the solver fails) on the vertices held.
-
-    Raises
-    ------
-    DesignError
-        If a returned solution fails the re-check of its blocks or budgets.
-    ValueError
-        On inconsistent shapes.
-    """
-    Acl = np.asarray(Acl, float)
-    R, n, _ = Acl.shape
-    ws, D = np.asarray(w_max, float), np.asarray(D, float)
-    p = ws.size
-    K = np.atleast_2d(np.asarray(K, float))
-    if Acl.shape[2] != n or D.shape != (n,) or p > n or np.shape(shape) != (p, p) \
-            or K.shape[1] != n or not 0.0 < lam < 1.0:  # fmt: skip
-        raise ValueError(
-            f"invariant_ellipsoid: shapes Acl {Acl.shape}, w_max {ws.shape}, D {D.shape}, "
-            f"shape {np.shape(shape)}, K {K.shape}, lam {lam}"
-        )
-    As = Acl / D[None, :, None] * D[None, None, :]
-    wss = ws / D[:p]
-    Ss = np.asarray(shape, float) / np.outer(D[:p], D[:p])
-    Ks = K * D[None, :]
-    tmax = np.asarray(support_max, float)
-    # W as the unit box through E = [diag(w); 0]: multipliers of order 1 - lam (with the
-    # identity they were of order (1 - lam) / w^2, and the solves were less accurate)
-    E = np.vstack([np.diag(wss), np.zeros((n - p, p))])
-    budget = (1.0 - lam) * (1.0 - BUDGET_MARGIN)
-    rho = np.abs(np.linalg.eigvals(As)).max(axis=1)
-    chosen = np.sort(np.argsort(-rho)[:active])
-    while True:
-        P = cp.Variable((n, n), symmetric=True)
-        mu = cp.Variable((len(chosen), p), nonneg=True)
-        s2 = cp.Variable()
-        cons = [P >> LMI_MARGIN * np.eye(n), cp.sum(mu, axis=1) <= budget, P[:p, :p] << s2 * Ss]
-        cons += [Ks[j] @ P @ Ks[j] <= tmax[j] ** 2 for j in range(K.shape[0])]
-        cons += [_s_procedure_block(lam * P, As[i] @ P, E, mu[r], P) >> 0
-                 for r, i in enumerate(chosen)]  # fmt: skip
-        prob = cp.Problem(cp.Minimize(s2), cons)
-        if not _solved(prob):
-            return None
-        Pv = 0.5 * (P.value + P.value.T)
-        P_un = Pv * np.outer(D, D)
-        lev = np.asarray(levels(P_un), float)
-        bad = np.setdiff1d(np.flatnonzero(lev > 1.0), chosen)
-        if bad.size == 0:
-            break
-        chosen = np.union1d(chosen, bad[np.argsort(-lev[bad])[:add]])
-    muv = np.maximum(mu.value, 0.0)
-    for r, i in enumerate(chosen):
-        blk = _invariance_blocks(As[i : i + 1] @ Pv, lam, muv[r], Pv, E)[0]
-        require_psd(blk, f"RPI LMI of the fixed loop at vertex {i}", rtol=1e-6)
-    if np.any(muv.sum(axis=1) > (1.0 - lam) * (1 + 1e-9)):
-        raise DesignError("certificate failed: sum mu of the fixed loop > 1 - lam (W: unit box)")
-    L = np.linalg.cholesky(Ss)
-    Li = np.linalg.inv(L)
-    s = float(np.sqrt(np.linalg.eigvalsh(Li @ Pv[:p, :p] @ Li.T).max()))
-    supports = np.sqrt(np.einsum("ij,jk,ik->i", K, P_un, K))
-    return InvariantEllipsoid(P_un, s, supports, len(chosen))
-
-
-@dataclass(frozen=True)
-class OutputFeedbackStep:
-    """One convex step of :func:`output_feedback_step` (unscaled units).
-
-    Attributes
-    ----------
-    F : (m, p_y) ndarray
-        Static output-feedback gain, u - v = F T xi.
-    P : (n, n) ndarray
-        Ellipsoid E = {xi : xi' P^-1 xi <= 1} RPI for the loop with F at every vertex
-        (exact level <= 1, checked by the ``levels`` callable at every vertex).
-    gamma : float
-        The step's objective: the projection of E lies in gamma S and the input supports
-        within gamma ``support_max`` (as solved; the caller re-checks both exactly).
-    n_blocks : int
-        Vertex blocks the last solve held (constraint generation).
-    """
-
-    F: np.ndarray
-    P: np.ndarray
-    gamma: float
-    n_blocks: int
-
-
-def output_feedback_step(A0, B0, T, w_max, F0, P0, shape, support_max, levels, lam: float,
-                         active: int = 20, add: int = 40) -> OutputFeedbackStep | None:  # fmt: skip
-    """One convex step of a static output-feedback gain and its RPI ellipsoid, together.
-
-    For the loop xi+ = (A0_i + B0_i F T) xi + E w, E = [diag(w_max); 0], w in the unit
-    box, the RPI condition of :func:`invariant_ellipsoid` is bilinear in (F, P). This
-    step uses its dilated form (de Oliveira, Bernussou & Geromel 1999, discrete time),
-    with a slack G in place of P where the loop acts::
-
-        [[lam (G + G' - P), 0, (A0_i G + B0_i Y T)'], [0, diag(mu_i), E'],
-         [A0_i G + B0_i Y T, E, P]] >= 0,       sum_j mu_i,j <= (1 - lam)(1 - BUDGET_MARGIN),
-
-    which implies the S-procedure condition of E(P) (G' P^-1 G >= G + G' - P), and the
-    output structure on the slack (Crusius & Trofino 1999): T G = M T makes
-    F T G = F M T = Y T, so every block is linear in (P, G, M, Y, mu) and F = Y M^-1.
-    The input supports are bounded through the same slack,
-    [[gamma^2 t_j^2, Y_j T], [T' Y_j', G + G' - P]] >= 0, and the projection on the
-    first p states by P_pp <= gamma^2 S; gamma^2 is minimised.
-
-    Solved in the coordinates whitened by the last ellipsoid P0 (xi = L z, P0 = L L'),
-    where (G, P, M, Y) = (P0, P0, I, F0) is feasible whenever P0 is RPI for F0: the step
-    starts from the last certificate and can only lower gamma (without the whitening
-    cond(M) reached 4e6 on the notch loop; without the slack the steps stalled). The
-    vertices are held by constraint generation: the ``active`` worst of the start (by
-    spectral radius and by exact level) first, then per round at most ``add`` of those
-    whose exact level ``levels(F, P)`` exceeds 1, until none does; that exact level over
-    every vertex, not the solver's status, is what the result is accepted on.
-
-    Parameters
-    ----------
-    A0 : (R, n, n) ndarray
-    B0 : (R, n, m) ndarray
-        Vertices of the loop without the feedback (unscaled).
-    T : (p_y, n) ndarray
-        Output map: the gain acts on y = T xi.
-    w_max : (p,) array_like
-        Half-widths of W on the first p states, p <= n.
-    F0 : (m, p_y) ndarray
-        The last gain, for which P0 is RPI.
-    P0 : (n, n) ndarray
-        The last ellipsoid (positive definite).
-    shape : (p, p) ndarray
-        S, the ellipsoid the projection is bounded by.
-    support_max : (m,) array_like
-        t_j, the input deviation's support bound per row.
-    levels : callable
-        ``levels(F, P) -> (R,)``: the exact worst one-step level of every vertex of the
-        loop with gain F for the ellipsoid of shape P (e.g. built on
-        :func:`fahv.design.certificate.vertex_levels`).
-    lam : float
-        Contraction factor in (0, 1).
-    active, add : int
-        Constraint generation: vertices of the first solve per criterion, and per round.
-
-    Returns
-    -------
-    OutputFeedbackStep or None
-        None if the LMI is infeasible or the solver fails on the vertices held.
-
-    Raises
-    ------
-    ValueError
-        On inconsistent shapes or lam outside (0, 1).
-    DesignError
-        If the solved slack's block M is singular (F = Y M^-1 undefined).
-    """
-    A0, B0, T, F0, P0 = (np.asarray(v, float) for v in (A0, B0, T, F0, P0))
-    R, n, _ = A0.shape
-    m, py = B0.shape[2], T.shape[0]
-    ws = np.asarray(w_max, float)
-    p = ws.size
-    tmax = np.asarray(support_max, float)
-    if (A0.shape[2] != n or B0.shape[:2] != (R, n) or T.shape[1] != n or F0.shape != (m, py)
-            or P0.shape != (n, n) or np.shape(shape) != (p, p) or p > n or tmax.shape != (m,)
-            or not 0.0 < lam < 1.0):  # fmt: skip
-        raise ValueError(
-            f"output_feedback_step: shapes A0 {A0.shape}, B0 {B0.shape}, T {T.shape}, F0 "
-            f"{F0.shape}, P0 {P0.shape}, w_max {ws.shape}, shape {np.shape(shape)}, "
-            f"support_max {tmax.shape}, lam {lam}"
-        )
-    L = np.linalg.cholesky(0.5 * (P0 + P0.T))
-    Li = np.linalg.inv(L)
-    Aw, Bw, Tw = Li[None] @ A0 @ L[None], Li[None] @ B0, T @ L
-    E = Li @ np.vstack([np.diag(ws), np.zeros((n - p, p))])
-    Si = np.linalg.inv(np.linalg.cholesky(np.asarray(shape, float)))
-    Acl0 = A0 + B0 @ F0 @ T
-    rho = np.abs(np.linalg.eigvals(Acl0)).max(axis=1)
-    chosen = np.union1d(np.argsort(-rho)[:active], np.argsort(-np.asarray(levels(F0, P0)))[:active])
-    budget = (1.0 - lam) * (1.0 - BUDGET_MARGIN)
-    while True:
-        P = cp.Variable((n, n), symmetric=True)
-        G = cp.Variable((n, n))
-        M = cp.Variable((py, py))
-        Y = cp.Variable((m, py))
-        g2 = cp.Variable()
-        mu = cp.Variable((len(chosen), p), nonneg=True)
-        GG = G + G.T - P
-        proj = Si @ L[:p] @ P @ L[:p].T @ Si.T
-        cons = [P >> LMI_MARGIN * np.eye(n), Tw @ G == M @ Tw,
-                0.5 * (proj + proj.T) << g2 * np.eye(p), cp.sum(mu, axis=1) <= budget]  # fmt: skip
-        for j in range(m):
-            row = cp.reshape(Y[j] @ Tw, (1, n), order="C")
-            blk = cp.bmat([[cp.reshape(g2 * tmax[j] ** 2, (1, 1), order="C"), row], [row.T, GG]])
-            cons.append(0.5 * (blk + blk.T) >> 0)
-        cons += [_s_procedure_block(lam * GG, Aw[i] @ G + Bw[i] @ Y @ Tw, E, mu[r], P) >> 0
-                 for r, i in enumerate(chosen)]  # fmt: skip
-        prob = cp.Problem(cp.Minimize(g2), cons)
-        if not _solved(prob):
-            return None
-        Mv = M.value
-        if not np.all(np.isfinite(Mv)) or np.linalg.cond(Mv) > 1e12:
-            raise DesignError(
-                f"output_feedback_step: the slack's output block M is singular (cond "
-                f"{np.linalg.cond(Mv):.2e}): F = Y M^-1 is not defined"
-            )
-        F = Y.value @ np.linalg.inv(Mv)
-        Pn = L @ (0.5 * (P.value + P.value.T)) @ L.T
-        lev = np.asarray(levels(F, Pn), float)
-        bad = np.setdiff1d(np.flatnonzero(lev > 1.0), chosen)
-        if bad.size == 0:
-            break
-        chosen = np.union1d(chosen, bad[np.argsort(-lev[bad])[:add]])
-    return OutputFeedbackStep(F, Pn, float(np.sqrt(max(g2.value, 0.0))), len(chosen))
-
-
-def _invariance_blocks(AP, lam, mu, P, E) -> np.ndarray:
-    """Blocks (R, 2n + p, 2n + p) [[lam P, 0, AP'], [0, diag(mu), E'], [AP, E, P]] (scaled).
-
-    AP (R, n, n) stacks A_cl,i P; E (n, p) maps the p generators of the disturbance.
-    """
-    R, n, _ = AP.shape
-    p = E.shape[1]
-    blk = np.zeros((R, 2 * n + p, 2 * n + p))
-    blk[:, :n, :n] = lam * P
-    blk[:, n : n + p, n : n + p] = np.diag(mu)
-    blk[:, n : n + p, n + p :] = E.T
-    blk[:, n + p :, n : n + p] = E
-    blk[:, n + p :, :n] = AP
-    blk[:, :n, n + p :] = AP.transpose(0, 2, 1)
-    blk[:, n + p :, n + p :] = P
-    return blk

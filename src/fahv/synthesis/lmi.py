@@ -2,12 +2,38 @@
 
 from __future__ import annotations
 
+import cvxpy as cp
 import numpy as np
 
 from fahv.errors import DesignError
 
-#: Solver used for every LMI (interior point, handles SDP cones); see docs/environment.md.
+#: Solver used for every LMI (interior point, handles SDP cones); see docs/reference/environment.md.
 SDP_SOLVER = "CLARABEL"
+
+#: Strict margin of the RPI LMI blocks (scaled units), so that the solver's tolerance
+#: cannot break the re-check.
+LMI_MARGIN = 1e-5
+
+
+def solve_lmi(prob: cp.Problem) -> bool:
+    """Solve an LMI problem with :data:`SDP_SOLVER`.
+
+    "optimal_inaccurate" counts as solved: every caller re-checks its certificate.
+
+    Parameters
+    ----------
+    prob : cvxpy.Problem
+
+    Returns
+    -------
+    bool
+        False if the solver fails or finds no (near-)optimal point.
+    """
+    try:
+        prob.solve(solver=SDP_SOLVER)
+    except cp.error.SolverError:
+        return False
+    return prob.status in ("optimal", "optimal_inaccurate")
 
 
 def scale_vertices(A: np.ndarray, B: np.ndarray, Dx: np.ndarray, Du: np.ndarray):
@@ -43,3 +69,39 @@ def require_psd(M: np.ndarray, what: str, rtol: float = 1e-9) -> float:
             f"certificate failed: {what} has eigenvalue {e:.3e} < -{tol:.2e} (tolerance)"
         )
     return e
+
+
+def invariance_blocks(AP, lam, mu, P, E) -> np.ndarray:
+    """The S-procedure blocks [[lam P, 0, AP'], [0, diag(mu), E'], [AP, E, P]] of RPI.
+
+    A block is positive semidefinite exactly when (A_cl e + E w)' P^-1 (A_cl e + E w) <=
+    lam e' P^-1 e + sum_j mu_j w_j^2 for every e and w (the S-procedure form of LMI (24)).
+
+    Parameters
+    ----------
+    AP : (R, n, n) ndarray
+        A_cl,i P stacked over the vertices.
+    lam : float
+        Contraction factor.
+    mu : (p,) ndarray
+        Multipliers of the disturbance's generators.
+    P : (n, n) ndarray
+        The ellipsoid's shape.
+    E : (n, p) ndarray
+        Map of the p generators of the disturbance.
+
+    Returns
+    -------
+    (R, 2n + p, 2n + p) ndarray
+    """
+    R, n, _ = AP.shape
+    p = E.shape[1]
+    blk = np.zeros((R, 2 * n + p, 2 * n + p))
+    blk[:, :n, :n] = lam * P
+    blk[:, n : n + p, n : n + p] = np.diag(mu)
+    blk[:, n : n + p, n + p :] = E.T
+    blk[:, n + p :, n : n + p] = E
+    blk[:, n + p :, :n] = AP
+    blk[:, :n, n + p :] = AP.transpose(0, 2, 1)
+    blk[:, n + p :, n + p :] = P
+    return blk

@@ -17,7 +17,7 @@ it, so a K computed once stays valid along the whole nominal trajectory as long 
 nominal state stays in E(Q) (there is no disturbance on it). On this vehicle no
 ellipsoid certified for the tightened bounds contains the whole Case 1 step; the
 design maximises the fraction s of the command that fits, and the governor feeds the
-rest in gradually (docs/control_design.md).
+rest in gradually (docs/theory/certificate.md).
 """
 
 from __future__ import annotations
@@ -247,7 +247,7 @@ def design_nominal(A, B, d, u_max, Dx, Du, lam: float = DEFAULT_LAM) -> NominalD
     The paper minimises gamma_n of (32) for a given x_n0. On this vehicle that
     problem is numerically ill-posed with the tightened bounds: gamma_n diverges
     while Clarabel iterates and it stops with a numerical error (measured for
-    x_n0 = 0.2 d with psi = sigma = I and 1e-2 I, docs/control_design.md).
+    x_n0 = 0.2 d with psi = sigma = I and 1e-2 I, docs/theory/certificate.md).
     Maximising the certified region instead is well posed; the reference governor
     then feeds the command in so that the nominal state stays in it.
     """

@@ -23,7 +23,7 @@ E(a) = {x' (a P_i + (1 - a) P_{i+1}) x <= 1} to be invariant under the interpola
 gain. On this vehicle it does not hold between the outer ellipsoids (the ellipsoid
 that holds the Case 1 step is close to the largest admissible one, so only gains very
 close to K_1 keep it invariant), and imposing it as an LMI (slack-variable form, K =
-Y G^-1) made every ellipsoid collapse onto E_1 (measured, docs/control_design.md).
+Y G^-1) made every ellipsoid collapse onto E_1 (measured, docs/theory/rmpc.md).
 So it is measured and reported, and what the law needs is checked directly:
 :func:`verify_sequence` requires every interpolated ellipsoid E(a) to be contracted by
 the interpolated gain at every vertex and to keep the input bound, on a grid of

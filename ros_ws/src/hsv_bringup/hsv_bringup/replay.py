@@ -27,14 +27,15 @@ from pathlib import Path
 from hsv_common.codec import msg_type_of
 from hsv_common.graph_status import GraphStatus
 from hsv_common.parameters import declare_graph, declare_validated, run_metadata_param
-from hsv_common.runtime import LOOP_QOS, WatchdogError, end_reason, main
+from hsv_common.runtime import LOOP_QOS, WatchdogError, end_reason, main, node_options
 from rclpy.node import Node
 
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
-from fahv.runs.bag import RunWriter, iter_raw
+from fahv.runs.bag import iter_raw
 from fahv.runs.nodes import REPLAY
 from fahv.runs.replay import output_attachments
+from fahv.runs.writer import RunWriter
 from hsv_bringup.recorder import step_of
 
 
@@ -92,7 +93,7 @@ class Replay(Node):
     ROLE = "replay"
 
     def __init__(self) -> None:
-        super().__init__("replay")
+        super().__init__("replay", **node_options())
         graph_nodes, run_id = declare_graph(self)
         get = declare_validated(self, REPLAY)
         self.steps, Ts, self.topics = load_steps(get["run"], get["topics"] or None, get["steps"])

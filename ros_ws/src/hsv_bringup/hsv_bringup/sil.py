@@ -60,6 +60,9 @@ CAUSE_GRACE_S = 3.0
 #: How long a failed graph waits for a still-starting recorder to open its run file [s]
 #: (so that even a graph that failed at once leaves a run with status and reason).
 RECORDING_START_S = 30.0
+#: Period of the runner's look at its nodes [s]: the run ends this long at most after
+#: the last node exited (its wall time is the run's).
+SUPERVISE_S = 0.02
 
 
 def executable(name: str) -> Path:
@@ -237,7 +240,7 @@ class Graph:
                 on_progress(*self.progress)
             if running == 0:
                 return None, 0
-            time.sleep(0.1)
+            time.sleep(SUPERVISE_S)
 
 
 def describe(rc: int) -> str:

@@ -49,6 +49,8 @@ FOREIGN_GRACE_S = 2.0 * STATUS_PERIOD_S
 STARTUP_MAX_S = 60.0
 #: Wall time between two "waiting for ..." lines of a node that is not ready [s].
 WAITING_LOG_S = 2.0
+#: Longest wait for the peers' acknowledgement of an error exit's status [s].
+EXIT_ACK_S = 0.5
 
 
 class GraphStatus:
@@ -125,13 +127,19 @@ class GraphStatus:
         self.publish()
 
     def close(self, exit_status: int, reason: str) -> None:
-        """Stop the heartbeat; announce the exit with its status and reason."""
+        """Stop the heartbeat; announce the exit with its status and reason.
+
+        An error exit waits (at most :data:`EXIT_ACK_S`) until the peers acknowledged it:
+        they stop naming this node's reason. A clean exit does not wait: the peers
+        already know the node is done.
+        """
         self._stop.set()
         self._beat.join(timeout=2.0)
         self.state = "exited"
-        try:  # delivered before the writer goes away (peers name this node's reason)
+        try:
             self.publish(exit_status, reason)
-            self._pub.wait_for_all_acked(Duration(seconds=0.5))
+            if exit_status:
+                self._pub.wait_for_all_acked(Duration(seconds=EXIT_ACK_S))
         except Exception:  # the context may be gone already
             pass
 
@@ -149,6 +157,28 @@ class GraphStatus:
         return [
             n for n in self.graph_nodes if n in GRAPH and topic in GRAPH[n][0] and n != self.name
         ]
+
+    def finished(self, name: str, n_steps: int) -> bool:
+        """True if peer ``name`` of this run finished its ``n_steps`` steps.
+
+        It announced them done (or exited cleanly after them): it took every message of
+        every step it consumes.
+        """
+        s = self.peers.own(name)
+        return (
+            s is not None
+            and s["k"] >= n_steps
+            and (s["state"] == "done" or (s["state"] == "exited" and not s.get("exit")))
+        )
+
+    def consumers_finished(self, topics, n_steps: int) -> bool:
+        """True if every consumer of ``topics`` in the graph finished its ``n_steps`` steps.
+
+        Then every message of these topics reached its readers, whether or not the DDS
+        writer has seen their acknowledgements yet (which may take a heartbeat period of
+        the middleware, about 3 s with Fast DDS, measured).
+        """
+        return all(self.finished(n, n_steps) for t in topics for n in self.consumers(t))
 
     def unmatched(self) -> list[str]:
         """What the node's topics still wait for, e.g. ``/hsv/state (from plant)``."""

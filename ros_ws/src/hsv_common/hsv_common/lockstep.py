@@ -17,7 +17,7 @@ A :class:`LockstepNode` declares the typed parameters of its node
   the topic and the node that should have sent it (exit status 3).
 
 The process around the node (exit codes, signals, executor) is :mod:`hsv_common.runtime`,
-the conversion between typed and ROS messages :mod:`hsv_common.codec`.
+the conversion between typed messages and their CDR bytes :mod:`hsv_common.codec`.
 """
 
 from __future__ import annotations
@@ -26,16 +26,17 @@ import time
 
 from rclpy.node import Node
 
-from fahv.loop.graph import GRAPH, PREVIOUS, n_steps_of, producer_of
+from fahv.loop.graph import GRAPH, NODES, PREVIOUS, n_steps_of, producer_of
 from fahv.loop.params import specs, validate
-from hsv_common.codec import from_msg, msg_type_of, to_msg
+from hsv_common.codec import decode, encode, msg_type_of, step_of
 from hsv_common.graph_status import GraphStatus
 from hsv_common.parameters import declare_graph, declare_parameters
 from hsv_common.runtime import (
     LOOP_QOS,
-    START_PARAMETER_SERVICES,
     ForeignGraphError,
     WatchdogError,
+    all_acked,
+    node_options,
     quiet_publisher,
     quiet_subscription,
 )
@@ -53,10 +54,7 @@ class LockstepNode(Node):
     WAIT_FOR_PEERS = False
 
     def __init__(self, name: str | None = None) -> None:
-        super().__init__(
-            name or self.ROLE,
-            start_parameter_services=START_PARAMETER_SERVICES,
-        )
+        super().__init__(name or self.ROLE, **node_options())
         self.graph_nodes, run_id = declare_graph(self)
         raw = declare_parameters(self, specs()[self.spec_name()])
         self.p = validate(self.spec_name(), raw)
@@ -76,18 +74,23 @@ class LockstepNode(Node):
             t: self.create_publisher(msg_type_of(t), t, LOOP_QOS, event_callbacks=quiet_publisher())
             for t in self.outputs
         }
-        self.subs = {
+        self.subs = {  # raw: the CDR bytes, decoded once the step's inputs are all in
             t: self.create_subscription(
                 msg_type_of(t),
                 t,
-                lambda m, t=t: self._receive(t, m),
+                lambda data, t=t: self._receive(t, data),
                 LOOP_QOS,
                 event_callbacks=quiet_subscription(),
+                raw=True,
             )  # fmt: skip
             for t in self.inputs
         }
         self.status.attach(self.subs, self.pubs)
         self.status.waiting = []
+        loop_nodes = {n.name for n in NODES.values() if n.kind in ("loop", "controller")}
+        self.publish_order = sorted(  # stable: the table's order within each group
+            self.outputs, key=lambda t: not loop_nodes & set(self.status.consumers(t))
+        )
         self.done = False
         self.last_progress = time.monotonic()
         self.t_ready = time.monotonic()
@@ -121,8 +124,9 @@ class LockstepNode(Node):
         """True once the node announced itself ready."""
         return self.status.ready
 
-    def _receive(self, topic: str, msg) -> None:
-        k = msg.k + 1 if topic in self.previous else msg.k  # the step that uses it
+    def _receive(self, topic: str, data: bytes) -> None:
+        k = step_of(data)
+        k = k + 1 if topic in self.previous else k  # the step that uses it
         if k in self.buf[topic]:
             raise ForeignGraphError(
                 f"{self.get_name()}: a second {topic} of step {k} arrived: another publisher "
@@ -139,7 +143,7 @@ class LockstepNode(Node):
                 )
             self.status.check_foreign()
             return
-        self.buf[topic][k] = msg
+        self.buf[topic][k] = data
         self._advance()
 
     def _advance(self) -> None:
@@ -147,11 +151,10 @@ class LockstepNode(Node):
             self.k in b or (self.k == 0 and t in self.previous) for t, b in self.buf.items()
         ):
             inputs = {
-                t: from_msg(t, self.buf[t].pop(self.k)) if self.k in self.buf[t] else None
+                t: decode(t, self.buf[t].pop(self.k)) if self.k in self.buf[t] else None
                 for t in self.inputs
             }
-            for topic, message in self.on_step(self.k, inputs):
-                self.pubs[topic].publish(to_msg(topic, message))
+            self.publish(self.on_step(self.k, inputs))
             if self.k == 0:
                 self.status.set_state("running")
             self.k += 1
@@ -159,6 +162,17 @@ class LockstepNode(Node):
             self.last_progress = time.monotonic()
             if self.k >= self.n_steps:
                 self.finish()
+
+    def publish(self, outputs) -> None:
+        """Publish (topic, message) pairs, those a loop node waits for first.
+
+        A step's critical path runs through the loop topics; what only the recorder
+        reads (/clock, the tube and fault statuses) is converted and sent after them.
+        """
+        out = dict(outputs)
+        for topic in self.publish_order:
+            if topic in out:
+                self.pubs[topic].publish(encode(topic, out[topic]))
 
     def finish(self) -> None:
         """Mark the run as complete for this node."""
@@ -169,6 +183,14 @@ class LockstepNode(Node):
             f"done: {self.k} steps in {wall:.2f} s wall ({1e3 * wall / max(self.k, 1):.2f} ms per "
             f"step), {self.stale} stale messages"
         )
+
+    def delivered(self) -> bool:
+        """True when the node's last messages need no more waiting (then it may exit).
+
+        Every consumer of its outputs finished all steps (the recorder announces that
+        once it holds every step of every topic), or every subscriber acknowledged them.
+        """
+        return self.status.consumers_finished(self.outputs, self.n_steps) or all_acked(self)
 
     def poll(self) -> None:
         """Called between spins: readiness (then :meth:`on_ready`), checks, the watchdog.

@@ -1,6 +1,6 @@
 """Process runtime of every node: QoS profiles, exit codes, executor, signals, ``main``.
 
-Exit status of a node (:func:`main`), also in docs/architecture.md:
+Exit status of a node (:func:`main`), also in docs/guide/sil.md:
 
 ==  =====================================================================
 0   done: every step, and every subscriber acknowledged the last messages
@@ -15,6 +15,7 @@ Exit status of a node (:func:`main`), also in docs/architecture.md:
 from __future__ import annotations
 
 import faulthandler
+import gc
 import os
 import signal
 import sys
@@ -25,7 +26,9 @@ from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
 from fahv.errors import ParameterError
 from fahv.loop import graph
@@ -38,14 +41,23 @@ EXIT_OK, EXIT_ERROR, EXIT_PARAM, EXIT_WATCHDOG, EXIT_SIGNAL, EXIT_FOREIGN = 0, 1
 #: thread waits for a lock it holds, with the GIL held). A C-level timer
 #: (faulthandler) then dumps every thread's traceback and ends the process with status
 #: 1 after the line ``TEARDOWN_MARK``; the runner reads that as a hung teardown, not a
-#: failure, when the node had closed with status 0.
-TEARDOWN_S = 10.0
+#: failure, when the node had closed with status 0. A teardown takes 12 ms (median,
+#: 36 ms at most, 18 node teardowns under a load of 7 on 2 cores, measured); the
+#: runner waits for the stalled one, so the deadline is short.
+TEARDOWN_S = 2.0
 #: Longest a node's main thread may stay away from its spin loop, beyond its watchdog [s].
 #: Every callback returns within ``watchdog_s`` in a working graph (the peers' watchdogs
-#: fail the run otherwise); a main thread stuck in a C call (seen once in CI, cause not
-#: found: the plant never exited, with every peer done) is ended by the same C-level
+#: fail the run otherwise); a main thread stuck in a C call is ended by the same C-level
 #: timer as the teardown: faulthandler dumps every thread's traceback and exits with 1.
+#: (A plant that never exited with every peer done had its DDS entities destroyed after
+#: this guard, when the EventsExecutor was freed: :func:`teardown` now runs under it.)
 HANG_S = 10.0
+#: Longest wait of one spin of a node's main loop [s]: signals, the peers' statuses and
+#: the watchdog are looked at least this often (and a spin is never unbounded, see
+#: :func:`make_executor`).
+SPIN_S = 0.05
+#: Longest wait of one spin while a node waits for its last messages to be delivered [s].
+LINGER_SPIN_S = 0.01
 
 
 class HangGuard:
@@ -80,6 +92,22 @@ class HangGuard:
 
 #: Parameter services cost every spin of every node (more entities in the wait set).
 START_PARAMETER_SERVICES = os.environ.get("HSV_PARAM_SERVICES", "0") == "1"
+
+
+def node_options() -> dict:
+    """Keyword arguments of every node's ``Node.__init__``: no services unless asked.
+
+    The six parameter services and rclpy's type description service serve ``ros2 param``
+    and ``ros2 topic info`` on a full ROS install; the SingleThreadedExecutor (the
+    recorder's) puts every service into its wait set at every spin. ``HSV_PARAM_SERVICES=1``
+    starts them all.
+    """
+    return {
+        "start_parameter_services": START_PARAMETER_SERVICES,
+        "parameter_overrides": [
+            Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=START_PARAMETER_SERVICES)
+        ],
+    }
 
 
 def qos_profile(q: graph.QoS) -> QoSProfile:
@@ -137,25 +165,42 @@ def end_reason(done: bool, status: int) -> str:
 
 
 def make_executor(message_info: bool = False):
-    """Executor of every node: rclpy's SingleThreadedExecutor unless ``HSV_EXECUTOR=events``.
+    """Executor of a node: rclpy's EventsExecutor unless ``HSV_EXECUTOR=single``.
 
-    ``HSV_EXECUTOR=events`` selects rclpy's experimental EventsExecutor (a C++ event
-    queue) for the nodes that take no message info; it ran the Case 1 graph about 1.4x
-    faster on this 2-core machine (docs/sil.md), but it hung in a ring test
-    (docs/environment.md) and a plant on it once never exited in CI with every peer
-    done, so it is no longer the default. ``message_info=True`` (the recorder: it keeps
-    the DDS source timestamps) always takes the SingleThreadedExecutor: the Jazzy
-    EventsExecutor cannot call a subscription callback with its message info
-    (SystemError, measured).
+    The EventsExecutor (a C++ event queue fed by the middleware's callbacks) runs the
+    lockstep graph about 1.5x faster than the SingleThreadedExecutor, which rebuilds a
+    wait set for every callback it hands out. Two properties of the Jazzy wheel (rclpy
+    7.1.6, built for manylinux_2_28) decide how :func:`main` uses it:
+
+    - **Only bounded spins.** ``spin()``, ``spin_once()`` without a timeout and
+      ``spin_until_future_complete(f)`` wait for ``steady_clock::time_point::max()``.
+      The wheel's libstdc++ has no ``pthread_cond_clockwait``, converts that deadline to
+      the system clock, overflows to a negative ``abstime`` (``tv_sec = -7.4e9``,
+      measured in gdb), so every wait returns at once and the queue's predicate loop
+      spins: 100 % CPU in C++ with the GIL released. A Python signal handler only sets a
+      flag for the main thread, which never comes back to the interpreter, so SIGTERM
+      and SIGINT are ignored. :func:`main` therefore only calls ``spin_once`` with a
+      timeout (:data:`SPIN_S`), and wakes up at least that often.
+    - **Tear down the executor first.** It keeps every subscription and service of its
+      nodes in use, so ``node.destroy_node()`` only marks the DDS entities for
+      destruction; they went away when the executor object was freed, after the hang
+      guard was cancelled, with the GIL held, where a Fast DDS teardown stall (see
+      :data:`TEARDOWN_S`) left a process that never exited and ignored SIGTERM.
+      :func:`main` calls ``ex.shutdown()`` (it releases the entities) before
+      ``destroy_node``, both under the teardown deadline.
+
+    ``message_info=True`` (the recorder: it keeps the DDS source timestamps) always takes
+    the SingleThreadedExecutor: the Jazzy EventsExecutor calls a callback that takes the
+    message info with one argument (SystemError, measured).
 
     Raises
     ------
     ParameterError
-        If ``HSV_EXECUTOR`` is neither ``single`` nor ``events``.
+        If ``HSV_EXECUTOR`` is neither ``events`` nor ``single``.
     """
-    kind = os.environ.get("HSV_EXECUTOR", "single")
+    kind = os.environ.get("HSV_EXECUTOR", "events")
     if kind not in ("single", "events"):
-        raise ParameterError(f"HSV_EXECUTOR = {kind!r}: 'single' (default) or 'events'")
+        raise ParameterError(f"HSV_EXECUTOR = {kind!r}: 'events' (default) or 'single'")
     if message_info or kind == "single":
         return SingleThreadedExecutor()
     from rclpy.experimental.events_executor import EventsExecutor
@@ -176,24 +221,70 @@ def all_acked(node: Node) -> bool:
     return all(p.wait_for_all_acked(Duration(seconds=0)) for p in node.publishers)
 
 
+def delivered(node: Node) -> bool:
+    """True when the node's messages need no more waiting.
+
+    ``node.delivered()`` if the node has one, else :func:`all_acked`.
+    """
+    check = getattr(node, "delivered", None)
+    return check() if check is not None else all_acked(node)
+
+
+def teardown(ex, node: Node | None) -> None:
+    """Release the executor's hold on the node's entities, then destroy the node.
+
+    ``ex.shutdown()`` first: the EventsExecutor keeps every subscription and service in
+    use until then, and ``destroy_node`` would only mark them (:func:`make_executor`).
+    """
+    if ex is not None:
+        ex.shutdown(timeout_sec=TEARDOWN_S)
+    if node is not None:
+        node.destroy_node()
+
+
+def failure(name: str, exc: Exception) -> tuple[int, str]:
+    """Exit status and reason of the exception that stopped node ``name``; prints them.
+
+    Call it from the ``except`` clause: an unexpected error prints its traceback too.
+    """
+    kinds = (
+        (ParameterError, EXIT_PARAM, "parameter error"),
+        (WatchdogError, EXIT_WATCHDOG, "watchdog"),
+        (ForeignGraphError, EXIT_FOREIGN, "error"),
+    )
+    for cls, status, what in kinds:
+        if isinstance(exc, cls):
+            print(f"[{name}] {what}: {exc}", file=sys.stderr)
+            return status, str(exc)
+    import traceback
+
+    reason = f"{type(exc).__name__}: {exc}"
+    print(f"[{name}] error: {reason}", file=sys.stderr)
+    traceback.print_exc()
+    return EXIT_ERROR, reason
+
+
 def main(node_cls, args=None, linger_s: float = 10.0) -> int:
     """Run one node until its last step, a signal, or an error; returns the exit status.
 
     The node class provides ``done`` (bool), ``k`` (step), ``poll()`` (called between
-    spins; raises to stop) and ``close(status, reason)`` (called once at the end, with
-    the exit status and the error message, "" when none).
+    spins; raises to stop), ``close(status, reason)`` (called once at the end, with
+    the exit status and the error message, "" when none) and optionally
+    ``delivered()`` (:func:`delivered`).
 
-    After the last step the node stays until every subscriber (the recorder too, which
-    may lag behind the loop) acknowledged its messages, at most ``linger_s`` seconds:
-    a reliable writer that goes away earlier loses what is still unacknowledged.
-    SIGINT and SIGTERM stop the spin loop cleanly (the node's ``close`` runs, so
-    the recorder finishes its file).
+    After the last step the node stays until its messages are delivered (every
+    consumer finished its steps, or every subscriber acknowledged them: the recorder
+    may lag behind the loop), at most ``linger_s`` seconds: a reliable writer that goes
+    away earlier loses what is still unacknowledged. SIGINT and SIGTERM stop the spin
+    loop cleanly (the node's ``close`` runs, so the recorder finishes its file). Every
+    spin is bounded (:data:`SPIN_S`), and the executor is shut down before the node is
+    destroyed, under the teardown deadline (:func:`make_executor`).
     """
     stop = _Stop()
     rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)
-    node = None
+    node = ex = None
     status = EXIT_OK
     reason = ""
     name = node_cls.ROLE
@@ -203,10 +294,14 @@ def main(node_cls, args=None, linger_s: float = 10.0) -> int:
         name = node.get_name()
         ex = make_executor(getattr(node, "MESSAGE_INFO", False))
         ex.add_node(node)
+        # the objects of the start (modules, the core, the entities) live as long as the
+        # node: out of the collector's way, a full collection scans only what the run made
+        gc.collect()
+        gc.freeze()
         guard.arm(max(getattr(node, "watchdog_s", HANG_S), HANG_S) + HANG_S)
         while not node.done and stop.signal is None:
             guard.beat()
-            ex.spin_once(timeout_sec=0.05)
+            ex.spin_once(timeout_sec=SPIN_S)
             if stop.signal is None:  # a signal first: peers stopping by it are no failure
                 node.poll()
         if stop.signal is not None and not node.done:
@@ -216,37 +311,22 @@ def main(node_cls, args=None, linger_s: float = 10.0) -> int:
         else:  # let reliable QoS deliver the last messages before the writers go away
             guard.arm(linger_s + 2 * HANG_S)  # the linger, then close (the recorder's file)
             t_end = time.monotonic() + linger_s
-            while time.monotonic() < t_end and stop.signal is None and not all_acked(node):
-                ex.spin_once(timeout_sec=0.01)
-    except ParameterError as exc:
-        reason = str(exc)
-        print(f"[{name}] parameter error: {exc}", file=sys.stderr)
-        status = EXIT_PARAM
-    except WatchdogError as exc:
-        reason = str(exc)
-        print(f"[{name}] watchdog: {exc}", file=sys.stderr)
-        status = EXIT_WATCHDOG
-    except ForeignGraphError as exc:
-        reason = str(exc)
-        print(f"[{name}] error: {exc}", file=sys.stderr)
-        status = EXIT_FOREIGN
-    except Exception as exc:  # report any failure with the node's name, then the traceback
-        import traceback
-
-        reason = f"{type(exc).__name__}: {exc}"
-        print(f"[{name}] error: {reason}", file=sys.stderr)
-        traceback.print_exc()
-        status = EXIT_ERROR
+            while time.monotonic() < t_end and stop.signal is None and not delivered(node):
+                ex.spin_once(timeout_sec=LINGER_SPIN_S)
+    except Exception as exc:  # report any failure with the node's name
+        status, reason = failure(name, exc)
     finally:
-        if node is not None:
-            try:
+        try:
+            if node is not None:
                 node.close(status, reason)
-            finally:
+        finally:
+            if node is not None:
                 print(f"[{name}] {TEARDOWN_MARK} {status}; DDS teardown", file=sys.stderr,
                       flush=True)  # fmt: skip
-                guard.arm(TEARDOWN_S)
-                node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-        guard.cancel()
+            guard.arm(TEARDOWN_S)
+            teardown(ex, node)
+            ex = None
+            if rclpy.ok():
+                rclpy.shutdown()
+            guard.cancel()
     return status

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import sys
 
-from hsv_common.codec import to_msg
 from hsv_common.lockstep import LockstepNode
 from hsv_common.runtime import main
 
 from fahv.lanes import Lanes
 from fahv.loop.cores import PlantCore
 from fahv.loop.graph import clock_msg
+from fahv.msg import ControlCommand
 
 
 class PlantNode(LockstepNode):
@@ -29,8 +29,16 @@ class PlantNode(LockstepNode):
     WAIT_FOR_PEERS = True
 
     def make_core(self, p: dict) -> None:
-        """Build the library object from the raw node parameters."""
+        """Build the library object from the raw node parameters; compile its step.
+
+        The first step of a plant compiles its integrator (numba; cached on disk, so
+        again after every change of the model's source). A throwaway core takes that
+        step now, before the node is ready: in the loop, a compile of several seconds
+        at step 0 left every peer waiting for step 1 past its watchdog.
+        """
         self.core = PlantCore([p], Lanes(1))
+        warm_up = PlantCore([p], Lanes(1))
+        warm_up.advance(ControlCommand.of(0, 0.0, warm_up.limits.u_min[None, :]))
 
     def _publish_state(self) -> list:
         k = self.core.k
@@ -39,8 +47,7 @@ class PlantNode(LockstepNode):
     def on_ready(self) -> None:
         """Every peer is ready: publish the state of step 0."""
         self.get_logger().info(f"graph ready ({len(self.graph_nodes) - 1} peers): step 0")
-        for topic, fields in self._publish_state():
-            self.pubs[topic].publish(to_msg(topic, fields))
+        self.publish(self._publish_state())
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""

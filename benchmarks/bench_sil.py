@@ -1,0 +1,155 @@
+"""Real-time factor of the SIL node graph: the working tree against an earlier commit.
+
+Both trees run the same ROS 2 parameter file (made once by the working tree's
+``fahv sil SCENARIO --duration D --write-params``), each with its own nodes, runner
+and library: the commit is exported with ``git archive`` (the repository is not
+touched), its workspace built with its own ``scripts/build_ros.sh`` and its ``src``
+put first on ``PYTHONPATH``. The runs alternate (new, old, then old, new, ...) so that
+the load of other processes on the machine falls on both alike. The wall time is that
+of the ``sil`` runner process, as ``fahv sil`` measures it (start-up, the steps, the
+teardown); the real-time factor is the simulated time over it. Prints every run, the
+median of each tree and their ratio.
+
+Run: .venv/bin/python benchmarks/bench_sil.py [--commit HEAD] [-n 3] [--duration 60]
+     [--scenario offline_design/scenarios/case1.yaml]
+The two trees must read the same node parameters; a commit whose nodes refuse the
+file shows as failed runs (exit status 1, the node's reason printed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+from fahv.runs.workspace import ROOT, WS, ensure_built, ros_env
+
+#: Environment variables of the nodes that the benchmark does not pass on (each tree
+#: runs with its own defaults).
+NODE_SWITCHES = ("HSV_EXECUTOR", "HSV_PARAM_SERVICES")
+
+
+def export_commit(commit: str, cache: Path) -> tuple[Path, str]:
+    """The tree of ``commit`` under ``cache/<sha>``, its workspace built (reused if there).
+
+    Raises
+    ------
+    subprocess.CalledProcessError
+        If the commit is unknown or its workspace does not build.
+    """
+    sha = subprocess.run(
+        ["git", "-C", str(ROOT), "rev-parse", "--verify", f"{commit}^{{commit}}"],
+        capture_output=True, text=True, check=True,
+    ).stdout.strip()  # fmt: skip
+    tree = cache / sha[:12]
+    if not (tree / "ros_ws" / "install" / "setup.bash").is_file():
+        shutil.rmtree(tree, ignore_errors=True)
+        tree.mkdir(parents=True)
+        archive = subprocess.run(
+            ["git", "-C", str(ROOT), "archive", sha], capture_output=True, check=True
+        ).stdout
+        subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
+        (tree / ".venv").symlink_to(ROOT / ".venv")
+        print(f"building the workspace of {sha[:12]} in {tree} ...", flush=True)
+        env = {**os.environ, "PYTHONPATH": str(tree / "src")}
+        subprocess.run(
+            ["bash", str(tree / "scripts" / "build_ros.sh")], env=env, check=True,
+            stdout=subprocess.DEVNULL,
+        )  # fmt: skip
+    return tree, sha[:12]
+
+
+def tree_env(ws: Path, src: Path | None) -> dict:
+    """Environment of a sourced workspace, with ``src`` first on PYTHONPATH."""
+    env = {k: v for k, v in os.environ.items() if k not in NODE_SWITCHES}
+    if src is not None:
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(src), env.get("PYTHONPATH")) if p)
+    venv_bin = Path(sys.executable).parent
+    script = f'export PATH="{venv_bin}:$PATH"; source "{ws}/install/setup.bash" && env -0'
+    out = subprocess.run(["bash", "-c", script], env=env, capture_output=True, check=True).stdout
+    return dict(item.split("=", 1) for item in out.decode().split("\0") if "=" in item)
+
+
+def write_params(scenario: str, duration: float, path: Path) -> dict:
+    """The run's parameter file, made by the working tree's ``fahv sil --write-params``."""
+    fahv = ROOT / ".venv" / "bin" / "fahv"
+    cmd = [str(fahv) if fahv.is_file() else "fahv", "sil", scenario, "--duration", str(duration)]
+    r = subprocess.run(
+        [*cmd, "--write-params", str(path)], cwd=ROOT, capture_output=True, text=True
+    )
+    if r.returncode != 0:
+        sys.exit(f"bench_sil: {' '.join(cmd)} --write-params failed:\n{r.stdout}{r.stderr}")
+    return yaml.safe_load(path.read_text())
+
+
+def run_once(content: dict, ws: Path, env: dict, work: Path) -> tuple[int, float, str]:
+    """One run of a workspace's ``sil`` runner; (exit status, wall time [s], error tail)."""
+    work.mkdir(parents=True)
+    c = yaml.safe_load(yaml.safe_dump(content))
+    c["recorder"]["ros__parameters"].update(bag=str(work / "run"), params_file="")
+    c["/**"]["ros__parameters"]["run_id"] = work.name
+    params = work / "params.yaml"
+    params.write_text(yaml.safe_dump(c, sort_keys=False))
+    exe = ws / "install" / "hsv_bringup" / "lib" / "hsv_bringup" / "sil"
+    cmd = [str(exe), "--params-file", str(params), "--log-dir", str(work / "logs"), "--quiet"]
+    t0 = time.monotonic()
+    r = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    wall = time.monotonic() - t0
+    return r.returncode, wall, "" if r.returncode == 0 else r.stderr[-1500:]
+
+
+def main() -> None:
+    """Alternate runs of both trees; print each run, the medians and their ratio."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default="offline_design/scenarios/case1.yaml")
+    ap.add_argument("--commit", default="HEAD", help="earlier commit to compare with")
+    ap.add_argument("--duration", type=float, default=60.0, help="simulated time [s]")
+    ap.add_argument("-n", type=int, default=3, help="runs of each tree")
+    ap.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "fahv_bench_sil")
+    ap.add_argument("--keep", action="store_true", help="keep the run folders")
+    args = ap.parse_args()
+
+    ensure_built()
+    base, sha = export_commit(args.commit, args.cache)
+    work = Path(tempfile.mkdtemp(prefix="bench_sil_"))
+    content = write_params(args.scenario, args.duration, work / "params.yaml")
+    trees = {
+        "working tree": (WS, ros_env()),
+        sha: (base / "ros_ws", tree_env(base / "ros_ws", base / "src")),
+    }
+    for _, env in trees.values():
+        for k in NODE_SWITCHES:
+            env.pop(k, None)
+    rtf: dict[str, list[float]] = {name: [] for name in trees}
+    print(f"{args.scenario}, {args.duration:g} s simulated, {args.n} runs each, alternating")
+    for i in range(args.n):
+        order = list(trees) if i % 2 == 0 else list(trees)[::-1]
+        for name in order:
+            ws, env = trees[name]
+            rc, wall, err = run_once(content, ws, env, work / f"{i}_{name.replace(' ', '_')}")
+            rtf[name].append(args.duration / wall if rc == 0 else float("nan"))
+            print(f"  run {i + 1} {name:>12s}: wall {wall:6.2f} s, real-time factor "
+                  f"{rtf[name][-1]:5.2f}" + ("" if rc == 0 else f"  FAILED (exit {rc})"),
+                  flush=True)  # fmt: skip
+            if err:
+                print("    " + err.strip().replace("\n", "\n    "), flush=True)
+    med = {n: statistics.median([x for x in v if x == x] or [float("nan")]) for n, v in rtf.items()}
+    for name, v in rtf.items():
+        runs = ", ".join(f"{x:.2f}" for x in v)
+        print(f"{name:>12s}: median real-time factor {med[name]:.2f}  ({runs})")
+    new, old = med["working tree"], med[sha]
+    print(f"ratio working tree / {sha}: {new / old:.2f}")
+    if not args.keep:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

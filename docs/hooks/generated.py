@@ -1,0 +1,161 @@
+"""Generated parts of the documentation site: an MkDocs hook, and the command that writes them.
+
+Two kinds of generated content:
+
+- **Tables written into their pages** between ``<!-- NAME -->`` and ``<!-- /NAME -->``
+  (the key tables of design, scenario and campaign files, the node table, the registry
+  tables). The tests read them from the page; the site build checks that each equals what
+  the code generates now and fails naming the command that rewrites them::
+
+      .venv/bin/python docs/hooks/generated.py
+
+- **The command-line reference**, made at build time from the ``fahv`` argument parser
+  where a page holds ``<!-- fahv-cli -->``; nothing of it is stored.
+
+The hook also tells apart two kinds of message of the API reference build that are not
+defects of the pages (see :data:`NOT_CROSS_REFERENCES` and :data:`KNOWN_DOCSTRING_NOTES`)
+and logs them as information, so that every other warning still fails the strict build.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import re
+import sys
+from importlib import import_module
+from pathlib import Path
+
+DOCS = Path(__file__).resolve().parents[1]
+
+#: Marker name -> (module, function returning the Markdown table).
+TABLES = {
+    "design-keys": ("fahv.design.case", "design_spec"),
+    "scenario-keys": ("fahv.design.case", "scenario_spec"),
+    "campaign-keys": ("fahv.campaign.spec", "campaign_spec"),
+    "node-table": ("fahv.loop.graph", "markdown_table"),
+    "registry-tables": ("fahv.loop.graph", "registry_tables"),
+}
+#: Specs whose table is ``fahv.config.spec.markdown(spec())``; the others return Markdown.
+SPECS = {"design-keys", "scenario-keys", "campaign-keys"}
+
+CLI_MARKER = "<!-- fahv-cli -->"
+MARKER = re.compile(r"<!-- ([a-z-]+) -->\n(.*?)<!-- /\1 -->", re.DOTALL)
+
+#: An autorefs target holding ", " is a bracketed list in a docstring (units such as
+#: ``[ft, ft/s]`` after ``[h, V]``, an index such as ``[:, c_i]``), which Markdown reads as
+#: a reference link ``[a] [b]``; an identifier never holds ", ".
+NOT_CROSS_REFERENCES = re.compile(r"Could not find cross-reference target '[^']*, [^']*'")
+
+#: (source file, word) of docstrings whose closing paragraph follows the Parameters
+#: section without a heading, so that the numpydoc parser reads its first word as a
+#: parameter (reported for a "Notes" heading in src/).
+KNOWN_DOCSTRING_NOTES = (
+    ("fahv/runs/bag.py", "Idempotent"),
+    ("fahv/runs/latency.py", "Returns"),
+    ("fahv/runs/sil.py", "Every"),
+    ("fahv/runs/sil.py", "this"),
+)
+
+log = logging.getLogger("mkdocs.hooks.generated")
+
+
+def table(name: str) -> str:
+    """The Markdown the code generates for the marker ``name``."""
+    module, function = TABLES[name]
+    made = getattr(import_module(module), function)()
+    if name in SPECS:
+        from fahv.config.spec import markdown
+
+        made = markdown(made)
+    return made.strip("\n")
+
+
+def rewrite(text: str) -> str:
+    """``text`` with every marked table replaced by the one the code generates."""
+
+    def fresh(m: re.Match) -> str:
+        name = m.group(1)
+        if name not in TABLES:
+            return m.group(0)
+        return f"<!-- {name} -->\n{table(name)}\n<!-- /{name} -->"
+
+    return MARKER.sub(fresh, text)
+
+
+def stale_tables(text: str) -> list[str]:
+    """Names of the marked tables of ``text`` that differ from the code's."""
+    return [
+        m.group(1)
+        for m in MARKER.finditer(text)
+        if m.group(1) in TABLES and m.group(2).strip("\n") != table(m.group(1))
+    ]
+
+
+def cli_reference() -> str:
+    """The help of ``fahv`` and of every subcommand, one section each."""
+    os.environ["COLUMNS"] = "100"  # argparse wraps at the terminal width
+    from fahv.cli import build_parser
+
+    parts: list[str] = []
+
+    def walk(parser: argparse.ArgumentParser, level: int) -> None:
+        parts.append(f"{'#' * level} `{parser.prog}`\n\n```text\n{parser.format_help()}```\n")
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in dict.fromkeys(action.choices.values()):
+                    walk(sub, min(level + 1, 4))
+
+    walk(build_parser(), 2)
+    return "\n".join(parts)
+
+
+class _Demote(logging.Filter):
+    """Log the messages that are not page defects (module docstring) as information."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        text = record.getMessage()
+        known = NOT_CROSS_REFERENCES.search(text) or any(
+            path in text and f"'{word}'" in text for path, word in KNOWN_DOCSTRING_NOTES
+        )
+        if known and record.levelno == logging.WARNING:
+            record.levelno, record.levelname = logging.INFO, "INFO"
+        return True
+
+
+for _name in ("mkdocs.plugins.griffe", "mkdocs.plugins.mkdocs_autorefs._internal.plugin"):
+    logging.getLogger(_name).addFilter(_Demote())
+
+
+def on_page_markdown(markdown: str, page, **kwargs) -> str:
+    """MkDocs event: check the marked tables of a page, expand the CLI reference."""
+    stale = stale_tables(markdown)
+    if stale:
+        log.warning(
+            "%s: generated table(s) %s differ from the code; rewrite them with "
+            "`.venv/bin/python docs/hooks/generated.py`",
+            page.file.src_path,
+            ", ".join(stale),
+        )
+    if CLI_MARKER in markdown:
+        markdown = markdown.replace(CLI_MARKER, cli_reference())
+    return markdown
+
+
+def main() -> int:
+    """Rewrite every marked table under docs/ from the code; print what changed."""
+    changed = 0
+    for path in sorted(DOCS.rglob("*.md")):
+        text = path.read_text()
+        new = rewrite(text)
+        if new != text:
+            path.write_text(new)
+            changed += 1
+            print(f"rewrote {path.relative_to(DOCS.parent)}")
+    print(f"{changed} page(s) rewritten")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

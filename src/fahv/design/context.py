@@ -1,0 +1,29 @@
+"""What a control law's offline part sees when a design or a scenario prepares it."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from fahv.model.vehicle import Vehicle
+
+
+@dataclass(frozen=True)
+class DesignContext:
+    """What a control law's offline part (:meth:`fahv.control.ControlLaw.design`) sees.
+
+    Attributes
+    ----------
+    case : dict
+        Validated case data.
+    vehicle : fahv.model.vehicle.Vehicle
+    arrays : dict
+        Arrays designed so far (the TP model, W, F, Z, K, Q, trim map ...).
+    log : callable
+        Receives one line per step.
+    """
+
+    case: dict
+    vehicle: Vehicle
+    arrays: dict
+    log: Callable[[str], None]

@@ -1,0 +1,385 @@
+"""The certificate lines the design prints, each with its margin and verdict, in one place.
+
+Every function here formats a result computed elsewhere; none computes a certificate.
+The eight-state tube set: :func:`tube_set_lines` (with :func:`range_line`,
+:func:`onset_lines` and :func:`notch_loop_line`) and :func:`closure_iteration_line`. The
+paper's vertex tube checked over its domain: :func:`rpi_check_line`,
+:func:`adjustable_tube_line`, :func:`domain_line`, :func:`domain_bound_line`,
+:func:`closed_line` and :func:`vertex_onset_line`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fahv.design.domain import (
+    BOX_COORDINATES,
+    OTHER_COORDINATES,
+    SchedulingBox,
+    product_supports,
+)
+from fahv.design.tube_set import ASSUMPTIONS, EIGHT_STATES
+
+
+def _join(values, fmt: str, sep: str = " ") -> str:
+    """``values`` formatted with ``fmt`` and joined with ``sep``."""
+    return sep.join(format(v, fmt) for v in values)
+
+
+def closure_iteration_line(it: int, tightening, N_8, ab, ratio) -> str:
+    """The design log's line of one W_8-Z_8 iteration (:mod:`fahv.design.closure`).
+
+    Parameters
+    ----------
+    it : int
+        The iteration's index.
+    tightening : (2,) array_like
+        F_8 Z_8's support per input [-, rad].
+    N_8 : (8, 8) ndarray
+        Z_8's shape.
+    ab : fahv.design.one_step_bound.AltitudeBound
+    ratio : (8,) array_like
+        bound / W_8 per row.
+    """
+    return (
+        f"eight-state tube, iteration {it}: tightening {tightening[0]:.4f} / "
+        f"{np.degrees(tightening[1]):.3f} deg, alpha support "
+        f"{np.degrees(np.sqrt(N_8[1, 1])):.4f} deg, H = {ab.H:.2f} ft (step {ab.step:.3f} "
+        f"ft, w_h {ab.w_h:.3f} ft); bound / W_8 (V ... eta_2_dot) " + _join(ratio, ".3f")
+    )
+
+
+def range_line(cert: SchedulingBox, nominal: SchedulingBox) -> str:
+    """The line of the certified nominal range (:func:`fahv.design.domain.certified_range`)."""
+    deg = np.degrees
+    o = cert.other_half
+    return (
+        f"the certificate covers a nominal anywhere in the scheduling box less the tube: h "
+        f"{cert.lo[0]:.0f}..{cert.hi[0]:.0f} ft, V {cert.lo[1]:.2f}..{cert.hi[1]:.2f} ft/s, "
+        f"alpha {deg(cert.lo[2]):+.3f}..{deg(cert.hi[2]):+.3f} deg and theta "
+        f"{deg(cert.lo[3]):+.3f}..{deg(cert.hi[3]):+.3f} deg from the trim at its own (h, V), "
+        f"applied Phi {cert.lo[4]:+.4f}..{cert.hi[4]:+.4f} and delta_e "
+        f"{deg(cert.lo[5]):+.3f}..{deg(cert.hi[5]):+.3f} deg from the trim's, |q| <= "
+        f"{deg(o[0]):.3f} deg/s, |eta_1|, |eta_1_dot|, |eta_2|, |eta_2_dot| <= {o[1]:.3f}, "
+        f"{o[2]:.3f}, {o[3]:.3f}, {o[4]:.3f} from the trim's (the case's nominal box, "
+        f"e.g. alpha +/-{deg(nominal.hi[2]):.3f} deg, is the part the QP's rows keep)"
+    )
+
+
+def tube_set_lines(tube_set, nominal: SchedulingBox, box: SchedulingBox) -> list[str]:
+    """The certificate lines of a closed tube set, each with its margin (the design log).
+
+    Parameters
+    ----------
+    tube_set : fahv.design.tube_set.TubeSet
+    nominal, box : SchedulingBox
+        The nominal box and the scheduling box it was closed over.
+
+    Returns
+    -------
+    list of str
+        W_8's bound, the closure, the altitude bound, the box's reach, the certified
+        range, Z_8's supports, the assumptions, then the onset lines and the notch loops.
+    """
+    s_lo, s_oth = product_supports(tube_set.F_8, tube_set.N_8, tube_set.H)
+    lo, hi, oth = box.margin_to(nominal)
+    room = np.r_[np.minimum(lo, hi)[1:] / s_lo[1:], oth / s_oth]
+    names = [*BOX_COORDINATES[1:], *OTHER_COORDINATES]
+    worst = int(np.argmin(room))
+    sz = np.sqrt(np.diag(tube_set.N_8))
+    t = tube_set.tightening
+    return [
+        "W_8 bounds the one-step disturbance over its domain (the nominal box, the product "
+        "set |e_h| <= H x Z_8, every corner of the parameter box, rho_f in [rho_min, 1]): "
+        f"slack per row (V ... eta_2_dot) {_join(tube_set.slack, '.3f')}, smallest "
+        f"{tube_set.slack.min():.3f}  OK",
+        f"closed: Z_8 RPI for W_8, exact worst one-step level {tube_set.level:.6f} <= 1 "
+        f"(margin {1.0 - tube_set.level:.2e}), lam = {tube_set.lam}  OK",
+        f"altitude: |e_h| <= H = {tube_set.H:.3f} ft by the reset every {tube_set.moves} "
+        f"steps (step {tube_set.step:.4f} ft, w_h {tube_set.w_h:.4f} ft)",
+        f"scheduling box holds the nominal box plus the tube: smallest reach "
+        f"{room[worst]:.2f} x the tube's support ({names[worst]})  OK",
+        range_line(tube_set.certified_range(box), nominal),
+        f"Z_8 supports: V {sz[0]:.3f} ft/s, alpha {np.degrees(sz[1]):.4f} deg, theta "
+        f"{np.degrees(sz[2]):.4f} deg, q {np.degrees(sz[3]):.4f} deg/s; tightening "
+        f"{t[0]:.4f} / {np.degrees(t[1]):.3f} deg",
+        "assumed, not certified: " + "; ".join(ASSUMPTIONS),
+        *([] if tube_set.onset is None else onset_lines(tube_set.onset)),
+        *(notch_loop_line(loop) for loop in tube_set.notch_loops),
+    ]
+
+
+def onset_lines(onset) -> list[str]:
+    """The design log's lines of an onset bound (:class:`fahv.design.onset.OnsetBound`).
+
+    The level bound at the design's loss with its verdict, the largest certified losses,
+    the first jump state by state and, with a lower bound, :func:`witness_line`.
+    """
+    ok = onset.peak <= 1.0
+    gains = f"estimate gain {onset.gamma:.3f} per step"
+    if onset.gamma_e > 0.0:
+        gains += (
+            f", {onset.gamma_e:.3f} along the elevator column (the jump's share along it "
+            f"{onset.jump_elevator:.3f}, the rest {onset.jump_rest:.3f} x Z_8)"
+        )
+    share = ", ".join(f"{n} {v:+.3f}" for n, v in zip(EIGHT_STATES, onset.jump_share, strict=True))
+    return [
+        f"onset of a {100 * onset.loss:.1f} % loss (from the error at its steady level "
+        f"{onset.level0:.3f} (c Z_8, c = {onset.steady:.3f}; the ellipsoid RPI for the bound "
+        f"itself lies in {onset.steady_shaped:.3f} Z_8), {gains}): first jump "
+        f"{onset.jump:.3f} x Z_8 at the scheduling box's worst point (interior samples "
+        f"{onset.interior_ratio:.3f} of the corners'), closed-loop contraction "
+        f"{onset.contraction:.5f} per step, level bound {onset.peak:.3f} "
+        + ("<= 1  OK" if ok else "> 1: NOT certified"),
+        f"largest loss whose onset keeps e in Z_8: {100 * onset.certified_loss:.2f} % with "
+        f"the case's estimate, {100 * onset.certified_loss_one_step:.2f} % with an estimate "
+        "that knows the whole loss one step after it acts (the first step alone, which no "
+        "estimate can remove)",
+        f"the first jump state by state, x Z_8's support: {share}; its Z_8 norm without the "
+        f"bending modes {onset.jump_rigid_q:.3f}, without q and them (V, alpha, theta alone) "
+        f"{onset.jump_rigid:.3f}",
+    ] + ([] if onset.witness is None else [witness_line(onset)])
+
+
+def witness_line(onset) -> str:
+    """The design log's line of the onset's lower bound (requires ``onset.witness``)."""
+    w = onset.witness
+    refuted = w.level_any_column > 1.0
+    return (
+        f"onset lower bound (one vertex held, w inside the bound for {w.pre_steps} steps, "
+        f"a jump sample, the estimate's most favourable elevator direction; re-simulated): "
+        f"level {w.level:.3f} at the {100 * onset.loss:.1f} % loss, {w.step} steps after "
+        f"the onset (its onset part {w.pulse:.3f}; whichever column the estimate uses, "
+        f"{w.level_any_column:.3f}) "
+        + ("> 1: no analysis on the tube set's assumptions certifies this loss; the smallest "
+           f"loss so refuted {100 * onset.ceiling:.2f} % (certified "
+           f"{100 * onset.certified_loss:.2f} %)" if refuted else
+           "<= 1: not refuted")
+    )  # fmt: skip
+
+
+def notch_loop_line(loop) -> str:
+    """The design log's line of a tube loop through a notch, with its verdict.
+
+    Parameters
+    ----------
+    loop : fahv.design.notch_loop.NotchLoop
+    """
+    head = (
+        f"variant {loop.variant}: tube feedback through the notch on q (omega {loop.omega:.2f} "
+        f"rad/s, eps_p {loop.eps_p:g}): largest spectral radius over the vertices "
+        f"{loop.rho:.6f} (on the measured q {loop.rho_q:.6f})"
+    )
+    if not loop.stable:
+        return head + f": UNSTABLE at vertex {loop.vertex}: NOT certified with the notch"
+    if loop.s is None:
+        return head + (
+            ": stable at every vertex (necessary only); the RPI certificate is for the "
+            "feedback on the measured q: NOT certified with the notch"
+        )
+    if not np.isfinite(loop.s):
+        return head + (
+            "; no ellipsoid of the loop with the filter's states RPI for W with its input "
+            "support within the tightening (LMI infeasible): NOT certified with the notch"
+        )
+    closed = ""
+    if loop.w_ratio is not None:
+        closed = (f", over the loop's own set of (e, u - v): H / the tube set's "
+                  f"{loop.w_ratio[0]:.3f}, W's bound / W per row "
+                  + _join(loop.w_ratio[1:], ".3f"))  # fmt: skip
+    return head + (
+        ("; with the gain designed for the loop" if loop.designed else "")
+        + f"; an ellipsoid of the loop with the filter's states, RPI for W: exact worst "
+        f"one-step level {loop.level:.6f}, its projection on e inside {loop.s:.4f} x Z, "
+        f"input support through q' {_join(loop.supports, '.4f', ' / ')} (tightening "
+        f"{_join(loop.tightening, '.4f', ' / ')}){closed}"
+        + (": certified with the notch  OK" if loop.certified
+           else ": NOT certified with the notch")
+    )  # fmt: skip
+
+
+def rpi_check_line(level: float, n_vertices: int, n_corners: int, growth: float,
+                   tau: float) -> str:  # fmt: skip
+    """The vertex tube's exact RPI check (:func:`fahv.synthesis.rpi_level.worst_level`).
+
+    Parameters
+    ----------
+    level : float
+        The worst one-step level.
+    n_vertices, n_corners : int
+        Vertices (the gains tau' F included) and corners of W checked.
+    growth : float
+        The factor W may grow by (:func:`fahv.synthesis.rpi_level.rpi_margin`).
+    tau : float
+        Adjustable factor (eq. 48).
+    """
+    gains = f" with the gains tau' F, tau' in [{tau:g}, 1]" if tau < 1 else ""
+    return (
+        f"RPI check (exact): worst one-step level over {n_vertices} vertices{gains} x "
+        f"{n_corners} corners of W and all of Z = {level:.5f} (<= 1 required; margin "
+        f"{1 - level:.2e}); the tube stays RPI for W scaled by up to {growth:.3f}x"
+        + ("  OK" if level <= 1.0 else ": NOT RPI for its own W")
+    )
+
+
+def adjustable_tube_line(tau: float, level_t: float, w_prime: float) -> str:
+    """The adjustable tube tau Z with tau F (eq. 47-48): its level for W and W' = g W."""
+    return (
+        f"adjustable tube tau Z with tau F (eq. 47-48, tau = {tau:g}): worst one-step "
+        f"level for W = {level_t:.5f}; RPI for W' = {w_prime:.3f} W (the incomplete "
+        f"disturbance set; >= tau by the LMI's tau vertices"
+        + ("  OK)" if w_prime >= tau * (1 - 1e-9) else ": NOT as designed)")
+        + ". For the whole W the error stays in Z and the input deviation in tau F Z"
+    )
+
+
+def domain_line(dom, n_schedules: int) -> str:
+    """The vertex tube's domain (:class:`fahv.design.domain.CertificateDomain`)."""
+    return (
+        f"certificate domain: {n_schedules} scheduling point(s) over the envelope; x - x_rs "
+        f"within nominal + Z = +/-[{_join(dom.x_half, '.3g', ', ')}]; inputs Phi in "
+        f"[{dom.u_lo[0]:.3f}, {dom.u_hi[0]:.3f}], delta_e in [{np.degrees(dom.u_lo[1]):.1f}, "
+        f"{np.degrees(dom.u_hi[1]):.1f}] deg (tightened set + tau F Z); all "
+        f"{2 ** len(dom.uncertainty)} corners of the sec. 5.1 box; rho_f in {list(dom.rho)}. "
+        "Assumed: " + "; ".join(dom.notes)
+    )
+
+
+def domain_bound_line(n_evaluations: int, ratio, slack) -> str:
+    """W against the bound over the domain (:mod:`fahv.design.one_step_bound`)."""
+    return (
+        "W over the domain (Taylor bound + corner remainder, "
+        f"{n_evaluations} plant steps): bound / W per row = "
+        + _join(ratio, ".2f", ", ")
+        + "; slack (W - bound) / W = "
+        + _join(slack, "+.2f", ", ")
+    )
+
+
+def closed_line(closed: bool, ratio, growth: float) -> str:
+    """Whether the bound over the domain lies inside W, or by how much it exceeds it."""
+    if closed:
+        return "certificate closed: the disturbance over the domain lies inside W  OK"
+    worst_row = int(np.argmax(ratio))
+    return (
+        f"certificate NOT closed: the disturbance over the domain exceeds W by up to "
+        f"{ratio[worst_row]:.1f}x (row {worst_row}); the tube is RPI only up to "
+        f"{growth:.3f} W, so e in Z is NOT guaranteed for this plant (measured, "
+        "docs/theory/certificate.md)"
+    )
+
+
+def vertex_onset_line(rho_min: float, delta_e: float, est_tau, level_max: float) -> str:
+    """The vertex tube's onset of a loss (:func:`fahv.design.vertex_tube.onset_levels`)."""
+    return (
+        f"onset of a {100 * (1 - rho_min):.0f} % loss at delta_e = "
+        f"{np.degrees(delta_e):.1f} deg (estimate time constant {est_tau} s): "
+        f"level bound from the certificate up to {level_max:.3g} "
+        + ("<= 1  OK" if level_max <= 1 else "> 1: the onset is NOT certified")
+    )
+
+
+# -- the design pipeline's own lines (fahv.design.pipeline, fahv.design.tube_forms) ------
+def tp_model_line(kind: str, n_vertices: int, Ts: float) -> str:
+    """The TP model's line: design model, vertex count (eq. 11), control period [s]."""
+    return f"TP model: {kind.upper()}, {n_vertices} vertices, Ts = {Ts} s"
+
+
+def disturbance_line(section: dict, W) -> str:
+    """The sampled W's line (eq. 13-19): samples, margin, dominant source per state."""
+    return (
+        f"W: {section['samples']} samples, margin {section['margin']}, constant part of the "
+        f"parameter error {section['constant']}; dominant source per state: "
+        + ", ".join(W.dominant())
+    )
+
+
+def tube_lmi_line(n_vertices: int, rho_f: float, tau: float, min_eig: float, lam) -> str:
+    """The tube LMI's line (LMI 24 with the S-procedure, eq. 48 for tau < 1)."""
+    return (
+        f"certificate F, Z (LMI 24 + S-procedure, {n_vertices} vertices incl. rho_f = "
+        f"{rho_f}{f' and the gains tau F, tau = {tau:g} (eq. 48)' if tau < 1 else ''}): min "
+        f"eigenvalue {min_eig:.3e} >= -1e-12 x the largest entry of each vertex matrix "
+        f"(tolerance), lam = {lam}  OK"
+    )
+
+
+def tightening_line(room, tightening, tau: float) -> str:
+    """The tightened inputs' line (eq. 30; eq. 53 with tau < 1): room and tau F Z's support."""
+    return (
+        f"tightened inputs (eq. 30{', 53 with tau = ' + str(tau) if tau < 1 else ''}): "
+        f"room {room[0]:.4f} / {np.degrees(room[1]):.3f} deg, tightening "
+        f"{tau * tightening[0]:.4f} / {np.degrees(tau * tightening[1]):.3f} deg"
+    )
+
+
+def coverage_line(coverage, rho_f: float) -> str:
+    """The loss coverage's line (:class:`fahv.design.coverage.LossCoverage`)."""
+    c = coverage
+    return (
+        f"largest elevator loss whose faulty trim fits the tightened inputs for every one of "
+        f"the {c.corners} distinct corners of the parameter box (1024 corners; I_yy does "
+        f"not enter a trim): {100 * c.loss_path:.1f} % on the design step's path, "
+        f"{100 * c.loss:.1f} % over the whole envelope ({c.points} grid points, "
+        f"+{np.degrees(c.remainder):.4f} deg of elevator between them; trim elevator "
+        f"monotone in h, V: {c.monotone[0]}, {c.monotone[1]}); worst: "
+        f"{np.degrees(c.delta_e_max):.3f} deg at h = {c.worst_point[0]:.0f} ft, "
+        f"V = {c.worst_point[1]:.1f} ft/s; design rho_f = {rho_f}"
+    )
+
+
+def input_rows_line(offsets, nominal: SchedulingBox, u_box) -> str:
+    """The line of the QP's rows on the nominal input (``mpc.u_box``, :mod:`fahv.design.rows`)."""
+    off_lo, off_hi = offsets
+    deg = np.degrees
+    return (
+        f"nominal box inputs (applied input minus the nominal trim): the box corners' trims "
+        f"lie at Phi {off_lo[0]:+.4f}..{off_hi[0]:+.4f}, delta_e {deg(off_lo[1]):+.3f}"
+        f"..{deg(off_hi[1]):+.3f} deg (any loss or bias: the plant applies its own "
+        f"trim); the box allows {nominal.lo[4]:+.3f}..{nominal.hi[4]:+.3f} and "
+        f"{deg(nominal.lo[5]):+.2f}..{deg(nominal.hi[5]):+.2f} deg, so "
+        f"the QP bounds the manoeuvre part K zeta + c of the nominal input to Phi "
+        f"{u_box[0, 0]:+.4f}..{u_box[1, 0]:+.4f}, delta_e {deg(u_box[0, 1]):+.3f}.."
+        f"{deg(u_box[1, 1]):+.3f} deg (mpc.u_box; a loss scales the applied part "
+        "towards 0)"
+    )
+
+
+def nominal_range_line(hv_box) -> str:
+    """The line of the nominal's h, V range (``mpc.hv_box``)."""
+    return (
+        f"nominal range (mpc.hv_box): h {hv_box[0, 0]:.0f}..{hv_box[1, 0]:.0f} ft, V "
+        f"{hv_box[0, 1]:.2f}..{hv_box[1, 1]:.2f} ft/s: the QP keeps its set point and its "
+        "predicted h, V in it (the tube set's nominal box)"
+    )
+
+
+def state_rows_line(x_box) -> str:
+    """The line of the nominal's other states' range (``mpc.x_box``)."""
+    xd = np.degrees(x_box[:, :3])
+    return (
+        f"nominal state range (mpc.x_box): alpha {xd[0, 0]:+.3f}..{xd[1, 0]:+.3f} deg, theta "
+        f"{xd[0, 1]:+.3f}..{xd[1, 1]:+.3f} deg, |q| <= {xd[1, 2]:.3f} deg/s, |eta_1|, "
+        f"|eta_1_dot|, |eta_2|, |eta_2_dot| <= "
+        + ", ".join(f"{v:.3f}" for v in x_box[1, 3:])
+        + " from the trim at the nominal's own (h, V): the QP keeps its prediction in it "
+        "(the range the certificate covers)"
+    )
+
+
+def nominal_gain_line(cert: dict, s: float) -> str:
+    """The nominal gain's line (LMI 33-35'): contraction, input ratio, LMI margin, s."""
+    return (
+        f"certificate K (LMI 33-35'): contraction {cert['contraction']:.6f} < 1, input "
+        f"ratio {cert['input_ratio']:.4f} <= 1, LMI (34') min eigenvalue "
+        f"{cert['lmi34_min_eig']:.2e} >= -{cert['lmi34_tol']:.2e} (tolerance: 1e-9 x the "
+        f"largest entry of the block), fraction of the design step in E(Q) s = {s:.3f}  OK"
+    )
+
+
+def no_estimate_line(variant: str) -> str:
+    """The note for a tube variant without disturbance estimate while W leaves it one."""
+    return (
+        f"note: variant {variant} has no disturbance estimate; W leaves the constant "
+        "part of the parameter error to one, so its tube certificate does not cover it"
+    )

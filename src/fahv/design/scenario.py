@@ -1,0 +1,331 @@
+"""Scenarios: one thing to fly on a stored design, checked against what the design certifies.
+
+A scenario file (:func:`fahv.design.case.scenario_spec`) names a design and gives the
+command, the fault instance, the simulated vehicle draw, the duration and the variants.
+:func:`load_scenario` reads it, finds its design file, and forms the **case** the loop
+runs on (the design's entries with the scenario's); :func:`scenario_design` adds to a
+stored design what depends on the scenario, in seconds and without re-designing:
+
+* ``x0``, the plant's initial state: the design's trim map at (h0, V0);
+* the simulated vehicle's perturbed parameters (``summary['plant_params']``);
+* the RMPC baseline's ellipsoids along the scenario's step, when its step differs from
+  the design step (Wan & Kothare 2003 re-solved, then cached by content hash).
+
+:func:`certified_range` states what the design certifies (nominal h, V range, fault
+range, uncertainty box) and :func:`uncertified` lists what a scenario asks beyond it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fahv.control import LAWS, VARIANTS
+from fahv.design.artefacts import Design
+from fahv.design.case import Case, case_from_mapping, read_yaml_file, scenario_spec
+from fahv.errors import CaseError
+from fahv.model.trim import TrimMap
+from fahv.plant.faults import make_fault
+from fahv.plant.uncertainty import perturbed_params
+
+#: Top-level entries of a design file that the case does not carry (the scenario's own
+#: command and vehicle draw replace them).
+DESIGN_ONLY_KEYS = ("design_step", "uncertainty", "name", "description", "variants")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario file and the case it forms with its design.
+
+    Attributes
+    ----------
+    path : Path
+        The scenario file.
+    data : dict
+        Its validated entries (:func:`fahv.design.case.scenario_spec`).
+    design_file : Path
+        The design file it names.
+    design : Case
+        The validated design file.
+    case : Case
+        The design's entries with the scenario's (:func:`fahv.design.case.case_spec`).
+    """
+
+    path: Path
+    data: dict
+    design_file: Path
+    design: Case
+    case: Case
+
+    @property
+    def name(self) -> str:
+        """Scenario name (run names)."""
+        return self.data["name"]
+
+
+def design_file_of(scenario_path: str | Path, design: str) -> Path:
+    """The design file a scenario names.
+
+    ``design`` is a design name, looked up as ``designs/<design>.yaml`` beside the
+    scenario's folder (``offline_design/scenarios/x.yaml`` ->
+    ``offline_design/designs/<design>.yaml``), then under ``offline_design/designs/`` of
+    the working folder; or a path to a ``.yaml`` file, relative to the scenario file.
+
+    Raises
+    ------
+    CaseError
+        If no such design file exists (naming the scenario and the places looked in).
+    """
+    p = Path(scenario_path)
+    if design.endswith((".yaml", ".yml")):
+        tries = [p.parent / design, Path(design)]
+    else:
+        tries = [p.parent.parent / "designs" / f"{design}.yaml",
+                 Path("offline_design") / "designs" / f"{design}.yaml"]  # fmt: skip
+    for t in tries:
+        if t.is_file():
+            return t
+    raise CaseError(
+        f"{p}: key 'design': no design file {design!r} (looked for "
+        + ", ".join(str(t) for t in tries)
+        + ")"
+    )
+
+
+def form_case(design: Case, scenario: dict, path: str | Path) -> Case:
+    """The case of a scenario on a design: the design's entries with the scenario's.
+
+    Parameters
+    ----------
+    design : Case
+        A validated design file (:func:`fahv.design.case.load_design_file`).
+    scenario : dict
+        Validated scenario entries (``command``, ``fault``, ``uncertainty``,
+        ``duration``, ``variants``, ``name``, ``description``).
+    path : str or Path
+        Named in errors.
+
+    Raises
+    ------
+    CaseError
+        If a variant is not one the design prepared, or the case does not validate.
+    """
+    variants = list(scenario.get("variants") or design["variants"])
+    extra = [v for v in variants if v not in design["variants"]]
+    if extra:
+        raise CaseError(
+            f"{path}: key 'variants': {extra} not prepared by design {design.name!r} "
+            f"(its variants: {list(design['variants'])})"
+        )
+    data = {k: v for k, v in design.data.items() if k not in DESIGN_ONLY_KEYS}
+    data.update({k: scenario[k] for k in ("name", "description", "command", "fault",
+                                          "uncertainty", "duration")})  # fmt: skip
+    data["variants"] = variants
+    return case_from_mapping(data, str(path))
+
+
+def scenario_from_mapping(data, path: str | Path = "<mapping>") -> Scenario:
+    """Validate a scenario mapping, load its design file and form its case.
+
+    Raises
+    ------
+    CaseError
+        Naming the file and the key at fault (scenario or design file).
+    """
+    from fahv.design.case import load_design_file
+
+    v = case_from_mapping(data, str(path), scenario_spec())
+    dfile = design_file_of(path, v["design"])
+    design = load_design_file(dfile)
+    return Scenario(Path(path), v.data, dfile, design, form_case(design, v.data, path))
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read a scenario file (``offline_design/scenarios/<name>.yaml``).
+
+    Raises
+    ------
+    CaseError
+        If the scenario or its design file is missing, malformed, or names a variant
+        the design did not prepare.
+    """
+    return scenario_from_mapping(read_yaml_file(path, "scenario file"), path)
+
+
+def certified_range(design: Design) -> dict:
+    """What a stored design certifies for the scenarios flown on it.
+
+    Returns
+    -------
+    dict
+        ``hv_box`` ((2, 2) ``[[h lo, V lo], [h hi, V hi]]`` in ft, ft/s, the nominal range of
+        the eight-state tube; None for the vertex tube, which covers the envelope),
+        ``rho_min`` (smallest elevator effectiveness of the fault range),
+        ``uncertainty_scale`` (fraction of the sec. 5.1 box), ``u_lo``, ``u_hi`` ((2,)
+        tightened input limits, eq. 30).
+    """
+    hv = design.arrays.get("hv_box")
+    return {
+        "hv_box": None if hv is None else np.asarray(hv, float),
+        "rho_min": float(design.summary["tube"]["rho_f"]),
+        "uncertainty_scale": float(design.summary.get("uncertainty_scale", 1.0)),
+        "u_lo": np.asarray(design.arrays["u_lo"], float),
+        "u_hi": np.asarray(design.arrays["u_hi"], float),
+    }
+
+
+def uncertified(design: Design, case: dict, vehicle) -> list[str]:
+    """What a scenario asks beyond the range its design certifies, one sentence each.
+
+    Checks the initial point and the command against the envelope and the design's
+    nominal range (``hv_box``), their trim inputs against the tightened input set
+    (eq. 30), the fault's effectiveness against the fault range (``tube.rho_min``) and
+    the simulated vehicle's draw against the uncertainty box.
+
+    Parameters
+    ----------
+    design : Design
+        The stored design.
+    case : dict
+        The scenario's case (``command``, ``fault``, ``uncertainty``).
+    vehicle : fahv.model.vehicle.Vehicle
+
+    Returns
+    -------
+    list of str
+        Empty when the design certifies everything the scenario asks.
+    """
+    rng = certified_range(design)
+    cmd, out = case["command"], []
+    tm = TrimMap(*(design.arrays[k] for k in ("trim_h", "trim_V", "trim_x", "trim_u")))
+    for what, h, V in (("initial point", cmd["h0"], cmd["V0"]),
+                       ("command", cmd["h_c"], cmd["V_c"])):  # fmt: skip
+        if not vehicle.envelope.contains(h, V):
+            out.append(f"the {what} ({h:g} ft, {V:g} ft/s) lies outside the flight envelope")
+            continue
+        hv = rng["hv_box"]
+        if hv is not None and not (hv[0, 0] <= h <= hv[1, 0] and hv[0, 1] <= V <= hv[1, 1]):
+            out.append(
+                f"the {what} ({h:g} ft, {V:g} ft/s) lies outside the nominal range the tube "
+                f"is certified for, h {hv[0, 0]:.0f}..{hv[1, 0]:.0f} ft, V "
+                f"{hv[0, 1]:.2f}..{hv[1, 1]:.2f} ft/s"
+            )
+        u = tm(h, V)[1]
+        if np.any(u < rng["u_lo"]) or np.any(u > rng["u_hi"]):
+            out.append(
+                f"the trim input at the {what} (Phi {u[0]:.4f}, delta_e "
+                f"{np.degrees(u[1]):.3f} deg) lies outside the tightened input set "
+                f"Phi {rng['u_lo'][0]:.4f}..{rng['u_hi'][0]:.4f}, delta_e "
+                f"{np.degrees(rng['u_lo'][1]):.3f}..{np.degrees(rng['u_hi'][1]):.3f} deg"
+            )
+    f = case["fault"]
+    eff = make_fault(f["kind"], f["t_onset"], f).design_effectiveness()
+    if eff < rng["rho_min"] - 1e-12:
+        out.append(
+            f"the fault's elevator effectiveness {eff:g} lies below the design's fault range "
+            f"rho_f in [{rng['rho_min']:g}, 1] (a loss of at most "
+            f"{100 * (1 - rng['rho_min']):.0f} %)"
+        )
+    if case["uncertainty"]["scale"] > rng["uncertainty_scale"] + 1e-12:
+        out.append(
+            f"the vehicle draw's uncertainty scale {case['uncertainty']['scale']:g} exceeds the "
+            f"design's box ({rng['uncertainty_scale']:g} of the sec. 5.1 box)"
+        )
+    return out
+
+
+def _steps_equal(case: dict, design: Design) -> bool:
+    step = design.summary.get("design_step")
+    cmd = case["command"]
+    return step is not None and all(
+        float(cmd[k]) == float(step[k]) for k in ("h0", "V0", "h_c", "V_c")
+    )
+
+
+def scenario_key(design: Design, case: dict) -> str:
+    """Content hash of what a scenario's own arrays depend on (16 hex characters)."""
+    text = json.dumps(
+        {"design": design.summary["design_hash"], "command": case["command"],
+         "variants": case["variants"]}, sort_keys=True, default=str,
+    )  # fmt: skip
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def scenario_arrays(design: Design, case: dict, vehicle, cache: Path | None, log=print) -> dict:
+    """The arrays of a run that depend on its scenario.
+
+    ``x0`` (9,): the trim at (h0, V0) from the design's trim map. When the scenario runs
+    the RMPC baseline on another step than the design step, the baseline's ellipsoids
+    (``rmpc_*``) are designed along the scenario's step (its offline LMIs, Wan & Kothare
+    2003) and cached in ``cache`` by :func:`scenario_key`.
+
+    Raises
+    ------
+    DesignError
+        If the baseline's ellipsoids cannot be designed for the scenario's step.
+    """
+    from fahv.design.artefacts import load_arrays, save_arrays
+    from fahv.design.context import DesignContext
+
+    a = design.arrays
+    tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+    cmd = case["command"]
+    out = {"x0": np.asarray(tm(cmd["h0"], cmd["V0"])[0][:9], float)}
+    laws = dict.fromkeys(VARIANTS[v].law for v in case["variants"])
+    if "rmpc" not in laws or _steps_equal(case, design):
+        return out
+    key = scenario_key(design, case)
+    path = None if cache is None else Path(cache) / f"{key}.npz"
+    if path is not None and path.is_file():
+        out.update(load_arrays(path))
+        return out
+    log("baseline rmpc: its ellipsoids along this scenario's step (not the design step)")
+    ctx = DesignContext(case, vehicle, {**a, **out}, log)
+    rmpc = LAWS["rmpc"].design(ctx)
+    if path is not None:
+        save_arrays(rmpc, path)
+    out.update(rmpc)
+    return out
+
+
+def scenario_design(
+    design: Design, scenario_case: Case, vehicle, cache: Path | None = None, log=print
+) -> Design:
+    """A stored design with one scenario's case and arrays: what a run is given.
+
+    Parameters
+    ----------
+    design : Design
+        The stored, verified design.
+    scenario_case : Case
+        The scenario's case (:attr:`Scenario.case`).
+    vehicle : fahv.model.vehicle.Vehicle
+        The nominal vehicle (its parameters are perturbed by the scenario's draw).
+    cache : Path, optional
+        Folder of the scenario arrays designed earlier (:func:`scenario_arrays`).
+
+    Returns
+    -------
+    Design
+        ``case``: the scenario's case; ``arrays``: the design's with the scenario's;
+        ``summary``: the design's, with ``plant_params`` of the vehicle draw,
+        ``scenario_hash`` and ``content_hash`` (of this run's design, checked by
+        :func:`fahv.design.artefacts.load_design`). ``summary['design_hash']`` stays the
+        stored design's.
+    """
+    c = scenario_case.data
+    arrays = {**design.arrays, **scenario_arrays(design, c, vehicle, cache, log)}
+    summary = {
+        **design.summary,
+        "plant_params": perturbed_params(
+            vehicle, c["uncertainty"]["seed"], c["uncertainty"]["scale"]
+        ),  # fmt: skip
+        "scenario_hash": scenario_case.content_hash(),
+    }
+    run = Design(c, arrays, summary)
+    run.summary["content_hash"] = run.content_hash()
+    return run

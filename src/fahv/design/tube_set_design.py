@@ -1,0 +1,239 @@
+"""The eight-state tube set of a case (``tube.form: eight_state``), designed and checked.
+
+From the case's ``eight_state`` section: the nominal and scheduling boxes
+(:func:`fahv.design.domain.nominal_box`), the vertices along the nominal
+(:func:`fahv.design.vertices.nominal_vertices`), the closure of W_8 and Z_8
+(:func:`fahv.design.closure.close_tube_set`), the onset of the design's loss as a
+transient (:func:`fahv.design.onset.onset_bound`) and the loops of the variants that
+feed q through a notch (:mod:`fahv.design.notch_loop`, with a gain designed for the loop
+when the case asks for one, :func:`designed_notch_loop`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from fahv.control.base import ATTITUDE_BOUND_DEG
+from fahv.design.closure import close_tube_set
+from fahv.design.domain import SchedulingBox, nominal_box
+from fahv.design.notch_gain import notch_gain
+from fahv.design.notch_loop import NotchLoop, notch_loop, notch_tube
+from fahv.design.one_step_bound import altitude_bound
+from fahv.design.onset import STEADY_LAMS, onset_bound, onset_jumps
+from fahv.design.report import notch_loop_line
+from fahv.design.tube_set import EIGHT_STATES, TubeSet
+from fahv.design.vertices import NominalVertices, nominal_vertices
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+
+
+def _state_max(case: dict, log) -> np.ndarray | None:
+    """Z_8's largest supports: alpha, theta bounded by the requirement less the QP's rows."""
+    if not case["eight_state"]["certify_attitude"]:
+        return None
+    state_max = np.full(8, np.inf)
+    state_max[1:3] = np.radians(ATTITUDE_BOUND_DEG - case["mpc"]["att_max"])
+    log(f"eight-state tube: supports in alpha and theta bounded to "
+        f"{ATTITUDE_BOUND_DEG - case['mpc']['att_max']:.3f} deg (requirement "
+        f"{ATTITUDE_BOUND_DEG} deg less the QP's rows mpc.att_max)")  # fmt: skip
+    return state_max
+
+
+def _contain(case: dict, box, vehicle, trim_map, unc, rho_min: float, log) -> np.ndarray | None:
+    """The onset's first jumps J / rho_min, over the level kappa Z_8 may hold them at."""
+    kappa = case["eight_state"]["onset_in_tube"]
+    if kappa <= 0.0:
+        return None
+    J, _ = onset_jumps(box, vehicle, trim_map, unc, rho_min, case["Ts"], case["plant_substeps"],
+                       interior=1024)  # fmt: skip
+    log(f"eight-state tube: the first jumps of a {100 * (1 - rho_min):.1f} % loss at "
+        f"{len(J)} box points held in {kappa:g} Z_8 (eight_state.onset_in_tube)")  # fmt: skip
+    return J[:, 1:] / rho_min / kappa
+
+
+def _notch_loops(nv, tube_set: TubeSet, case: dict, notches, stable_only, log):
+    """The notch variants' loops at the tube set's vertices, and the gains designed."""
+    s, Ts = case["eight_state"], case["Ts"]
+    A, B = nv.vertices()
+    A_8, B_8, iq = A[:, 1:, 1:], B[:, 1:, :], EIGHT_STATES.index("q")
+    loops = tuple(notch_loop(A_8, B_8, tube_set.F_8, nf, Ts, iq, v)
+                  for v, nf in (stable_only or {}).items())  # fmt: skip
+    gains = {}
+    for v, nf in (notches or {}).items():
+        loop = notch_tube(A_8, B_8, tube_set.F_8, tube_set.N_8, tube_set.W_8, nf, Ts, iq,
+                          tube_set.lam, v)  # fmt: skip
+        if s["notch_gain"] == "designed" and not loop.certified:
+            log(f"{notch_loop_line(loop)}; a gain is designed for this loop "
+                "(eight_state.notch_gain)")  # fmt: skip
+            got = designed_notch_loop(nv, A, B, tube_set, nf, Ts, v, s["notch_continuation"], log)
+            if got is not None:
+                loop, gains[v] = got
+        loops += (loop,)
+    return loops, gains
+
+
+def design_tube_set(
+    case: dict,
+    vehicle,
+    trim_map,
+    scale,
+    w_max,
+    col_scale,
+    rho_min: float,
+    room,
+    log: Callable[[str], None] = print,
+    gamma: float | None = None,
+    notches=None,
+    stable_only=None,
+    **estimate,
+) -> tuple[TubeSet, SchedulingBox, SchedulingBox]:
+    """The eight-state tube set of a case (``tube.form: eight_state``), closed and checked.
+
+    Parameters
+    ----------
+    case : dict
+        Validated case data (its ``eight_state``, ``uncertainty``, ``tube.tau``,
+        ``mpc.M``, ``mpc.att_max``, ``Ts``, ``plant_substeps``).
+    vehicle : fahv.model.vehicle.Vehicle
+        The nominal vehicle.
+    trim_map : fahv.model.trim.TrimMap
+    scale : (11,) array_like
+        Design scaling (Dx, Du).
+    w_max : (9,) array_like
+        The sampled W (eq. 19): the row scale of the parameter directions and the unit of
+        ``eight_state.w0``.
+    col_scale : (11,) array_like
+        Supports of e and F e over the vertex tube: the column scale of the directions.
+    rho_min : float
+        Smallest elevator effectiveness (eq. 15) the vertices cover.
+    room : (2,) array_like
+        Input room of each row with the faulty trim (the tube objective's weights).
+    log : callable
+    gamma : float, optional
+        The case's estimator gain per step: the onset of the design loss is then bounded
+        as a transient of the tube set (:func:`fahv.design.onset.onset_bound`,
+        ``tube_set.onset``).
+    notches : dict, optional
+        ``{variant: NotchFilter}``: the tube variants that feed q through a notch; their
+        loops are certified in their own states at the tube set's vertices
+        (:func:`fahv.design.notch_loop.notch_tube`, a few minutes each;
+        ``tube_set.notch_loops``).
+    stable_only : dict, optional
+        ``{variant: NotchFilter}``: notch variants whose error filters the measured q
+        alone; their loops with F_8 are checked for stability only
+        (:func:`fahv.design.notch_loop.notch_loop`, also in ``tube_set.notch_loops``).
+    **estimate
+        ``gamma_e``, ``directions``, ``projection_scale`` of
+        :func:`fahv.design.onset.onset_bound` (the estimate's gain along the elevator
+        column).
+
+    Returns
+    -------
+    tube_set : TubeSet
+    nominal, box : SchedulingBox
+        The nominal box and the scheduling box the tube set is closed over.
+
+    Raises
+    ------
+    DesignError
+        If the boxes are malformed, a plant step leaves the model, or the tube set does
+        not close (:func:`fahv.design.closure.close_tube_set`).
+    """
+    s = case["eight_state"]
+    nominal, box = nominal_box(s, vehicle.envelope)
+    unc = {k: v * case["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
+    nv = nominal_vertices(box, vehicle, trim_map, unc, rho_min, case["Ts"],
+                          case["plant_substeps"], scale, s["k"], w_max, col_scale)  # fmt: skip
+    tau = float(case["tube"]["tau"])
+    if tau < 1.0:  # the adjustable law's gains tau' F, tau' in [tau, 1] (eq. 48)
+        nv = replace(nv, tau=tau)
+    log(f"eight-state tube: {nv.n_vertices} vertices along the nominal (64 scheduling-box "
+        f"corners x 2^{s['k']} parameter directions x rho_f in {{{rho_min:g}, 1}}"
+        + (f" x the gains tau' F_8 at tau' = {tau:g} and 1 (eq. 48)" if tau < 1.0 else "")
+        + f"), {sum(nv.n_vehicles)} vehicles for the residual")  # fmt: skip
+    scale = np.asarray(scale, float)
+    w_max = np.asarray(w_max, float)
+    state_max = _state_max(case, log)
+    contain = _contain(case, box, vehicle, trim_map, unc, rho_min, log)
+    tube_set = close_tube_set(nv, nominal, s["w0"] * w_max[1:], scale[:9], scale[9:], room,
+                              s["lam"], case["mpc"]["M"], grow=s["grow"],
+                              iterations=s["iterations"], w_ref=w_max, state_max=state_max,
+                              contain=contain, log=log)  # fmt: skip
+    if gamma is not None:
+        lams = tuple(dict.fromkeys((tube_set.lam, *STEADY_LAMS)))
+        onset = onset_bound(nv, tube_set, vehicle, trim_map, unc, gamma, case["Ts"],
+                            case["plant_substeps"], steady_lams=lams, **estimate)  # fmt: skip
+        tube_set = replace(tube_set, onset=onset)
+    if notches or stable_only:
+        loops, gains = _notch_loops(nv, tube_set, case, notches, stable_only, log)
+        tube_set = replace(tube_set, notch_loops=loops, notch_gains=gains)
+    return tube_set, nominal, box
+
+
+def designed_notch_loop(
+    nv: NominalVertices,
+    A,
+    B,
+    tube_set: TubeSet,
+    notch,
+    Ts: float,
+    variant: str,
+    continuation=(),
+    log: Callable[[str], None] = print,
+) -> tuple[NotchLoop, np.ndarray] | None:
+    """A gain designed for the tube set's loop through the notch, closed on W_8 (or None).
+
+    The loop u - v = F e' through the notch (:func:`fahv.design.notch_gain.notch_gain`,
+    from F_8, with the tube set's Z_8 and tightening) keeps e_8 in Z_8 and the applied
+    input within the tightening, but its input deviation is K xi, not F_8 e_8: W_8's
+    bound over the product set is therefore recomputed for the loop's own joint set of
+    (e_8, u - v) (:func:`fahv.design.one_step_bound.altitude_bound` with ``joint``); the
+    loop is closed if its altitude bound is at most the tube set's H (the scheduling box
+    holds that) and its bound lies inside W_8 (``NotchLoop.w_ratio`` = (H / the tube
+    set's H, bound / W_8), every entry <= 1).
+
+    Parameters
+    ----------
+    nv : NominalVertices
+    A, B : (R, 9, 9), (R, 9, 2) ndarray
+        The tube set's vertices (``nv.vertices()``).
+    tube_set : TubeSet
+    notch : fahv.model.notch.NotchFilter
+    Ts : float
+        Control period [s].
+    variant : str
+    continuation : sequence of float
+        ``eight_state.notch_continuation``.
+    log : callable
+
+    Returns
+    -------
+    (NotchLoop, (2, 8) ndarray) or None
+        The certified loop's re-check (``designed``, ``w_ratio``) and its gain; None if no
+        gain was certified and closed at the case's eps_p (the variant keeps F_8).
+
+    Raises
+    ------
+    DesignError
+        As :func:`fahv.design.notch_gain.notch_gain`.
+    """
+    iq = EIGHT_STATES.index("q")
+    got = notch_gain(A[:, 1:, 1:], B[:, 1:, :], tube_set.F_8, tube_set.N_8, tube_set.W_8, notch,
+                     Ts, iq, tube_set.lam, continuation, variant=variant, log=log)  # fmt: skip
+    if got is None:
+        return None
+    ab = altitude_bound(nv, A, B, tube_set.F_8, tube_set.N_8, tube_set.moves,
+                        joint=got.joint(notch, Ts, iq))  # fmt: skip
+    # h first: the scheduling box was checked to hold |e_h| <= H, the loop's H must not exceed it
+    ratio = [ab.H / tube_set.H, *(ab.bound / tube_set.W_8).tolist()]
+    loop = replace(got.loop, w_ratio=tuple(ratio))
+    log(f"variant {variant}: the designed gain's loop: H {ab.H:.3f} ft (the tube set's "
+        f"{tube_set.H:.3f} ft), W_8's bound over its own set / W_8 "
+        + " ".join(f"{v:.3f}" for v in loop.w_ratio[1:])
+        + "; the onset lines are F_8's loop's, none is computed for this gain")  # fmt: skip
+    if not loop.certified:  # the variant keeps F_8 (and its own loop's verdict)
+        log(f"{notch_loop_line(loop)}; the variant runs F_8")
+        return None
+    return loop, got.F

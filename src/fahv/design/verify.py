@@ -1,0 +1,406 @@
+"""Verification of a stored design: every certificate re-checked from its arrays, no solver.
+
+``fahv design`` synthesises (LMIs, the W-Z iteration); this module re-checks what it
+certified, from the stored arrays and the current model code, and trusts no solver
+status. Each check gives one line with its margin (the distance to the bound it must
+respect; negative when it fails):
+
+``model``
+    The TP vertices, weighting functions, scales and trim map, rebuilt from the vehicle
+    file with the current model code, equal the stored ones (relative 1e-8). A model
+    change that moves the vertices fails here, before any certificate is trusted.
+``tightening`` (eq. 30)
+    The stored tightened input limits equal the true limits less the support of
+    tau F Z, sqrt(F_j N F_j') per input, recomputed from F and N.
+``tube RPI`` (LMI 24)
+    Exact worst one-step level of the tube under its gain over every vertex (fault
+    vertices included) and every corner of W: at most 1.
+``W_8 over the domain``, ``scheduling box`` (eight-state tube)
+    The one-step bound of the nonlinear, perturbed plant over the tube's own domain
+    lies inside W_8, and the scheduling box holds the nominal box grown by the tube
+    (:func:`check_eight_state`); the exact level is then taken over those vertices.
+``attitude``
+    The attitude requirement (0.5 deg) follows from the QP's rows plus the support of Z
+    in alpha and theta, where the design claimed it.
+``nominal K`` (LMI 33-35)
+    The nominal ellipsoid E(Q) contracts under K at every vertex and K keeps the
+    nominal input inside u_n,max on E(Q).
+``terminal set``
+    E(Q) is invariant under K at every vertex (the tracking MPC's terminal set).
+``RMPC`` (Wan & Kothare 2003)
+    Every ellipsoid of the baseline's sequence: contraction, input bound, nesting.
+
+:func:`verify` runs them; :func:`verified_design` caches a pass by content hash
+(design hash, code hash, vehicle hash), so that a design is re-checked once per code
+version, not once per run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fahv.design.artefacts import Design, code_hash
+from fahv.errors import DesignError
+
+#: Relative tolerance of the model check (the rebuild runs the same code: bit-identical
+#: on one machine; other BLAS builds move the SVD of the TP model in the last digits).
+MODEL_RTOL = 1e-8
+#: Tolerance of the tightening check (the stored limits are the same float expression).
+TIGHTENING_RTOL = 1e-9
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """One re-checked certificate.
+
+    Attributes
+    ----------
+    name : str
+        Which certificate (``model``, ``tightening``, ``tube RPI``, ...).
+    ok : bool
+        True if it holds.
+    margin : float
+        Distance to its bound in the check's own unit (negative: violated).
+    line : str
+        What was checked, the value, the bound and the margin.
+    """
+
+    name: str
+    ok: bool
+    margin: float
+    line: str
+
+    def text(self) -> str:
+        """The printed line: ``name: line  OK`` or ``... FAILED``."""
+        return f"{self.name}: {self.line}  {'OK' if self.ok else 'FAILED'}"
+
+
+def _rel_diff(a, b) -> float:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if a.shape != b.shape:
+        return np.inf
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300)) if b.size else 0.0
+
+
+def check_model(design: Design, vehicle) -> CheckResult:
+    """Rebuild the TP model and trim map with the current code; compare with the stored ones."""
+    from fahv.model.notch import NotchFilter
+    from fahv.model.tp_model import build_tp_model
+    from fahv.model.trim import trim_map
+
+    c, a = design.case, design.arrays
+    kind = c["design_model"]
+    n = c["notch"]
+    notch = (
+        NotchFilter(n["omega_z"], n["eps_z"], n["omega_p"], n["eps_p"]) if kind == "ecm" else None
+    )
+    tp = build_tp_model(vehicle, kind, *c["vertices"], *c["samples"], notch)
+    disc = tp.discretize(c["Ts"])
+    tm = trim_map(vehicle, *c["trim_grid"], kind, notch)
+    got = {"A": disc.A, "B": disc.B, "W_h": tp.W_h, "W_V": tp.W_V, "Dx": tp.state_scale,
+           "Du": tp.input_scale, "trim_x": tm.x_r, "trim_u": tm.u_r}  # fmt: skip
+    diffs = {k: _rel_diff(v, a[k]) for k, v in got.items()}
+    worst = max(diffs, key=diffs.get)
+    ok = diffs[worst] <= MODEL_RTOL
+    return CheckResult(
+        "model", ok, MODEL_RTOL - diffs[worst],
+        f"TP vertices, weights, scales and trim map rebuilt with the current model code: "
+        f"largest relative difference {diffs[worst]:.2e} ({worst}) <= {MODEL_RTOL:g}",
+    )  # fmt: skip
+
+
+def check_tightening(design: Design, vehicle) -> CheckResult:
+    """The stored tightened limits u_lo, u_hi against the limits less tau sqrt(F_j N F_j')."""
+    a, tau = design.arrays, float(design.case["tube"]["tau"])
+    F, N = np.asarray(a["F"], float), np.asarray(a["N"], float)
+    support = tau * np.sqrt(np.einsum("jn,nm,jm->j", F, N, F))
+    lo = vehicle.limits.u_min + support
+    hi = vehicle.limits.u_max - support
+    diff = max(_rel_diff(lo, a["u_lo"]), _rel_diff(hi, a["u_hi"]))
+    empty = bool(np.any(hi <= lo))
+    ok = diff <= TIGHTENING_RTOL and not empty
+    return CheckResult(
+        "tightening", ok, TIGHTENING_RTOL - diff,
+        f"eq. (30): stored limits vs true limits less tau F Z (support {support[0]:.4f} / "
+        f"{np.degrees(support[1]):.3f} deg): relative difference {diff:.1e} <= "
+        f"{TIGHTENING_RTOL:g}; tightened set {'EMPTY' if empty else 'non-empty'}",
+    )  # fmt: skip
+
+
+def check_tube_rpi(design: Design) -> CheckResult:
+    """Exact worst one-step level of the vertex tube over the fault vertices and W's corners."""
+    from fahv.design.vertices import fault_vertices, gain_vertices
+    from fahv.synthesis.rpi_level import worst_level
+
+    a, c = design.arrays, design.case
+    rho = float(design.summary["tube"]["rho_f"])
+    tau = float(c["tube"]["tau"])
+    Af, Bf = fault_vertices(a["A"], a["B"], rho)
+    At, Bt = gain_vertices(Af, Bf, tau)
+    level, _ = worst_level(At, Bt, a["F"], a["N"], a["w_max"])
+    return CheckResult(
+        "tube RPI", level <= 1.0, 1.0 - level,
+        f"LMI (24) re-checked exactly: worst one-step level over {At.shape[0]} vertices "
+        f"(rho_f in {{{rho:g}, 1}}{f', gains tau F, tau = {tau:g}' if tau < 1 else ''}) and "
+        f"every corner of W = {level:.6f} <= 1",
+    )  # fmt: skip
+
+
+def check_nominal(design: Design) -> CheckResult:
+    """E(Q) contracts under K at every vertex (34') and K respects u_n,max on E(Q) (35)."""
+    from fahv.synthesis.lmi import scale_vertices
+    from fahv.synthesis.nominal import contraction, input_ratio
+
+    a = design.arrays
+    Dx, Du = np.asarray(a["Dx"], float), np.asarray(a["Du"], float)
+    As, Bs = scale_vertices(a["A"], a["B"], Dx, Du)
+    Qs = a["Q"] / np.outer(Dx, Dx)
+    Ks = a["K"] * Dx[None, :] / Du[:, None]
+    con = float(contraction(As, Bs, Ks, Qs))
+    ratio = float(np.max(input_ratio(a["K"], a["Q"], a["u_n_max"])))
+    ok = con < 1.0 and ratio <= 1.0 + 1e-6
+    return CheckResult(
+        "nominal K",
+        ok,
+        min(1.0 - con, 1.0 - ratio),
+        f"LMI (33-35'): contraction {con:.6f} < 1, input ratio {ratio:.4f} <= 1",
+    )
+
+
+def check_terminal(design: Design) -> CheckResult:
+    """E(Q) invariant under K at every vertex: the terminal set of the tracking MPC."""
+    from fahv.model.trim import TrimMap
+    from fahv.synthesis.nominal import verify_terminal
+
+    a = design.arrays
+    step = design.summary.get("design_step") or {}
+    tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+    path = np.array([tm(step["h0"], step["V0"])[1], tm(step["h_c"], step["V_c"])[1]])
+    try:
+        cert = verify_terminal(a["A"], a["B"], a["K"], a["Q"], a["u_lo"], a["u_hi"], path)
+    except DesignError as exc:
+        return CheckResult("terminal set", False, -1.0, str(exc))
+    inv = float(cert["invariance"])
+    return CheckResult(
+        "terminal set",
+        inv <= 1.0,
+        1.0 - inv,
+        f"E(Q) invariant under K at every vertex: norm {inv:.6f} <= 1",
+    )
+
+
+def check_rmpc(design: Design) -> CheckResult:
+    """Every ellipsoid of the RMPC baseline's sequence re-checked (Wan & Kothare 2003)."""
+    from fahv.synthesis.offline_rmpc import EllipsoidSequence, verify_sequence
+
+    a, r = design.arrays, design.case["rmpc"]
+    seq = EllipsoidSequence(a["rmpc_Q"], a["rmpc_P"], a["rmpc_K"], a["rmpc_gamma"],
+                            a["rmpc_z"], a["rmpc_Ds"], a["u_room"])  # fmt: skip
+    try:
+        cert = verify_sequence(a["rmpc_A"], a["rmpc_B"], seq, np.asarray(r["psi"], float),
+                               np.full(2, float(r["sigma"])))  # fmt: skip
+    except DesignError as exc:
+        return CheckResult("RMPC", False, -1.0, str(exc))
+    con = float(np.max(cert["contraction"]))
+    ratio = float(np.max(cert["input_ratio"]))
+    nest = float(np.max(cert["nesting"], initial=0.0))
+    ok = con < 1.0 and ratio <= 1.0 + 1e-6 and nest < 1.0
+    return CheckResult(
+        "RMPC", ok, min(1.0 - con, 1.0 - ratio, 1.0 - nest),
+        f"{seq.Q.shape[0]} ellipsoids on the {a['rmpc_A'].shape[0]}-vertex DM: contraction "
+        f"<= {con:.7f} < 1, input ratio <= {ratio:.4f} <= 1, nesting <= {nest:.4f} < 1",
+    )  # fmt: skip
+
+
+def check_attitude(design: Design) -> CheckResult:
+    """The attitude requirement from the tube: the QP's rows plus Z's support in alpha, theta.
+
+    Recomputes the support sqrt(N_jj) and the rows' bounds from the stored N and the
+    design's ``mpc.att_max`` (:func:`fahv.control.mpc.attitude.attitude_bounds`), compares
+    the rows with the stored ones, and states whether the requirement follows from the
+    certificate, as the design claimed. A design that claimed it must still have it; one
+    that did not (the paper's) is reported, not failed.
+    """
+    from fahv.control.mpc.attitude import attitude_bounds
+
+    a, c = design.arrays, design.case
+    offset = float(a["att_trim_offset"]) if "att_trim_offset" in a else 0.0
+    att = attitude_bounds(a["N"], c["mpc"]["att_max"], offset)
+    same = np.allclose(att.used, a["att_max"], rtol=0, atol=1e-15)
+    claimed = bool((c.get("eight_state") or {}).get("certify_attitude", False))
+    margin = float(np.min(att.certified - att.used))
+    ok = same and (att.is_certified or not claimed)
+    sup = np.degrees(att.support)
+    verdict = "follows from the certificate" if att.is_certified else "NOT certified (as stated)"
+    return CheckResult(
+        "attitude", ok, margin if att.is_certified else 0.0,
+        f"support of Z {sup[0]:.3f} / {sup[1]:.3f} deg under QP rows at "
+        f"{np.degrees(att.used[0]):.3f} deg (requirement 0.5 deg): {verdict}"
+        + ("" if same else "; the stored rows differ from the recomputed ones"),
+    )  # fmt: skip
+
+
+def checks_of(design: Design) -> list[Callable]:
+    """The checks that apply to a design (by its tube form and its variants' laws)."""
+    from fahv.control import VARIANTS
+
+    laws = {VARIANTS[v].law for v in design.case["variants"]}
+    out = [check_model, check_tightening]
+    if design.case["tube"]["form"] == "eight_state":
+        out.append(check_eight_state)
+    else:
+        out.append(check_tube_rpi)
+    if "att_max" in design.arrays and "mpc" in design.case:
+        out.append(check_attitude)
+    out += [check_nominal]
+    if "K" in design.arrays and "Q" in design.arrays:
+        out.append(check_terminal)
+    if "rmpc" in laws:
+        out.append(check_rmpc)
+    return out
+
+
+def check_eight_state(design: Design, vehicle) -> list[CheckResult]:
+    """The eight-state tube's certificate over its own domain, from the stored F_8, N_8, W_8.
+
+    The vertices along the nominal over the scheduling box are rebuilt from the design
+    file's ``eight_state`` section with the current model code (the sampled W and the
+    column scale of the parameter directions are the stored ones); F_8, N_8 are the
+    stored F, N without their h row and column, W_8 the stored certificate's. Three
+    lines: the one-step bound of the nonlinear plant over the domain inside W_8 (every
+    row), the scheduling box holding the nominal box grown by the tube, and the exact
+    worst one-step level of Z_8 (LMI 24 re-checked exactly).
+    """
+    from fahv.design.domain import box_shortfall, nominal_box
+    from fahv.design.one_step_bound import altitude_bound
+    from fahv.design.vertices import nominal_vertices
+    from fahv.model.trim import TrimMap
+    from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+    from fahv.synthesis.rpi_level import worst_level
+
+    a, c, s = design.arrays, design.case, design.summary
+    cert = s["certificate"]
+    nominal, box = nominal_box(c["eight_state"], vehicle.envelope)
+    unc = {k: v * c["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
+    tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
+    scale = np.concatenate([a["Dx"], a["Du"]])
+    nv = nominal_vertices(box, vehicle, tm, unc, float(s["tube"]["rho_f"]), c["Ts"],
+                          c["plant_substeps"], scale, c["eight_state"]["k"], a["w_max"],
+                          np.asarray(cert["col_scale"], float))  # fmt: skip
+    tau = float(c["tube"]["tau"])
+    if tau < 1.0:
+        nv = dataclasses.replace(nv, tau=tau)
+    A, B = nv.vertices()
+    F_8, N_8 = np.asarray(a["F"], float)[:, 1:], np.asarray(a["N"], float)[1:, 1:]
+    W_8 = np.asarray(cert["W_8"], float)
+    ab = altitude_bound(nv, A, B, F_8, N_8, int(cert["moves"]))
+    ratio = ab.bound / W_8
+    short = box_shortfall(nv.box, nominal, F_8, N_8, ab.H)
+    level, _ = worst_level(A[:, 1:, 1:], B[:, 1:, :], F_8, N_8, W_8)
+    return [
+        CheckResult(
+            "W_8 over the domain", bool(np.all(ratio <= 1.0)), float(1.0 - ratio.max()),
+            f"one-step bound of the nonlinear plant over {A.shape[0]} vertices along the "
+            f"nominal (scheduling box, uncertainty box corners, rho_f in "
+            f"{{{s['tube']['rho_f']:g}, 1}}) / W_8 per row: "
+            + " ".join(f"{r:.3f}" for r in ratio) + f" <= 1 (H = {ab.H:.2f} ft)",
+        ),
+        CheckResult(
+            "scheduling box", not short, 0.0 if not short else -max(short.values()),
+            "the scheduling box holds the nominal box grown by the tube"
+            + ("" if not short else ": short by " + ", ".join(f"{k} {v:.3g}"
+                                                                for k, v in short.items())),
+        ),
+        CheckResult(
+            "tube RPI", level <= 1.0, 1.0 - level,
+            f"Z_8 (LMI 24 along the nominal) re-checked exactly: worst one-step level over "
+            f"{A.shape[0]} vertices and every corner of W_8 = {level:.6f} <= 1",
+        ),
+    ]  # fmt: skip
+
+
+def verify(design: Design, vehicle, log: Callable[[str], None] = print) -> list[CheckResult]:
+    """Re-check every certificate of a stored design (module docstring); log each line.
+
+    Parameters
+    ----------
+    design : Design
+        A stored design (its ``case`` is the design file's data).
+    vehicle : fahv.model.vehicle.Vehicle
+        The vehicle the design was made for.
+    log : callable
+        Receives one line per check.
+
+    Returns
+    -------
+    list of CheckResult
+        In the order checked; the caller decides what a failure means
+        (:func:`require_verified` raises).
+    """
+    out = []
+    for check in checks_of(design):
+        try:
+            res = check(design, vehicle) if _takes_vehicle(check) else check(design)
+        except (KeyError, ValueError, np.linalg.LinAlgError) as exc:
+            res = CheckResult(check.__name__.removeprefix("check_"), False, -np.inf,
+                              f"could not be re-checked: {type(exc).__name__}: {exc}")  # fmt: skip
+        for r in res if isinstance(res, list) else [res]:
+            log(r.text())
+            out.append(r)
+    return out
+
+
+def _takes_vehicle(check) -> bool:
+    return check.__code__.co_argcount == 2
+
+
+def require_verified(results: list[CheckResult], name: str) -> None:
+    """Raise :class:`DesignError` naming every failed certificate of design ``name``."""
+    bad = [r for r in results if not r.ok]
+    if bad:
+        raise DesignError(
+            f"design {name} does not verify: "
+            + "; ".join(f"{r.name} ({r.line})" for r in bad)
+            + "; re-make it with `fahv design` on its design file"
+        )
+
+
+def verdict_key(design: Design, vehicle) -> str:
+    """Content hash a verification verdict holds for: design, code and vehicle hashes."""
+    text = json.dumps([design.summary["design_hash"], code_hash(), vehicle.data_hash])
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def verified_design(design: Design, vehicle, folder: Path, log=print) -> list[CheckResult] | None:
+    """Verify a stored design unless a pass for the same content is recorded in ``folder``.
+
+    A pass is recorded as ``folder/.verified-<key>`` (:func:`verdict_key`): it holds
+    for these arrays, this library code and this vehicle file only.
+
+    Returns
+    -------
+    list of CheckResult or None
+        The results when verified now; None when a recorded pass was reused.
+
+    Raises
+    ------
+    DesignError
+        If a certificate fails (nothing is recorded then).
+    """
+    mark = Path(folder) / f".verified-{verdict_key(design, vehicle)}"
+    if mark.is_file():
+        return None
+    results = verify(design, vehicle, log)
+    require_verified(results, design.summary.get("design_name", str(folder)))
+    try:
+        mark.write_text("\n".join(r.text() for r in results) + "\n")
+    except OSError:
+        pass  # a read-only checkout verifies again next time
+    return results

@@ -1,0 +1,208 @@
+"""The exact RPI level of an ellipsoidal tube: the worst one-step level over Z and W.
+
+A tube Z = {e : e' N^-1 e <= 1} is robust positively invariant (RPI) for
+e+ = A_cl,i e + w, w in the box W, at every vertex i exactly when
+
+    level = max_i max_{e in Z, w in W} (A_cl,i e + w)' N^-1 (A_cl,i e + w) <= 1.
+
+The level is convex in (e, w), so over the box W its maximum lies at a corner; over the
+ellipsoid it is a trust-region subproblem, solved through its dual (:func:`max_on_ball`,
+compiled with numba). Whatever found N (an LMI, a scaling, a file), this level is the
+certificate: it trusts no solver.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+
+import numpy as np
+
+
+def max_on_ball(M: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Max over |u| <= 1 of |M u + c_l|^2 per row c_l of c, bounded from above.
+
+    Exact up to the bisection's rounding, never below the maximum. The trust-region
+    subproblem max u'G u + 2 b'u + c'c (G = M'M, b = M'c) has no duality gap (Moré and
+    Sorensen 1983): it equals the minimum over lam >= sigma_max^2 of the convex dual
+    function lam + b'(lam I - G)^-1 b + c'c, attained where |(lam I - G)^-1 b| = 1 (the
+    secular equation), or at lam = sigma_max^2 in the hard case. The bisection keeps an
+    upper end lam above that minimiser; the dual function there bounds the maximum from
+    above (weak duality), with an error of second order in the bisection's gap (the
+    function's slope vanishes at the minimiser). A primal point of that lam, its norm
+    filled up to 1 along the top eigenvector, is no bound: in the nearly hard case the
+    fill leaves the ball and overstates a level (by 4e-3 on a tube of this vehicle).
+
+    Parameters
+    ----------
+    M : (n, n) ndarray
+        The map on the unit ball.
+    c : (L, n) ndarray
+        Offsets, one per row.
+
+    Returns
+    -------
+    (L,) ndarray
+        Upper bounds of max_u |M u + c_l|^2.
+    """
+    s, V = np.linalg.eigh(M.T @ M)
+    b = np.ascontiguousarray((c @ M) @ V)  # (L, n): components of M'c in the eigenbasis
+    cc = np.einsum("li,li->l", c, c)
+    return _dual_kernel()(s, b, cc, 200)
+
+
+@functools.cache
+def _dual_kernel():
+    """:func:`_dual_bound` compiled by numba (cached on disk), built at its first use.
+
+    The bisection is up to 200 steps for each of L rows: in numpy, its per-call overhead
+    made it 70 % of an onset bound's time (benchmarks/bench_certificate.py).
+    """
+    import numba
+
+    return numba.njit(cache=True, error_model="numpy")(_dual_bound)
+
+
+def _dual_bound(s, b, cc, steps):  # pragma: no cover - compiled
+    """The dual bound of :func:`max_on_ball` per row, in the eigenbasis of M'M.
+
+    s (n,) ascending eigenvalues, b (L, n) the rows' M'c in that basis, cc (L,) |c_l|^2,
+    ``steps`` bisection halvings at most; returns (L,) upper bounds of the maxima. The
+    bisection stops where no float lies between its ends (about 55 halvings): from there
+    each further step leaves lo and hi as they are, so the result is that of all
+    ``steps`` halvings, bit for bit.
+    """
+    n_rows, n = b.shape
+    smax = s[n - 1]
+    out = np.empty(n_rows)
+    for r in range(n_rows):
+        bb = 0.0
+        for j in range(n):
+            bb += b[r, j] * b[r, j]
+        lo = smax
+        hi = smax + np.sqrt(bb) + 1.0
+        for _ in range(steps):
+            mid = 0.5 * (lo + hi)
+            norm2 = 0.0  # |(mid I - G)^-1 b|^2, the secular function
+            for j in range(n):
+                d = mid - s[j]
+                norm2 += b[r, j] * b[r, j] / (d * d)
+            last = mid == lo or mid == hi  # no float between them: every later step is void
+            if norm2 > 1.0:
+                lo = mid
+            else:
+                hi = mid
+            if last:
+                break
+        # >= 0 gaps; 0 only along the top eigenvector in the hard case, where b_j = 0
+        total = cc[r] + hi
+        for j in range(n):
+            if b[r, j] != 0.0:
+                total += b[r, j] * b[r, j] / (hi - s[j])
+        out[r] = total
+    return out
+
+
+def worst_level(A, B, F, N, w_max, tau: float = 1.0, pulse=None):
+    """Exact max of (A_cl,i e + w)' (tau^2 N)^-1 (A_cl,i e + w) over e in tau Z, w in W.
+
+    The level is convex in (e, w), so over the box W its maximum lies at a corner; over
+    the ellipsoid the trust-region subproblem of :func:`max_on_ball` is solved by its
+    dual (an upper bound, exact up to the bisection's rounding). The tube is RPI for W
+    if the result is at most 1.
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+        Vertices (the fault vertices included).
+    F : (m, n) ndarray
+    N : (n, n) ndarray
+        Tube shape, Z = {e' N^-1 e <= 1}.
+    w_max : (n,) ndarray
+        Half-widths of W (a zero row: no disturbance there, one corner).
+    tau : float
+        Adjustable factor (eq. 54): the tube is tau Z, the gain tau F.
+    pulse : (g, n) ndarray, optional
+        Pulse generators G: w ranges over W + {G' p : |p| <= 1} (the corners of both).
+
+    Returns
+    -------
+    level : float
+        The worst one-step level (1: the boundary of the tube).
+    where : tuple
+        (vertex index, corner of W (and of p) as signs (n + g,)).
+    """
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    Acl = A + B @ (tau * np.asarray(F, float))
+    lev, corner, signs = _levels(Acl, tau**2 * np.asarray(N, float), w_max, pulse)
+    i = int(np.argmax(lev))
+    return float(lev[i]), (i, signs[corner[i]])
+
+
+def vertex_levels(Acl, N, w_max, pulse=None) -> np.ndarray:
+    """Exact worst one-step level of each closed-loop vertex (:func:`worst_level`).
+
+    Parameters
+    ----------
+    Acl : (R, n, n) ndarray
+        Closed-loop vertices.
+    N : (n, n) ndarray
+        Shape of the set, {e' N^-1 e <= 1}.
+    w_max : (n,) array_like
+        Half-widths of W (a zero row: no disturbance there).
+    pulse : (g, n) ndarray, optional
+        Pulse generators, as in :func:`worst_level`.
+
+    Returns
+    -------
+    (R,) ndarray
+        max over e in the set and w in W of (A_cl,i e + w)' N^-1 (A_cl,i e + w).
+    """
+    return _levels(np.asarray(Acl, float), np.asarray(N, float), w_max, pulse)[0]
+
+
+def _levels(Acl, Ns, w_max, pulse):
+    """Levels (R,), the worst corner's index (R,) and the corners' signs of every vertex."""
+    L = np.linalg.cholesky(Ns)
+    Linv = np.linalg.inv(L)
+    n = Ns.shape[0]
+    G = np.zeros((0, n)) if pulse is None else np.atleast_2d(np.asarray(pulse, float))
+    w_max = np.asarray(w_max, float)
+    free = np.r_[w_max != 0.0, np.ones(len(G), bool)]  # a zero half-width has one corner
+    signs = np.ones((2 ** int(free.sum()), n + len(G)))
+    signs[:, free] = np.array(list(itertools.product((-1.0, 1.0), repeat=int(free.sum()))))
+    C = (signs[:, :n] * w_max[None, :] + signs[:, n:] @ G) @ Linv.T
+    lev = np.empty(Acl.shape[0])
+    corner = np.empty(Acl.shape[0], int)
+    for i in range(Acl.shape[0]):
+        li = max_on_ball(Linv @ Acl[i] @ L, C)
+        corner[i] = int(np.argmax(li))
+        lev[i] = li[corner[i]]
+    return lev, corner, signs
+
+
+def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, hi: float = 4.0) -> float:
+    """Largest factor g in [0, hi] such that the tube stays RPI for g W.
+
+    Bisection on :func:`worst_level` (30 halvings of [0, hi], or of [0, 1] when the
+    tube is not RPI for W itself). Arguments as :func:`worst_level`.
+
+    Returns
+    -------
+    float
+        The factor (to 2^-30 of the interval); 0 if the tube is not invariant even
+        without a disturbance (some vertex's closed loop expands Z).
+    """
+    if worst_level(A, B, F, N, 0.0 * np.asarray(w_max, float), tau)[0] > 1.0:
+        return 0.0
+    lo = 0.0
+    if worst_level(A, B, F, N, w_max, tau)[0] > 1.0:
+        hi = 1.0
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        if worst_level(A, B, F, N, mid * np.asarray(w_max), tau)[0] <= 1.0:
+            lo = mid
+        else:
+            hi = mid
+    return lo

@@ -1,0 +1,117 @@
+"""Designs apart from scenarios: a scenario runs on its stored design without designing,
+is refused beyond what the design certifies, and a stale design is never used."""
+
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from fahv.design.case import case_data
+from fahv.design.scenario import load_scenario, uncertified
+from fahv.design.store import load_or_design, stored_design
+from fahv.errors import CaseError, DesignError
+from fahv.model.vehicle import load_vehicle
+
+ROOT = Path(__file__).resolve().parents[2]
+PAPER = ROOT / "offline_design" / "scenarios" / "case1_paper.yaml"
+
+
+def _copy_tree(tmp_path: Path) -> Path:
+    """offline_design/ (the paper's design with its stored outputs) copied to tmp_path."""
+    root = tmp_path / "offline_design"
+    (root / "designs").mkdir(parents=True)
+    (root / "scenarios").mkdir()
+    src = ROOT / "offline_design" / "designs"
+    shutil.copy(src / "cm_paper.yaml", root / "designs")
+    shutil.copytree(src / "cm_paper", root / "designs" / "cm_paper",
+                    ignore=shutil.ignore_patterns(".verified-*"))  # fmt: skip
+    return root
+
+
+def _scenario(root: Path, name: str, **changes) -> Path:
+    d = yaml.safe_load(PAPER.read_text())
+    d["name"] = name
+    for key, value in changes.items():
+        section, _, field = key.partition(".")
+        if field:
+            d[section][field] = value
+        else:
+            d[section] = value
+    path = root / "scenarios" / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    return path
+
+
+def test_a_new_scenario_runs_on_the_stored_design_without_designing(tmp_path, monkeypatch):
+    root = _copy_tree(tmp_path)
+    path = _scenario(root, "descent", **{"command.h_c": 85100.0, "command.V_c": 7800.0,
+                                         "fault.rho_f": 0.8, "fault.t_onset": 60.0,
+                                         "variants": ["tube_mpc"]})  # fmt: skip
+    import fahv.design.pipeline as pipeline
+
+    def no_design(*args, **kwargs):
+        raise AssertionError("a scenario must not re-design")
+
+    monkeypatch.setattr(pipeline, "run_design", no_design)
+    t0 = time.perf_counter()
+    case, design, _ = load_or_design(path, log=lambda *_: None)
+    assert time.perf_counter() - t0 < 60.0  # verification included (a few seconds)
+    stored = stored_design(root / "designs" / "cm_paper.yaml", vehicle=load_vehicle())[1]
+    assert design.summary["design_hash"] == stored.summary["design_hash"]
+    for k in ("F", "N", "K", "Q", "w_max", "A", "B"):
+        np.testing.assert_array_equal(design.arrays[k], stored.arrays[k])
+    assert design.case["command"]["h_c"] == 85100.0 and case["fault"]["rho_f"] == 0.8
+    # x0 is the trim at the scenario's own initial point (here the design point)
+    np.testing.assert_allclose(design.arrays["x0"], stored.arrays["x0"], rtol=0, atol=0)
+    # the verdict was recorded for this content: the next run does not verify again
+    assert list((root / "designs" / "cm_paper").glob(".verified-*"))
+
+
+def test_a_fault_beyond_the_design_range_is_refused_or_warned(tmp_path):
+    root = _copy_tree(tmp_path)
+    path = _scenario(root, "big_loss", **{"fault.rho_f": 0.6})
+    with pytest.raises(CaseError, match=r"below the design's fault range rho_f in \[0.76, 1\]"):
+        load_or_design(path, log=lambda *_: None)
+    lines = []
+    load_or_design(path, log=lines.append, allow_uncertified=True)
+    assert any(line.startswith("warning:") and "0.6" in line for line in lines)
+
+
+def test_a_command_outside_the_envelope_is_named():
+    vehicle = load_vehicle()
+    sc = load_scenario(PAPER)
+    _, design, _ = stored_design(sc.design_file, vehicle=vehicle)
+    c = case_data(PAPER)
+    c["command"]["h_c"] = vehicle.envelope.h_max + 100.0
+    msgs = uncertified(design, c, vehicle)
+    assert len(msgs) == 1 and "command" in msgs[0] and "flight envelope" in msgs[0]
+    assert uncertified(design, case_data(PAPER), vehicle) == []
+
+
+def test_a_variant_the_design_did_not_prepare_is_refused(tmp_path):
+    root = _copy_tree(tmp_path)
+    d = yaml.safe_load((root / "designs" / "cm_paper.yaml").read_text())
+    d["variants"] = ["tube_mpc"]
+    (root / "designs" / "cm_paper.yaml").write_text(yaml.safe_dump(d, sort_keys=False))
+    path = _scenario(root, "rmpc_too", variants=["tube_mpc", "rmpc"])
+    with pytest.raises(CaseError, match=r"\['rmpc'\] not prepared by design 'cm_paper'"):
+        load_scenario(path)
+
+
+def test_a_stale_design_is_refused_with_the_command_that_fixes_it(tmp_path):
+    root = _copy_tree(tmp_path)
+    dfile = root / "designs" / "cm_paper.yaml"
+    dfile.write_text(dfile.read_text().replace("margin: 1.2", "margin: 1.3"))
+    path = _scenario(root, "c1")
+    with pytest.raises(DesignError, match=r"stale: the design file .* changed .*fahv design"):
+        load_or_design(path, log=lambda *_: None)
+
+
+def test_a_missing_design_names_the_command(tmp_path):
+    root = _copy_tree(tmp_path)
+    shutil.rmtree(root / "designs" / "cm_paper")
+    with pytest.raises(DesignError, match=r"no stored design .* run `fahv design"):
+        load_or_design(_scenario(root, "c1"), log=lambda *_: None)

@@ -1,0 +1,102 @@
+"""fahv verify: every shipped design re-checks from its arrays; a changed array fails,
+naming the certificate that broke."""
+
+import dataclasses
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fahv.design.artefacts import Design
+from fahv.design.store import stored_design
+from fahv.design.verify import require_verified, verify
+from fahv.errors import DesignError
+from fahv.model.vehicle import load_vehicle
+
+ROOT = Path(__file__).resolve().parents[2]
+DESIGNS = sorted(p.stem for p in (ROOT / "offline_design" / "designs").glob("*.yaml"))
+
+
+@pytest.fixture(scope="module")
+def paper():
+    vehicle = load_vehicle()
+    return stored_design(ROOT / "offline_design/designs/cm_paper.yaml", vehicle=vehicle)[1], vehicle
+
+
+def _changed(design: Design, name: str, change) -> Design:
+    arrays = dict(design.arrays)
+    arrays[name] = change(np.array(arrays[name], float))
+    return dataclasses.replace(design, arrays=arrays)
+
+
+@pytest.mark.parametrize("name", DESIGNS)
+def test_every_shipped_design_verifies(name):
+    res = subprocess.run([str(ROOT / ".venv/bin/fahv"), "verify", name], cwd=ROOT,
+                         capture_output=True, text=True, timeout=900)  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "verified:" in res.stdout and "FAILED" not in res.stdout
+
+
+def test_every_check_of_the_paper_design_holds_with_its_margin(paper):
+    design, vehicle = paper
+    res = {r.name: r for r in verify(design, vehicle, log=lambda *_: None)}
+    assert set(res) == {
+        "model",
+        "tightening",
+        "tube RPI",
+        "attitude",
+        "nominal K",
+        "terminal set",
+        "RMPC",
+    }
+    assert all(r.ok for r in res.values())
+    # the margins the design states (certificate.txt): level 0.99920, contraction 0.99975
+    assert res["tube RPI"].margin == pytest.approx(1 - 0.999199, abs=2e-6)
+    assert res["nominal K"].margin == pytest.approx(1 - 0.999750, abs=2e-6)
+
+
+def test_one_entry_of_F_changed_by_one_percent_fails(paper):
+    design, vehicle = paper
+    bad = _changed(
+        design, "F", lambda F: F * np.where(np.arange(F.size) == 3, 1.01, 1.0).reshape(F.shape)
+    )
+    results = verify(bad, vehicle, log=lambda *_: None)
+    failed = {r.name for r in results if not r.ok}
+    assert "tightening" in failed
+    with pytest.raises(DesignError, match="does not verify: tightening"):
+        require_verified(results, "cm_paper")
+
+
+def test_a_model_change_fails_the_model_check(paper):
+    design, vehicle = paper
+    bad = _changed(design, "A", lambda A: A * (1 + 1e-6))
+    failed = {r.name: r for r in verify(bad, vehicle, log=lambda *_: None) if not r.ok}
+    assert "model" in failed and "(A)" in failed["model"].line
+
+
+#: Arrays the model code alone makes (rebuilt bit for bit on one machine) and arrays an
+#: LMI solve makes (they move with the floating point of the machine, within the
+#: solver's accuracy: the relative tolerance below, measured differences ~1e-6).
+MODEL_ARRAYS = ("A", "B", "W_h", "W_V", "Dx", "Du", "trim_x", "trim_u", "w_max", "x0")
+SOLVED_ARRAYS = ("F", "N", "K", "Q")
+SOLVED_RTOL = 1e-3
+
+
+def test_the_shipped_paper_design_is_what_its_design_file_makes(tmp_path):
+    """Re-designs cm_paper from its design file with the current code (about a minute) and
+    compares with the shipped arrays: a change of the code or the design file that moves
+    the design is caught here (the slower cm_certified is covered by its verification)."""
+    from fahv.design.case import load_design_file
+    from fahv.design.pipeline import run_design
+
+    dfile = ROOT / "offline_design/designs/cm_paper.yaml"
+    vehicle = load_vehicle()
+    shipped = stored_design(dfile, vehicle=vehicle)[1]
+    new = run_design(load_design_file(dfile), vehicle, log=lambda *_: None)
+    for k in MODEL_ARRAYS:
+        np.testing.assert_allclose(new.arrays[k], shipped.arrays[k], rtol=1e-9, atol=0, err_msg=k)
+    for k in SOLVED_ARRAYS:
+        scale = np.max(np.abs(shipped.arrays[k]))
+        np.testing.assert_allclose(new.arrays[k], shipped.arrays[k], rtol=0,
+                                   atol=SOLVED_RTOL * scale, err_msg=k)  # fmt: skip

@@ -1,0 +1,83 @@
+"""The README and the documentation site: a guide of a few screens, product documentation.
+
+The site itself is built, strict, by scripts/docs.sh; these checks are the ones a build
+does not make: the README's length and links, the vocabulary of every page, every page in
+the nav, and an API page for every part of the library.
+"""
+
+import re
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+
+#: Words of how the project was made rather than of what it is.
+PROCESS_WORDS = (
+    re.compile(r"\b(stop|issue|item|session)\s+\d+", re.IGNORECASE),
+    re.compile(r"lab" + r" notebook", re.IGNORECASE),
+    re.compile(r"^#{1,6}\s.*\b(19|20)\d\d-\d\d", re.MULTILINE),
+    re.compile(r"\b(19|20)\d\d-\d\d-\d\d\b"),
+)
+
+
+def _pages() -> list[Path]:
+    """Every Markdown page of the site (docs/hooks/ holds code, not pages)."""
+    return sorted(p for p in DOCS.rglob("*.md") if "hooks" not in p.relative_to(DOCS).parts)
+
+
+def _nav_pages(entries) -> list[str]:
+    found = []
+    for entry in entries:
+        if isinstance(entry, str):
+            found.append(entry)
+        elif isinstance(entry, dict):
+            for value in entry.values():
+                found += _nav_pages(value) if isinstance(value, list) else [value]
+    return found
+
+
+def _nav() -> list[str]:
+    return _nav_pages(yaml.safe_load((ROOT / "mkdocs.yml").read_text())["nav"])
+
+
+def test_readme_is_a_guide_of_at_most_300_lines():
+    lines = (ROOT / "README.md").read_text().splitlines()
+    assert len(lines) <= 300, f"README.md has {len(lines)} lines"
+
+
+def test_readme_links_resolve():
+    text = (ROOT / "README.md").read_text()
+    targets = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
+    assert targets, "the README links to the documentation"
+    missing = [t for t in targets if "://" not in t and not (ROOT / t).exists()]
+    assert missing == []
+
+
+def test_no_development_process_vocabulary():
+    found = []
+    for path in [ROOT / "README.md", *_pages()]:
+        text = path.read_text()
+        for pattern in PROCESS_WORDS:
+            for m in pattern.finditer(text):
+                line = text.count("\n", 0, m.start()) + 1
+                found.append(f"{path.relative_to(ROOT)}:{line}: {m.group(0)!r}")
+    assert found == []
+
+
+def test_every_page_is_in_the_nav_and_every_nav_entry_is_a_page():
+    pages = {p.relative_to(DOCS).as_posix() for p in _pages()}
+    nav = set(_nav())
+    assert sorted(pages - nav) == [], "pages missing from the nav of mkdocs.yml"
+    assert sorted(nav - pages) == [], "nav entries without a page"
+
+
+def test_every_part_of_the_library_has_an_api_page():
+    src = ROOT / "src" / "fahv"
+    parts = {p.name for p in src.iterdir() if (p / "__init__.py").exists()}
+    parts |= {p.stem for p in src.glob("*.py") if p.stem != "__init__"}
+    api = "\n".join(p.read_text() for p in (DOCS / "reference" / "api").glob("*.md"))
+    documented = set(re.findall(r"^::: fahv\.(\w+)", api, re.MULTILINE))
+    assert sorted(parts - documented) == []
+    assert sorted(documented - parts) == []
