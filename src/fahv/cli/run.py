@@ -8,6 +8,7 @@ import warnings
 from pathlib import Path
 
 from fahv.cli.common import add_vehicle_option, progress, read_run_warned, to_json
+from fahv.design.scenario import load_scenario
 from fahv.design.store import load_or_design
 from fahv.errors import FahvError, RunInterrupted
 from fahv.loop.graph import NODES, TOPICS, graph_nodes
@@ -152,10 +153,11 @@ def cmd_simulate(args) -> int:
     """In-process closed loop of a case; records each variant to bags/, prints metrics."""
     import time
 
+    variants = selected_variants(load_scenario(args.case).case, args.variant)
     case, design, vehicle = load_or_design(
-        args.case, args.design, args.vehicle, allow_uncertified=args.allow_uncertified
-    )
-    variants = selected_variants(case, args.variant)
+        args.case, args.design, args.vehicle, allow_uncertified=args.allow_uncertified,
+        variants=variants,
+    )  # fmt: skip
     limits = vehicle.limits
     table = {}
     live = _live_view(args.live, case["Ts"])
@@ -193,10 +195,11 @@ def _live_view(port: int | None, Ts: float):
 
 def cmd_sil(args) -> int:
     """Run a case through the ROS 2 node graph, recorded to MCAP; metrics of the run."""
+    variant = args.variant or load_scenario(args.case).case["variants"][0]
     case, design, vehicle = load_or_design(
-        args.case, args.design, args.vehicle, allow_uncertified=args.allow_uncertified
-    )
-    variant = args.variant or case["variants"][0]
+        args.case, args.design, args.vehicle, allow_uncertified=args.allow_uncertified,
+        variants=[variant],
+    )  # fmt: skip
     if args.write_params:
         return _write_params_only(args, design, variant)
     # with --json, stdout holds the JSON only; the status lines go to stderr

@@ -255,13 +255,16 @@ def scenario_key(design: Design, case: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def scenario_arrays(design: Design, case: dict, vehicle, cache: Path | None, log=print) -> dict:
+def scenario_arrays(
+    design: Design, case: dict, vehicle, cache: Path | None, log=print, variants=None
+) -> dict:
     """The arrays of a run that depend on its scenario.
 
     ``x0`` (9,): the trim at (h0, V0) from the design's trim map. When the scenario runs
     the RMPC baseline on another step than the design step, the baseline's ellipsoids
     (``rmpc_*``) are designed along the scenario's step (its offline LMIs, Wan & Kothare
-    2003) and cached in ``cache`` by :func:`scenario_key`.
+    2003) and cached in ``cache`` by :func:`scenario_key`; only when one of ``variants``
+    (all of the case's by default) runs the baseline.
 
     Raises
     ------
@@ -275,7 +278,7 @@ def scenario_arrays(design: Design, case: dict, vehicle, cache: Path | None, log
     tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
     cmd = case["command"]
     out = {"x0": np.asarray(tm(cmd["h0"], cmd["V0"])[0][:9], float)}
-    laws = dict.fromkeys(VARIANTS[v].law for v in case["variants"])
+    laws = dict.fromkeys(VARIANTS[v].law for v in (variants or case["variants"]))
     if "rmpc" not in laws or _steps_equal(case, design):
         return out
     key = scenario_key(design, case)
@@ -293,7 +296,12 @@ def scenario_arrays(design: Design, case: dict, vehicle, cache: Path | None, log
 
 
 def scenario_design(
-    design: Design, scenario_case: Case, vehicle, cache: Path | None = None, log=print
+    design: Design,
+    scenario_case: Case,
+    vehicle,
+    cache: Path | None = None,
+    log=print,
+    variants=None,
 ) -> Design:
     """A stored design with one scenario's case and arrays: what a run is given.
 
@@ -307,6 +315,9 @@ def scenario_design(
         The nominal vehicle (its parameters are perturbed by the scenario's draw).
     cache : Path, optional
         Folder of the scenario arrays designed earlier (:func:`scenario_arrays`).
+    variants : list of str, optional
+        The variants that will run (all of the case's by default): the baseline's
+        ellipsoids along a new step are designed only if one of them runs it.
 
     Returns
     -------
@@ -318,7 +329,7 @@ def scenario_design(
         stored design's.
     """
     c = scenario_case.data
-    arrays = {**design.arrays, **scenario_arrays(design, c, vehicle, cache, log)}
+    arrays = {**design.arrays, **scenario_arrays(design, c, vehicle, cache, log, variants)}
     summary = {
         **design.summary,
         "plant_params": perturbed_params(

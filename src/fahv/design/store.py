@@ -75,6 +75,7 @@ def load_or_design(
     vehicle_file=None,
     log=_stderr,
     allow_uncertified: bool = False,
+    variants=None,
 ):
     """The case of a scenario file and the stored, verified design it runs on.
 
@@ -83,6 +84,9 @@ def load_or_design(
     content (:func:`fahv.design.verify.verified_design`). What the scenario asks beyond
     the design's certified range (:func:`fahv.design.scenario.uncertified`) is refused,
     or with ``allow_uncertified`` reported as a warning.
+
+    ``variants`` (all of the scenario's by default) are the variants that will run: what
+    only another variant needs (the baseline's ellipsoids along a new step) is not made.
 
     Returns
     -------
