@@ -13,6 +13,7 @@ import domain_coordinator
 import numpy as np
 import pytest
 
+from fahv.design.store import load_or_design
 from fahv.loop.graph import NODES, TOPICS
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import read_run, run_result_of
@@ -81,17 +82,19 @@ def test_a_foreign_graph_stops_only_the_graph_that_joined_second(
     design, quick_case, tmp_path, capfd
 ):
     """Two graphs forced into one domain (`--domain-id`, as a user might), the second
-    (`fahv sil`, about 10 s to start) started once the first one's recorder is up (the
-    first runs 100 s of simulated time, 20-40 s): the second stops naming the first and
+    (`fahv sil`, about 10 s to start, its design's verification done beforehand) started
+    once the first one's recorder is up (the first runs 250 s of simulated time, 30-60 s
+    at real-time factors 4-8): the second stops naming the first and
     the domain, reports the real-time factor of the steps it ran, and the first one
     completes and equals `fahv simulate`."""
     case_file, art = quick_case
+    load_or_design(case_file, art, log=lambda _: None)  # the verdict cached: no wait at start
     result = {}
     with domain_coordinator.domain_id() as domain:
 
         def first():
             result["a"] = run_sil(
-                design, "tube_mpc", duration=100.0, out_dir=tmp_path / "a", watchdog_s=10.0,
+                design, "tube_mpc", duration=250.0, out_dir=tmp_path / "a", watchdog_s=10.0,
                 quiet=True, log=lambda _: None, domain_id=domain,
             )  # fmt: skip
 
@@ -129,8 +132,8 @@ def test_a_foreign_graph_stops_only_the_graph_that_joined_second(
     rec = read_run(res.bag)
     assert rec.metadata["status"] == "complete" and not rec.truncated
     run = run_result_of(rec)
-    ref = simulate(design, "tube_mpc", duration=100.0)
-    assert run.x.shape == ref.x.shape == (5000, 9)
+    ref = simulate(design, "tube_mpc", duration=250.0)
+    assert run.x.shape == ref.x.shape == (12500, 9)
     np.testing.assert_allclose(run.x, ref.x, rtol=1e-9, atol=0)
     np.testing.assert_allclose(run.u, ref.u, rtol=1e-9, atol=0)
 
