@@ -51,12 +51,7 @@ NOT_CROSS_REFERENCES = re.compile(r"Could not find cross-reference target '[^']*
 #: (source file, word) of docstrings whose closing paragraph follows the Parameters
 #: section without a heading, so that the numpydoc parser reads its first word as a
 #: parameter (reported for a "Notes" heading in src/).
-KNOWN_DOCSTRING_NOTES = (
-    ("fahv/runs/bag.py", "Idempotent"),
-    ("fahv/runs/latency.py", "Returns"),
-    ("fahv/runs/sil.py", "Every"),
-    ("fahv/runs/sil.py", "this"),
-)
+KNOWN_DOCSTRING_NOTES: tuple = ()
 
 log = logging.getLogger("mkdocs.hooks.generated")
 

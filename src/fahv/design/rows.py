@@ -35,7 +35,7 @@ def input_rows(trim_offsets, nominal: SchedulingBox) -> np.ndarray:
     Returns
     -------
     (2, 2) ndarray
-        [[Phi lo, delta_e lo], [Phi hi, delta_e hi]] [-, rad], lo < 0 < hi.
+        ``[[Phi lo, delta_e lo], [Phi hi, delta_e hi]]`` in -, rad; lo < 0 < hi.
 
     Raises
     ------
