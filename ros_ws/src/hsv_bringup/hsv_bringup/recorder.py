@@ -27,16 +27,15 @@ Parameters: ``bag`` (folder to create), ``Ts``, ``duration``, ``watchdog_s``,
 
 from __future__ import annotations
 
-import struct
 import sys
 import time
 from array import array
 from pathlib import Path
 
-from hsv_common.codec import msg_type_of
 from hsv_common.graph_status import GraphStatus
 from hsv_common.parameters import declare_graph, declare_validated, run_metadata_param
 from hsv_common.runtime import LOOP_QOS, WatchdogError, end_reason, main, node_options
+from hsv_common.topics import msg_type_of
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 
@@ -44,6 +43,7 @@ from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
 from fahv.runs.latency import TIMESTAMPS_FILE, timestamps_npz
 from fahv.runs.live import LiveView, live_hint
+from fahv.runs.messages import step_of
 from fahv.runs.nodes import RECORDER
 from fahv.runs.writer import RunWriter
 
@@ -52,18 +52,6 @@ from fahv.runs.writer import RunWriter
 #: a few steps (QOS_DEPTH steps are kept for it), and it gives the loop nodes the CPU
 #: (10 ms rather than 2 ms: a fifth less recorder CPU over a 60 s run, measured).
 DRAIN_PAUSE_S = 0.01
-
-
-def step_of(topic: str, data: bytes, Ts_ns: int) -> int:
-    """Step index k of a serialised loop message (little- or big-endian CDR).
-
-    Every hsv_interfaces message starts with ``int64 k``; /clock carries t_k.
-    """
-    endian = "<" if data[1] == 1 else ">"
-    if topic == "/clock":
-        sec, nsec = struct.unpack_from(f"{endian}iI", data, 4)
-        return int(round((sec * 1_000_000_000 + nsec) / Ts_ns))
-    return struct.unpack_from(f"{endian}q", data, 4)[0]
 
 
 class Recorder(Node):

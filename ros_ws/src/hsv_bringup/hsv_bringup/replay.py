@@ -24,19 +24,19 @@ import time
 import warnings
 from pathlib import Path
 
-from hsv_common.codec import msg_type_of
 from hsv_common.graph_status import GraphStatus
 from hsv_common.parameters import declare_graph, declare_validated, run_metadata_param
 from hsv_common.runtime import LOOP_QOS, WatchdogError, end_reason, main, node_options
+from hsv_common.topics import msg_type_of
 from rclpy.node import Node
 
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
 from fahv.runs.bag import iter_raw
+from fahv.runs.messages import step_of
 from fahv.runs.nodes import REPLAY
 from fahv.runs.replay import output_attachments
 from fahv.runs.writer import RunWriter
-from hsv_bringup.recorder import step_of
 
 
 def load_steps(run: str, topics: list[str] | None, steps: int) -> tuple[list, float, list]:

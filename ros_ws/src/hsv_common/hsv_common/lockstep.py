@@ -17,7 +17,8 @@ A :class:`LockstepNode` declares the typed parameters of its node
   the topic and the node that should have sent it (exit status 3).
 
 The process around the node (exit codes, signals, executor) is :mod:`hsv_common.runtime`,
-the conversion between typed messages and their CDR bytes :mod:`hsv_common.codec`.
+the conversion between typed messages and their CDR bytes the library's codec
+(:mod:`fahv.runs.messages`).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from rclpy.node import Node
 
 from fahv.loop.graph import GRAPH, NODES, PREVIOUS, n_steps_of, producer_of
 from fahv.loop.params import specs, validate
-from hsv_common.codec import decode, encode, msg_type_of, step_of
+from fahv.runs.messages import decode_message, encode, step_of
 from hsv_common.graph_status import GraphStatus
 from hsv_common.parameters import declare_graph, declare_parameters
 from hsv_common.runtime import (
@@ -40,6 +41,7 @@ from hsv_common.runtime import (
     quiet_publisher,
     quiet_subscription,
 )
+from hsv_common.topics import msg_type_of
 
 
 class LockstepNode(Node):
@@ -59,6 +61,7 @@ class LockstepNode(Node):
         raw = declare_parameters(self, specs()[self.spec_name()])
         self.p = validate(self.spec_name(), raw)
         self.Ts = self.p["Ts"]
+        self.Ts_ns = int(round(self.Ts * 1e9))
         self.n_steps = n_steps_of(self.p)
         self.watchdog_s = self.p["watchdog_s"]
         wait_for = self.graph_nodes if self.WAIT_FOR_PEERS else ()
@@ -125,7 +128,7 @@ class LockstepNode(Node):
         return self.status.ready
 
     def _receive(self, topic: str, data: bytes) -> None:
-        k = step_of(data)
+        k = step_of(topic, data, self.Ts_ns)
         k = k + 1 if topic in self.previous else k  # the step that uses it
         if k in self.buf[topic]:
             raise ForeignGraphError(
@@ -151,7 +154,7 @@ class LockstepNode(Node):
             self.k in b or (self.k == 0 and t in self.previous) for t, b in self.buf.items()
         ):
             inputs = {
-                t: decode(t, self.buf[t].pop(self.k)) if self.k in self.buf[t] else None
+                t: decode_message(t, self.buf[t].pop(self.k)) if self.k in self.buf[t] else None
                 for t in self.inputs
             }
             self.publish(self.on_step(self.k, inputs))
