@@ -16,6 +16,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from fahv.cli import main
 from fahv.loop.graph import TOPICS
 from fahv.loop.simulate import simulate
+from fahv.loop.wire import encode, typestore
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import (
     PARAMS,
@@ -27,7 +28,7 @@ from fahv.runs.bag import (
     stored_metadata,
 )
 from fahv.runs.latency import TIMESTAMPS_FILE, load_timestamps, run_latencies, save_timestamps
-from fahv.runs.messages import LOOP_QOS, encode, typestore
+from fahv.runs.messages import LOOP_QOS
 from fahv.runs.metrics import metrics
 from fahv.runs.sil import recorder_metadata, run_parameter_file
 from fahv.runs.writer import RunWriter

@@ -1,4 +1,4 @@
-"""The one wire codec of the loop messages (fahv.runs.messages.encode / decode_message).
+"""The one wire codec of the loop messages (fahv.loop.wire.encode / decode_message).
 
 In process: every loop message round-trips exactly (values, dtypes, shapes), with empty
 and non-empty arrays and strings, and the typed path writes the same bytes as the lane
@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from fahv.loop.graph import TOPICS, clock_msg
+from fahv.loop.wire import decode_message, encode, step_of
 from fahv.msg import MESSAGES
-from fahv.runs.messages import decode_message, encode, step_of
 from fahv.runs.workspace import ensure_built, ros_env
 
 
@@ -78,10 +78,10 @@ SCRIPT = (
     "from hsv_common.topics import msg_type_of\n"
     "from fahv.loop.graph import TOPICS, clock_msg\n"
     "from fahv.msg import MESSAGES\n"
-    "from fahv.runs.messages import decode_message, encode\n"
+    "from fahv.loop.wire import decode_message, encode\n"
     + inspect.getsource(random_message)
     + inspect.getsource(assert_same)
-    + r'''
+    + r"""
 def generated(topic, lane):
     msg = msg_type_of(topic)()
     for name, v in lane.items():
@@ -112,7 +112,7 @@ for trial in range(50):
 clock = clock_msg(1234, 0.02)
 assert encode("/clock", clock) == serialize_message(generated("/clock", clock))
 print("checked", n)
-'''
+"""
 )
 
 

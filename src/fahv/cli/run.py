@@ -14,8 +14,8 @@ from fahv.errors import FahvError, RunInterrupted
 from fahv.loop.graph import NODES, TOPICS, graph_nodes
 from fahv.loop.params import controller_node
 from fahv.loop.simulate import simulate
+from fahv.loop.wire import encode
 from fahv.runs.bag import read_run, run_result_of, stored_metadata
-from fahv.runs.messages import encode
 from fahv.runs.metrics import metrics
 from fahv.runs.plots import paper_figures
 from fahv.runs.replay import run_replay

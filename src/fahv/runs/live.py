@@ -29,7 +29,7 @@ def schema_text(topic: str) -> str:
     The definition of the type followed by those it uses, in the rosbag2/MCAP
     concatenated form (``MSG:`` sections).
     """
-    from fahv.runs.messages import typestore
+    from fahv.loop.wire import typestore
 
     text, _ = typestore().generate_msgdef(TOPICS[topic], ros_version=2)
     return text

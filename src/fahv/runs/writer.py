@@ -23,8 +23,9 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from fahv.errors import RunError
 from fahv.interrupt import deferred
 from fahv.loop.graph import TOPICS
+from fahv.loop.wire import encode, typestore
 from fahv.runs.bag import PARAMS, RUN_RECORD
-from fahv.runs.messages import LOOP_QOS, encode, typestore
+from fahv.runs.messages import LOOP_QOS
 from fahv.version import code_version
 
 

@@ -41,9 +41,9 @@ from rclpy.node import Node
 
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
+from fahv.loop.wire import step_of
 from fahv.runs.latency import TIMESTAMPS_FILE, timestamps_npz
 from fahv.runs.live import LiveView, live_hint
-from fahv.runs.messages import step_of
 from fahv.runs.nodes import RECORDER
 from fahv.runs.writer import RunWriter
 

@@ -32,8 +32,8 @@ from rclpy.node import Node
 
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
+from fahv.loop.wire import step_of
 from fahv.runs.bag import iter_raw
-from fahv.runs.messages import step_of
 from fahv.runs.nodes import REPLAY
 from fahv.runs.replay import output_attachments
 from fahv.runs.writer import RunWriter

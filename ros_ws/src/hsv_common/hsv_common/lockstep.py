@@ -18,7 +18,7 @@ A :class:`LockstepNode` declares the typed parameters of its node
 
 The process around the node (exit codes, signals, executor) is :mod:`hsv_common.runtime`,
 the conversion between typed messages and their CDR bytes the library's codec
-(:mod:`fahv.runs.messages`).
+(:mod:`fahv.loop.wire`).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from rclpy.node import Node
 
 from fahv.loop.graph import GRAPH, NODES, PREVIOUS, n_steps_of, producer_of
 from fahv.loop.params import specs, validate
-from fahv.runs.messages import decode_message, encode, step_of
+from fahv.loop.wire import decode_message, encode, step_of
 from hsv_common.graph_status import GraphStatus
 from hsv_common.parameters import declare_graph, declare_parameters
 from hsv_common.runtime import (

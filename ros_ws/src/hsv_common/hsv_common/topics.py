@@ -1,7 +1,7 @@
 """The generated ROS message class of each loop topic.
 
 The nodes publish and receive the loop messages as CDR bytes, converted by the library's
-one codec (:func:`fahv.runs.messages.encode`, :func:`fahv.runs.messages.decode_message`);
+one codec (:func:`fahv.loop.wire.encode`, :func:`fahv.loop.wire.decode_message`);
 rclpy still needs each topic's generated class to create its publishers and
 subscriptions, and this module names it.
 """
