@@ -39,7 +39,7 @@ class HoldStart(NominalSource):
     def node_values(cls, arrays, case):
         return {"hold_scale": 1.0}
 
-    def step(self, k, t, x, u_prev):
+    def output(self, k, t, x, u_prev):
         B = self.h0.size
         z = np.zeros(B, dtype=np.int64)
         n = self.x_r.shape[1]

@@ -24,6 +24,38 @@ def test_state_space_matches_tf():
         assert H_ss == pytest.approx(H_tf, rel=1e-10)
 
 
+@pytest.mark.parametrize(
+    "params",
+    [(19.05, 0.02, 19.05, 0.1), (30.0, 0.0, 30.0, 0.7), (25.3, 0.05, 31.7, 0.61),
+     (4.1, 0.2, 55.0, 0.05)],
+)  # fmt: skip
+def test_state_space_is_python_controls_realisation_bit_for_bit(params):
+    """The written-out canonical form equals control.tf2ss exactly (the ECM's x_q are
+    these coordinates, and the shipped designs were made with them)."""
+    import control
+
+    nf = NotchFilter(*params)
+    ref = control.tf2ss(nf.tf())
+    A, B, C, D = nf.ss()
+    assert np.array_equal(A, np.asarray(ref.A))
+    assert np.array_equal(B, np.asarray(ref.B).ravel())
+    assert np.array_equal(C, np.asarray(ref.C).ravel())
+    assert D == float(np.asarray(ref.D).item())
+
+
+def test_building_a_filter_does_not_import_python_control():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\nfrom fahv.model.notch import DiscreteNotch, NotchFilter\n"
+        "DiscreteNotch(NotchFilter(19.05, 0.02, 19.05, 0.1), 0.02).step([0.01])\n"
+        "print('control' in sys.modules)"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.stdout.strip() == "False", r.stderr
+
+
 def test_discrete_notch_kills_sinusoid_at_centre():
     Ts, w = 0.02, 19.05
     nf = DiscreteNotch(NotchFilter(w, 0.0, w, 0.5), Ts)

@@ -94,6 +94,10 @@ class NominalSource:
     def step(self, k: int, t: float, x: np.ndarray, u_prev: np.ndarray | None) -> NominalTrajectory:
         """Reference and nominal trajectory of step k for the B runs, then advance.
 
+        :meth:`output` then :meth:`advance`: the simulator and the batch call this; the
+        node publishes the output before it advances (the advance is off the step's
+        critical path), with the same arithmetic.
+
         Parameters
         ----------
         k : int
@@ -109,7 +113,21 @@ class NominalSource:
         -------
         fahv.msg.NominalTrajectory
         """
+        out = self.output(k, t, x, u_prev)
+        self.advance()
+        return out
+
+    def output(
+        self, k: int, t: float, x: np.ndarray, u_prev: np.ndarray | None
+    ) -> NominalTrajectory:
+        """Reference and nominal trajectory of step k (arguments as :meth:`step`).
+
+        Must be followed by :meth:`advance` before the output of step k + 1.
+        """
         raise NotImplementedError
+
+    def advance(self) -> None:
+        """Move the nominal to step k + 1 after :meth:`output` of step k (default: nothing)."""
 
 
 @dataclass(frozen=True)

@@ -127,8 +127,8 @@ class ReferenceGovernor(NominalSource):
                 hi = np.where(ok, hi, mid)
         return s_best, xr_b, ur_b, xn_b
 
-    def step(self, k, t, x, u_prev) -> NominalTrajectory:
-        """Output of step k (module docstring), then advance the nominal model and g."""
+    def output(self, k, t, x, u_prev) -> NominalTrajectory:
+        """Output of step k (module docstring)."""
         B = self.g.shape[0]
         h_c, V_c = self.command(t)
         u_n = mv(self.K, self.x_n)
@@ -137,6 +137,12 @@ class ReferenceGovernor(NominalSource):
             self.u_r.copy(), self.x_n.copy(), u_n, quad(self.x_n, self.P), counters(B),
             counters(B), counters(B), np.zeros((B, 2)), counters(B),
         )  # fmt: skip
+        self._k = k
+        return out
+
+    def advance(self) -> None:
+        """Advance the nominal model and the governed reference g to step k + 1."""
+        k = self._k
         A, Bm = self.lpv.systems(self.g[:, 0], self.g[:, 1])
         x_pred = (
             np.matmul(A, self.x_n[:, :, None])[..., 0]
@@ -146,7 +152,6 @@ class ReferenceGovernor(NominalSource):
         dh, dV = ch - self.g[:, 0], cV - self.g[:, 1]
         s, self.x_r, self.u_r, self.x_n = self._govern(dh, dV, x_pred)
         self.g = np.stack([self.g[:, 0] + s * dh, self.g[:, 1] + s * dV], axis=1)
-        return out
 
 
 @register_nominal
@@ -168,7 +173,7 @@ class CommandReference(NominalSource):
         self.command = CommandSchedule([Command.of_parameters(r) for r in runs])
         self.n = p["A"].shape[1]
 
-    def step(self, k, t, x, u_prev) -> NominalTrajectory:
+    def output(self, k, t, x, u_prev) -> NominalTrajectory:
         """Reference of step k (x_n = 0, u_n = 0, level NaN)."""
         h, V = self.command(t)
         x_r, u_r = self.trim_map.at(h, V)

@@ -184,15 +184,27 @@ class NominalCore:
         self.k = 0
 
     def on_state(self, state: VehicleState, previous: ControlCommand | None = None):
-        """NominalTrajectory of step k from VehicleState k and ControlCommand k - 1."""
+        """NominalTrajectory of step k from VehicleState k and ControlCommand k - 1.
+
+        :meth:`output` then :meth:`advance` (the node publishes between the two).
+        """
+        out = self.output(state, previous)
+        self.advance()
+        return out
+
+    def output(self, state: VehicleState, previous: ControlCommand | None = None):
+        """NominalTrajectory of step k; :meth:`advance` must follow before step k + 1."""
         check_step("nominal_trajectory", "state", state, self.k)
         u_prev = None
         if previous is not None:
             check_step("nominal_trajectory", "control_command", previous, self.k - 1)
             u_prev = previous.u()
-        out = self.source.step(state.k, state.t, state.x(), u_prev)
+        return self.source.output(state.k, state.t, state.x(), u_prev)
+
+    def advance(self) -> None:
+        """Move the nominal part to step k + 1 (:meth:`fahv.control.NominalSource.advance`)."""
+        self.source.advance()
         self.k += 1
-        return out
 
 
 class ControllerCore:

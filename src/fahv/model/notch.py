@@ -4,13 +4,13 @@ Continuous transfer function (eq. 38)::
 
     H(s) = (s^2/omega_z^2 + 2 eps_z s/omega_z + 1) / (s^2/omega_p^2 + 2 eps_p s/omega_p + 1)
 
-Transfer function, state space (eq. 39), discretisation and frequency responses
-come from python-control; the only code here is the parameter handling and the
-per-sample state update used by the simulator and the notch_filter node.
-
-python-control (which imports matplotlib) is imported where it is used, not with
-this module: every node of the SIL graph imports this module, and only the filter
-construction needs it (start-up time of the graph, docs/guide/sil.md).
+The transfer function, the discretisation and the frequency responses come from
+python-control. The state-space form of eq. (39) is the controllable canonical
+realisation, written out (equal bit for bit to ``control.tf2ss``, tested) together with
+the per-sample update used by the simulator, the batch and the nodes: a node builds its
+filter without python-control, whose import (with scipy.signal and matplotlib) took
+0.9 s of each filtering node's start-up (docs/guide/sil.md). python-control is imported
+where it is used, not with this module.
 """
 
 from __future__ import annotations
@@ -68,25 +68,29 @@ class NotchFilter:
         """Continuous transfer function H(s) of eq. (38) (python-control)."""
         import control
 
-        num = [1.0 / self.omega_z**2, 2.0 * self.eps_z / self.omega_z, 1.0]
-        den = [1.0 / self.omega_p**2, 2.0 * self.eps_p / self.omega_p, 1.0]
+        num, den = self.coefficients()
         return control.tf(num, den)
+
+    def coefficients(self) -> tuple[np.ndarray, np.ndarray]:
+        """Numerator and denominator of eq. (38), each (3,), highest power of s first."""
+        num = np.array([1.0 / self.omega_z**2, 2.0 * self.eps_z / self.omega_z, 1.0])
+        den = np.array([1.0 / self.omega_p**2, 2.0 * self.eps_p / self.omega_p, 1.0])
+        return num, den
 
     def ss(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """State-space form of eq. (39): A_q (2, 2), B_q (2,), C_q (2,), D_q scalar.
 
-        Controllable canonical realisation from ``control.tf2ss``; with
-        ``omega_z = omega_p`` D_q = 1.
+        The controllable canonical realisation of eq. (38) (the one of
+        ``control.tf2ss`` and ``scipy.signal.tf2ss``, equal to them bit for bit, tested),
+        written out so that a node builds its filter without importing python-control:
+        with n(s) = n_0 s^2 + n_1 s + n_2 and d(s) = d_0 s^2 + d_1 s + d_2 divided by d_0,
+        A_q = [[-d_1, -d_2], [1, 0]], B_q = (1, 0), C_q = (n_1 - n_0 d_1, n_2 - n_0 d_2),
+        D_q = n_0; with ``omega_z = omega_p`` D_q = 1.
         """
-        import control
-
-        sys = control.tf2ss(self.tf())
-        return (
-            np.asarray(sys.A, dtype=float),
-            np.asarray(sys.B, dtype=float).ravel(),
-            np.asarray(sys.C, dtype=float).ravel(),
-            float(np.asarray(sys.D).item()),
-        )
+        num, den = self.coefficients()
+        n, d = num / den[0], den / den[0]
+        A = np.array([[-d[1], -d[2]], [1.0, 0.0]])
+        return A, np.array([1.0, 0.0]), n[1:] - n[0] * d[1:], float(n[0])
 
     def state_scale(self, q_scale: float) -> np.ndarray:
         """Typical magnitudes of (x_q1, x_q2) for a pitch-rate magnitude ``q_scale``.
@@ -107,6 +111,21 @@ class NotchFilter:
         ValueError
             If Ts <= 0 or omega_z is not below the Nyquist frequency pi/Ts.
         """
+        self.check_sampling(Ts)
+        import control
+
+        return control.c2d(
+            control.ss(self.tf()), Ts, method="tustin", prewarp_frequency=self.omega_z
+        )
+
+    def check_sampling(self, Ts: float) -> None:
+        """Check that the filter can be sampled at Ts [s].
+
+        Raises
+        ------
+        ValueError
+            If Ts <= 0 or omega_z is not below the Nyquist frequency pi/Ts.
+        """
         if not (math.isfinite(Ts) and Ts > 0.0):
             raise ValueError(f"sampling period Ts must be > 0, got {Ts}")
         if self.omega_z >= math.pi / Ts:
@@ -114,11 +133,6 @@ class NotchFilter:
                 f"notch frequency omega_z = {self.omega_z} rad/s is not below the Nyquist "
                 f"frequency pi/Ts = {math.pi / Ts:.3f} rad/s"
             )
-        import control
-
-        return control.c2d(
-            control.ss(self.tf()), Ts, method="tustin", prewarp_frequency=self.omega_z
-        )
 
     def magnitude(self, omega) -> np.ndarray:
         """|H(j omega)| for frequencies ``omega`` [rad/s] (array_like) -> ndarray."""
@@ -162,7 +176,7 @@ class DiscreteNotch:
     """
 
     def __init__(self, notch: NotchFilter, Ts: float, q0=0.0) -> None:
-        notch.discretize(Ts)  # validates Ts against the notch frequency
+        notch.check_sampling(Ts)
         A, B, C, D = notch.ss()
         A, B, C = np.asarray(A, float), np.asarray(B, float).ravel(), np.asarray(C, float)
         alpha = math.tan(notch.omega_z * Ts / 2.0) / notch.omega_z

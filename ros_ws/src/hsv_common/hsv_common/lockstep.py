@@ -114,6 +114,13 @@ class LockstepNode(Node):
         """
         raise NotImplementedError
 
+    def after_publish(self, k: int) -> None:
+        """Work of step k that no output of step k waits for (default: none).
+
+        Called once the outputs of step k are published, before the inputs of step
+        k + 1 are taken: what a node does here is off the step's critical path.
+        """
+
     def on_ready(self) -> None:
         """Called once when the node is ready (the plant publishes step 0 here)."""
 
@@ -158,6 +165,7 @@ class LockstepNode(Node):
                 for t in self.inputs
             }
             self.publish(self.on_step(self.k, inputs))
+            self.after_publish(self.k)
             if self.k == 0:
                 self.status.set_state("running")
             self.k += 1

@@ -29,8 +29,12 @@ class NominalTrajectoryNode(LockstepNode):
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""
-        nominal = self.core.on_state(inputs["/hsv/state"], inputs["/hsv/control_command"])
+        nominal = self.core.output(inputs["/hsv/state"], inputs["/hsv/control_command"])
         return [("/hsv/nominal", nominal)]
+
+    def after_publish(self, k: int) -> None:
+        """The nominal's advance to step k + 1, once step k's output is on its way."""
+        self.core.advance()
 
 
 def run(args=None) -> None:

@@ -403,8 +403,8 @@ class TrackingMPCNominal(NominalSource):
             self.TRX[moved], self.TRU[moved] = self.trim_map.at(*self.TH[moved].T)
         self._counts = self._qp_counts()
 
-    def step(self, k, t, x, u_prev) -> NominalTrajectory:
-        """Output of step k for the B runs (class docstring), then advance one fast step.
+    def output(self, k, t, x, u_prev) -> NominalTrajectory:
+        """Output of step k for the B runs (class docstring); :meth:`advance` follows.
 
         QP counters and the input-equivalent estimate d_hat = -u_d (for a loss of
         elevator effectiveness alone, (0, (rho_f - 1) delta_e,r)) are in the message.
@@ -440,16 +440,18 @@ class TrackingMPCNominal(NominalSource):
             self.XN - x_r, u_nom - u_r, (w[:, None, :] @ w[:, :, None])[:, 0, 0],
             solves, fallback, terminal, -u_d, recovered,
         )  # fmt: skip
-        self._advance(z, u_nom, u_d, u_dev)
-        self.k += 1
+        self._pending = (z, u_nom, u_d, u_dev)
         return out
 
-    def _advance(self, z: np.ndarray, u_nom: np.ndarray, u_d: np.ndarray, u_dev) -> None:
+    def advance(self) -> None:
         """Move the nominal state one fast step by its model (class docstring).
 
-        z (B, n) is the nominal minus the scheduling trim, u_nom (B, 2) the nominal input,
-        u_d + u_dev (B, 2) its deviation from the scheduling trim's input.
+        From the output's z (B, n), the nominal minus the scheduling trim, u_nom (B, 2),
+        the nominal input, and u_d + u_dev (B, 2), its deviation from the scheduling
+        trim's input.
         """
+        z, u_nom, u_d, u_dev = self._pending
+        self.k += 1
         d_n = np.zeros_like(z)
         if self.has_est:
             d_n[:, : self.p_est] = self.est.d
