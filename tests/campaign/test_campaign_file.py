@@ -133,3 +133,24 @@ def test_fault_onsets_beyond_the_run_are_warned(write_campaign, capsys, monkeypa
     assert main(["campaign", str(c.path), "--out", str(c.path.parent / "w")]) == 2
     err = capsys.readouterr().err
     assert err.index("warning: ") < err.index("stopped by the test")
+
+
+def test_the_nominal_range_warning_uses_the_campaigns_vehicle(tmp_path):
+    """A campaign run with another vehicle file runs that vehicle's design: the range it
+    warns about is the nominal range over that vehicle's envelope, not the packaged
+    vehicle's: 85005..86495 ft for the packaged vehicle, 85005..86995 ft for one that
+    flies up to 87000 ft."""
+    from importlib import resources
+
+    from fahv.model.vehicle import load_vehicle
+
+    text = resources.files("fahv.data").joinpath("vehicle_parker2007.yaml").read_text()
+    text = text.replace("h: {min: 85000.0, max: 86500.0,", "h: {min: 85000.0, max: 87000.0,")
+    (tmp_path / "wide.yaml").write_text(text)
+    wide = load_vehicle(tmp_path / "wide.yaml")
+    assert wide.envelope.h_max == 87000.0
+    path = ROOT / "offline_design" / "campaigns" / "envelope.yaml"
+    [h_c] = [w for w in load_campaign(path).warnings if "commanded h_c" in w]
+    assert "[85000, 86500] ft" in h_c and "[85005, 86495] ft" in h_c
+    [h_c] = [w for w in load_campaign(path, vehicle=wide).warnings if "commanded h_c" in w]
+    assert "[85000, 86500] ft" in h_c and "[85005, 86995] ft" in h_c

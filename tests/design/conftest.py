@@ -18,7 +18,7 @@ TS, N_SUB = 0.02, 5
 #: The stored closed tube sets of the baseline law: the k = 5 set on the box the
 #: certified design reproduces, and the certified design's own (k = 7, 16384 vertices,
 #: the attitude supports bounded and the onset's jumps held).
-TUBE_SETS = ("closed_tube_h_reset.npz", "closed_tube_case1.npz")
+TUBE_SETS = ("closed_tube_h_reset.npz", "cm_certified")
 
 
 def rebuilt(design, name):
@@ -59,7 +59,7 @@ def tube_set_k5(stored_tube_sets):
 @pytest.fixture(scope="session")
 def tube_set_case1(stored_tube_sets):
     """The certified design's own tube set (16384 vertices), as ``tube_set``."""
-    return stored_tube_sets("closed_tube_case1.npz")
+    return stored_tube_sets("cm_certified")
 
 
 @pytest.fixture(scope="session")

@@ -149,7 +149,7 @@ def test_onset_bound_of_a_stored_tube_set_holds_along_switching_vertices(tube_se
 
 
 def test_no_analysis_on_the_certified_tube_set_certifies_the_onset_of_24_percent(tube_set_case1):
-    """The onset's limit on the certified design's own tube set (closed_tube_case1.npz), from
+    """The onset's limit on the certified design's own tube set (the shipped cm_certified), from
     below: the onset bound's model (e = e_w + e_p, w in the disturbance bound, the jump of
     the plant's nonlinear step, the estimate's gain 1 along its elevator column and 0.2
     otherwise) admits, at one vertex held throughout and with the estimate's most

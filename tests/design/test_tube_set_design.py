@@ -403,12 +403,11 @@ def test_design_refuses_a_command_outside_the_nominal_range(raw8, vehicle):
         command_range(bad, vehicle.envelope)
 
 
-def test_the_stored_record_is_the_certified_designs_tube_set(vehicle):
-    """tests/data/closed_tube_case1.npz (tube_set_records.py: how it is regenerated)
-    belongs to the case as it stands: the same parameter directions and loss, and its
-    nominal and scheduling boxes are the case's to 1e-12 (a changed case file must be
-    designed and its record written again)."""
-    d = load_record("closed_tube_case1.npz")
+def test_the_shipped_designs_tube_set_is_its_design_files(vehicle):
+    """The shipped cm_certified tube set (the one the sampling tests check) belongs to the
+    design file as it stands: the same parameter directions and loss, and its nominal and
+    scheduling boxes are the file's to 1e-12."""
+    d = load_record("cm_certified")
     c = load_case(CASE)
     assert int(d["k"]) == c["eight_state"]["k"] and float(d["rho_min"]) == c["tube"]["rho_min"]
     nominal, box = nominal_box(c["eight_state"], vehicle.envelope)

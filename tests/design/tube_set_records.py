@@ -10,13 +10,9 @@ its exact level. The tests rebuild the vertex data with the library's code from 
   certified design of Case 1 reproduces within rounding;
 - ``closed_tube_h_reset_tau.npz``: a tube set of the adjustable law (tau = 0.8, 8192
   vertices);
-- ``closed_tube_case1.npz``: the certified design's own tube set (k = 7, 16384
-  vertices). It is :func:`record_of_design` of that design's artefact folder; after the
-  design changes, regenerate it from the repository root with::
-
-      .venv/bin/fahv design offline_design/designs/cm_certified.yaml --out ARTEFACTS
-      PYTHONPATH=tests/design .venv/bin/python -c "import tube_set_records as r; \\
-          r.write_record('ARTEFACTS', 'tests/data/closed_tube_case1.npz')"
+- ``cm_certified``: the shipped certified design's own tube set (k = 7, 16384
+  vertices), read from ``offline_design/designs/cm_certified/`` by
+  :func:`record_of_design`: the tests sample the design the product runs.
 """
 
 import json
@@ -24,12 +20,16 @@ from pathlib import Path
 
 import numpy as np
 
-DATA = Path(__file__).resolve().parents[1] / "data"
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "tests" / "data"
+DESIGNS = ROOT / "offline_design" / "designs"
 
 
 def load_record(name: str) -> dict:
-    """The record ``tests/data/<name>`` as a dict of arrays."""
-    return dict(np.load(DATA / name))
+    """The record ``tests/data/<name>`` (.npz), or that of the shipped design ``name``."""
+    if name.endswith(".npz"):
+        return dict(np.load(DATA / name))
+    return record_of_design(DESIGNS / name)
 
 
 def record_of_design(folder) -> dict:

@@ -19,6 +19,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from fahv.config import Check, Field, Section, validate
 from fahv.config.yamlio import load_yaml
@@ -152,11 +153,15 @@ class Campaign:
         Validated content, defaults filled in (see :func:`campaign_spec`).
     case : fahv.design.case.Case
         The case file it names, validated.
+    vehicle : fahv.model.vehicle.Vehicle
+        The vehicle its envelope and range checks used (``--vehicle``, or the packaged
+        one).
     """
 
     path: Path
     data: dict
     case: Case
+    vehicle: Any
 
     def __getitem__(self, key: str):
         """Top-level entry of the campaign."""
@@ -218,7 +223,7 @@ class Campaign:
         """Initial points and commands drawn beyond the eight-state tube's nominal range."""
         from fahv.design.domain import nominal_box
 
-        nominal, _ = nominal_box(self.case["eight_state"], load_vehicle().envelope)
+        nominal, _ = nominal_box(self.case["eight_state"], self.vehicle.envelope)
         lo, hi = nominal.lo[:2], nominal.hi[:2]
         cmd, d = self.case["command"], self.data["dispersions"]
         h0 = d["initial"]["h0"] or [cmd["h0"]] * 2
@@ -326,8 +331,9 @@ def campaign_from_mapping(data, source: str = "<mapping>", case: Case | None = N
             case = load_scenario(path).case
         except CaseError as exc:
             raise _fail(source, "scenario", f"names a scenario that does not load: {exc}") from None
+    vehicle = load_vehicle() if vehicle is None else vehicle
     check_campaign(v.values, case, source, vehicle)
-    return Campaign(Path(source), v.values, case)
+    return Campaign(Path(source), v.values, case, vehicle)
 
 
 def scenario_path(name: str, base: Path | None = None) -> Path:

@@ -43,6 +43,15 @@ def _stderr(line: str) -> None:
 def stored_design(design_file: Path, design_folder=None, vehicle=None):
     """The stored design of a design file, refused if missing or stale.
 
+    Parameters
+    ----------
+    design_file : Path
+        The design file (``offline_design/designs/<name>.yaml``).
+    design_folder : Path, optional
+        Where the design is stored (default :func:`design_dir`).
+    vehicle : fahv.model.vehicle.Vehicle, optional
+        The vehicle it was made for (default: the packaged one).
+
     Returns
     -------
     (Case, Design, Path)
@@ -54,10 +63,11 @@ def stored_design(design_file: Path, design_folder=None, vehicle=None):
         If the folder holds no valid design, or the design file or vehicle changed
         since it was made (the message gives the command that re-makes it).
     """
+    vehicle = load_vehicle() if vehicle is None else vehicle
     case = load_design_file(design_file)
     folder = design_dir(case.path, case.name, design_folder, vehicle)
     fix = f"run `fahv design {case.path}`" + (
-        f" --vehicle {vehicle.source_file}" if vehicle is not None and not vehicle.packaged else ""
+        "" if vehicle.packaged else f" --vehicle {vehicle.source_file}"
     )
     try:
         design = load_design(folder)

@@ -42,6 +42,7 @@ import hashlib
 import json
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -247,23 +248,33 @@ def check_attitude(design: Design) -> CheckResult:
     )  # fmt: skip
 
 
-def checks_of(design: Design) -> list[Callable]:
-    """The checks that apply to a design (by its tube form and its variants' laws)."""
+def checks_of(design: Design, vehicle) -> list[tuple[str, Callable[[], object]]]:
+    """The checks that apply to a design (by its tube form and its variants' laws).
+
+    Returns
+    -------
+    list of (str, callable)
+        The certificate's name and its check bound to its arguments; calling it gives a
+        :class:`CheckResult` or a list of them.
+    """
     from fahv.control import VARIANTS
 
     laws = {VARIANTS[v].law for v in design.case["variants"]}
-    out = [check_model, check_tightening]
+    out = [
+        ("model", partial(check_model, design, vehicle)),
+        ("tightening", partial(check_tightening, design, vehicle)),
+    ]
     if design.case["tube"]["form"] == "eight_state":
-        out.append(check_eight_state)
+        out.append(("eight-state tube", partial(check_eight_state, design, vehicle)))
     else:
-        out.append(check_tube_rpi)
+        out.append(("tube RPI", partial(check_tube_rpi, design)))
     if "att_max" in design.arrays and "mpc" in design.case:
-        out.append(check_attitude)
-    out += [check_nominal]
+        out.append(("attitude", partial(check_attitude, design)))
+    out.append(("nominal K", partial(check_nominal, design)))
     if "K" in design.arrays and "Q" in design.arrays:
-        out.append(check_terminal)
+        out.append(("terminal set", partial(check_terminal, design)))
     if "rmpc" in laws:
-        out.append(check_rmpc)
+        out.append(("RMPC", partial(check_rmpc, design)))
     return out
 
 
@@ -345,20 +356,16 @@ def verify(design: Design, vehicle, log: Callable[[str], None] = print) -> list[
         (:func:`require_verified` raises).
     """
     out = []
-    for check in checks_of(design):
+    for name, check in checks_of(design, vehicle):
         try:
-            res = check(design, vehicle) if _takes_vehicle(check) else check(design)
+            res = check()
         except (KeyError, ValueError, np.linalg.LinAlgError) as exc:
-            res = CheckResult(check.__name__.removeprefix("check_"), False, -np.inf,
+            res = CheckResult(name, False, -np.inf,
                               f"could not be re-checked: {type(exc).__name__}: {exc}")  # fmt: skip
         for r in res if isinstance(res, list) else [res]:
             log(r.text())
             out.append(r)
     return out
-
-
-def _takes_vehicle(check) -> bool:
-    return check.__code__.co_argcount == 2
 
 
 def require_verified(results: list[CheckResult], name: str) -> None:
