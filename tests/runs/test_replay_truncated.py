@@ -145,3 +145,26 @@ def test_fewer_steps_than_the_complete_ones_are_replayed_as_asked(runs, stand_in
     assert params["replay"]["ros__parameters"]["steps"] == 20
     assert not any("truncated" in line for line in lines)
     assert res.outputs.compared == 40 and res.outputs.truncated_at is None
+
+
+@pytest.mark.ros  # imports the replay node (rclpy, the built workspace)
+def test_the_replay_node_by_hand_keeps_the_complete_steps_too(runs):
+    """``ros2 run hsv_bringup replay`` with ``steps: 0`` (every step) loads the N
+    complete steps of the cut recording, not the N + LAG recorded, and says why."""
+    import subprocess
+    import sys
+
+    from fahv.runs.workspace import ensure_built, ros_env
+
+    ensure_built()
+    code = (
+        "import sys\n"
+        "from hsv_bringup.replay import load_steps\n"
+        f"steps, Ts, topics = load_steps(sys.argv[1], {INPUTS!r}, 0, {OUTPUTS!r})\n"
+        "print(len(steps), round(Ts, 6))\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code, str(runs[0])], env=ros_env(),
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.split() == [str(N), str(round(runs[2], 6))]
+    assert f"recording truncated at step {N}" in r.stderr

@@ -105,25 +105,39 @@ def recorded_steps(run: str | Path, topics=None) -> RecordedSteps:
     RunError
         If the file is missing or not an MCAP file.
     """
-    times: dict[str, set] = {}
+    at: dict[int, set] = {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TruncatedRunWarning)
         for topic, _, log_ns, _ in iter_raw(run, list(TOPICS)):
-            times.setdefault(topic, set()).add(log_ns)
+            at.setdefault(log_ns, set()).add(topic)
     cut = False
     for w in caught:  # the truncation is reported in the result, other warnings pass on
         if issubclass(w.category, TruncatedRunWarning):
             cut = True
         else:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    needed = [t for t in topics if t in times] if topics else list(times)
-    steps = sorted(set().union(*times.values()))
-    complete = next(
-        (i for i, ns in enumerate(steps) if any(ns not in times[t] for t in needed)), len(steps)
-    )
-    at = steps[complete] if complete < len(steps) else None
-    missing = [t for t in needed if at is not None and at not in times[t]]
-    return RecordedSteps(complete, len(steps), needed, missing, cut)
+    return steps_of(at, topics, cut)
+
+
+def steps_of(at: dict[int, set], topics=None, file_truncated: bool = False) -> RecordedSteps:
+    """:class:`RecordedSteps` of a run from the topics recorded at each log time.
+
+    Parameters
+    ----------
+    at : dict of int -> set of str
+        Log time [ns] -> the loop topics with a message at that time (one step each).
+    topics : sequence of str, optional
+        Topics a step needs; those never recorded are left out. Default: every topic
+        recorded.
+    file_truncated : bool
+        The file ended before its summary.
+    """
+    recorded = set().union(*at.values()) if at else set()
+    needed = [t for t in (topics or TOPICS) if t in recorded]
+    steps = sorted(at)
+    complete = next((i for i, ns in enumerate(steps) if not at[ns].issuperset(needed)), len(steps))
+    missing = [t for t in needed if t not in at[steps[complete]]] if complete < len(steps) else []
+    return RecordedSteps(complete, len(steps), needed, missing, file_truncated)
 
 
 @dataclass

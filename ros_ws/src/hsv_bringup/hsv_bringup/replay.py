@@ -33,14 +33,16 @@ from rclpy.node import Node
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
 from fahv.loop.wire import step_of
-from fahv.runs.bag import iter_raw
+from fahv.runs.bag import TruncatedRunWarning, iter_raw
 from fahv.runs.nodes import REPLAY
-from fahv.runs.replay import output_attachments
+from fahv.runs.replay import output_attachments, steps_of
 from fahv.runs.writer import RunWriter
 
 
-def load_steps(run: str, topics: list[str] | None, steps: int) -> tuple[list, float, list]:
-    """Recorded messages grouped by step.
+def load_steps(
+    run: str, topics: list[str] | None, steps: int, capture: list[str] = ()
+) -> tuple[list, float, list]:
+    """Recorded messages grouped by step, complete steps only.
 
     Parameters
     ----------
@@ -49,39 +51,49 @@ def load_steps(run: str, topics: list[str] | None, steps: int) -> tuple[list, fl
     topics : list of str or None
         Topics to load; None: every loop topic present in the run.
     steps : int
-        Number of steps to keep (0: all).
+        Number of steps to keep (0: every complete step).
+    capture : list of str
+        Topics captured from the nodes under test (a step needs their recorded
+        messages too, to compare with).
 
     Returns
     -------
     ([(log_ns, [(topic, data), ...]), ...], Ts [s], topics selected)
         The steps hold every loop topic of the run (the output run copies the ones
-        that are neither published nor captured).
+        that are neither published nor captured). A recording cut short keeps its
+        complete steps (:func:`fahv.runs.replay.steps_of`), and says so.
 
     Raises
     ------
     ParameterError
         If the run cannot be read, lacks a selected topic or holds fewer than 2 steps.
     """
+    cut = False
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             groups: dict[int, list] = {}
-            seen = set()
             for topic, _, log_ns, data in iter_raw(run, list(TOPICS)):
                 groups.setdefault(log_ns, []).append((topic, data))
-                seen.add(topic)
         for w in caught:
+            cut = cut or issubclass(w.category, TruncatedRunWarning)
             print(f"[replay] warning: {w.message}", file=sys.stderr)
     except RunError as exc:
         raise ParameterError(f"replay: parameter 'run': {exc}") from None
+    at = {ns: {t for t, _ in msgs} for ns, msgs in groups.items()}
+    seen = set().union(*at.values()) if at else set()
     topics = topics or [t for t in TOPICS if t in seen]
     missing = [t for t in topics if t not in seen]
     if missing:
         raise ParameterError(f"replay: parameter 'topics': {missing} not in the run {run}")
+    have = steps_of(at, [*topics, *capture], cut)
+    if have.truncated:
+        print(f"[replay] {have.summary(run)}", file=sys.stderr)
     times = sorted(groups)
     if len(times) < 2:
         raise ParameterError(f"replay: parameter 'run': {run} holds fewer than 2 steps")
     Ts = min(b - a for a, b in zip(times, times[1:], strict=False)) * 1e-9  # a step may be missing
+    times = times[: have.complete]
     if steps:
         times = times[:steps]
     return [(t, groups[t]) for t in times], Ts, topics
@@ -96,7 +108,9 @@ class Replay(Node):
         super().__init__("replay", **node_options())
         graph_nodes, run_id = declare_graph(self)
         get = declare_validated(self, REPLAY)
-        self.steps, Ts, self.topics = load_steps(get["run"], get["topics"] or None, get["steps"])
+        self.steps, Ts, self.topics = load_steps(
+            get["run"], get["topics"] or None, get["steps"], list(get["capture"])
+        )
         self.Ts_ns = int(round(Ts * 1e9))
         self.rate = float(get["rate"])
         self.watchdog_s = float(get["watchdog_s"])
