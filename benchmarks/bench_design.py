@@ -9,7 +9,7 @@ Usage::
 
     .venv/bin/python benchmarks/bench_design.py \\
         [--design offline_design/designs/cm_certified.yaml] \\
-        [--before e33c49c --before-file offline_design/case1.yaml]
+        [--before e33c49c --before-file offline_design/case1.yaml] [--keep DIR]
 
 Prints one line per design (wall time, design hash, whether the certified arrays are
 identical) and the ratio. Each design runs in its own process on one BLAS thread.
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -53,6 +54,8 @@ def main() -> int:
     ap.add_argument("--before", default="e33c49c", help="earlier commit ('' : skip it)")
     ap.add_argument("--before-file", default="offline_design/case1.yaml",
                     help="the design's file as the earlier commit named it")  # fmt: skip
+    ap.add_argument("--keep", type=Path, default=None,
+                    help="copy today's design folder here (e.g. to ship it)")  # fmt: skip
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -69,6 +72,8 @@ def main() -> int:
             print(f"before ({args.before}, {args.before_file}): {times['before']:.1f} s wall")
         times["after"] = run_design(ROOT / "src", ROOT, args.design, tmp / "a")
         print(f"after (working tree, {args.design}): {times['after']:.1f} s wall")
+        if args.keep is not None:
+            shutil.copytree(tmp / "a", args.keep, dirs_exist_ok=True)
         if "before" in times:
             with np.load(tmp / "b" / "design.npz") as b, np.load(tmp / "a" / "design.npz") as a:
                 same = [k for k in CERTIFIED if k in a and k in b and np.array_equal(a[k], b[k])]

@@ -8,10 +8,11 @@ import warnings
 from pathlib import Path
 
 from fahv.cli.common import add_vehicle_option, progress, vehicle_of
-from fahv.design.artefacts import save_design
+from fahv.design.artefacts import load_design, save_design
 from fahv.design.case import load_design_file, read_yaml_file
 from fahv.design.pipeline import run_design
 from fahv.design.scenario import load_scenario
+from fahv.design.stage_clock import StageClock
 from fahv.design.store import design_dir, stored_design
 from fahv.design.verify import require_verified, verify
 from fahv.errors import CaseError, DesignError
@@ -21,7 +22,9 @@ def design_case(case, vehicle, out_dir: Path, log=print):
     """Design a design file's case for ``vehicle`` and store it with its certificate lines.
 
     Writes ``design.npz``, ``design.json`` and ``certificate.txt`` (every line the
-    design printed) into ``out_dir`` atomically.
+    design printed) into ``out_dir`` atomically. A progress line names the stage at
+    least every 10 s, with the time left estimated from the stage times of the design
+    ``out_dir`` held before (:class:`fahv.design.stage_clock.StageClock`).
 
     Returns
     -------
@@ -43,10 +46,20 @@ def design_case(case, vehicle, out_dir: Path, log=print):
     def bar(it):
         return progress(it, desc="sample W", leave=False)
 
-    design = run_design(case, vehicle, progress=bar, log=both)
+    with StageClock(_previous_stage_times(out_dir)) as clock:
+        design = run_design(case, vehicle, progress=bar, log=both, clock=clock)
     design.summary["design_time_s"] = round(time.monotonic() - t0, 1)  # not in the hash
+    design.summary["stage_times_s"] = clock.times  # not in the hash: the next estimate
     save_design(design, out_dir, {"certificate.txt": "\n".join(lines) + "\n"})
     return design
+
+
+def _previous_stage_times(folder: Path) -> dict | None:
+    """Stage times [s] of the design stored in ``folder`` (None if none is)."""
+    try:
+        return load_design(folder).summary.get("stage_times_s")
+    except DesignError:
+        return None
 
 
 def cmd_design(args) -> int:

@@ -55,26 +55,38 @@ def _certifies(folder: Path) -> tuple[str, str]:
     return ", ".join(parts), "-" if t is None else f"{t / 60:.1f} min"
 
 
+def _design_row(f: Path, d: dict) -> str:
+    what, t = _certifies(f.parent / f.stem)
+    return f"| `{f.stem}` | {_one_line(d.get('description'))} | {what} | {t} |"
+
+
+def _scenario_row(f: Path, d: dict) -> str:
+    return (f"| `{f.stem}` | `{d.get('design')}` | {_one_line(d.get('description'))} | "
+            f"{', '.join(d.get('variants') or [])} |")  # fmt: skip
+
+
+def _campaign_row(f: Path, d: dict) -> str:
+    return (f"| `{f.stem}` | `{Path(str(d.get('scenario'))).stem}` | "
+            f"{_one_line(d.get('description'))} | {d.get('runs')} |")  # fmt: skip
+
+
+#: The index's tables: (title, folder, columns, row of a file).
+TABLES = (
+    ("Designs", "designs", ("design", "what it is", "certifies", "design time"), _design_row),
+    ("Scenarios", "scenarios", ("scenario", "design", "what it flies", "variants"),
+     _scenario_row),
+    ("Campaigns", "campaigns", ("campaign", "scenario", "what it draws", "runs"),
+     _campaign_row),
+)  # fmt: skip
+
+
 def index_markdown(root: Path = ROOT) -> str:
     """The index of ``root`` (designs, scenarios, campaigns) as Markdown."""
-    out = [HEAD, "## Designs", "", "| design | what it is | certifies | design time |",
-           "|---|---|---|---|"]  # fmt: skip
-    for f in sorted((root / "designs").glob("*.yaml")):
-        d = _yaml(f)
-        what, t = _certifies(f.parent / f.stem)
-        out.append(f"| `{f.stem}` | {_one_line(d.get('description'))} | {what} | {t} |")
-    out += ["", "## Scenarios", "", "| scenario | design | what it flies | variants |",
-            "|---|---|---|---|"]  # fmt: skip
-    for f in sorted((root / "scenarios").glob("*.yaml")):
-        d = _yaml(f)
-        out.append(f"| `{f.stem}` | `{d.get('design')}` | {_one_line(d.get('description'))} | "
-                   f"{', '.join(d.get('variants') or [])} |")  # fmt: skip
-    out += ["", "## Campaigns", "", "| campaign | scenario | what it draws | runs |",
-            "|---|---|---|---|"]  # fmt: skip
-    for f in sorted((root / "campaigns").glob("*.yaml")):
-        d = _yaml(f)
-        out.append(f"| `{f.stem}` | `{Path(str(d.get('scenario'))).stem}` | "
-                   f"{_one_line(d.get('description'))} | {d.get('runs')} |")  # fmt: skip
+    out = [HEAD.rstrip("\n")]
+    for title, folder, columns, row in TABLES:
+        out += ["", f"## {title}", "", f"| {' | '.join(columns)} |",
+                "|" + "---|" * len(columns)]  # fmt: skip
+        out += [row(f, _yaml(f)) for f in sorted((root / folder).glob("*.yaml"))]
     return "\n".join(out) + "\n"
 
 

@@ -137,16 +137,25 @@ class DesignState:
     """What the stages of one design have made so far (unscaled units).
 
     Set at the start: ``case`` (the validated design file), ``c`` (its data), ``veh``,
-    ``log``, ``progress``, and the empty ``arrays`` (what is stored). Each stage adds its
-    results as attributes, documented in the stage that sets them (``tp``, ``disc``,
-    ``W``, ``tube``, ``F``, ``N``, ``tightening``, ``u_lo``, ``u_hi``, ``coverage``,
-    ``certificate``, ``nominal`` ...); ``tube_set`` is set by the eight-state form only.
+    ``log``, ``progress``, ``clock`` (:meth:`stage`), and the empty ``arrays`` (what is
+    stored). Each stage adds its results as attributes, documented in the stage that sets
+    them (``tp``, ``disc``, ``W``, ``tube``, ``F``, ``N``, ``tightening``, ``u_lo``,
+    ``u_hi``, ``coverage``, ``certificate``, ``nominal`` ...); ``tube_set`` is set by the
+    eight-state form only.
     """
 
-    def __init__(self, case: Case, veh: Vehicle, log: Callable[[str], None], progress=None):
+    def __init__(
+        self, case: Case, veh: Vehicle, log: Callable[[str], None], progress=None, clock=None
+    ) -> None:
         self.case, self.c, self.veh, self.log, self.progress = case, case.data, veh, log, progress
+        self.clock = clock
         self.arrays: dict = {}
         self.tube_set = None
+
+    def stage(self, name: str) -> None:
+        """Tell the clock (if any) that stage ``name`` starts."""
+        if self.clock is not None:
+            self.clock.stage(name)
 
 
 def model_stage(st: DesignState) -> None:
@@ -325,7 +334,7 @@ def summary_of(st: DesignState) -> dict:
     }
 
 
-def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
+def run_design(case: Case, vehicle=None, progress=None, log=print, clock=None) -> Design:
     """Run every stage of :data:`STAGES` on a design file; the certified design.
 
     Parameters
@@ -339,6 +348,9 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
         Iterable wrapper for long loops (tqdm).
     log : callable
         Receives one line per step and per certificate.
+    clock : fahv.design.stage_clock.StageClock, optional
+        Told the start of every stage (and of the tube form's parts): the progress
+        lines and the stage times.
 
     Returns
     -------
@@ -357,12 +369,13 @@ def run_design(case: Case, vehicle=None, progress=None, log=print) -> Design:
     if "command" in case.data:  # a whole case: its design part, then its scenario
         from fahv.design.scenario import scenario_design
 
-        design = run_design(design_part(case), veh, progress, log)
+        design = run_design(design_part(case), veh, progress, log, clock)
         return scenario_design(design, case, veh, None, log)
     if case.defaults_used:
         log("defaults used by the design file:\n" + defaults_text(case.defaults_used))
-    st = DesignState(case, veh, log, progress)
+    st = DesignState(case, veh, log, progress, clock)
     for stage in STAGES:
+        st.stage(stage.__name__.removesuffix("_stage").replace("_", " "))
         stage(st)
     design = Design(case.data, st.arrays, summary_of(st))
     design.summary["design_hash"] = design.content_hash()

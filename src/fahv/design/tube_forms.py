@@ -123,7 +123,7 @@ class EightStateTube(TubeForm):
         ts, st.es_nominal, st.es_box = design_tube_set(
             c, st.veh, st.tm, np.concatenate([st.Dx, st.Du]), st.W.w_max, st.cols, st.rho_f,
             st.room_f, st.log, gamma=gamma, notches=st.notches, stable_only=st.stable_only,
-            **estimate,
+            stage=st.stage, **estimate,
         )  # fmt: skip
         for line in tube_set_lines(ts, st.es_nominal, st.es_box):
             st.log(line)

@@ -6,7 +6,9 @@ From the case's ``eight_state`` section: the nominal and scheduling boxes
 (:func:`fahv.design.closure.close_tube_set`), the onset of the design's loss as a
 transient (:func:`fahv.design.onset.onset_bound`) and the loops of the variants that
 feed q through a notch (:mod:`fahv.design.notch_loop`, with a gain designed for the loop
-when the case asks for one, :func:`designed_notch_loop`).
+when the case asks for one, :func:`designed_notch_loop`). The onset bound and the notch
+loops both start from the closed tube set and not from each other: Dask runs them in
+two processes (each about a third of the certified design's time).
 """
 
 from __future__ import annotations
@@ -14,7 +16,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import replace
 
+import dask
 import numpy as np
+from dask import delayed
 
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.design.closure import close_tube_set
@@ -87,6 +91,7 @@ def design_tube_set(
     gamma: float | None = None,
     notches=None,
     stable_only=None,
+    stage: Callable[[str], None] | None = None,
     **estimate,
 ) -> tuple[TubeSet, SchedulingBox, SchedulingBox]:
     """The eight-state tube set of a case (``tube.form: eight_state``), closed and checked.
@@ -124,6 +129,9 @@ def design_tube_set(
         ``{variant: NotchFilter}``: notch variants whose error filters the measured q
         alone; their loops with F_8 are checked for stability only
         (:func:`fahv.design.notch_loop.notch_loop`, also in ``tube_set.notch_loops``).
+    stage : callable, optional
+        Told the start of each part (vertices, closure, onset and notch loops): the
+        design's progress lines (:class:`fahv.design.stage_clock.StageClock`).
     **estimate
         ``gamma_e``, ``directions``, ``projection_scale`` of
         :func:`fahv.design.onset.onset_bound` (the estimate's gain along the elevator
@@ -141,9 +149,11 @@ def design_tube_set(
         If the boxes are malformed, a plant step leaves the model, or the tube set does
         not close (:func:`fahv.design.closure.close_tube_set`).
     """
+    stage = stage or (lambda name: None)
     s = case["eight_state"]
     nominal, box = nominal_box(s, vehicle.envelope)
     unc = {k: v * case["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
+    stage("tube set: vertices")
     nv = nominal_vertices(box, vehicle, trim_map, unc, rho_min, case["Ts"],
                           case["plant_substeps"], scale, s["k"], w_max, col_scale)  # fmt: skip
     tau = float(case["tube"]["tau"])
@@ -156,20 +166,42 @@ def design_tube_set(
     scale = np.asarray(scale, float)
     w_max = np.asarray(w_max, float)
     state_max = _state_max(case, log)
+    stage("tube set: closure")
     contain = _contain(case, box, vehicle, trim_map, unc, rho_min, log)
     tube_set = close_tube_set(nv, nominal, s["w0"] * w_max[1:], scale[:9], scale[9:], room,
                               s["lam"], case["mpc"]["M"], grow=s["grow"],
                               iterations=s["iterations"], w_ref=w_max, state_max=state_max,
                               contain=contain, log=log)  # fmt: skip
+    parts = {}  # what the closed tube set is checked against, independent of each other
     if gamma is not None:
         lams = tuple(dict.fromkeys((tube_set.lam, *STEADY_LAMS)))
-        onset = onset_bound(nv, tube_set, vehicle, trim_map, unc, gamma, case["Ts"],
-                            case["plant_substeps"], steady_lams=lams, **estimate)  # fmt: skip
-        tube_set = replace(tube_set, onset=onset)
+        parts["onset"] = delayed(onset_bound)(
+            nv, tube_set, vehicle, trim_map, unc, gamma, case["Ts"], case["plant_substeps"],
+            steady_lams=lams, **estimate,
+        )  # fmt: skip
     if notches or stable_only:
-        loops, gains = _notch_loops(nv, tube_set, case, notches, stable_only, log)
+        parts["loops"] = delayed(_notch_loops_logged)(nv, tube_set, case, notches, stable_only)
+    stage("tube set: onset bound, notch loops")
+    if len(parts) > 1:  # one process each (Dask; chunksize 1: not both to one worker)
+        log(f"eight-state tube: the onset bound and the notch loops on {len(parts)} processes")
+        (got,) = dask.compute(parts, scheduler="processes", num_workers=len(parts), chunksize=1)
+    else:
+        (got,) = dask.compute(parts, scheduler="sync")
+    if "onset" in got:
+        tube_set = replace(tube_set, onset=got["onset"])
+    if "loops" in got:
+        loops, gains, lines = got["loops"]
+        for line in lines:
+            log(line)
         tube_set = replace(tube_set, notch_loops=loops, notch_gains=gains)
     return tube_set, nominal, box
+
+
+def _notch_loops_logged(nv, tube_set: TubeSet, case: dict, notches, stable_only):
+    """:func:`_notch_loops` with its log lines returned (it may run in another process)."""
+    lines: list[str] = []
+    loops, gains = _notch_loops(nv, tube_set, case, notches, stable_only, lines.append)
+    return loops, gains, lines
 
 
 def designed_notch_loop(
