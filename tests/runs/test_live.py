@@ -27,7 +27,8 @@ from fahv.runs.writer import RunWriter
 pytestmark = pytest.mark.ros  # runs the built node graph
 
 CLIENT = ROOT / "tests" / "live" / "client.cjs"
-N = 1500  # 30 s of simulated time: the graph runs while `ros2 topic list` looks
+N = 6000  # 120 s of simulated time (12 s of wall time or more): the graph still runs while
+# `ros2 topic list` looks (30 s ended before it did once the graph ran at 10 x real time)
 
 
 def _read_until(stream, pattern, sink):
