@@ -29,6 +29,9 @@ def _minutes(seconds: float) -> str:
 class StageClock:
     """Stage times of one design and a progress line every ``period_s`` seconds.
 
+    Call :meth:`stage` at the start of each stage and :meth:`close` at the end (or use
+    the clock as a context manager); :attr:`times` holds the stage times [s] so far.
+
     Parameters
     ----------
     previous : dict of str -> float, optional
@@ -38,9 +41,6 @@ class StageClock:
         Receives each progress line (default: stderr).
     period_s : float
         Interval between progress lines [s].
-
-    Use :meth:`stage` at the start of each stage and :meth:`close` at the end (or the
-    clock as a context manager); :attr:`times` holds the stage times [s] so far.
     """
 
     def __init__(
