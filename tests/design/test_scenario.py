@@ -70,6 +70,28 @@ def test_a_new_scenario_runs_on_the_stored_design_without_designing(tmp_path, mo
     assert list((root / "designs" / "cm_paper").glob(".verified-*"))
 
 
+def test_the_baselines_ellipsoids_are_made_only_when_the_baseline_runs(tmp_path, monkeypatch):
+    """A new step with rmpc among the scenario's variants: running tube_mpc alone (what
+    `fahv simulate` runs by default) does not solve the baseline's ellipsoids; running
+    rmpc does, once, and caches them."""
+    from fahv.control import LAWS
+
+    root = _copy_tree(tmp_path)
+    path = _scenario(root, "climb", **{"command.h_c": 86000.0})
+    monkeypatch.chdir(tmp_path)  # the scenario cache, .cache/scenarios/, goes here
+    solved = []
+    real = LAWS["rmpc"].design.__func__
+    counted = classmethod(lambda cls, ctx: solved.append(1) or real(cls, ctx))
+    monkeypatch.setattr(LAWS["rmpc"], "design", counted)
+    _, design, _ = load_or_design(path, log=lambda *_: None, variants=["tube_mpc"])
+    assert solved == [] and "rmpc_Q" in design.arrays  # the design step's, unused
+    stored = design.arrays["rmpc_Q"]
+    _, design, _ = load_or_design(path, log=lambda *_: None, variants=["rmpc"])
+    assert solved == [1] and design.arrays["rmpc_Q"].shape[1:] == stored.shape[1:]
+    load_or_design(path, log=lambda *_: None, variants=["rmpc"])
+    assert solved == [1]  # cached
+
+
 def test_a_fault_beyond_the_design_range_is_refused_or_warned(tmp_path):
     root = _copy_tree(tmp_path)
     path = _scenario(root, "big_loss", **{"fault.rho_f": 0.6})

@@ -122,4 +122,5 @@ def load_or_design(
             raise CaseError(text + " (--allow-uncertified runs it anyway, with this warning)")
         log(f"warning: {text}")
     cache = Path(".cache") / "scenarios" / folder.name
-    return scenario.case, scenario_design(design, scenario.case, vehicle, cache, log), vehicle
+    run = scenario_design(design, scenario.case, vehicle, cache, log, variants)
+    return scenario.case, run, vehicle
