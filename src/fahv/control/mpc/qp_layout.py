@@ -315,10 +315,30 @@ def attitude_rows(fine, C, S):
     Att_z : (2 (fine_moves (M-1) + N_p), n) ndarray
         Rows in pairs (alpha, theta), step by step.
     """
-    ny, n = C.shape[2], S.shape[2]
-    att_y = [Zy[:, 2:4].reshape(-1, ny) for Zy, _ in fine] + [C[1:, 2:4].reshape(-1, ny)]
-    att_z = [Zz[:, 2:4].reshape(-1, n) for _, Zz in fine] + [S[1:, 2:4].reshape(-1, n)]
-    return np.concatenate(att_y), np.concatenate(att_z)
+    Y, Z = row_steps(fine, C, S)
+    return Y[:, 2:4].reshape(-1, Y.shape[2]), Z[:, 2:4].reshape(-1, Z.shape[2])
+
+
+def row_steps(fine, C, S) -> tuple[np.ndarray, np.ndarray]:
+    """The predictions at the steps the state rows constrain: fine steps, then move starts.
+
+    Parameters
+    ----------
+    fine : list of (Zy, Zz)
+        :func:`fine_step_predictions`.
+    C, S : ndarray
+        Move-start predictions (:func:`horizon_predictions`); their first (the current
+        step) is left out.
+
+    Returns
+    -------
+    Y : (steps, n, ny) ndarray
+    Z : (steps, n, n) ndarray
+        zeta at each step as a map of the decision vector y and of the current zeta.
+    """
+    Y = np.concatenate([Zy for Zy, _ in fine] + [C[1:]])
+    Z = np.concatenate([Zz for _, Zz in fine] + [S[1:]])
+    return Y, Z
 
 
 def range_rows(fine, C, S, Gx, layout: QPLayout):
@@ -341,13 +361,10 @@ def range_rows(fine, C, S, Gx, layout: QPLayout):
     Hv_z : (rows, n) ndarray
         Rows in pairs (h, V), step by step (the steps of :func:`attitude_rows`).
     """
-    ny, n = layout.ny, S.shape[2]
-    hv_y = np.concatenate([Zy[:, 0:2] for Zy, _ in fine] + [C[1:, 0:2]])  # (., 2, ny)
+    Y, Z = row_steps(fine, C, S)
+    hv_y = Y[:, 0:2].copy()  # (steps, 2, ny)
     hv_y[:, :, layout.delta] += Gx[0:2]
-    Hv_z = np.concatenate(
-        [Zz[:, 0:2].reshape(-1, n) for _, Zz in fine] + [S[1:, 0:2].reshape(-1, n)]
-    )  # fmt: skip
-    return hv_y.reshape(-1, ny), Hv_z
+    return hv_y.reshape(-1, layout.ny), Z[:, 0:2].reshape(-1, Z.shape[2])
 
 
 def own_trim_rows(fine, C, S, Gx):
@@ -374,13 +391,11 @@ def own_trim_rows(fine, C, S, Gx):
     Xb_z : (rows, n) ndarray
         Rows in sevens, step by step (the steps of :func:`attitude_rows`).
     """
-    ny, n = C.shape[2], S.shape[2]
+    Y, Z = row_steps(fine, C, S)
     T_own = Gx[2:9] @ np.linalg.inv(Gx[0:2])  # (7, 2) trim slope per ft, ft/s
-    xb_y = [Zy[:, 2:9] - T_own @ Zy[:, 0:2] for Zy, _ in fine]
-    xb_z = [Zz[:, 2:9] - T_own @ Zz[:, 0:2] for _, Zz in fine]
-    xb_y.append(C[1:, 2:9] - T_own @ C[1:, 0:2])
-    xb_z.append(S[1:, 2:9] - T_own @ S[1:, 0:2])
-    return T_own, np.concatenate(xb_y).reshape(-1, ny), np.concatenate(xb_z).reshape(-1, n)
+    Xb_y = (Y[:, 2:9] - T_own @ Y[:, 0:2]).reshape(-1, Y.shape[2])
+    Xb_z = (Z[:, 2:9] - T_own @ Z[:, 0:2]).reshape(-1, Z.shape[2])
+    return T_own, Xb_y, Xb_z
 
 
 def rate_rows(Phi_w, Gam_w, Psi_w, C, S, K, Du, layout: QPLayout):
