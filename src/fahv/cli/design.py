@@ -18,13 +18,15 @@ from fahv.design.verify import require_verified, verify
 from fahv.errors import CaseError, DesignError
 
 
-def design_case(case, vehicle, out_dir: Path, log=print):
+def design_case(case, vehicle, out_dir: Path, log=print, cold: bool = False):
     """Design a design file's case for ``vehicle`` and store it with its certificate lines.
 
     Writes ``design.npz``, ``design.json`` and ``certificate.txt`` (every line the
     design printed) into ``out_dir`` atomically. A progress line names the stage at
     least every 10 s, with the time left estimated from the stage times of the design
-    ``out_dir`` held before (:class:`fahv.design.stage_clock.StageClock`).
+    ``out_dir`` held before (:class:`fahv.design.stage_clock.StageClock`). The LMIs'
+    constraint generation starts from the active sets that design stored, unless
+    ``cold`` (``previous`` of :func:`fahv.design.pipeline.run_design`).
 
     Returns
     -------
@@ -46,18 +48,21 @@ def design_case(case, vehicle, out_dir: Path, log=print):
     def bar(it):
         return progress(it, desc="sample W", leave=False)
 
-    with StageClock(_previous_stage_times(out_dir)) as clock:
-        design = run_design(case, vehicle, progress=bar, log=both, clock=clock)
+    previous = _previous_design(out_dir)
+    times = None if previous is None else previous.summary.get("stage_times_s")
+    start = None if cold or previous is None else previous.arrays
+    with StageClock(times) as clock:
+        design = run_design(case, vehicle, progress=bar, log=both, clock=clock, previous=start)
     design.summary["design_time_s"] = round(time.monotonic() - t0, 1)  # not in the hash
     design.summary["stage_times_s"] = clock.times  # not in the hash: the next estimate
     save_design(design, out_dir, {"certificate.txt": "\n".join(lines) + "\n"})
     return design
 
 
-def _previous_stage_times(folder: Path) -> dict | None:
-    """Stage times [s] of the design stored in ``folder`` (None if none is)."""
+def _previous_design(folder: Path):
+    """The design stored in ``folder`` (None if none is, or it does not load)."""
     try:
-        return load_design(folder).summary.get("stage_times_s")
+        return load_design(folder)
     except DesignError:
         return None
 
@@ -67,7 +72,7 @@ def cmd_design(args) -> int:
     case = load_design_file(args.design)
     vehicle = vehicle_of(args)
     out = design_dir(case.path, case.name, args.out, vehicle)
-    design = design_case(case, vehicle, out)
+    design = design_case(case, vehicle, out, cold=args.cold)
     prov = design.summary["provenance"]
     print(
         f"design hash {design.summary['design_hash']} (design file {prov['design_file_hash']}, "
@@ -125,6 +130,12 @@ def add_parsers(sub) -> None:
         "--out",
         default=None,
         help="artefact folder (default: beside the design file, named after it)",
+    )
+    p.add_argument(
+        "--cold",
+        action="store_true",
+        help="start the LMIs' constraint generation from scratch, not from the active sets "
+        "the design stored in the artefact folder holds (the same certificate, found slower)",
     )
     add_vehicle_option(p)
     p.set_defaults(func=cmd_design)

@@ -22,7 +22,7 @@ from fahv.design.report import closure_iteration_line
 from fahv.design.tube_set import TubeSet
 from fahv.design.vertices import NominalVertices
 from fahv.errors import DesignError
-from fahv.synthesis.feedback import design_tube
+from fahv.synthesis.feedback import GENERATION_ADD, ActiveSet, design_tube
 from fahv.synthesis.rpi_level import worst_level
 
 
@@ -39,9 +39,10 @@ def close_tube_set(
     grow: float = 1.05,
     iterations: int = 6,
     w_ref=None,
-    active: int = 96,
+    active: int = GENERATION_ADD,
     state_max=None,
     contain=None,
+    warm: ActiveSet | None = None,
     log: Callable[[str], None] = print,
 ) -> TubeSet:
     """Iterate W_8 and Z_8 to a closed tube set over the vertices ``nv`` (module docstring).
@@ -71,7 +72,8 @@ def close_tube_set(
         Reference size of W for the LMI's scaling (:func:`fahv.synthesis.feedback.design_tube`);
         its eight entries after h are used.
     active : int
-        Vertex blocks per pass of constraint generation.
+        Vertex blocks and points added per pass of constraint generation
+        (:func:`fahv.synthesis.feedback.design_tube`).
     state_max : (8,) array_like, optional
         Largest supports of Z_8 along e_8's axes (V, alpha, theta, ...; unscaled, inf: no
         bound), e.g. 0.5 deg less the QP's attitude rows in alpha and theta, so that the
@@ -80,6 +82,10 @@ def close_tube_set(
     contain : (S, 8) array_like, optional
         Errors Z_8 must contain (``contain`` of :func:`fahv.synthesis.feedback.design_tube`),
         e.g. the onset's jumps over the level they may use.
+    warm : ActiveSet, optional
+        The vertices and points the constraint generation starts from (the ``active_set``
+        of an earlier design of this file); it changes how fast the LMI is solved, not
+        what is certified.
     log : callable
         Receives one line per iteration.
 
@@ -104,7 +110,7 @@ def close_tube_set(
     for it in range(iterations):
         tube = design_tube(A_8, B_8, W_8, np.asarray(state_scale, float)[1:], input_scale, room,
                            (lam,), state_max=state_max, w_ref=w_ref_8, active=active,
-                           contain=contain)  # fmt: skip
+                           contain=contain, warm=warm)  # fmt: skip
         F_8, N_8 = tube.F, tube.N
         ab = altitude_bound(nv, A, B, F_8, N_8, moves)
         ratio = ab.bound / W_8
@@ -125,7 +131,7 @@ def close_tube_set(
                     f"is {level:.6f} > 1 over {A_8.shape[0]} vertices"
                 )
             return TubeSet(F_8, N_8, W_8, ab.H, float(tube.lam), ab.bound, float(level),
-                           int(moves), ab.step, ab.w_h)  # fmt: skip
+                           int(moves), ab.step, ab.w_h, active_set=tube.active_set)  # fmt: skip
         W_8 = np.maximum(W_8, grow * ab.bound)
     raise DesignError(
         f"eight-state tube: not closed in {iterations} iterations (bound / W_8 "

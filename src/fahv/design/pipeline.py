@@ -145,10 +145,11 @@ class DesignState:
     """
 
     def __init__(
-        self, case: Case, veh: Vehicle, log: Callable[[str], None], progress=None, clock=None
+        self, case: Case, veh: Vehicle, log: Callable[[str], None], progress=None, clock=None,
+        previous=None,
     ) -> None:
         self.case, self.c, self.veh, self.log, self.progress = case, case.data, veh, log, progress
-        self.clock = clock
+        self.clock, self.previous = clock, previous
         self.arrays: dict = {}
         self.tube_set = None
 
@@ -334,7 +335,8 @@ def summary_of(st: DesignState) -> dict:
     }
 
 
-def run_design(case: Case, vehicle=None, progress=None, log=print, clock=None) -> Design:
+def run_design(case: Case, vehicle=None, progress=None, log=print, clock=None,
+               previous=None) -> Design:  # fmt: skip
     """Run every stage of :data:`STAGES` on a design file; the certified design.
 
     Parameters
@@ -351,6 +353,11 @@ def run_design(case: Case, vehicle=None, progress=None, log=print, clock=None) -
     clock : fahv.design.stage_clock.StageClock, optional
         Told the start of every stage (and of the tube form's parts): the progress
         lines and the stage times.
+    previous : Mapping[str, ndarray], optional
+        The arrays of an earlier design of the same file: where the constraint
+        generation of its LMIs starts (the closure's ``closure_vertices`` and
+        ``closure_points``). It changes how fast the design runs, not what is certified
+        (every certificate is the exact check over every vertex).
 
     Returns
     -------
@@ -369,11 +376,11 @@ def run_design(case: Case, vehicle=None, progress=None, log=print, clock=None) -
     if "command" in case.data:  # a whole case: its design part, then its scenario
         from fahv.design.scenario import scenario_design
 
-        design = run_design(design_part(case), veh, progress, log, clock)
+        design = run_design(design_part(case), veh, progress, log, clock, previous)
         return scenario_design(design, case, veh, None, log)
     if case.defaults_used:
         log("defaults used by the design file:\n" + defaults_text(case.defaults_used))
-    st = DesignState(case, veh, log, progress, clock)
+    st = DesignState(case, veh, log, progress, clock, previous)
     for stage in STAGES:
         st.stage(stage.__name__.removesuffix("_stage").replace("_", " "))
         stage(st)

@@ -39,6 +39,7 @@ from fahv.design.tube_set_design import design_tube_set
 from fahv.design.vertex_tube import certify_tube
 from fahv.errors import DesignError
 from fahv.model.vehicle import IQ
+from fahv.synthesis.feedback import ActiveSet
 
 
 class TubeForm:
@@ -123,7 +124,7 @@ class EightStateTube(TubeForm):
         ts, st.es_nominal, st.es_box = design_tube_set(
             c, st.veh, st.tm, np.concatenate([st.Dx, st.Du]), st.W.w_max, st.cols, st.rho_f,
             st.room_f, st.log, gamma=gamma, notches=st.notches, stable_only=st.stable_only,
-            stage=st.stage, **estimate,
+            stage=st.stage, warm=closure_active_set(st.previous), **estimate,
         )  # fmt: skip
         for line in tube_set_lines(ts, st.es_nominal, st.es_box):
             st.log(line)
@@ -141,6 +142,9 @@ class EightStateTube(TubeForm):
         x_box = state_rows(ts.certified_range(st.es_box))
         st.log(state_rows_line(x_box))
         st.arrays.update(u_box=u_box, hv_box=st.hv_box, x_box=x_box)
+        if ts.active_set is not None:  # where the next design of this file starts its LMI
+            st.arrays.update(closure_vertices=ts.active_set.vertices,
+                             closure_points=ts.active_set.points)  # fmt: skip
         for v, F_8v in ts.notch_gains.items():  # a gain designed for a variant's notch loop
             st.arrays[variant_gain_key(v)] = np.hstack([np.zeros((2, 1)), F_8v])
         certificate = ts.summary(st.es_nominal, st.es_box)  # W_8 over its own domain
@@ -148,6 +152,25 @@ class EightStateTube(TubeForm):
         # and the certificate re-checked from the stored design (fahv verify)
         certificate["col_scale"] = st.cols.tolist()
         return certificate
+
+
+def closure_active_set(previous) -> ActiveSet | None:
+    """The closure's active set stored in an earlier design's arrays (None if none is).
+
+    Parameters
+    ----------
+    previous : Mapping[str, ndarray] or None
+        The arrays of the design the output folder held before (``closure_vertices``,
+        ``closure_points``), or None.
+
+    Returns
+    -------
+    fahv.synthesis.feedback.ActiveSet or None
+    """
+    if previous is None or "closure_vertices" not in previous:
+        return None
+    return ActiveSet(np.asarray(previous["closure_vertices"], int),
+                     np.asarray(previous.get("closure_points", np.zeros(0)), int))  # fmt: skip
 
 
 #: The registered tube forms, by ``tube.form``.

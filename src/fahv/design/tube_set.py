@@ -27,6 +27,7 @@ from fahv.design.domain import SchedulingBox, certified_range
 if TYPE_CHECKING:
     from fahv.design.notch_loop import NotchLoop
     from fahv.design.onset import OnsetBound
+    from fahv.synthesis.feedback import ActiveSet
 
 #: The states of the tube, after h (the design's state order without its first entry).
 EIGHT_STATES = ("V", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
@@ -83,6 +84,9 @@ class TubeSet:
         ``{variant: (2, 8) ndarray}``: the gains designed for those loops and certified
         (``eight_state.notch_gain: designed``, :func:`fahv.design.notch_gain.notch_gain`);
         such a variant runs its own gain in place of F_8.
+    active_set : fahv.synthesis.feedback.ActiveSet, optional
+        The vertices and contained points the closure's last LMI solve held: where a
+        later design of the same file starts its constraint generation.
     """
 
     F_8: np.ndarray
@@ -98,6 +102,7 @@ class TubeSet:
     onset: OnsetBound | None = None
     notch_loops: tuple[NotchLoop, ...] = ()
     notch_gains: dict = field(default_factory=dict)
+    active_set: ActiveSet | None = None
 
     @property
     def F(self) -> np.ndarray:

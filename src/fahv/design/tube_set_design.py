@@ -92,6 +92,7 @@ def design_tube_set(
     notches=None,
     stable_only=None,
     stage: Callable[[str], None] | None = None,
+    warm=None,
     **estimate,
 ) -> tuple[TubeSet, SchedulingBox, SchedulingBox]:
     """The eight-state tube set of a case (``tube.form: eight_state``), closed and checked.
@@ -132,6 +133,8 @@ def design_tube_set(
     stage : callable, optional
         Told the start of each part (vertices, closure, onset and notch loops): the
         design's progress lines (:class:`fahv.design.stage_clock.StageClock`).
+    warm : fahv.synthesis.feedback.ActiveSet, optional
+        Where the closure's constraint generation starts (:func:`close_tube_set`).
     **estimate
         ``gamma_e``, ``directions``, ``projection_scale`` of
         :func:`fahv.design.onset.onset_bound` (the estimate's gain along the elevator
@@ -171,7 +174,7 @@ def design_tube_set(
     tube_set = close_tube_set(nv, nominal, s["w0"] * w_max[1:], scale[:9], scale[9:], room,
                               s["lam"], case["mpc"]["M"], grow=s["grow"],
                               iterations=s["iterations"], w_ref=w_max, state_max=state_max,
-                              contain=contain, log=log)  # fmt: skip
+                              contain=contain, warm=warm, log=log)  # fmt: skip
     parts = {}  # what the closed tube set is checked against, independent of each other
     if gamma is not None:
         lams = tuple(dict.fromkeys((tube_set.lam, *STEADY_LAMS)))

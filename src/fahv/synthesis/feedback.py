@@ -35,6 +35,7 @@ import numpy as np
 from fahv.errors import DesignError
 from fahv.synthesis.lmi import (
     LMI_MARGIN,
+    dual_support,
     invariance_blocks,
     require_psd,
     scale_vertices,
@@ -71,6 +72,9 @@ class TubeDesign:
         Pulse generators G (unscaled): Z is RPI for w + G' p, |w| <= w_max, |p| <= 1.
     mu_pulse : (g,) ndarray or None
         Their S-procedure multipliers (scaled coordinates).
+    active_set : ActiveSet or None
+        The vertices and points that support the solution (constraint generation), the
+        start of a later design of the same vertex set (``warm`` of :func:`design_tube`).
     """
 
     F: np.ndarray
@@ -84,6 +88,7 @@ class TubeDesign:
     n_blocks: int = 0
     pulse: np.ndarray | None = None
     mu_pulse: np.ndarray | None = None
+    active_set: ActiveSet | None = None
 
     def contains(self, e: np.ndarray, scale: float = 1.0) -> bool:
         """True if the error e (n,) lies in scale * Z."""
@@ -160,86 +165,153 @@ def _levels(P: np.ndarray, N: np.ndarray) -> np.ndarray:
     return np.einsum("si,si->s", P, np.linalg.solve(N, P.T).T)
 
 
-def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None, Ps=None):
-    """Solve the tube LMI for one lam (scaled data); (value, lam, N, M, mu, blocks) or None.
+@dataclass(frozen=True)
+class ActiveSet:
+    """The vertex blocks and points a tube LMI's last solve held (constraint generation).
 
-    With ``active`` (an int) the vertex blocks are generated: the LMI is solved with
-    the ``active`` vertices of largest open-loop norm, every block is then evaluated at
-    the solution, and the worst violated blocks (at most ``active`` per pass) are
-    added until every block holds with half the strict margin (constraint generation).
-    The blocks solved hold with the full margin ``LMI_MARGIN``, the ones left out with
-    at least half of it, so the result is the full LMI's optimum up to that margin (not
-    exactly); :func:`verify_tube` re-checks every one of the R blocks either way. ``Gs`` (g, n):
-    pulse generators (scaled), the last g multipliers of the returned mu. ``Ps`` (S, n):
-    points Z must contain (scaled), p' N^-1 p <= 1, entered as [[1 - 1e-5, p'], [p, N]] >= 0
-    (a margin for the solver's accuracy, as the budget's) and generated like the vertex
-    blocks (the ``active`` largest first, then the violated).
+    Started from again (``warm`` of :func:`design_tube`), the first solve is the last one
+    of the design that stored it: on the same data and machine, the same solution.
+
+    Attributes
+    ----------
+    vertices : (a,) ndarray of int
+        Indices of the vertices whose blocks the last solve held.
+    points : (b,) ndarray of int
+        Indices of the ``contain`` points it held.
+    """
+
+    vertices: np.ndarray
+    points: np.ndarray
+
+    @staticmethod
+    def empty() -> ActiveSet:
+        """No vertex and no point."""
+        return ActiveSet(np.zeros(0, int), np.zeros(0, int))
+
+
+#: Vertex blocks and points of the first solve (each, the largest first) and added per
+#: pass of constraint generation (the most violated first): an LMI of d unknowns has a
+#: subset of at most d constraints with the same optimum, and Clarabel's time grows
+#: with the blocks held, so few are held and few added (docs: results/speed).
+GENERATION_START = 24
+GENERATION_ADD = 12
+def _rpi_problem(As, Bs, ws, room, sw, lam, zs_max, E, Ps):
+    """The tube LMI on the given vertices and points (scaled): problem, variables, blocks.
+
+    The S-procedure block of :func:`_rpi_blocks` with its middle diag(mu) eliminated by
+    a Schur complement: with nu = 1 / mu (mu > 0 wherever w_j != 0),
+    [[lam N, (A N + B M)'], [A N + B M, N - E diag(nu) E']] >= 0, linear in (N, M, nu),
+    and the budget sum_j w_j^2 / nu_j (+ sum_l 1 / nu_p,l) <= 1 - lam, convex in nu:
+    the same condition on blocks of 2n instead of 3n + g rows (an interior-point
+    step's cost grows with the cube of a block's size).
+
+    Returns (prob, (N, M, nu), vertex_constraints, point_constraints).
+    """
+    R, n, m = Bs.shape
+    k = E.shape[1]
+    N = cp.Variable((n, n), symmetric=True)
+    M = cp.Variable((m, n))
+    # nu = weights r / (1 - lam), weights = (w_j^2, 1 per pulse): r of order the count
+    r = cp.Variable(k, pos=True)
+    weights = np.r_[ws**2, np.ones(k - n)]
+    nu = cp.multiply(weights / (1.0 - lam), r)
+    t = cp.Variable(m)
+    cons = [N >> LMI_MARGIN * np.eye(n), cp.sum(cp.inv_pos(r)) <= 1.0 - 1e-6]
+    cons += [N[j, j] <= (1.0 - 1e-6) * zs_max[j] ** 2 for j in range(n) if np.isfinite(zs_max[j])]
+    inner = N - E @ cp.diag(nu) @ E.T
+    vertex_cons = []
+    for i in range(R):
+        AN = As[i] @ N + Bs[i] @ M
+        blk = cp.bmat([[lam * N, AN.T], [AN, inner]])
+        vertex_cons.append(0.5 * (blk + blk.T) >> LMI_MARGIN * np.eye(2 * n))
+    point_cons = []
+    for p in Ps:  # p' N^-1 p <= 1 - 1e-5: room for the solver's accuracy
+        blk = cp.bmat([[np.full((1, 1), 1.0 - 1e-5), p[None, :]], [p[:, None], N]])
+        point_cons.append(0.5 * (blk + blk.T) >> 0)
+    for j in range(m):
+        blk = cp.bmat(
+            [[cp.reshape(t[j], (1, 1), order="F"), M[j : j + 1, :]], [M[j : j + 1, :].T, N]]
+        )
+        cons.append(0.5 * (blk + blk.T) >> 0)
+    obj = cp.Minimize(cp.sum(cp.multiply(t, 1.0 / room**2)) + sw @ cp.diag(N))
+    return cp.Problem(obj, cons + vertex_cons + point_cons), (N, M, nu), vertex_cons, point_cons
+
+
+def _reduced_min_eigs(As, Bs, N, M, nu, lam, E) -> np.ndarray:
+    """Smallest eigenvalue (R,) of each vertex's reduced block (:func:`_rpi_problem`)."""
+    n = N.shape[0]
+    AN = As @ N + Bs @ M
+    blk = np.empty((As.shape[0], 2 * n, 2 * n))
+    blk[:, :n, :n] = lam * N
+    blk[:, n:, :n] = AN
+    blk[:, :n, n:] = AN.transpose(0, 2, 1)
+    blk[:, n:, n:] = N - (E * nu[None, :]) @ E.T
+    return np.linalg.eigvalsh(blk)[:, 0]
+
+
+def _most(values, candidates, count) -> np.ndarray:
+    """The ``count`` candidates of largest ``values`` (sorted indices)."""
+    return np.sort(candidates[np.argsort(-values[candidates], kind="stable")[:count]])
+
+
+def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None, Ps=None,
+                   warm=None):  # fmt: skip
+    """Solve the tube LMI for one lam (scaled data); (value, lam, N, M, mu, blocks, set) or None.
+
+    With ``active`` (an int: the blocks and points added per pass) the vertex blocks and
+    the points are generated: the LMI is solved on the ``warm`` set (an
+    :class:`ActiveSet`, e.g. the one a stored design ended with) or else on the
+    ``active`` vertices of largest open-loop norm and points of largest norm; every block
+    and point is then evaluated at the solution; the ``active`` most violated of each are
+    added, and the held ones outside the solution's support (a zero dual,
+    :func:`fahv.synthesis.lmi.dual_support`) are released, each at most once, until every
+    block holds with half the strict margin and every point lies in Z (constraint
+    generation). The blocks solved hold with the full margin ``LMI_MARGIN``, the ones
+    left out with at least half of it, so the result is the full LMI's optimum up to that
+    margin (not exactly); :func:`verify_tube` re-checks every one of the R blocks either
+    way. ``Gs`` (g, n): pulse generators (scaled), the last g multipliers of the
+    returned mu. ``Ps`` (S, n): points Z must contain (scaled), p' N^-1 p <= 1, entered
+    as [[1 - 1e-5, p'], [p, N]] >= 0 (a margin for the solver's accuracy, as the
+    budget's).
     """
     R, n, m = Bs.shape
     E = _generators(n, Gs)
-    k = E.shape[1]
-    if active is None or active >= R:
-        chosen = np.arange(R)
+    Ps = np.zeros((0, n)) if Ps is None else np.asarray(Ps, float)
+    zs_max = np.full(n, np.inf) if state_max is None else np.asarray(state_max, float) / Dx
+    warm = warm or ActiveSet.empty()
+    warm_v, warm_p = warm.vertices[warm.vertices < R], warm.points[warm.points < len(Ps)]
+    if active is None or active >= R + len(Ps):
+        chosen, held = np.arange(R), np.arange(len(Ps))
+    elif warm_v.size:  # exactly the set an earlier solve ended on: the same solution again
+        chosen, held = np.unique(warm_v), np.unique(warm_p).astype(int)
     else:
         norms = np.linalg.norm(As.reshape(R, -1), axis=1)
         norms = norms + np.linalg.norm(Bs.reshape(R, -1), axis=1)
-        chosen = np.sort(np.argsort(-norms)[:active])
-    held = np.zeros(0, int)
-    if Ps is not None and len(Ps):
-        held = np.sort(np.argsort(-np.linalg.norm(Ps, axis=1))[: active or len(Ps)])
+        chosen = _most(norms, np.arange(R), active)
+        held = _most(np.linalg.norm(Ps, axis=1), np.arange(len(Ps)), active)
+    released_v, released_p = np.zeros(0, int), np.zeros(0, int)
     while True:
-        N = cp.Variable((n, n), symmetric=True)
-        M = cp.Variable((m, n))
-        mu = cp.Variable(k, nonneg=True)
-        t = cp.Variable(m)
-        budget = mu[:n] @ (ws**2) + (cp.sum(mu[n:]) if k > n else 0.0)
-        cons = [N >> LMI_MARGIN * np.eye(n), budget <= (1.0 - lam) * (1.0 - 1e-6)]
-        if state_max is not None:
-            zs_max = np.asarray(state_max, float) / Dx
-            cons += [N[j, j] <= (1.0 - 1e-6) * zs_max[j] ** 2
-                     for j in range(n) if np.isfinite(zs_max[j])]  # fmt: skip
-        for i in chosen:
-            AN = As[i] @ N + Bs[i] @ M
-            blk = cp.bmat(
-                [
-                    [lam * N, np.zeros((n, k)), AN.T],
-                    [np.zeros((k, n)), cp.diag(mu), E.T],
-                    [AN, E, N],
-                ]
-            )
-            cons.append(0.5 * (blk + blk.T) >> LMI_MARGIN * np.eye(2 * n + k))
-        for s in held:  # p' N^-1 p <= 1 - 1e-5: room for the solver's accuracy
-            p = Ps[s][:, None]
-            blk = cp.bmat([[np.full((1, 1), 1.0 - 1e-5), p.T], [p, N]])
-            cons.append(0.5 * (blk + blk.T) >> 0)
-        for j in range(m):
-            blk = cp.bmat(
-                [[cp.reshape(t[j], (1, 1), order="F"), M[j : j + 1, :]], [M[j : j + 1, :].T, N]]
-            )
-            cons.append(0.5 * (blk + blk.T) >> 0)
-        obj = cp.Minimize(cp.sum(cp.multiply(t, 1.0 / room**2)) + sw @ cp.diag(N))
-        prob = cp.Problem(obj, cons)
+        prob, (N, M, nu), vcons, pcons = _rpi_problem(As[chosen], Bs[chosen], ws, room, sw, lam,
+                                                      zs_max, E, Ps[held])  # fmt: skip
         if not solve_lmi(prob):
             return None
         Nv = 0.5 * (N.value + N.value.T)
-        outside = np.zeros(0, int)  # points Z must contain that it does not yet
-        if held.size:
-            level = _levels(Ps, Nv)
-            outside = np.setdiff1d(np.flatnonzero(level > 1.0 + 1e-7), held)
-            add = outside[np.argsort(-level[outside])[: active or outside.size]]
-            held = np.union1d(held, add)
-        if len(chosen) == R:
-            if outside.size == 0:
-                return prob.value, lam, N.value, M.value, mu.value, R
-            continue
-        blocks = _rpi_blocks(As @ Nv + Bs @ M.value, lam, np.maximum(mu.value, 0.0), Nv, Gs)
-        eig = np.linalg.eigvalsh(blocks)[:, 0]
-        bad = np.flatnonzero(eig < 0.5 * LMI_MARGIN)
-        bad = np.setdiff1d(bad, chosen)
+        level = _levels(Ps, Nv) if len(Ps) else np.zeros(0)
+        outside = np.setdiff1d(np.flatnonzero(level > 1.0 + 1e-7), held)
+        mu = 1.0 / nu.value
+        if len(chosen) < R:
+            eig = _reduced_min_eigs(As, Bs, Nv, M.value, nu.value, lam, E)
+            bad = np.setdiff1d(np.flatnonzero(eig < 0.5 * LMI_MARGIN), chosen)
+        else:
+            eig, bad = np.zeros(R), np.zeros(0, int)
         if bad.size == 0 and outside.size == 0:
-            return prob.value, lam, N.value, M.value, mu.value, len(chosen)
-        worst = bad[np.argsort(eig[bad])[:active]]
-        chosen = np.union1d(chosen, worst)
+            return prob.value, lam, N.value, M.value, mu, len(chosen), ActiveSet(chosen, held)
+        # release the held constraints outside the support (once each), add the worst
+        drop_v = np.setdiff1d(np.setdiff1d(chosen, chosen[dual_support(vcons)]), released_v)
+        drop_p = np.setdiff1d(np.setdiff1d(held, held[dual_support(pcons)]), released_p)
+        released_v, released_p = np.union1d(released_v, drop_v), np.union1d(released_p, drop_p)
+        chosen = np.union1d(np.setdiff1d(chosen, drop_v), _most(-eig, bad, active))
+        held = np.union1d(np.setdiff1d(held, drop_p), _most(level, outside, active)).astype(int)
 
 
 def design_tube(
@@ -256,6 +328,7 @@ def design_tube(
     active=None,
     pulse=None,
     contain=None,
+    warm=None,
 ) -> TubeDesign:
     """Design F and the ellipsoidal RPI tube Z for the box W = {|w| <= w_max}.
 
@@ -294,9 +367,11 @@ def design_tube(
         another scale (measured: a W of 1/100 of the design's gave the tube of W / 10).
         With ``state_max`` the bound is scaled with W (s Z has s times Z's supports).
     active : int, optional
-        Vertex blocks per pass of constraint generation, for large vertex sets: the
-        LMI is solved on a growing subset of the vertices until every block holds at
-        the solution (:func:`_solve_rpi_lmi`); None: all blocks at once.
+        Vertex blocks and points added per pass of constraint generation, for large
+        vertex sets: the LMI is solved on a subset of the vertices and points, grown by
+        the most violated and cleared of those outside the solution's support, until
+        every block holds at the solution (:func:`_solve_rpi_lmi`); None: all blocks at
+        once.
     pulse : (g, n) array_like, optional
         Pulse generators G (unscaled): Z is made RPI for w + G' p, |w| <= w_max,
         |p_l| <= 1 (module docstring), e.g. the one-step jumps of the residual at the
@@ -307,6 +382,11 @@ def design_tube(
         the one-step jumps of a loss's onset over the level they may use, so that the
         error stays in Z through the onset (:func:`fahv.design.closure.close_tube_set`).
         Re-checked exactly.
+    warm : ActiveSet, optional
+        Vertices and points to start the constraint generation from (e.g. the
+        ``active_set`` of an earlier design of the same vertex set); indices beyond the
+        vertex or point count are ignored. It changes how fast the solve gets there, not
+        what is certified.
 
     Returns
     -------
@@ -328,7 +408,7 @@ def design_tube(
                         state_weight, state_max=sm, active=active,
                         pulse=None if pulse is None else np.asarray(pulse, float) / s,
                         contain=None if contain is None else np.asarray(contain, float) / s,
-                        )  # fmt: skip
+                        warm=warm)  # fmt: skip
         tube = dataclasses.replace(
             t, N=t.N * s**2, mu=t.mu / s**2, w_max=np.asarray(w_max, float),
             tightening=t.tightening * s, z_box=t.z_box * s,
@@ -344,7 +424,7 @@ def design_tube(
     Ps = None if contain is None else np.atleast_2d(np.asarray(contain, float)) / Dx[None, :]
     best = None
     for lam in lam_grid:
-        sol = _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs, Ps)
+        sol = _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs, Ps, warm)
         if sol is not None and (best is None or sol[0] < best[0]):
             best = sol
     if best is None:
@@ -356,7 +436,7 @@ def design_tube(
             "tube LMI (24) with RPI condition is infeasible for every lam in "
             f"{list(lam_grid)}{bound}: W is too large for any common ellipsoidal tube"
         )
-    _, lam, Ns, Ms, mus, n_blocks = best
+    _, lam, Ns, Ms, mus, n_blocks, active_set = best
     Ns = 0.5 * (Ns + Ns.T)
     Fs = Ms @ np.linalg.inv(Ns)
     F = Fs * Du[:, None] / Dx[None, :]
@@ -374,6 +454,7 @@ def design_tube(
         n_blocks=int(n_blocks),
         pulse=None if Gs is None else Gs * Dx[None, :],
         mu_pulse=None if Gs is None else mus[n:],
+        active_set=active_set,
     )
     eigs = verify_tube(A, B, tube, Dx, Du)
     if Ps is not None:

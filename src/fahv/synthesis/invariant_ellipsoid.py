@@ -17,7 +17,13 @@ import cvxpy as cp
 import numpy as np
 
 from fahv.errors import DesignError
-from fahv.synthesis.lmi import LMI_MARGIN, invariance_blocks, require_psd, solve_lmi
+from fahv.synthesis.lmi import (
+    LMI_MARGIN,
+    dual_support,
+    invariance_blocks,
+    require_psd,
+    solve_lmi,
+)
 
 
 @dataclass(frozen=True)
@@ -44,6 +50,10 @@ class InvariantEllipsoid:
     n_blocks: int
 
 
+#: A held vertex whose exact level lies below this at a solution does not bind it:
+#: constraint generation releases it (at most once) for the next pass.
+RELEASE_LEVEL = 0.999
+
 #: Share of the budget 1 - lam :func:`invariant_ellipsoid` leaves unused, so that its
 #: blocks, solved without a strict margin, leave room for the exact re-check.
 BUDGET_MARGIN = 4e-3
@@ -63,8 +73,36 @@ def _s_procedure_block(top, AX, E, mu, P):
     return 0.5 * (blk + blk.T)
 
 
+def _analysis_problem(As, E, Ss, Ks, tmax, lam):
+    """The LMI of :func:`invariant_ellipsoid` on the vertices As (scaled): its parts.
+
+    Each vertex's S-procedure block with its middle diag(mu_i) eliminated by a Schur
+    complement, mu_i,j = b / r_i,j (b the budget (1 - lam)(1 - BUDGET_MARGIN)):
+    [[lam P, (A_i P)'], [A_i P, P - E diag(r_i) E' / b]] >= 0 with sum_j 1 / r_i,j <= 1
+    (sum_j mu_i,j <= b): the same condition on blocks of 2n rows instead of 2n + p.
+
+    Returns (prob, P, r, s2, vertex_constraints).
+    """
+    R, n, _ = As.shape
+    p = E.shape[1]
+    b = (1.0 - lam) * (1.0 - BUDGET_MARGIN)
+    P = cp.Variable((n, n), symmetric=True)
+    r = cp.Variable((R, p), pos=True)
+    s2 = cp.Variable()
+    cons = [P >> LMI_MARGIN * np.eye(n), cp.sum(cp.inv_pos(r), axis=1) <= 1.0,
+            P[:p, :p] << s2 * Ss]  # fmt: skip
+    cons += [Ks[j] @ P @ Ks[j] <= tmax[j] ** 2 for j in range(Ks.shape[0])]
+    blocks = []
+    for i in range(R):
+        AP = As[i] @ P
+        inner = P - E @ cp.diag(r[i]) @ E.T / b
+        blk = cp.bmat([[lam * P, AP.T], [AP, inner]])
+        blocks.append(0.5 * (blk + blk.T) >> 0)
+    return cp.Problem(cp.Minimize(s2), cons + blocks), P, r, s2, blocks
+
+
 def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float,
-                        active: int = 40, add: int = 10) -> InvariantEllipsoid | None:  # fmt: skip
+                        active: int = 24, add: int = 12) -> InvariantEllipsoid | None:  # fmt: skip
     """Smallest ellipsoid RPI for a fixed closed loop whose projection lies in a given one.
 
     The analysis form of the tube LMI (24) for a closed loop xi+ = A_cl,i xi + E w with
@@ -146,15 +184,9 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     budget = (1.0 - lam) * (1.0 - BUDGET_MARGIN)
     rho = np.abs(np.linalg.eigvals(As)).max(axis=1)
     chosen = np.sort(np.argsort(-rho)[:active])
+    released = np.zeros(0, int)
     while True:
-        P = cp.Variable((n, n), symmetric=True)
-        mu = cp.Variable((len(chosen), p), nonneg=True)
-        s2 = cp.Variable()
-        cons = [P >> LMI_MARGIN * np.eye(n), cp.sum(mu, axis=1) <= budget, P[:p, :p] << s2 * Ss]
-        cons += [Ks[j] @ P @ Ks[j] <= tmax[j] ** 2 for j in range(K.shape[0])]
-        cons += [_s_procedure_block(lam * P, As[i] @ P, E, mu[r], P) >> 0
-                 for r, i in enumerate(chosen)]  # fmt: skip
-        prob = cp.Problem(cp.Minimize(s2), cons)
+        prob, P, r, s2, blocks = _analysis_problem(As[chosen], E, Ss, Ks, tmax, lam)
         if not solve_lmi(prob):
             return None
         Pv = 0.5 * (P.value + P.value.T)
@@ -163,8 +195,13 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
         bad = np.setdiff1d(np.flatnonzero(lev > 1.0), chosen)
         if bad.size == 0:
             break
-        chosen = np.union1d(chosen, bad[np.argsort(-lev[bad])[:add]])
-    muv = np.maximum(mu.value, 0.0)
+        # release the blocks outside the solution's support (a zero dual, or an exact
+        # level below RELEASE_LEVEL: not binding), each at most once; add the worst
+        support = np.union1d(chosen[dual_support(blocks)], chosen[lev[chosen] >= RELEASE_LEVEL])
+        drop = np.setdiff1d(np.setdiff1d(chosen, support), released)
+        released = np.union1d(released, drop)
+        chosen = np.union1d(np.setdiff1d(chosen, drop), bad[np.argsort(-lev[bad])[:add]])
+    muv = budget / np.maximum(r.value, 1e-300)
     for r, i in enumerate(chosen):
         blk = invariance_blocks(As[i : i + 1] @ Pv, lam, muv[r], Pv, E)[0]
         require_psd(blk, f"RPI LMI of the fixed loop at vertex {i}", rtol=1e-6)

@@ -9,6 +9,10 @@ from fahv.errors import DesignError
 
 #: Solver used for every LMI (interior point, handles SDP cones); see docs/reference/environment.md.
 SDP_SOLVER = "CLARABEL"
+#: Its options: one thread, so that a solve gives the same numbers on every run (a
+#: parallel factorisation may sum in another order) and two design processes on two
+#: cores do not contend for four threads (measured: 2 threads took twice one's time then).
+SDP_OPTIONS = {"max_threads": 1}
 
 #: Strict margin of the RPI LMI blocks (scaled units), so that the solver's tolerance
 #: cannot break the re-check.
@@ -30,10 +34,41 @@ def solve_lmi(prob: cp.Problem) -> bool:
         False if the solver fails or finds no (near-)optimal point.
     """
     try:
-        prob.solve(solver=SDP_SOLVER)
+        prob.solve(solver=SDP_SOLVER, **SDP_OPTIONS)
     except cp.error.SolverError:
         return False
     return prob.status in ("optimal", "optimal_inaccurate")
+
+
+#: A constraint whose dual is below this share of the largest one is not in the
+#: solution's support (:func:`dual_support`): constraint generation releases it.
+SUPPORT_RTOL = 1e-6
+
+
+def dual_support(constraints) -> np.ndarray:
+    """Positions of the constraints whose dual carries the solution.
+
+    The activity of a constraint is the trace of its dual (a scalar's dual for a scalar
+    constraint); those above :data:`SUPPORT_RTOL` of the largest are the support. Of a
+    convex problem in d unknowns, at most d constraints support the optimum; the rest
+    can be left out without changing it, which constraint generation uses to keep its
+    LMIs small.
+
+    Parameters
+    ----------
+    constraints : sequence of cvxpy.Constraint
+        Constraints of a solved problem.
+
+    Returns
+    -------
+    (s,) ndarray of int
+        Their positions in ``constraints`` (all of them where no dual is available).
+    """
+    if not constraints:
+        return np.zeros(0, int)
+    tr = np.array([np.trace(np.atleast_2d(c.dual_value)) if c.dual_value is not None else np.inf
+                   for c in constraints])  # fmt: skip
+    return np.flatnonzero(~(tr <= SUPPORT_RTOL * np.max(tr[np.isfinite(tr)], initial=0.0)))
 
 
 def scale_vertices(A: np.ndarray, B: np.ndarray, Dx: np.ndarray, Du: np.ndarray):

@@ -28,7 +28,7 @@ import cvxpy as cp
 import numpy as np
 
 from fahv.errors import DesignError
-from fahv.synthesis.lmi import SDP_SOLVER, psd_tolerance, require_psd, scale_vertices
+from fahv.synthesis.lmi import SDP_OPTIONS, SDP_SOLVER, psd_tolerance, require_psd, scale_vertices
 
 #: Default decay factor of (34): per-step Lyapunov decrease V+ <= lam V.
 DEFAULT_LAM = 0.9995
@@ -198,7 +198,7 @@ def _invariance_constraints(As, Bs, Q, Y, Xd, ums, lam):
 
 def _solve(prob: cp.Problem, what: str) -> None:
     try:
-        prob.solve(solver=SDP_SOLVER)
+        prob.solve(solver=SDP_SOLVER, **SDP_OPTIONS)
     except cp.error.SolverError:
         raise DesignError(
             f"{what}: infeasible or numerically unsolvable (the solver stopped): no "

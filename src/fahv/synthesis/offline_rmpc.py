@@ -49,7 +49,7 @@ import cvxpy as cp
 import numpy as np
 
 from fahv.errors import DesignError
-from fahv.synthesis.lmi import SDP_SOLVER, scale_vertices
+from fahv.synthesis.lmi import SDP_OPTIONS, SDP_SOLVER, scale_vertices
 
 #: Clarabel settings of every solve (fixed, so designs do not depend on defaults that
 #: change between versions): absolute/relative gap and feasibility tolerances.
@@ -58,6 +58,7 @@ SOLVER_SETTINGS = {
     "tol_gap_rel": 1e-9,
     "tol_feas": 1e-9,
     "max_iter": 200,
+    **SDP_OPTIONS,
 }
 #: Margin of (34) in the well-scaled coordinates: block >= EPS_34 I (Q ~ I there).
 EPS_34 = 1e-6

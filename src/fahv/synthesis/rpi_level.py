@@ -22,16 +22,17 @@ import numpy as np
 def max_on_ball(M: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Max over |u| <= 1 of |M u + c_l|^2 per row c_l of c, bounded from above.
 
-    Exact up to the bisection's rounding, never below the maximum. The trust-region
+    Exact up to rounding, never below the maximum. The trust-region
     subproblem max u'G u + 2 b'u + c'c (G = M'M, b = M'c) has no duality gap (Moré and
     Sorensen 1983): it equals the minimum over lam >= sigma_max^2 of the convex dual
     function lam + b'(lam I - G)^-1 b + c'c, attained where |(lam I - G)^-1 b| = 1 (the
-    secular equation), or at lam = sigma_max^2 in the hard case. The bisection keeps an
-    upper end lam above that minimiser; the dual function there bounds the maximum from
-    above (weak duality), with an error of second order in the bisection's gap (the
-    function's slope vanishes at the minimiser). A primal point of that lam, its norm
-    filled up to 1 along the top eigenvector, is no bound: in the nearly hard case the
-    fill leaves the ball and overstates a level (by 4e-3 on a tube of this vehicle).
+    secular equation), or at lam = sigma_max^2 in the hard case. A safeguarded Newton
+    iteration (:func:`_dual_bound`) brackets that minimiser; the dual function at any
+    lam above sigma_max^2 bounds the maximum from above (weak duality), with an error of
+    second order in the distance to the minimiser (the function's slope vanishes there).
+    A primal point of that lam, its norm filled up to 1 along the top eigenvector, is no
+    bound: in the nearly hard case the fill leaves the ball and overstates a level (by
+    4e-3 on a tube of this vehicle).
 
     Parameters
     ----------
@@ -55,7 +56,7 @@ def max_on_ball(M: np.ndarray, c: np.ndarray) -> np.ndarray:
 def _dual_kernel():
     """:func:`_dual_bound` compiled by numba (cached on disk), built at its first use.
 
-    The bisection is up to 200 steps for each of L rows: in numpy, its per-call overhead
+    The iteration is up to 200 steps for each of L rows: in numpy, its per-call overhead
     made it 70 % of an onset bound's time (benchmarks/bench_certificate.py).
     """
     import numba
@@ -67,10 +68,15 @@ def _dual_bound(s, b, cc, steps):  # pragma: no cover - compiled
     """The dual bound of :func:`max_on_ball` per row, in the eigenbasis of M'M.
 
     s (n,) ascending eigenvalues, b (L, n) the rows' M'c in that basis, cc (L,) |c_l|^2,
-    ``steps`` bisection halvings at most; returns (L,) upper bounds of the maxima. The
-    bisection stops where no float lies between its ends (about 55 halvings): from there
-    each further step leaves lo and hi as they are, so the result is that of all
-    ``steps`` halvings, bit for bit.
+    ``steps`` iterations at most; returns (L,) upper bounds of the maxima. The minimiser
+    lam* > sigma_max^2 of the dual function is where psi(lam) = 1 / |x(lam)| - 1 = 0,
+    x(lam) = (lam I - G)^-1 b; psi is nearly linear in lam, so Newton's method on it
+    (Moré and Sorensen 1983) reaches lam* in a few steps. Each step is kept inside a
+    bracket [lo, hi] of lam* (|x| > 1 at lo, <= 1 at hi) and bisects it where Newton
+    would leave it; the iteration stops when the bracket or the step falls below the
+    float spacing. The dual function is evaluated at the last hi and the last iterate
+    (both above sigma_max^2, so both bound the maximum: weak duality) and the smaller
+    is returned; its error is of second order in the distance to lam*.
     """
     n_rows, n = b.shape
     smax = s[n - 1]
@@ -80,26 +86,40 @@ def _dual_bound(s, b, cc, steps):  # pragma: no cover - compiled
         for j in range(n):
             bb += b[r, j] * b[r, j]
         lo = smax
-        hi = smax + np.sqrt(bb) + 1.0
+        hi = smax + np.sqrt(bb) + 1.0  # |x(hi)| <= |b| / (hi - smax) < 1
+        lam = hi
         for _ in range(steps):
-            mid = 0.5 * (lo + hi)
-            norm2 = 0.0  # |(mid I - G)^-1 b|^2, the secular function
+            norm2 = 0.0  # |x(lam)|^2, the secular function, and its slope
+            slope = 0.0
             for j in range(n):
-                d = mid - s[j]
-                norm2 += b[r, j] * b[r, j] / (d * d)
-            last = mid == lo or mid == hi  # no float between them: every later step is void
+                d = lam - s[j]
+                t = b[r, j] * b[r, j] / (d * d)
+                norm2 += t
+                slope -= 2.0 * t / d
             if norm2 > 1.0:
-                lo = mid
+                lo = lam
             else:
-                hi = mid
-            if last:
+                hi = lam
+            nxt = 0.5 * (lo + hi)
+            if norm2 > 0.0 and slope < 0.0:  # Newton on psi = |x|^-1 - 1
+                nrm = np.sqrt(norm2)
+                step = (1.0 / nrm - 1.0) / (-0.5 * slope / (norm2 * nrm))
+                if abs(step) <= 1e-15 * lam:  # converged to the float spacing
+                    break
+                if lo < lam - step < hi:
+                    nxt = lam - step
+            if nxt <= lo or nxt >= hi or hi - lo <= 1e-15 * hi:
                 break
-        # >= 0 gaps; 0 only along the top eigenvector in the hard case, where b_j = 0
-        total = cc[r] + hi
-        for j in range(n):
-            if b[r, j] != 0.0:
-                total += b[r, j] * b[r, j] / (hi - s[j])
-        out[r] = total
+            lam = nxt
+        best = np.inf
+        for at in (hi, lam):
+            if at > smax:  # >= 0 gaps; 0 only along the top eigenvector, where b_j = 0
+                total = cc[r] + at
+                for j in range(n):
+                    if b[r, j] != 0.0:
+                        total += b[r, j] * b[r, j] / (at - s[j])
+                best = min(best, total)
+        out[r] = best
     return out
 
 
@@ -163,7 +183,13 @@ def vertex_levels(Acl, N, w_max, pulse=None) -> np.ndarray:
 
 
 def _levels(Acl, Ns, w_max, pulse):
-    """Levels (R,), the worst corner's index (R,) and the corners' signs of every vertex."""
+    """Levels (R,), the worst corner's index (R,) and the corners' signs of every vertex.
+
+    The vertices' maps M_i = L^-1 A_cl,i L (N = L L') and the eigen-decompositions of
+    M_i' M_i are batched in numpy; the dual bound of every corner at every vertex runs
+    in one compiled loop over the vertices, spread over the cores
+    (:func:`_vertex_kernel`): the same bound as :func:`max_on_ball`, vertex by vertex.
+    """
     L = np.linalg.cholesky(Ns)
     Linv = np.linalg.inv(L)
     n = Ns.shape[0]
@@ -173,13 +199,41 @@ def _levels(Acl, Ns, w_max, pulse):
     signs = np.ones((2 ** int(free.sum()), n + len(G)))
     signs[:, free] = np.array(list(itertools.product((-1.0, 1.0), repeat=int(free.sum()))))
     C = (signs[:, :n] * w_max[None, :] + signs[:, n:] @ G) @ Linv.T
-    lev = np.empty(Acl.shape[0])
-    corner = np.empty(Acl.shape[0], int)
-    for i in range(Acl.shape[0]):
-        li = max_on_ball(Linv @ Acl[i] @ L, C)
-        corner[i] = int(np.argmax(li))
-        lev[i] = li[corner[i]]
+    M = Linv[None] @ np.asarray(Acl, float) @ L[None]
+    s, V = np.linalg.eigh(M.transpose(0, 2, 1) @ M)
+    CM = np.ascontiguousarray(M @ V)  # (R, n, n): row l of C @ CM[i] is b_l of vertex i
+    cc = np.einsum("li,li->l", C, C)
+    lev, corner = _vertex_kernel()(np.ascontiguousarray(s), CM, np.ascontiguousarray(C), cc, 200)
     return lev, corner, signs
+
+
+@functools.cache
+def _vertex_kernel():
+    """:func:`_vertex_bounds` compiled by numba with a parallel loop over the vertices."""
+    import numba
+
+    dual = numba.njit(cache=True, error_model="numpy")(_dual_bound)
+    body = _vertex_bounds_factory(dual)
+    return numba.njit(cache=True, parallel=True, error_model="numpy")(body)
+
+
+def _vertex_bounds_factory(dual):
+    """The all-vertex loop around the compiled per-vertex dual bound ``dual``."""
+    import numba
+
+    def _vertex_bounds(s, CM, C, cc, steps):  # pragma: no cover - compiled
+        """Worst dual bound (R,) and its corner (R,) of every vertex (:func:`_levels`)."""
+        R = s.shape[0]
+        lev = np.empty(R)
+        corner = np.empty(R, np.int64)
+        for i in numba.prange(R):
+            li = dual(s[i], C @ CM[i], cc, steps)
+            k = np.argmax(li)
+            corner[i] = k
+            lev[i] = li[k]
+        return lev, corner
+
+    return _vertex_bounds
 
 
 def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, hi: float = 4.0) -> float:
