@@ -14,10 +14,15 @@ best of REPEAT calls:
 The machine is shared: the figures move with its load (compare two versions of the code
 one right after the other).
 
-Usage: .venv/bin/python benchmarks/bench_certificate.py [REPEAT]   (default 3)
+Usage: .venv/bin/python benchmarks/bench_certificate.py [REPEAT] [--smoke]   (default 3)
+
+``--smoke`` runs the same kernels at a tiny size, once each, in seconds (CI's check that
+the benchmark still runs; its figures mean nothing): k = 1 parameter direction (256
+vertices), three uncertain parameters (8 parameter corners), 16 interior points and one
+bisection step.
 """
 
-import sys
+import argparse
 import time
 import warnings
 from pathlib import Path
@@ -36,7 +41,10 @@ from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.synthesis.rpi_level import vertex_levels
 
 ROOT = Path(__file__).resolve().parents[1]
-TS, N_SUB = 0.02, 5  # case1.yaml's period and RK4 sub-steps
+TS, N_SUB = 0.02, 5  # cm_certified.yaml's period and RK4 sub-steps
+#: --smoke: the uncertain parameters kept (the largest of sec. 5.1), the parameter
+#: directions k and the interior points of the jumps and of the onset bound.
+SMOKE_PARAMETERS, SMOKE_K, SMOKE_INTERIOR = ("m", "I_yy", "c_e"), 1, 16
 
 
 def best(f, repeat):
@@ -51,16 +59,26 @@ def best(f, repeat):
 
 def main() -> None:
     """Print the three figures of the module docstring."""
-    repeat = int(sys.argv[1]) if len(sys.argv) > 1 else 3
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("repeat", nargs="?", type=int, default=3, help="calls per figure (best)")
+    ap.add_argument("--smoke", action="store_true",
+                    help="tiny size, one call each (CI: the benchmark still runs)")  # fmt: skip
+    args = ap.parse_args()
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     d = dict(np.load(ROOT / "tests/data/closed_tube_h_reset.npz"))
     veh, unc = load_vehicle(), dict(PAPER_UNCERTAINTY)
+    k, interior, iterations, repeat = int(d["k"]), 256, 4, args.repeat
+    if args.smoke:
+        unc = {p: unc[p] for p in SMOKE_PARAMETERS}
+        k, interior, iterations, repeat = SMOKE_K, SMOKE_INTERIOR, 1, 1
+        print(f"smoke: k = {k}, parameters {', '.join(unc)}, interior {interior}, "
+              "1 bisection step, one call each (the figures mean nothing)")  # fmt: skip
     tm = trim_map(veh, 13, 13)
     tp = build_tp_model(veh, "cm", 4, 5, 21, 21)
     box = SchedulingBox(d["lo"], d["hi"], d["other_half"])
     scale = np.concatenate([tp.state_scale, tp.input_scale])
-    nv = nominal_vertices(box, veh, tm, unc, float(d["rho_min"]), TS, N_SUB, scale,
-                          int(d["k"]), d["w_design"], d["col_scale"])  # fmt: skip
+    nv = nominal_vertices(box, veh, tm, unc, float(d["rho_min"]), TS, N_SUB, scale, k,
+                          d["w_design"], d["col_scale"], interior=interior)  # fmt: skip
     A, B = nv.vertices()
     Acl = A[:, 1:, 1:] + B[:, 1:, :] @ d["F"]
     vertex_levels(Acl[:2], d["N"], d["W"])  # compile (or load) the kernel first
@@ -69,13 +87,13 @@ def main() -> None:
         f"vertex_levels: {len(Acl)} vertices x 256 corners of W_8 in {t:.2f} s "
         f"({t / len(Acl) * 1e3:.2f} ms per vertex); worst level {lev.max():.6f}"
     )
-    t, (J, n_c) = best(lambda: onset_jumps(box, veh, tm, unc, 0.76, TS, N_SUB, 256), repeat)
+    t, (J, n_c) = best(lambda: onset_jumps(box, veh, tm, unc, 0.76, TS, N_SUB, interior), repeat)
     print(f"onset_jumps: {len(J)} jumps ({n_c} at corners) in {t:.2f} s")
     ab = altitude_bound(nv, A, B, d["F"], d["N"], int(d["moves"]))
     tube_set = TubeSet(d["F"], d["N"], d["W"], ab.H, float(d["lam"]), ab.bound, 0.0,
                        int(d["moves"]), ab.step, ab.w_h)  # fmt: skip
-    t, ob = best(lambda: onset_bound(nv, tube_set, veh, tm, unc, 0.2, TS, N_SUB, interior=256,
-                                     iterations=4), 1)  # fmt: skip
+    t, ob = best(lambda: onset_bound(nv, tube_set, veh, tm, unc, 0.2, TS, N_SUB,
+                                     interior=interior, iterations=iterations), 1)  # fmt: skip
     print(
         f"onset_bound: {t:.1f} s; certified loss {100 * ob.certified_loss:.2f} %, "
         f"steady set {ob.steady_shaped:.3f} Z_8"

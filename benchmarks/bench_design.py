@@ -1,18 +1,32 @@
-"""Wall time of ``fahv design``, today's code beside an earlier commit's, in one session.
+"""Wall time of ``fahv design``: an earlier commit beside today's, and how it scales.
 
-The machine's speed varies between hours and machines of the same kind, so the figure
-that means something is the ratio of two designs timed back to back here. The earlier
-commit is checked out into a temporary git worktree and run with its own sources on the
-same virtual environment (its design file given as it named it then).
+The machine's speed varies between hours and machines of the same kind, so the figures
+that mean something are those timed back to back in one session. Three designs of the
+same design file, each in its own process:
+
+- ``before``: an earlier commit, checked out into a temporary git worktree and run with
+  its own sources on the same virtual environment (its design file as it named it then);
+- ``cold``: today's code from scratch (``fahv design --cold`` into an empty folder: no
+  earlier design and no stored active set, as for a user's new vehicle);
+- ``warm``: today's code into a folder holding the shipped design, whose stored active
+  sets start the LMIs' constraint generation (what re-making a design costs).
+
+Then the scaling table (``--scaling``): the closure of the eight-state tube set (the
+tube LMI by constraint generation, W_8's bound and the exact all-vertex level) on the
+certified design's own vertex data with k = 3, 5, 7, 9 parameter directions (1024 to
+65 536 vertices), and the tube LMI alone on systems of 8, 12, 16 and 24 states: the
+eight-state vertices (a random subset) augmented with first-order input filters (the
+actuators' place) and lags of the states (the sensors' and estimator's place), W of
+1e-4 on the added states.
 
 Usage::
 
-    .venv/bin/python benchmarks/bench_design.py \\
-        [--design offline_design/designs/cm_certified.yaml] \\
-        [--before e33c49c --before-file offline_design/case1.yaml] [--keep DIR]
+    .venv/bin/python benchmarks/bench_design.py [--design offline_design/designs/cm_certified.yaml]
+        [--before fd01aef --before-file offline_design/designs/cm_certified.yaml]
+        [--scaling] [--only-scaling] [--keep DIR] [--smoke]
 
-Prints one line per design (wall time, design hash, whether the certified arrays are
-identical) and the ratio. Each design runs in its own process on one BLAS thread.
+``--smoke`` runs the scaling code at a tiny size (256 vertices, 8 and 10 states on 64
+vertices) and no design: seconds, its figures mean nothing.
 """
 
 from __future__ import annotations
@@ -24,62 +38,203 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The arrays a design certifies (compared between the two runs; x0 and omega_flex
-#: follow the design point, the rest must not move).
+#: The arrays a design certifies (compared between the runs).
 CERTIFIED = ("A", "B", "w_max", "F", "N", "K", "Q", "u_lo", "u_hi", "trim_x", "trim_u")
 
 
-def run_design(src: Path, cwd: Path, design_file: str, out: Path) -> float:
+def run_design(src: Path, cwd: Path, design_file: str, out: Path, *extra: str) -> float:
     """Run ``fahv design design_file --out out`` with the sources in ``src``; wall seconds."""
     env = {**os.environ, "PYTHONPATH": str(src), "OPENBLAS_NUM_THREADS": "1"}
     code = "import sys; from fahv.cli import main; sys.exit(main(sys.argv[1:]))"
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-c", code, "design", design_file, "--out", str(out)],
-                         cwd=cwd, env=env, capture_output=True, text=True)  # fmt: skip
+    res = subprocess.run([sys.executable, "-c", code, "design", design_file, "--out", str(out),
+                          *extra], cwd=cwd, env=env, capture_output=True, text=True)  # fmt: skip
     wall = time.perf_counter() - t0
     if res.returncode != 0:
         sys.exit(f"design of {design_file} in {cwd} failed:\n{res.stderr[-3000:]}")
     return wall
 
 
+def compare(a_dir: Path, b_dir: Path) -> str:
+    """Largest relative difference of each certified array between two design folders."""
+    with np.load(a_dir / "design.npz") as a, np.load(b_dir / "design.npz") as b:
+        out = []
+        for k in CERTIFIED:
+            if k in a and k in b and a[k].shape == b[k].shape:
+                d = np.max(np.abs(a[k] - b[k])) / max(np.max(np.abs(b[k])), 1e-300)
+                out.append(f"{k} {d:.1e}")
+    return ", ".join(out)
+
+
+def designs(args, tmp: Path) -> None:
+    """Time the earlier commit's design, today's from scratch and today's warm."""
+    times = {}
+    if args.before:
+        tree = tmp / "before"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree),
+                        args.before], check=True, capture_output=True)  # fmt: skip
+        try:
+            times["before"] = run_design(tree / "src", tree, args.before_file, tmp / "b")
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)],
+                           capture_output=True)  # fmt: skip
+        print(f"before ({args.before}, {args.before_file}): {times['before']:.1f} s wall",
+              flush=True)  # fmt: skip
+    times["cold"] = run_design(ROOT / "src", ROOT, args.design, tmp / "cold", "--cold")
+    print(f"after, cold (working tree, {args.design}, from scratch): {times['cold']:.1f} s wall",
+          flush=True)  # fmt: skip
+    shipped = ROOT / Path(args.design).with_suffix("")
+    shutil.copytree(shipped, tmp / "warm")
+    times["warm"] = run_design(ROOT / "src", ROOT, args.design, tmp / "warm")
+    print(f"after, warm (working tree, from the shipped design's active sets): "
+          f"{times['warm']:.1f} s wall", flush=True)  # fmt: skip
+    if "before" in times:
+        for k in ("cold", "warm"):
+            print(f"ratio {k} / before: {times[k] / times['before']:.2f}; certified arrays, "
+                  f"largest relative difference: {compare(tmp / k, tmp / 'b')}")  # fmt: skip
+    if args.keep is not None:
+        shutil.copytree(tmp / "warm", args.keep, dirs_exist_ok=True)
+
+
+def _vertex_data(design_file: Path, k: int):
+    """The eight-state vertex data of a design file with k parameter directions."""
+    from fahv.design.artefacts import load_design
+    from fahv.design.case import load_design_file
+    from fahv.design.domain import nominal_box
+    from fahv.design.vertices import nominal_vertices
+    from fahv.model.trim import trim_map
+    from fahv.model.vehicle import load_vehicle
+    from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+
+    c = load_design_file(design_file).data
+    d = load_design(design_file.with_suffix(""))
+    veh = load_vehicle()
+    nominal, box = nominal_box(c["eight_state"], veh.envelope)
+    tm = trim_map(veh, *c["trim_grid"], "cm")
+    unc = {n: v * c["uncertainty"]["scale"] for n, v in PAPER_UNCERTAINTY.items()}
+    a = d.arrays
+    scale = np.concatenate([a["Dx"], a["Du"]])
+    nv = nominal_vertices(box, veh, tm, unc, float(c["tube"]["rho_min"]), c["Ts"],
+                          c["plant_substeps"], scale, k, a["w_max"],
+                          np.asarray(d.summary["certificate"]["col_scale"]))  # fmt: skip
+    return c, d, nv, nominal
+
+
+def vertex_scaling(design_file: Path, ks) -> None:
+    """The closure of the tube set against the number of vertices (k directions)."""
+    from fahv.design.closure import close_tube_set
+    from fahv.design.tube_set_design import _contain, _state_max
+    from fahv.model.trim import trim_map
+    from fahv.model.vehicle import load_vehicle
+    from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+
+    print("closure of the eight-state tube set (tube LMI by constraint generation from "
+          "scratch, W_8's bound, exact all-vertex level):")  # fmt: skip
+    print(f"  {'vertices':>9} {'closure [s]':>12} {'blocks held':>12}")
+    for k in ks:
+        c, d, nv, nominal = _vertex_data(design_file, k)
+        s, a = c["eight_state"], d.arrays
+        veh = load_vehicle()
+        unc = {n: v * c["uncertainty"]["scale"] for n, v in PAPER_UNCERTAINTY.items()}
+        tm = trim_map(veh, *c["trim_grid"], "cm")
+        contain = _contain(c, nv.box, veh, tm, unc, float(c["tube"]["rho_min"]), lambda _: None)
+        t0 = time.perf_counter()
+        try:
+            ts = close_tube_set(nv, nominal, s["w0"] * a["w_max"][1:], a["Dx"], a["Du"],
+                                np.asarray(d.summary["tube"]["row_room"]), s["lam"],
+                                c["mpc"]["M"], grow=s["grow"], iterations=s["iterations"],
+                                w_ref=a["w_max"], state_max=_state_max(c, lambda _: None),
+                                contain=contain, log=lambda _: None)  # fmt: skip
+            held = str(len(ts.active_set.vertices))
+        except Exception as exc:  # a size at which the tube set does not close: say so
+            held = f"not closed: {str(exc)[:60]}"
+        print(f"  {nv.n_vertices:>9} {time.perf_counter() - t0:>12.1f} {held:>12}", flush=True)
+
+
+def _augmented(A, B, extra: int):
+    """A, B (R, n, n), (R, n, m) with ``extra`` states: input filters, then state lags."""
+    R, n, m = B.shape
+    if extra == 0:
+        return A, B
+    na, a = n + extra, 0.8
+    k = min(extra, 2 * m)  # first-order filters of the inputs (two per input)
+    Aa, Ba = np.zeros((R, na, na)), np.zeros((R, na, m))
+    Aa[:, :n, :n], Ba[:, :n] = A, 0.5 * B  # half of each input direct, half filtered
+    f = min(m, extra)
+    Aa[:, :n, n : n + f] = 0.5 * B[:, :, :f]
+    Aa[:, n:, n:] = a * np.eye(extra)
+    for j in range(k):
+        Ba[:, n + j, j % m] = 1.0 - a
+        if j >= m:  # the second filter of an input follows the first
+            Aa[:, n + j, n + j - m] = 1.0 - a
+    for j in range(k, extra):  # lags of the plant's states
+        Aa[:, n + j, j % n] = 1.0 - a
+    return Aa, Ba
+
+
+def state_scaling(dims, R: int) -> None:
+    """The tube LMI alone against the state dimension (augmented eight-state vertices)."""
+    from fahv.design.artefacts import load_design
+    from fahv.synthesis.feedback import design_tube
+
+    design_file = ROOT / "offline_design/designs/cm_certified.yaml"
+    _, d, nv, _ = _vertex_data(design_file, 3)
+    A, B = nv.vertices()
+    rng = np.random.default_rng(0)
+    idx = rng.choice(A.shape[0], min(R, A.shape[0]), replace=False)
+    A8, B8 = A[idx, 1:, 1:], B[idx, 1:, :]
+    a = load_design(design_file.with_suffix("")).arrays
+    w8 = np.asarray(load_design(design_file.with_suffix("")).summary["certificate"]["W_8"])
+    print(f"tube LMI (constraint generation from scratch) on {len(idx)} vertices against the "
+          "state dimension (eight states augmented with input filters and state lags):")
+    print(f"  {'states':>7} {'LMI [s]':>9} {'blocks held':>12}")
+    for n in dims:
+        extra = n - 8
+        An, Bn = _augmented(A8, B8, extra)
+        w = np.r_[w8, np.full(extra, 1e-4)]
+        Dx = np.r_[a["Dx"][1:], np.ones(extra)]
+        t0 = time.perf_counter()
+        try:
+            tube = design_tube(An, Bn, w, Dx, a["Du"], np.ones(2), (0.995,), active=12)
+            held = str(tube.n_blocks)
+        except Exception as exc:  # infeasible at that size: say so
+            held = f"failed: {str(exc)[:50]}"
+        print(f"  {n:>7} {time.perf_counter() - t0:>9.1f} {held:>12}", flush=True)
+
+
 def main() -> int:
-    """Time the earlier commit's design and today's, print both and their ratio."""
+    """Time the designs (unless --only-scaling), then the scaling tables if asked."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--design", default="offline_design/designs/cm_certified.yaml")
-    ap.add_argument("--before", default="e33c49c", help="earlier commit ('' : skip it)")
-    ap.add_argument("--before-file", default="offline_design/case1.yaml",
+    ap.add_argument("--before", default="fd01aef", help="earlier commit ('' : skip it)")
+    ap.add_argument("--before-file", default="offline_design/designs/cm_certified.yaml",
                     help="the design's file as the earlier commit named it")  # fmt: skip
     ap.add_argument("--keep", type=Path, default=None,
-                    help="copy today's design folder here (e.g. to ship it)")  # fmt: skip
+                    help="copy today's warm design folder here (e.g. to ship it)")  # fmt: skip
+    ap.add_argument("--scaling", action="store_true", help="print the scaling tables too")
+    ap.add_argument("--only-scaling", action="store_true", help="the scaling tables alone")
+    ap.add_argument("--smoke", action="store_true",
+                    help="the scaling code at a tiny size, no design (CI)")  # fmt: skip
     args = ap.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        times = {}
-        if args.before:
-            tree = tmp / "before"
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree),
-                            args.before], check=True, capture_output=True)  # fmt: skip
-            try:
-                times["before"] = run_design(tree / "src", tree, args.before_file, tmp / "b")
-            finally:
-                subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
-                                str(tree)], capture_output=True)  # fmt: skip
-            print(f"before ({args.before}, {args.before_file}): {times['before']:.1f} s wall")
-        times["after"] = run_design(ROOT / "src", ROOT, args.design, tmp / "a")
-        print(f"after (working tree, {args.design}): {times['after']:.1f} s wall")
-        if args.keep is not None:
-            shutil.copytree(tmp / "a", args.keep, dirs_exist_ok=True)
-        if "before" in times:
-            with np.load(tmp / "b" / "design.npz") as b, np.load(tmp / "a" / "design.npz") as a:
-                same = [k for k in CERTIFIED if k in a and k in b and np.array_equal(a[k], b[k])]
-            print(f"ratio after / before: {times['after'] / times['before']:.2f}; certified "
-                  f"arrays identical: {len(same)} of {len(CERTIFIED)} "
-                  f"({', '.join(same)})")  # fmt: skip
+    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+    design_file = ROOT / args.design
+    if args.smoke:
+        print("smoke: the scaling code at a tiny size, no design (the figures mean nothing)")
+        vertex_scaling(design_file, (1,))
+        state_scaling((8, 10), 64)
+        return 0
+    if not args.only_scaling:
+        with tempfile.TemporaryDirectory() as tmp:
+            designs(args, Path(tmp))
+    if args.scaling or args.only_scaling:
+        vertex_scaling(design_file, (3, 5, 7, 9))
+        state_scaling((8, 12, 16, 24), 256)
     return 0
 
 

@@ -1,11 +1,15 @@
 """Nominal MPC QP and whole in-process step of Case 1 (tube_mpc): median, p99, max.
 
-Run: .venv/bin/python benchmarks/bench_qp.py [--steps 15000] [--case CASE] [--x-box-both]
+Run: .venv/bin/python benchmarks/bench_qp.py [--steps 15000] [--case SCENARIO]
+     [--x-box-both] [--smoke]
 Prints the time of every nominal QP (DAQP) and of every in-process loop step of
 ``fahv.loop.simulate.simulate`` (plant, notch, nominal MPC, controller, fault injector,
-and the step's messages kept in memory) over a Case 1 run. ``--x-box-both`` runs the
-case twice in one session, with the design's state range rows (``mpc.x_box``) and
+and the step's messages kept in memory) over a Case 1 run (default: scenario
+offline_design/scenarios/case1_paper.yaml, on the paper's design). ``--x-box-both`` runs
+the case twice in one session, with the design's state range rows (``mpc.x_box``) and
 without them (the parameter set to zeros), to compare the QP's cost of those rows.
+``--smoke`` runs 100 steps (4 QPs) in seconds: CI's check that the benchmark still runs
+(its figures mean nothing).
 """
 
 import argparse
@@ -14,9 +18,12 @@ import time
 
 import numpy as np
 
-from fahv.cli.design import load_or_design
 from fahv.control.mpc import tracking
+from fahv.design.store import load_or_design
 from fahv.loop.simulate import simulate
+
+#: --smoke: the steps simulated (the nominal MPC solves a QP every 25 steps).
+SMOKE_STEPS = 100
 
 
 def main() -> None:
@@ -25,8 +32,13 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=15000)
     ap.add_argument("--case", default="offline_design/scenarios/case1_paper.yaml")
     ap.add_argument("--x-box-both", action="store_true")
+    ap.add_argument("--smoke", action="store_true",
+                    help=f"{SMOKE_STEPS} steps (CI: the benchmark still runs)")  # fmt: skip
     args = ap.parse_args()
-    _, design, _ = load_or_design(args.case, None, None, io.StringIO().write)
+    if args.smoke:
+        args.steps = SMOKE_STEPS
+        print(f"smoke: {SMOKE_STEPS} steps (the figures mean nothing)")
+    _, design, _ = load_or_design(args.case, log=io.StringIO().write, variants=["tube_mpc"])
     runs = [("", None)]
     if args.x_box_both:
         off = {"nominal_trajectory": {"mpc.x_box": [0.0] * 14}}
@@ -69,7 +81,8 @@ def _bench(design, steps_n: int, label: str, overrides) -> None:
             f"{label}{name:36s} n={t.size:6d}  median {np.median(t):.3f} ms  "
             f"p99 {np.percentile(t, 99):.3f} ms  max {t.max():.3f} ms"
         )
-    print(f"{label}QP counters (accepted, shifted plan, terminal law): {run.qp_counts.tolist()}")
+    print(f"{label}QP counters (accepted, shifted plan, terminal law, recovery re-plans): "
+          f"{run.qp_counts.tolist()}")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -1,12 +1,13 @@
 """Which QP solver for the nominal MPC: the QPs of a Case 1 run, solved by each candidate.
 
-Run: .venv/bin/python benchmarks/bench_qp_solvers.py [--steps 15000] [--repeat 3]
+Run: .venv/bin/python benchmarks/bench_qp_solvers.py [--steps 15000] [--repeat 3] [--smoke]
 
 Records every QP the nominal MPC of ``tube_mpc`` hands to DAQP during a Case 1 run
-(in process), then solves the same sequence with each installed candidate, in order,
-the way the MPC would use it: a solver keeps its factorisation/workspace while H and
-the constraint matrix are unchanged (they change only when the MPC is rescheduled) and
-gets the vectors updated and the previous solution as warm start where its API allows.
+(in process; scenario offline_design/scenarios/case1_paper.yaml, on the paper's design),
+then solves the same sequence with each installed candidate, in order, the way the MPC
+would use it: a solver keeps its factorisation/workspace while H and the constraint
+matrix are unchanged (they change only when the MPC is rescheduled) and gets the vectors
+updated and the previous solution as warm start where its API allows.
 Prints per solver: median, p99 and max time per QP (best of ``--repeat`` passes), QPs
 it did not solve, the worst constraint violation and the worst objective gap to DAQP.
 
@@ -14,6 +15,9 @@ Candidates: DAQP (dual active set), OSQP (ADMM), Clarabel (interior point, no wa
 start), PIQP (proximal interior point), ProxSuite ProxQP (augmented Lagrangian).
 PIQP and ProxSuite are not project dependencies; the table says so when missing
 (``pip install piqp proxsuite`` to compare them).
+
+``--smoke`` records 100 steps (4 QPs) and makes one pass, in seconds: CI's check that the
+benchmark still runs (its figures mean nothing).
 """
 
 import argparse
@@ -23,11 +27,13 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from fahv.cli.design import load_or_design
 from fahv.control.mpc import tracking
+from fahv.design.store import load_or_design
 from fahv.loop.simulate import simulate
 
 BIG = 1e29  # |bound| >= BIG: no bound (DAQP's convention in the MPC)
+#: --smoke: the steps recorded (the nominal MPC solves a QP every 25 steps).
+SMOKE_STEPS = 100
 
 
 def record(steps: int) -> list[tuple]:
@@ -69,8 +75,9 @@ def record(steps: int) -> list[tuple]:
 
     tracking.daqp_module = lambda: Recorder
     _, design, _ = load_or_design(
-        "offline_design/scenarios/case1_paper.yaml", None, None, io.StringIO().write
-    )
+        "offline_design/scenarios/case1_paper.yaml", log=io.StringIO().write,
+        variants=["tube_mpc"],
+    )  # fmt: skip
     simulate(design, "tube_mpc", duration=steps * design.case["Ts"])
     return qps
 
@@ -235,7 +242,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=15000)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--smoke", action="store_true",
+                    help=f"{SMOKE_STEPS} steps, one pass (CI: it still runs)")  # fmt: skip
     args = ap.parse_args()
+    if args.smoke:
+        args.steps, args.repeat = SMOKE_STEPS, 1
+        print(f"smoke: {SMOKE_STEPS} steps, one pass (the figures mean nothing)")
     qps = record(args.steps)
     n_sched = len({id(q[0]) for q in qps})
     ny, nc = qps[0][0].shape[0], qps[0][2].shape[0]

@@ -11,9 +11,13 @@ teardown); the real-time factor is the simulated time over it. Prints every run,
 median of each tree and their ratio.
 
 Run: .venv/bin/python benchmarks/bench_sil.py [--commit HEAD] [-n 3] [--duration 60]
-     [--scenario offline_design/scenarios/case1.yaml]
+     [--scenario offline_design/scenarios/case1.yaml] [--smoke]
 The two trees must read the same node parameters; a commit whose nodes refuse the
 file shows as failed runs (exit status 1, the node's reason printed).
+
+``--smoke`` skips the earlier commit (nothing exported or built) and runs the working
+tree's graph once for 2 s simulated: CI's check that the benchmark still runs (its
+figures mean nothing). It needs the built workspace, as every SIL run.
 """
 
 from __future__ import annotations
@@ -35,6 +39,8 @@ from fahv.runs.workspace import ROOT, WS, ensure_built, ros_env
 #: Environment variables of the nodes that the benchmark does not pass on (each tree
 #: runs with its own defaults).
 NODE_SWITCHES = ("HSV_EXECUTOR", "HSV_PARAM_SERVICES")
+#: --smoke: runs of the working tree and simulated time [s].
+SMOKE_RUNS, SMOKE_DURATION = 1, 2.0
 
 
 def export_commit(commit: str, cache: Path) -> tuple[Path, str]:
@@ -115,21 +121,29 @@ def main() -> None:
     ap.add_argument("-n", type=int, default=3, help="runs of each tree")
     ap.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "fahv_bench_sil")
     ap.add_argument("--keep", action="store_true", help="keep the run folders")
+    ap.add_argument("--smoke", action="store_true",
+                    help="no earlier commit, one short run of the working tree (CI: the "
+                    "benchmark still runs)")  # fmt: skip
     args = ap.parse_args()
 
     ensure_built()
-    base, sha = export_commit(args.commit, args.cache)
+    trees = {"working tree": (WS, ros_env())}
+    sha = None
+    if args.smoke:
+        args.n, args.duration = SMOKE_RUNS, SMOKE_DURATION
+        print(f"smoke: earlier commit {args.commit} skipped (not exported, not built); the "
+              "working tree's graph only (the figures mean nothing)")  # fmt: skip
+    else:
+        base, sha = export_commit(args.commit, args.cache)
+        trees[sha] = (base / "ros_ws", tree_env(base / "ros_ws", base / "src"))
     work = Path(tempfile.mkdtemp(prefix="bench_sil_"))
     content = write_params(args.scenario, args.duration, work / "params.yaml")
-    trees = {
-        "working tree": (WS, ros_env()),
-        sha: (base / "ros_ws", tree_env(base / "ros_ws", base / "src")),
-    }
     for _, env in trees.values():
         for k in NODE_SWITCHES:
             env.pop(k, None)
     rtf: dict[str, list[float]] = {name: [] for name in trees}
-    print(f"{args.scenario}, {args.duration:g} s simulated, {args.n} runs each, alternating")
+    print(f"{args.scenario}, {args.duration:g} s simulated, {args.n} run(s) each"
+          + (", alternating" if len(trees) > 1 else ""))  # fmt: skip
     for i in range(args.n):
         order = list(trees) if i % 2 == 0 else list(trees)[::-1]
         for name in order:
@@ -145,10 +159,13 @@ def main() -> None:
     for name, v in rtf.items():
         runs = ", ".join(f"{x:.2f}" for x in v)
         print(f"{name:>12s}: median real-time factor {med[name]:.2f}  ({runs})")
-    new, old = med["working tree"], med[sha]
-    print(f"ratio working tree / {sha}: {new / old:.2f}")
+    if sha is not None:
+        new, old = med["working tree"], med[sha]
+        print(f"ratio working tree / {sha}: {new / old:.2f}")
     if not args.keep:
         shutil.rmtree(work, ignore_errors=True)
+    if any(x != x for x in rtf["working tree"]):
+        sys.exit("bench_sil: a run of the working tree failed")
 
 
 if __name__ == "__main__":

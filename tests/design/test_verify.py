@@ -2,6 +2,8 @@
 naming the certificate that broke."""
 
 import dataclasses
+import os
+import re
 import subprocess
 from pathlib import Path
 
@@ -30,12 +32,20 @@ def _changed(design: Design, name: str, change) -> Design:
     return dataclasses.replace(design, arrays=arrays)
 
 
+@pytest.mark.parametrize("threads", ["1", "2"])
 @pytest.mark.parametrize("name", DESIGNS)
-def test_every_shipped_design_verifies(name):
-    res = subprocess.run([str(ROOT / ".venv/bin/fahv"), "verify", name], cwd=ROOT,
+def test_every_shipped_design_verifies(name, threads):
+    """Every shipped design verifies from the command line whatever the environment's
+    BLAS thread count (the model is rebuilt on one thread, fahv.model.blas): the model
+    line's relative difference stays within its tolerance under 1 and 2 threads."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": threads, "OMP_NUM_THREADS": threads}
+    res = subprocess.run([str(ROOT / ".venv/bin/fahv"), "verify", name], cwd=ROOT, env=env,
                          capture_output=True, text=True, timeout=900)  # fmt: skip
     assert res.returncode == 0, res.stdout + res.stderr
     assert "verified:" in res.stdout and "FAILED" not in res.stdout
+    model = next(line for line in res.stdout.splitlines() if line.startswith("model:"))
+    diff, tol = re.search(r"difference ([0-9.e+-]+) .* <= ([0-9.e+-]+)", model).groups()
+    assert float(diff) <= float(tol), model
 
 
 def test_every_check_of_the_paper_design_holds_with_its_margin(paper):

@@ -84,6 +84,42 @@ def onset_jumps(box: SchedulingBox, vehicle, trim_map, uncertainty: dict, rho_f:
     """
     if not 0.0 < rho_f <= 1.0:
         raise ValueError(f"onset_jumps: rho_f must be in (0, 1], got {rho_f}")
+    return OnsetPoints(box, vehicle, trim_map, uncertainty, Ts, n_sub, interior, seed).jumps(rho_f)
+
+
+class OnsetPoints:
+    """The box points, applied inputs and vehicles of :func:`onset_jumps`, stepped once.
+
+    The healthy step f_p(x, u) of every point does not depend on the loss: it is taken
+    once here, so that the jumps at another loss (a bisection over the loss) cost one
+    plant step per point instead of two. Arguments as :func:`onset_jumps`.
+    """
+
+    def __init__(self, box: SchedulingBox, vehicle, trim_map, uncertainty: dict, Ts: float,
+                 n_sub: int, interior: int = 4096, seed: int = 0) -> None:  # fmt: skip
+        got = _onset_points(box, vehicle, trim_map, uncertainty, interior, seed)
+        self.X, self.U, self.recs, self.n_corner = got
+        self.Ts, self.n_sub = Ts, n_sub
+        self.healthy = plant_step(self.X, self.U, self.recs, Ts, n_sub)
+
+    def jumps(self, rho_f: float) -> tuple[np.ndarray, int]:
+        """The jumps (S, 9) at effectiveness rho_f in (0, 1] and the corner count.
+
+        Raises
+        ------
+        DesignError
+            If a plant step is not finite.
+        """
+        Uf = self.U.copy()
+        Uf[:, 1] *= rho_f
+        J = plant_step(self.X, Uf, self.recs, self.Ts, self.n_sub) - self.healthy
+        if not np.all(np.isfinite(J)):
+            raise DesignError("onset_jumps: a plant step is not finite; the box leaves the model")
+        return J, self.n_corner
+
+
+def _onset_points(box, vehicle, trim_map, uncertainty, interior, seed):
+    """States X (S, 9), inputs U (S, 2), vehicle records and corner count of the samples."""
     names = list(uncertainty)
     corners = np.array(list(itertools.product((-1.0, 1.0), repeat=len(names))))
     rng = np.random.default_rng(seed)
@@ -98,12 +134,7 @@ def onset_jumps(box: SchedulingBox, vehicle, trim_map, uncertainty: dict, rho_f:
     other[: len(S) * len(corners)] = 0.0  # the corner points at the trim's q, eta
     X[:, 4:9] += other
     recs = perturbed_records(vehicle.params, uncertainty, f_all)
-    Uf = U.copy()
-    Uf[:, 1] *= rho_f
-    J = plant_step(X, Uf, recs, Ts, n_sub) - plant_step(X, U, recs, Ts, n_sub)
-    if not np.all(np.isfinite(J)):
-        raise DesignError("onset_jumps: a plant step is not finite; the box leaves the model")
-    return J, len(S) * len(corners)
+    return X, U, recs, len(S) * len(corners)
 
 
 def pulse_peak(a: float, j0: float, parts, steps: int = 100_000) -> float:
@@ -293,6 +324,35 @@ def steady_set(Acl_8, N_8, F_8, bound, lam: float) -> tuple[float, np.ndarray | 
     return float(s), ell.P
 
 
+def steady_disturbance(nv: NominalVertices, tube_set: TubeSet, jump_h: float,
+                       gamma: float) -> np.ndarray:  # fmt: skip
+    """The disturbance bound before an onset, at the altitude bound the onset grows.
+
+    W_8's bound over the product set (:func:`fahv.design.one_step_bound.product_bound`)
+    with |e_h| <= H + jump_h / gamma: the altitude error takes up to jump_h per step
+    until the estimate removes it, at most 1 / gamma of it between resets
+    (:func:`onset_bound`).
+
+    Parameters
+    ----------
+    nv : NominalVertices
+    tube_set : TubeSet
+    jump_h : float
+        [ft] largest |J_h| / rho_f at the design loss (:func:`onset_jumps`).
+    gamma : float
+        The estimator's gain per step, in (0, 1].
+
+    Returns
+    -------
+    (8,) ndarray
+        The bound per row of e_8 (state units per period).
+    """
+    H = tube_set.H + jump_h / gamma
+    par, interp = product_bound(nv, tube_set.F_8, tube_set.N_8, H)
+    A = nv.vertices()[0]
+    return par[1:] + interp[1:] + np.abs(A[:, 1:, 0]).max(axis=0) * H
+
+
 class _OnsetModel:
     """The closed loop and the jumps of one onset bound (:func:`onset_bound`).
 
@@ -309,6 +369,7 @@ class _OnsetModel:
         A_8, B_8 = self.A[:, 1:, 1:], B[:, 1:, :]
         self.L = np.linalg.cholesky(tube_set.N_8)
         self.Acl_8 = A_8 + B_8 @ tube_set.F_8
+        self.points = OnsetPoints(nv.box, vehicle, trim_map, uncertainty, Ts, n_sub, interior)
         self.a = float(np.linalg.norm(np.linalg.solve(self.L, self.Acl_8) @ self.L, 2,
                                       axis=(1, 2)).max())  # fmt: skip
 
@@ -322,8 +383,9 @@ class _OnsetModel:
         Returns J, its Z_8 norms (S,), the corner count, the largest |J_h| / rho_f and the
         largest norms of the shares along and off the elevator column (0 without gamma_e).
         """
-        J, n_c = onset_jumps(self.nv.box, self.vehicle, self.trim_map, self.uncertainty,
-                             1.0 - loss, self.Ts, self.n_sub, self.interior)  # fmt: skip
+        if not 0.0 < loss < 1.0:
+            raise ValueError(f"onset_bound: a loss must be in (0, 1), got {loss}")
+        J, n_c = self.points.jumps(1.0 - loss)
         J = J / (1.0 - loss)
         norm, jb, jr = self.z_norm(J), 0.0, 0.0
         if self.gamma_e is not None:
@@ -488,9 +550,7 @@ def onset_bound(nv: NominalVertices, tube_set: TubeSet, vehicle, trim_map,
     rigid_q = float(m.z_norm(J_rigid).max())
     J_rigid[:, 4] = 0.0  # and q
     rigid = float(m.z_norm(J_rigid).max())
-    H = tube_set.H + jump_h / gamma
-    par, interp = product_bound(nv, tube_set.F_8, tube_set.N_8, H)
-    bound = par[1:] + interp[1:] + np.abs(m.A[:, 1:, 0]).max(axis=0) * H
+    bound = steady_disturbance(nv, tube_set, jump_h, gamma)
     c = float((bound / tube_set.W_8).max())
     if steady_shaped is None:
         steady_shaped = min(steady_set(m.Acl_8, tube_set.N_8, tube_set.F_8, bound, lam)[0]

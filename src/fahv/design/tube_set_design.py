@@ -7,12 +7,14 @@ From the case's ``eight_state`` section: the nominal and scheduling boxes
 transient (:func:`fahv.design.onset.onset_bound`) and the loops of the variants that
 feed q through a notch (:mod:`fahv.design.notch_loop`, with a gain designed for the loop
 when the case asks for one, :func:`designed_notch_loop`). The onset bound and the notch
-loops both start from the closed tube set and not from each other: Dask runs them in
-two processes (each about a third of the certified design's time).
+loops both start from the closed tube set and not from each other: their invariant
+ellipsoids (the onset's steady set at each contraction factor, each notch loop) are
+Dask tasks spread over the cores' processes.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import replace
 
@@ -26,7 +28,13 @@ from fahv.design.domain import SchedulingBox, nominal_box
 from fahv.design.notch_gain import notch_gain
 from fahv.design.notch_loop import NotchLoop, notch_loop, notch_tube
 from fahv.design.one_step_bound import altitude_bound
-from fahv.design.onset import STEADY_LAMS, onset_bound, onset_jumps
+from fahv.design.onset import (
+    STEADY_LAMS,
+    onset_bound,
+    onset_jumps,
+    steady_disturbance,
+    steady_set,
+)
 from fahv.design.report import notch_loop_line
 from fahv.design.tube_set import EIGHT_STATES, TubeSet
 from fahv.design.vertices import NominalVertices, nominal_vertices
@@ -175,29 +183,48 @@ def design_tube_set(
                               s["lam"], case["mpc"]["M"], grow=s["grow"],
                               iterations=s["iterations"], w_ref=w_max, state_max=state_max,
                               contain=contain, warm=warm, log=log)  # fmt: skip
-    parts = {}  # what the closed tube set is checked against, independent of each other
-    if gamma is not None:
-        lams = tuple(dict.fromkeys((tube_set.lam, *STEADY_LAMS)))
-        parts["onset"] = delayed(onset_bound)(
-            nv, tube_set, vehicle, trim_map, unc, gamma, case["Ts"], case["plant_substeps"],
-            steady_lams=lams, **estimate,
-        )  # fmt: skip
-    if notches or stable_only:
-        parts["loops"] = delayed(_notch_loops_logged)(nv, tube_set, case, notches, stable_only)
     stage("tube set: onset bound, notch loops")
-    if len(parts) > 1:  # one process each (Dask; chunksize 1: not both to one worker)
-        log(f"eight-state tube: the onset bound and the notch loops on {len(parts)} processes")
-        (got,) = dask.compute(parts, scheduler="processes", num_workers=len(parts), chunksize=1)
+    # the invariant ellipsoids the closed tube set is checked with, independent of each
+    # other: the onset's steady set at each contraction factor, each notch loop
+    parts, bound = {}, None
+    if gamma is not None:
+        bound = steady_disturbance(nv, tube_set, _jump_h(case, box, vehicle, trim_map, unc,
+                                                         rho_min), gamma)  # fmt: skip
+        A, B = nv.vertices()
+        Acl_8 = A[:, 1:, 1:] + B[:, 1:, :] @ tube_set.F_8
+        for lam in dict.fromkeys((tube_set.lam, *STEADY_LAMS)):
+            parts[f"steady {lam}"] = delayed(steady_set)(Acl_8, tube_set.N_8, tube_set.F_8,
+                                                         bound, lam)  # fmt: skip
+    for v, nf in (notches or {}).items():
+        parts[f"loop {v}"] = delayed(_notch_loops_logged)(nv, tube_set, case, {v: nf}, None)
+    workers = min(len(parts), os.cpu_count() or 1)
+    if workers > 1:  # Dask: each ellipsoid a task, the cores' processes take them in turn
+        log(f"eight-state tube: the onset's steady sets and the notch loops, {len(parts)} "
+            f"invariant ellipsoids on {workers} processes")  # fmt: skip
+        (got,) = dask.compute(parts, scheduler="processes", num_workers=workers, chunksize=1)
     else:
         (got,) = dask.compute(parts, scheduler="sync")
-    if "onset" in got:
-        tube_set = replace(tube_set, onset=got["onset"])
-    if "loops" in got:
-        loops, gains, lines = got["loops"]
+    loops, gains = _notch_loops(nv, tube_set, case, None, stable_only, log)  # stability only
+    for v in notches or {}:
+        got_loops, got_gains, lines = got[f"loop {v}"]
         for line in lines:
             log(line)
-        tube_set = replace(tube_set, notch_loops=loops, notch_gains=gains)
+        loops, gains = loops + got_loops, {**gains, **got_gains}
+    tube_set = replace(tube_set, notch_loops=loops, notch_gains=gains)
+    if gamma is not None:
+        c_w = min(got[k][0] for k in got if k.startswith("steady "))
+        tube_set = replace(tube_set, onset=onset_bound(
+            nv, tube_set, vehicle, trim_map, unc, gamma, case["Ts"], case["plant_substeps"],
+            steady_shaped=c_w, **estimate,
+        ))  # fmt: skip
     return tube_set, nominal, box
+
+
+def _jump_h(case: dict, box, vehicle, trim_map, unc, rho_min: float) -> float:
+    """[ft] The largest altitude jump |J_h| / rho_min of the design loss's onset."""
+    J, _ = onset_jumps(box, vehicle, trim_map, unc, rho_min, case["Ts"], case["plant_substeps"],
+                       interior=1024)  # fmt: skip
+    return float(np.abs(J[:, 0]).max() / rho_min)
 
 
 def _notch_loops_logged(nv, tube_set: TubeSet, case: dict, notches, stable_only):

@@ -7,7 +7,7 @@ respect; negative when it fails):
 
 ``model``
     The TP vertices, weighting functions, scales and trim map, rebuilt from the vehicle
-    file with the current model code, equal the stored ones (relative 1e-8). A model
+    file with the current model code, equal the stored ones (:data:`MODEL_RTOL`). A model
     change that moves the vertices fails here, before any certificate is trusted.
 ``tightening`` (eq. 30)
     The stored tightened input limits equal the true limits less the support of
@@ -50,9 +50,16 @@ import numpy as np
 from fahv.design.artefacts import Design, code_hash
 from fahv.errors import DesignError
 
-#: Relative tolerance of the model check (the rebuild runs the same code: bit-identical
-#: on one machine; other BLAS builds move the SVD of the TP model in the last digits).
-MODEL_RTOL = 1e-8
+#: Relative tolerance of the model check, per array. The model is built on one BLAS
+#: thread (:mod:`fahv.model.blas`): the rebuild is then bit-identical to the design on
+#: one machine (measured 0 for every array with OPENBLAS_NUM_THREADS 1 and 2, numpy
+#: imported before or after fahv). Not pinned, two threads moved W_V by 1.02e-8, W_h by
+#: 4.4e-14 and A, B by 1.3e-10 (cm_certified); each tolerance is 100 times that, so
+#: that another BLAS build or processor cannot refuse a sound design; the scales and
+#: the trim map never moved and keep a floor of 1e-10. A model change moves them by far
+#: more (a 1e-6 change of A fails).
+MODEL_RTOL = {"A": 1e-8, "B": 1e-8, "W_h": 1e-6, "W_V": 1e-6, "Dx": 1e-10, "Du": 1e-10,
+              "trim_x": 1e-10, "trim_u": 1e-10}  # fmt: skip
 #: Tolerance of the tightening check (the stored limits are the same float expression).
 TIGHTENING_RTOL = 1e-9
 
@@ -108,12 +115,13 @@ def check_model(design: Design, vehicle) -> CheckResult:
     got = {"A": disc.A, "B": disc.B, "W_h": tp.W_h, "W_V": tp.W_V, "Dx": tp.state_scale,
            "Du": tp.input_scale, "trim_x": tm.x_r, "trim_u": tm.u_r}  # fmt: skip
     diffs = {k: _rel_diff(v, a[k]) for k, v in got.items()}
-    worst = max(diffs, key=diffs.get)
-    ok = diffs[worst] <= MODEL_RTOL
+    worst = max(diffs, key=lambda k: diffs[k] / MODEL_RTOL[k])  # closest to its tolerance
+    ok = all(diffs[k] <= MODEL_RTOL[k] for k in diffs)
     return CheckResult(
-        "model", ok, MODEL_RTOL - diffs[worst],
+        "model", ok, MODEL_RTOL[worst] - diffs[worst],
         f"TP vertices, weights, scales and trim map rebuilt with the current model code: "
-        f"largest relative difference {diffs[worst]:.2e} ({worst}) <= {MODEL_RTOL:g}",
+        f"relative difference {diffs[worst]:.2e} ({worst}, the closest to its tolerance) "
+        f"<= {MODEL_RTOL[worst]:g}",
     )  # fmt: skip
 
 

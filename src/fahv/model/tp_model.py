@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fahv.errors import DesignError
+from fahv.model.blas import one_blas_thread
 
 
 def tp_weights(h, V, h_grid, V_grid, W_h, W_V) -> np.ndarray:
@@ -147,6 +148,7 @@ class TPModel:
         w = self.weights(h, V)
         return (np.tensordot(w, self.A_vertices, axes=1), np.tensordot(w, self.B_vertices, axes=1))
 
+    @one_blas_thread
     def discretize(self, Ts: float) -> DiscretePolytope:
         """ZOH discretisation of every vertex with period Ts [s], eq. (12).
 
@@ -361,6 +363,7 @@ def approximation_error(tp: TPModel, sample, test_points) -> dict[str, float]:
     }
 
 
+@one_blas_thread
 def build_tp_model(
     vehicle, kind: str, r_h: int, r_V: int, n_h: int = 21, n_V: int = 21, notch=None, progress=None
 ) -> TPModel:

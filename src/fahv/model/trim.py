@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fahv.errors import TrimError
+from fahv.model.blas import one_blas_thread
 from fahv.model.dynamics import dm_rhs, forces, make_model
 from fahv.model.jacobian import jacobian_complex_step
 from fahv.model.vehicle import ALPHA, IQ, Vehicle, VehicleParams
@@ -319,6 +320,7 @@ class TrimMap:
         return x[0], u[0]
 
 
+@one_blas_thread
 def trim_map(vehicle: Vehicle, n_h: int = 13, n_V: int = 13, model: str = "cm", notch=None):
     """Trim the model on an n_h x n_V grid over the envelope and build a :class:`TrimMap`.
 
