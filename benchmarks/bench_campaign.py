@@ -27,9 +27,9 @@ import yaml
 from fahv.campaign.draws import draw, overrides
 from fahv.campaign.engine import run_campaign
 from fahv.campaign.spec import campaign_from_mapping, load_campaign
-from fahv.design.artefacts import load_design
 from fahv.loop.batch import simulate_batch
 from fahv.loop.simulate import simulate
+from fahv.spec.artefacts import load_design
 
 ROOT = Path(__file__).resolve().parents[1]
 FULL = 300.0

@@ -10,9 +10,9 @@ Usage: .venv/bin/python benchmarks/bench_step.py [ARTEFACT_DIR] [STEPS]
 import sys
 import time
 
-from fahv.design.artefacts import load_design
 from fahv.loop.cores import build_core
 from fahv.loop.params import node_parameters
+from fahv.spec.artefacts import load_design
 
 art = sys.argv[1] if len(sys.argv) > 1 else "offline_design/designs/cm_paper"
 n = int(sys.argv[2]) if len(sys.argv) > 2 else 2000

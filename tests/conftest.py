@@ -7,10 +7,10 @@ import warnings
 import pytest
 import yaml
 
-from fahv.design.case import case_from_mapping
 from fahv.design.pipeline import run_design
 from fahv.model.tp_model import build_tp_model
 from fahv.model.vehicle import load_vehicle
+from fahv.spec.schema import case_from_mapping
 
 #: The paper's Case 1 design with its scenario: the quick design of the tests.
 SCENARIO = "offline_design/scenarios/case1_paper.yaml"
@@ -35,7 +35,7 @@ def plain(data):
 @pytest.fixture(scope="session")
 def raw():
     """The whole case of scenario case1_paper (its design's entries with its own)."""
-    from fahv.design.scenario import load_scenario
+    from fahv.spec.scenario import load_scenario
 
     return plain(load_scenario(SCENARIO).case.data)
 
@@ -68,7 +68,7 @@ def design(raw, tmp_path_factory, worker_id):
     """
     from filelock import FileLock
 
-    from fahv.design.artefacts import load_design, save_design
+    from fahv.spec.artefacts import load_design, save_design
 
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     if worker_id == "master":  # not distributed
@@ -106,9 +106,9 @@ def store_quick(design, folder):
     file's design, and the case's scenario to ``folder/scenarios/quick.yaml``. Returns
     (scenario file, artefact folder) to pass as ``fahv simulate|sil SCENARIO --design DIR``.
     """
-    from fahv.design.artefacts import Design, save_design
-    from fahv.design.case import SCENARIO_KEYS, case_from_mapping, load_design_file
     from fahv.design.pipeline import design_part
+    from fahv.spec.artefacts import Design, save_design
+    from fahv.spec.schema import SCENARIO_KEYS, case_from_mapping, load_design_file
 
     c = design.case
     dpart = design_part(case_from_mapping(c, "quick.yaml"))

@@ -42,8 +42,8 @@ def test_simulate_runs_the_default_variant_unless_told(raw):
     import pytest
 
     from fahv.cli.run import selected_variants
-    from fahv.design.case import case_from_mapping
     from fahv.errors import FahvError
+    from fahv.spec.schema import case_from_mapping
 
     case = case_from_mapping(raw, "case1.yaml")
     assert selected_variants(case, None) == ["tube_mpc"]

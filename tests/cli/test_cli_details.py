@@ -100,7 +100,7 @@ def test_tube_study_takes_the_case_design_effectiveness(monkeypatch, capsys):
 
 def test_design_for_another_vehicle_keeps_the_shipped_artefacts(tmp_path, monkeypatch):
     import fahv.cli.design as cli_design
-    from fahv.design.store import design_dir
+    from fahv.spec.store import design_dir
 
     text = resources.files("fahv.data").joinpath("vehicle_parker2007.yaml").read_text()
     heavy = tmp_path / "heavy.yaml"

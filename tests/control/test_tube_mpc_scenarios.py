@@ -14,11 +14,11 @@ import warnings
 import numpy as np
 import pytest
 
-from fahv.design.case import case_data, case_from_mapping
 from fahv.design.pipeline import run_design
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.metrics import metrics
+from fahv.spec.schema import case_data, case_from_mapping
 
 H_TOL, V_TOL, ATT_DEG, WINDOW = 10.0, 2.0, 0.5, 60.0
 

@@ -6,14 +6,14 @@ import json
 import numpy as np
 import pytest
 
-from fahv.design.artefacts import load_design, save_design
-from fahv.design.case import case_from_mapping, load_case
 from fahv.design.pipeline import run_design
 from fahv.errors import CaseError, DesignError
 from fahv.loop.params import node_parameters
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.metrics import metrics
+from fahv.spec.artefacts import load_design, save_design
+from fahv.spec.schema import case_from_mapping, load_case
 
 
 def test_scenario_files_load():
@@ -193,7 +193,7 @@ def test_docs_key_tables_are_the_declarations():
     from pathlib import Path
 
     from fahv.config.spec import markdown
-    from fahv.design.case import design_spec, scenario_spec
+    from fahv.spec.schema import design_spec, scenario_spec
 
     text = (Path(__file__).resolve().parents[2] / "docs/reference/configuration.md").read_text()
     for n, spec in (("design-keys", design_spec), ("scenario-keys", scenario_spec)):

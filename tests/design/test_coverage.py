@@ -1,9 +1,9 @@
-"""Coverage of an elevator loss over the whole parameter box (fahv.design.coverage)."""
+"""Coverage of an elevator loss over the whole parameter box (fahv.bounds.coverage)."""
 
 import numpy as np
 import pytest
 
-from fahv.design.coverage import TRIM_FREE_PARAMETERS, box_corner_trims, box_coverage
+from fahv.bounds.coverage import TRIM_FREE_PARAMETERS, box_corner_trims, box_coverage
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
+from fahv.bounds.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
 
@@ -54,7 +54,7 @@ def test_deviation_box_appends_the_notch_states_for_the_ecm_only():
     """The CM / DM box is a copy of DEFAULT_DEV_BOX; the ECM's appends twice the filter's
     steady states for the given q scale; a q scale that is not positive and finite is
     refused naming it."""
-    from fahv.design.disturbance import deviation_box
+    from fahv.bounds.disturbance import deviation_box
     from fahv.model.notch import NotchFilter
 
     cm = deviation_box()

@@ -1,11 +1,10 @@
-"""The domains of the one-step bounds (fahv.design.domain)."""
+"""The domains of the one-step bounds (fahv.bounds.domain)."""
 
 import numpy as np
 import pytest
 from tube_set_records import load_record
 
-from fahv.design.case import load_case
-from fahv.design.domain import (
+from fahv.bounds.domain import (
     SchedulingBox,
     certified_range,
     joint_shape,
@@ -13,7 +12,8 @@ from fahv.design.domain import (
     product_supports,
     schedule_points,
 )
-from fahv.design.report import range_line
+from fahv.certificate.report import range_line
+from fahv.spec.schema import load_case
 
 CASE = "offline_design/scenarios/case1.yaml"
 

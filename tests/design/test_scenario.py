@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import yaml
 
-from fahv.design.case import case_data
-from fahv.design.scenario import load_scenario, uncertified
-from fahv.design.store import load_or_design, stored_design
 from fahv.errors import CaseError, DesignError
 from fahv.model.vehicle import load_vehicle
+from fahv.spec.scenario import load_scenario, uncertified
+from fahv.spec.schema import case_data
+from fahv.spec.store import load_or_design, stored_design
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "offline_design" / "scenarios" / "case1_paper.yaml"

@@ -13,12 +13,12 @@ import pytest
 from tube_set_records import load_record
 
 import fahv.design.tube_set_design as tsd
-from fahv.design.case import case_data, case_from_mapping, load_case
-from fahv.design.domain import nominal_box
-from fahv.design.notch_gain import NotchGain
-from fahv.design.notch_loop import NotchLoop
-from fahv.design.tube_set import TubeSet
+from fahv.bounds.domain import nominal_box
 from fahv.errors import CaseError, DesignError
+from fahv.spec.schema import case_data, case_from_mapping, load_case
+from fahv.tube.notch_gain import NotchGain
+from fahv.tube.notch_loop import NotchLoop
+from fahv.tube.tube_set import TubeSet
 
 CASE = "offline_design/scenarios/case1.yaml"
 
@@ -390,7 +390,7 @@ def test_design_refuses_a_command_outside_the_nominal_range(raw8, vehicle):
     """The tube set is certified for a nominal inside the envelope less h_margin / V_margin:
     a design step beyond that range is refused before any design work, naming the point
     and the range; the range is what the QP gets as mpc.hv_box (and what a scenario is
-    checked against, :func:`fahv.design.scenario.uncertified`)."""
+    checked against, :func:`fahv.spec.scenario.uncertified`)."""
     from fahv.design.pipeline import design_part
     from fahv.design.tube_forms import command_range
 

@@ -112,8 +112,8 @@ def design_case2():
     import copy
     import warnings
 
-    from fahv.design.case import case_data, case_from_mapping
     from fahv.design.pipeline import run_design
+    from fahv.spec.schema import case_data, case_from_mapping
 
     raw = case_data("offline_design/scenarios/case2.yaml")
     d = copy.deepcopy(raw)

@@ -17,12 +17,12 @@ import pytest
 
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS, load_plugins
 from fahv.control.base import unregister_law
-from fahv.design.case import case_from_mapping
 from fahv.errors import CaseError
 from fahv.loop.batch import simulate_batch
 from fahv.loop.params import node_parameters, specs
 from fahv.loop.simulate import simulate
 from fahv.plant.faults import FAULTS
+from fahv.spec.schema import case_from_mapping
 
 HERE = Path(__file__).resolve().parent
 

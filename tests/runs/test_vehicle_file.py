@@ -6,14 +6,14 @@ from importlib import resources
 import numpy as np
 import pytest
 
-from fahv.design.artefacts import load_design, save_design, stale_reason
-from fahv.design.case import case_from_mapping
 from fahv.design.pipeline import run_design
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import read_run, run_result_of
 from fahv.runs.sil import run_sil
 from fahv.runs.tools import run_vehicle
+from fahv.spec.artefacts import load_design, save_design, stale_reason
+from fahv.spec.schema import case_from_mapping
 
 T = 1.0
 

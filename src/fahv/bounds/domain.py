@@ -106,7 +106,7 @@ def nominal_box(section: dict, envelope) -> tuple[SchedulingBox, SchedulingBox]:
     Parameters
     ----------
     section : dict
-        The validated ``eight_state`` section (:mod:`fahv.design.case`).
+        The validated ``eight_state`` section (:mod:`fahv.spec.schema`).
     envelope : fahv.model.vehicle.Envelope
         The flight envelope (h, V ranges).
 
@@ -154,7 +154,7 @@ def joint_shape(F_8, N_8) -> np.ndarray:
     not F_8 e_8 (the tube loop through the notch filter, u - v = K xi over an ellipsoid
     E(P) of xi = [e_8; chi]) has its own joint shape, [[I, 0], K] P [[I, 0], K]' (the
     ``joint`` argument of :func:`product_supports` and of the one-step bounds of
-    :mod:`fahv.design.one_step_bound`).
+    :mod:`fahv.bounds.one_step_bound`).
 
     Parameters
     ----------
@@ -240,7 +240,7 @@ def product_supports(F_8, N_8, H: float, joint=None) -> tuple[np.ndarray, np.nda
 def box_shortfall(box: SchedulingBox, nominal: SchedulingBox, F_8, N_8, H: float) -> dict:
     """Where the scheduling box does not hold the nominal box grown by the product set.
 
-    The integral form of the one-step bound (:mod:`fahv.design.one_step_bound`) holds for
+    The integral form of the one-step bound (:mod:`fahv.bounds.one_step_bound`) holds for
     every segment from a nominal point to the plant inside the scheduling box: the box
     must hold the nominal box grown by the supports of {|e_h| <= H} x Z_8 and F_8 Z_8.
 
@@ -269,7 +269,7 @@ def certified_range(box: SchedulingBox, F_8, N_8, H: float) -> SchedulingBox:
     """The nominal points the tube set's certificate covers: the scheduling box less the tube.
 
     The vertices and W_8's bound hold for every segment from a nominal point to the plant
-    inside the scheduling box (the integral form, :mod:`fahv.design.one_step_bound`), so
+    inside the scheduling box (the integral form, :mod:`fahv.bounds.one_step_bound`), so
     the certificate needs the nominal inside the box shrunk by the product set's
     supports (H in h, Z_8's in the states, F_8 Z_8's in the inputs); the nominal box of
     the case is a part of it (:func:`box_shortfall` checks that).

@@ -24,12 +24,12 @@ from typing import Any
 from fahv.config import Check, Field, Section, validate
 from fahv.config.yamlio import load_yaml
 from fahv.control import VARIANTS
-from fahv.design.case import Case
-from fahv.design.scenario import load_scenario
 from fahv.errors import CampaignError, CaseError
 from fahv.model.vehicle import load_vehicle
 from fahv.plant.faults import FAULTS
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.spec.scenario import load_scenario
+from fahv.spec.schema import Case
 
 #: Ways to draw the uncertain parameters of sec. 5.1.
 METHODS = ("uniform", "corners", "lhs", "none")
@@ -151,7 +151,7 @@ class Campaign:
         File it was read from.
     data : dict
         Validated content, defaults filled in (see :func:`campaign_spec`).
-    case : fahv.design.case.Case
+    case : fahv.spec.schema.Case
         The case file it names, validated.
     vehicle : fahv.model.vehicle.Vehicle
         The vehicle its envelope and range checks used (``--vehicle``, or the packaged
@@ -221,7 +221,7 @@ class Campaign:
 
     def _beyond_nominal_range(self) -> list[str]:
         """Initial points and commands drawn beyond the eight-state tube's nominal range."""
-        from fahv.design.domain import nominal_box
+        from fahv.bounds.domain import nominal_box
 
         nominal, _ = nominal_box(self.case["eight_state"], self.vehicle.envelope)
         lo, hi = nominal.lo[:2], nominal.hi[:2]

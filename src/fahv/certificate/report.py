@@ -12,45 +12,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from fahv.design.domain import (
+from fahv.bounds.domain import (
     BOX_COORDINATES,
     OTHER_COORDINATES,
     SchedulingBox,
     product_supports,
 )
-from fahv.design.tube_set import ASSUMPTIONS, EIGHT_STATES
-
-
-def _join(values, fmt: str, sep: str = " ") -> str:
-    """``values`` formatted with ``fmt`` and joined with ``sep``."""
-    return sep.join(format(v, fmt) for v in values)
-
-
-def closure_iteration_line(it: int, tightening, N_8, ab, ratio) -> str:
-    """The design log's line of one W_8-Z_8 iteration (:mod:`fahv.design.closure`).
-
-    Parameters
-    ----------
-    it : int
-        The iteration's index.
-    tightening : (2,) array_like
-        F_8 Z_8's support per input [-, rad].
-    N_8 : (8, 8) ndarray
-        Z_8's shape.
-    ab : fahv.design.one_step_bound.AltitudeBound
-    ratio : (8,) array_like
-        bound / W_8 per row.
-    """
-    return (
-        f"eight-state tube, iteration {it}: tightening {tightening[0]:.4f} / "
-        f"{np.degrees(tightening[1]):.3f} deg, alpha support "
-        f"{np.degrees(np.sqrt(N_8[1, 1])):.4f} deg, H = {ab.H:.2f} ft (step {ab.step:.3f} "
-        f"ft, w_h {ab.w_h:.3f} ft); bound / W_8 (V ... eta_2_dot) " + _join(ratio, ".3f")
-    )
+from fahv.tube.lines import join as _join
+from fahv.tube.lines import notch_loop_line
+from fahv.tube.tube_set import ASSUMPTIONS, EIGHT_STATES
 
 
 def range_line(cert: SchedulingBox, nominal: SchedulingBox) -> str:
-    """The line of the certified nominal range (:func:`fahv.design.domain.certified_range`)."""
+    """The line of the certified nominal range (:func:`fahv.bounds.domain.certified_range`)."""
     deg = np.degrees
     o = cert.other_half
     return (
@@ -71,7 +45,7 @@ def tube_set_lines(tube_set, nominal: SchedulingBox, box: SchedulingBox) -> list
 
     Parameters
     ----------
-    tube_set : fahv.design.tube_set.TubeSet
+    tube_set : fahv.tube.tube_set.TubeSet
     nominal, box : SchedulingBox
         The nominal box and the scheduling box it was closed over.
 
@@ -110,7 +84,7 @@ def tube_set_lines(tube_set, nominal: SchedulingBox, box: SchedulingBox) -> list
 
 
 def onset_lines(onset) -> list[str]:
-    """The design log's lines of an onset bound (:class:`fahv.design.onset.OnsetBound`).
+    """The design log's lines of an onset bound (:class:`fahv.onset.bound.OnsetBound`).
 
     The level bound at the design's loss with its verdict, the largest certified losses,
     the first jump state by state and, with a lower bound, :func:`witness_line`.
@@ -158,46 +132,6 @@ def witness_line(onset) -> str:
     )  # fmt: skip
 
 
-def notch_loop_line(loop) -> str:
-    """The design log's line of a tube loop through a notch, with its verdict.
-
-    Parameters
-    ----------
-    loop : fahv.design.notch_loop.NotchLoop
-    """
-    head = (
-        f"variant {loop.variant}: tube feedback through the notch on q (omega {loop.omega:.2f} "
-        f"rad/s, eps_p {loop.eps_p:g}): largest spectral radius over the vertices "
-        f"{loop.rho:.6f} (on the measured q {loop.rho_q:.6f})"
-    )
-    if not loop.stable:
-        return head + f": UNSTABLE at vertex {loop.vertex}: NOT certified with the notch"
-    if loop.s is None:
-        return head + (
-            ": stable at every vertex (necessary only); the RPI certificate is for the "
-            "feedback on the measured q: NOT certified with the notch"
-        )
-    if not np.isfinite(loop.s):
-        return head + (
-            "; no ellipsoid of the loop with the filter's states RPI for W with its input "
-            "support within the tightening (LMI infeasible): NOT certified with the notch"
-        )
-    closed = ""
-    if loop.w_ratio is not None:
-        closed = (f", over the loop's own set of (e, u - v): H / the tube set's "
-                  f"{loop.w_ratio[0]:.3f}, W's bound / W per row "
-                  + _join(loop.w_ratio[1:], ".3f"))  # fmt: skip
-    return head + (
-        ("; with the gain designed for the loop" if loop.designed else "")
-        + f"; an ellipsoid of the loop with the filter's states, RPI for W: exact worst "
-        f"one-step level {loop.level:.6f}, its projection on e inside {loop.s:.4f} x Z, "
-        f"input support through q' {_join(loop.supports, '.4f', ' / ')} (tightening "
-        f"{_join(loop.tightening, '.4f', ' / ')}){closed}"
-        + (": certified with the notch  OK" if loop.certified
-           else ": NOT certified with the notch")
-    )  # fmt: skip
-
-
 def rpi_check_line(level: float, n_vertices: int, n_corners: int, growth: float,
                    tau: float) -> str:  # fmt: skip
     """The vertex tube's exact RPI check (:func:`fahv.synthesis.rpi_level.worst_level`).
@@ -234,7 +168,7 @@ def adjustable_tube_line(tau: float, level_t: float, w_prime: float) -> str:
 
 
 def domain_line(dom, n_schedules: int) -> str:
-    """The vertex tube's domain (:class:`fahv.design.domain.CertificateDomain`)."""
+    """The vertex tube's domain (:class:`fahv.bounds.domain.CertificateDomain`)."""
     return (
         f"certificate domain: {n_schedules} scheduling point(s) over the envelope; x - x_rs "
         f"within nominal + Z = +/-[{_join(dom.x_half, '.3g', ', ')}]; inputs Phi in "
@@ -246,7 +180,7 @@ def domain_line(dom, n_schedules: int) -> str:
 
 
 def domain_bound_line(n_evaluations: int, ratio, slack) -> str:
-    """W against the bound over the domain (:mod:`fahv.design.one_step_bound`)."""
+    """W against the bound over the domain (:mod:`fahv.bounds.one_step_bound`)."""
     return (
         "W over the domain (Taylor bound + corner remainder, "
         f"{n_evaluations} plant steps): bound / W per row = "
@@ -270,7 +204,7 @@ def closed_line(closed: bool, ratio, growth: float) -> str:
 
 
 def vertex_onset_line(rho_min: float, delta_e: float, est_tau, level_max: float) -> str:
-    """The vertex tube's onset of a loss (:func:`fahv.design.vertex_tube.onset_levels`)."""
+    """The vertex tube's onset of a loss (:func:`fahv.tube.vertex_tube.onset_levels`)."""
     return (
         f"onset of a {100 * (1 - rho_min):.0f} % loss at delta_e = "
         f"{np.degrees(delta_e):.1f} deg (estimate time constant {est_tau} s): "
@@ -314,7 +248,7 @@ def tightening_line(room, tightening, tau: float) -> str:
 
 
 def coverage_line(coverage, rho_f: float) -> str:
-    """The loss coverage's line (:class:`fahv.design.coverage.LossCoverage`)."""
+    """The loss coverage's line (:class:`fahv.bounds.coverage.LossCoverage`)."""
     c = coverage
     return (
         f"largest elevator loss whose faulty trim fits the tightened inputs for every one of "
@@ -329,7 +263,7 @@ def coverage_line(coverage, rho_f: float) -> str:
 
 
 def input_rows_line(offsets, nominal: SchedulingBox, u_box) -> str:
-    """The line of the QP's rows on the nominal input (``mpc.u_box``, :mod:`fahv.design.rows`)."""
+    """The line of the QP's rows on the nominal input (``mpc.u_box``, :mod:`fahv.tube.rows`)."""
     off_lo, off_hi = offsets
     deg = np.degrees
     return (

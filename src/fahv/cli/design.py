@@ -7,15 +7,15 @@ import time
 import warnings
 from pathlib import Path
 
+from fahv.certificate.verify import require_verified, verify
 from fahv.cli.common import add_vehicle_option, progress, vehicle_of
-from fahv.design.artefacts import load_design, save_design
-from fahv.design.case import load_design_file, read_yaml_file
 from fahv.design.pipeline import run_design
-from fahv.design.scenario import load_scenario
 from fahv.design.stage_clock import StageClock
-from fahv.design.store import design_dir, stored_design
-from fahv.design.verify import require_verified, verify
 from fahv.errors import CaseError, DesignError
+from fahv.spec.artefacts import load_design, save_design
+from fahv.spec.scenario import load_scenario
+from fahv.spec.schema import load_design_file, read_yaml_file
+from fahv.spec.store import design_dir, stored_design
 
 
 def design_case(case, vehicle, out_dir: Path, log=print):
@@ -28,7 +28,7 @@ def design_case(case, vehicle, out_dir: Path, log=print):
 
     Returns
     -------
-    fahv.design.artefacts.Design
+    fahv.spec.artefacts.Design
 
     Raises
     ------

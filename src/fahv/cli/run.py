@@ -8,8 +8,6 @@ import warnings
 from pathlib import Path
 
 from fahv.cli.common import add_vehicle_option, progress, read_run_warned, to_json
-from fahv.design.scenario import load_scenario
-from fahv.design.store import load_or_design
 from fahv.errors import FahvError, RunInterrupted
 from fahv.loop.graph import NODES, TOPICS, graph_nodes
 from fahv.loop.params import controller_node
@@ -29,6 +27,8 @@ from fahv.runs.sil import (
 from fahv.runs.tools import format_metrics
 from fahv.runs.workspace import ROOT
 from fahv.runs.writer import RunWriter
+from fahv.spec.scenario import load_scenario
+from fahv.spec.store import load_or_design
 
 
 class StepProgress:

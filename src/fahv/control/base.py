@@ -76,7 +76,7 @@ class NominalSource:
 
         Parameters
         ----------
-        ctx : fahv.design.context.DesignContext
+        ctx : fahv.spec.context.DesignContext
             ``case`` data, ``vehicle``, the ``arrays`` designed so far, ``log``.
 
         Raises
@@ -191,7 +191,7 @@ class ControlLaw:
     #: True if the law can form its error's q through the notch (the nominal's q through
     #: a replica of the filter, with the case key ``tube.filter_nominal_q``), so that the
     #: design may certify the loop through the notch
-    #: (:func:`fahv.design.notch_loop.notch_tube`); otherwise the measured q alone is
+    #: (:func:`fahv.tube.notch_loop.notch_tube`); otherwise the measured q alone is
     #: filtered and only the loop's stability is checked.
     filters_nominal_q: ClassVar[bool] = False
     #: Case-file section the law needs (required only when a variant uses the law).
@@ -210,7 +210,7 @@ class ControlLaw:
         ----------
         ctx : object
             The design context of :func:`fahv.design.pipeline.run_design`
-            (:class:`fahv.design.context.DesignContext`: ``case`` data, ``vehicle``,
+            (:class:`fahv.spec.context.DesignContext`: ``case`` data, ``vehicle``,
             the ``arrays`` designed so far, ``log``).
 
         Returns

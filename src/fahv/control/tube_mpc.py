@@ -129,7 +129,7 @@ class TubeMPCLaw(PaperTubeMPCLaw):
 
         e'_q = notch(q) - notch(q_r + q_n) = notch(q - q_r - q_n),
 
-    the loop the notch certificate covers (:func:`fahv.design.notch_loop.notch_tube`,
+    the loop the notch certificate covers (:func:`fahv.tube.notch_loop.notch_tube`,
     xi = [e; chi]). Without the replica, e'_q would also carry (notch - 1)(q_r + q_n), a
     term of the nominal's manoeuvre neither W nor the filter's certificate holds
     (docs/theory/notch.md, "The notch loop certified in its own states"). The 11-state

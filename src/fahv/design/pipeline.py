@@ -19,8 +19,8 @@ one :class:`DesignState`:
    terminal check, the RMPC baseline's ellipsoids).
 
 Every certificate is re-checked where it is made and printed with its margin (the lines
-are in :mod:`fahv.design.report`); nothing is written unless all hold. What depends on a
-scenario (its x0, its vehicle draw) is not designed here (:mod:`fahv.design.scenario`).
+are in :mod:`fahv.certificate.report`); nothing is written unless all hold. What depends on a
+scenario (its x0, its vehicle draw) is not designed here (:mod:`fahv.spec.scenario`).
 """
 
 from __future__ import annotations
@@ -29,15 +29,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fahv.config.spec import defaults_text
-from fahv.control import LAWS, VARIANTS, variant_notch
-from fahv.design.artefacts import Design, provenance
-from fahv.design.case import Case
-from fahv.design.context import DesignContext
-from fahv.design.coverage import box_coverage
-from fahv.design.disturbance import DEFAULT_DU_BOX, deviation_box, sample_disturbance
-from fahv.design.feasibility import input_room
-from fahv.design.report import (
+from fahv.bounds.coverage import box_coverage
+from fahv.bounds.disturbance import DEFAULT_DU_BOX, deviation_box, sample_disturbance
+from fahv.bounds.vertices import fault_vertices, gain_vertices
+from fahv.certificate.report import (
     coverage_line,
     disturbance_line,
     no_estimate_line,
@@ -46,8 +41,9 @@ from fahv.design.report import (
     tp_model_line,
     tube_lmi_line,
 )
+from fahv.config.spec import defaults_text
+from fahv.control import LAWS, VARIANTS, variant_notch
 from fahv.design.tube_forms import TUBE_FORMS
-from fahv.design.vertices import fault_vertices, gain_vertices
 from fahv.errors import DesignError
 from fahv.model.linearize import classify_modes, linearize
 from fahv.model.notch import NotchFilter
@@ -55,8 +51,12 @@ from fahv.model.tp_model import build_tp_model
 from fahv.model.trim import trim_map
 from fahv.model.vehicle import IQ, Vehicle, load_vehicle
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.spec.artefacts import Design, provenance
+from fahv.spec.context import DesignContext
+from fahv.spec.schema import Case
 from fahv.synthesis.feedback import design_tube, verify_tube
 from fahv.synthesis.nominal import design_nominal, verify_nominal
+from fahv.tube.feasibility import input_room
 from fahv.version import __version__
 
 
@@ -90,10 +90,10 @@ def notch_checks(c: dict, notches: dict) -> tuple[dict, dict]:
 
     A law that forms its error's q with the same filter on the nominal's q as on the
     measured one (``LAWS[law].filters_nominal_q`` with the case key
-    ``tube.filter_nominal_q`` true) runs the loop :func:`fahv.design.notch_loop.notch_tube`
+    ``tube.filter_nominal_q`` true) runs the loop :func:`fahv.tube.notch_loop.notch_tube`
     certifies in its own states, [e; chi]. Any other notch variant filters the measured q
     alone: its error also carries (notch - 1)(q_r + q_n), which no certificate covers, so
-    only its stability is checked (:func:`fahv.design.notch_loop.notch_loop`).
+    only its stability is checked (:func:`fahv.tube.notch_loop.notch_loop`).
 
     Parameters
     ----------
@@ -118,7 +118,7 @@ def design_rho_f(case) -> float:
     """Smallest elevator effectiveness the tube is designed for (eq. 15): ``tube.rho_min``.
 
     The design covers every loss of effectiveness up to ``1 - rho_min``; a scenario's
-    fault beyond it is reported by :func:`fahv.design.scenario.uncertified`.
+    fault beyond it is reported by :func:`fahv.spec.scenario.uncertified`.
     """
     return float(case["tube"]["rho_min"])
 
@@ -340,8 +340,8 @@ def run_design(case: Case, vehicle=None, progress=None, log=print, clock=None) -
     Parameters
     ----------
     case : Case
-        A validated design file (:func:`fahv.design.case.load_design_file`), or a whole
-        case (a design's entries with a scenario's, :func:`fahv.design.case.case_spec`).
+        A validated design file (:func:`fahv.spec.schema.load_design_file`), or a whole
+        case (a design's entries with a scenario's, :func:`fahv.spec.schema.case_spec`).
     vehicle : fahv.model.vehicle.Vehicle, optional
         The vehicle to design for; the packaged vehicle file by default.
     progress : callable, optional
@@ -358,7 +358,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print, clock=None) -
         For a design file, its stored form (``case``: the design data). For a whole case,
         its design part (:func:`design_part`) designed with the case's command as design
         step, carrying the case and its scenario arrays
-        (:func:`fahv.design.scenario.scenario_design`), ready to run.
+        (:func:`fahv.spec.scenario.scenario_design`), ready to run.
 
     Raises
     ------
@@ -367,7 +367,7 @@ def run_design(case: Case, vehicle=None, progress=None, log=print, clock=None) -
     """
     veh = load_vehicle() if vehicle is None else vehicle
     if "command" in case.data:  # a whole case: its design part, then its scenario
-        from fahv.design.scenario import scenario_design
+        from fahv.spec.scenario import scenario_design
 
         design = run_design(design_part(case), veh, progress, log, clock)
         return scenario_design(design, case, veh, None, log)
@@ -390,7 +390,7 @@ def design_part(case: Case) -> Case:
     CaseError
         If the result does not validate as a design file.
     """
-    from fahv.design.case import SCENARIO_KEYS, case_from_mapping, design_spec
+    from fahv.spec.schema import SCENARIO_KEYS, case_from_mapping, design_spec
 
     c = case.data
     data = {k: v for k, v in c.items() if k not in SCENARIO_KEYS}

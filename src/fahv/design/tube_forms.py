@@ -9,7 +9,7 @@ the TP vertices for the sampled W) and the trim map, and fills in, through two c
   tightened inputs and the loss coverage are known, with the arrays the QP needs.
 
 Forms: ``vertices`` (:class:`VertexTube`, the paper's Z over the TP vertices for a
-sampled W, checked over its domain by :func:`fahv.design.vertex_tube.certify_tube`) and
+sampled W, checked over its domain by :func:`fahv.tube.vertex_tube.certify_tube`) and
 ``eight_state`` (:class:`EightStateTube`, the tube set (W_8, Z_8) along the nominal,
 closed over its own domain by :func:`fahv.design.tube_set_design.design_tube_set`).
 A new form subclasses :class:`TubeForm` and is added with :func:`register_tube_form`.
@@ -21,24 +21,24 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from fahv.control.mpc.attitude import attitude_bounds
-from fahv.control.mpc.estimator import estimator_gains
-from fahv.design.artefacts import variant_gain_key
-from fahv.design.disturbance import DEFAULT_DEV_BOX
-from fahv.design.domain import nominal_box
-from fahv.design.notch_loop import notch_loop, notch_tube
-from fahv.design.report import (
+from fahv.bounds.disturbance import DEFAULT_DEV_BOX
+from fahv.bounds.domain import nominal_box
+from fahv.certificate.report import (
     input_rows_line,
     nominal_range_line,
     notch_loop_line,
     state_rows_line,
     tube_set_lines,
 )
-from fahv.design.rows import input_rows, state_rows
+from fahv.control.mpc.attitude import attitude_bounds
+from fahv.control.mpc.estimator import estimator_gains
 from fahv.design.tube_set_design import design_tube_set
-from fahv.design.vertex_tube import certify_tube
 from fahv.errors import DesignError
 from fahv.model.vehicle import IQ
+from fahv.spec.artefacts import variant_gain_key
+from fahv.tube.notch_loop import notch_loop, notch_tube
+from fahv.tube.rows import input_rows, state_rows
+from fahv.tube.vertex_tube import certify_tube
 
 
 class TubeForm:
@@ -65,8 +65,8 @@ class VertexTube(TubeForm):
     """The paper's tube: Z over the TP vertices for the sampled W (LMI 24, eq. 25-28).
 
     Its notch loops are checked at the fault vertices (stability, or certified in the
-    loop's own states, :mod:`fahv.design.notch_loop`); its certificate is checked over
-    its domain (:func:`fahv.design.vertex_tube.certify_tube`): for a sampled W it is
+    loop's own states, :mod:`fahv.tube.notch_loop`); its certificate is checked over
+    its domain (:func:`fahv.tube.vertex_tube.certify_tube`): for a sampled W it is
     reported as not closed, with the measured factor.
     """
 
@@ -176,7 +176,7 @@ def command_range(case: dict, envelope) -> np.ndarray:
     """The eight-state tube's nominal h, V range, checked against the design step.
 
     The tube set is certified for a nominal inside its nominal box (the envelope less
-    ``eight_state.h_margin`` / ``V_margin``, :func:`fahv.design.domain.nominal_box`);
+    ``eight_state.h_margin`` / ``V_margin``, :func:`fahv.bounds.domain.nominal_box`);
     the QP keeps its set point and prediction in that range (``mpc.hv_box``).
 
     Parameters

@@ -20,17 +20,17 @@ import dask
 import numpy as np
 from dask import delayed
 
+from fahv.bounds.domain import SchedulingBox, nominal_box
+from fahv.bounds.one_step_bound import altitude_bound
+from fahv.bounds.vertices import NominalVertices, nominal_vertices
 from fahv.control.base import ATTITUDE_BOUND_DEG
-from fahv.design.closure import close_tube_set
-from fahv.design.domain import SchedulingBox, nominal_box
-from fahv.design.notch_gain import notch_gain
-from fahv.design.notch_loop import NotchLoop, notch_loop, notch_tube
-from fahv.design.one_step_bound import altitude_bound
-from fahv.design.onset import STEADY_LAMS, onset_bound, onset_jumps
-from fahv.design.report import notch_loop_line
-from fahv.design.tube_set import EIGHT_STATES, TubeSet
-from fahv.design.vertices import NominalVertices, nominal_vertices
+from fahv.onset.bound import STEADY_LAMS, onset_bound, onset_jumps
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.tube.closure import close_tube_set
+from fahv.tube.lines import notch_loop_line
+from fahv.tube.notch_gain import notch_gain
+from fahv.tube.notch_loop import NotchLoop, notch_loop, notch_tube
+from fahv.tube.tube_set import EIGHT_STATES, TubeSet
 
 
 def _state_max(case: dict, log) -> np.ndarray | None:

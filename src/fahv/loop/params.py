@@ -1,7 +1,7 @@
 """Node parameters of the SIL graph: declarations, validation, and their values per run.
 
 Every parameter is a :class:`fahv.config.Field`; scenario values reuse the case
-file's fields (:mod:`fahv.design.case`), so Ts, the command, the notch and the fault
+file's fields (:mod:`fahv.spec.schema`), so Ts, the command, the notch and the fault
 have one range everywhere. :func:`specs` lists the parameters of each node (the
 controller's include every registered law's own parameters, the fault injector's
 every registered fault kind's); the ROS nodes generate their descriptors from it
@@ -23,12 +23,12 @@ import numpy as np
 from fahv.config import Field
 from fahv.config.spec import validate_flat
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS, variant_notch
-from fahv.design.artefacts import variant_gain_key
-from fahv.design.case import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, TS
 from fahv.errors import ParameterError
 from fahv.loop.graph import CONTROLLER_NODES
 from fahv.plant.faults import FAULT_KIND, FAULTS, T_ONSET, fault_fields
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.spec.artefacts import variant_gain_key
+from fahv.spec.schema import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, TS
 
 COMMON = (
     Field("case", "str", "case name of the design (offline_design/<case>.yaml)"),
@@ -211,7 +211,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
 
     Parameters
     ----------
-    design : fahv.design.artefacts.Design
+    design : fahv.spec.artefacts.Design
     variant : str, optional
         A variant of the case (:data:`fahv.control.VARIANTS`; default: the case's
         first). The variant gives the law (its controller node, the nominal node's

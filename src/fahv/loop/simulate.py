@@ -225,7 +225,7 @@ def run_parameters(design, variant: str | None, duration, overrides: dict | None
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variant : str or None
         A variant of the case (its first by default).
     duration : float or None
@@ -330,7 +330,7 @@ def simulate(
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variant : str, optional
         One of the case's variants (:data:`fahv.control.VARIANTS`); the first by default.
     duration : float, optional

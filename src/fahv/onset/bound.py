@@ -19,19 +19,19 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from fahv.bounds.domain import SchedulingBox
+from fahv.bounds.one_step_bound import product_bound
+from fahv.bounds.plant_step import plant_step
+from fahv.bounds.vertices import NominalVertices
 from fahv.control.mpc.estimator import elevator_share
-from fahv.design.domain import SchedulingBox
-from fahv.design.one_step_bound import product_bound
-from fahv.design.onset_witness import OnsetWitness, onset_witness
-from fahv.design.plant_step import plant_step
-from fahv.design.vertices import NominalVertices
 from fahv.errors import DesignError
+from fahv.onset.witness import OnsetWitness, onset_witness
 from fahv.plant.rk4 import perturbed_records
 from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid
 from fahv.synthesis.rpi_level import vertex_levels
 
 if TYPE_CHECKING:
-    from fahv.design.tube_set import TubeSet
+    from fahv.tube.tube_set import TubeSet
 
 #: Contraction factors tried for the onset bound's steady set (:func:`steady_set`): the
 #: smallest ellipsoid RPI for the bound at one factor may not exist at another (on

@@ -92,7 +92,7 @@ def run_metadata(
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variant, source : str
     duration : float
         Simulated time [s].
@@ -173,7 +173,7 @@ def run_parameter_file(
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variant : str
     bag : Path
         Run folder the recorder creates.
@@ -335,7 +335,7 @@ def run_sil(
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variant : str, optional
         The case's first variant by default.
     duration : float, optional

@@ -1,6 +1,6 @@
 """Scenarios: one thing to fly on a stored design, checked against what the design certifies.
 
-A scenario file (:func:`fahv.design.case.scenario_spec`) names a design and gives the
+A scenario file (:func:`fahv.spec.schema.scenario_spec`) names a design and gives the
 command, the fault instance, the simulated vehicle draw, the duration and the variants.
 :func:`load_scenario` reads it, finds its design file, and forms the **case** the loop
 runs on (the design's entries with the scenario's); :func:`scenario_design` adds to a
@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 
 from fahv.control import LAWS, VARIANTS
-from fahv.design.artefacts import Design
-from fahv.design.case import Case, case_from_mapping, read_yaml_file, scenario_spec
 from fahv.errors import CaseError
 from fahv.model.trim import TrimMap
 from fahv.plant.faults import make_fault
 from fahv.plant.uncertainty import perturbed_params
+from fahv.spec.artefacts import Design
+from fahv.spec.schema import Case, case_from_mapping, read_yaml_file, scenario_spec
 
 #: Top-level entries of a design file that the case does not carry (the scenario's own
 #: command and vehicle draw replace them).
@@ -46,13 +46,13 @@ class Scenario:
     path : Path
         The scenario file.
     data : dict
-        Its validated entries (:func:`fahv.design.case.scenario_spec`).
+        Its validated entries (:func:`fahv.spec.schema.scenario_spec`).
     design_file : Path
         The design file it names.
     design : Case
         The validated design file.
     case : Case
-        The design's entries with the scenario's (:func:`fahv.design.case.case_spec`).
+        The design's entries with the scenario's (:func:`fahv.spec.schema.case_spec`).
     """
 
     path: Path
@@ -102,7 +102,7 @@ def form_case(design: Case, scenario: dict, path: str | Path) -> Case:
     Parameters
     ----------
     design : Case
-        A validated design file (:func:`fahv.design.case.load_design_file`).
+        A validated design file (:func:`fahv.spec.schema.load_design_file`).
     scenario : dict
         Validated scenario entries (``command``, ``fault``, ``uncertainty``,
         ``duration``, ``variants``, ``name``, ``description``).
@@ -136,7 +136,7 @@ def scenario_from_mapping(data, path: str | Path = "<mapping>") -> Scenario:
     CaseError
         Naming the file and the key at fault (scenario or design file).
     """
-    from fahv.design.case import load_design_file
+    from fahv.spec.schema import load_design_file
 
     v = case_from_mapping(data, str(path), scenario_spec())
     dfile = design_file_of(path, v["design"])
@@ -271,8 +271,8 @@ def scenario_arrays(
     DesignError
         If the baseline's ellipsoids cannot be designed for the scenario's step.
     """
-    from fahv.design.artefacts import load_arrays, save_arrays
-    from fahv.design.context import DesignContext
+    from fahv.spec.artefacts import load_arrays, save_arrays
+    from fahv.spec.context import DesignContext
 
     a = design.arrays
     tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
@@ -325,7 +325,7 @@ def scenario_design(
         ``case``: the scenario's case; ``arrays``: the design's with the scenario's;
         ``summary``: the design's, with ``plant_params`` of the vehicle draw,
         ``scenario_hash`` and ``content_hash`` (of this run's design, checked by
-        :func:`fahv.design.artefacts.load_design`). ``summary['design_hash']`` stays the
+        :func:`fahv.spec.artefacts.load_design`). ``summary['design_hash']`` stays the
         stored design's.
     """
     c = scenario_case.data

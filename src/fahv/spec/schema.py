@@ -300,7 +300,7 @@ def _command_section() -> Section:
 def case_spec() -> Section:
     """The whole case: a design's entries with one scenario's (what the loop runs on).
 
-    A case is never written by hand: :func:`fahv.design.scenario.load_scenario` forms it
+    A case is never written by hand: :func:`fahv.spec.scenario.load_scenario` forms it
     from a scenario file and the design it names, and validates it against this spec.
     """
     return Section(
@@ -452,14 +452,14 @@ def load_design_file(path: str | Path) -> Case:
 def load_case(path: str | Path) -> Case:
     """The whole case of a scenario file: its design's entries with its own.
 
-    See :func:`fahv.design.scenario.load_scenario`.
+    See :func:`fahv.spec.scenario.load_scenario`.
 
     Raises
     ------
     CaseError
         If the scenario or its design file is missing or does not validate.
     """
-    from fahv.design.scenario import load_scenario
+    from fahv.spec.scenario import load_scenario
 
     return load_scenario(path).case
 

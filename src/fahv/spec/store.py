@@ -4,8 +4,8 @@ A design made by ``fahv design`` is stored beside its design file
 (``offline_design/designs/<name>/``) and committed. :func:`stored_design` loads it and
 refuses it when its design file or vehicle changed (naming the command that re-makes
 it); :func:`load_or_design` gives a scenario its stored design after the design verified
-(:func:`fahv.design.verify.verified_design`) and the scenario stayed inside what the
-design certifies (:func:`fahv.design.scenario.uncertified`). Nothing here designs.
+(:func:`fahv.certificate.verify.verified_design`) and the scenario stayed inside what the
+design certifies (:func:`fahv.spec.scenario.uncertified`). Nothing here designs.
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ import sys
 import warnings
 from pathlib import Path
 
-from fahv.design.artefacts import load_design, stale_reason
-from fahv.design.case import load_design_file
-from fahv.design.scenario import load_scenario, scenario_design, uncertified
-from fahv.design.verify import verified_design
+from fahv.certificate.verify import verified_design
 from fahv.errors import CaseError, DesignError
 from fahv.model.vehicle import load_vehicle
+from fahv.spec.artefacts import load_design, stale_reason
+from fahv.spec.scenario import load_scenario, scenario_design, uncertified
+from fahv.spec.schema import load_design_file
 
 
 def design_dir(design_file: Path, name: str, out=None, vehicle=None) -> Path:
@@ -91,8 +91,8 @@ def load_or_design(
 
     The design is never made here: a missing or stale design is refused with the
     command that makes it (:func:`stored_design`); a stored design is verified once per
-    content (:func:`fahv.design.verify.verified_design`). What the scenario asks beyond
-    the design's certified range (:func:`fahv.design.scenario.uncertified`) is refused,
+    content (:func:`fahv.certificate.verify.verified_design`). What the scenario asks beyond
+    the design's certified range (:func:`fahv.spec.scenario.uncertified`) is refused,
     or with ``allow_uncertified`` reported as a warning.
 
     ``variants`` (all of the scenario's by default) are the variants that will run: what
@@ -102,7 +102,7 @@ def load_or_design(
     -------
     (Case, Design, Vehicle)
         The scenario's case, the design with the scenario's arrays
-        (:func:`fahv.design.scenario.scenario_design`), the vehicle.
+        (:func:`fahv.spec.scenario.scenario_design`), the vehicle.
 
     Raises
     ------

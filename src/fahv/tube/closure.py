@@ -16,14 +16,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fahv.design.domain import SchedulingBox, box_shortfall
-from fahv.design.one_step_bound import altitude_bound
-from fahv.design.report import closure_iteration_line
-from fahv.design.tube_set import TubeSet
-from fahv.design.vertices import NominalVertices
+from fahv.bounds.domain import SchedulingBox, box_shortfall
+from fahv.bounds.one_step_bound import altitude_bound
+from fahv.bounds.vertices import NominalVertices
 from fahv.errors import DesignError
 from fahv.synthesis.feedback import design_tube
 from fahv.synthesis.rpi_level import worst_level
+from fahv.tube.lines import closure_iteration_line
+from fahv.tube.tube_set import TubeSet
 
 
 def close_tube_set(

@@ -11,14 +11,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fahv.design.notch_loop import (
+from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid, output_feedback_step
+from fahv.synthesis.rpi_level import vertex_levels
+from fahv.tube.notch_loop import (
     NotchLoop,
     notch_certificate,
     notch_closed_loop,
     notch_loop_scale,
 )
-from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid, output_feedback_step
-from fahv.synthesis.rpi_level import vertex_levels
 
 
 @dataclass(frozen=True)

@@ -16,10 +16,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fahv.design.report import notch_loop_line
 from fahv.model.notch import DiscreteNotch
 from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid
 from fahv.synthesis.rpi_level import vertex_levels
+from fahv.tube.lines import notch_loop_line
 
 
 @dataclass(frozen=True)

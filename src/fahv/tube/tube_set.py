@@ -7,11 +7,11 @@ the tube's RPI condition. The tube (F_8, Z_8 = {e_8' N_8^-1 e_8 <= 1}) is design
 other eight states e_8 = (V, alpha, theta, q, eta_1, eta_1_dot, eta_2, eta_2_dot) with
 the ancillary gain blind to e_h, and the altitude error is bounded by the nominal MPC's
 reset of its h to the measured altitude at every re-plan (``mpc.h_reset``, M fast steps
-apart): |e_h| <= H (:func:`fahv.design.one_step_bound.altitude_bound`, eq. (1) there).
+apart): |e_h| <= H (:func:`fahv.bounds.one_step_bound.altitude_bound`, eq. (1) there).
 
 W_8 bounds the one-step disturbance over the product set {|e_h| <= H} x Z_8 in the
-integral form (:mod:`fahv.design.one_step_bound`); the closure iterates W_8 and Z_8 until
-the bound lies inside W_8 (:mod:`fahv.design.closure`). What the tube set assumes besides
+integral form (:mod:`fahv.bounds.one_step_bound`); the closure iterates W_8 and Z_8 until
+the bound lies inside W_8 (:mod:`fahv.tube.closure`). What the tube set assumes besides
 the vertices' own assumptions is :data:`ASSUMPTIONS`.
 """
 
@@ -22,11 +22,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fahv.design.domain import SchedulingBox, certified_range
+from fahv.bounds.domain import SchedulingBox, certified_range
 
 if TYPE_CHECKING:
-    from fahv.design.notch_loop import NotchLoop
-    from fahv.design.onset import OnsetBound
+    from fahv.onset.bound import OnsetBound
+    from fahv.tube.notch_loop import NotchLoop
 
 #: The states of the tube, after h (the design's state order without its first entry).
 EIGHT_STATES = ("V", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
@@ -60,7 +60,7 @@ class TubeSet:
     W_8 : (8,) ndarray
         Half-widths of W_8 (state units per period Ts).
     H : float
-        Altitude error bound [ft] (:func:`fahv.design.one_step_bound.altitude_bound`).
+        Altitude error bound [ft] (:func:`fahv.bounds.one_step_bound.altitude_bound`).
     lam : float
         Contraction factor of the tube LMI (24).
     bound : (8,) ndarray
@@ -75,13 +75,13 @@ class TubeSet:
         The h row's disturbance over the product set [ft].
     onset : OnsetBound, optional
         The onset of a loss as a transient of the tube set
-        (:func:`fahv.design.onset.onset_bound`).
+        (:func:`fahv.onset.bound.onset_bound`).
     notch_loops : tuple of NotchLoop
         The tube variants that feed q through a notch, their loops certified in their
-        own states at the tube set's vertices (:func:`fahv.design.notch_loop.notch_tube`).
+        own states at the tube set's vertices (:func:`fahv.tube.notch_loop.notch_tube`).
     notch_gains : dict
         ``{variant: (2, 8) ndarray}``: the gains designed for those loops and certified
-        (``eight_state.notch_gain: designed``, :func:`fahv.design.notch_gain.notch_gain`);
+        (``eight_state.notch_gain: designed``, :func:`fahv.tube.notch_gain.notch_gain`);
         such a variant runs its own gain in place of F_8.
     """
 
@@ -128,7 +128,7 @@ class TubeSet:
     def certified_range(self, box: SchedulingBox) -> SchedulingBox:
         """The nominal points the certificate covers: ``box`` less the tube.
 
-        :func:`fahv.design.domain.certified_range` of this tube set.
+        :func:`fahv.bounds.domain.certified_range` of this tube set.
         """
         return certified_range(box, self.F_8, self.N_8, self.H)
 
@@ -136,7 +136,7 @@ class TubeSet:
         """JSON-ready record of the tube set for the design summary (``certificate``).
 
         Units as the attributes; the boxes in their coordinates
-        (:data:`fahv.design.domain.BOX_COORDINATES`); ``certified_range`` is
+        (:data:`fahv.bounds.domain.BOX_COORDINATES`); ``certified_range`` is
         :meth:`certified_range` of the scheduling box.
         """
         return {

@@ -4,8 +4,8 @@ The tube Z = {e : e' N^-1 e <= 1} of LMI (24) is RPI for e+ = (A_i + B_i F) e + 
 the sampled box W, at every TP vertex i. That statement is only as true as W: W must
 bound the one-step disturbance of the perturbed, faulty nonlinear plant over every state
 and input the closed loop can reach. :func:`certify_tube` states that domain
-(:class:`fahv.design.domain.CertificateDomain`), bounds the disturbance over it
-(:func:`fahv.design.one_step_bound.bound_disturbance`), computes the exact RPI level and
+(:class:`fahv.bounds.domain.CertificateDomain`), bounds the disturbance over it
+(:func:`fahv.bounds.one_step_bound.bound_disturbance`), computes the exact RPI level and
 its margin (:mod:`fahv.synthesis.rpi_level`), and bounds the onset of a loss by the level
 recursion of the S-procedure certificate (:func:`onset_levels`). It reports; it does not
 refuse a design.
@@ -15,12 +15,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from fahv.control.mpc.estimator import estimator_gains
-from fahv.control.mpc.settings import MPC_SECTION_FIELDS
-from fahv.design.domain import CertificateDomain, nominal_half_widths, schedule_points
-from fahv.design.one_step_bound import bound_disturbance
-from fahv.design.plant_step import plant_step
-from fahv.design.report import (
+from fahv.bounds.domain import CertificateDomain, nominal_half_widths, schedule_points
+from fahv.bounds.one_step_bound import bound_disturbance
+from fahv.bounds.plant_step import plant_step
+from fahv.bounds.vertices import gain_vertices
+from fahv.certificate.report import (
     adjustable_tube_line,
     closed_line,
     domain_bound_line,
@@ -28,7 +27,8 @@ from fahv.design.report import (
     rpi_check_line,
     vertex_onset_line,
 )
-from fahv.design.vertices import gain_vertices
+from fahv.control.mpc.estimator import estimator_gains
+from fahv.control.mpc.settings import MPC_SECTION_FIELDS
 from fahv.model.vehicle import DELTA_E
 from fahv.plant.rk4 import params_records
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
@@ -129,7 +129,7 @@ def certify_tube(case: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi,
                  Dx, x_default, log, progress=None) -> dict:  # fmt: skip
     """Check the tube certificate against its own assumptions and report (no exception).
 
-    Prints, with margins (:mod:`fahv.design.report`): the exact worst one-step level
+    Prints, with margins (:mod:`fahv.certificate.report`): the exact worst one-step level
     over the vertices and the corners of W and the factor by which W may grow; the
     stated domain; the bound of the one-step disturbance over it per row, as a multiple
     of W; whether the certificate is closed (the bound inside W); the onset of a loss of
@@ -141,14 +141,14 @@ def certify_tube(case: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi,
         Validated case data (``mpc``, ``certificate``, ``uncertainty``, ``Ts``,
         ``plant_substeps``).
     vehicle, tp, trim_map
-        As :func:`fahv.design.one_step_bound.bound_disturbance`.
+        As :func:`fahv.bounds.one_step_bound.bound_disturbance`.
     A : (R, n, n) ndarray
     B : (R, n, m) ndarray
         Vertices of the tube certificate (fault vertices included).
     tube : fahv.synthesis.feedback.TubeDesign
     tau : float
         Adjustable factor (eq. 48). The RPI check covers every gain tau' F, tau' in
-        [tau, 1] (:func:`fahv.design.vertices.gain_vertices`); for tau < 1 it also
+        [tau, 1] (:func:`fahv.bounds.vertices.gain_vertices`); for tau < 1 it also
         reports the factor g for which eq. (53)'s tau Z is RPI (W' = g W, eq. 47).
     u_lo, u_hi : (2,) ndarray
         Tightened nominal input limits (absolute).
