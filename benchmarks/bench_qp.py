@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from fahv.cli.design import load_or_design
+from fahv.certificate.verified import load_or_design
 from fahv.control.mpc import tracking
 from fahv.loop.simulate import simulate
 

@@ -23,7 +23,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from fahv.cli.design import load_or_design
+from fahv.certificate.verified import load_or_design
 from fahv.control.mpc import tracking
 from fahv.loop.simulate import simulate
 

@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from fahv.cli.design import load_or_design
+from fahv.certificate.verified import load_or_design
 from fahv.control.rmpc import RMPCLaw
 from fahv.lanes import Lanes
 from fahv.loop.cores import ControllerCore

@@ -43,9 +43,9 @@ def test_simulate_runs_the_default_variant_unless_told(raw):
 
     from fahv.cli.run import selected_variants
     from fahv.errors import FahvError
-    from fahv.spec.schema import case_from_mapping
+    from fahv.spec.files import spec_file
 
-    case = case_from_mapping(raw, "case1.yaml")
+    case = spec_file(raw, "case1.yaml")
     assert selected_variants(case, None) == ["tube_mpc"]
     assert selected_variants(case, ["all"]) == list(raw["variants"])
     assert selected_variants(case, ["rmpc", "tube_mpc", "rmpc"]) == ["rmpc", "tube_mpc"]

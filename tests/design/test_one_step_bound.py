@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fahv.bounds.disturbance import DEFAULT_DEV_BOX
+from fahv.bounds.disturbance import STATE_DEVIATIONS
 from fahv.bounds.domain import (
     CertificateDomain,
     SchedulingBox,
@@ -352,7 +352,7 @@ def test_disturbance_bound_holds_on_100000_independent_samples(model):
     x_r, u_r = tm(h, V)
     nominal, notes = nominal_half_widths(
         {"reschedule": [100.0, 50.0], "dtheta_max": [300.0, 150.0], "att_max": 0.35},
-        DEFAULT_DEV_BOX,
+        STATE_DEVIATIONS,
     )
     dom = CertificateDomain(
         np.array([[h, V]]), 0.25 * nominal, 0.25 * nominal, u_r - [0.05, np.radians(2.0)],
@@ -386,7 +386,7 @@ def test_the_vertex_tube_W_bounds_the_disturbance_over_its_own_domain(design, mo
     a = design.arrays
     h, V = 85500.0, 7900.0
     x_r, u_r = tm(h, V)
-    nominal, notes = nominal_half_widths(design.case["mpc"], DEFAULT_DEV_BOX)
+    nominal, notes = nominal_half_widths(design.case["mpc"], STATE_DEVIATIONS)
     t = veh.limits.u_max - a["u_hi"]
     dom = CertificateDomain(
         np.array([[h, V]]), nominal + np.sqrt(np.diag(a["N"])), nominal, a["u_lo"] - t,

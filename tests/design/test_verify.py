@@ -88,7 +88,7 @@ def test_the_shipped_paper_design_is_what_its_design_file_makes(tmp_path):
     compares with the shipped arrays: a change of the code or the design file that moves
     the design is caught here (the slower cm_certified is covered by its verification)."""
     from fahv.design.pipeline import run_design
-    from fahv.spec.schema import load_design_file
+    from fahv.spec.files import load_design_file
 
     dfile = ROOT / "offline_design/designs/cm_paper.yaml"
     vehicle = load_vehicle()

@@ -113,14 +113,15 @@ def design_case2():
     import warnings
 
     from fahv.design.pipeline import run_design
-    from fahv.spec.schema import case_data, case_from_mapping
+    from fahv.spec.files import spec_file
+    from fahv.spec.scenario import run_spec_data
 
-    raw = case_data("offline_design/scenarios/case2.yaml")
+    raw = run_spec_data("offline_design/scenarios/case2.yaml")
     d = copy.deepcopy(raw)
     d["disturbance"]["samples"] = 40
     d["certificate"] = {"schedules": 0}  # checked in tests/design/test_one_step_bound.py
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    return run_design(case_from_mapping(d, "quick2.yaml"), log=lambda *_: None)
+    return run_design(spec_file(d, "quick2.yaml"), log=lambda *_: None)
 
 
 def test_case2_eleven_state_law_batched_and_equal(design_case2):

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from fahv.certificate.verified import load_or_design
 from fahv.runs.results import TOLERANCES, compare_reference, read_reference, run_case
-from fahv.spec.store import load_or_design
 
 REFERENCE = Path(__file__).parents[1] / "data" / "results_reference.json"
 

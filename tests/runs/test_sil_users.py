@@ -13,6 +13,7 @@ import domain_coordinator
 import numpy as np
 import pytest
 
+from fahv.certificate.verified import load_or_design
 from fahv.loop.graph import NODES, TOPICS
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import read_run, run_result_of
@@ -20,7 +21,6 @@ from fahv.runs.latency import run_latencies
 from fahv.runs.sil import run_sil
 from fahv.runs.workspace import ROOT, ros_env
 from fahv.runs.writer import RunWriter
-from fahv.spec.store import load_or_design
 
 pytestmark = pytest.mark.ros  # every test here runs the built node graph
 

@@ -39,6 +39,7 @@ import numpy as np
 from fahv.campaign import store
 from fahv.campaign.draws import _vehicle, draw, overrides, run_seed
 from fahv.campaign.spec import Campaign
+from fahv.certificate.verified import load_or_design
 from fahv.errors import CampaignError, DesignError
 from fahv.interrupt import deferred
 from fahv.loop.batch import simulate_batch
@@ -46,7 +47,6 @@ from fahv.loop.simulate import RunResult
 from fahv.model.vehicle import ALPHA, THETA, H, V, load_vehicle
 from fahv.runs.metrics import metrics
 from fahv.spec.artefacts import load_design, save_design
-from fahv.spec.store import load_or_design
 from fahv.version import __version__
 
 #: Decimation of the stored trajectories [s between samples].
@@ -244,12 +244,12 @@ def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=p
         design = load_design(out / "design")
     except DesignError:
         pass
-    same = design is not None and _same(design.case, campaign.case.data)
+    same = design is not None and _same(design.case, campaign.run_spec.data)
     if design is not None and done and not same:
         raise CampaignError(f"{out}: its design belongs to another scenario content; its runs "
                             "cannot be completed, use another --out")  # fmt: skip
     if not same:
-        design = load_or_design(campaign.case.path, None, veh.source_file if not veh.packaged
+        design = load_or_design(campaign.run_spec.path, None, veh.source_file if not veh.packaged
                                 else None, log=log, allow_uncertified=True)[1]  # fmt: skip
         save_design(design, out / "design")
     if man is None:
@@ -260,7 +260,7 @@ def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=p
                 "hash": campaign.content_hash(),
                 "campaign": campaign.data,
                 "campaign_file": str(campaign.path),
-                "case": campaign.case.data,
+                "case": campaign.run_spec.data,
                 "duration": campaign.duration,
                 "design_hash": design.summary["design_hash"],
                 "code_version": __version__,

@@ -1,23 +1,19 @@
-"""The certificate lines the design prints, each with its margin and verdict, in one place.
+"""The certificate lines a design prints, each with its margin and verdict: formatting only.
 
-Every function here formats a result computed elsewhere; none computes a certificate.
-The eight-state tube set: :func:`tube_set_lines` (with :func:`range_line`,
-:func:`onset_lines` and :func:`notch_loop_line`) and :func:`closure_iteration_line`. The
-paper's vertex tube checked over its domain: :func:`rpi_check_line`,
-:func:`adjustable_tube_line`, :func:`domain_line`, :func:`domain_bound_line`,
-:func:`closed_line` and :func:`vertex_onset_line`.
+Every function here formats a result computed elsewhere and computes nothing; no
+computation imports this module (the design's stages call it, an import-linter contract
+holds it). The eight-state tube set: :func:`tube_set_lines` (with :func:`range_line`,
+:func:`onset_lines` and the notch loops' lines). The paper's vertex tube checked over its
+domain: :func:`vertex_certificate_lines`. The stages' own lines follow. The two lines the
+tube's computations print while they run (a closure iteration, a notch loop's verdict)
+are :mod:`fahv.tube.lines`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from fahv.bounds.domain import (
-    BOX_COORDINATES,
-    OTHER_COORDINATES,
-    SchedulingBox,
-    product_supports,
-)
+from fahv.bounds.domain import SchedulingBox
 from fahv.tube.lines import join as _join
 from fahv.tube.lines import notch_loop_line
 from fahv.tube.tube_set import ASSUMPTIONS, EIGHT_STATES
@@ -35,7 +31,7 @@ def range_line(cert: SchedulingBox, nominal: SchedulingBox) -> str:
         f"applied Phi {cert.lo[4]:+.4f}..{cert.hi[4]:+.4f} and delta_e "
         f"{deg(cert.lo[5]):+.3f}..{deg(cert.hi[5]):+.3f} deg from the trim's, |q| <= "
         f"{deg(o[0]):.3f} deg/s, |eta_1|, |eta_1_dot|, |eta_2|, |eta_2_dot| <= {o[1]:.3f}, "
-        f"{o[2]:.3f}, {o[3]:.3f}, {o[4]:.3f} from the trim's (the case's nominal box, "
+        f"{o[2]:.3f}, {o[3]:.3f}, {o[4]:.3f} from the trim's (the design's nominal box, "
         f"e.g. alpha +/-{deg(nominal.hi[2]):.3f} deg, is the part the QP's rows keep)"
     )
 
@@ -55,11 +51,7 @@ def tube_set_lines(tube_set, nominal: SchedulingBox, box: SchedulingBox) -> list
         W_8's bound, the closure, the altitude bound, the box's reach, the certified
         range, Z_8's supports, the assumptions, then the onset lines and the notch loops.
     """
-    s_lo, s_oth = product_supports(tube_set.F_8, tube_set.N_8, tube_set.H)
-    lo, hi, oth = box.margin_to(nominal)
-    room = np.r_[np.minimum(lo, hi)[1:] / s_lo[1:], oth / s_oth]
-    names = [*BOX_COORDINATES[1:], *OTHER_COORDINATES]
-    worst = int(np.argmin(room))
+    reach, where = tube_set.reach(nominal, box)
     sz = np.sqrt(np.diag(tube_set.N_8))
     t = tube_set.tightening
     return [
@@ -72,7 +64,7 @@ def tube_set_lines(tube_set, nominal: SchedulingBox, box: SchedulingBox) -> list
         f"altitude: |e_h| <= H = {tube_set.H:.3f} ft by the reset every {tube_set.moves} "
         f"steps (step {tube_set.step:.4f} ft, w_h {tube_set.w_h:.4f} ft)",
         f"scheduling box holds the nominal box plus the tube: smallest reach "
-        f"{room[worst]:.2f} x the tube's support ({names[worst]})  OK",
+        f"{reach:.2f} x the tube's support ({where})  OK",
         range_line(tube_set.certified_range(box), nominal),
         f"Z_8 supports: V {sz[0]:.3f} ft/s, alpha {np.degrees(sz[1]):.4f} deg, theta "
         f"{np.degrees(sz[2]):.4f} deg, q {np.degrees(sz[3]):.4f} deg/s; tightening "
@@ -106,7 +98,7 @@ def onset_lines(onset) -> list[str]:
         f"{onset.contraction:.5f} per step, level bound {onset.peak:.3f} "
         + ("<= 1  OK" if ok else "> 1: NOT certified"),
         f"largest loss whose onset keeps e in Z_8: {100 * onset.certified_loss:.2f} % with "
-        f"the case's estimate, {100 * onset.certified_loss_one_step:.2f} % with an estimate "
+        f"the design's estimate, {100 * onset.certified_loss_one_step:.2f} % with an estimate "
         "that knows the whole loss one step after it acts (the first step alone, which no "
         "estimate can remove)",
         f"the first jump state by state, x Z_8's support: {share}; its Z_8 norm without the "
@@ -174,7 +166,7 @@ def domain_line(dom, n_schedules: int) -> str:
         f"within nominal + Z = +/-[{_join(dom.x_half, '.3g', ', ')}]; inputs Phi in "
         f"[{dom.u_lo[0]:.3f}, {dom.u_hi[0]:.3f}], delta_e in [{np.degrees(dom.u_lo[1]):.1f}, "
         f"{np.degrees(dom.u_hi[1]):.1f}] deg (tightened set + tau F Z); all "
-        f"{2 ** len(dom.uncertainty)} corners of the sec. 5.1 box; rho_f in {list(dom.rho)}. "
+        f"{2 ** len(dom.uncertainty)} corners of the parameter box; rho_f in {list(dom.rho)}. "
         "Assumed: " + "; ".join(dom.notes)
     )
 
@@ -213,7 +205,40 @@ def vertex_onset_line(rho_min: float, delta_e: float, est_tau, level_max: float)
     )
 
 
-# -- the design pipeline's own lines (fahv.design.pipeline, fahv.design.tube_forms) ------
+def vertex_certificate_lines(cert) -> list[str]:
+    """The lines of the vertex tube checked over its domain, in the order it was checked.
+
+    Parameters
+    ----------
+    cert : fahv.tube.vertex_tube.VertexCertificate
+
+    Returns
+    -------
+    list of str
+        The exact RPI check (:func:`rpi_check_line`; :func:`adjustable_tube_line` for
+        tau < 1), then the domain (:func:`domain_line`), the bound over it
+        (:func:`domain_bound_line`), whether it closes (:func:`closed_line`) and the onset
+        (:func:`vertex_onset_line`), or why the domain was not checked.
+    """
+    r = cert.rpi
+    lines = [rpi_check_line(r.level, r.n_vertices, r.n_corners, r.growth, r.tau)]
+    if r.tau < 1:
+        lines.append(adjustable_tube_line(r.tau, r.level_tau, r.w_prime))
+    if cert.skipped is not None:
+        return lines + [
+            f"certificate domain: {cert.skipped}; the tube certificate is NOT checked over "
+            "its domain"
+        ]
+    return lines + [
+        domain_line(cert.domain, cert.n_schedules),
+        domain_bound_line(cert.bound.n_evaluations, cert.ratio, cert.slack),
+        closed_line(cert.closed, cert.ratio, r.growth),
+        vertex_onset_line(cert.rho_min, cert.domain.u_hi[1], cert.est_tau,
+                          cert.onset_level_max),  # fmt: skip
+    ]
+
+
+# -- the stages' own lines (fahv.design.stages, fahv.design.tube_forms) -------------------
 def tp_model_line(kind: str, n_vertices: int, Ts: float) -> str:
     """The TP model's line: design model, vertex count (eq. 11), control period [s]."""
     return f"TP model: {kind.upper()}, {n_vertices} vertices, Ts = {Ts} s"

@@ -11,10 +11,10 @@ from fahv.certificate.verify import require_verified, verify
 from fahv.cli.common import add_vehicle_option, progress, vehicle_of
 from fahv.design.pipeline import run_design
 from fahv.design.stage_clock import StageClock
-from fahv.errors import CaseError, DesignError
+from fahv.errors import DesignError, SpecError
 from fahv.spec.artefacts import load_design, save_design
+from fahv.spec.files import load_design_file, read_yaml_file
 from fahv.spec.scenario import load_scenario
-from fahv.spec.schema import load_design_file, read_yaml_file
 from fahv.spec.store import design_dir, stored_design
 
 
@@ -82,7 +82,7 @@ def resolve_design_file(path: str | Path) -> Path:
 
     Raises
     ------
-    CaseError
+    SpecError
         If ``path`` is none of them.
     """
     p = Path(path)
@@ -92,7 +92,7 @@ def resolve_design_file(path: str | Path) -> Path:
                 p = d / f"{p}.yaml"
                 break
         else:
-            raise CaseError(f"no design or scenario named {path!r} in offline_design/")
+            raise SpecError(f"no design or scenario named {path!r} in offline_design/")
     data = read_yaml_file(p, "design or scenario file")
     if isinstance(data, dict) and "design" in data and "design_step" not in data:
         return load_scenario(p).design_file

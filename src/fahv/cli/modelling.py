@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fahv.bounds.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX
+from fahv.bounds.disturbance import INPUT_DEVIATIONS, STATE_DEVIATIONS
 from fahv.cli.common import add_vehicle_option, progress, shape_arg, vehicle_of
 from fahv.errors import FahvError
 from fahv.model import figures as plots
@@ -179,10 +179,10 @@ def cmd_tube(args) -> int:
     veh = vehicle_of(args)
     rho_f = args.rho_f
     if rho_f is None:  # the effectiveness the case's design covers
-        from fahv.design.pipeline import design_rho_f
-        from fahv.spec.schema import load_case
+        from fahv.design.stages import design_rho_f
+        from fahv.spec.scenario import load_run_spec
 
-        rho_f = design_rho_f(load_case(args.case))
+        rho_f = design_rho_f(load_run_spec(args.case))
         print(f"rho_f = {rho_f:g}: the elevator effectiveness {args.case} designs its tube for")
     tp = _tp(args, veh, args.model, args.vertices)
     Dx = veh.state_scale
@@ -197,8 +197,8 @@ def cmd_tube(args) -> int:
             args.Ts,
             PAPER_UNCERTAINTY,
             rho_f,
-            DEFAULT_DEV_BOX,
-            DEFAULT_DU_BOX,
+            STATE_DEVIATIONS,
+            INPUT_DEVIATIONS,
             args.samples_w,
             args.seed,
             args.margin,

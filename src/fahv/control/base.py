@@ -77,7 +77,8 @@ class NominalSource:
         Parameters
         ----------
         ctx : fahv.spec.context.DesignContext
-            ``case`` data, ``vehicle``, the ``arrays`` designed so far, ``log``.
+            ``spec`` (the design data and its command), ``vehicle``, the ``arrays``
+            designed so far, ``log``.
 
         Raises
         ------
@@ -210,7 +211,7 @@ class ControlLaw:
         ----------
         ctx : object
             The design context of :func:`fahv.design.pipeline.run_design`
-            (:class:`fahv.spec.context.DesignContext`: ``case`` data, ``vehicle``,
+            (:class:`fahv.spec.context.DesignContext`: ``spec`` data, ``vehicle``,
             the ``arrays`` designed so far, ``log``).
 
         Returns

@@ -199,13 +199,13 @@ class RMPCLaw(ControlLaw):
         # offline only: the nodes and the campaign workers never import cvxpy (0.6 s each)
         from fahv.synthesis.offline_rmpc import design_sequence
 
-        r = ctx.case["rmpc"]
+        r = ctx.spec["rmpc"]
         rv = r["vertices"]
-        dm = build_tp_model(ctx.vehicle, "dm", rv[0], rv[1], *ctx.case["samples"])
-        dmd = dm.discretize(ctx.case["Ts"])
+        dm = build_tp_model(ctx.vehicle, "dm", rv[0], rv[1], *ctx.spec["samples"])
+        dmd = dm.discretize(ctx.spec["Ts"])
         a = ctx.arrays
         tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
-        cmd = ctx.case["command"]
+        cmd = ctx.spec["command"]
         x_r = np.asarray(tm(cmd["h_c"], cmd["V_c"])[0][:NX], float)
         d = np.asarray(a["x0"][:NX], float) - x_r
         Dx = np.asarray(dm.state_scale, float)[:NX]

@@ -28,7 +28,7 @@ def input_rows(trim_offsets, nominal: SchedulingBox) -> np.ndarray:
     ----------
     trim_offsets : tuple of (2,) ndarray
         (lo, hi) of the corners' trim inputs minus the nominal trim [Phi -, delta_e rad]
-        (:meth:`fahv.bounds.coverage.BoxCoverage.trim_offsets`).
+        (:meth:`fahv.bounds.coverage.LossCoverage.trim_offsets`).
     nominal : SchedulingBox
         The nominal box (its Phi and delta_e coordinates).
 

@@ -18,14 +18,19 @@ the vertices' own assumptions is :data:`ASSUMPTIONS`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fahv.bounds.domain import SchedulingBox, certified_range
+from fahv.bounds.domain import (
+    BOX_COORDINATES,
+    OTHER_COORDINATES,
+    SchedulingBox,
+    certified_range,
+    product_supports,
+)
 
 if TYPE_CHECKING:
-    from fahv.onset.bound import OnsetBound
     from fahv.tube.notch_loop import NotchLoop
 
 #: The states of the tube, after h (the design's state order without its first entry).
@@ -73,9 +78,10 @@ class TubeSet:
         Largest one-step change of e_h by the tube's own dynamics [ft].
     w_h : float
         The h row's disturbance over the product set [ft].
-    onset : OnsetBound, optional
+    onset : fahv.onset.bound.OnsetBound, optional
         The onset of a loss as a transient of the tube set
-        (:func:`fahv.onset.bound.onset_bound`).
+        (:func:`fahv.onset.bound.onset_bound`, which takes a closed tube set: the onset
+        package sits above this one, so the type is not imported here).
     notch_loops : tuple of NotchLoop
         The tube variants that feed q through a notch, their loops certified in their
         own states at the tube set's vertices (:func:`fahv.tube.notch_loop.notch_tube`).
@@ -95,7 +101,7 @@ class TubeSet:
     moves: int
     step: float
     w_h: float
-    onset: OnsetBound | None = None
+    onset: Any = None
     notch_loops: tuple[NotchLoop, ...] = ()
     notch_gains: dict = field(default_factory=dict)
 
@@ -131,6 +137,21 @@ class TubeSet:
         :func:`fahv.bounds.domain.certified_range` of this tube set.
         """
         return certified_range(box, self.F_8, self.N_8, self.H)
+
+    def reach(self, nominal: SchedulingBox, box: SchedulingBox) -> tuple[float, str]:
+        """How far the scheduling box reaches beyond the nominal box, in tube supports.
+
+        The smallest over the coordinates after h of the box's margin beyond the nominal
+        box (its nearer side) over the product set's support there
+        (:func:`fahv.bounds.domain.product_supports`), and that coordinate's name; at
+        least 1 when the box holds the nominal box grown by the tube.
+        """
+        s_lo, s_oth = product_supports(self.F_8, self.N_8, self.H)
+        lo, hi, oth = box.margin_to(nominal)
+        room = np.r_[np.minimum(lo, hi)[1:] / s_lo[1:], oth / s_oth]
+        names = [*BOX_COORDINATES[1:], *OTHER_COORDINATES]
+        worst = int(np.argmin(room))
+        return float(room[worst]), names[worst]
 
     def summary(self, nominal: SchedulingBox, box: SchedulingBox) -> dict:
         """JSON-ready record of the tube set for the design summary (``certificate``).

@@ -7,26 +7,21 @@ and input the closed loop can reach. :func:`certify_tube` states that domain
 (:class:`fahv.bounds.domain.CertificateDomain`), bounds the disturbance over it
 (:func:`fahv.bounds.one_step_bound.bound_disturbance`), computes the exact RPI level and
 its margin (:mod:`fahv.synthesis.rpi_level`), and bounds the onset of a loss by the level
-recursion of the S-procedure certificate (:func:`onset_levels`). It reports; it does not
+recursion of the S-procedure certificate (:func:`onset_levels`). It reports
+(:class:`VertexCertificate`, its lines in :mod:`fahv.certificate.report`); it does not
 refuse a design.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from fahv.bounds.domain import CertificateDomain, nominal_half_widths, schedule_points
-from fahv.bounds.one_step_bound import bound_disturbance
+from fahv.bounds.one_step_bound import DisturbanceBound, bound_disturbance
 from fahv.bounds.plant_step import plant_step
 from fahv.bounds.vertices import gain_vertices
-from fahv.certificate.report import (
-    adjustable_tube_line,
-    closed_line,
-    domain_bound_line,
-    domain_line,
-    rpi_check_line,
-    vertex_onset_line,
-)
 from fahv.control.mpc.estimator import estimator_gains
 from fahv.control.mpc.settings import MPC_SECTION_FIELDS
 from fahv.model.vehicle import DELTA_E
@@ -96,49 +91,151 @@ def fault_jump(vehicle, trim_map, u_hi_abs: float, rho: float, Ts, n_sub) -> np.
                   axis=0)  # fmt: skip
 
 
-def _rpi_check(A, B, tube, tau, log) -> dict:
+@dataclass(frozen=True)
+class RPICheck:
+    """The exact RPI level of the vertex tube for W over every gain tau' F (:func:`rpi_check`).
+
+    Attributes
+    ----------
+    level : float
+        Worst one-step level over the vertices (the gains tau' F included) and the
+        corners of W (:func:`fahv.synthesis.rpi_level.worst_level`).
+    n_vertices, n_corners : int
+        Vertices and corners of W checked.
+    growth : float
+        The factor W may grow by (:func:`fahv.synthesis.rpi_level.rpi_margin`).
+    tau : float
+        Adjustable factor (eq. 48).
+    level_tau, w_prime : float or None
+        For tau < 1: the level of eq. (53)'s tau Z for W and the factor g for which it is
+        RPI (W' = g W, eq. 47).
+    """
+
+    level: float
+    n_vertices: int
+    n_corners: int
+    growth: float
+    tau: float
+    level_tau: float | None = None
+    w_prime: float | None = None
+
+
+def rpi_check(A, B, tube, tau) -> RPICheck:
     """The exact RPI level for W over every gain tau' F, and for tau < 1 that of tau Z."""
     w = tube.w_max
     At, Bt = gain_vertices(A, B, tau)  # every gain tau' F, tau' in [tau, 1] (eq. 48)
     level, _ = worst_level(At, Bt, tube.F, tube.N, w)
     growth = rpi_margin(At, Bt, tube.F, tube.N, w)
-    log(rpi_check_line(level, At.shape[0], 2**w.size, growth, tau))
-    out = {"rpi_level": level, "rpi_growth": growth, "certified": False}
-    if tau < 1:  # eq. (53)'s smaller tube tau Z: RPI for the incomplete set W' only
-        level_t = worst_level(A, B, tube.F, tube.N, w, tau)[0]
-        w_prime = rpi_margin(A, B, tube.F, tube.N, w, tau)
-        log(adjustable_tube_line(tau, level_t, w_prime))
-        out.update(rpi_level_tau=level_t, w_prime=w_prime)
-    return out
+    if tau >= 1:
+        return RPICheck(level, At.shape[0], 2**w.size, growth, tau)
+    # eq. (53)'s smaller tube tau Z: RPI for the incomplete set W' only
+    level_t = worst_level(A, B, tube.F, tube.N, w, tau)[0]
+    w_prime = rpi_margin(A, B, tube.F, tube.N, w, tau)
+    return RPICheck(level, At.shape[0], 2**w.size, growth, tau, level_t, w_prime)
 
 
-def _domain(case, mpc, vehicle, tube, tau, u_lo, u_hi, rho_min, x_default) -> CertificateDomain:
+@dataclass(frozen=True)
+class VertexCertificate:
+    """The vertex tube checked against its own assumptions (:func:`certify_tube`).
+
+    Attributes
+    ----------
+    rpi : RPICheck
+    skipped : str or None
+        Why the check over the domain was not made (None: it was).
+    n_schedules : int
+        Scheduling points of the domain (``certificate.schedules``).
+    domain : CertificateDomain or None
+    bound : fahv.bounds.one_step_bound.DisturbanceBound or None
+        The one-step bound over the domain.
+    w_max : (n,) ndarray
+        Half-widths of W.
+    rho_min : float
+        Smallest elevator effectiveness of the fault range.
+    est_tau : float or None
+        The disturbance estimate's time constant [s] (``mpc.est_tau``).
+    onset_level_max : float or None
+        Largest level bound after the onset of the loss 1 - rho_min (:func:`onset_levels`).
+    """
+
+    rpi: RPICheck
+    skipped: str | None
+    n_schedules: int
+    domain: CertificateDomain | None = None
+    bound: DisturbanceBound | None = None
+    w_max: np.ndarray | None = None
+    rho_min: float = 1.0
+    est_tau: float | None = None
+    onset_level_max: float | None = None
+
+    @property
+    def ratio(self) -> np.ndarray:
+        """Bound / W per row (the domain check made)."""
+        return self.bound.w_bound / self.w_max
+
+    @property
+    def slack(self) -> np.ndarray:
+        """(W - bound) / W per row (the domain check made)."""
+        return (self.w_max - self.bound.w_bound) / self.w_max
+
+    @property
+    def closed(self) -> bool:
+        """True if the bound over the domain lies inside W (the domain check made)."""
+        return bool(np.all(self.bound.w_bound <= self.w_max))
+
+    def summary(self) -> dict:
+        """JSON-able record (the design summary's ``certificate``).
+
+        ``certified`` (bool), ``rpi_level``, ``rpi_growth``; for tau < 1 ``rpi_level_tau``
+        and ``w_prime``; then either ``domain`` (why it was skipped) or the bound per row
+        (``w_bound``, ``w_ratio``, ``slack``, ``corner_max``, ``worst``),
+        ``onset_level_max`` and the ``domain``.
+        """
+        r = self.rpi
+        out = {"rpi_level": r.level, "rpi_growth": r.growth, "certified": False}
+        if r.tau < 1:
+            out.update(rpi_level_tau=r.level_tau, w_prime=r.w_prime)
+        if self.skipped is not None:
+            out["domain"] = self.skipped
+            return out
+        bnd, level_max = self.bound, self.onset_level_max
+        out.update(
+            certified=self.closed and level_max <= 1.0 and r.level <= 1.0,
+            w_bound=bnd.w_bound.tolist(), w_ratio=self.ratio.tolist(),
+            slack=self.slack.tolist(), corner_max=bnd.corner_max.tolist(),
+            worst=bnd.worst, onset_level_max=level_max, domain=self.domain.summary(),
+        )  # fmt: skip
+        return out
+
+
+def _domain(spec, mpc, vehicle, tube, tau, u_lo, u_hi, rho_min, x_default) -> CertificateDomain:
     """The domain of the certificate: the QP's nominal ranges plus Z, the inputs plus F Z."""
     nominal, notes = nominal_half_widths(mpc, x_default)
     z_box = tube.z_box  # under the whole W the error stays in Z, also for tau < 1
     t = tau * tube.tightening  # the input deviation tau F e, e in Z
-    unc = {k: v * case["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
+    unc = {k: v * spec["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
     return CertificateDomain(
-        schedule_points(vehicle.envelope, case["certificate"]["schedules"]), nominal + z_box,
-        nominal, u_lo - t, u_hi + t, unc, tuple(sorted({rho_min, 1.0})), case["Ts"],
-        case["plant_substeps"], notes,
+        schedule_points(vehicle.envelope, spec["certificate"]["schedules"]), nominal + z_box,
+        nominal, u_lo - t, u_hi + t, unc, tuple(sorted({rho_min, 1.0})), spec["Ts"],
+        spec["plant_substeps"], notes,
     )  # fmt: skip
 
 
-def certify_tube(case: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi, rho_min,
-                 Dx, x_default, log, progress=None) -> dict:  # fmt: skip
-    """Check the tube certificate against its own assumptions and report (no exception).
+def certify_tube(spec: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi, rho_min,
+                 Dx, x_default, progress=None) -> VertexCertificate:  # fmt: skip
+    """Check the tube certificate against its own assumptions (no exception).
 
-    Prints, with margins (:mod:`fahv.certificate.report`): the exact worst one-step level
-    over the vertices and the corners of W and the factor by which W may grow; the
-    stated domain; the bound of the one-step disturbance over it per row, as a multiple
-    of W; whether the certificate is closed (the bound inside W); the onset of a loss of
-    1 - rho_min at the largest elevator of the domain (:func:`onset_levels`).
+    Computes: the exact worst one-step level over the vertices and the corners of W and
+    the factor by which W may grow (:func:`rpi_check`); the stated domain; the bound of
+    the one-step disturbance over it per row, as a multiple of W; whether the
+    certificate is closed (the bound inside W); the onset of a loss of 1 - rho_min at the
+    largest elevator of the domain (:func:`onset_levels`). Its lines, with margins, are
+    :func:`fahv.certificate.report.vertex_certificate_lines`.
 
     Parameters
     ----------
-    case : dict
-        Validated case data (``mpc``, ``certificate``, ``uncertainty``, ``Ts``,
+    spec : dict
+        Validated design data (``mpc``, ``certificate``, ``uncertainty``, ``Ts``,
         ``plant_substeps``).
     vehicle, tp, trim_map
         As :func:`fahv.bounds.one_step_bound.bound_disturbance`.
@@ -157,47 +254,31 @@ def certify_tube(case: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi,
         State scaling of the tube certificate (mu is in these units).
     x_default : (n,) ndarray
         Assumed nominal deviations of the states no QP row bounds.
-    log : callable
     progress : callable, optional
         Iterable wrapper (tqdm) of the bound's loop.
 
     Returns
     -------
-    dict
-        Summary (JSON-able): ``certified`` (bool), per-row ``w_ratio`` and ``slack``,
-        ``rpi_level``, ``rpi_growth``, ``onset_level_max``, the domain; for tau < 1
-        ``rpi_level_tau`` (tau Z for W) and ``w_prime`` (g).
+    VertexCertificate
+        Its :meth:`VertexCertificate.summary` is the design summary's ``certificate``.
     """
-    out = _rpi_check(A, B, tube, tau, log)
-    n_s = case["certificate"]["schedules"]
+    rpi = rpi_check(A, B, tube, tau)
+    n_s = spec["certificate"]["schedules"]
     if n_s == 0 or A.shape[1] != 9:
         why = (
             "skipped (certificate.schedules: 0)"
             if n_s == 0
             else (f"not evaluated for the {A.shape[1]}-state design model (9-state CM/DM only)")
         )
-        log(f"certificate domain: {why}; the tube certificate is NOT checked over its domain")
-        out["domain"] = why
-        return out
-    mpc = case.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
-    dom = _domain(case, mpc, vehicle, tube, tau, u_lo, u_hi, rho_min, x_default)
-    log(domain_line(dom, n_s))
+        return VertexCertificate(rpi, why, n_s)
+    mpc = spec.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
+    dom = _domain(spec, mpc, vehicle, tube, tau, u_lo, u_hi, rho_min, x_default)
     w = tube.w_max
     bnd = bound_disturbance(dom, vehicle, tp, trim_map, progress)
-    ratio = bnd.w_bound / w
-    log(domain_bound_line(bnd.n_evaluations, ratio, (w - bnd.w_bound) / w))
-    closed = bool(np.all(bnd.w_bound <= w))
-    log(closed_line(closed, ratio, out["rpi_growth"]))
     # onset of the design loss at the largest elevator of the domain, estimate's pulse
-    gamma, _ = estimator_gains(case["Ts"], mpc.get("est_tau", 0.0))
-    J = fault_jump(vehicle, trim_map, float(dom.u_hi[1]), rho_min, case["Ts"],
-                   case["plant_substeps"])  # fmt: skip
+    gamma, _ = estimator_gains(spec["Ts"], mpc.get("est_tau", 0.0))
+    J = fault_jump(vehicle, trim_map, float(dom.u_hi[1]), rho_min, spec["Ts"],
+                   spec["plant_substeps"])  # fmt: skip
     Ls = onset_levels(tube.lam, tube.mu, np.minimum(bnd.w_bound, w) / Dx, J / Dx, gamma, 2000)
-    log(vertex_onset_line(rho_min, dom.u_hi[1], mpc.get("est_tau"), float(Ls.max())))
-    out.update(
-        certified=closed and Ls.max() <= 1.0 and out["rpi_level"] <= 1.0,
-        w_bound=bnd.w_bound.tolist(), w_ratio=ratio.tolist(),
-        slack=((w - bnd.w_bound) / w).tolist(), corner_max=bnd.corner_max.tolist(),
-        worst=bnd.worst, onset_level_max=float(Ls.max()), domain=dom.summary(),
-    )  # fmt: skip
-    return out
+    return VertexCertificate(rpi, None, n_s, dom, bnd, w, rho_min, mpc.get("est_tau"),
+                             float(Ls.max()))  # fmt: skip

@@ -483,8 +483,8 @@ class TrackingMPCNominal(NominalSource):
 
         a = ctx.arrays
         u_lo, u_hi = a["u_lo"], a["u_hi"]
-        cmd = ctx.case["command"]
-        mpc = ctx.case.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
+        cmd = ctx.spec["command"]
+        mpc = ctx.spec.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
         offset = float(a["att_trim_offset"]) if "att_trim_offset" in a else 0.0
         att = attitude_bounds(a["N"], mpc["att_max"], offset)
         ctx.log(att.report())
