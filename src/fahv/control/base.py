@@ -143,27 +143,27 @@ class LawStep:
         Tube error x - x_r - x_n (or x - x_r without a tube).
     level : (B,) ndarray
         e' N^-1 e (<= 1 inside the tube Z; NaN without a tube).
-    lmi : (B, 3) int ndarray
-        Online LMI solves, certified fallbacks and rejected solves so far (zeros
-        for laws without online LMIs).
+    lmi_failed : (B,) int ndarray
+        Steps so far with the state outside the law's largest ellipsoid (the RMPC
+        baseline's E_1; zeros for the tube laws).
     """
 
     u: np.ndarray
     e: np.ndarray
     level: np.ndarray
-    lmi: np.ndarray
+    lmi_failed: np.ndarray
 
 
 @functools.cache
-def no_lmi(n_runs: int) -> np.ndarray:
-    """Zero online-LMI counters (n_runs, 3) of a law without online LMIs (read-only, shared).
+def no_lmi_failed(n_runs: int) -> np.ndarray:
+    """Zero ``LawStep.lmi_failed`` (n_runs,) of a law without ellipsoids (read-only, shared).
 
     Raises
     ------
     ValueError
         If ``n_runs`` is negative.
     """
-    out = np.zeros((n_runs, 3), dtype=np.int64)
+    out = np.zeros(n_runs, dtype=np.int64)
     out.setflags(write=False)
     return out
 

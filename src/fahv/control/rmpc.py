@@ -253,16 +253,15 @@ class RMPCLaw(ControlLaw):
     def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
         """Commands of step k for B runs (closed form, no solver; no tube).
 
-        ``LawStep.lmi`` holds (0, 0, steps so far with the state outside E_1).
+        ``LawStep.lmi_failed`` holds the steps so far with the state outside E_1.
         """
         x = np.asarray(x, float)
         dx = x[:, :NX] - ref.x_r[:, :NX]
         du, c, _ = self.kernel.control(dx)
         self.outside += (c == 0) & lanes.alive
         B = x.shape[0]
-        lmi = np.zeros((B, 3), dtype=np.int64)
-        lmi[:, 2] = self.outside
-        return LawStep(ref.u_r + du, x - ref.x_r, np.full(B, math.nan), lmi)
+        outside = np.asarray(self.outside, dtype=np.int64).copy()
+        return LawStep(ref.u_r + du, x - ref.x_r, np.full(B, math.nan), outside)
 
 
 register_law(RMPCLaw)

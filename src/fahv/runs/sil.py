@@ -52,11 +52,6 @@ class SilRun:
     simulated_s: float
     interrupted: bool = False
 
-    @property
-    def real_time_factor(self) -> float:
-        """Simulated time / wall time (> 1: faster than real time)."""
-        return self.simulated_s / self.wall_s if self.wall_s > 0 else float("nan")
-
 
 def run_name(case: str, variant: str, source: str) -> str:
     """``<case>_<variant>_<source>_<YYYYmmdd-HHMMSS>``."""
