@@ -24,7 +24,7 @@ import numpy as np
 
 from fahv.config import Field
 
-#: Case-file section of the nominal tracking MPC (all keys defaulted; docs/theory/nominal_mpc.md).
+#: Design-file section of the nominal tracking MPC (all keys defaulted; docs/theory/nominal_mpc.md).
 MPC_SECTION_FIELDS = (
     Field("M", "int", "fast steps per nominal move: nominal rate Ts_n = M Ts", lo=1,
           hi=1000, default=25),
