@@ -48,7 +48,7 @@ def test_vectorised_trim_equals_the_scalar_trim_and_ignores_I_yy(vehicle):
             np.testing.assert_allclose(z2, z, atol=1e-13)
 
 
-def test_box_coverage_reproduces_the_measured_figures(vehicle, trims):
+def test_loss_coverage_reproduces_the_measured_figures(vehicle, trims):
     """Tightened elevator 18.24 deg (the rho_min = 0.7 design): 22.8 % over the envelope,
     27.9 % at the Case 1 end point, worst corner heavy with the weaker c_e at (86500, 7700)."""
     u_lo = np.array([0.178, np.radians(-18.24)])
@@ -71,7 +71,7 @@ def test_box_coverage_reproduces_the_measured_figures(vehicle, trims):
     assert cov.failing(0.78, u_hi[1]) == ""
 
 
-def test_box_coverage_worst_case_is_a_corner_and_the_grid_remainder_holds(vehicle, trims):
+def test_loss_coverage_worst_case_is_a_corner_and_the_grid_remainder_holds(vehicle, trims):
     """Interior draws never need more elevator than the worst corner at the same point, and a
     grid three times finer stays within the grid maximum plus the stated remainder."""
     from fahv.model.trim import TrimMap, trim_batch

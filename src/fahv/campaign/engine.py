@@ -215,7 +215,7 @@ def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=p
 
     The design is the one saved in ``out_dir/design`` (a resumed campaign must keep
     it), else the stored, verified design of the campaign's scenario with the
-    scenario's arrays (:func:`fahv.spec.store.load_or_design`; nothing is designed).
+    scenario's arrays (:func:`fahv.certificate.verified.load_or_design`; nothing is designed).
 
     Raises
     ------
