@@ -58,7 +58,7 @@ def campaign_spec() -> Section:
             Field("method", "str", "uniform in the box, its corners (index bits), a Latin "
                   "hypercube over the campaign (scipy.stats.qmc), or none (the scenario's draw)",
                   choices=METHODS, default="uniform"),
-            Field("scale", "float", "fraction of the sec. 5.1 uncertainty box", lo=0.0, hi=1.0,
+            Field("scale", "float", "fraction of the sec. 5.1 parameter box", lo=0.0, hi=1.0,
                   default=1.0),
             Field("parameters", "strs", "uncertain parameters drawn (the others nominal)",
                   choices=tuple(PAPER_UNCERTAINTY), default=tuple(PAPER_UNCERTAINTY)),

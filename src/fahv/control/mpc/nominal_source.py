@@ -141,7 +141,7 @@ class TrackingMPCNominal(NominalSource):
     eight states after h (docs/theory/nominal_mpc.md, "The altitude reset"). The QP plans
     from the reset nominal. A reset by Delta h, with the artificial set point moved by the
     same Delta h, moves the QP's rows only by the trim map's slope in h times Delta h
-    (below 0.001 deg over the eight-state pair's bound of 2.6 ft): feasibility after the
+    (below 0.001 deg over the eight-state tube set's bound of 2.6 ft): feasibility after the
     reset is argued and measured (every re-plan accepted in the runs measured), not
     certified; an infeasible re-plan takes the recovery like any other.
 
