@@ -115,11 +115,11 @@ def test_design_for_another_vehicle_keeps_the_shipped_artefacts(tmp_path, monkey
     assert other.parent == packaged.parent  # a sibling: saving it cannot replace cm_paper/
     written = []
 
-    def record(case, vehicle, out, log=print):
+    def record(spec, vehicle, out, log=print):
         written.append(out)
         raise DesignError("stopped by the test")
 
-    monkeypatch.setattr(cli_design, "design_case", record)
+    monkeypatch.setattr(cli_design, "design_and_store", record)
     assert main(["design", str(dfile), "--vehicle", str(heavy)]) == 2
     assert written == [other]
 

@@ -18,8 +18,8 @@ from fahv.spec.scenario import load_scenario
 from fahv.spec.store import design_dir, stored_design
 
 
-def design_case(case, vehicle, out_dir: Path, log=print):
-    """Design a design file's case for ``vehicle`` and store it with its certificate lines.
+def design_and_store(spec, vehicle, out_dir: Path, log=print):
+    """Design a design file (``spec``) for ``vehicle`` and store it with its certificate lines.
 
     Writes ``design.npz``, ``design.json`` and ``certificate.txt`` (every line the
     design printed) into ``out_dir`` atomically. A progress line names the stage at
@@ -47,7 +47,7 @@ def design_case(case, vehicle, out_dir: Path, log=print):
         return progress(it, desc="sample W", leave=False)
 
     with StageClock(_previous_stage_times(out_dir)) as clock:
-        design = run_design(case, vehicle, progress=bar, log=both, clock=clock)
+        design = run_design(spec, vehicle, progress=bar, log=both, clock=clock)
     design.summary["design_time_s"] = round(time.monotonic() - t0, 1)  # not in the hash
     design.summary["stage_times_s"] = clock.times  # not in the hash: the next estimate
     save_design(design, out_dir, {"certificate.txt": "\n".join(lines) + "\n"})
@@ -64,10 +64,10 @@ def _previous_stage_times(folder: Path) -> dict | None:
 
 def cmd_design(args) -> int:
     """Offline synthesis of a design file: print every certificate, write the artefacts."""
-    case = load_design_file(args.design)
+    spec = load_design_file(args.design)
     vehicle = vehicle_of(args)
-    out = design_dir(case.path, case.name, args.out, vehicle)
-    design = design_case(case, vehicle, out)
+    out = design_dir(spec.path, spec.name, args.out, vehicle)
+    design = design_and_store(spec, vehicle, out)
     prov = design.summary["provenance"]
     print(
         f"design hash {design.summary['design_hash']} (design file {prov['design_file_hash']}, "
