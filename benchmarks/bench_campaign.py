@@ -34,7 +34,7 @@ import yaml
 from fahv.campaign.draws import draw, overrides
 from fahv.campaign.engine import run_campaign
 from fahv.campaign.spec import campaign_from_mapping, load_campaign
-from fahv.design.store import load_or_design
+from fahv.certificate.verified import load_or_design
 from fahv.loop.batch import simulate_batch
 from fahv.loop.simulate import simulate
 

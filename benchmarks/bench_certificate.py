@@ -29,16 +29,16 @@ from pathlib import Path
 
 import numpy as np
 
-from fahv.design.domain import SchedulingBox
-from fahv.design.one_step_bound import altitude_bound
-from fahv.design.onset import onset_bound, onset_jumps
-from fahv.design.tube_set import TubeSet
-from fahv.design.vertices import nominal_vertices
+from fahv.bounds.domain import SchedulingBox
+from fahv.bounds.one_step_bound import altitude_bound
+from fahv.bounds.vertices import nominal_vertices
 from fahv.model.tp_model import build_tp_model
 from fahv.model.trim import trim_map
 from fahv.model.vehicle import load_vehicle
+from fahv.onset.bound import onset_bound, onset_jumps
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.synthesis.rpi_level import vertex_levels
+from fahv.tube.tube_set import TubeSet
 
 ROOT = Path(__file__).resolve().parents[1]
 TS, N_SUB = 0.02, 5  # cm_certified.yaml's period and RK4 sub-steps

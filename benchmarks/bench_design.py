@@ -104,13 +104,13 @@ def designs(args, tmp: Path) -> None:
 
 def _vertex_data(design_file: Path, k: int):
     """The eight-state vertex data of a design file with k parameter directions."""
-    from fahv.design.artefacts import load_design
-    from fahv.design.case import load_design_file
-    from fahv.design.domain import nominal_box
-    from fahv.design.vertices import nominal_vertices
+    from fahv.bounds.domain import nominal_box
+    from fahv.bounds.vertices import nominal_vertices
     from fahv.model.trim import trim_map
     from fahv.model.vehicle import load_vehicle
     from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+    from fahv.spec.artefacts import load_design
+    from fahv.spec.files import load_design_file
 
     c = load_design_file(design_file).data
     d = load_design(design_file.with_suffix(""))
@@ -128,11 +128,11 @@ def _vertex_data(design_file: Path, k: int):
 
 def vertex_scaling(design_file: Path, ks) -> None:
     """The closure of the tube set against the number of vertices (k directions)."""
-    from fahv.design.closure import close_tube_set
     from fahv.design.tube_set_design import _contain, _state_max
     from fahv.model.trim import trim_map
     from fahv.model.vehicle import load_vehicle
     from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+    from fahv.tube.closure import close_tube_set
 
     print("closure of the eight-state tube set (tube LMI by constraint generation from "
           "scratch, W_8's bound, exact all-vertex level):")  # fmt: skip
@@ -180,7 +180,7 @@ def _augmented(A, B, extra: int):
 
 def state_scaling(dims, R: int) -> None:
     """The tube LMI alone against the state dimension (augmented eight-state vertices)."""
-    from fahv.design.artefacts import load_design
+    from fahv.spec.artefacts import load_design
     from fahv.synthesis.feedback import design_tube
 
     design_file = ROOT / "offline_design/designs/cm_certified.yaml"

@@ -18,8 +18,8 @@ import time
 
 import numpy as np
 
+from fahv.certificate.verified import load_or_design
 from fahv.control.mpc import tracking
-from fahv.design.store import load_or_design
 from fahv.loop.simulate import simulate
 
 #: --smoke: the steps simulated (the nominal MPC solves a QP every 25 steps).

@@ -27,8 +27,8 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from fahv.certificate.verified import load_or_design
 from fahv.control.mpc import tracking
-from fahv.design.store import load_or_design
 from fahv.loop.simulate import simulate
 
 BIG = 1e29  # |bound| >= BIG: no bound (DAQP's convention in the MPC)

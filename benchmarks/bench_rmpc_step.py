@@ -22,8 +22,8 @@ import time
 
 import numpy as np
 
+from fahv.certificate.verified import load_or_design
 from fahv.control.rmpc import RMPCLaw
-from fahv.design.store import load_or_design
 from fahv.lanes import Lanes
 from fahv.loop.cores import ControllerCore
 from fahv.loop.simulate import simulate

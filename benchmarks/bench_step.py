@@ -17,7 +17,7 @@ import argparse
 import io
 import time
 
-from fahv.design.store import load_or_design
+from fahv.certificate.verified import load_or_design
 from fahv.loop.cores import build_core
 from fahv.loop.params import node_parameters
 

@@ -7,10 +7,10 @@ import warnings
 import pytest
 import yaml
 
-from fahv.design.case import case_from_mapping
 from fahv.design.pipeline import run_design
 from fahv.model.tp_model import build_tp_model
 from fahv.model.vehicle import load_vehicle
+from fahv.spec.files import spec_file
 
 #: The paper's Case 1 design with its scenario: the quick design of the tests.
 SCENARIO = "offline_design/scenarios/case1_paper.yaml"
@@ -35,9 +35,9 @@ def plain(data):
 @pytest.fixture(scope="session")
 def raw():
     """The whole case of scenario case1_paper (its design's entries with its own)."""
-    from fahv.design.scenario import load_scenario
+    from fahv.spec.scenario import load_scenario
 
-    return plain(load_scenario(SCENARIO).case.data)
+    return plain(load_scenario(SCENARIO).run_spec.data)
 
 
 def quick(raw, **changes):
@@ -46,7 +46,7 @@ def quick(raw, **changes):
     d["disturbance"]["samples"] = 40
     d["certificate"] = {"schedules": 0}  # checked in tests/design/test_one_step_bound.py
     d.update(changes)
-    return case_from_mapping(d, "quick.yaml")
+    return spec_file(d, "quick.yaml")
 
 
 @pytest.fixture(scope="session")
@@ -68,7 +68,7 @@ def design(raw, tmp_path_factory, worker_id):
     """
     from filelock import FileLock
 
-    from fahv.design.artefacts import load_design, save_design
+    from fahv.spec.artefacts import load_design, save_design
 
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     if worker_id == "master":  # not distributed
@@ -106,12 +106,13 @@ def store_quick(design, folder):
     file's design, and the case's scenario to ``folder/scenarios/quick.yaml``. Returns
     (scenario file, artefact folder) to pass as ``fahv simulate|sil SCENARIO --design DIR``.
     """
-    from fahv.design.artefacts import Design, save_design
-    from fahv.design.case import SCENARIO_KEYS, case_from_mapping, load_design_file
-    from fahv.design.pipeline import design_part
+    from fahv.spec.artefacts import Design, save_design
+    from fahv.spec.files import load_design_file, spec_file
+    from fahv.spec.scenario import design_part
+    from fahv.spec.schema import SCENARIO_KEYS
 
     c = design.case
-    dpart = design_part(case_from_mapping(c, "quick.yaml"))
+    dpart = design_part(spec_file(c, "quick.yaml"))
     (folder / "designs").mkdir(parents=True, exist_ok=True)
     (folder / "scenarios").mkdir(parents=True, exist_ok=True)
     dfile = folder / "designs" / "quick.yaml"

@@ -31,8 +31,8 @@ DOCS = Path(__file__).resolve().parents[1]
 
 #: Marker name -> (module, function returning the Markdown table).
 TABLES = {
-    "design-keys": ("fahv.design.case", "design_spec"),
-    "scenario-keys": ("fahv.design.case", "scenario_spec"),
+    "design-keys": ("fahv.spec.schema", "design_spec"),
+    "scenario-keys": ("fahv.spec.schema", "scenario_spec"),
     "campaign-keys": ("fahv.campaign.spec", "campaign_spec"),
     "node-table": ("fahv.loop.graph", "markdown_table"),
     "registry-tables": ("fahv.loop.graph", "registry_tables"),

@@ -22,11 +22,14 @@ class DesignError(FahvError, RuntimeError):
 
 
 class ConfigError(FahvError, ValueError):
-    """A configuration value (case file, campaign file, node parameter) is invalid."""
+    """A configuration value (design, scenario or campaign file, node parameter) is invalid."""
 
 
-class CaseError(ConfigError):
-    """A case file is missing, malformed, or holds an unknown or out-of-range key."""
+class SpecError(ConfigError):
+    """A design file, a scenario file or the run spec they form is missing or malformed.
+
+    Or it holds an unknown or out-of-range key (the message names the file and the key).
+    """
 
 
 class ParameterError(ConfigError):

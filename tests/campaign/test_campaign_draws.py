@@ -20,19 +20,19 @@ def test_run_streams_are_the_seed_sequence_children():
 
 
 def test_a_run_is_a_function_of_seed_and_index(campaign):
-    a = draw(campaign.data, campaign.case.data, 5)
-    assert a == draw(campaign.data, campaign.case.data, 5)
-    assert a != draw(campaign.data, campaign.case.data, 6)
+    a = draw(campaign.data, campaign.run_spec.data, 5)
+    assert a == draw(campaign.data, campaign.run_spec.data, 5)
+    assert a != draw(campaign.data, campaign.run_spec.data, 6)
     other = dict(campaign.data, seed=12)
-    assert a != draw(other, campaign.case.data, 5)
+    assert a != draw(other, campaign.run_spec.data, 5)
     # more runs in the campaign do not change run 5 (uniform draws)
-    assert a == draw(dict(campaign.data, runs=500), campaign.case.data, 5)
+    assert a == draw(dict(campaign.data, runs=500), campaign.run_spec.data, 5)
 
 
 def test_values_stay_in_their_ranges(campaign):
     d = campaign["dispersions"]
     for i in range(campaign["runs"]):
-        v = draw(campaign.data, campaign.case.data, i)
+        v = draw(campaign.data, campaign.run_spec.data, i)
         assert all(-1.0 <= v[f"s.{k}"] <= 1.0 for k in PAPER_UNCERTAINTY)
         assert v["fault.kind"] in d["fault"]["kinds"]
         assert 1.0 <= v["fault.t_onset"] <= 4.0 and 0.7 <= v["fault.rho_f"] <= 1.0
@@ -45,7 +45,7 @@ def test_corners_visit_every_corner_once(campaign):
     data = dict(campaign.data, runs=8)
     data["dispersions"] = dict(data["dispersions"], uncertainty={
         "method": "corners", "scale": 1.0, "parameters": ["m", "I_yy", "c_e"]})  # fmt: skip
-    corners = {tuple(draw(data, campaign.case.data, i)[f"s.{k}"] for k in ("m", "I_yy", "c_e"))
+    corners = {tuple(draw(data, campaign.run_spec.data, i)[f"s.{k}"] for k in ("m", "I_yy", "c_e"))
                for i in range(8)}  # fmt: skip
     assert len(corners) == 8 and all(abs(c) == 1.0 for corner in corners for c in corner)
 
@@ -55,14 +55,14 @@ def test_latin_hypercube_is_stratified(campaign):
     data = dict(campaign.data, runs=n)
     data["dispersions"] = dict(data["dispersions"], uncertainty={
         "method": "lhs", "scale": 1.0, "parameters": list(PAPER_UNCERTAINTY)})  # fmt: skip
-    s = np.array([[draw(data, campaign.case.data, i)[f"s.{k}"] for k in PAPER_UNCERTAINTY]
+    s = np.array([[draw(data, campaign.run_spec.data, i)[f"s.{k}"] for k in PAPER_UNCERTAINTY]
                   for i in range(n)])  # fmt: skip
     for j in range(s.shape[1]):  # one point in each of the n strata of every parameter
         assert sorted(np.floor((s[:, j] + 1.0) / 2.0 * n).astype(int)) == list(range(n))
 
 
 def test_overrides_carry_the_values_to_the_nodes(campaign, design):
-    v = draw(campaign.data, campaign.case.data, 2)
+    v = draw(campaign.data, campaign.run_spec.data, 2)
     ov = overrides(v, design, "tube_mpc")
     vp = load_vehicle().params
     for k, r in PAPER_UNCERTAINTY.items():

@@ -18,15 +18,15 @@ ROOT = Path(__file__).resolve().parents[2]
 )  # fmt: skip
 def test_shipped_campaign_files_validate(name, scenario):
     c = load_campaign(ROOT / "offline_design" / "campaigns" / name)
-    assert c.case.name == scenario
+    assert c.run_spec.name == scenario
     assert c.duration == 300.0
-    assert set(c["variants"]) <= set(c.case["variants"])
+    assert set(c["variants"]) <= set(c.run_spec["variants"])
 
 
 def test_a_campaign_runs_around_another_scenario():
     """--scenario: the same dispersions around another scenario (and its design)."""
     c = load_campaign(ROOT / "offline_design" / "campaigns" / "case1.yaml", scenario="case1_paper")
-    assert c.case.name == "case1_paper" and c.case["tube"]["form"] == "vertices"
+    assert c.run_spec.name == "case1_paper" and c.run_spec["tube"]["form"] == "vertices"
     base = load_campaign(ROOT / "offline_design" / "campaigns" / "case1.yaml")
     assert c["dispersions"] == base["dispersions"] and c.content_hash() != base.content_hash()
 

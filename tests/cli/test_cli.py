@@ -42,10 +42,10 @@ def test_simulate_runs_the_default_variant_unless_told(raw):
     import pytest
 
     from fahv.cli.run import selected_variants
-    from fahv.design.case import case_from_mapping
     from fahv.errors import FahvError
+    from fahv.spec.files import spec_file
 
-    case = case_from_mapping(raw, "case1.yaml")
+    case = spec_file(raw, "case1.yaml")
     assert selected_variants(case, None) == ["tube_mpc"]
     assert selected_variants(case, ["all"]) == list(raw["variants"])
     assert selected_variants(case, ["rmpc", "tube_mpc", "rmpc"]) == ["rmpc", "tube_mpc"]

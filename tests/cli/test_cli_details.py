@@ -100,7 +100,7 @@ def test_tube_study_takes_the_case_design_effectiveness(monkeypatch, capsys):
 
 def test_design_for_another_vehicle_keeps_the_shipped_artefacts(tmp_path, monkeypatch):
     import fahv.cli.design as cli_design
-    from fahv.design.store import design_dir
+    from fahv.spec.store import design_dir
 
     text = resources.files("fahv.data").joinpath("vehicle_parker2007.yaml").read_text()
     heavy = tmp_path / "heavy.yaml"
@@ -115,11 +115,11 @@ def test_design_for_another_vehicle_keeps_the_shipped_artefacts(tmp_path, monkey
     assert other.parent == packaged.parent  # a sibling: saving it cannot replace cm_paper/
     written = []
 
-    def record(case, vehicle, out, log=print):
+    def record(spec, vehicle, out, log=print):
         written.append(out)
         raise DesignError("stopped by the test")
 
-    monkeypatch.setattr(cli_design, "design_case", record)
+    monkeypatch.setattr(cli_design, "design_and_store", record)
     assert main(["design", str(dfile), "--vehicle", str(heavy)]) == 2
     assert written == [other]
 

@@ -103,7 +103,7 @@ def test_the_law_counts_steps_outside_the_largest_ellipsoid(design, seq):
     lanes = Lanes(2, strict=False)
     for k in range(3):
         out = law.step(k, np.stack([big, 0.0 * big]), ref, lanes)
-    assert out.lmi[:, 2].tolist() == [3, 0] and np.all(np.isnan(out.level))
+    assert out.lmi_failed.tolist() == [3, 0] and np.all(np.isnan(out.level))
     np.testing.assert_array_equal(out.u[1], ref.u_r[1])  # at the trim: the trim input
 
 

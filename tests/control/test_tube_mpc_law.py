@@ -3,7 +3,7 @@
 
 The notch_filter node filters the measured q; the law filters the nominal's q with a
 replica of the same filter, so that the error is the one the notch certificate covers
-(fahv.design.notch_loop.notch_tube). Checked against the filter run on the difference,
+(fahv.tube.notch_loop.notch_tube). Checked against the filter run on the difference,
 with B = 3 runs of random pitch rates.
 """
 

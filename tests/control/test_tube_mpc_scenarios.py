@@ -14,11 +14,12 @@ import warnings
 import numpy as np
 import pytest
 
-from fahv.design.case import case_data, case_from_mapping
 from fahv.design.pipeline import run_design
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.metrics import metrics
+from fahv.spec.files import spec_file
+from fahv.spec.scenario import run_spec_data
 
 H_TOL, V_TOL, ATT_DEG, WINDOW = 10.0, 2.0, 0.5, 60.0
 
@@ -56,7 +57,7 @@ def requirements(run, case) -> dict:
 
 
 def _case(path, **changes):
-    d = case_data(path)
+    d = run_spec_data(path)
     d = copy.deepcopy(d)
     d["disturbance"]["samples"] = 40
     d["certificate"] = {"schedules": 0}  # checked in tests/design/test_one_step_bound.py
@@ -64,7 +65,7 @@ def _case(path, **changes):
     for key, value in changes.items():
         section, name = key.split(".")
         d[section][name] = value
-    return case_from_mapping(d, "scenario.yaml")
+    return spec_file(d, "scenario.yaml")
 
 
 SCENARIOS = {

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from tube_set_records import load_record
 
-from fahv.design.domain import SchedulingBox
-from fahv.design.vertices import nominal_vertices
+from fahv.bounds.domain import SchedulingBox
+from fahv.bounds.vertices import nominal_vertices
 from fahv.model.trim import TrimMap
 from fahv.model.vehicle import load_vehicle
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY

@@ -6,14 +6,15 @@ import json
 import numpy as np
 import pytest
 
-from fahv.design.artefacts import load_design, save_design
-from fahv.design.case import case_from_mapping, load_case
 from fahv.design.pipeline import run_design
-from fahv.errors import CaseError, DesignError
+from fahv.errors import DesignError, SpecError
 from fahv.loop.params import node_parameters
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.metrics import metrics
+from fahv.spec.artefacts import load_design, save_design
+from fahv.spec.files import spec_file
+from fahv.spec.scenario import load_run_spec
 
 
 def test_scenario_files_load():
@@ -21,9 +22,9 @@ def test_scenario_files_load():
         "offline_design/scenarios/case1_paper.yaml",
         "offline_design/scenarios/case2.yaml",
     ):
-        c = load_case(path)
+        c = load_run_spec(path)
         assert c["Ts"] == 0.02
-    assert load_case("offline_design/scenarios/case2.yaml")["tube"]["tau"] == 0.8
+    assert load_run_spec("offline_design/scenarios/case2.yaml")["tube"]["tau"] == 0.8
 
 
 @pytest.mark.parametrize(
@@ -51,17 +52,17 @@ def test_scenario_files_load():
 def test_bad_case_rejected_naming_key(raw, mutate, match):
     d = copy.deepcopy(raw)
     mutate(d)
-    with pytest.raises(CaseError, match=match):
-        case_from_mapping(d, "bad.yaml")
+    with pytest.raises(SpecError, match=match):
+        spec_file(d, "bad.yaml")
 
 
 def test_missing_or_broken_case_file(tmp_path):
-    with pytest.raises(CaseError, match="not found"):
-        load_case(tmp_path / "nope.yaml")
+    with pytest.raises(SpecError, match="not found"):
+        load_run_spec(tmp_path / "nope.yaml")
     p = tmp_path / "broken.yaml"
     p.write_text("name: [unclosed\n")
-    with pytest.raises(CaseError, match="not a valid YAML"):
-        load_case(p)
+    with pytest.raises(SpecError, match="not a valid YAML"):
+        load_run_spec(p)
 
 
 def test_vertex_count_beyond_samples_rejected(make_case):
@@ -72,9 +73,9 @@ def test_vertex_count_beyond_samples_rejected(make_case):
 
 def test_infeasible_design_writes_nothing(make_case, tmp_path, monkeypatch):
     """No tube fits (input room shrunk to nothing): error names eq. (30), no artefact."""
-    import fahv.design.pipeline as dmod
+    import fahv.design.stages as stages
 
-    monkeypatch.setattr(dmod, "input_room", lambda veh, **_: np.array([1e-3, 1e-4]))
+    monkeypatch.setattr(stages, "input_room", lambda veh, **_: np.array([1e-3, 1e-4]))
     out = tmp_path / "art"
     with pytest.raises(DesignError, match=r"eq\. 30|U minus F Z|infeasible|certificate failed"):
         save_design(run_design(make_case(), log=lambda *_: None), out)
@@ -154,8 +155,8 @@ def test_defaulted_knobs_may_be_omitted(raw):
     for key in ("vertices", "ellipsoids", "ratio", "margin"):
         d["rmpc"].pop(key)
     d["tube"].pop("lam")
-    c = case_from_mapping(d, "lean.yaml")
-    full = case_from_mapping(raw, "full.yaml")
+    c = spec_file(d, "lean.yaml")
+    full = spec_file(raw, "full.yaml")
     assert c.data == full.data  # the whole case sets every knob (defaults filled in)
     assert c.defaults_used["disturbance.samples"] == 300
     assert c.defaults_used["rmpc.ellipsoids"] == 9
@@ -167,7 +168,7 @@ def test_section_only_required_when_used(raw):
     d = copy.deepcopy(raw)
     d["variants"] = ["tube_mpc"]
     d.pop("rmpc")
-    c = case_from_mapping(d, "no_rmpc.yaml")
+    c = spec_file(d, "no_rmpc.yaml")
     assert "rmpc" not in c.data
 
 
@@ -193,7 +194,7 @@ def test_docs_key_tables_are_the_declarations():
     from pathlib import Path
 
     from fahv.config.spec import markdown
-    from fahv.design.case import design_spec, scenario_spec
+    from fahv.spec.schema import design_spec, scenario_spec
 
     text = (Path(__file__).resolve().parents[2] / "docs/reference/configuration.md").read_text()
     for n, spec in (("design-keys", design_spec), ("scenario-keys", scenario_spec)):
@@ -205,17 +206,17 @@ def test_notch_variants_are_certified_only_where_the_law_filters_the_nominal_q()
     certified in the loop's own states; the paper's law, which filters the measured q
     alone, only has its stability checked, whatever the key; with the key false (the
     paper's vertex case) every notch variant is checked for stability only."""
-    from fahv.design.pipeline import notch_checks, tube_notches
+    from fahv.design.stages import notch_checks, tube_notches
 
-    case = load_case("offline_design/scenarios/case1.yaml")
+    case = load_run_spec("offline_design/scenarios/case1.yaml")
     c = copy.deepcopy(dict(case.data))
     c["variants"] = [*c["variants"], "tube_mpc_paper"]
     notches = tube_notches(c, (19.05, 49.0))
     assert list(notches) == ["tube_mpc", "tube_mpc_notch2", "tube_mpc_paper"]
     assert notches["tube_mpc_notch2"].omega_z == pytest.approx(49.0, abs=1e-12)
-    certified, stable_only = notch_checks(c, notches)
-    assert list(certified) == ["tube_mpc", "tube_mpc_notch2"]
-    assert list(stable_only) == ["tube_mpc_paper"]
+    split = notch_checks(c, notches)
+    assert list(split.certified) == ["tube_mpc", "tube_mpc_notch2"]
+    assert list(split.stable_only) == ["tube_mpc_paper"]
     c["tube"] = {**c["tube"], "filter_nominal_q": False}
-    certified, stable_only = notch_checks(c, notches)
-    assert certified == {} and list(stable_only) == list(notches)
+    split = notch_checks(c, notches)
+    assert split.certified == {} and list(split.stable_only) == list(notches)

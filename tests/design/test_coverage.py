@@ -1,9 +1,9 @@
-"""Coverage of an elevator loss over the whole parameter box (fahv.design.coverage)."""
+"""Coverage of an elevator loss over the whole parameter box (fahv.bounds.coverage)."""
 
 import numpy as np
 import pytest
 
-from fahv.design.coverage import TRIM_FREE_PARAMETERS, box_corner_trims, box_coverage
+from fahv.bounds.coverage import TRIM_FREE_PARAMETERS, corner_trims, loss_coverage
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
 
@@ -48,12 +48,12 @@ def test_vectorised_trim_equals_the_scalar_trim_and_ignores_I_yy(vehicle):
             np.testing.assert_allclose(z2, z, atol=1e-13)
 
 
-def test_box_coverage_reproduces_the_measured_figures(vehicle, trims):
+def test_loss_coverage_reproduces_the_measured_figures(vehicle, trims):
     """Tightened elevator 18.24 deg (the rho_min = 0.7 design): 22.8 % over the envelope,
     27.9 % at the Case 1 end point, worst corner heavy with the weaker c_e at (86500, 7700)."""
     u_lo = np.array([0.178, np.radians(-18.24)])
     u_hi = np.array([1.322, np.radians(18.24)])
-    cov = box_coverage(vehicle, PAPER_UNCERTAINTY, trims, u_lo, u_hi, path=[(86100.0, 8150.0)])
+    cov = loss_coverage(vehicle, PAPER_UNCERTAINTY, trims, u_lo, u_hi, path=[(86100.0, 8150.0)])
     assert cov.corners == 512 and cov.points == 169
     assert 100 * cov.loss == pytest.approx(22.8, abs=0.05)
     assert 100 * cov.loss_path == pytest.approx(27.9, abs=0.05)
@@ -71,16 +71,16 @@ def test_box_coverage_reproduces_the_measured_figures(vehicle, trims):
     assert cov.failing(0.78, u_hi[1]) == ""
 
 
-def test_box_coverage_worst_case_is_a_corner_and_the_grid_remainder_holds(vehicle, trims):
+def test_loss_coverage_worst_case_is_a_corner_and_the_grid_remainder_holds(vehicle, trims):
     """Interior draws never need more elevator than the worst corner at the same point, and a
     grid three times finer stays within the grid maximum plus the stated remainder."""
     from fahv.model.trim import TrimMap, trim_batch
 
     u_lo = np.array([0.178, np.radians(-18.24)])
     u_hi = np.array([1.322, np.radians(18.24)])
-    cov = box_coverage(vehicle, PAPER_UNCERTAINTY, trims, u_lo, u_hi)
+    cov = loss_coverage(vehicle, PAPER_UNCERTAINTY, trims, u_lo, u_hi)
     names = [k for k in PAPER_UNCERTAINTY if k not in TRIM_FREE_PARAMETERS]
-    _, corners, z = box_corner_trims(vehicle, PAPER_UNCERTAINTY, trims)
+    _, corners, z = corner_trims(vehicle, PAPER_UNCERTAINTY, trims)
     de_corner_max = z[1].max(axis=0)  # (N_h, N_V)
     # 2000 interior draws at every 4th grid point
     rng = np.random.default_rng(11)
@@ -106,6 +106,6 @@ def test_box_coverage_worst_case_is_a_corner_and_the_grid_remainder_holds(vehicl
     Vf = np.linspace(trims.V_grid[0], trims.V_grid[-1], 37)
     xf, uf = trims.at(*[a.ravel() for a in np.meshgrid(hf, Vf, indexing="ij")])
     fine = TrimMap(hf, Vf, xf.reshape(37, 37, -1), uf.reshape(37, 37, 2))
-    _, _, zf = box_corner_trims(vehicle, PAPER_UNCERTAINTY, fine, signs)
+    _, _, zf = corner_trims(vehicle, PAPER_UNCERTAINTY, fine, signs)
     assert zf[1].max() <= cov.delta_e_max + cov.remainder
     assert zf[1].max() == pytest.approx(cov.delta_e_max, abs=1e-9)  # monotone: a corner

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX, sample_disturbance
+from fahv.bounds.disturbance import INPUT_DEVIATIONS, STATE_DEVIATIONS, sample_disturbance
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
 
@@ -14,8 +14,8 @@ def _sample(vehicle, tp, margin=1.2):
         0.02,
         PAPER_UNCERTAINTY,
         0.9,
-        DEFAULT_DEV_BOX,
-        DEFAULT_DU_BOX,
+        STATE_DEVIATIONS,
+        INPUT_DEVIATIONS,
         25,
         seed=0,
         margin=margin,
@@ -51,22 +51,22 @@ def test_seeded_and_reproducible(vehicle, tp_cm, wset):
 
 
 def test_deviation_box_appends_the_notch_states_for_the_ecm_only():
-    """The CM / DM box is a copy of DEFAULT_DEV_BOX; the ECM's appends twice the filter's
+    """The CM / DM box is a copy of STATE_DEVIATIONS; the ECM's appends twice the filter's
     steady states for the given q scale; a q scale that is not positive and finite is
     refused naming it."""
-    from fahv.design.disturbance import deviation_box
+    from fahv.bounds.disturbance import state_deviations
     from fahv.model.notch import NotchFilter
 
-    cm = deviation_box()
-    np.testing.assert_array_equal(cm, DEFAULT_DEV_BOX)
+    cm = state_deviations()
+    np.testing.assert_array_equal(cm, STATE_DEVIATIONS)
     cm[0] = 0.0  # a copy: the module's box is untouched
-    assert DEFAULT_DEV_BOX[0] == 600.0
+    assert STATE_DEVIATIONS[0] == 600.0
     nf = NotchFilter(20.0, 0.0, 25.0, 0.5)
-    ecm = deviation_box(nf, 0.05)
+    ecm = state_deviations(nf, 0.05)
     assert ecm.shape == (11,)
-    np.testing.assert_array_equal(ecm[:9], DEFAULT_DEV_BOX)
+    np.testing.assert_array_equal(ecm[:9], STATE_DEVIATIONS)
     # twice the filter's steady states for q = 0.05 rad/s: q / omega_p, q / omega_p^2
     np.testing.assert_allclose(ecm[9:], [2 * 0.05 / 25.0, 2 * 0.05 / 625.0], rtol=1e-12)
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(ValueError, match="q_scale"):
-            deviation_box(nf, bad)
+            state_deviations(nf, bad)

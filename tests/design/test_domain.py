@@ -1,11 +1,10 @@
-"""The domains of the one-step bounds (fahv.design.domain)."""
+"""The domains of the one-step bounds (fahv.bounds.domain)."""
 
 import numpy as np
 import pytest
 from tube_set_records import load_record
 
-from fahv.design.case import load_case
-from fahv.design.domain import (
+from fahv.bounds.domain import (
     SchedulingBox,
     certified_range,
     joint_shape,
@@ -13,7 +12,8 @@ from fahv.design.domain import (
     product_supports,
     schedule_points,
 )
-from fahv.design.report import range_line
+from fahv.certificate.report import range_line
+from fahv.spec.scenario import load_run_spec
 
 CASE = "offline_design/scenarios/case1.yaml"
 
@@ -65,7 +65,7 @@ def test_case_boxes_are_the_stored_tube_sets_within_rounding(vehicle):
     H = 2.6 ft), and its scheduling box holds the stored one, larger by at most 0.3 % of
     a reach except there."""
     d = load_record("closed_tube_h_reset.npz")
-    nominal, box = nominal_box(load_case(CASE)["eight_state"], vehicle.envelope)
+    nominal, box = nominal_box(load_run_spec(CASE)["eight_state"], vehicle.envelope)
     env = vehicle.envelope
     np.testing.assert_allclose([nominal.lo[0], nominal.hi[0]], [env.h_min + 5.0, env.h_max - 5.0])
     np.testing.assert_allclose([d["nominal_lo"][0], d["nominal_hi"][0]],
@@ -81,7 +81,7 @@ def test_case_boxes_are_the_stored_tube_sets_within_rounding(vehicle):
     np.testing.assert_allclose(box.lo[4:] - nominal.lo[4:], -reach_lo[4:], rtol=0.003)
     assert np.all(box.hi[2:] - d["hi"][2:] <= 0.003 * reach_hi[2:])
     with pytest.raises(Exception, match="h_margin"):
-        nominal_box({**load_case(CASE)["eight_state"], "h_margin": 1e4}, vehicle.envelope)
+        nominal_box({**load_run_spec(CASE)["eight_state"], "h_margin": 1e4}, vehicle.envelope)
 
 
 def test_certified_range_is_the_box_less_the_tube_and_holds_the_nominal_box():

@@ -5,11 +5,11 @@ import warnings
 import numpy as np
 import pytest
 
-from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX
-from fahv.design.feasibility import input_room, tube_feasibility
-from fahv.design.vertices import fault_vertices
+from fahv.bounds.disturbance import INPUT_DEVIATIONS, STATE_DEVIATIONS
+from fahv.bounds.vertices import fault_vertices
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.synthesis.feedback import verify_tube
+from fahv.tube.feasibility import input_room, tube_feasibility
 
 
 def _run(vehicle, tp, treatment):
@@ -21,8 +21,8 @@ def _run(vehicle, tp, treatment):
             0.02,
             PAPER_UNCERTAINTY,
             0.9,
-            DEFAULT_DEV_BOX,
-            DEFAULT_DU_BOX,
+            STATE_DEVIATIONS,
+            INPUT_DEVIATIONS,
             60,
             0,
             1.2,

@@ -1,13 +1,13 @@
-"""A gain designed for the loop through the notch on q (fahv.design.notch_gain)."""
+"""A gain designed for the loop through the notch on q (fahv.tube.notch_gain)."""
 
 import numpy as np
 import pytest
 
-from fahv.design.notch_gain import notch_gain
-from fahv.design.notch_loop import notch_closed_loop, notch_loop_scale, notch_tube
 from fahv.model.notch import NotchFilter
 from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid, output_feedback_step
 from fahv.synthesis.rpi_level import vertex_levels
+from fahv.tube.notch_gain import notch_gain
+from fahv.tube.notch_loop import notch_closed_loop, notch_loop_scale, notch_tube
 
 TS = 0.02
 

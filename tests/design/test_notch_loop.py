@@ -1,12 +1,12 @@
-"""The tube loop with the notch filter on q (fahv.design.notch_loop)."""
+"""The tube loop with the notch filter on q (fahv.tube.notch_loop)."""
 
 import numpy as np
 import pytest
 
-from fahv.design.notch_loop import notch_certificate, notch_closed_loop, notch_loop, notch_tube
 from fahv.model.notch import DiscreteNotch, NotchFilter
 from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid
 from fahv.synthesis.rpi_level import vertex_levels
+from fahv.tube.notch_loop import notch_certificate, notch_closed_loop, notch_loop, notch_tube
 
 NOTCH = NotchFilter(19.05, 0.02, 19.05, 0.5)
 TS = 0.02

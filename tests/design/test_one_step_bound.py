@@ -1,4 +1,4 @@
-"""The one-step bounds of W (fahv.design.one_step_bound), checked independently.
+"""The one-step bounds of W (fahv.bounds.one_step_bound), checked independently.
 
 The integral form on the stored eight-state tube sets (their vertex data rebuilt here,
 tests/design/conftest.py), and the Taylor form of the vertex tube around a trim.
@@ -9,8 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fahv.design.disturbance import DEFAULT_DEV_BOX
-from fahv.design.domain import (
+from fahv.bounds.disturbance import STATE_DEVIATIONS
+from fahv.bounds.domain import (
     CertificateDomain,
     SchedulingBox,
     box_shortfall,
@@ -18,20 +18,20 @@ from fahv.design.domain import (
     nominal_half_widths,
     product_supports,
 )
-from fahv.design.one_step_bound import (
+from fahv.bounds.one_step_bound import (
     altitude_bound,
     bound_disturbance,
     disturbance_at,
     product_bound,
 )
-from fahv.design.plant_step import jacobians
-from fahv.design.tube_set import TubeSet
+from fahv.bounds.plant_step import jacobians
 from fahv.model.tp_model import build_tp_model
 from fahv.model.trim import TrimMap
 from fahv.model.vehicle import load_vehicle
 from fahv.plant.rk4 import params_records, perturbed_records, rk4_cm
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.synthesis.rpi_level import worst_level
+from fahv.tube.tube_set import TubeSet
 
 TS, N_SUB = 0.02, 5
 
@@ -352,7 +352,7 @@ def test_disturbance_bound_holds_on_100000_independent_samples(model):
     x_r, u_r = tm(h, V)
     nominal, notes = nominal_half_widths(
         {"reschedule": [100.0, 50.0], "dtheta_max": [300.0, 150.0], "att_max": 0.35},
-        DEFAULT_DEV_BOX,
+        STATE_DEVIATIONS,
     )
     dom = CertificateDomain(
         np.array([[h, V]]), 0.25 * nominal, 0.25 * nominal, u_r - [0.05, np.radians(2.0)],
@@ -386,7 +386,7 @@ def test_the_vertex_tube_W_bounds_the_disturbance_over_its_own_domain(design, mo
     a = design.arrays
     h, V = 85500.0, 7900.0
     x_r, u_r = tm(h, V)
-    nominal, notes = nominal_half_widths(design.case["mpc"], DEFAULT_DEV_BOX)
+    nominal, notes = nominal_half_widths(design.case["mpc"], STATE_DEVIATIONS)
     t = veh.limits.u_max - a["u_hi"]
     dom = CertificateDomain(
         np.array([[h, V]]), nominal + np.sqrt(np.diag(a["N"])), nominal, a["u_lo"] - t,

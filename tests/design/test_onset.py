@@ -1,4 +1,4 @@
-"""The onset of a loss as a transient of a tube set (fahv.design.onset, onset_witness).
+"""The onset of a loss as a transient of a tube set (fahv.onset.bound, onset_witness).
 
 Unit checks on loops whose worst case is known in closed form, and the bound and its
 lower bound on the stored eight-state tube sets (tests/design/conftest.py).
@@ -7,14 +7,14 @@ lower bound on the stored eight-state tube sets (tests/design/conftest.py).
 import numpy as np
 import pytest
 
+from fahv.bounds.one_step_bound import altitude_bound, product_bound
+from fahv.certificate.report import onset_lines
 from fahv.control.mpc.estimator import estimator_gains
-from fahv.design.one_step_bound import altitude_bound, product_bound
-from fahv.design.onset import onset_bound, onset_jumps, pulse_peak
-from fahv.design.onset_witness import onset_witness
-from fahv.design.report import onset_lines
-from fahv.design.tube_set import EIGHT_STATES, TubeSet
 from fahv.model.tp_model import build_tp_model
+from fahv.onset.bound import onset_bound, onset_jumps, pulse_peak
+from fahv.onset.witness import onset_witness
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.tube.tube_set import EIGHT_STATES, TubeSet
 
 TS, N_SUB = 0.02, 5
 

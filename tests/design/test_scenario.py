@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import yaml
 
-from fahv.design.case import case_data
-from fahv.design.scenario import load_scenario, uncertified
-from fahv.design.store import load_or_design, stored_design
-from fahv.errors import CaseError, DesignError
+from fahv.certificate.verified import load_or_design
+from fahv.errors import DesignError, SpecError
 from fahv.model.vehicle import load_vehicle
+from fahv.spec.scenario import load_scenario, run_spec_data, uncertified
+from fahv.spec.store import stored_design
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "offline_design" / "scenarios" / "case1_paper.yaml"
@@ -95,7 +95,7 @@ def test_the_baselines_ellipsoids_are_made_only_when_the_baseline_runs(tmp_path,
 def test_a_fault_beyond_the_design_range_is_refused_or_warned(tmp_path):
     root = _copy_tree(tmp_path)
     path = _scenario(root, "big_loss", **{"fault.rho_f": 0.6})
-    with pytest.raises(CaseError, match=r"below the design's fault range rho_f in \[0.76, 1\]"):
+    with pytest.raises(SpecError, match=r"below the design's fault range rho_f in \[0.76, 1\]"):
         load_or_design(path, log=lambda *_: None)
     lines = []
     load_or_design(path, log=lines.append, allow_uncertified=True)
@@ -106,11 +106,11 @@ def test_a_command_outside_the_envelope_is_named():
     vehicle = load_vehicle()
     sc = load_scenario(PAPER)
     _, design, _ = stored_design(sc.design_file, vehicle=vehicle)
-    c = case_data(PAPER)
+    c = run_spec_data(PAPER)
     c["command"]["h_c"] = vehicle.envelope.h_max + 100.0
     msgs = uncertified(design, c, vehicle)
     assert len(msgs) == 1 and "command" in msgs[0] and "flight envelope" in msgs[0]
-    assert uncertified(design, case_data(PAPER), vehicle) == []
+    assert uncertified(design, run_spec_data(PAPER), vehicle) == []
 
 
 def test_a_variant_the_design_did_not_prepare_is_refused(tmp_path):
@@ -119,7 +119,7 @@ def test_a_variant_the_design_did_not_prepare_is_refused(tmp_path):
     d["variants"] = ["tube_mpc"]
     (root / "designs" / "cm_paper.yaml").write_text(yaml.safe_dump(d, sort_keys=False))
     path = _scenario(root, "rmpc_too", variants=["tube_mpc", "rmpc"])
-    with pytest.raises(CaseError, match=r"\['rmpc'\] not prepared by design 'cm_paper'"):
+    with pytest.raises(SpecError, match=r"\['rmpc'\] not prepared by design 'cm_paper'"):
         load_scenario(path)
 
 

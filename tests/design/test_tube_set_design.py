@@ -13,26 +13,27 @@ import pytest
 from tube_set_records import load_record
 
 import fahv.design.tube_set_design as tsd
-from fahv.design.case import case_data, case_from_mapping, load_case
-from fahv.design.domain import nominal_box
-from fahv.design.notch_gain import NotchGain
-from fahv.design.notch_loop import NotchLoop
-from fahv.design.tube_set import TubeSet
-from fahv.errors import CaseError, DesignError
+from fahv.bounds.domain import nominal_box
+from fahv.errors import DesignError, SpecError
+from fahv.spec.files import spec_file
+from fahv.spec.scenario import load_run_spec, run_spec_data
+from fahv.tube.notch_gain import NotchGain
+from fahv.tube.notch_loop import NotchLoop
+from fahv.tube.tube_set import TubeSet
 
 CASE = "offline_design/scenarios/case1.yaml"
 
 
 @pytest.fixture(scope="module")
 def raw8():
-    return case_data(CASE)
+    return run_spec_data(CASE)
 
 
 def test_eight_state_case_sets_every_knob(raw8):
-    c = load_case(CASE)
+    c = load_run_spec(CASE)
     assert c.defaults_used == {}
     assert c["tube"]["form"] == "eight_state" and c["eight_state"]["k"] == 7
-    plain = load_case("offline_design/scenarios/case1_paper.yaml")
+    plain = load_run_spec("offline_design/scenarios/case1_paper.yaml")
     assert plain["tube"]["form"] == "vertices" and "eight_state" not in plain.data
 
 
@@ -85,8 +86,8 @@ def test_eight_state_case_sets_every_knob(raw8):
 def test_eight_state_case_refuses_a_loop_it_is_not_closed_for(raw8, mutate, match):
     d = copy.deepcopy(raw8)
     mutate(d)
-    with pytest.raises(CaseError, match=match):
-        case_from_mapping(d, "bad.yaml")
+    with pytest.raises(SpecError, match=match):
+        spec_file(d, "bad.yaml")
 
 
 @pytest.mark.parametrize("certify", [True, False])
@@ -114,7 +115,7 @@ def test_certify_attitude_bounds_the_supports_in_the_tube_lmi(raw8, vehicle, mon
     r["mpc"]["att_max"] = 0.35
     lines = []
     with pytest.raises(DesignError, match="closure reached"):
-        tsd.design_tube_set(case_from_mapping(r, "att.yaml").data, vehicle, None,
+        tsd.design_tube_set(spec_file(r, "att.yaml").data, vehicle, None,
                             np.ones(11), np.ones(9), np.ones(11), 0.76, np.ones(2),
                             log=lines.append)  # fmt: skip
     if not certify:
@@ -155,7 +156,7 @@ def test_onset_in_tube_asks_the_tube_lmi_to_hold_the_onset_jumps(raw8, vehicle, 
     r["eight_state"]["onset_in_tube"] = kappa
     lines = []
     with pytest.raises(DesignError, match="closure reached"):
-        tsd.design_tube_set(case_from_mapping(r, "onset.yaml").data, vehicle, None,
+        tsd.design_tube_set(spec_file(r, "onset.yaml").data, vehicle, None,
                             np.ones(11), np.ones(9), np.ones(11), 0.76, np.ones(2),
                             log=lines.append)  # fmt: skip
     if kappa == 0.0:
@@ -197,7 +198,7 @@ def test_design_runs_the_law_on_the_eight_state_tube_set(raw8, vehicle, monkeypa
     r["disturbance"]["samples"] = 40
     r["certificate"] = {"schedules": 0}
     lines = []
-    design = pmod.run_design(case_from_mapping(r, "quick8.yaml"), log=lines.append)
+    design = pmod.run_design(spec_file(r, "quick8.yaml"), log=lines.append)
     # the estimate's gains: Ts / est_tau, and 1 along the 20 LPV vertices' elevator columns
     assert calls == [(0.76, (11,), (11,), pytest.approx(0.2), 1.0, (20, 9))]
     a, s = design.arrays, design.summary
@@ -287,7 +288,7 @@ def test_the_adjustable_law_runs_tau_F_8_and_tightens_by_tau_F_8_Z_8(raw8, vehic
     r["disturbance"]["samples"] = 40
     r["certificate"] = {"schedules": 0}
     r["tube"]["tau"] = 0.8
-    design = pmod.run_design(case_from_mapping(r, "quick8_tau.yaml"), log=lambda *_: None)
+    design = pmod.run_design(spec_file(r, "quick8_tau.yaml"), log=lambda *_: None)
     assert taus == [0.8]
     a, lim = design.arrays, vehicle.limits
     np.testing.assert_allclose(a["u_lo"], lim.u_min + 0.8 * ts.tightening, rtol=1e-12)
@@ -313,7 +314,7 @@ def test_a_nominal_box_without_room_for_the_faulty_trim_is_refused(raw8, monkeyp
     r["certificate"] = {"schedules": 0}
     r["eight_state"]["delta_e"] = [-0.9, 7.0]
     with pytest.raises(DesignError, match="eight_state.Phi / delta_e") as err:
-        pmod.run_design(case_from_mapping(r, "narrow.yaml"), log=lambda *_: None)
+        pmod.run_design(spec_file(r, "narrow.yaml"), log=lambda *_: None)
     print(err.value)
     need = float(re.search(r"delta_e -([\d.]+)\.\.\+[\d.]+ deg", str(err.value)).group(1))
     assert 1.0 < need < 1.02  # the lightest corner's trim, with the remainder between points
@@ -368,7 +369,7 @@ def test_a_designed_notch_gain_is_used_only_when_certified_and_closed(raw8, vehi
     r = copy.deepcopy(raw8)
     r["eight_state"].update(notch_gain="designed", notch_continuation=[0.05], onset_in_tube=0.0)
     lines = []
-    got, _, _ = tsd.design_tube_set(case_from_mapping(r, "gain.yaml").data, vehicle, None,
+    got, _, _ = tsd.design_tube_set(spec_file(r, "gain.yaml").data, vehicle, None,
                                     np.ones(11), np.ones(9), np.ones(11), 0.76, np.ones(2),
                                     log=lines.append, notches={"tube_mpc": NotchFilter(
                                         19.05, 0.02, 19.05, 0.1)})  # fmt: skip
@@ -390,11 +391,11 @@ def test_design_refuses_a_command_outside_the_nominal_range(raw8, vehicle):
     """The tube set is certified for a nominal inside the envelope less h_margin / V_margin:
     a design step beyond that range is refused before any design work, naming the point
     and the range; the range is what the QP gets as mpc.hv_box (and what a scenario is
-    checked against, :func:`fahv.design.scenario.uncertified`)."""
-    from fahv.design.pipeline import design_part
+    checked against, :func:`fahv.spec.scenario.uncertified`)."""
     from fahv.design.tube_forms import command_range
+    from fahv.spec.scenario import design_part
 
-    c = design_part(load_case(CASE)).data
+    c = design_part(load_run_spec(CASE)).data
     np.testing.assert_allclose(command_range(c, vehicle.envelope),
                                [[85005.0, 7704.98], [86495.0, 8295.02]], rtol=1e-12)  # fmt: skip
     bad = {**c, "design_step": {**c["design_step"], "h_c": 86498.0}}  # 3 ft beyond the range
@@ -408,7 +409,7 @@ def test_the_shipped_designs_tube_set_is_its_design_files(vehicle):
     design file as it stands: the same parameter directions and loss, and its nominal and
     scheduling boxes are the file's to 1e-12."""
     d = load_record("cm_certified")
-    c = load_case(CASE)
+    c = load_run_spec(CASE)
     assert int(d["k"]) == c["eight_state"]["k"] and float(d["rho_min"]) == c["tube"]["rho_min"]
     nominal, box = nominal_box(c["eight_state"], vehicle.envelope)
     for got, want in ((nominal, "nominal_"), (box, "")):

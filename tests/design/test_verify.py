@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fahv.design.artefacts import Design
-from fahv.design.store import stored_design
-from fahv.design.verify import require_verified, verify
+from fahv.certificate.verify import require_verified, verify
 from fahv.errors import DesignError
 from fahv.model.vehicle import load_vehicle
+from fahv.spec.artefacts import Design
+from fahv.spec.store import stored_design
 
 ROOT = Path(__file__).resolve().parents[2]
 DESIGNS = sorted(p.stem for p in (ROOT / "offline_design" / "designs").glob("*.yaml"))
@@ -97,8 +97,8 @@ def test_the_shipped_paper_design_is_what_its_design_file_makes(tmp_path):
     """Re-designs cm_paper from its design file with the current code (about a minute) and
     compares with the shipped arrays: a change of the code or the design file that moves
     the design is caught here (the slower cm_certified is covered by its verification)."""
-    from fahv.design.case import load_design_file
     from fahv.design.pipeline import run_design
+    from fahv.spec.files import load_design_file
 
     dfile = ROOT / "offline_design/designs/cm_paper.yaml"
     vehicle = load_vehicle()

@@ -1,11 +1,11 @@
-"""The vertex tube checked against its own assumptions (fahv.design.vertex_tube)."""
+"""The vertex tube checked against its own assumptions (fahv.tube.vertex_tube)."""
 
 import numpy as np
 import pytest
 
-from fahv.design.vertex_tube import onset_levels
-from fahv.design.vertices import fault_vertices
+from fahv.bounds.vertices import fault_vertices
 from fahv.synthesis.rpi_level import worst_level
+from fahv.tube.vertex_tube import onset_levels
 
 
 def test_onset_levels_follow_the_certificate_recursion():

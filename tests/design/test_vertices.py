@@ -1,9 +1,9 @@
-"""Vertex sets of the tube LMI (fahv.design.vertices): faults and adjustable gains."""
+"""Vertex sets of the tube LMI (fahv.bounds.vertices): faults and adjustable gains."""
 
 import numpy as np
 import pytest
 
-from fahv.design.vertices import fault_vertices, gain_vertices
+from fahv.bounds.vertices import fault_vertices, gain_vertices
 from fahv.synthesis.feedback import design_tube, verify_tube
 from fahv.synthesis.rpi_level import rpi_margin, worst_level
 

@@ -77,7 +77,7 @@ class HalfFeedback(ControlLaw):
     def step(self, k, x, ref, lanes):
         e = np.ascontiguousarray(x - ref.x_r - ref.x_n)
         u = (ref.u_r + ref.u_n) + mv(self.gain * self.F, e)
-        return LawStep(u, e, quad(e, self.N_inv), np.zeros((e.shape[0], 3), dtype=np.int64))
+        return LawStep(u, e, quad(e, self.N_inv), np.zeros(e.shape[0], dtype=np.int64))
 
 
 register_law(HalfFeedback)

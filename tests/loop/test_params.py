@@ -73,7 +73,7 @@ def test_a_variant_runs_the_gain_designed_for_its_notch_loop(design):
     variant's controller only; the other variants keep the tube's F."""
     import dataclasses
 
-    from fahv.design.artefacts import variant_gain_key
+    from fahv.spec.artefacts import variant_gain_key
 
     first, *others = design.case["variants"]
     own = 1.5 * np.asarray(design.arrays["F"])

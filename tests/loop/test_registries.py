@@ -17,12 +17,12 @@ import pytest
 
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS, load_plugins
 from fahv.control.base import unregister_law
-from fahv.design.case import case_from_mapping
-from fahv.errors import CaseError
+from fahv.errors import SpecError
 from fahv.loop.batch import simulate_batch
 from fahv.loop.params import node_parameters, specs
 from fahv.loop.simulate import simulate
 from fahv.plant.faults import FAULTS
+from fahv.spec.files import spec_file
 
 HERE = Path(__file__).resolve().parent
 
@@ -47,7 +47,7 @@ def dummy(registered, raw, design):
     d["variants"] = ["tube_mpc_paper", "half_feedback"]
     d["half_feedback"] = {"gain": 0.5}
     d["fault"] = {"kind": "elevator_scale", "t_onset": 1.0, "factor": 0.95}
-    case = case_from_mapping(d, "dummy.yaml")
+    case = spec_file(d, "dummy.yaml")
     # the design's arrays do not depend on these choices: reuse them with the new case
     return type(design)(case.data, design.arrays, design.summary)
 
@@ -97,8 +97,8 @@ def test_plugin_law_runs_through_the_graph(dummy, tmp_path):
 def test_unknown_law_or_fault_names_the_registry(raw):
     d = copy.deepcopy(raw)
     d["fault"]["kind"] = "elevator_scale"
-    with pytest.raises(CaseError, match="'fault.kind' must be one of"):
-        case_from_mapping(d, "x.yaml")
+    with pytest.raises(SpecError, match="'fault.kind' must be one of"):
+        spec_file(d, "x.yaml")
 
 
 def test_a_law_must_name_a_registered_nominal_part():

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from fahv.design.store import load_or_design
+from fahv.certificate.verified import load_or_design
 from fahv.runs.results import TOLERANCES, compare_reference, read_reference, run_case
 
 REFERENCE = Path(__file__).parents[1] / "data" / "results_reference.json"

@@ -13,7 +13,7 @@ import domain_coordinator
 import numpy as np
 import pytest
 
-from fahv.design.store import load_or_design
+from fahv.certificate.verified import load_or_design
 from fahv.loop.graph import NODES, TOPICS
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import read_run, run_result_of

@@ -6,14 +6,14 @@ from importlib import resources
 import numpy as np
 import pytest
 
-from fahv.design.artefacts import load_design, save_design, stale_reason
-from fahv.design.case import case_from_mapping
 from fahv.design.pipeline import run_design
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import read_run, run_result_of
 from fahv.runs.sil import run_sil
 from fahv.runs.tools import run_vehicle
+from fahv.spec.artefacts import load_design, save_design, stale_reason
+from fahv.spec.files import spec_file
 
 T = 1.0
 
@@ -42,19 +42,19 @@ def test_vehicle_changes_design_hash_and_provenance(design, heavy_design, heavy,
     assert design.summary["provenance"]["vehicle_file"] == ""  # the packaged file
     # a saved design is stale for another vehicle and for a changed design part, not for
     # a changed scenario
-    from fahv.design.pipeline import design_part
+    from fahv.spec.scenario import design_part
 
     save_design(design, tmp_path / "d")
     back = load_design(tmp_path / "d")
-    c = design_part(case_from_mapping(design.case, "quick.yaml"))
+    c = design_part(spec_file(design.case, "quick.yaml"))
     assert stale_reason(back, c, load_vehicle()) is None
     assert stale_reason(back, c, load_vehicle(heavy)) == (
         "the vehicle file changed since the design was made"
     )
-    longer = design_part(case_from_mapping({**design.case, "duration": 299.0}, "quick.yaml"))
+    longer = design_part(spec_file({**design.case, "duration": 299.0}, "quick.yaml"))
     assert stale_reason(back, longer, load_vehicle()) is None  # a scenario key
     margin = {**design.case["disturbance"], "margin": 1.3}
-    c2 = design_part(case_from_mapping({**design.case, "disturbance": margin}, "quick.yaml"))
+    c2 = design_part(spec_file({**design.case, "disturbance": margin}, "quick.yaml"))
     assert stale_reason(back, c2, load_vehicle()) == (
         "the design file quick.yaml changed since the design was made"
     )

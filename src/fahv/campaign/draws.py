@@ -166,7 +166,7 @@ def overrides(values: dict, design, variant: str) -> dict:
     ----------
     values : dict
         From :func:`draw`.
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
         The case's design (its trim map gives the initial trim state; its vehicle
         file the nominal parameters).
     variant : str

@@ -39,14 +39,14 @@ import numpy as np
 from fahv.campaign import store
 from fahv.campaign.draws import _vehicle, draw, overrides, run_seed
 from fahv.campaign.spec import Campaign
-from fahv.design.artefacts import load_design, save_design
-from fahv.design.store import load_or_design
+from fahv.certificate.verified import load_or_design
 from fahv.errors import CampaignError, DesignError
 from fahv.interrupt import deferred
 from fahv.loop.batch import simulate_batch
 from fahv.loop.simulate import RunResult
 from fahv.model.vehicle import ALPHA, THETA, H, V, load_vehicle
 from fahv.runs.metrics import metrics
+from fahv.spec.artefacts import load_design, save_design
 from fahv.version import __version__
 
 #: Decimation of the stored trajectories [s between samples].
@@ -106,7 +106,7 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
         The campaign's design (scattered to the workers once).
     data : dict
         Validated campaign data.
@@ -215,7 +215,7 @@ def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=p
 
     The design is the one saved in ``out_dir/design`` (a resumed campaign must keep
     it), else the stored, verified design of the campaign's scenario with the
-    scenario's arrays (:func:`fahv.design.store.load_or_design`; nothing is designed).
+    scenario's arrays (:func:`fahv.certificate.verified.load_or_design`; nothing is designed).
 
     Raises
     ------
@@ -244,12 +244,12 @@ def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=p
         design = load_design(out / "design")
     except DesignError:
         pass
-    same = design is not None and _same(design.case, campaign.case.data)
+    same = design is not None and _same(design.case, campaign.run_spec.data)
     if design is not None and done and not same:
         raise CampaignError(f"{out}: its design belongs to another scenario content; its runs "
                             "cannot be completed, use another --out")  # fmt: skip
     if not same:
-        design = load_or_design(campaign.case.path, None, veh.source_file if not veh.packaged
+        design = load_or_design(campaign.run_spec.path, None, veh.source_file if not veh.packaged
                                 else None, log=log, allow_uncertified=True)[1]  # fmt: skip
         save_design(design, out / "design")
     if man is None:
@@ -260,7 +260,7 @@ def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=p
                 "hash": campaign.content_hash(),
                 "campaign": campaign.data,
                 "campaign_file": str(campaign.path),
-                "case": campaign.case.data,
+                "case": campaign.run_spec.data,
                 "duration": campaign.duration,
                 "design_hash": design.summary["design_hash"],
                 "code_version": __version__,

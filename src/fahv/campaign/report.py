@@ -107,7 +107,7 @@ def verdicts(row: dict, req: dict, certified: dict | None = None) -> dict[str, b
     """Pass (True), fail (False) or not applicable (None) of each requirement for one run.
 
     ``certified`` is the design's certified nominal range (``certificate.certified_range``
-    of an eight-state design's summary, :func:`fahv.design.domain.certified_range`):
+    of an eight-state design's summary, :func:`fahv.bounds.domain.certified_range`):
     "nominal_range" checks the run's nominal against it (None without it, or for a run
     without a nominal). It is the tube's assumption, not one of the requirements "all"
     combines.

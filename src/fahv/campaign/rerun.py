@@ -25,7 +25,6 @@ from pathlib import Path
 
 from fahv.campaign import store
 from fahv.campaign.draws import _vehicle, draw, overrides
-from fahv.design.artefacts import load_design
 from fahv.errors import CampaignError, RunError
 from fahv.loop.simulate import simulate, simulate_parameters
 from fahv.runs.bag import PARAMS, read_run, run_result_of, start_metadata
@@ -33,6 +32,7 @@ from fahv.runs.metrics import metrics
 from fahv.runs.sil import recorder_metadata, run_graph, run_parameter_file, run_sil
 from fahv.runs.tools import run_vehicle
 from fahv.runs.writer import RunWriter
+from fahv.spec.artefacts import load_design
 
 
 @dataclass

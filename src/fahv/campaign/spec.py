@@ -6,9 +6,9 @@ Declared once in the configuration language (:mod:`fahv.config`), validated once
 list ``[low, high]`` (uniform draw, ``low == high`` fixes the value); an absent range
 leaves the scenario's value. The generated key table is in docs/reference/configuration.md.
 
-Checks beyond the field ranges (made here, with the case and the vehicle at hand):
+Checks beyond the field ranges (made here, with the run spec and the vehicle at hand):
 ``low <= high``; the variants are among the scenario's; every fault kind drawn has its
-size and onset (from the campaign or the case); initial trims and commanded points
+size and onset (from the campaign or the scenario); initial trims and commanded points
 stay inside the vehicle's flight envelope for every value of their ranges.
 """
 
@@ -24,12 +24,12 @@ from typing import Any
 from fahv.config import Check, Field, Section, validate
 from fahv.config.yamlio import load_yaml
 from fahv.control import VARIANTS
-from fahv.design.case import Case
-from fahv.design.scenario import load_scenario
-from fahv.errors import CampaignError, CaseError
+from fahv.errors import CampaignError, SpecError
 from fahv.model.vehicle import load_vehicle
 from fahv.plant.faults import FAULTS
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.spec.files import SpecFile
+from fahv.spec.scenario import load_scenario
 
 #: Ways to draw the uncertain parameters of sec. 5.1.
 METHODS = ("uniform", "corners", "lhs", "none")
@@ -58,7 +58,7 @@ def campaign_spec() -> Section:
             Field("method", "str", "uniform in the box, its corners (index bits), a Latin "
                   "hypercube over the campaign (scipy.stats.qmc), or none (the scenario's draw)",
                   choices=METHODS, default="uniform"),
-            Field("scale", "float", "fraction of the sec. 5.1 uncertainty box", lo=0.0, hi=1.0,
+            Field("scale", "float", "fraction of the sec. 5.1 parameter box", lo=0.0, hi=1.0,
                   default=1.0),
             Field("parameters", "strs", "uncertain parameters drawn (the others nominal)",
                   choices=tuple(PAPER_UNCERTAINTY), default=tuple(PAPER_UNCERTAINTY)),
@@ -69,7 +69,7 @@ def campaign_spec() -> Section:
         "fault",
         (
             Field("kinds", "strs", "fault kinds drawn with equal probability (empty: the "
-                  "case's kind)", choices=FAULTS.names, default=()),
+                  "scenario's kind)", choices=FAULTS.names, default=()),
             _range("onset", "fault onset time range", "s", lo=0.0),
             _range("loss", "elevator loss of effectiveness 1 - rho_f range", lo=0.0, hi=1.0,
                    hi_open=True, equation="eq. (15)"),
@@ -151,8 +151,8 @@ class Campaign:
         File it was read from.
     data : dict
         Validated content, defaults filled in (see :func:`campaign_spec`).
-    case : fahv.design.case.Case
-        The case file it names, validated.
+    run_spec : fahv.spec.files.SpecFile
+        The run spec of the scenario file it names.
     vehicle : fahv.model.vehicle.Vehicle
         The vehicle its envelope and range checks used (``--vehicle``, or the packaged
         one).
@@ -160,7 +160,7 @@ class Campaign:
 
     path: Path
     data: dict
-    case: Case
+    run_spec: SpecFile
     vehicle: Any
 
     def __getitem__(self, key: str):
@@ -175,7 +175,7 @@ class Campaign:
     @property
     def duration(self) -> float:
         """Simulated time of each run [s] (the scenario's when the file says 0)."""
-        return float(self.data["duration"] or self.case["duration"])
+        return float(self.data["duration"] or self.run_spec["duration"])
 
     @property
     def warnings(self) -> list[str]:
@@ -185,7 +185,7 @@ class Campaign:
         end before their fault, i.e. without one.
         """
         out = self._beyond_design()
-        f, cf, d = self.data["dispersions"]["fault"], self.case["fault"], self.duration
+        f, cf, d = self.data["dispersions"]["fault"], self.run_spec["fault"], self.duration
         kinds = f["kinds"] or [cf["kind"]]
         if all(k == "none" for k in kinds):
             return out
@@ -206,26 +206,27 @@ class Campaign:
     def _beyond_design(self) -> list[str]:
         """Draws beyond the fault range and nominal range the scenario's design certifies."""
         out = []
-        rho_min = float(self.case["tube"]["rho_min"])
+        rho_min = float(self.run_spec["tube"]["rho_min"])
         f = self.data["dispersions"]["fault"]
-        if "loss_of_effectiveness" in (f["kinds"] or [self.case["fault"]["kind"]]) and f["loss"]:
+        kinds = f["kinds"] or [self.run_spec["fault"]["kind"]]
+        if "loss_of_effectiveness" in kinds and f["loss"]:
             if f["loss"][1] > 1.0 - rho_min + 1e-12:
                 out.append(
                     f"{self.path}: dispersions.fault.loss {list(f['loss'])} reaches beyond the "
                     f"design's fault range (losses up to {100 * (1 - rho_min):.0f} %, "
                     f"tube.rho_min {rho_min:g}): those runs are not covered by its certificate"
                 )
-        if self.case["tube"]["form"] == "eight_state":
+        if self.run_spec["tube"]["form"] == "eight_state":
             out += self._beyond_nominal_range()
         return out
 
     def _beyond_nominal_range(self) -> list[str]:
         """Initial points and commands drawn beyond the eight-state tube's nominal range."""
-        from fahv.design.domain import nominal_box
+        from fahv.bounds.domain import nominal_box
 
-        nominal, _ = nominal_box(self.case["eight_state"], self.vehicle.envelope)
+        nominal, _ = nominal_box(self.run_spec["eight_state"], self.vehicle.envelope)
         lo, hi = nominal.lo[:2], nominal.hi[:2]
-        cmd, d = self.case["command"], self.data["dispersions"]
+        cmd, d = self.run_spec["command"], self.data["dispersions"]
         h0 = d["initial"]["h0"] or [cmd["h0"]] * 2
         V0 = d["initial"]["V0"] or [cmd["V0"]] * 2
         h_c = [h0[0] + d["command"]["dh"][0], h0[1] + d["command"]["dh"][1]] if d["command"][
@@ -246,8 +247,8 @@ class Campaign:
         return out
 
     def content_hash(self) -> str:
-        """sha256 of the campaign and case content (defaults included), 16 hex characters."""
-        text = json.dumps({"campaign": self.data, "case": self.case.data}, sort_keys=True)
+        """sha256 of the campaign and run spec content (defaults included), 16 hex characters."""
+        text = json.dumps({"campaign": self.data, "case": self.run_spec.data}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -255,21 +256,21 @@ def _fail(source: str, key: str, message: str) -> CampaignError:
     return CampaignError(f"{source}: key '{key}' {message}")
 
 
-def check_campaign(data: dict, case: Case, source: str, vehicle=None) -> None:
-    """Cross-checks of a validated campaign against its case and the vehicle.
+def check_campaign(data: dict, run_spec: SpecFile, source: str, vehicle=None) -> None:
+    """Cross-checks of a validated campaign against its run spec and the vehicle.
 
     Raises
     ------
     CampaignError
-        Naming the key: a variant the case does not run, a fault kind without size or
+        Naming the key: a variant the run spec does not run, a fault kind without size or
         onset, an initial trim or commanded point outside the flight envelope.
     """
     veh = load_vehicle() if vehicle is None else vehicle
     for v in data["variants"]:
-        if v not in case["variants"]:
-            raise _fail(source, "variants", f"names '{v}', which the case {case.name} does "
-                        f"not run (its variants: {case['variants']})")  # fmt: skip
-    f, cf = data["dispersions"]["fault"], case["fault"]
+        if v not in run_spec["variants"]:
+            raise _fail(source, "variants", f"names '{v}', which the scenario {run_spec.name} "
+                        f"does not run (its variants: {run_spec['variants']})")  # fmt: skip
+    f, cf = data["dispersions"]["fault"], run_spec["fault"]
     kinds = f["kinds"] or [cf["kind"]]
     if any(k != "none" for k in kinds) and not f["onset"] and not math.isfinite(cf["t_onset"]):
         raise _fail(
@@ -279,7 +280,7 @@ def check_campaign(data: dict, case: Case, source: str, vehicle=None) -> None:
         if kind in kinds and not f[key] and cf["kind"] != kind:
             msg = f"is needed for fault kind '{kind}' (the scenario's fault is '{cf['kind']}')"
             raise _fail(source, f"dispersions.fault.{key}", msg)
-    env, cmd = veh.envelope, case["command"]
+    env, cmd = veh.envelope, run_spec["command"]
     init, dc = data["dispersions"]["initial"], data["dispersions"]["command"]
     h0s = init["h0"] or [cmd["h0"]]
     V0s = init["V0"] or [cmd["V0"]]
@@ -288,20 +289,20 @@ def check_campaign(data: dict, case: Case, source: str, vehicle=None) -> None:
         if min(vals) < lo or max(vals) > hi:
             raise _fail(source, f"dispersions.{key}", f"must stay inside the flight envelope "
                         f"[{lo}, {hi}], got {vals}")  # fmt: skip
-    for key, starts, steps, case_end, lo, hi in (
+    for key, starts, steps, spec_end, lo, hi in (
         ("dh", h0s, dc["dh"], cmd["h_c"], env.h_min, env.h_max),
         ("dV", V0s, dc["dV"], cmd["V_c"], env.V_min, env.V_max),
     ):
-        ends = [s + d for s in starts for d in steps] if steps else [case_end]
+        ends = [s + d for s in starts for d in steps] if steps else [spec_end]
         if min(ends) < lo or max(ends) > hi:
             raise _fail(source, f"dispersions.command.{key}", f"takes the command outside the "
                         f"flight envelope [{lo}, {hi}]: commanded values {min(ends)} to "
                         f"{max(ends)}")  # fmt: skip
 
 
-def campaign_from_mapping(data, source: str = "<mapping>", case: Case | None = None,
+def campaign_from_mapping(data, source: str = "<mapping>", run_spec: SpecFile | None = None,
                           base: Path | None = None, vehicle=None) -> Campaign:  # fmt: skip
-    """Validate a campaign mapping and load (or take) its case.
+    """Validate a campaign mapping and load (or take) its scenario's run spec.
 
     Parameters
     ----------
@@ -309,8 +310,8 @@ def campaign_from_mapping(data, source: str = "<mapping>", case: Case | None = N
         Parsed campaign file.
     source : str
         Name used in messages.
-    case : Case, optional
-        The scenario's case, when already loaded (otherwise that of the scenario file
+    run_spec : SpecFile, optional
+        The scenario's run spec, when already loaded (otherwise that of the scenario file
         ``data['scenario']``, relative to ``base``).
     base : Path, optional
         Folder the scenario path is relative to (the campaign file's folder).
@@ -325,15 +326,15 @@ def campaign_from_mapping(data, source: str = "<mapping>", case: Case | None = N
         the key ``scenario``.
     """
     v = validate(campaign_spec(), data, source, CampaignError)
-    if case is None:
+    if run_spec is None:
         path = scenario_path(v.values["scenario"], base)
         try:
-            case = load_scenario(path).case
-        except CaseError as exc:
+            run_spec = load_scenario(path).run_spec
+        except SpecError as exc:
             raise _fail(source, "scenario", f"names a scenario that does not load: {exc}") from None
     vehicle = load_vehicle() if vehicle is None else vehicle
-    check_campaign(v.values, case, source, vehicle)
-    return Campaign(Path(source), v.values, case, vehicle)
+    check_campaign(v.values, run_spec, source, vehicle)
+    return Campaign(Path(source), v.values, run_spec, vehicle)
 
 
 def scenario_path(name: str, base: Path | None = None) -> Path:

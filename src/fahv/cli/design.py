@@ -7,19 +7,19 @@ import time
 import warnings
 from pathlib import Path
 
+from fahv.certificate.verify import require_verified, verify
 from fahv.cli.common import add_vehicle_option, progress, vehicle_of
-from fahv.design.artefacts import load_design, save_design
-from fahv.design.case import load_design_file, read_yaml_file
 from fahv.design.pipeline import run_design
-from fahv.design.scenario import load_scenario
 from fahv.design.stage_clock import StageClock
-from fahv.design.store import design_dir, stored_design
-from fahv.design.verify import require_verified, verify
-from fahv.errors import CaseError, DesignError
+from fahv.errors import DesignError, SpecError
+from fahv.spec.artefacts import load_design, save_design
+from fahv.spec.files import load_design_file, read_yaml_file
+from fahv.spec.scenario import load_scenario
+from fahv.spec.store import design_dir, stored_design
 
 
-def design_case(case, vehicle, out_dir: Path, log=print, cold: bool = False):
-    """Design a design file's case for ``vehicle`` and store it with its certificate lines.
+def design_and_store(spec, vehicle, out_dir: Path, log=print, cold: bool = False):
+    """Design a design file (``spec``) for ``vehicle`` and store it with its certificate lines.
 
     Writes ``design.npz``, ``design.json`` and ``certificate.txt`` (every line the
     design printed) into ``out_dir`` atomically. A progress line names the stage at
@@ -30,7 +30,7 @@ def design_case(case, vehicle, out_dir: Path, log=print, cold: bool = False):
 
     Returns
     -------
-    fahv.design.artefacts.Design
+    fahv.spec.artefacts.Design
 
     Raises
     ------
@@ -52,7 +52,7 @@ def design_case(case, vehicle, out_dir: Path, log=print, cold: bool = False):
     times = None if previous is None else previous.summary.get("stage_times_s")
     start = None if cold or previous is None else previous.arrays
     with StageClock(times) as clock:
-        design = run_design(case, vehicle, progress=bar, log=both, clock=clock, previous=start)
+        design = run_design(spec, vehicle, progress=bar, log=both, clock=clock, previous=start)
     design.summary["design_time_s"] = round(time.monotonic() - t0, 1)  # not in the hash
     design.summary["stage_times_s"] = clock.times  # not in the hash: the next estimate
     save_design(design, out_dir, {"certificate.txt": "\n".join(lines) + "\n"})
@@ -69,10 +69,10 @@ def _previous_design(folder: Path):
 
 def cmd_design(args) -> int:
     """Offline synthesis of a design file: print every certificate, write the artefacts."""
-    case = load_design_file(args.design)
+    spec = load_design_file(args.design)
     vehicle = vehicle_of(args)
-    out = design_dir(case.path, case.name, args.out, vehicle)
-    design = design_case(case, vehicle, out, cold=args.cold)
+    out = design_dir(spec.path, spec.name, args.out, vehicle)
+    design = design_and_store(spec, vehicle, out, cold=args.cold)
     prov = design.summary["provenance"]
     print(
         f"design hash {design.summary['design_hash']} (design file {prov['design_file_hash']}, "
@@ -87,7 +87,7 @@ def resolve_design_file(path: str | Path) -> Path:
 
     Raises
     ------
-    CaseError
+    SpecError
         If ``path`` is none of them.
     """
     p = Path(path)
@@ -97,7 +97,7 @@ def resolve_design_file(path: str | Path) -> Path:
                 p = d / f"{p}.yaml"
                 break
         else:
-            raise CaseError(f"no design or scenario named {path!r} in offline_design/")
+            raise SpecError(f"no design or scenario named {path!r} in offline_design/")
     data = read_yaml_file(p, "design or scenario file")
     if isinstance(data, dict) and "design" in data and "design_step" not in data:
         return load_scenario(p).design_file

@@ -9,9 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fahv.bounds.disturbance import INPUT_DEVIATIONS, STATE_DEVIATIONS
 from fahv.cli.common import add_vehicle_option, progress, shape_arg, vehicle_of
-from fahv.design.disturbance import DEFAULT_DEV_BOX, DEFAULT_DU_BOX
-from fahv.design.feasibility import tube_feasibility
 from fahv.errors import FahvError
 from fahv.model import figures as plots
 from fahv.model.linearize import classify_modes, linearize
@@ -20,6 +19,7 @@ from fahv.model.tp_model import approximation_error, build_tp_model, offgrid_poi
 from fahv.model.trim import trim
 from fahv.model.vehicle import STATE_NAMES
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.tube.feasibility import tube_feasibility
 
 
 def cmd_trim(args) -> int:
@@ -179,10 +179,10 @@ def cmd_tube(args) -> int:
     veh = vehicle_of(args)
     rho_f = args.rho_f
     if rho_f is None:  # the effectiveness the case's design covers
-        from fahv.design.case import load_case
-        from fahv.design.pipeline import design_rho_f
+        from fahv.design.stages import design_rho_f
+        from fahv.spec.scenario import load_run_spec
 
-        rho_f = design_rho_f(load_case(args.case))
+        rho_f = design_rho_f(load_run_spec(args.case))
         print(f"rho_f = {rho_f:g}: the elevator effectiveness {args.case} designs its tube for")
     tp = _tp(args, veh, args.model, args.vertices)
     Dx = veh.state_scale
@@ -197,8 +197,8 @@ def cmd_tube(args) -> int:
             args.Ts,
             PAPER_UNCERTAINTY,
             rho_f,
-            DEFAULT_DEV_BOX,
-            DEFAULT_DU_BOX,
+            STATE_DEVIATIONS,
+            INPUT_DEVIATIONS,
             args.samples_w,
             args.seed,
             args.margin,

@@ -7,9 +7,8 @@ import sys
 import warnings
 from pathlib import Path
 
+from fahv.certificate.verified import load_or_design
 from fahv.cli.common import add_vehicle_option, progress, read_run_warned, to_json
-from fahv.design.scenario import load_scenario
-from fahv.design.store import load_or_design
 from fahv.errors import FahvError, RunInterrupted
 from fahv.loop.graph import NODES, TOPICS, graph_nodes
 from fahv.loop.params import controller_node
@@ -29,6 +28,7 @@ from fahv.runs.sil import (
 from fahv.runs.tools import format_metrics
 from fahv.runs.workspace import ROOT
 from fahv.runs.writer import RunWriter
+from fahv.spec.scenario import load_scenario
 
 
 class StepProgress:
@@ -153,7 +153,7 @@ def cmd_simulate(args) -> int:
     """In-process closed loop of a case; records each variant to bags/, prints metrics."""
     import time
 
-    variants = selected_variants(load_scenario(args.case).case, args.variant)
+    variants = selected_variants(load_scenario(args.case).run_spec, args.variant)
     case, design, vehicle = load_or_design(
         args.case, args.design, args.vehicle, allow_uncertified=args.allow_uncertified,
         variants=variants,
@@ -195,7 +195,7 @@ def _live_view(port: int | None, Ts: float):
 
 def cmd_sil(args) -> int:
     """Run a case through the ROS 2 node graph, recorded to MCAP; metrics of the run."""
-    variant = args.variant or load_scenario(args.case).case["variants"][0]
+    variant = args.variant or load_scenario(args.case).run_spec["variants"][0]
     case, design, vehicle = load_or_design(
         args.case, args.design, args.vehicle, allow_uncertified=args.allow_uncertified,
         variants=[variant],

@@ -3,7 +3,7 @@
 A :class:`Field` declares one value: type, unit, range, default (or required),
 description and the paper equation it enters. A :class:`Section` groups fields (and
 sections) of a YAML mapping, is required always or only when another value asks for
-it, and carries cross-field checks. Case files (:mod:`fahv.design.case`), campaign
+it, and carries cross-field checks. Case files (:mod:`fahv.spec.schema`), campaign
 files and the node parameters of the SIL graph (:mod:`fahv.loop.params`) are declared
 this way; the ROS nodes generate their parameter descriptors (type, description,
 range) from the same fields, so a range is written in exactly one place.

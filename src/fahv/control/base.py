@@ -6,8 +6,8 @@ A control law is one module: a subclass of :class:`ControlLaw` registered with
 - its nominal part, a registered :class:`NominalSource` class (:attr:`ControlLaw.nominal`),
   which runs in the nominal_trajectory node and gives the reference (x_r, u_r) and the
   nominal trajectory (x_n, u_n) of every step,
-- the case-file section it needs (:attr:`ControlLaw.section`, required only when a
-  variant of the case uses the law),
+- the design-file section it needs (:attr:`ControlLaw.section`, required only when a
+  variant of the design uses the law),
 - the parameters its controller node takes beyond the common ones
   (:attr:`ControlLaw.parameters`, generated into ROS descriptors),
 - its offline part (:meth:`ControlLaw.design`: extra certified arrays) and how the
@@ -20,7 +20,7 @@ A nominal part has the same shape (section, parameters, offline design and check
 node values, a batched ``step``) and its own registry, so a new law that brings a
 new nominal part is its module(s) plus two registry entries.
 
-A *variant* is what a case lists and a run is made of: a law plus a notch setting
+A *variant* is what a design file lists and a run is made of: a law plus a notch setting
 (``tube_mpc_no_notch`` is the law ``tube_mpc`` with the notch off).
 """
 
@@ -59,7 +59,7 @@ class NominalSource:
 
     #: Registry name (node parameter ``nominal``).
     name: ClassVar[str] = ""
-    #: Case-file section of the nominal part (required when a variant's law uses it).
+    #: Design-file section of the nominal part (required when a variant's law uses it).
     section: ClassVar[Section | None] = None
     #: Parameters of the nominal_trajectory node it adds (used only with it).
     parameters: ClassVar[tuple[Field, ...]] = ()
@@ -76,8 +76,9 @@ class NominalSource:
 
         Parameters
         ----------
-        ctx : fahv.design.context.DesignContext
-            ``case`` data, ``vehicle``, the ``arrays`` designed so far, ``log``.
+        ctx : fahv.spec.context.DesignContext
+            ``spec`` (the design data and its command), ``vehicle``, the ``arrays``
+            designed so far, ``log``.
 
         Raises
         ------
@@ -142,27 +143,27 @@ class LawStep:
         Tube error x - x_r - x_n (or x - x_r without a tube).
     level : (B,) ndarray
         e' N^-1 e (<= 1 inside the tube Z; NaN without a tube).
-    lmi : (B, 3) int ndarray
-        Online LMI solves, certified fallbacks and rejected solves so far (zeros
-        for laws without online LMIs).
+    lmi_failed : (B,) int ndarray
+        Steps so far with the state outside the law's largest ellipsoid (the RMPC
+        baseline's E_1; zeros for the tube laws).
     """
 
     u: np.ndarray
     e: np.ndarray
     level: np.ndarray
-    lmi: np.ndarray
+    lmi_failed: np.ndarray
 
 
 @functools.cache
-def no_lmi(n_runs: int) -> np.ndarray:
-    """Zero online-LMI counters (n_runs, 3) of a law without online LMIs (read-only, shared).
+def no_lmi_failed(n_runs: int) -> np.ndarray:
+    """Zero ``LawStep.lmi_failed`` (n_runs,) of a law without ellipsoids (read-only, shared).
 
     Raises
     ------
     ValueError
         If ``n_runs`` is negative.
     """
-    out = np.zeros((n_runs, 3), dtype=np.int64)
+    out = np.zeros(n_runs, dtype=np.int64)
     out.setflags(write=False)
     return out
 
@@ -191,10 +192,10 @@ class ControlLaw:
     #: True if the law can form its error's q through the notch (the nominal's q through
     #: a replica of the filter, with the case key ``tube.filter_nominal_q``), so that the
     #: design may certify the loop through the notch
-    #: (:func:`fahv.design.notch_loop.notch_tube`); otherwise the measured q alone is
+    #: (:func:`fahv.tube.notch_loop.notch_tube`); otherwise the measured q alone is
     #: filtered and only the loop's stability is checked.
     filters_nominal_q: ClassVar[bool] = False
-    #: Case-file section the law needs (required only when a variant uses the law).
+    #: Design-file section the law needs (required only when a variant uses the law).
     section: ClassVar[Section | None] = None
     #: Parameters of the controller node the law adds (each used only with the law).
     parameters: ClassVar[tuple[Field, ...]] = ()
@@ -210,7 +211,7 @@ class ControlLaw:
         ----------
         ctx : object
             The design context of :func:`fahv.design.pipeline.run_design`
-            (:class:`fahv.design.context.DesignContext`: ``case`` data, ``vehicle``,
+            (:class:`fahv.spec.context.DesignContext`: ``spec`` data, ``vehicle``,
             the ``arrays`` designed so far, ``log``).
 
         Returns
@@ -249,33 +250,33 @@ class ControlLaw:
 
 @dataclass(frozen=True)
 class Variant:
-    """A run configuration a case may list.
+    """A run configuration a design file may list: a law with a notch setting.
 
     Attributes
     ----------
     name : str
     law : str
         Registered control law.
-    notch : {"case", "off", "mode2"}
-        Notch as in the case file, switched off, or centred on flexible mode 2.
+    notch : {"design", "off", "mode2"}
+        Notch as in the design file, switched off, or centred on flexible mode 2.
     description : str
     """
 
     name: str
     law: str
-    notch: str = "case"
+    notch: str = "design"
     description: str = ""
 
 
-def variant_notch(case_notch, setting: str, omega_flex) -> dict | None:
+def variant_notch(design_notch, setting: str, omega_flex) -> dict | None:
     """The notch filter (eq. 38) a variant runs with on the q feedback, or None.
 
     Parameters
     ----------
-    case_notch : mapping
-        The case's ``notch`` section (``enabled``, ``omega_z``, ``eps_z``, ``omega_p``,
+    design_notch : mapping
+        The design's ``notch`` section (``enabled``, ``omega_z``, ``eps_z``, ``omega_p``,
         ``eps_p``; rad/s and -).
-    setting : {"case", "off", "mode2"}
+    setting : {"design", "off", "mode2"}
         :attr:`Variant.notch`.
     omega_flex : (2,) array_like
         Flexible mode frequencies of the design [rad/s]; ``mode2`` centres the notch on
@@ -285,11 +286,11 @@ def variant_notch(case_notch, setting: str, omega_flex) -> dict | None:
     -------
     dict or None
         ``omega_z``, ``eps_z``, ``omega_p``, ``eps_p`` as floats; None when the notch is
-        off (case or variant).
+        off (in the design or by the variant).
     """
-    if not case_notch["enabled"] or setting == "off":
+    if not design_notch["enabled"] or setting == "off":
         return None
-    notch = {k: float(case_notch[k]) for k in ("omega_z", "eps_z", "omega_p", "eps_p")}
+    notch = {k: float(design_notch[k]) for k in ("omega_z", "eps_z", "omega_p", "eps_p")}
     if setting == "mode2":
         w2 = float(np.asarray(omega_flex, float)[1])
         notch.update(omega_z=w2, omega_p=w2)
@@ -336,7 +337,7 @@ def register_law(cls: type[ControlLaw], variants: tuple[Variant, ...] = ()) -> t
             "(register_nominal)"
         )
     LAWS.register(cls.name, cls)
-    for v in (Variant(cls.name, cls.name, "case", cls.__doc__.splitlines()[0]), *variants):
+    for v in (Variant(cls.name, cls.name, "design", cls.__doc__.splitlines()[0]), *variants):
         VARIANTS.register(v.name, v)
     return cls
 

@@ -199,13 +199,13 @@ class RMPCLaw(ControlLaw):
         # offline only: the nodes and the campaign workers never import cvxpy (0.6 s each)
         from fahv.synthesis.offline_rmpc import design_sequence
 
-        r = ctx.case["rmpc"]
+        r = ctx.spec["rmpc"]
         rv = r["vertices"]
-        dm = build_tp_model(ctx.vehicle, "dm", rv[0], rv[1], *ctx.case["samples"])
-        dmd = dm.discretize(ctx.case["Ts"])
+        dm = build_tp_model(ctx.vehicle, "dm", rv[0], rv[1], *ctx.spec["samples"])
+        dmd = dm.discretize(ctx.spec["Ts"])
         a = ctx.arrays
         tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
-        cmd = ctx.case["command"]
+        cmd = ctx.spec["command"]
         x_r = np.asarray(tm(cmd["h_c"], cmd["V_c"])[0][:NX], float)
         d = np.asarray(a["x0"][:NX], float) - x_r
         Dx = np.asarray(dm.state_scale, float)[:NX]
@@ -253,16 +253,15 @@ class RMPCLaw(ControlLaw):
     def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
         """Commands of step k for B runs (closed form, no solver; no tube).
 
-        ``LawStep.lmi`` holds (0, 0, steps so far with the state outside E_1).
+        ``LawStep.lmi_failed`` holds the steps so far with the state outside E_1.
         """
         x = np.asarray(x, float)
         dx = x[:, :NX] - ref.x_r[:, :NX]
         du, c, _ = self.kernel.control(dx)
         self.outside += (c == 0) & lanes.alive
         B = x.shape[0]
-        lmi = np.zeros((B, 3), dtype=np.int64)
-        lmi[:, 2] = self.outside
-        return LawStep(ref.u_r + du, x - ref.x_r, np.full(B, math.nan), lmi)
+        outside = np.asarray(self.outside, dtype=np.int64).copy()
+        return LawStep(ref.u_r + du, x - ref.x_r, np.full(B, math.nan), outside)
 
 
 register_law(RMPCLaw)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fahv.control.base import ControlLaw, LawStep, Variant, no_lmi, register_law
+from fahv.control.base import ControlLaw, LawStep, Variant, no_lmi_failed, register_law
 from fahv.control.mpc.nominal_source import TrackingMPCNominal
 from fahv.control.reference import ReferenceGovernor, mv, quad
 from fahv.lanes import Lanes
@@ -112,7 +112,7 @@ class PaperTubeMPCLaw(ControlLaw):
     def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
         """Commands and tube status of step k (see :meth:`ControlLaw.step`)."""
         u, e = self.tube.step(x, ref)
-        return LawStep(u, e, self.tube.tube_level(e), no_lmi(e.shape[0]))
+        return LawStep(u, e, self.tube.tube_level(e), no_lmi_failed(e.shape[0]))
 
 
 class TubeMPCLaw(PaperTubeMPCLaw):
@@ -129,7 +129,7 @@ class TubeMPCLaw(PaperTubeMPCLaw):
 
         e'_q = notch(q) - notch(q_r + q_n) = notch(q - q_r - q_n),
 
-    the loop the notch certificate covers (:func:`fahv.design.notch_loop.notch_tube`,
+    the loop the notch certificate covers (:func:`fahv.tube.notch_loop.notch_tube`,
     xi = [e; chi]). Without the replica, e'_q would also carry (notch - 1)(q_r + q_n), a
     term of the nominal's manoeuvre neither W nor the filter's certificate holds
     (docs/theory/notch.md, "The notch loop certified in its own states"). The 11-state
@@ -157,7 +157,7 @@ class TubeMPCLaw(PaperTubeMPCLaw):
         if self.q_filter is not None:
             q_ref = self.q_filter.step(ref.x_r[:, IQ] + ref.x_n[:, IQ])
         u, e = self.tube.step(x, ref, q_ref)
-        return LawStep(u, e, self.tube.tube_level(e), no_lmi(e.shape[0]))
+        return LawStep(u, e, self.tube.tube_level(e), no_lmi_failed(e.shape[0]))
 
 
 register_law(PaperTubeMPCLaw)

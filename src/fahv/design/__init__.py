@@ -1,5 +1,7 @@
-"""Offline design of a case.
+"""The design pipeline: a design file to certified artefacts with their provenance.
 
-case files, disturbance set W (eq. 13-19), the pipeline to certified artefacts with
-provenance.
+The stages (:mod:`fahv.design.pipeline`), the tube forms they run
+(:mod:`fahv.design.tube_forms`, the eight-state tube set of
+:mod:`fahv.design.tube_set_design`) and the design's progress lines
+(:mod:`fahv.design.stage_clock`).
 """

@@ -1,11 +1,11 @@
 """The eight-state tube set of a case (``tube.form: eight_state``), designed and checked.
 
 From the case's ``eight_state`` section: the nominal and scheduling boxes
-(:func:`fahv.design.domain.nominal_box`), the vertices along the nominal
-(:func:`fahv.design.vertices.nominal_vertices`), the closure of W_8 and Z_8
-(:func:`fahv.design.closure.close_tube_set`), the onset of the design's loss as a
-transient (:func:`fahv.design.onset.onset_bound`) and the loops of the variants that
-feed q through a notch (:mod:`fahv.design.notch_loop`, with a gain designed for the loop
+(:func:`fahv.bounds.domain.nominal_box`), the vertices along the nominal
+(:func:`fahv.bounds.vertices.nominal_vertices`), the closure of W_8 and Z_8
+(:func:`fahv.tube.closure.close_tube_set`), the onset of the design's loss as a
+transient (:func:`fahv.onset.bound.onset_bound`) and the loops of the variants that
+feed q through a notch (:mod:`fahv.tube.notch_loop`, with a gain designed for the loop
 when the case asks for one, :func:`designed_notch_loop`). The onset bound and the notch
 loops both start from the closed tube set and not from each other: their invariant
 ellipsoids (the onset's steady set at each contraction factor, each notch loop) are
@@ -22,23 +22,23 @@ import dask
 import numpy as np
 from dask import delayed
 
+from fahv.bounds.domain import SchedulingBox, nominal_box
+from fahv.bounds.one_step_bound import altitude_bound
+from fahv.bounds.vertices import NominalVertices, nominal_vertices
 from fahv.control.base import ATTITUDE_BOUND_DEG
-from fahv.design.closure import close_tube_set
-from fahv.design.domain import SchedulingBox, nominal_box
-from fahv.design.notch_gain import notch_gain
-from fahv.design.notch_loop import NotchLoop, notch_loop, notch_tube
-from fahv.design.one_step_bound import altitude_bound
-from fahv.design.onset import (
+from fahv.onset.bound import (
     STEADY_LAMS,
     onset_bound,
     onset_jumps,
     steady_disturbance,
     steady_set,
 )
-from fahv.design.report import notch_loop_line
-from fahv.design.tube_set import EIGHT_STATES, TubeSet
-from fahv.design.vertices import NominalVertices, nominal_vertices
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.tube.closure import close_tube_set
+from fahv.tube.lines import notch_loop_line
+from fahv.tube.notch_gain import notch_gain
+from fahv.tube.notch_loop import NotchLoop, notch_loop, notch_tube
+from fahv.tube.tube_set import EIGHT_STATES, TubeSet
 
 
 def _state_max(case: dict, log) -> np.ndarray | None:
@@ -127,17 +127,17 @@ def design_tube_set(
     log : callable
     gamma : float, optional
         The case's estimator gain per step: the onset of the design loss is then bounded
-        as a transient of the tube set (:func:`fahv.design.onset.onset_bound`,
+        as a transient of the tube set (:func:`fahv.onset.bound.onset_bound`,
         ``tube_set.onset``).
     notches : dict, optional
         ``{variant: NotchFilter}``: the tube variants that feed q through a notch; their
         loops are certified in their own states at the tube set's vertices
-        (:func:`fahv.design.notch_loop.notch_tube`, a few minutes each;
+        (:func:`fahv.tube.notch_loop.notch_tube`, a few minutes each;
         ``tube_set.notch_loops``).
     stable_only : dict, optional
         ``{variant: NotchFilter}``: notch variants whose error filters the measured q
         alone; their loops with F_8 are checked for stability only
-        (:func:`fahv.design.notch_loop.notch_loop`, also in ``tube_set.notch_loops``).
+        (:func:`fahv.tube.notch_loop.notch_loop`, also in ``tube_set.notch_loops``).
     stage : callable, optional
         Told the start of each part (vertices, closure, onset and notch loops): the
         design's progress lines (:class:`fahv.design.stage_clock.StageClock`).
@@ -145,7 +145,7 @@ def design_tube_set(
         Where the closure's constraint generation starts (:func:`close_tube_set`).
     **estimate
         ``gamma_e``, ``directions``, ``projection_scale`` of
-        :func:`fahv.design.onset.onset_bound` (the estimate's gain along the elevator
+        :func:`fahv.onset.bound.onset_bound` (the estimate's gain along the elevator
         column).
 
     Returns
@@ -158,7 +158,7 @@ def design_tube_set(
     ------
     DesignError
         If the boxes are malformed, a plant step leaves the model, or the tube set does
-        not close (:func:`fahv.design.closure.close_tube_set`).
+        not close (:func:`fahv.tube.closure.close_tube_set`).
     """
     stage = stage or (lambda name: None)
     s = case["eight_state"]
@@ -247,11 +247,11 @@ def designed_notch_loop(
 ) -> tuple[NotchLoop, np.ndarray] | None:
     """A gain designed for the tube set's loop through the notch, closed on W_8 (or None).
 
-    The loop u - v = F e' through the notch (:func:`fahv.design.notch_gain.notch_gain`,
+    The loop u - v = F e' through the notch (:func:`fahv.tube.notch_gain.notch_gain`,
     from F_8, with the tube set's Z_8 and tightening) keeps e_8 in Z_8 and the applied
     input within the tightening, but its input deviation is K xi, not F_8 e_8: W_8's
     bound over the product set is therefore recomputed for the loop's own joint set of
-    (e_8, u - v) (:func:`fahv.design.one_step_bound.altitude_bound` with ``joint``); the
+    (e_8, u - v) (:func:`fahv.bounds.one_step_bound.altitude_bound` with ``joint``); the
     loop is closed if its altitude bound is at most the tube set's H (the scheduling box
     holds that) and its bound lies inside W_8 (``NotchLoop.w_ratio`` = (H / the tube
     set's H, bound / W_8), every entry <= 1).
@@ -279,7 +279,7 @@ def designed_notch_loop(
     Raises
     ------
     DesignError
-        As :func:`fahv.design.notch_gain.notch_gain`.
+        As :func:`fahv.tube.notch_gain.notch_gain`.
     """
     iq = EIGHT_STATES.index("q")
     got = notch_gain(A[:, 1:, 1:], B[:, 1:, :], tube_set.F_8, tube_set.N_8, tube_set.W_8, notch,

@@ -74,7 +74,7 @@ def simulate_batch(
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variant : str, optional
         One of the case's variants; its first by default.
     overrides : sequence of dict or None

@@ -257,7 +257,7 @@ class ControllerCore:
         t = state.t
         tube = TubeStatus(
             k, t, self._law_names, self._tau, ls.level, ls.level <= 1.0,
-            ls.e, ls.lmi[:, 0], ls.lmi[:, 1], ls.lmi[:, 2], nominal.qp_solves,
+            ls.e, ls.lmi_failed, nominal.qp_solves,
             nominal.qp_fallback, nominal.qp_terminal, nominal.qp_recovered,
         )  # fmt: skip
         return ControlCommand.of(k, t, ls.u), tube

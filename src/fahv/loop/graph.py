@@ -237,7 +237,7 @@ def registry_tables() -> str:
     def where(cls) -> str:
         return f"`{cls.__module__}.{cls.__name__}`"
 
-    out = ["| law | class | node | nominal part | tube | case section | what |",
+    out = ["| law | class | node | nominal part | tube | design-file section | what |",
            "|---|---|---|---|---|---|---|"]  # fmt: skip
     for name, cls in LAWS.items():
         sec = f"`{cls.section.name}`" if cls.section is not None else "-"
@@ -245,7 +245,7 @@ def registry_tables() -> str:
             f"| `{name}` | {where(cls)} | `{cls.node}` | `{cls.nominal.name}` | "
             f"{'yes' if cls.has_tube else 'no'} | {sec} | {first_line(cls)} |"
         )
-    out += ["", "| nominal part | class | estimates d | case section | what |",
+    out += ["", "| nominal part | class | estimates d | design-file section | what |",
             "|---|---|---|---|---|"]  # fmt: skip
     for name, cls in NOMINAL_SOURCES.items():
         sec = f"`{cls.section.name}`" if cls.section is not None else "-"

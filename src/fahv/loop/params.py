@@ -1,10 +1,11 @@
 """Node parameters of the SIL graph: declarations, validation, and their values per run.
 
-Every parameter is a :class:`fahv.config.Field`; scenario values reuse the case
-file's fields (:mod:`fahv.design.case`), so Ts, the command, the notch and the fault
-have one range everywhere. :func:`specs` lists the parameters of each node (the
-controller's include every registered law's own parameters, the fault injector's
-every registered fault kind's); the ROS nodes generate their descriptors from it
+Every parameter is a :class:`fahv.config.Field`; the run spec's values reuse the fields
+of the design and scenario files (:mod:`fahv.spec.schema`: the loop imports the files'
+package, no design code), so Ts, the command, the notch and the fault have one range
+everywhere. :func:`specs` lists the parameters of each node (the controller's include
+every registered law's own parameters, the fault injector's every registered fault
+kind's); the ROS nodes generate their descriptors from it
 (``hsv_common``) and call :func:`validate` once at start-up, as the in-process
 simulator does on the same dictionaries, so both build the same objects from the
 same numbers.
@@ -23,15 +24,16 @@ import numpy as np
 from fahv.config import Field
 from fahv.config.spec import validate_flat
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS, variant_notch
-from fahv.design.artefacts import variant_gain_key
-from fahv.design.case import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, TS
 from fahv.errors import ParameterError
 from fahv.loop.graph import CONTROLLER_NODES
 from fahv.plant.faults import FAULT_KIND, FAULTS, T_ONSET, fault_fields
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.spec.artefacts import variant_gain_key
+from fahv.spec.schema import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, TS
 
 COMMON = (
-    Field("case", "str", "case name of the design (offline_design/<case>.yaml)"),
+    Field("case", "str", "name of the run spec the run flies (its scenario's name; the run "
+          "files' metadata 'case')"),
     Field("design_hash", "str", "content hash of the design artefacts"),
     TS,
     DURATION,
@@ -207,15 +209,15 @@ def flat_parameter(name: str, value) -> dict:
 
 
 def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0) -> dict:
-    """Parameters of every loop node for one variant of a designed case.
+    """Parameters of every loop node for one variant of a design with its run spec.
 
     Parameters
     ----------
-    design : fahv.design.artefacts.Design
+    design : fahv.spec.artefacts.Design
     variant : str, optional
-        A variant of the case (:data:`fahv.control.VARIANTS`; default: the case's
+        A variant of the run spec (:data:`fahv.control.VARIANTS`; default: its
         first). The variant gives the law (its controller node, the nominal node's
-        mode, the law's own parameters), the notch setting (as in the case, off, or
+        mode, the law's own parameters), the notch setting (as in the design, off, or
         centred on flexible mode 2) and the gain F: the design's ``F_<variant>`` if it
         designed one for the variant's loop through the notch, else ``F``.
     watchdog_s : float
@@ -230,7 +232,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     Raises
     ------
     ParameterError
-        If the variant is not one of the case's.
+        If the variant is not one of the run spec's.
     """
     a, c = design.arrays, design.case
     variant = c["variants"][0] if variant is None else variant
@@ -312,7 +314,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
 
 
 def _plain(v):
-    """A case value as a ROS parameter value (tuples as lists, ints kept)."""
+    """A run spec value as a ROS parameter value (tuples as lists, ints kept)."""
     if isinstance(v, tuple | list):
         return [float(x) for x in v]
     return v

@@ -38,9 +38,9 @@ from fahv.msg import (
     VehicleState,
 )
 
-#: Counters of online LMI solves in /hsv/tube_status (``lmi_<name>``; the off-line
-#: RMPC counts its steps outside its largest ellipsoid as ``failed``).
-LMI_COUNTS = ("solves", "fallback", "failed")
+#: Counters of /hsv/tube_status (``lmi_<name>``): the off-line RMPC counts its steps
+#: outside its largest ellipsoid as ``failed``.
+LMI_COUNTS = ("failed",)
 #: Counters of the nominal MPC's QP in /hsv/nominal (``qp_<name>``).
 QP_COUNTS = ("solves", "fallback", "terminal", "recovered")
 #: Loop nodes in the order of one step (the controller node is added per run).
@@ -73,9 +73,9 @@ class RunResult:
         e' N^-1 e (<= 1 inside the tube Z; NaN for the RMPC).
     fault_active : (N,) bool ndarray
         Fault applied at the step.
-    lmi_counts : (3,) int ndarray
-        Online LMI solves, solves that were not cost-optimal, and (RMPC) steps with
-        the state outside its largest ellipsoid over the run (zeros for the tube laws).
+    lmi_counts : (1,) int ndarray
+        (RMPC) steps with the state outside its largest ellipsoid over the run
+        (:data:`LMI_COUNTS`; zero for the tube laws).
     info : dict
         Variant, case name, metadata.
     qp_counts : (4,) int ndarray
@@ -171,11 +171,11 @@ class History:
         self.count += 1
 
     def counts(self, b: int) -> tuple[np.ndarray, np.ndarray]:
-        """LMI (3,) and QP (4,) counters of run ``b`` at the last stored step (zeros before)."""
+        """LMI (1,) and QP (4,) counters of run ``b`` at the last stored step (zeros before)."""
         if self._counters is None:
-            return np.zeros(3, dtype=int), np.zeros(4, dtype=int)
+            return np.zeros(len(LMI_COUNTS), dtype=int), np.zeros(4, dtype=int)
         tube, nom = self._counters
-        lmi = (tube.lmi_solves, tube.lmi_fallback, tube.lmi_failed)
+        lmi = (tube.lmi_failed,)
         qp = (nom.qp_solves, nom.qp_fallback, nom.qp_terminal, nom.qp_recovered)
         return np.array([c[b] for c in lmi], dtype=int), np.array([c[b] for c in qp], dtype=int)
 
@@ -225,7 +225,7 @@ def run_parameters(design, variant: str | None, duration, overrides: dict | None
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variant : str or None
         A variant of the case (its first by default).
     duration : float or None
@@ -330,7 +330,7 @@ def simulate(
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variant : str, optional
         One of the case's variants (:data:`fahv.control.VARIANTS`); the first by default.
     duration : float, optional

@@ -9,14 +9,12 @@ import numpy as np
 from fahv.model.vehicle import (
     ALPHA,
     DELTA_E,
-    ECM_STATE_NAMES,
     ETA1,
     ETA1_DOT,
     ETA2,
     ETA2_DOT,
     IQ,
     PHI,
-    STATE_NAMES,
     THETA,
     H,
     V,
@@ -262,11 +260,6 @@ class Model:
     def n_x(self) -> int:
         """Number of states: 9 (DM, CM) or 11 (ECM)."""
         return 11 if self.kind == "ecm" else 9
-
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        """State names in order (eq. 7 or eq. 43)."""
-        return ECM_STATE_NAMES if self.kind == "ecm" else STATE_NAMES
 
     def f(self, x, u) -> np.ndarray:
         """Evaluate x_dot = f(x, u); x shape (n_x,), u (2,), units as the module docstring."""

@@ -282,10 +282,6 @@ class TubeStatus(LoopMessage):
     level: np.ndarray = _f("float64", "e' N^-1 e, <= 1 inside the tube Z; NaN for rmpc")
     inside: np.ndarray = _f("bool", "level <= 1")
     e: np.ndarray = _f("float64[]", "tube error, design-model order")
-    lmi_solves: np.ndarray = _f(
-        "int64", "online LMI (33)-(35) solves so far (0: rmpc solves off line, tube laws none)"
-    )
-    lmi_fallback: np.ndarray = _f("int64", "online LMI solves not cost-optimal (0 for every law)")
     lmi_failed: np.ndarray = _f(
         "int64", "rmpc: steps so far with the state outside its largest ellipsoid E_1"
     )

@@ -75,7 +75,7 @@ def params_records(params) -> np.ndarray:
 
 
 def perturbed_records(params: VehicleParams, uncertainty: dict, signs) -> np.ndarray:
-    """Records (B,) of B vehicles of the uncertainty box: p (1 + s_bp rel_p) (sec. 5.1).
+    """Records (B,) of B vehicles of the parameter box: p (1 + s_bp rel_p) (sec. 5.1).
 
     The vectorised form of :func:`fahv.plant.uncertainty.perturb` over many vehicles,
     with the same arithmetic (the same bits).

@@ -1,4 +1,4 @@
-"""Parameter uncertainty of sec. 5.1: the uncertainty box and seeded draws inside it."""
+"""Parameter uncertainty of sec. 5.1: the parameter box and seeded draws inside it."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 
 from fahv.model.vehicle import VehicleParams
 
-#: Parameters of the uncertainty box of sec. 5.1 and their relative bounds.
+#: The parameters of the box of sec. 5.1 (the parameter box) and their relative bounds.
 PAPER_UNCERTAINTY = {
     "m": 0.10,
     "I_yy": 0.10,
@@ -22,7 +22,7 @@ PAPER_UNCERTAINTY = {
 
 
 def perturb(vp: VehicleParams, rel: dict[str, float], signs: dict[str, float]) -> VehicleParams:
-    """Parameters with p -> p (1 + s_p rel_p) for s_p in [-1, 1] (uncertainty box, sec. 5.1).
+    """Parameters with p -> p (1 + s_p rel_p) for s_p in [-1, 1] (parameter box, sec. 5.1).
 
     Raises
     ------
@@ -41,7 +41,7 @@ def perturb(vp: VehicleParams, rel: dict[str, float], signs: dict[str, float]) -
 
 
 def perturbed_params(vehicle, seed: int, scale: float) -> dict[str, float]:
-    """Seeded parameter set inside the uncertainty box of sec. 5.1.
+    """Seeded parameter set inside the parameter box of sec. 5.1.
 
     Each parameter p of :data:`fahv.plant.PAPER_UNCERTAINTY` becomes
     p (1 + s_p scale rel_p), s_p ~ U(-1, 1) from ``numpy.random.default_rng(seed)``

@@ -63,7 +63,7 @@ def nominal_deviation(run: RunResult) -> np.ndarray:
     (:func:`fahv.model.trim.trim_map`) at the nominal's (h, V), clipped to the envelope.
     Columns :data:`NOMINAL_STATES` [rad, rad, rad/s, -, 1/s, -, 1/s]: the coordinates
     of the eight-state tube's nominal box, whose range the certificate assumes
-    (:func:`fahv.design.domain.certified_range`).
+    (:func:`fahv.bounds.domain.certified_range`).
 
     Raises
     ------

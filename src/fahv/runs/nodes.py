@@ -7,8 +7,8 @@ nodes generate their ROS descriptors from here and validate once at start-up.
 from __future__ import annotations
 
 from fahv.config import Field
-from fahv.design.case import DURATION, TS
 from fahv.loop.graph import NODES, TOPICS
+from fahv.spec.schema import DURATION, TS
 
 _WATCHDOG = Field("watchdog_s", "float", "wall time without any message that ends the run",
                   unit="s", lo=0.1, hi=3600.0, default=10.0)  # fmt: skip

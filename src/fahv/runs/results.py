@@ -55,7 +55,7 @@ def run_case(design, variants, limits, log=print) -> dict[str, dict]:
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variants : sequence of str
         Variants of the case, in order.
     limits : fahv.model.vehicle.InputLimits

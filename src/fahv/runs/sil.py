@@ -52,11 +52,6 @@ class SilRun:
     simulated_s: float
     interrupted: bool = False
 
-    @property
-    def real_time_factor(self) -> float:
-        """Simulated time / wall time (> 1: faster than real time)."""
-        return self.simulated_s / self.wall_s if self.wall_s > 0 else float("nan")
-
 
 def run_name(case: str, variant: str, source: str) -> str:
     """``<case>_<variant>_<source>_<YYYYmmdd-HHMMSS>``."""
@@ -92,7 +87,7 @@ def run_metadata(
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variant, source : str
     duration : float
         Simulated time [s].
@@ -173,7 +168,7 @@ def run_parameter_file(
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variant : str
     bag : Path
         Run folder the recorder creates.
@@ -335,7 +330,7 @@ def run_sil(
 
     Parameters
     ----------
-    design : fahv.design.Design
+    design : fahv.spec.artefacts.Design
     variant : str, optional
         The case's first variant by default.
     duration : float, optional

@@ -61,8 +61,6 @@ METRIC_ROWS = (
     ("tube_fraction_inside", "fraction of steps with e in Z", "{:.4f}"),
     ("tube_level_max", "max e' Z^-1 e", "{:.4f}"),
     ("tube_error_h_max_ft", "max |e_h| (altitude part of the tube error) [ft]", "{:.3f}"),
-    ("rmpc_lmi_solves", "RMPC online LMI solves", "{}"),
-    ("rmpc_lmi_fallback", "RMPC online solves not cost-optimal", "{}"),
     ("rmpc_lmi_failed", "RMPC steps outside its largest ellipsoid", "{}"),
     ("nominal_alpha_dev_max_deg", "max nominal |alpha - trim at its (h, V)| [deg]", "{:.3f}"),
     ("nominal_theta_dev_max_deg", "max nominal |theta - trim at its (h, V)| [deg]", "{:.3f}"),

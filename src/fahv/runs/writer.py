@@ -49,7 +49,7 @@ class _McapStorage:
         self._channels: dict[int, int] = {}
 
     def add_msgtype(self, connection) -> None:
-        """Register the schema of a connection's message type."""
+        """Register the schema of a connection's message type (called by rosbags' writer)."""
         fmt = "ros2msg" if connection.msgdef.format.name == "MSG" else "ros2idl"
         self._schemas[connection.msgtype] = self._mcap.register_schema(
             connection.msgtype, fmt, connection.msgdef.data.encode()
@@ -83,7 +83,7 @@ class _McapStorage:
         self._file.close()
 
     def abort(self) -> None:
-        """Close without summary."""
+        """Close without summary (called by rosbags' writer when a write fails)."""
         self._file.close()
 
 

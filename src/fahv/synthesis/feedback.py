@@ -347,7 +347,7 @@ def design_tube(
         State and input scaling.
     u_room : (m,) array_like
         Room of each input row (unscaled): the distance from the trim input to the
-        binding side of the asymmetric input set (:func:`fahv.design.feasibility.input_room`).
+        binding side of the asymmetric input set (:func:`fahv.tube.feasibility.input_room`).
         The objective is sum_j (max_Z |F_j e| / u_room_j)^2: the tightening of eq. (30),
         row by row, relative to the room that row has.
     lam_grid : sequence of float
@@ -380,7 +380,7 @@ def design_tube(
         Points Z must contain (unscaled), e' N^-1 e <= 1 for each row, entered as
         [[1, e'], [e, N]] >= 0 (linear in N) and generated like the vertex blocks; e.g.
         the one-step jumps of a loss's onset over the level they may use, so that the
-        error stays in Z through the onset (:func:`fahv.design.closure.close_tube_set`).
+        error stays in Z through the onset (:func:`fahv.tube.closure.close_tube_set`).
         Re-checked exactly.
     warm : ActiveSet, optional
         Vertices and points to start the constraint generation from (e.g. the

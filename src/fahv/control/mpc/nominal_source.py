@@ -141,7 +141,7 @@ class TrackingMPCNominal(NominalSource):
     eight states after h (docs/theory/nominal_mpc.md, "The altitude reset"). The QP plans
     from the reset nominal. A reset by Delta h, with the artificial set point moved by the
     same Delta h, moves the QP's rows only by the trim map's slope in h times Delta h
-    (below 0.001 deg over the eight-state pair's bound of 2.6 ft): feasibility after the
+    (below 0.001 deg over the eight-state tube set's bound of 2.6 ft): feasibility after the
     reset is argued and measured (every re-plan accepted in the runs measured), not
     certified; an infeasible re-plan takes the recovery like any other.
 
@@ -483,8 +483,8 @@ class TrackingMPCNominal(NominalSource):
 
         a = ctx.arrays
         u_lo, u_hi = a["u_lo"], a["u_hi"]
-        cmd = ctx.case["command"]
-        mpc = ctx.case.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
+        cmd = ctx.spec["command"]
+        mpc = ctx.spec.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
         offset = float(a["att_trim_offset"]) if "att_trim_offset" in a else 0.0
         att = attitude_bounds(a["N"], mpc["att_max"], offset)
         ctx.log(att.report())

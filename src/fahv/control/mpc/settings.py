@@ -24,7 +24,7 @@ import numpy as np
 
 from fahv.config import Field
 
-#: Case-file section of the nominal tracking MPC (all keys defaulted; docs/theory/nominal_mpc.md).
+#: Design-file section of the nominal tracking MPC (all keys defaulted; docs/theory/nominal_mpc.md).
 MPC_SECTION_FIELDS = (
     Field("M", "int", "fast steps per nominal move: nominal rate Ts_n = M Ts", lo=1,
           hi=1000, default=25),
@@ -115,7 +115,7 @@ class MPCSettings:
         shift u_d), K zeta + c, at every move start and every fast step of the first
         ``fine_moves`` moves: the eight-state tube's nominal box less the box corners'
         trim offsets (the plant applies its own trim at steady state, whatever its loss
-        or bias; :mod:`fahv.design.rows`); None (``mpc.u_box`` all 0): no rows.
+        or bias; :mod:`fahv.tube.rows`); None (``mpc.u_box`` all 0): no rows.
     hv_box : (2, 2) ndarray or None
         ``[[h lo, V lo], [h hi, V hi]]`` in ft, ft/s: the nominal's altitude and speed range
         the design assumed (the eight-state tube's nominal box, the envelope less
@@ -126,7 +126,7 @@ class MPCSettings:
         [lo, hi] of the nominal's alpha, theta [rad], q [rad/s], eta_1, eta_1_dot [1/s],
         eta_2, eta_2_dot [1/s] as deviations from the nominal vehicle's trim at the
         nominal's own (h, V): the range the tube's certificate covers
-        (:func:`fahv.design.domain.certified_range`). Rows keep the predicted nominal
+        (:func:`fahv.bounds.domain.certified_range`). Rows keep the predicted nominal
         in it at the attitude rows' steps, with the trim at its own (h, V) linearised at
         the scheduling point (``T = Gx[2:9] Gx[0:2]^-1``), widened only to hold the start;
         None (``mpc.x_box`` all 0): no rows.

@@ -47,8 +47,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fahv.design.artefacts import Design, code_hash
 from fahv.errors import DesignError
+from fahv.spec.artefacts import Design, code_hash
 
 #: Relative tolerance of the model check, per array. The model is built on one BLAS
 #: thread (:mod:`fahv.model.blas`): the rebuild is then bit-identical to the design on
@@ -145,7 +145,7 @@ def check_tightening(design: Design, vehicle) -> CheckResult:
 
 def check_tube_rpi(design: Design) -> CheckResult:
     """Exact worst one-step level of the vertex tube over the fault vertices and W's corners."""
-    from fahv.design.vertices import fault_vertices, gain_vertices
+    from fahv.bounds.vertices import fault_vertices, gain_vertices
     from fahv.synthesis.rpi_level import worst_level
 
     a, c = design.arrays, design.case
@@ -297,9 +297,9 @@ def check_eight_state(design: Design, vehicle) -> list[CheckResult]:
     row), the scheduling box holding the nominal box grown by the tube, and the exact
     worst one-step level of Z_8 (LMI 24 re-checked exactly).
     """
-    from fahv.design.domain import box_shortfall, nominal_box
-    from fahv.design.one_step_bound import altitude_bound
-    from fahv.design.vertices import nominal_vertices
+    from fahv.bounds.domain import box_shortfall, nominal_box
+    from fahv.bounds.one_step_bound import altitude_bound
+    from fahv.bounds.vertices import nominal_vertices
     from fahv.model.trim import TrimMap
     from fahv.plant.uncertainty import PAPER_UNCERTAINTY
     from fahv.synthesis.rpi_level import worst_level

@@ -7,14 +7,14 @@ reach. Two tube forms state that domain differently:
   over a **scheduling box** (:class:`SchedulingBox`): the nominal points the vertices
   cover, s = (h, V, alpha - alpha_r, theta - theta_r, Phi - Phi_r, delta_e - delta_e,r)
   with the trim (x_r, u_r) at (h, V), and half-widths of q and the flexible states. The
-  case's **nominal box** is the part the nominal MPC keeps (:func:`nominal_box`); the
+  design's **nominal box** is the part the nominal MPC keeps (:func:`nominal_box`); the
   error adds the **product set** {|e_h| <= H} x Z_8 (:func:`product_supports`), so the
   scheduling box must hold the nominal box grown by it (:func:`box_shortfall`); the
   nominal points the certificate covers are the scheduling box less the tube
   (:func:`certified_range`);
 * the paper's vertex tube (``tube.form: vertices``) is checked around the scheduling trim
   of the nominal MPC (:class:`CertificateDomain`): scheduling points over the envelope,
-  the nominal deviations the QP allows plus the box of Z, the inputs of the tightened set
+  the nominal deviations the QP allows plus Z's supports, the inputs of the tightened set
   plus F Z, every corner of the sec. 5.1 parameter box, rho_f at both ends of
   [rho_min, 1].
 """
@@ -101,12 +101,12 @@ class SchedulingBox:
 
 
 def nominal_box(section: dict, envelope) -> tuple[SchedulingBox, SchedulingBox]:
-    """The nominal box and the scheduling box of a case's ``eight_state`` section.
+    """The nominal box and the scheduling box of a design's ``eight_state`` section.
 
     Parameters
     ----------
     section : dict
-        The validated ``eight_state`` section (:mod:`fahv.design.case`).
+        The validated ``eight_state`` section (:mod:`fahv.spec.schema`).
     envelope : fahv.model.vehicle.Envelope
         The flight envelope (h, V ranges).
 
@@ -154,7 +154,7 @@ def joint_shape(F_8, N_8) -> np.ndarray:
     not F_8 e_8 (the tube loop through the notch filter, u - v = K xi over an ellipsoid
     E(P) of xi = [e_8; chi]) has its own joint shape, [[I, 0], K] P [[I, 0], K]' (the
     ``joint`` argument of :func:`product_supports` and of the one-step bounds of
-    :mod:`fahv.design.one_step_bound`).
+    :mod:`fahv.bounds.one_step_bound`).
 
     Parameters
     ----------
@@ -240,7 +240,7 @@ def product_supports(F_8, N_8, H: float, joint=None) -> tuple[np.ndarray, np.nda
 def box_shortfall(box: SchedulingBox, nominal: SchedulingBox, F_8, N_8, H: float) -> dict:
     """Where the scheduling box does not hold the nominal box grown by the product set.
 
-    The integral form of the one-step bound (:mod:`fahv.design.one_step_bound`) holds for
+    The integral form of the one-step bound (:mod:`fahv.bounds.one_step_bound`) holds for
     every segment from a nominal point to the plant inside the scheduling box: the box
     must hold the nominal box grown by the supports of {|e_h| <= H} x Z_8 and F_8 Z_8.
 
@@ -269,10 +269,10 @@ def certified_range(box: SchedulingBox, F_8, N_8, H: float) -> SchedulingBox:
     """The nominal points the tube set's certificate covers: the scheduling box less the tube.
 
     The vertices and W_8's bound hold for every segment from a nominal point to the plant
-    inside the scheduling box (the integral form, :mod:`fahv.design.one_step_bound`), so
+    inside the scheduling box (the integral form, :mod:`fahv.bounds.one_step_bound`), so
     the certificate needs the nominal inside the box shrunk by the product set's
     supports (H in h, Z_8's in the states, F_8 Z_8's in the inputs); the nominal box of
-    the case is a part of it (:func:`box_shortfall` checks that).
+    the design is a part of it (:func:`box_shortfall` checks that).
 
     Parameters
     ----------
@@ -313,14 +313,14 @@ class CertificateDomain:
         centre of the envelope grid.
     x_half : (9,) ndarray
         Half-widths of x - x_rs: the nominal deviation the nominal MPC allows from its
-        scheduling trim plus the box of Z [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s].
+        scheduling trim plus Z's supports [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s].
     nominal_half : (9,) ndarray
         The nominal part of ``x_half`` (without Z), for the report.
     u_lo, u_hi : (2,) ndarray
         Absolute input range [Phi, delta_e rad]: the tightened nominal set plus the
         support of tau F Z (the actuator limits when the design is consistent).
     uncertainty : dict[str, float]
-        Relative bounds of the sec. 5.1 box; every corner is evaluated.
+        Relative bounds of the parameter box; every corner is evaluated.
     rho : tuple of float
         Elevator effectiveness values evaluated (the ends of [rho_min, 1]).
     Ts : float
@@ -371,7 +371,7 @@ def nominal_half_widths(mpc: dict, x_default: np.ndarray) -> tuple[np.ndarray, t
     Parameters
     ----------
     mpc : dict
-        The case's ``mpc`` section (``reschedule``, ``dtheta_max``, ``att_max``).
+        The design's ``mpc`` section (``reschedule``, ``dtheta_max``, ``att_max``).
     x_default : (9,) array_like
         Assumed half-widths of the states no QP row bounds.
 

@@ -1,6 +1,6 @@
 """A tube gain designed for the loop through the notch on q, with its certificate.
 
-:func:`fahv.design.notch_loop.notch_tube` certifies the loop u = F e' for the tube's own
+:func:`fahv.tube.notch_loop.notch_tube` certifies the loop u = F e' for the tube's own
 F. :func:`notch_gain` designs the gain on e' (q' = notch(q) for q) together with the
 loop's ellipsoid, by convex steps in continuation over the notch's pole damping.
 """
@@ -11,14 +11,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fahv.design.notch_loop import (
+from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid, output_feedback_step
+from fahv.synthesis.rpi_level import vertex_levels
+from fahv.tube.notch_loop import (
     NotchLoop,
     notch_certificate,
     notch_closed_loop,
     notch_loop_scale,
 )
-from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid, output_feedback_step
-from fahv.synthesis.rpi_level import vertex_levels
 
 
 @dataclass(frozen=True)
@@ -31,10 +31,10 @@ class NotchGain:
         Gain on e' (e with q' = notch(q) for q) [(-, rad) per state unit].
     P : (n + 2, n + 2) ndarray
         Its ellipsoid in xi = [e; chi] (coordinates of
-        :func:`fahv.design.notch_loop.notch_closed_loop`).
+        :func:`fahv.tube.notch_loop.notch_closed_loop`).
     loop : NotchLoop
         The exact re-check at the case's notch
-        (:func:`fahv.design.notch_loop.notch_certificate` against the tightening the
+        (:func:`fahv.tube.notch_loop.notch_certificate` against the tightening the
         design applies), ``designed`` set.
     steps : tuple of (float, float)
         (eps_p, gamma) of every convex step taken, in order.
@@ -48,7 +48,7 @@ class NotchGain:
     def joint(self, notch, Ts: float, iq: int) -> np.ndarray:
         """Shape (n + m, n + m) of (e, u - v) over E(P): [[I, 0], K] P [[I, 0], K]'.
 
-        ``notch``, ``Ts``, ``iq`` as :func:`fahv.design.notch_loop.notch_closed_loop` (the
+        ``notch``, ``Ts``, ``iq`` as :func:`fahv.tube.notch_loop.notch_closed_loop` (the
         case's notch).
         """
         m, n = self.F.shape
@@ -62,7 +62,7 @@ def notch_gain(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
                log=print) -> NotchGain | None:  # fmt: skip
     """Design the tube gain of the loop through the notch on q together with its certificate.
 
-    :func:`fahv.design.notch_loop.notch_tube` certifies the loop u = F e' for the tube's own
+    :func:`fahv.tube.notch_loop.notch_tube` certifies the loop u = F e' for the tube's own
     F; a gain that
     tolerates the filter's lag less well than the loop needs (the eight-state tube set with
     its attitude supports bounded: spectral radius above 1 through deep notches) has no
@@ -76,7 +76,7 @@ def notch_gain(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
     at the first eps_p of ``continuation`` (one is sought with a 100 x looser input
     support bound), each certified gain starts the next, the case's ``notch.eps_p``
     last. Each eps_p is stepped until the exact re-check
-    (:func:`fahv.design.notch_loop.notch_certificate`: level over every vertex and corner
+    (:func:`fahv.tube.notch_loop.notch_certificate`: level over every vertex and corner
     of W, s, the supports against the tightening) certifies it, or gamma gains less than
     1e-3 (stalled), or ``max_steps`` steps; each eps_p before the case's must end
     certified. A start certified as it is is kept

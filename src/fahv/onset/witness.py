@@ -1,6 +1,6 @@
 """A lower bound of the onset transient: the worst onset a tube set's assumptions allow.
 
-The onset bound (:func:`fahv.design.onset.onset_bound`) is an upper bound of the error's
+The onset bound (:func:`fahv.onset.bound.onset_bound`) is an upper bound of the error's
 Z_8 norm after the onset of an elevator loss. :func:`onset_witness` is the matching lower
 bound on the same model: an explicit scenario, re-simulated step by step, that every
 certificate on those assumptions must cover. If its level exceeds 1 at a loss, no
@@ -175,12 +175,12 @@ def onset_witness(Acl_8, N_8, bound, J, gamma: float, *, gamma_e: float | None =
         Half-widths of the disturbance box (state units per period).
     J : (S, 9) ndarray
         Jump samples J / rho_f, h first (state units per period), e.g. from
-        :func:`fahv.design.onset.onset_jumps`; the estimate's share is taken of all nine
+        :func:`fahv.onset.bound.onset_jumps`; the estimate's share is taken of all nine
         rows, as it computes it, and the error of the last eight.
     gamma : float
         The estimate's gain per step, in (0, 1].
     gamma_e, directions, projection_scale
-        As :func:`fahv.design.onset.onset_bound` (directions (D, 9), scale (9,)).
+        As :func:`fahv.onset.bound.onset_bound` (directions (D, 9), scale (9,)).
     top : int
         Jump samples tried (largest Z_8 norm first).
     steps : int

@@ -1,10 +1,11 @@
 """Scenarios: one thing to fly on a stored design, checked against what the design certifies.
 
-A scenario file (:func:`fahv.design.case.scenario_spec`) names a design and gives the
+A scenario file (:func:`fahv.spec.schema.scenario_spec`) names a design and gives the
 command, the fault instance, the simulated vehicle draw, the duration and the variants.
-:func:`load_scenario` reads it, finds its design file, and forms the **case** the loop
-runs on (the design's entries with the scenario's); :func:`scenario_design` adds to a
-stored design what depends on the scenario, in seconds and without re-designing:
+:func:`load_scenario` reads it, finds its design file, and forms the **run spec** the
+loop runs on (the design's entries with the scenario's, :func:`form_run_spec`;
+:func:`design_part` goes back); :func:`scenario_design` adds to a stored design what
+depends on the scenario, in seconds and without re-designing:
 
 * ``x0``, the plant's initial state: the design's trim map at (h0, V0);
 * the simulated vehicle's perturbed parameters (``summary['plant_params']``);
@@ -12,7 +13,7 @@ stored design what depends on the scenario, in seconds and without re-designing:
   the design step (Wan & Kothare 2003 re-solved, then cached by content hash).
 
 :func:`certified_range` states what the design certifies (nominal h, V range, fault
-range, uncertainty box) and :func:`uncertified` lists what a scenario asks beyond it.
+range, parameter box) and :func:`uncertified` lists what a scenario asks beyond it.
 """
 
 from __future__ import annotations
@@ -25,41 +26,43 @@ from pathlib import Path
 import numpy as np
 
 from fahv.control import LAWS, VARIANTS
-from fahv.design.artefacts import Design
-from fahv.design.case import Case, case_from_mapping, read_yaml_file, scenario_spec
-from fahv.errors import CaseError
+from fahv.errors import SpecError
 from fahv.model.trim import TrimMap
 from fahv.plant.faults import make_fault
 from fahv.plant.uncertainty import perturbed_params
+from fahv.spec.artefacts import Design, load_arrays, save_arrays
+from fahv.spec.context import DesignContext
+from fahv.spec.files import SpecFile, load_design_file, read_yaml_file, spec_file
+from fahv.spec.schema import SCENARIO_KEYS, design_spec, scenario_spec
 
-#: Top-level entries of a design file that the case does not carry (the scenario's own
+#: Top-level entries of a design file that the run spec does not carry (the scenario's own
 #: command and vehicle draw replace them).
 DESIGN_ONLY_KEYS = ("design_step", "uncertainty", "name", "description", "variants")
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """A validated scenario file and the case it forms with its design.
+    """A validated scenario file and the run spec it forms with its design.
 
     Attributes
     ----------
     path : Path
         The scenario file.
     data : dict
-        Its validated entries (:func:`fahv.design.case.scenario_spec`).
+        Its validated entries (:func:`fahv.spec.schema.scenario_spec`).
     design_file : Path
         The design file it names.
-    design : Case
+    design : SpecFile
         The validated design file.
-    case : Case
-        The design's entries with the scenario's (:func:`fahv.design.case.case_spec`).
+    run_spec : SpecFile
+        The design's entries with the scenario's (:func:`fahv.spec.schema.run_spec`).
     """
 
     path: Path
     data: dict
     design_file: Path
-    design: Case
-    case: Case
+    design: SpecFile
+    run_spec: SpecFile
 
     @property
     def name(self) -> str:
@@ -77,7 +80,7 @@ def design_file_of(scenario_path: str | Path, design: str) -> Path:
 
     Raises
     ------
-    CaseError
+    SpecError
         If no such design file exists (naming the scenario and the places looked in).
     """
     p = Path(scenario_path)
@@ -89,20 +92,20 @@ def design_file_of(scenario_path: str | Path, design: str) -> Path:
     for t in tries:
         if t.is_file():
             return t
-    raise CaseError(
+    raise SpecError(
         f"{p}: key 'design': no design file {design!r} (looked for "
         + ", ".join(str(t) for t in tries)
         + ")"
     )
 
 
-def form_case(design: Case, scenario: dict, path: str | Path) -> Case:
-    """The case of a scenario on a design: the design's entries with the scenario's.
+def form_run_spec(design: SpecFile, scenario: dict, path: str | Path) -> SpecFile:
+    """The run spec of a scenario on a design: the design's entries with the scenario's.
 
     Parameters
     ----------
-    design : Case
-        A validated design file (:func:`fahv.design.case.load_design_file`).
+    design : SpecFile
+        A validated design file (:func:`fahv.spec.files.load_design_file`).
     scenario : dict
         Validated scenario entries (``command``, ``fault``, ``uncertainty``,
         ``duration``, ``variants``, ``name``, ``description``).
@@ -111,13 +114,13 @@ def form_case(design: Case, scenario: dict, path: str | Path) -> Case:
 
     Raises
     ------
-    CaseError
-        If a variant is not one the design prepared, or the case does not validate.
+    SpecError
+        If a variant is not one the design prepared, or the run spec does not validate.
     """
     variants = list(scenario.get("variants") or design["variants"])
     extra = [v for v in variants if v not in design["variants"]]
     if extra:
-        raise CaseError(
+        raise SpecError(
             f"{path}: key 'variants': {extra} not prepared by design {design.name!r} "
             f"(its variants: {list(design['variants'])})"
         )
@@ -125,23 +128,39 @@ def form_case(design: Case, scenario: dict, path: str | Path) -> Case:
     data.update({k: scenario[k] for k in ("name", "description", "command", "fault",
                                           "uncertainty", "duration")})  # fmt: skip
     data["variants"] = variants
-    return case_from_mapping(data, str(path))
+    return spec_file(data, str(path))
 
 
-def scenario_from_mapping(data, path: str | Path = "<mapping>") -> Scenario:
-    """Validate a scenario mapping, load its design file and form its case.
+def design_part(run_spec: SpecFile) -> SpecFile:
+    """The design file of a run spec: its entries less the scenario's, its command as step.
+
+    The inverse of :func:`form_run_spec` for a run spec whose command is the design step.
 
     Raises
     ------
-    CaseError
+    SpecError
+        If the result does not validate as a design file.
+    """
+    c = run_spec.data
+    data = {k: v for k, v in c.items() if k not in SCENARIO_KEYS}
+    data.update(name=c["name"], description=c["description"], variants=list(c["variants"]))
+    data["design_step"] = {k: c["command"][k] for k in ("h0", "V0", "h_c", "V_c")}
+    data["uncertainty"] = {"scale": c["uncertainty"]["scale"]}
+    return spec_file(data, str(run_spec.path), design_spec())
+
+
+def scenario_from_mapping(data, path: str | Path = "<mapping>") -> Scenario:
+    """Validate a scenario mapping, load its design file and form its run spec.
+
+    Raises
+    ------
+    SpecError
         Naming the file and the key at fault (scenario or design file).
     """
-    from fahv.design.case import load_design_file
-
-    v = case_from_mapping(data, str(path), scenario_spec())
+    v = spec_file(data, str(path), scenario_spec())
     dfile = design_file_of(path, v["design"])
     design = load_design_file(dfile)
-    return Scenario(Path(path), v.data, dfile, design, form_case(design, v.data, path))
+    return Scenario(Path(path), v.data, dfile, design, form_run_spec(design, v.data, path))
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -149,11 +168,27 @@ def load_scenario(path: str | Path) -> Scenario:
 
     Raises
     ------
-    CaseError
+    SpecError
         If the scenario or its design file is missing, malformed, or names a variant
         the design did not prepare.
     """
     return scenario_from_mapping(read_yaml_file(path, "scenario file"), path)
+
+
+def load_run_spec(path: str | Path) -> SpecFile:
+    """The run spec of a scenario file: its design's entries with its own.
+
+    Raises
+    ------
+    SpecError
+        If the scenario or its design file is missing or does not validate.
+    """
+    return load_scenario(path).run_spec
+
+
+def run_spec_data(path: str | Path) -> dict:
+    """The run spec of a scenario file as plain data (lists, not tuples), to modify."""
+    return json.loads(json.dumps(load_run_spec(path).data))
 
 
 def certified_range(design: Design) -> dict:
@@ -165,8 +200,8 @@ def certified_range(design: Design) -> dict:
         ``hv_box`` ((2, 2) ``[[h lo, V lo], [h hi, V hi]]`` in ft, ft/s, the nominal range of
         the eight-state tube; None for the vertex tube, which covers the envelope),
         ``rho_min`` (smallest elevator effectiveness of the fault range),
-        ``uncertainty_scale`` (fraction of the sec. 5.1 box), ``u_lo``, ``u_hi`` ((2,)
-        tightened input limits, eq. 30).
+        ``uncertainty_scale`` (the parameter box's fraction of the sec. 5.1 box), ``u_lo``,
+        ``u_hi`` ((2,) tightened input limits, eq. 30).
     """
     hv = design.arrays.get("hv_box")
     return {
@@ -178,20 +213,20 @@ def certified_range(design: Design) -> dict:
     }
 
 
-def uncertified(design: Design, case: dict, vehicle) -> list[str]:
+def uncertified(design: Design, spec: dict, vehicle) -> list[str]:
     """What a scenario asks beyond the range its design certifies, one sentence each.
 
     Checks the initial point and the command against the envelope and the design's
     nominal range (``hv_box``), their trim inputs against the tightened input set
     (eq. 30), the fault's effectiveness against the fault range (``tube.rho_min``) and
-    the simulated vehicle's draw against the uncertainty box.
+    the simulated vehicle's draw against the parameter box.
 
     Parameters
     ----------
     design : Design
         The stored design.
-    case : dict
-        The scenario's case (``command``, ``fault``, ``uncertainty``).
+    spec : dict
+        The run spec's data (``command``, ``fault``, ``uncertainty``).
     vehicle : fahv.model.vehicle.Vehicle
 
     Returns
@@ -200,7 +235,7 @@ def uncertified(design: Design, case: dict, vehicle) -> list[str]:
         Empty when the design certifies everything the scenario asks.
     """
     rng = certified_range(design)
-    cmd, out = case["command"], []
+    cmd, out = spec["command"], []
     tm = TrimMap(*(design.arrays[k] for k in ("trim_h", "trim_V", "trim_x", "trim_u")))
     for what, h, V in (("initial point", cmd["h0"], cmd["V0"]),
                        ("command", cmd["h_c"], cmd["V_c"])):  # fmt: skip
@@ -222,7 +257,7 @@ def uncertified(design: Design, case: dict, vehicle) -> list[str]:
                 f"Phi {rng['u_lo'][0]:.4f}..{rng['u_hi'][0]:.4f}, delta_e "
                 f"{np.degrees(rng['u_lo'][1]):.3f}..{np.degrees(rng['u_hi'][1]):.3f} deg"
             )
-    f = case["fault"]
+    f = spec["fault"]
     eff = make_fault(f["kind"], f["t_onset"], f).design_effectiveness()
     if eff < rng["rho_min"] - 1e-12:
         out.append(
@@ -230,33 +265,33 @@ def uncertified(design: Design, case: dict, vehicle) -> list[str]:
             f"rho_f in [{rng['rho_min']:g}, 1] (a loss of at most "
             f"{100 * (1 - rng['rho_min']):.0f} %)"
         )
-    if case["uncertainty"]["scale"] > rng["uncertainty_scale"] + 1e-12:
+    if spec["uncertainty"]["scale"] > rng["uncertainty_scale"] + 1e-12:
         out.append(
-            f"the vehicle draw's uncertainty scale {case['uncertainty']['scale']:g} exceeds the "
-            f"design's box ({rng['uncertainty_scale']:g} of the sec. 5.1 box)"
+            f"the vehicle draw's uncertainty scale {spec['uncertainty']['scale']:g} exceeds the "
+            f"design's parameter box ({rng['uncertainty_scale']:g} of the sec. 5.1 box)"
         )
     return out
 
 
-def _steps_equal(case: dict, design: Design) -> bool:
+def _steps_equal(spec: dict, design: Design) -> bool:
     step = design.summary.get("design_step")
-    cmd = case["command"]
+    cmd = spec["command"]
     return step is not None and all(
         float(cmd[k]) == float(step[k]) for k in ("h0", "V0", "h_c", "V_c")
     )
 
 
-def scenario_key(design: Design, case: dict) -> str:
+def scenario_key(design: Design, spec: dict) -> str:
     """Content hash of what a scenario's own arrays depend on (16 hex characters)."""
     text = json.dumps(
-        {"design": design.summary["design_hash"], "command": case["command"],
-         "variants": case["variants"]}, sort_keys=True, default=str,
+        {"design": design.summary["design_hash"], "command": spec["command"],
+         "variants": spec["variants"]}, sort_keys=True, default=str,
     )  # fmt: skip
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def scenario_arrays(
-    design: Design, case: dict, vehicle, cache: Path | None, log=print, variants=None
+    design: Design, spec: dict, vehicle, cache: Path | None, log=print, variants=None
 ) -> dict:
     """The arrays of a run that depend on its scenario.
 
@@ -264,30 +299,27 @@ def scenario_arrays(
     the RMPC baseline on another step than the design step, the baseline's ellipsoids
     (``rmpc_*``) are designed along the scenario's step (its offline LMIs, Wan & Kothare
     2003) and cached in ``cache`` by :func:`scenario_key`; only when one of ``variants``
-    (all of the case's by default) runs the baseline.
+    (all of the run spec's by default) runs the baseline.
 
     Raises
     ------
     DesignError
         If the baseline's ellipsoids cannot be designed for the scenario's step.
     """
-    from fahv.design.artefacts import load_arrays, save_arrays
-    from fahv.design.context import DesignContext
-
     a = design.arrays
     tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
-    cmd = case["command"]
+    cmd = spec["command"]
     out = {"x0": np.asarray(tm(cmd["h0"], cmd["V0"])[0][:9], float)}
-    laws = dict.fromkeys(VARIANTS[v].law for v in (variants or case["variants"]))
-    if "rmpc" not in laws or _steps_equal(case, design):
+    laws = dict.fromkeys(VARIANTS[v].law for v in (variants or spec["variants"]))
+    if "rmpc" not in laws or _steps_equal(spec, design):
         return out
-    key = scenario_key(design, case)
+    key = scenario_key(design, spec)
     path = None if cache is None else Path(cache) / f"{key}.npz"
     if path is not None and path.is_file():
         out.update(load_arrays(path))
         return out
     log("baseline rmpc: its ellipsoids along this scenario's step (not the design step)")
-    ctx = DesignContext(case, vehicle, {**a, **out}, log)
+    ctx = DesignContext(spec, vehicle, {**a, **out}, log)
     rmpc = LAWS["rmpc"].design(ctx)
     if path is not None:
         save_arrays(rmpc, path)
@@ -297,45 +329,45 @@ def scenario_arrays(
 
 def scenario_design(
     design: Design,
-    scenario_case: Case,
+    run_spec: SpecFile,
     vehicle,
     cache: Path | None = None,
     log=print,
     variants=None,
 ) -> Design:
-    """A stored design with one scenario's case and arrays: what a run is given.
+    """A stored design with one scenario's run spec and arrays: what a run is given.
 
     Parameters
     ----------
     design : Design
         The stored, verified design.
-    scenario_case : Case
-        The scenario's case (:attr:`Scenario.case`).
+    run_spec : SpecFile
+        The scenario's run spec (:attr:`Scenario.run_spec`).
     vehicle : fahv.model.vehicle.Vehicle
         The nominal vehicle (its parameters are perturbed by the scenario's draw).
     cache : Path, optional
         Folder of the scenario arrays designed earlier (:func:`scenario_arrays`).
     variants : list of str, optional
-        The variants that will run (all of the case's by default): the baseline's
+        The variants that will run (all of the run spec's by default): the baseline's
         ellipsoids along a new step are designed only if one of them runs it.
 
     Returns
     -------
     Design
-        ``case``: the scenario's case; ``arrays``: the design's with the scenario's;
+        ``case``: the run spec's data; ``arrays``: the design's with the scenario's;
         ``summary``: the design's, with ``plant_params`` of the vehicle draw,
         ``scenario_hash`` and ``content_hash`` (of this run's design, checked by
-        :func:`fahv.design.artefacts.load_design`). ``summary['design_hash']`` stays the
+        :func:`fahv.spec.artefacts.load_design`). ``summary['design_hash']`` stays the
         stored design's.
     """
-    c = scenario_case.data
+    c = run_spec.data
     arrays = {**design.arrays, **scenario_arrays(design, c, vehicle, cache, log, variants)}
     summary = {
         **design.summary,
         "plant_params": perturbed_params(
             vehicle, c["uncertainty"]["seed"], c["uncertainty"]["scale"]
         ),  # fmt: skip
-        "scenario_hash": scenario_case.content_hash(),
+        "scenario_hash": run_spec.content_hash(),
     }
     run = Design(c, arrays, summary)
     run.summary["content_hash"] = run.content_hash()

@@ -5,7 +5,7 @@ content hash, the vehicle data file and its hash, and the version and hash of th
 code that made it. :func:`stale_reason` compares a stored design with its design file and
 vehicle, so a design whose inputs changed is refused (with the command that re-makes it),
 never used. Whether the current code still certifies a stored design is what
-``fahv verify`` re-checks (:mod:`fahv.design.verify`).
+``fahv verify`` re-checks (:mod:`fahv.certificate.verify`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ class Design:
     ----------
     case : dict
         The validated design file data; for a run, the scenario's case
-        (:func:`fahv.design.scenario.scenario_design`).
+        (:func:`fahv.spec.scenario.scenario_design`).
     arrays : dict[str, ndarray]
         ``A``, ``B`` (R, n, n/m) discrete nominal vertices; ``h_grid``, ``V_grid``,
         ``W_h``, ``W_V`` TP weighting functions; ``Dx``, ``Du`` scales; ``w_max`` (n,)
@@ -127,7 +127,8 @@ def load_design(out_dir: str | Path) -> Design:
 
 
 #: Library packages a design depends on (their source is hashed into the provenance).
-DESIGN_PACKAGES = ("config", "synthesis", "model", "plant", "control", "design")
+DESIGN_PACKAGES = ("config", "synthesis", "model", "plant", "control", "spec", "bounds", "tube",
+                   "onset", "certificate", "design")  # fmt: skip
 
 
 def save_arrays(arrays: dict, path: str | Path) -> Path:
@@ -175,7 +176,7 @@ def provenance(case, vehicle) -> dict:
 
     Parameters
     ----------
-    case : fahv.design.case.Case
+    case : fahv.spec.files.SpecFile
         The validated design file.
     vehicle : fahv.model.vehicle.Vehicle
         The vehicle the design is made for (its ``source_file`` is recorded).
@@ -205,7 +206,7 @@ def stale_reason(design: Design, case, vehicle) -> str | None:
     Parameters
     ----------
     design : Design
-    case : fahv.design.case.Case
+    case : fahv.spec.files.SpecFile
         The validated design file.
     vehicle : fahv.model.vehicle.Vehicle
     """

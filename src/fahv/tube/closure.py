@@ -2,10 +2,10 @@
 
 Z_8 is designed for W_8 (the tube LMI (24) over the vertices along the nominal), and
 W_8 must bound the one-step disturbance over the product set of that Z_8
-(:func:`fahv.design.one_step_bound.altitude_bound`). :func:`close_tube_set` iterates
+(:func:`fahv.bounds.one_step_bound.altitude_bound`). :func:`close_tube_set` iterates
 W_8 <- max(W_8, grow x bound) with the LMI re-solved until the bound lies inside W_8,
 checks that the scheduling box holds the nominal box grown by the product set's supports
-(the integral form's segment condition, :func:`fahv.design.domain.box_shortfall`), and
+(the integral form's segment condition, :func:`fahv.bounds.domain.box_shortfall`), and
 re-checks the exact worst one-step level over the vertices and the corners of W_8
 (:func:`fahv.synthesis.rpi_level.worst_level`).
 """
@@ -16,14 +16,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fahv.design.domain import SchedulingBox, box_shortfall
-from fahv.design.one_step_bound import altitude_bound
-from fahv.design.report import closure_iteration_line
-from fahv.design.tube_set import TubeSet
-from fahv.design.vertices import NominalVertices
+from fahv.bounds.domain import SchedulingBox, box_shortfall
+from fahv.bounds.one_step_bound import altitude_bound
+from fahv.bounds.vertices import NominalVertices
 from fahv.errors import DesignError
 from fahv.synthesis.feedback import GENERATION_ADD, ActiveSet, design_tube
 from fahv.synthesis.rpi_level import worst_level
+from fahv.tube.lines import closure_iteration_line
+from fahv.tube.tube_set import TubeSet
 
 
 def close_tube_set(
@@ -60,7 +60,7 @@ def close_tube_set(
     input_scale : (2,) array_like
         Design input scaling (Du).
     room : (2,) array_like
-        Input room of each row (:func:`fahv.design.feasibility.input_room`).
+        Input room of each row (:func:`fahv.tube.feasibility.input_room`).
     lam : float
         Contraction factor of the tube LMI (24).
     moves : int

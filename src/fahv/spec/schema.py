@@ -1,11 +1,11 @@
-"""Design, scenario and case schemas: what a design certifies and what a scenario flies.
+"""Design, scenario and run-spec schemas: what a design certifies and what a scenario flies.
 
 A **design file** (:func:`design_spec`, ``offline_design/designs/<name>.yaml``) holds what
-``fahv design`` synthesises and certifies: design model, uncertainty box, fault range,
+``fahv design`` synthesises and certifies: design model, parameter box, fault range,
 tube, nominal MPC, notch and baseline settings. A **scenario file**
 (:func:`scenario_spec`, ``offline_design/scenarios/<name>.yaml``) names a design and holds
 one thing to fly on it: command, fault instance, simulated vehicle draw, duration,
-variants. The **case** (:func:`case_spec`) is the two together, what the loop runs on.
+variants. The **run spec** (:func:`run_spec`) is the two together, what the loop runs on.
 
 Each schema is declared once in the configuration language (:mod:`fahv.config`), with
 the fault kinds of :data:`fahv.plant.faults.FAULTS` and the sections of the control laws
@@ -14,24 +14,18 @@ uses the law). Numerical knobs (sample counts, seeds, margins, trim grid, LMI fa
 have defaults, and the defaults a design used are reported by it. The node parameters of
 the SIL graph reuse the same fields (:mod:`fahv.loop.params`), so a range is written once.
 
-Loading fails with :class:`fahv.errors.CaseError` naming the file and the dotted key.
+Loading (:mod:`fahv.spec.files`) fails with :class:`fahv.errors.SpecError` naming the
+file and the dotted key.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
 
-from fahv.config import Check, Field, Section, validate
+from fahv.config import Check, Field, Section
 from fahv.config.spec import lookup
-from fahv.config.yamlio import load_yaml
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
 from fahv.control.base import ATTITUDE_BOUND_DEG
-from fahv.errors import CaseError
 from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
 
 TS = Field("Ts", "float", "control period Ts", unit="s", lo=0.0, hi=0.1, lo_open=True)
@@ -74,10 +68,10 @@ def _eight_state(root) -> bool:
 
 #: The eight-state tube (:mod:`fahv.design.tube_set_design`): vertex data, the nominal box
 #: (the ranges of the nominal the certificate covers), the scheduling box beyond it and
-#: the W_8-Z_8 iteration. Defaults: the pair of docs/theory/certificate.md.
+#: the W_8-Z_8 iteration. Defaults: the tube set of docs/theory/certificate.md.
 EIGHT_STATE = (
-    Field("k", "int", "parameter directions the vertices carry (64 box corners x 2^k x 2 "
-          "rho_f vertices)", lo=1, hi=8, default=5),
+    Field("k", "int", "parameter directions the vertices carry (64 scheduling-box corners "
+          "x 2^k x 2 rho_f vertices)", lo=1, hi=8, default=5),
     Field("lam", "float", "contraction factor of the eight-state tube LMI", lo=0.0, hi=1.0,
           lo_open=True, hi_open=True, default=0.995, equation="LMI (24)"),
     Field("w0", "float", "W_8 the iteration starts from, as a fraction of the sampled W",
@@ -88,7 +82,7 @@ EIGHT_STATE = (
     Field("h_margin", "float", "nominal box: the nominal's h range is the envelope's shrunk "
           "by this on each side (the scheduling box spans the envelope; at least the altitude "
           "bound H); the QP keeps its set point and prediction in it (mpc.hv_box) and the "
-          "case's command must lie in it", unit="ft", lo=0.0, default=5.0),
+          "design step must lie in it", unit="ft", lo=0.0, default=5.0),
     Field("V_margin", "float", "nominal box: the nominal's V range is the envelope's shrunk "
           "by this on each side (at least Z_8's V support; mpc.hv_box as h_margin)",
           unit="ft/s", lo=0.0, default=4.98),
@@ -96,11 +90,11 @@ EIGHT_STATE = (
           "deviation from the trim at its own (h, V); at least mpc.att_max", unit="deg",
           lo=0.0, lo_open=True, hi=5.0, default=0.4),
     Field("Phi", "floats", "nominal box: range of the applied Phi minus the nominal trim's "
-          "(it must hold every box corner's trim and the manoeuvres)", lo=-2.0, hi=2.0,
-          length=2, default=(-0.2, 1.1)),
+          "(it must hold every parameter-box corner's trim and the manoeuvres)", lo=-2.0,
+          hi=2.0, length=2, default=(-0.2, 1.1)),
     Field("delta_e", "floats", "nominal box: range of the applied delta_e minus the nominal "
-          "trim's (it must hold every box corner's trim and the manoeuvres)", unit="deg",
-          lo=-30.0, hi=30.0, length=2, default=(-3.0, 7.0)),
+          "trim's (it must hold every parameter-box corner's trim and the manoeuvres)",
+          unit="deg", lo=-30.0, hi=30.0, length=2, default=(-3.0, 7.0)),
     Field("other", "floats", "nominal box: half-widths of the nominal's q [deg/s] and "
           "eta_1, eta_1_dot, eta_2, eta_2_dot deviations from the trim", lo=0.0,
           lo_open=True, length=5, default=(0.7, 0.5, 3.5, 0.3, 3.5)),
@@ -110,15 +104,15 @@ EIGHT_STATE = (
           length=9, default=(0.59, 0.554, 0.0772, 4.39, 0.886, 0.716, 9.48, 0.24, 5.655)),
     Field("certify_attitude", "bool", "bound Z_8's supports in alpha and theta in the tube "
           "LMI to the attitude requirement (0.5 deg, sec. 5.1) minus mpc.att_max, so that "
-          "the requirement follows from the pair with the QP's rows", default=False),
+          "the requirement follows from the tube set with the QP's rows", default=False),
     Field("onset_in_tube", "float", "kappa: the tube LMI makes Z_8 hold every first jump "
           "J / rho_min of the design's loss 1 - rho_min over the scheduling box (its 64 x "
           "2^P corners and 1024 interior points) in kappa Z_8, so that the onset bound "
           "starts from room along the elevator's column (docs/theory/certificate.md, 'A tube "
           "shaped for the onset's jump'); 0: not imposed", lo=0.0, default=0.0),
     Field("notch_gain", "str", "gain of the tube variants that run through the certified "
-          "notch (tube.filter_nominal_q): the pair's F_8 ('tube') or a gain designed for the "
-          "loop with the filter's states, certified with the pair's Z_8 and tightening and "
+          "notch (tube.filter_nominal_q): the tube set's F_8 ('tube') or a gain designed for the "
+          "loop with the filter's states, certified with the tube set's Z_8 and tightening and "
           "W_8 re-bounded over its own set ('designed'; docs/theory/certificate.md)",
           choices=("tube", "designed"), default="tube"),
     Field("notch_continuation", "floats", "notch pole dampings eps_p the designed gain "
@@ -151,7 +145,7 @@ EIGHT_STATE_CHECKS = (
 
 
 def _eight_state_needs(r) -> bool:
-    """True unless the case asks for the eight-state tube without the loop it is closed for.
+    """True unless the design asks for the eight-state tube without the loop it is closed for.
 
     That loop: the CM design model, the CM nominal with the altitude reset and a
     disturbance estimate (W_8 bounds what the converged estimate leaves), and attitude
@@ -169,7 +163,7 @@ def _eight_state_needs(r) -> bool:
 
 UNCERTAINTY = (
     Field("seed", "int", "seed of the parameter draw s_p ~ U(-1, 1)", lo=0),
-    Field("scale", "float", "fraction of the sec. 5.1 uncertainty box", lo=0.0, hi=1.0),
+    Field("scale", "float", "fraction of the sec. 5.1 parameter box", lo=0.0, hi=1.0),
 )
 
 
@@ -191,7 +185,7 @@ DESIGN_STEP = (
           lo=0.0, hi=2e4, equation="eq. (33)"),
 )  # fmt: skip
 
-#: Top-level keys a scenario sets; everything else of a case comes from its design.
+#: Top-level keys a scenario sets; everything else of a run spec comes from its design.
 SCENARIO_KEYS = ("name", "description", "command", "fault", "uncertainty", "duration", "variants")
 
 
@@ -297,11 +291,11 @@ def _command_section() -> Section:
     ))  # fmt: skip
 
 
-def case_spec() -> Section:
-    """The whole case: a design's entries with one scenario's (what the loop runs on).
+def run_spec() -> Section:
+    """The run spec: a design's entries with one scenario's (what the loop runs on).
 
-    A case is never written by hand: :func:`fahv.design.scenario.load_scenario` forms it
-    from a scenario file and the design it names, and validates it against this spec.
+    A run spec is never written by hand: :func:`fahv.spec.scenario.load_scenario` forms
+    it from a scenario file and the design it names, and validates it against this spec.
     """
     return Section(
         "",
@@ -315,7 +309,7 @@ def case_spec() -> Section:
             Section("uncertainty", UNCERTAINTY, "plant parameters p (1 + s_p scale rel_p)"),
             _variants("variants to run (law + notch setting)"),
         ),
-        "case",
+        "run spec",
         checks=(
             Check("duration", lambda r: r["duration"] >= 10 * r["Ts"], "must be >= 10 Ts"),
             *_design_checks(),
@@ -326,7 +320,7 @@ def case_spec() -> Section:
 def design_spec() -> Section:
     """A design file (``offline_design/designs/<name>.yaml``): what ``fahv design`` certifies.
 
-    The vehicle's envelope and uncertainty box (``uncertainty.scale``), the fault range
+    The vehicle's envelope and parameter box (``uncertainty.scale``), the fault range
     (``tube.rho_min``), the design model, tube, nominal MPC, notch and baseline settings,
     the design step, and the variants whose offline parts it prepares. Nothing of a
     scenario (command, fault instance, vehicle draw, duration) enters it.
@@ -341,7 +335,7 @@ def design_spec() -> Section:
             Section(
                 "uncertainty",
                 (UNCERTAINTY[1],),
-                "the uncertainty box the design covers: this fraction of the sec. 5.1 box",
+                "the parameter box the design covers: this fraction of the sec. 5.1 box",
             ),
             _variants("variants whose offline parts the design prepares"),
         ),
@@ -374,96 +368,3 @@ def scenario_spec() -> Section:
         ),
         "scenario file",
     )
-
-
-@dataclass(frozen=True)
-class Case:
-    """A validated case file.
-
-    Attributes
-    ----------
-    path : Path
-        File it was read from.
-    data : dict
-        Validated content, defaults filled in (see :func:`case_spec`).
-    defaults_used : dict
-        ``{dotted key: value}`` of every default the file relied on.
-    """
-
-    path: Path
-    data: dict
-    defaults_used: dict = field(default_factory=dict)
-
-    def __getitem__(self, key: str) -> Any:
-        """Top-level entry of the case."""
-        return self.data[key]
-
-    @property
-    def name(self) -> str:
-        """Name of the design, scenario or case (artefact folders and run files)."""
-        return self.data["name"]
-
-    def content_hash(self) -> str:
-        """sha256 of the validated content (defaults included), first 16 hex characters."""
-        text = json.dumps(self.data, sort_keys=True, default=str)
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def case_from_mapping(data: Any, path: str = "<mapping>", spec: Section | None = None) -> Case:
-    """Validate a mapping against ``spec`` (:func:`case_spec` by default) as a :class:`Case`.
-
-    Raises
-    ------
-    CaseError
-        Naming the file, the dotted key and the value at fault.
-    """
-    v = validate(case_spec() if spec is None else spec, data, path, CaseError)
-    return Case(Path(path), v.values, v.defaults_used)
-
-
-def read_yaml_file(path: str | Path, what: str) -> Any:
-    """The YAML content of a file.
-
-    Raises
-    ------
-    CaseError
-        If the file is missing or is not YAML (naming the file, ``what`` it should be).
-    """
-    p = Path(path)
-    if not p.is_file():
-        raise CaseError(f"{what} not found: {p}")
-    try:
-        return load_yaml(p.read_text())
-    except Exception as exc:  # yaml errors carry the line number
-        raise CaseError(f"{p}: not a valid YAML file: {exc}") from None
-
-
-def load_design_file(path: str | Path) -> Case:
-    """Read and validate a design file (:func:`design_spec`).
-
-    Raises
-    ------
-    CaseError
-        If the file is missing, is not YAML, or does not validate (naming the key).
-    """
-    return case_from_mapping(read_yaml_file(path, "design file"), str(path), design_spec())
-
-
-def load_case(path: str | Path) -> Case:
-    """The whole case of a scenario file: its design's entries with its own.
-
-    See :func:`fahv.design.scenario.load_scenario`.
-
-    Raises
-    ------
-    CaseError
-        If the scenario or its design file is missing or does not validate.
-    """
-    from fahv.design.scenario import load_scenario
-
-    return load_scenario(path).case
-
-
-def case_data(path: str | Path) -> dict:
-    """The whole case of a scenario file as plain data (lists, not tuples), to modify."""
-    return json.loads(json.dumps(load_case(path).data))

@@ -14,8 +14,9 @@ class DesignContext:
 
     Attributes
     ----------
-    case : dict
-        Validated case data.
+    spec : dict
+        The validated design data with the ``command`` the offline part is sized for
+        (the design step as a step command, or a scenario's command: a run spec's data).
     vehicle : fahv.model.vehicle.Vehicle
     arrays : dict
         Arrays designed so far (the TP model, W, F, Z, K, Q, trim map ...).
@@ -23,7 +24,7 @@ class DesignContext:
         Receives one line per step.
     """
 
-    case: dict
+    spec: dict
     vehicle: Vehicle
     arrays: dict
     log: Callable[[str], None]

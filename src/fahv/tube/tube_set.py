@@ -7,27 +7,32 @@ the tube's RPI condition. The tube (F_8, Z_8 = {e_8' N_8^-1 e_8 <= 1}) is design
 other eight states e_8 = (V, alpha, theta, q, eta_1, eta_1_dot, eta_2, eta_2_dot) with
 the ancillary gain blind to e_h, and the altitude error is bounded by the nominal MPC's
 reset of its h to the measured altitude at every re-plan (``mpc.h_reset``, M fast steps
-apart): |e_h| <= H (:func:`fahv.design.one_step_bound.altitude_bound`, eq. (1) there).
+apart): |e_h| <= H (:func:`fahv.bounds.one_step_bound.altitude_bound`, eq. (1) there).
 
 W_8 bounds the one-step disturbance over the product set {|e_h| <= H} x Z_8 in the
-integral form (:mod:`fahv.design.one_step_bound`); the closure iterates W_8 and Z_8 until
-the bound lies inside W_8 (:mod:`fahv.design.closure`). What the tube set assumes besides
+integral form (:mod:`fahv.bounds.one_step_bound`); the closure iterates W_8 and Z_8 until
+the bound lies inside W_8 (:mod:`fahv.tube.closure`). What the tube set assumes besides
 the vertices' own assumptions is :data:`ASSUMPTIONS`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fahv.design.domain import SchedulingBox, certified_range
+from fahv.bounds.domain import (
+    BOX_COORDINATES,
+    OTHER_COORDINATES,
+    SchedulingBox,
+    certified_range,
+    product_supports,
+)
 
 if TYPE_CHECKING:
-    from fahv.design.notch_loop import NotchLoop
-    from fahv.design.onset import OnsetBound
     from fahv.synthesis.feedback import ActiveSet
+    from fahv.tube.notch_loop import NotchLoop
 
 #: The states of the tube, after h (the design's state order without its first entry).
 EIGHT_STATES = ("V", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
@@ -61,7 +66,7 @@ class TubeSet:
     W_8 : (8,) ndarray
         Half-widths of W_8 (state units per period Ts).
     H : float
-        Altitude error bound [ft] (:func:`fahv.design.one_step_bound.altitude_bound`).
+        Altitude error bound [ft] (:func:`fahv.bounds.one_step_bound.altitude_bound`).
     lam : float
         Contraction factor of the tube LMI (24).
     bound : (8,) ndarray
@@ -74,15 +79,16 @@ class TubeSet:
         Largest one-step change of e_h by the tube's own dynamics [ft].
     w_h : float
         The h row's disturbance over the product set [ft].
-    onset : OnsetBound, optional
+    onset : fahv.onset.bound.OnsetBound, optional
         The onset of a loss as a transient of the tube set
-        (:func:`fahv.design.onset.onset_bound`).
+        (:func:`fahv.onset.bound.onset_bound`, which takes a closed tube set: the onset
+        package sits above this one, so the type is not imported here).
     notch_loops : tuple of NotchLoop
         The tube variants that feed q through a notch, their loops certified in their
-        own states at the tube set's vertices (:func:`fahv.design.notch_loop.notch_tube`).
+        own states at the tube set's vertices (:func:`fahv.tube.notch_loop.notch_tube`).
     notch_gains : dict
         ``{variant: (2, 8) ndarray}``: the gains designed for those loops and certified
-        (``eight_state.notch_gain: designed``, :func:`fahv.design.notch_gain.notch_gain`);
+        (``eight_state.notch_gain: designed``, :func:`fahv.tube.notch_gain.notch_gain`);
         such a variant runs its own gain in place of F_8.
     active_set : fahv.synthesis.feedback.ActiveSet, optional
         The vertices and contained points the closure's last LMI solve held: where a
@@ -99,7 +105,7 @@ class TubeSet:
     moves: int
     step: float
     w_h: float
-    onset: OnsetBound | None = None
+    onset: Any = None
     notch_loops: tuple[NotchLoop, ...] = ()
     notch_gains: dict = field(default_factory=dict)
     active_set: ActiveSet | None = None
@@ -133,15 +139,30 @@ class TubeSet:
     def certified_range(self, box: SchedulingBox) -> SchedulingBox:
         """The nominal points the certificate covers: ``box`` less the tube.
 
-        :func:`fahv.design.domain.certified_range` of this tube set.
+        :func:`fahv.bounds.domain.certified_range` of this tube set.
         """
         return certified_range(box, self.F_8, self.N_8, self.H)
+
+    def reach(self, nominal: SchedulingBox, box: SchedulingBox) -> tuple[float, str]:
+        """How far the scheduling box reaches beyond the nominal box, in tube supports.
+
+        The smallest over the coordinates after h of the box's margin beyond the nominal
+        box (its nearer side) over the product set's support there
+        (:func:`fahv.bounds.domain.product_supports`), and that coordinate's name; at
+        least 1 when the box holds the nominal box grown by the tube.
+        """
+        s_lo, s_oth = product_supports(self.F_8, self.N_8, self.H)
+        lo, hi, oth = box.margin_to(nominal)
+        room = np.r_[np.minimum(lo, hi)[1:] / s_lo[1:], oth / s_oth]
+        names = [*BOX_COORDINATES[1:], *OTHER_COORDINATES]
+        worst = int(np.argmin(room))
+        return float(room[worst]), names[worst]
 
     def summary(self, nominal: SchedulingBox, box: SchedulingBox) -> dict:
         """JSON-ready record of the tube set for the design summary (``certificate``).
 
         Units as the attributes; the boxes in their coordinates
-        (:data:`fahv.design.domain.BOX_COORDINATES`); ``certified_range`` is
+        (:data:`fahv.bounds.domain.BOX_COORDINATES`); ``certified_range`` is
         :meth:`certified_range` of the scheduling box.
         """
         return {

@@ -8,7 +8,7 @@ its error is a sum of such jumps, each decaying geometrically. The error dynamic
 linear along any sequence of the vertices, so the error splits into the part the
 disturbance drives (in a steady set) and the part the jumps drive (bounded by a norm
 recursion, :func:`pulse_peak`): :func:`onset_bound` bounds their sum, and the loss it
-certifies. Its lower bound is :func:`fahv.design.onset_witness.onset_witness`.
+certifies. Its lower bound is :func:`fahv.onset.witness.onset_witness`.
 """
 
 from __future__ import annotations
@@ -19,19 +19,19 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from fahv.bounds.domain import SchedulingBox
+from fahv.bounds.one_step_bound import product_bound
+from fahv.bounds.plant_step import plant_step
+from fahv.bounds.vertices import NominalVertices
 from fahv.control.mpc.estimator import elevator_share
-from fahv.design.domain import SchedulingBox
-from fahv.design.one_step_bound import product_bound
-from fahv.design.onset_witness import OnsetWitness, onset_witness
-from fahv.design.plant_step import plant_step
-from fahv.design.vertices import NominalVertices
 from fahv.errors import DesignError
+from fahv.onset.witness import OnsetWitness, onset_witness
 from fahv.plant.rk4 import perturbed_records
 from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid
 from fahv.synthesis.rpi_level import vertex_levels
 
 if TYPE_CHECKING:
-    from fahv.design.tube_set import TubeSet
+    from fahv.tube.tube_set import TubeSet
 
 #: Contraction factors tried for the onset bound's steady set (:func:`steady_set`): the
 #: smallest ellipsoid RPI for the bound at one factor may not exist at another (on
@@ -234,7 +234,7 @@ class OnsetBound:
     jump_rigid_q : float
         The same with only the bending modes left out (V, alpha, theta and q).
     witness : OnsetWitness or None
-        The lower bound at the design's loss (:func:`fahv.design.onset_witness.onset_witness`;
+        The lower bound at the design's loss (:func:`fahv.onset.witness.onset_witness`;
         None: not computed).
     ceiling : float
         With ``witness``: the smallest loss found whose lower bound exceeds 1, bisected
@@ -328,7 +328,7 @@ def steady_disturbance(nv: NominalVertices, tube_set: TubeSet, jump_h: float,
                        gamma: float) -> np.ndarray:  # fmt: skip
     """The disturbance bound before an onset, at the altitude bound the onset grows.
 
-    W_8's bound over the product set (:func:`fahv.design.one_step_bound.product_bound`)
+    W_8's bound over the product set (:func:`fahv.bounds.one_step_bound.product_bound`)
     with |e_h| <= H + jump_h / gamma: the altitude error takes up to jump_h per step
     until the estimate removes it, at most 1 / gamma of it between resets
     (:func:`onset_bound`).
@@ -482,7 +482,7 @@ def onset_bound(nv: NominalVertices, tube_set: TubeSet, vehicle, trim_map,
     min(c, c_w).
 
     The bound is an upper one. Its matching lower bound
-    (:func:`fahv.design.onset_witness.onset_witness`) builds the worst onset the same
+    (:func:`fahv.onset.witness.onset_witness`) builds the worst onset the same
     model allows at one vertex held throughout, re-simulated: if its level exceeds 1 at
     the design's loss, no analysis on the tube set's assumptions certifies that loss, and
     the smallest loss it so refutes is bisected (``ceiling``): the loss certifiable on

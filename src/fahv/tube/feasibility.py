@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fahv.design.disturbance import DisturbanceSet, sample_disturbance
-from fahv.design.vertices import fault_vertices
+from fahv.bounds.disturbance import DisturbanceSet, sample_disturbance
+from fahv.bounds.vertices import fault_vertices
 from fahv.errors import DesignError
 from fahv.model.trim import trim_grid
 from fahv.model.vehicle import DELTA_E
@@ -87,8 +87,8 @@ def tube_feasibility(
     Ts,
     uncertainty,
     rho_f,
-    dev_box,
-    du_box,
+    dx_half,
+    du_half,
     n_samples,
     seed,
     margin,
@@ -98,7 +98,7 @@ def tube_feasibility(
 ) -> FeasibilityResult:
     """Sample W, design F and Z, try the box tube, report the input room left.
 
-    Parameters are those of :func:`fahv.design.disturbance.sample_disturbance` and
+    Parameters are those of :func:`fahv.bounds.disturbance.sample_disturbance` and
     :func:`fahv.synthesis.feedback.design_tube`; ``treatment`` is "box" or "polytopic".
     """
     if treatment not in ("box", "polytopic"):
@@ -110,8 +110,8 @@ def tube_feasibility(
         Ts,
         uncertainty,
         rho_f if treatment == "box" else 1.0,
-        dev_box,
-        du_box,
+        dx_half,
+        du_half,
         n_samples,
         seed,
         margin,

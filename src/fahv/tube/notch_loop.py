@@ -7,7 +7,7 @@ with q' = notch(q) in e', which adds the filter's two states to the loop
 necessary condition); :func:`notch_tube` seeks an ellipsoid of the loop RPI for W whose
 projection lies in Z and whose input support lies within the tightening, and
 :func:`notch_certificate` re-checks a given one exactly. A gain designed for the loop is
-:func:`fahv.design.notch_gain.notch_gain`.
+:func:`fahv.tube.notch_gain.notch_gain`.
 """
 
 from __future__ import annotations
@@ -16,10 +16,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fahv.design.report import notch_loop_line
 from fahv.model.notch import DiscreteNotch
 from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid
 from fahv.synthesis.rpi_level import vertex_levels
+from fahv.tube.lines import notch_loop_line
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,7 @@ class NotchLoop:
         The tightening the design applies, F Z's support per input [-, rad].
     designed : bool
         True if the loop runs a gain designed for it
-        (:func:`fahv.design.notch_gain.notch_gain`), not the tube's.
+        (:func:`fahv.tube.notch_gain.notch_gain`), not the tube's.
     w_ratio : tuple of float or None
         With a designed gain: the closure of the loop on W's assumptions, every entry
         <= 1 (:func:`fahv.design.tube_set_design.designed_notch_loop`: the loop's altitude
@@ -104,7 +104,7 @@ class NotchLoop:
         )  # fmt: skip
 
     def line(self) -> str:
-        """The design log's line of the loop (:func:`fahv.design.report.notch_loop_line`)."""
+        """The design log's line of the loop (:func:`fahv.tube.lines.notch_loop_line`)."""
         return notch_loop_line(self)
 
     def summary(self) -> dict:
@@ -320,7 +320,7 @@ def notch_certificate(A, B, F, N, w_max, notch, Ts: float, iq: int, P,
     as :func:`notch_tube`; ``P`` is (n + 2, n + 2) in the coordinates of
     :func:`notch_closed_loop`. ``tightening`` (m,), if given, is the tightening the
     supports are compared with in place of F Z's: for a gain designed for the loop
-    (:func:`fahv.design.notch_gain.notch_gain`) it is the tube set's, which the nominal QP
+    (:func:`fahv.tube.notch_gain.notch_gain`) it is the tube set's, which the nominal QP
     applies.
 
     Returns

@@ -1,6 +1,6 @@
 """Bounds of the one-step disturbance W over a domain, deterministic (no sampling).
 
-Two forms, one per tube form (:mod:`fahv.design.domain` states their domains):
+Two forms, one per tube form (:mod:`fahv.bounds.domain` states their domains):
 
 **Taylor form** (the paper's vertex tube around the scheduling trim,
 :func:`bound_disturbance`). In deviation coordinates around the scheduling trim
@@ -12,14 +12,14 @@ P = diag(1, rho_f)::
 
 is the one-step error of the vertex model with the constant part at the trim (which
 the online estimate removes, ``disturbance.constant: estimated``) taken out; Phi_p is
-one control period of the plant (:func:`fahv.design.plant_step.plant_step`). It is
+one control period of the plant (:func:`fahv.bounds.plant_step.plant_step`). It is
 bounded over the domain by a second-order Taylor model with an interval bound over the
 box, plus a third-order remainder measured at every corner of the box.
 
 **Integral form** (the eight-state tube set along the nominal, :func:`product_bound`,
 :func:`altitude_bound`). The error along the nominal is exactly a vertex combination of
 the one-period Jacobians averaged along the segment from the nominal to the plant
-(:mod:`fahv.design.vertices` (1)), up to what the vertices leave: each vehicle's
+(:mod:`fahv.bounds.vertices` (1)), up to what the vertices leave: each vehicle's
 parameter residual and the interpolation remainder. Both are first order in the tube,
 and their supports are exact over the product set {|e_h| <= H} x Z_8. The altitude error
 is held by the nominal's reset of its h to the measured one every M fast steps
@@ -40,16 +40,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fahv.design.domain import CertificateDomain, joint_of, product_supports
-from fahv.design.plant_step import REMAINDER_FACTOR, plant_step
-from fahv.design.vertices import NominalVertices
+from fahv.bounds.domain import CertificateDomain, joint_of, product_supports
+from fahv.bounds.plant_step import REMAINDER_FACTOR, plant_step
+from fahv.bounds.vertices import NominalVertices
 from fahv.errors import DesignError
 from fahv.plant.rk4 import perturbed_records
 
 
 @dataclass(frozen=True)
 class DisturbanceBound:
-    """Bound of the one-step disturbance over a :class:`~fahv.design.domain.CertificateDomain`.
+    """Bound of the one-step disturbance over a :class:`~fahv.bounds.domain.CertificateDomain`.
 
     Attributes
     ----------
@@ -208,7 +208,7 @@ def bound_disturbance(domain: CertificateDomain, vehicle, tp, trim_map, progress
     an interval bound of the quadratic model). The third-order remainder is measured
     as the largest mismatch between the exact Delta and the quadratic model at all
     2^11 corners of the box, for the parameter corner and rho_f that give the largest
-    quadratic bound of each row, and added times :data:`fahv.design.plant_step.REMAINDER_FACTOR`.
+    quadratic bound of each row, and added times :data:`fahv.bounds.plant_step.REMAINDER_FACTOR`.
 
     Parameters
     ----------
@@ -303,13 +303,13 @@ def product_bound(
     Parameters
     ----------
     nv : NominalVertices
-        Vertex data over the scheduling box (:func:`fahv.design.vertices.nominal_vertices`).
+        Vertex data over the scheduling box (:func:`fahv.bounds.vertices.nominal_vertices`).
     F_8 : (2, 8) array_like
     N_8 : (8, 8) array_like
     H : float
         Altitude error bound [ft].
     joint : (10, 10) array_like, optional
-        A loop's joint shape of (e_8, u - v) (:func:`fahv.design.domain.joint_shape`).
+        A loop's joint shape of (e_8, u - v) (:func:`fahv.bounds.domain.joint_shape`).
 
     Returns
     -------
@@ -374,14 +374,14 @@ def altitude_bound(nv: NominalVertices, A, B, F_8, N_8, moves: int, joint=None) 
     nv : NominalVertices
     A : (R, 9, 9) array_like
     B : (R, 9, 2) array_like
-        The vertices (:meth:`fahv.design.vertices.NominalVertices.vertices`).
+        The vertices (:meth:`fahv.bounds.vertices.NominalVertices.vertices`).
     F_8 : (2, 8) array_like
     N_8 : (8, 8) array_like
     moves : int
         Fast steps between the nominal's altitude resets.
     joint : (10, 10) array_like, optional
         Joint shape of (e_8, u - v) in place of the tube set's
-        (:func:`fahv.design.domain.joint_shape`): the step of (1) is then the support of
+        (:func:`fahv.bounds.domain.joint_shape`): the step of (1) is then the support of
         a_h,8 e_8 + b_h (u - v) over it.
 
     Returns

@@ -5,7 +5,7 @@ discrete polytopic model (deviation coordinates around the commanded trim):
 
 * f, modelling error (eq. 13): nominal nonlinear CM vs the polytopic LPV prediction;
 * f, parameter uncertainty (eq. 13): perturbed vs nominal nonlinear CM, parameters at
-  corners of the box of sec. 5.1;
+  corners of the parameter box of sec. 5.1;
 * w, elevator loss of effectiveness (eq. 14-17): delta_e,applied = rho_f delta_e on the
   whole deflection (trim included), vs the healthy vehicle.
 
@@ -37,17 +37,17 @@ from fahv.plant.uncertainty import perturb
 #: Half-widths of the state deviations sampled for W (h ft, V ft/s, alpha rad, theta rad,
 #: q rad/s, eta_1, eta_1_dot, eta_2, eta_2_dot): the Case 1 step (600 ft, 250 ft/s) and a
 #: few scale units of the attitude and flexible states (docs/theory/certificate.md).
-DEFAULT_DEV_BOX = np.array(
+STATE_DEVIATIONS = np.array(
     [600.0, 250.0, np.radians(1.0), np.radians(1.0), np.radians(2.0), 0.5, 5.0, 0.05, 1.0]
 )
 #: Half-widths of the input deviations sampled for W (Phi, delta_e rad).
-DEFAULT_DU_BOX = np.array([0.1, np.radians(3.0)])
+INPUT_DEVIATIONS = np.array([0.1, np.radians(3.0)])
 
 
-def deviation_box(notch=None, q_scale: float = 1.0) -> np.ndarray:
+def state_deviations(notch=None, q_scale: float = 1.0) -> np.ndarray:
     """Half-widths of the state deviations :func:`sample_disturbance` draws for a model.
 
-    ``DEFAULT_DEV_BOX`` for the CM and DM (9 states). For the ECM (``notch`` given) the
+    ``STATE_DEVIATIONS`` for the CM and DM (9 states). For the ECM (``notch`` given) the
     notch filter's two states follow, at twice their steady size for a q of ``q_scale``
     (:meth:`fahv.model.notch.NotchFilter.state_scale`).
 
@@ -70,10 +70,10 @@ def deviation_box(notch=None, q_scale: float = 1.0) -> np.ndarray:
         If ``q_scale`` is not a positive finite number.
     """
     if notch is None:
-        return DEFAULT_DEV_BOX.copy()
+        return STATE_DEVIATIONS.copy()
     if not (np.isfinite(q_scale) and q_scale > 0.0):
-        raise ValueError(f"deviation_box: q_scale must be positive and finite, got {q_scale}")
-    return np.concatenate([DEFAULT_DEV_BOX, 2.0 * np.asarray(notch.state_scale(q_scale), float)])
+        raise ValueError(f"state_deviations: q_scale must be positive and finite, got {q_scale}")
+    return np.concatenate([STATE_DEVIATIONS, 2.0 * np.asarray(notch.state_scale(q_scale), float)])
 
 
 @dataclass(frozen=True)
@@ -110,8 +110,8 @@ def sample_disturbance(
     Ts: float,
     uncertainty: dict[str, float],
     rho_f: float,
-    dev_box: np.ndarray,
-    du_box: np.ndarray,
+    dx_half: np.ndarray,
+    du_half: np.ndarray,
     n_samples: int,
     seed: int,
     margin: float,
@@ -133,10 +133,10 @@ def sample_disturbance(
         Relative parameter bounds (e.g. :data:`fahv.plant.PAPER_UNCERTAINTY`).
     rho_f : float
         Elevator effectiveness after the fault.
-    dev_box : (n,) ndarray
+    dx_half : (n,) ndarray
         Half-widths of the state deviations x = x_s - x_r sampled (unscaled); n = 9
         for a CM/DM model, 11 for the ECM (notch states last).
-    du_box : (2,) ndarray
+    du_half : (2,) ndarray
         Half-widths of the input deviations u = u_s - u_r sampled.
     n_samples : int
     seed : int
@@ -162,7 +162,7 @@ def sample_disturbance(
     Raises
     ------
     ValueError
-        If margin < 1, dev_box has the wrong length or is not finite, or ``constant``
+        If margin < 1, dx_half has the wrong length or is not finite, or ``constant``
         is unknown.
     """
     if margin < 1.0:
@@ -171,9 +171,9 @@ def sample_disturbance(
         raise ValueError(f"disturbance constant must be 'bounded' or 'estimated', got {constant!r}")
     kind = "ecm" if tp.kind == "ecm" else "cm"
     n = tp.A_vertices.shape[1]
-    dev_box = np.asarray(dev_box, float)
-    if dev_box.shape != (n,) or not np.all(np.isfinite(dev_box)):
-        raise ValueError(f"disturbance dev_box must have {n} finite entries, got {dev_box!r}")
+    dx_half = np.asarray(dx_half, float)
+    if dx_half.shape != (n,) or not np.all(np.isfinite(dx_half)):
+        raise ValueError(f"disturbance dx_half must have {n} finite entries, got {dx_half!r}")
     rng = np.random.default_rng(seed)
     env = vehicle.envelope
     disc = tp.discretize(Ts)
@@ -189,13 +189,13 @@ def sample_disturbance(
         Vc = rng.uniform(env.V_min, env.V_max)
         tr = trim(vehicle, hc, Vc)
         x_r = tr.x_r_ecm if kind == "ecm" else tr.x_r
-        x = rng.uniform(-1, 1, n) * dev_box
+        x = rng.uniform(-1, 1, n) * dx_half
         xs = x_r + x
         # keep the scheduling point inside the envelope
         xs[0] = np.clip(xs[0], env.h_min, env.h_max)
         xs[1] = np.clip(xs[1], env.V_min, env.V_max)
         x = xs - x_r
-        u = rng.uniform(-1, 1, 2) * du_box
+        u = rng.uniform(-1, 1, 2) * du_half
         us = tr.u_r + u
         w = tp.weights(xs[0], xs[1])
         x_lpv = np.tensordot(w, disc.A, 1) @ x + np.tensordot(w, disc.B, 1) @ u

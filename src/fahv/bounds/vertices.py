@@ -16,7 +16,7 @@ the constant part at the nominal point, by the mean-value theorem in integral fo
        = [int_0^1 J_p(z + s e, P (v + s F e)) ds] [e; P F e]                 (1)
 
 with J_p the one-period Jacobian [A, B] of the perturbed vehicle. If the segment lies in
-the scheduling box (:class:`fahv.design.domain.SchedulingBox`), the averaged Jacobian
+the scheduling box (:class:`fahv.bounds.domain.SchedulingBox`), the averaged Jacobian
 lies in the convex hull of J_p over the box. The vertices cover it:
 
 * the nominal vehicle's J_0 at the 64 corners of the box, each shifted along k
@@ -31,7 +31,7 @@ lies in the convex hull of J_p over the box. The vertices cover it:
   parameter residual.
 
 The residual and the interpolation remainder are what W bounds
-(:mod:`fahv.design.one_step_bound`); both are first order in the size of the tube.
+(:mod:`fahv.bounds.one_step_bound`); both are first order in the size of the tube.
 """
 
 from __future__ import annotations
@@ -41,8 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fahv.design.domain import SchedulingBox
-from fahv.design.plant_step import REMAINDER_FACTOR, jacobians
+from fahv.bounds.domain import SchedulingBox
+from fahv.bounds.plant_step import REMAINDER_FACTOR, jacobians
 from fahv.errors import DesignError
 from fahv.model.vehicle import DELTA_E
 from fahv.plant.rk4 import params_records, perturbed_records

@@ -2,9 +2,9 @@
 
 A vehicle with elevator effectiveness rho_f holds its trim with delta_e,r / rho_f (eq. 15;
 Phi unchanged). The tube covers a loss only if that faulty trim fits the tightened input
-set (eq. 30) for every vehicle of the sec. 5.1 box anywhere in the envelope:
-:func:`box_coverage` trims every corner of the box over the trim grid
-(:func:`box_corner_trims`) and bounds the trim elevator between grid points.
+set (eq. 30) for every vehicle of the parameter box (sec. 5.1) anywhere in the envelope:
+:func:`loss_coverage` trims every corner of the parameter box over the trim grid
+(:func:`corner_trims`) and bounds the trim elevator between grid points.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 
 from fahv.errors import DesignError
 
-#: Parameters of the sec. 5.1 box that do not enter a level-flight trim: with gamma = 0,
+#: Parameters of the parameter box (sec. 5.1) that do not enter a level-flight trim: with gamma = 0,
 #: q = 0 and eta_dot = 0 the trim rows are T cos(alpha) = D, L + T sin(alpha) = m g and
 #: M = 0 (eq. 1-2), in which I_yy does not appear (``tests/design/test_feasibility.py``
 #: checks it numerically).
@@ -24,11 +24,11 @@ TRIM_FREE_PARAMETERS = ("I_yy",)
 
 
 @dataclass(frozen=True)
-class BoxCoverage:
-    """Largest elevator loss whose faulty trim fits the tightened inputs over the whole box.
+class LossCoverage:
+    """Largest elevator loss whose faulty trim fits the tightened inputs over the parameter box.
 
     A vehicle with elevator effectiveness rho_f holds its trim with delta_e,r / rho_f
-    (eq. 15; Phi unchanged). :func:`box_coverage` computes it for every corner of the
+    (eq. 15; Phi unchanged). :func:`loss_coverage` computes it for every corner of the
     sec. 5.1 parameter box over the trim grid of the envelope.
 
     Attributes
@@ -37,12 +37,12 @@ class BoxCoverage:
         Largest loss 1 - rho_f in [0, 1] covered for every corner anywhere in the
         envelope (grid values plus the remainder bound between grid points).
     loss_path : float
-        The same at the case's path points only (start and end of the command).
+        The same at the design step's path points only (its start and end).
     delta_e_max : float
         Largest trim elevator [rad] over corners and grid points.
     remainder : float
         Bound [rad] on how much the trim elevator between grid points can exceed the
-        grid values (:func:`box_coverage`, Notes).
+        grid values (:func:`loss_coverage`, Notes).
     worst_corner : dict
         {parameter: sign in {-1, 0, +1}} of the corner that needs delta_e_max
         (0: parameters that do not enter the trim).
@@ -79,7 +79,7 @@ class BoxCoverage:
     input_offset: np.ndarray = field(default=None, repr=False)
 
     def trim_offsets(self) -> tuple[np.ndarray, np.ndarray]:
-        """Range of a box corner's trim input minus the nominal vehicle's at the same point.
+        """Range of a parameter-box corner's trim input minus the nominal vehicle's at a point.
 
         What the plant applies at steady state, whatever its elevator loss or bias (a
         vehicle that lost effectiveness is commanded delta_e,r / rho_f and applies
@@ -113,7 +113,7 @@ class BoxCoverage:
             f"between grid points) and needs "
             f"{np.degrees(self.delta_e_max + self.remainder) / rho_f:.3f} deg at rho_f = "
             f"{rho_f}, beyond the tightened limit {np.degrees(u_hi_e):.3f} deg; largest loss "
-            f"covered over the box and the envelope: {100 * self.loss:.1f} %"
+            f"covered over the parameter box and the envelope: {100 * self.loss:.1f} %"
         )
 
     def summary(self) -> dict:
@@ -141,14 +141,14 @@ def _corner_params(vp, names, signs, rel, reps: int):
     )  # fmt: skip
 
 
-def box_corner_trims(vehicle, rel: dict, tm, signs: np.ndarray | None = None):
+def corner_trims(vehicle, rel: dict, tm, signs: np.ndarray | None = None):
     """Trims of every corner of a parameter box at every point of a trim map's grid.
 
     Parameters
     ----------
     vehicle : fahv.model.vehicle.Vehicle
     rel : dict
-        {parameter: relative bound} (e.g. the sec. 5.1 box times the case's scale).
+        {parameter: relative bound} (e.g. the sec. 5.1 box times the design's scale).
     tm : fahv.model.trim.TrimMap
         Nominal trims on the grid (starting points; its grid spans the envelope).
     signs : (C, P) ndarray, optional
@@ -195,7 +195,7 @@ def box_corner_trims(vehicle, rel: dict, tm, signs: np.ndarray | None = None):
     return names, signs, z.reshape(3, C, nh, nv)
 
 
-def box_coverage(vehicle, rel: dict, tm, u_lo, u_hi, path=()) -> BoxCoverage:
+def loss_coverage(vehicle, rel: dict, tm, u_lo, u_hi, path=()) -> LossCoverage:
     """Largest elevator loss whose faulty trim fits [u_lo, u_hi] for every corner, everywhere.
 
     Parameters
@@ -209,11 +209,11 @@ def box_coverage(vehicle, rel: dict, tm, u_lo, u_hi, path=()) -> BoxCoverage:
     u_lo, u_hi : (2,) array_like
         Tightened absolute input limits [Phi, delta_e rad] (eq. 30).
     path : sequence of (h, V)
-        The case's path points (command start and end), trimmed for every corner too.
+        The design step's path points (start and end), trimmed for every corner too.
 
     Returns
     -------
-    BoxCoverage
+    LossCoverage
 
     Raises
     ------
@@ -224,11 +224,11 @@ def box_coverage(vehicle, rel: dict, tm, u_lo, u_hi, path=()) -> BoxCoverage:
     Notes
     -----
     Corners: a level-flight trim does not depend on I_yy
-    (:data:`TRIM_FREE_PARAMETERS`), so the 2^10 = 1024 corners of the sec. 5.1 box
+    (:data:`TRIM_FREE_PARAMETERS`), so the 2^10 = 1024 corners of the parameter box
     have 512 distinct trims; all are computed (vectorised Newton,
     :func:`fahv.model.trim.trim_batch`).
     The worst case lies at a corner because at a fixed point every parameter enters
-    the trim monotonically over the box (checked by the test of this function on
+    the trim monotonically over the parameter box (checked by the test of this function on
     interior draws).
 
     Between grid points: for each corner, the trim elevator f(h, V) on a grid cell is at
@@ -239,7 +239,7 @@ def box_coverage(vehicle, rel: dict, tm, u_lo, u_hi, path=()) -> BoxCoverage:
     finer.
     """
     u_lo, u_hi = np.asarray(u_lo, float), np.asarray(u_hi, float)
-    names, signs, z = box_corner_trims(vehicle, rel, tm)
+    names, signs, z = corner_trims(vehicle, rel, tm)
     alpha, de, Phi = z
     if np.any(de <= 0.0):
         raise DesignError("a corner of the parameter box trims with delta_e <= 0: the "
@@ -260,7 +260,7 @@ def box_coverage(vehicle, rel: dict, tm, u_lo, u_hi, path=()) -> BoxCoverage:
     if de.min() < u_lo[1] or Phi.min() < u_lo[0] or Phi.max() > u_hi[0]:
         loss = 0.0  # not even the healthy trim fits
     alpha_nom = tm.x_r[..., 2]
-    return BoxCoverage(
+    return LossCoverage(
         loss=loss,
         loss_path=_path_loss(vehicle, rel, tm, names, signs, u_hi, path) if len(path) else loss,
         delta_e_max=de_max,
@@ -277,7 +277,7 @@ def box_coverage(vehicle, rel: dict, tm, u_lo, u_hi, path=()) -> BoxCoverage:
 
 
 def _path_loss(vehicle, rel, tm, names, signs, u_hi, path) -> float:
-    """The largest loss covered at the case's path points (every corner trimmed there)."""
+    """The largest loss covered at the design step's path points (every corner trimmed there)."""
     from fahv.model.trim import TRIM_TOL, trim_batch
 
     pts = np.asarray(path, float)
@@ -287,5 +287,5 @@ def _path_loss(vehicle, rel, tm, names, signs, u_hi, path) -> float:
     guess = np.tile(np.stack([xs[:, 2], us[:, 1], us[:, 0]]), (1, C))
     zp, res = trim_batch(vp, np.tile(pts[:, 0], C), np.tile(pts[:, 1], C), guess)
     if not np.all(res < TRIM_TOL):
-        raise DesignError("no trim of a parameter corner at a point of the case's path")
+        raise DesignError("no trim of a parameter corner at a point of the design step's path")
     return float(np.clip(1.0 - zp[1].max() / u_hi[1], 0.0, 1.0))

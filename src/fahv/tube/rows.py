@@ -1,7 +1,7 @@
 """Rows of the nominal QP that keep the nominal inside the ranges the tube set assumes.
 
 The eight-state tube set is certified for a nominal inside its certified range
-(:func:`fahv.design.domain.certified_range`) with its applied input inside the nominal
+(:func:`fahv.bounds.domain.certified_range`) with its applied input inside the nominal
 box. The design turns both into rows of the nominal MPC's QP, so that the assumption
 holds by construction: :func:`input_rows` (``mpc.u_box``) and :func:`state_rows`
 (``mpc.x_box``).
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fahv.design.domain import SchedulingBox
+from fahv.bounds.domain import SchedulingBox
 from fahv.errors import DesignError
 
 
@@ -28,7 +28,7 @@ def input_rows(trim_offsets, nominal: SchedulingBox) -> np.ndarray:
     ----------
     trim_offsets : tuple of (2,) ndarray
         (lo, hi) of the corners' trim inputs minus the nominal trim [Phi -, delta_e rad]
-        (:meth:`fahv.design.coverage.BoxCoverage.trim_offsets`).
+        (:meth:`fahv.bounds.coverage.LossCoverage.trim_offsets`).
     nominal : SchedulingBox
         The nominal box (its Phi and delta_e coordinates).
 
@@ -58,7 +58,7 @@ def state_rows(cert: SchedulingBox) -> np.ndarray:
     """Rows of the QP on the nominal's states besides h, V and the inputs (``mpc.x_box``).
 
     The certificate covers a nominal inside the certified range
-    (:func:`fahv.design.domain.certified_range`): its alpha and theta between the range's
+    (:func:`fahv.bounds.domain.certified_range`): its alpha and theta between the range's
     bounds and q and the bending modes within its half-widths, all from the nominal
     vehicle's trim at the nominal's own (h, V). The QP keeps its prediction there
     (:class:`fahv.control.mpc.settings.MPCSettings`, ``x_box``), so the assumption holds by

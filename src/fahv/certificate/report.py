@@ -1,56 +1,26 @@
-"""The certificate lines the design prints, each with its margin and verdict, in one place.
+"""The certificate lines a design prints, each with its margin and verdict: formatting only.
 
-Every function here formats a result computed elsewhere; none computes a certificate.
-The eight-state tube set: :func:`tube_set_lines` (with :func:`range_line`,
-:func:`onset_lines` and :func:`notch_loop_line`) and :func:`closure_iteration_line`. The
-paper's vertex tube checked over its domain: :func:`rpi_check_line`,
-:func:`adjustable_tube_line`, :func:`domain_line`, :func:`domain_bound_line`,
-:func:`closed_line` and :func:`vertex_onset_line`.
+Every function here formats a result computed elsewhere and computes nothing; no
+computation imports this module (the design's stages call it, an import-linter contract
+holds it). The eight-state tube set: :func:`tube_set_lines` (with :func:`range_line`,
+:func:`onset_lines` and the notch loops' lines). The paper's vertex tube checked over its
+domain: :func:`vertex_certificate_lines`. The stages' own lines follow. The two lines the
+tube's computations print while they run (a closure iteration, a notch loop's verdict)
+are :mod:`fahv.tube.lines`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from fahv.design.domain import (
-    BOX_COORDINATES,
-    OTHER_COORDINATES,
-    SchedulingBox,
-    product_supports,
-)
-from fahv.design.tube_set import ASSUMPTIONS, EIGHT_STATES
-
-
-def _join(values, fmt: str, sep: str = " ") -> str:
-    """``values`` formatted with ``fmt`` and joined with ``sep``."""
-    return sep.join(format(v, fmt) for v in values)
-
-
-def closure_iteration_line(it: int, tightening, N_8, ab, ratio) -> str:
-    """The design log's line of one W_8-Z_8 iteration (:mod:`fahv.design.closure`).
-
-    Parameters
-    ----------
-    it : int
-        The iteration's index.
-    tightening : (2,) array_like
-        F_8 Z_8's support per input [-, rad].
-    N_8 : (8, 8) ndarray
-        Z_8's shape.
-    ab : fahv.design.one_step_bound.AltitudeBound
-    ratio : (8,) array_like
-        bound / W_8 per row.
-    """
-    return (
-        f"eight-state tube, iteration {it}: tightening {tightening[0]:.4f} / "
-        f"{np.degrees(tightening[1]):.3f} deg, alpha support "
-        f"{np.degrees(np.sqrt(N_8[1, 1])):.4f} deg, H = {ab.H:.2f} ft (step {ab.step:.3f} "
-        f"ft, w_h {ab.w_h:.3f} ft); bound / W_8 (V ... eta_2_dot) " + _join(ratio, ".3f")
-    )
+from fahv.bounds.domain import SchedulingBox
+from fahv.tube.lines import join as _join
+from fahv.tube.lines import notch_loop_line
+from fahv.tube.tube_set import ASSUMPTIONS, EIGHT_STATES
 
 
 def range_line(cert: SchedulingBox, nominal: SchedulingBox) -> str:
-    """The line of the certified nominal range (:func:`fahv.design.domain.certified_range`)."""
+    """The line of the certified nominal range (:func:`fahv.bounds.domain.certified_range`)."""
     deg = np.degrees
     o = cert.other_half
     return (
@@ -61,7 +31,7 @@ def range_line(cert: SchedulingBox, nominal: SchedulingBox) -> str:
         f"applied Phi {cert.lo[4]:+.4f}..{cert.hi[4]:+.4f} and delta_e "
         f"{deg(cert.lo[5]):+.3f}..{deg(cert.hi[5]):+.3f} deg from the trim's, |q| <= "
         f"{deg(o[0]):.3f} deg/s, |eta_1|, |eta_1_dot|, |eta_2|, |eta_2_dot| <= {o[1]:.3f}, "
-        f"{o[2]:.3f}, {o[3]:.3f}, {o[4]:.3f} from the trim's (the case's nominal box, "
+        f"{o[2]:.3f}, {o[3]:.3f}, {o[4]:.3f} from the trim's (the design's nominal box, "
         f"e.g. alpha +/-{deg(nominal.hi[2]):.3f} deg, is the part the QP's rows keep)"
     )
 
@@ -71,7 +41,7 @@ def tube_set_lines(tube_set, nominal: SchedulingBox, box: SchedulingBox) -> list
 
     Parameters
     ----------
-    tube_set : fahv.design.tube_set.TubeSet
+    tube_set : fahv.tube.tube_set.TubeSet
     nominal, box : SchedulingBox
         The nominal box and the scheduling box it was closed over.
 
@@ -81,11 +51,7 @@ def tube_set_lines(tube_set, nominal: SchedulingBox, box: SchedulingBox) -> list
         W_8's bound, the closure, the altitude bound, the box's reach, the certified
         range, Z_8's supports, the assumptions, then the onset lines and the notch loops.
     """
-    s_lo, s_oth = product_supports(tube_set.F_8, tube_set.N_8, tube_set.H)
-    lo, hi, oth = box.margin_to(nominal)
-    room = np.r_[np.minimum(lo, hi)[1:] / s_lo[1:], oth / s_oth]
-    names = [*BOX_COORDINATES[1:], *OTHER_COORDINATES]
-    worst = int(np.argmin(room))
+    reach, where = tube_set.reach(nominal, box)
     sz = np.sqrt(np.diag(tube_set.N_8))
     t = tube_set.tightening
     return [
@@ -98,7 +64,7 @@ def tube_set_lines(tube_set, nominal: SchedulingBox, box: SchedulingBox) -> list
         f"altitude: |e_h| <= H = {tube_set.H:.3f} ft by the reset every {tube_set.moves} "
         f"steps (step {tube_set.step:.4f} ft, w_h {tube_set.w_h:.4f} ft)",
         f"scheduling box holds the nominal box plus the tube: smallest reach "
-        f"{room[worst]:.2f} x the tube's support ({names[worst]})  OK",
+        f"{reach:.2f} x the tube's support ({where})  OK",
         range_line(tube_set.certified_range(box), nominal),
         f"Z_8 supports: V {sz[0]:.3f} ft/s, alpha {np.degrees(sz[1]):.4f} deg, theta "
         f"{np.degrees(sz[2]):.4f} deg, q {np.degrees(sz[3]):.4f} deg/s; tightening "
@@ -110,7 +76,7 @@ def tube_set_lines(tube_set, nominal: SchedulingBox, box: SchedulingBox) -> list
 
 
 def onset_lines(onset) -> list[str]:
-    """The design log's lines of an onset bound (:class:`fahv.design.onset.OnsetBound`).
+    """The design log's lines of an onset bound (:class:`fahv.onset.bound.OnsetBound`).
 
     The level bound at the design's loss with its verdict, the largest certified losses,
     the first jump state by state and, with a lower bound, :func:`witness_line`.
@@ -132,7 +98,7 @@ def onset_lines(onset) -> list[str]:
         f"{onset.contraction:.5f} per step, level bound {onset.peak:.3f} "
         + ("<= 1  OK" if ok else "> 1: NOT certified"),
         f"largest loss whose onset keeps e in Z_8: {100 * onset.certified_loss:.2f} % with "
-        f"the case's estimate, {100 * onset.certified_loss_one_step:.2f} % with an estimate "
+        f"the design's estimate, {100 * onset.certified_loss_one_step:.2f} % with an estimate "
         "that knows the whole loss one step after it acts (the first step alone, which no "
         "estimate can remove)",
         f"the first jump state by state, x Z_8's support: {share}; its Z_8 norm without the "
@@ -155,46 +121,6 @@ def witness_line(onset) -> str:
            f"loss so refuted {100 * onset.ceiling:.2f} % (certified "
            f"{100 * onset.certified_loss:.2f} %)" if refuted else
            "<= 1: not refuted")
-    )  # fmt: skip
-
-
-def notch_loop_line(loop) -> str:
-    """The design log's line of a tube loop through a notch, with its verdict.
-
-    Parameters
-    ----------
-    loop : fahv.design.notch_loop.NotchLoop
-    """
-    head = (
-        f"variant {loop.variant}: tube feedback through the notch on q (omega {loop.omega:.2f} "
-        f"rad/s, eps_p {loop.eps_p:g}): largest spectral radius over the vertices "
-        f"{loop.rho:.6f} (on the measured q {loop.rho_q:.6f})"
-    )
-    if not loop.stable:
-        return head + f": UNSTABLE at vertex {loop.vertex}: NOT certified with the notch"
-    if loop.s is None:
-        return head + (
-            ": stable at every vertex (necessary only); the RPI certificate is for the "
-            "feedback on the measured q: NOT certified with the notch"
-        )
-    if not np.isfinite(loop.s):
-        return head + (
-            "; no ellipsoid of the loop with the filter's states RPI for W with its input "
-            "support within the tightening (LMI infeasible): NOT certified with the notch"
-        )
-    closed = ""
-    if loop.w_ratio is not None:
-        closed = (f", over the loop's own set of (e, u - v): H / the tube set's "
-                  f"{loop.w_ratio[0]:.3f}, W's bound / W per row "
-                  + _join(loop.w_ratio[1:], ".3f"))  # fmt: skip
-    return head + (
-        ("; with the gain designed for the loop" if loop.designed else "")
-        + f"; an ellipsoid of the loop with the filter's states, RPI for W: exact worst "
-        f"one-step level {loop.level:.6f}, its projection on e inside {loop.s:.4f} x Z, "
-        f"input support through q' {_join(loop.supports, '.4f', ' / ')} (tightening "
-        f"{_join(loop.tightening, '.4f', ' / ')}){closed}"
-        + (": certified with the notch  OK" if loop.certified
-           else ": NOT certified with the notch")
     )  # fmt: skip
 
 
@@ -234,19 +160,19 @@ def adjustable_tube_line(tau: float, level_t: float, w_prime: float) -> str:
 
 
 def domain_line(dom, n_schedules: int) -> str:
-    """The vertex tube's domain (:class:`fahv.design.domain.CertificateDomain`)."""
+    """The vertex tube's domain (:class:`fahv.bounds.domain.CertificateDomain`)."""
     return (
         f"certificate domain: {n_schedules} scheduling point(s) over the envelope; x - x_rs "
         f"within nominal + Z = +/-[{_join(dom.x_half, '.3g', ', ')}]; inputs Phi in "
         f"[{dom.u_lo[0]:.3f}, {dom.u_hi[0]:.3f}], delta_e in [{np.degrees(dom.u_lo[1]):.1f}, "
         f"{np.degrees(dom.u_hi[1]):.1f}] deg (tightened set + tau F Z); all "
-        f"{2 ** len(dom.uncertainty)} corners of the sec. 5.1 box; rho_f in {list(dom.rho)}. "
+        f"{2 ** len(dom.uncertainty)} corners of the parameter box; rho_f in {list(dom.rho)}. "
         "Assumed: " + "; ".join(dom.notes)
     )
 
 
 def domain_bound_line(n_evaluations: int, ratio, slack) -> str:
-    """W against the bound over the domain (:mod:`fahv.design.one_step_bound`)."""
+    """W against the bound over the domain (:mod:`fahv.bounds.one_step_bound`)."""
     return (
         "W over the domain (Taylor bound + corner remainder, "
         f"{n_evaluations} plant steps): bound / W per row = "
@@ -270,7 +196,7 @@ def closed_line(closed: bool, ratio, growth: float) -> str:
 
 
 def vertex_onset_line(rho_min: float, delta_e: float, est_tau, level_max: float) -> str:
-    """The vertex tube's onset of a loss (:func:`fahv.design.vertex_tube.onset_levels`)."""
+    """The vertex tube's onset of a loss (:func:`fahv.tube.vertex_tube.onset_levels`)."""
     return (
         f"onset of a {100 * (1 - rho_min):.0f} % loss at delta_e = "
         f"{np.degrees(delta_e):.1f} deg (estimate time constant {est_tau} s): "
@@ -279,7 +205,40 @@ def vertex_onset_line(rho_min: float, delta_e: float, est_tau, level_max: float)
     )
 
 
-# -- the design pipeline's own lines (fahv.design.pipeline, fahv.design.tube_forms) ------
+def vertex_certificate_lines(cert) -> list[str]:
+    """The lines of the vertex tube checked over its domain, in the order it was checked.
+
+    Parameters
+    ----------
+    cert : fahv.tube.vertex_tube.VertexCertificate
+
+    Returns
+    -------
+    list of str
+        The exact RPI check (:func:`rpi_check_line`; :func:`adjustable_tube_line` for
+        tau < 1), then the domain (:func:`domain_line`), the bound over it
+        (:func:`domain_bound_line`), whether it closes (:func:`closed_line`) and the onset
+        (:func:`vertex_onset_line`), or why the domain was not checked.
+    """
+    r = cert.rpi
+    lines = [rpi_check_line(r.level, r.n_vertices, r.n_corners, r.growth, r.tau)]
+    if r.tau < 1:
+        lines.append(adjustable_tube_line(r.tau, r.level_tau, r.w_prime))
+    if cert.skipped is not None:
+        return lines + [
+            f"certificate domain: {cert.skipped}; the tube certificate is NOT checked over "
+            "its domain"
+        ]
+    return lines + [
+        domain_line(cert.domain, cert.n_schedules),
+        domain_bound_line(cert.bound.n_evaluations, cert.ratio, cert.slack),
+        closed_line(cert.closed, cert.ratio, r.growth),
+        vertex_onset_line(cert.rho_min, cert.domain.u_hi[1], cert.est_tau,
+                          cert.onset_level_max),  # fmt: skip
+    ]
+
+
+# -- the stages' own lines (fahv.design.stages, fahv.design.tube_forms) -------------------
 def tp_model_line(kind: str, n_vertices: int, Ts: float) -> str:
     """The TP model's line: design model, vertex count (eq. 11), control period [s]."""
     return f"TP model: {kind.upper()}, {n_vertices} vertices, Ts = {Ts} s"
@@ -314,7 +273,7 @@ def tightening_line(room, tightening, tau: float) -> str:
 
 
 def coverage_line(coverage, rho_f: float) -> str:
-    """The loss coverage's line (:class:`fahv.design.coverage.LossCoverage`)."""
+    """The loss coverage's line (:class:`fahv.bounds.coverage.LossCoverage`)."""
     c = coverage
     return (
         f"largest elevator loss whose faulty trim fits the tightened inputs for every one of "
@@ -329,7 +288,7 @@ def coverage_line(coverage, rho_f: float) -> str:
 
 
 def input_rows_line(offsets, nominal: SchedulingBox, u_box) -> str:
-    """The line of the QP's rows on the nominal input (``mpc.u_box``, :mod:`fahv.design.rows`)."""
+    """The line of the QP's rows on the nominal input (``mpc.u_box``, :mod:`fahv.tube.rows`)."""
     off_lo, off_hi = offsets
     deg = np.degrees
     return (

@@ -1,0 +1,95 @@
+"""Reading and validating design files, scenario files and run specs.
+
+A validated file is a :class:`SpecFile`: its path, its content with every default filled
+in, and the defaults it relied on. :func:`spec_file` validates a mapping against a
+schema of :mod:`fahv.spec.schema` (the run spec's by default), :func:`load_design_file`
+reads a design file; a scenario file and the run spec it forms are read by
+:func:`fahv.spec.scenario.load_scenario`. Every failure is a
+:class:`fahv.errors.SpecError` naming the file and the dotted key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fahv.config import Section, validate
+from fahv.config.yamlio import load_yaml
+from fahv.errors import SpecError
+from fahv.spec.schema import design_spec, run_spec
+
+
+@dataclass(frozen=True)
+class SpecFile:
+    """A validated design file, scenario file or run spec, with the file it came from.
+
+    Attributes
+    ----------
+    path : Path
+        File it was read from (for a run spec: its scenario file).
+    data : dict
+        Validated content, defaults filled in (see :mod:`fahv.spec.schema`).
+    defaults_used : dict
+        ``{dotted key: value}`` of every default the file relied on.
+    """
+
+    path: Path
+    data: dict
+    defaults_used: dict = field(default_factory=dict)
+
+    def __getitem__(self, key: str) -> Any:
+        """Top-level entry of the content."""
+        return self.data[key]
+
+    @property
+    def name(self) -> str:
+        """Name of the design or the scenario (artefact folders and run files)."""
+        return self.data["name"]
+
+    def content_hash(self) -> str:
+        """sha256 of the validated content (defaults included), first 16 hex characters."""
+        text = json.dumps(self.data, sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def spec_file(data: Any, path: str = "<mapping>", spec: Section | None = None) -> SpecFile:
+    """Validate a mapping against ``spec`` (:func:`fahv.spec.schema.run_spec` by default).
+
+    Raises
+    ------
+    SpecError
+        Naming the file, the dotted key and the value at fault.
+    """
+    v = validate(run_spec() if spec is None else spec, data, path, SpecError)
+    return SpecFile(Path(path), v.values, v.defaults_used)
+
+
+def read_yaml_file(path: str | Path, what: str) -> Any:
+    """The YAML content of a file.
+
+    Raises
+    ------
+    SpecError
+        If the file is missing or is not YAML (naming the file, ``what`` it should be).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise SpecError(f"{what} not found: {p}")
+    try:
+        return load_yaml(p.read_text())
+    except Exception as exc:  # yaml errors carry the line number
+        raise SpecError(f"{p}: not a valid YAML file: {exc}") from None
+
+
+def load_design_file(path: str | Path) -> SpecFile:
+    """Read and validate a design file (:func:`fahv.spec.schema.design_spec`).
+
+    Raises
+    ------
+    SpecError
+        If the file is missing, is not YAML, or does not validate (naming the key).
+    """
+    return spec_file(read_yaml_file(path, "design file"), str(path), design_spec())
