@@ -184,24 +184,29 @@ def design_tube_set(
                               iterations=s["iterations"], w_ref=w_max, state_max=state_max,
                               contain=contain, warm=warm, log=log)  # fmt: skip
     stage("tube set: onset bound, notch loops")
-    # the invariant ellipsoids the closed tube set is checked with, independent of each
-    # other: the onset's steady set at each contraction factor, each notch loop
-    parts, bound = {}, None
+    # what the closed tube set is checked with, as a graph of Dask tasks: the onset's
+    # steady set at each contraction factor, then the onset bound from the smallest; each
+    # notch loop, independent of them
+    parts, n_ellipsoids = {}, len(notches or {})
     if gamma is not None:
         bound = steady_disturbance(nv, tube_set, _jump_h(case, box, vehicle, trim_map, unc,
                                                          rho_min), gamma)  # fmt: skip
         A, B = nv.vertices()
         Acl_8 = A[:, 1:, 1:] + B[:, 1:, :] @ tube_set.F_8
-        for lam in dict.fromkeys((tube_set.lam, *STEADY_LAMS)):
-            parts[f"steady {lam}"] = delayed(steady_set)(Acl_8, tube_set.N_8, tube_set.F_8,
-                                                         bound, lam)  # fmt: skip
+        steady = [delayed(steady_set)(Acl_8, tube_set.N_8, tube_set.F_8, bound, lam)
+                  for lam in dict.fromkeys((tube_set.lam, *STEADY_LAMS))]  # fmt: skip
+        n_ellipsoids += len(steady)
+        parts["onset"] = delayed(onset_bound)(
+            nv, tube_set, vehicle, trim_map, unc, gamma, case["Ts"], case["plant_substeps"],
+            steady_shaped=delayed(_smallest_steady)(steady), **estimate,
+        )  # fmt: skip
     for v, nf in (notches or {}).items():
         parts[f"loop {v}"] = delayed(_notch_loops_logged)(nv, tube_set, case, {v: nf}, None)
-    workers = min(len(parts), os.cpu_count() or 1)
-    if workers > 1:  # Dask: each ellipsoid a task, the cores' processes take them in turn
-        log(f"eight-state tube: the onset's steady sets and the notch loops, {len(parts)} "
-            f"invariant ellipsoids on {workers} processes")  # fmt: skip
-        (got,) = dask.compute(parts, scheduler="processes", num_workers=workers, chunksize=1)
+    workers = min(n_ellipsoids, os.cpu_count() or 1)
+    if workers > 1:  # the cores' processes take the tasks in turn
+        log(f"eight-state tube: the onset bound and the notch loops, {n_ellipsoids} invariant "
+            f"ellipsoids, on {workers} processes")  # fmt: skip
+        (got,) = dask.compute(parts, scheduler="processes", num_workers=workers)
     else:
         (got,) = dask.compute(parts, scheduler="sync")
     loops, gains = _notch_loops(nv, tube_set, case, None, stable_only, log)  # stability only
@@ -212,12 +217,13 @@ def design_tube_set(
         loops, gains = loops + got_loops, {**gains, **got_gains}
     tube_set = replace(tube_set, notch_loops=loops, notch_gains=gains)
     if gamma is not None:
-        c_w = min(got[k][0] for k in got if k.startswith("steady "))
-        tube_set = replace(tube_set, onset=onset_bound(
-            nv, tube_set, vehicle, trim_map, unc, gamma, case["Ts"], case["plant_substeps"],
-            steady_shaped=c_w, **estimate,
-        ))  # fmt: skip
+        tube_set = replace(tube_set, onset=got["onset"])
     return tube_set, nominal, box
+
+
+def _smallest_steady(steady) -> float:
+    """The smallest c_w of the steady sets (:func:`fahv.onset.bound.steady_set` results)."""
+    return min(c_w for c_w, _ in steady)
 
 
 def _jump_h(case: dict, box, vehicle, trim_map, unc, rho_min: float) -> float:

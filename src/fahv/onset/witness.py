@@ -59,7 +59,7 @@ class OnsetWitness:
 
 def _z_norm(X, Ninv):
     """Z_8 norms sqrt(x' N_8^-1 x) of the rows of X (..., 8)."""
-    return np.sqrt(np.einsum("...i,ij,...j->...", X, Ninv, X))
+    return np.sqrt(np.sum((X @ Ninv) * X, axis=-1))  # (a 3-operand einsum was 10x slower)
 
 
 def _pulse_run(Acl_8, Ninv, J_s, Jb, gamma, g_e, steps):
@@ -75,7 +75,7 @@ def _pulse_run(Acl_8, Ninv, J_s, Jb, gamma, g_e, steps):
     k_best = np.zeros(best.shape, int)
     for k in range(1, steps):
         p = (1.0 - g_e) ** k * Jb + (1.0 - gamma) ** k * Jr
-        e = np.einsum("rij,drj->dri", Acl_8, e) + p[:, None, :]
+        e = np.matmul(Acl_8, e[..., None])[..., 0] + p[:, None, :]
         n = _z_norm(e, Ninv)
         up = n > best
         best, k_best = np.where(up, n, best), np.where(up, k, k_best)
