@@ -62,7 +62,7 @@ def case1_runs(batch: int):
     design's range allowed as the engine allows them).
     """
     c = load_campaign(CAMPAIGN)
-    _, design, _ = load_or_design(c.case.path, log=io.StringIO().write, allow_uncertified=True)
+    _, design, _ = load_or_design(c.run_spec.path, log=io.StringIO().write, allow_uncertified=True)
     return design, [
         overrides(draw(c.data, design.case, i), design, "tube_mpc") for i in range(batch)
     ]

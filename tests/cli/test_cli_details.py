@@ -115,7 +115,7 @@ def test_design_for_another_vehicle_keeps_the_shipped_artefacts(tmp_path, monkey
     assert other.parent == packaged.parent  # a sibling: saving it cannot replace cm_paper/
     written = []
 
-    def record(spec, vehicle, out, log=print):
+    def record(spec, vehicle, out, log=print, cold=False):
         written.append(out)
         raise DesignError("stopped by the test")
 

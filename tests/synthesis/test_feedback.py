@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from fahv.errors import DesignError
-from fahv.synthesis.feedback import box_tube, design_tube, verify_tube
+from fahv.synthesis.box_tube import box_tube
+from fahv.synthesis.feedback import design_tube, verify_tube
 from fahv.synthesis.rpi_level import worst_level
 
 # two-vertex unstable discrete system, 2 states, 1 input

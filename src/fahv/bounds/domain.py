@@ -107,7 +107,7 @@ def nominal_box(section: dict, envelope) -> tuple[SchedulingBox, SchedulingBox]:
     ----------
     section : dict
         The validated ``eight_state`` section (:mod:`fahv.spec.schema`).
-    envelope : fahv.model.vehicle.Envelope
+    envelope : fahv.model.envelope.Envelope
         The flight envelope (h, V ranges).
 
     Returns

@@ -120,8 +120,8 @@ def check_model(design: Design, vehicle) -> CheckResult:
     return CheckResult(
         "model", ok, MODEL_RTOL[worst] - diffs[worst],
         f"TP vertices, weights, scales and trim map rebuilt with the current model code: "
-        f"relative difference {diffs[worst]:.2e} ({worst}, the closest to its tolerance) "
-        f"<= {MODEL_RTOL[worst]:g}",
+        f"relative difference {diffs[worst]:.2e} ({worst}) <= {MODEL_RTOL[worst]:g} (the "
+        f"array closest to its tolerance)",
     )  # fmt: skip
 
 

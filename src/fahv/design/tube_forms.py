@@ -260,7 +260,7 @@ def command_range(spec: dict, envelope) -> np.ndarray:
     ----------
     spec : dict
         The validated design data (its ``eight_state`` and ``design_step`` sections).
-    envelope : fahv.model.vehicle.Envelope
+    envelope : fahv.model.envelope.Envelope
 
     Returns
     -------

@@ -32,6 +32,15 @@ def one_blas_thread(func: Callable[..., T]) -> Callable[..., T]:
     -------
     callable
         The wrapped function. The limit is restored when it returns or raises.
+
+    Examples
+    --------
+    >>> from threadpoolctl import threadpool_info
+    >>> @one_blas_thread
+    ... def blas_threads():
+    ...     return {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+    >>> blas_threads()
+    {1}
     """
 
     @functools.wraps(func)

@@ -28,6 +28,27 @@ def density(h, vp: VehicleParams):
 
     The paper prints ``exp(-h-h_s/h_0)``; the exponential model of Parker et al.
     2007 is ``rho_0 exp(-(h - h_0)/h_s)`` (docs/reference/vehicle_data.md).
+
+    Parameters
+    ----------
+    h : float or ndarray
+        Altitude [ft], real or complex (complex-step differentiation).
+    vp : VehicleParams
+        Uses ``rho_0`` [slug/ft^3], ``h_0`` [ft] and ``h_s`` [ft].
+
+    Returns
+    -------
+    float or ndarray
+        Density [slug/ft^3], of the shape of ``h``.
+
+    Examples
+    --------
+    >>> from fahv.model.vehicle import load_vehicle
+    >>> vp = load_vehicle().params
+    >>> round(float(density(vp.h_0, vp) / vp.rho_0), 12)
+    1.0
+    >>> round(float(density(vp.h_0 + vp.h_s, vp) / vp.rho_0), 6)  # exp(-1)
+    0.367879
     """
     return vp.rho_0 * np.exp(-(h - vp.h_0) / vp.h_s)
 
@@ -53,6 +74,18 @@ def forces(x, u, vp: VehicleParams):
     -----
     M = z_T T + q_bar S c_bar (C_M,alpha(alpha) + c_e delta_e), as in Parker et
     al. 2007 (the paper's eq. (2) drops the factor T after z_T).
+
+    Examples
+    --------
+    In level flight at trim, lift and the thrust's normal part carry the weight:
+
+    >>> from fahv.model.trim import trim
+    >>> from fahv.model.vehicle import load_vehicle
+    >>> v = load_vehicle()
+    >>> tp = trim(v, 85500.0, 7900.0, "cm")
+    >>> L, D, T, M, N1, N2 = forces(tp.x_r, tp.u_r, v.params)
+    >>> round(float((L + T * np.sin(tp.alpha)) / (v.params.m * v.params.g)), 9)
+    1.0
     """
     h, Vel, alpha = x[H], x[V], x[ALPHA]
     Phi, de = u[PHI], u[DELTA_E]
@@ -116,6 +149,18 @@ def cm_rhs(x, u, vp: VehicleParams) -> np.ndarray:
 
     with k_i = 1 + psi_i^2 / I_yy, then q_dot = (M + psi_1 eta_1_ddot +
     psi_2 eta_2_ddot) / I_yy.
+
+    Examples
+    --------
+    At a trim every derivative vanishes (to the trim's scaled tolerance):
+
+    >>> from fahv.model.trim import trim
+    >>> from fahv.model.vehicle import load_vehicle
+    >>> v = load_vehicle()
+    >>> tp = trim(v, 85500.0, 7900.0, "cm")
+    >>> x_dot = cm_rhs(tp.x_r, tp.u_r, v.params)
+    >>> x_dot.shape, bool(np.max(np.abs(x_dot / v.state_scale)) < 1e-8)
+    ((9,), True)
     """
     L, D, T, M, N1, N2 = forces(x, u, vp)
     h_dot, V_dot, alpha_dot, theta_dot = _rigid_kinematics(x, x[IQ], T, D, L, vp)
@@ -152,6 +197,31 @@ def dm_rhs(x, u, vp: VehicleParams) -> np.ndarray:
 
     Shapes and units as :func:`cm_rhs`. q_dot = M / I_yy and
     eta_i_ddot = -2 zeta_i omega_i eta_i_dot - omega_i^2 eta_i + N_i.
+
+    Parameters
+    ----------
+    x : (9,) array_like
+        [h ft, V ft/s, alpha rad, theta rad, q rad/s, eta_1, eta_1_dot, eta_2, eta_2_dot].
+    u : (2,) array_like
+        [Phi -, delta_e rad].
+    vp : VehicleParams
+        The vehicle's parameters (psi_i unused).
+
+    Returns
+    -------
+    x_dot : (9,) ndarray
+        Same dtype kind as the inputs (complex inputs give a complex result).
+
+    Examples
+    --------
+    CM and DM share their trim (M = 0 and eta_ddot = 0 there):
+
+    >>> from fahv.model.trim import trim
+    >>> from fahv.model.vehicle import load_vehicle
+    >>> v = load_vehicle()
+    >>> tp = trim(v, 85500.0, 7900.0, "dm")
+    >>> bool(np.allclose(dm_rhs(tp.x_r, tp.u_r, v.params), 0.0, atol=1e-9))
+    True
     """
     L, D, T, M, N1, N2 = forces(x, u, vp)
     h_dot, V_dot, alpha_dot, theta_dot = _rigid_kinematics(x, x[IQ], T, D, L, vp)
@@ -262,7 +332,20 @@ class Model:
         return 11 if self.kind == "ecm" else 9
 
     def f(self, x, u) -> np.ndarray:
-        """Evaluate x_dot = f(x, u); x shape (n_x,), u (2,), units as the module docstring."""
+        """Evaluate x_dot = f(x, u); units as the module docstring.
+
+        Parameters
+        ----------
+        x : (n_x,) array_like
+            State (9 for CM and DM, 11 for ECM), real or complex.
+        u : (2,) array_like
+            Input [Phi -, delta_e rad].
+
+        Returns
+        -------
+        (n_x,) ndarray
+            The state derivative x_dot.
+        """
         if self.kind == "cm":
             return cm_rhs(x, u, self.params)
         if self.kind == "dm":
@@ -270,7 +353,25 @@ class Model:
         return ecm_rhs(x, u, self.params, *self.notch_ss)
 
     def state_scale(self, vehicle: Vehicle, notch=None) -> np.ndarray:
-        """Scale vector of the states, shape (n_x,), from the vehicle file (and notch)."""
+        """Scale vector of the states, shape (n_x,), from the vehicle file (and notch).
+
+        Parameters
+        ----------
+        vehicle : Vehicle
+            Its ``state_scale`` (9,) [state units].
+        notch : NotchFilter, optional
+            Required for "ecm": the scales of the filter's two states.
+
+        Returns
+        -------
+        (n_x,) ndarray
+            Typical magnitudes of the states [state units].
+
+        Raises
+        ------
+        ValueError
+            For "ecm" without ``notch``.
+        """
         if self.kind != "ecm":
             return vehicle.state_scale.copy()
         if notch is None:
@@ -287,6 +388,28 @@ def make_model(kind: str, vehicle: Vehicle | VehicleParams, notch=None) -> Model
     vehicle : Vehicle or VehicleParams
     notch : fahv.model.notch.NotchFilter, optional
         Required for "ecm".
+
+    Returns
+    -------
+    Model
+        The model, with the notch's state space of eq. (39) for "ecm".
+
+    Raises
+    ------
+    ValueError
+        On an unknown kind, or "ecm" without a notch filter.
+
+    Examples
+    --------
+    >>> from fahv.model.notch import NotchFilter
+    >>> from fahv.model.vehicle import load_vehicle
+    >>> v = load_vehicle()
+    >>> make_model("cm", v).n_x, make_model("ecm", v, NotchFilter(19.05, 0.02, 19.05, 0.1)).n_x
+    (9, 11)
+    >>> make_model("ecm", v)
+    Traceback (most recent call last):
+        ...
+    ValueError: model kind 'ecm' needs the notch filter state space (eq. 39)
     """
     params = vehicle.params if isinstance(vehicle, Vehicle) else vehicle
     return Model(kind, params, notch.ss() if (kind == "ecm" and notch is not None) else None)

@@ -49,7 +49,24 @@ def _bode_line(am, ph, w, resp, **kw):
 
 
 def pole_map(vehicle: Vehicle, h: float, V: float, path: Path) -> Path:
-    """Open-loop poles of the linearised CM at (h, V) with named modes (Fig. 4)."""
+    """Open-loop poles of the linearised CM at (h, V) with named modes (Fig. 4).
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        The vehicle linearised.
+    h : float
+        Altitude of the operating point [ft], inside the envelope.
+    V : float
+        Speed of the operating point [ft/s], inside the envelope.
+    path : Path
+        PNG file to write.
+
+    Returns
+    -------
+    Path
+        ``path``, the PNG written.
+    """
     lm = linearize(vehicle, h, V, "cm")
     modes = classify_modes(lm.A, vehicle.params.omega_1, vehicle.params.omega_2)
     fig, (ax, axz) = plt.subplots(1, 2, figsize=(11, 5), gridspec_kw={"width_ratios": [1.4, 1]})
@@ -98,6 +115,26 @@ def bode_model_vs_lpv(
 
     Paper Fig. 2 (``tp.kind == "dm"``) and Fig. 8 (``tp.kind == "ecm"``, codesigned
     model; ``notch`` required). Channels q (or q') / delta_e, alpha / delta_e, V / Phi.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        The vehicle linearised.
+    tp : fahv.model.tp_model.TPModel
+        The polytopic LPV model compared, of the kind linearised.
+    h : float
+        Altitude of the operating point [ft], inside the envelope (off the TP grid).
+    V : float
+        Speed of the operating point [ft/s], inside the envelope (off the TP grid).
+    path : Path
+        PNG file to write.
+    notch : NotchFilter, optional
+        The notch of the ECM; required when ``tp.kind == "ecm"``.
+
+    Returns
+    -------
+    Path
+        ``path``, the PNG written.
     """
     kind = tp.kind
     lm = linearize(vehicle, h, V, kind, notch)
@@ -140,6 +177,26 @@ def notch_effect(
     """Open-loop q / delta_e of the CM with and without notch (Fig. 3).
 
     (a) omega_p varied with eps_p = 0.5; (b) eps_p varied with omega_p = omega_f.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        The vehicle linearised.
+    h : float
+        Altitude of the operating point [ft], inside the envelope.
+    V : float
+        Speed of the operating point [ft/s], inside the envelope.
+    omega_f : float
+        Notch frequency omega_z [rad/s] (a flexible mode's frequency).
+    eps_z : float
+        Numerator damping ratio of every notch drawn [-].
+    path : Path
+        PNG file to write.
+
+    Returns
+    -------
+    Path
+        ``path``, the PNG written.
     """
     lm = linearize(vehicle, h, V, "cm")
     fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
@@ -183,7 +240,26 @@ def notch_effect(
 def notch_modes(
     vehicle: Vehicle, h: float, V: float, notches: dict[str, NotchFilter], path: Path
 ) -> Path:
-    """Q / delta_e of the CM with a notch on each flexible mode (Fig. 5)."""
+    """Q / delta_e of the CM with a notch on each flexible mode (Fig. 5).
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        The vehicle linearised.
+    h : float
+        Altitude of the operating point [ft], inside the envelope.
+    V : float
+        Speed of the operating point [ft/s], inside the envelope.
+    notches : dict of str to NotchFilter
+        The notches drawn, by legend label.
+    path : Path
+        PNG file to write.
+
+    Returns
+    -------
+    Path
+        ``path``, the PNG written.
+    """
     lm = linearize(vehicle, h, V, "cm")
     fig, am, ph = _bode_axes(
         f"Notch filter on the flexible modes, CM at h = {h:.0f} ft, V = {V:.0f} ft/s (paper Fig. 5)"

@@ -22,6 +22,13 @@ def jacobian_complex_step(fun: Callable[[np.ndarray], np.ndarray], z: np.ndarray
     Returns
     -------
     J : (m, n) ndarray
+
+    Examples
+    --------
+    >>> def fun(z):
+    ...     return np.array([z[0] ** 2 * z[1], np.sin(z[1])])
+    >>> jacobian_complex_step(fun, [3.0, 0.0]).tolist()  # exact: no subtraction
+    [[0.0, 9.0], [0.0, 1.0]]
     """
     z = np.asarray(z, dtype=float)
     cols = []
@@ -38,6 +45,26 @@ def jacobian_central_difference(
     """Jacobian by central differences with per-coordinate steps ``step`` (n,).
 
     Used only to check :func:`jacobian_complex_step`; truncation error O(step^2).
+
+    Parameters
+    ----------
+    fun : callable
+        Map (n,) -> (m,).
+    z : (n,) array_like
+        Point of evaluation.
+    step : (n,) array_like
+        Step per coordinate, in the units of ``z``.
+
+    Returns
+    -------
+    J : (m, n) ndarray
+
+    Examples
+    --------
+    >>> def cube(z):
+    ...     return np.array([z[0] ** 3])
+    >>> round(float(jacobian_central_difference(cube, [2.0], [1e-3])[0, 0]), 9)  # 12 + step^2
+    12.000001
     """
     z = np.asarray(z, dtype=float)
     cols = []
@@ -62,6 +89,13 @@ def jacobians(f: Callable, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np
     -------
     A : (n, n) ndarray
     B : (n, m) ndarray
+
+    Examples
+    --------
+    >>> A0, B0 = np.array([[0.0, 1.0], [-2.0, -3.0]]), np.array([[0.0], [1.0]])
+    >>> A, B = jacobians(lambda x, u: A0 @ x + B0 @ u, [1.0, 2.0], [0.5])
+    >>> A.tolist(), B.tolist()
+    ([[0.0, 1.0], [-2.0, -3.0]], [[0.0], [1.0]])
     """
     x = np.asarray(x, dtype=float)
     u = np.asarray(u, dtype=float)

@@ -63,6 +63,15 @@ def linearize(vehicle, h: float, V: float, kind: str = "dm", notch=None) -> Line
     ------
     EnvelopeError, TrimError
         As :func:`fahv.model.trim.trim`.
+
+    Examples
+    --------
+    >>> from fahv.model.vehicle import load_vehicle
+    >>> lm = linearize(load_vehicle(), 85500.0, 7900.0, "cm")
+    >>> lm.A.shape, lm.B.shape
+    ((9, 9), (9, 2))
+    >>> round(float(np.linalg.eigvals(lm.A).real.max()), 3)  # the unstable short period
+    1.725
     """
     from fahv.model.dynamics import make_model
     from fahv.model.trim import trim
@@ -118,6 +127,17 @@ def classify_modes(
         Flexible 1, flexible 2, short period (the real pair of largest |lambda|
         below the flexible modes, one of them unstable for this vehicle), phugoid
         (the remaining complex pair), altitude (the pole nearest 0), others.
+
+    Examples
+    --------
+    >>> from fahv.model.vehicle import load_vehicle
+    >>> v = load_vehicle()
+    >>> modes = classify_modes(linearize(v, 85500.0, 7900.0, "cm").A, v.params.omega_1,
+    ...                        v.params.omega_2)
+    >>> [mode.name for mode in modes]
+    ['flexible 1', 'flexible 2', 'altitude', 'short period', 'phugoid']
+    >>> [round(float(mode.wn), 2) for mode in modes]  # [rad/s]
+    [19.05, 49.12, 0.0, 1.8, 0.04]
     """
     ev = list(np.linalg.eigvals(A))
     modes: list[Mode] = []

@@ -19,6 +19,18 @@ class PolytopicLPV:
     h_grid, V_grid : ndarray
     W_h, W_V : ndarray
         Sampled weighting functions (see :func:`fahv.model.tp_model.tp_weights`).
+
+    Examples
+    --------
+    Two vertices along h, one along V:
+
+    >>> lpv = PolytopicLPV(
+    ...     A=np.array([[[1.0]], [[3.0]]]), B=np.array([[[0.0]], [[2.0]]]),
+    ...     h_grid=np.array([85000.0, 86500.0]), V_grid=np.array([7700.0, 8300.0]),
+    ...     W_h=np.eye(2), W_V=np.ones((2, 1)))
+    >>> A, B = lpv.system(85375.0, 8000.0)  # a quarter of the way up in h
+    >>> float(A[0, 0]), float(B[0, 0])
+    (1.5, 0.5)
     """
 
     A: np.ndarray
@@ -46,6 +58,12 @@ class PolytopicLPV:
         h, V : (B,) array_like
             Scheduling variables [ft, ft/s], clipped to the weight grids.
 
+        Returns
+        -------
+        A : (B, n, n) ndarray
+        B : (B, n, m) ndarray
+            The scheduled discrete matrices at each point.
+
         Notes
         -----
         The weights are those of :func:`fahv.model.tp_model.tp_weights` (eq. 11); each
@@ -68,6 +86,20 @@ class PolytopicLPV:
         return A, B
 
     def system(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
-        """(A(p) (n, n), B(p) (n, m)) at one point p = (h, V): :meth:`systems` of one point."""
+        """(A(p) (n, n), B(p) (n, m)) at one point p = (h, V): :meth:`systems` of one point.
+
+        Parameters
+        ----------
+        h : float
+            Altitude [ft], clipped to the weight grid.
+        V : float
+            Speed [ft/s], clipped to the weight grid.
+
+        Returns
+        -------
+        A : (n, n) ndarray
+        B : (n, m) ndarray
+            The scheduled discrete matrices.
+        """
         A, B = self.systems([h], [V])
         return A[0], B[0]

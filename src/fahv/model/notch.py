@@ -45,6 +45,21 @@ class NotchFilter:
     ------
     ValueError
         If a frequency is not positive and finite or a damping ratio is negative.
+
+    Examples
+    --------
+    The notch of ``cm_certified``: at its centre the gain is eps_z / eps_p, at 0 it is 1.
+
+    >>> nf = NotchFilter(omega_z=19.05, eps_z=0.02, omega_p=19.05, eps_p=0.1)
+    >>> num, den = nf.coefficients()
+    >>> def gain(w):
+    ...     return float(abs(np.polyval(num, 1j * w) / np.polyval(den, 1j * w)))
+    >>> round(gain(19.05), 12), round(gain(0.0), 12)
+    (0.2, 1.0)
+    >>> NotchFilter(19.05, 0.02, 19.05, 0.0)
+    Traceback (most recent call last):
+        ...
+    ValueError: notch filter 'eps_p' must be > 0 for a stable filter
     """
 
     omega_z: float
@@ -65,14 +80,28 @@ class NotchFilter:
             raise ValueError("notch filter 'eps_p' must be > 0 for a stable filter")
 
     def tf(self) -> control.TransferFunction:
-        """Continuous transfer function H(s) of eq. (38) (python-control)."""
+        """Continuous transfer function H(s) of eq. (38) (python-control).
+
+        Returns
+        -------
+        control.TransferFunction
+            H(s), s in rad/s.
+        """
         import control
 
         num, den = self.coefficients()
         return control.tf(num, den)
 
     def coefficients(self) -> tuple[np.ndarray, np.ndarray]:
-        """Numerator and denominator of eq. (38), each (3,), highest power of s first."""
+        """Numerator and denominator of eq. (38), each (3,), highest power of s first.
+
+        Returns
+        -------
+        num : (3,) ndarray
+            (1 / omega_z^2, 2 eps_z / omega_z, 1) [s^2, s, -].
+        den : (3,) ndarray
+            (1 / omega_p^2, 2 eps_p / omega_p, 1) [s^2, s, -].
+        """
         num = np.array([1.0 / self.omega_z**2, 2.0 * self.eps_z / self.omega_z, 1.0])
         den = np.array([1.0 / self.omega_p**2, 2.0 * self.eps_p / self.omega_p, 1.0])
         return num, den
@@ -86,6 +115,22 @@ class NotchFilter:
         with n(s) = n_0 s^2 + n_1 s + n_2 and d(s) = d_0 s^2 + d_1 s + d_2 divided by d_0,
         A_q = [[-d_1, -d_2], [1, 0]], B_q = (1, 0), C_q = (n_1 - n_0 d_1, n_2 - n_0 d_2),
         D_q = n_0; with ``omega_z = omega_p`` D_q = 1.
+
+        Returns
+        -------
+        A_q : (2, 2) ndarray
+        B_q : (2,) ndarray
+        C_q : (2,) ndarray
+        D_q : float
+            The realisation x_q_dot = A_q x_q + B_q q, q' = C_q x_q + D_q q (q in rad/s).
+
+        Examples
+        --------
+        >>> A_q, B_q, C_q, D_q = NotchFilter(19.05, 0.02, 19.05, 0.1).ss()
+        >>> np.round(A_q, 6).tolist()  # [[-2 eps_p omega_p, -omega_p^2], [1, 0]]
+        [[-3.81, -362.9025], [1.0, 0.0]]
+        >>> B_q.tolist(), np.round(C_q, 6).tolist(), D_q  # C_q = (2 (eps_z - eps_p) omega, 0)
+        ([1.0, 0.0], [-3.048, 0.0], 1.0)
         """
         num, den = self.coefficients()
         n, d = num / den[0], den / den[0]
@@ -98,6 +143,21 @@ class NotchFilter:
         In the controllable canonical form of :meth:`ss` x_q2 is q filtered by
         1/(s^2 + 2 eps_p omega_p s + omega_p^2) and x_q1 its derivative, so
         x_q1 ~ q/omega_p and x_q2 ~ q/omega_p^2; used to scale the ECM.
+
+        Parameters
+        ----------
+        q_scale : float
+            Typical pitch-rate magnitude [rad/s].
+
+        Returns
+        -------
+        (2,) ndarray
+            Typical magnitudes of x_q1 [rad] and x_q2 [rad s].
+
+        Examples
+        --------
+        >>> NotchFilter(20.0, 0.02, 20.0, 0.1).state_scale(1.0).tolist()
+        [0.05, 0.0025]
         """
         return np.array([q_scale / self.omega_p, q_scale / self.omega_p**2])
 
@@ -105,6 +165,16 @@ class NotchFilter:
         """Discrete filter at sampling period Ts [s]: Tustin, prewarped at omega_z.
 
         Prewarping keeps the notch centre exactly at omega_z after discretisation.
+
+        Parameters
+        ----------
+        Ts : float
+            Sampling period [s].
+
+        Returns
+        -------
+        control.StateSpace
+            The discrete filter, sampling period Ts.
 
         Raises
         ------
@@ -121,10 +191,24 @@ class NotchFilter:
     def check_sampling(self, Ts: float) -> None:
         """Check that the filter can be sampled at Ts [s].
 
+        Parameters
+        ----------
+        Ts : float
+            Sampling period [s].
+
         Raises
         ------
         ValueError
             If Ts <= 0 or omega_z is not below the Nyquist frequency pi/Ts.
+
+        Examples
+        --------
+        >>> nf = NotchFilter(19.05, 0.02, 19.05, 0.1)
+        >>> nf.check_sampling(0.02)
+        >>> nf.check_sampling(0.2)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+            ...
+        ValueError: notch frequency omega_z = 19.05 rad/s is not below the Nyquist frequency ...
         """
         if not (math.isfinite(Ts) and Ts > 0.0):
             raise ValueError(f"sampling period Ts must be > 0, got {Ts}")
@@ -135,7 +219,18 @@ class NotchFilter:
             )
 
     def magnitude(self, omega) -> np.ndarray:
-        """|H(j omega)| for frequencies ``omega`` [rad/s] (array_like) -> ndarray."""
+        """|H(j omega)| of the continuous filter at the frequencies ``omega``.
+
+        Parameters
+        ----------
+        omega : float or (k,) array_like
+            Frequencies [rad/s].
+
+        Returns
+        -------
+        (k,) ndarray
+            The gains [-].
+        """
         import control
 
         resp = control.frequency_response(self.tf(), np.atleast_1d(np.asarray(omega, float)))
@@ -173,6 +268,20 @@ class DiscreteNotch:
     x_q1, x_q2 of the ECM state (eq. 43) that the adjustable Tube-MPC feeds back.
     Each run's products are the BLAS calls of one (2, 2) @ (2,) product, so a run's
     output does not depend on B.
+
+    Examples
+    --------
+    From steady state a constant rate passes unchanged; the prewarped discretisation
+    keeps the continuous depth eps_z / eps_p at omega_z exactly:
+
+    >>> nf = NotchFilter(19.05, 0.02, 19.05, 0.1)
+    >>> f = DiscreteNotch(nf, Ts=0.02, q0=0.5)
+    >>> [round(float(q), 12) for q in f.step([0.5])]
+    [0.5]
+    >>> z = np.exp(1j * nf.omega_z * f.Ts)  # transfer function of the recursion at omega_z
+    >>> H = f.C_q @ np.linalg.solve(z * np.eye(2) - f.A_d, f.B_d) * (z + 1.0) + f.D_q
+    >>> round(float(abs(H)), 9)
+    0.2
     """
 
     def __init__(self, notch: NotchFilter, Ts: float, q0=0.0) -> None:
@@ -193,6 +302,16 @@ class DiscreteNotch:
 
     def step(self, q) -> np.ndarray:
         """Filter one sample of the pitch rates q (B,) [rad/s]; returns q' (B,) [rad/s].
+
+        Parameters
+        ----------
+        q : float or (B,) array_like
+            The pitch rate of each run at this sample [rad/s].
+
+        Returns
+        -------
+        (B,) ndarray
+            The filtered pitch rates q' [rad/s].
 
         Raises
         ------

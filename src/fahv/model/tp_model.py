@@ -52,6 +52,19 @@ def tp_weights(h, V, h_grid, V_grid, W_h, W_V) -> np.ndarray:
     W_h : (N_h, r_h) ndarray
     W_V : (N_V, r_V) ndarray
         Sampled weighting functions, linearly interpolated.
+
+    Returns
+    -------
+    (R,) ndarray
+        The weights, R = r_h r_V: non-negative and summing to 1 where the sampled
+        weighting functions are.
+
+    Examples
+    --------
+    >>> w = tp_weights(0.25, 1.5, np.array([0.0, 1.0]), np.array([0.0, 1.0, 2.0]),
+    ...                np.eye(2), np.array([[1.0, 0.0], [0.5, 0.5], [0.0, 1.0]]))
+    >>> w.tolist(), float(w.sum())  # (0.75, 0.25) x (0.25, 0.75): non-negative, sum 1
+    ([0.1875, 0.5625, 0.0625, 0.1875], 1.0)
     """
     wh = np.array([np.interp(h, h_grid, W_h[:, a]) for a in range(W_h.shape[1])])
     wv = np.array([np.interp(V, V_grid, W_V[:, b]) for b in range(W_V.shape[1])])
@@ -106,6 +119,8 @@ class TPModel:
     input_scale : (m,) ndarray
     sv_h, sv_V : ndarray
         Singular values of the centred unfoldings (all of them, descending).
+    meta : dict
+        Free-form notes on how the model was made (empty by default).
     """
 
     kind: str
@@ -140,11 +155,41 @@ class TPModel:
             Scheduling variables [ft, ft/s]; clipped to the sampling grid (the
             envelope), so a plant that leaves the envelope transiently gets the
             weights of the nearest boundary point.
+
+        Returns
+        -------
+        (R,) ndarray
+            tau_i(p), i = a r_V + b (:func:`tp_weights`).
+
+        Examples
+        --------
+        >>> from fahv.model.vehicle import load_vehicle
+        >>> tp = build_tp_model(load_vehicle(), "dm", 2, 2, n_h=3, n_V=3)
+        >>> w = tp.weights(85500.0, 7900.0)
+        >>> w.shape, bool(w.min() >= 0.0), round(float(w.sum()), 12)
+        ((4,), True, 1.0)
+        >>> w_out = tp.weights(90000.0, 7900.0)  # outside: the nearest boundary point's
+        >>> bool(np.array_equal(w_out, tp.weights(86500.0, 7900.0)))
+        True
         """
         return tp_weights(h, V, self.h_grid, self.V_grid, self.W_h, self.W_V)
 
     def system(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
-        """Continuous A(p) (n, n), B(p) (n, m) = sum_i tau_i(p) [A_i, B_i], eq. (11)."""
+        """Continuous A(p) (n, n), B(p) (n, m) = sum_i tau_i(p) [A_i, B_i], eq. (11).
+
+        Parameters
+        ----------
+        h : float
+            Altitude [ft], clipped to the sampling grid.
+        V : float
+            Speed [ft/s], clipped to the sampling grid.
+
+        Returns
+        -------
+        A : (n, n) ndarray
+        B : (n, m) ndarray
+            The scheduled continuous matrices (unscaled units).
+        """
         w = self.weights(h, V)
         return (np.tensordot(w, self.A_vertices, axes=1), np.tensordot(w, self.B_vertices, axes=1))
 
@@ -152,7 +197,30 @@ class TPModel:
     def discretize(self, Ts: float) -> DiscretePolytope:
         """ZOH discretisation of every vertex with period Ts [s], eq. (12).
 
-        Uses ``scipy.signal.cont2discrete``. Raises ValueError if Ts <= 0.
+        Uses ``scipy.signal.cont2discrete``.
+
+        Parameters
+        ----------
+        Ts : float
+            Sampling period [s], > 0.
+
+        Returns
+        -------
+        DiscretePolytope
+            The discrete vertices A_i (R, n, n), B_i (R, n, m).
+
+        Raises
+        ------
+        ValueError
+            If Ts <= 0 or is not finite.
+
+        Examples
+        --------
+        >>> from fahv.model.vehicle import load_vehicle
+        >>> tp = build_tp_model(load_vehicle(), "dm", 2, 2, n_h=3, n_V=3)
+        >>> dp = tp.discretize(0.02)
+        >>> dp.n_vertices, dp.A.shape, dp.B.shape, dp.Ts
+        (4, (4, 9, 9), (4, 9, 2), 0.02)
         """
         from scipy.signal import cont2discrete  # design time only (node start-up)
 
@@ -288,6 +356,20 @@ def tp_transform(
     DesignError
         If the grid is too coarse for the requested r, or the weights are not
         SN/NN to 1e-9.
+
+    Examples
+    --------
+    A model affine in each scheduling variable is reproduced exactly by 2 x 2 vertices,
+    off the grid too:
+
+    >>> def sample(h, V):
+    ...     return np.array([[h + 2.0 * V]]), np.array([[1.0 + h * V]])
+    >>> tp = tp_transform(sample, [0.0, 1.0, 2.0], [0.0, 1.0, 2.0], 2, 2, [1.0], [1.0])
+    >>> tp.n_vertices, tp.shape
+    (4, (2, 2))
+    >>> A, B = tp.system(0.5, 1.5)
+    >>> round(float(A[0, 0]), 12), round(float(B[0, 0]), 12)  # 0.5 + 3.0, 1 + 0.75
+    (3.5, 1.75)
     """
     h_grid = np.asarray(h_grid, float)
     V_grid = np.asarray(V_grid, float)
@@ -343,6 +425,15 @@ def approximation_error(tp: TPModel, sample, test_points) -> dict[str, float]:
     dict
         ``max_rel``/``mean_rel``: ||S_tp - S||_F / ||S||_F in scaled coordinates;
         ``max_abs_scaled``: largest entry error of S_tp - S in scaled coordinates.
+
+    Examples
+    --------
+    >>> def sample(h, V):
+    ...     return np.array([[h + 2.0 * V]]), np.array([[1.0 + h * V]])
+    >>> tp = tp_transform(sample, [0.0, 1.0, 2.0], [0.0, 1.0, 2.0], 2, 2, [1.0], [1.0])
+    >>> err = approximation_error(tp, sample, [(0.5, 1.5), (1.2, 0.3)])
+    >>> err["n_points"], bool(err["max_rel"] < 1e-12)
+    (2, True)
     """
     Dx, Du = tp.state_scale, tp.input_scale
     rel, absmax = [], 0.0
@@ -389,6 +480,15 @@ def build_tp_model(
     Raises
     ------
     EnvelopeError, TrimError, DesignError
+
+    Examples
+    --------
+    A coarse model (the designs use 21 x 21 samples and 4 x 5 or 2 x 3 vertices):
+
+    >>> from fahv.model.vehicle import load_vehicle
+    >>> tp = build_tp_model(load_vehicle(), "dm", 2, 2, n_h=3, n_V=3)
+    >>> tp.kind, tp.shape, tp.A_vertices.shape, tp.B_vertices.shape
+    ('dm', (2, 2), (4, 9, 9), (4, 9, 2))
     """
     from fahv.model.dynamics import make_model
     from fahv.model.linearize import linearize
@@ -420,6 +520,29 @@ def offgrid_points(tp: TPModel, n_random: int = 50, seed: int = 0) -> list[tuple
     """Test points off the sampling grid: all cell centres plus ``n_random`` uniform points.
 
     The random points are drawn with ``numpy.random.default_rng(seed)``.
+
+    Parameters
+    ----------
+    tp : TPModel
+        The model whose sampling grid the points avoid.
+    n_random : int
+        Uniform random points added to the cell centres.
+    seed : int
+        Seed of the random points.
+
+    Returns
+    -------
+    list of (float, float)
+        (h [ft], V [ft/s]): the (N_h - 1)(N_V - 1) cell centres, then the random points.
+
+    Examples
+    --------
+    >>> def sample(h, V):
+    ...     return np.array([[h + V]]), np.array([[1.0]])
+    >>> tp = tp_transform(sample, [0.0, 1.0, 2.0], [0.0, 1.0, 2.0], 2, 2, [1.0], [1.0])
+    >>> points = offgrid_points(tp, n_random=3)
+    >>> len(points), points[0]  # 2 x 2 cell centres, then the random points
+    (7, (0.5, 0.5))
     """
     hc = 0.5 * (tp.h_grid[1:] + tp.h_grid[:-1])
     vc = 0.5 * (tp.V_grid[1:] + tp.V_grid[:-1])

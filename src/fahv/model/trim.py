@@ -40,6 +40,14 @@ class TrimPoint:
         Flexible coordinates at rest (eta_dot = 0).
     residual : float
         max |f(x_r, u_r)_i / scale_i| over all states of the model trimmed.
+
+    Examples
+    --------
+    >>> tp = TrimPoint(85500.0, 7900.0, 0.03, 0.2, 0.3, 1.9, 0.9, 0.0)
+    >>> tp.x_r.tolist()  # theta = alpha, q = 0, eta_dot = 0
+    [85500.0, 7900.0, 0.03, 0.03, 0.0, 1.9, 0.0, 0.9, 0.0]
+    >>> tp.u_r.tolist(), tp.x_r_ecm.shape
+    ([0.3, 0.2], (11,))
     """
 
     h: float
@@ -112,6 +120,23 @@ def trim(
     TrimError
         If the solver does not converge, the residual exceeds ``TRIM_TOL``
         (scaled), or the trim input violates the input limits.
+
+    Examples
+    --------
+    The design point of ``cm_certified`` (alpha and delta_e in deg):
+
+    >>> import math
+    >>> from fahv.model.vehicle import load_vehicle
+    >>> v = load_vehicle()
+    >>> tp = trim(v, 85500.0, 7900.0, "cm")
+    >>> [round(math.degrees(a), 4) for a in (tp.alpha, tp.delta_e)], round(float(tp.Phi), 4)
+    ([1.5774, 12.3816], 0.2696)
+    >>> tp.residual < TRIM_TOL
+    True
+    >>> trim(v, 90000.0, 7900.0)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+        ...
+    fahv.errors.EnvelopeError: flight condition h = 90000.0 ft, V = 7900.0 ft/s lies outside ...
     """
     vehicle.envelope.check(h, V)
     vp = vehicle.params
@@ -206,6 +231,22 @@ def trim_batch(
     ------
     ValueError
         If the shapes do not agree.
+
+    Examples
+    --------
+    The nominal vehicle and one 10 % heavier at the design point, from the nominal trim:
+
+    >>> import dataclasses, math
+    >>> from fahv.model.vehicle import load_vehicle
+    >>> v = load_vehicle()
+    >>> tp = trim(v, 85500.0, 7900.0)
+    >>> vp = dataclasses.replace(v.params, m=np.array([300.0, 330.0]))
+    >>> guess = np.array([[tp.alpha, tp.delta_e, tp.Phi]] * 2).T
+    >>> z, residual = trim_batch(vp, [85500.0] * 2, [7900.0] * 2, guess)
+    >>> [round(math.degrees(a), 4) for a in z[0]]  # alpha [deg]
+    [1.5774, 1.8176]
+    >>> bool(abs(z[0, 0] - tp.alpha) < 1e-10), bool(residual.max() < 1e-10)
+    (True, True)
     """
     h, V = np.asarray(h, float), np.asarray(V, float)
     zs = np.array([0.0174533, 0.0174533, 0.05])
@@ -229,9 +270,30 @@ def trim_batch(
 
 
 def trim_grid(vehicle: Vehicle, h_grid, V_grid, model: str = "dm", notch=None):
-    """Trim over a grid; returns a list of lists ``[[TrimPoint for V in V_grid] for h]``.
+    """Trim over a grid, each point started from its neighbour's solution.
 
-    Consecutive points start from their neighbour's solution. Raises as :func:`trim`.
+    Parameters
+    ----------
+    vehicle : Vehicle
+        The vehicle trimmed.
+    h_grid : (N_h,) array_like
+        Altitudes [ft], inside the envelope.
+    V_grid : (N_V,) array_like
+        Speeds [ft/s], inside the envelope.
+    model : {"dm", "cm", "ecm"}
+        Model whose full residual is checked (:func:`trim`).
+    notch : NotchFilter, optional
+        Needed for ``model="ecm"``.
+
+    Returns
+    -------
+    list of list of TrimPoint
+        ``[[TrimPoint for V in V_grid] for h in h_grid]``.
+
+    Raises
+    ------
+    EnvelopeError, TrimError
+        As :func:`trim`.
     """
     rows = []
     for h in h_grid:
@@ -303,7 +365,22 @@ class TrimMap:
         return self.x_r.shape[2]
 
     def at(self, h, V) -> tuple[np.ndarray, np.ndarray]:
-        """(x_r (B, n), u_r (B, 2)) at B points (h [ft], V [ft/s]) (B,), clipped to the grid."""
+        """(x_r (B, n), u_r (B, 2)) at B points, clipped to the grid.
+
+        Parameters
+        ----------
+        h : float or (B,) array_like
+            Altitudes [ft].
+        V : float or (B,) array_like
+            Speeds [ft/s].
+
+        Returns
+        -------
+        x_r : (B, n) ndarray
+            Trim states (state units).
+        u_r : (B, 2) ndarray
+            Trim inputs [Phi -, delta_e rad].
+        """
         h = np.minimum(
             np.maximum(np.atleast_1d(np.asarray(h, float)), self.h_grid[0]), self.h_grid[-1]
         )
@@ -325,7 +402,40 @@ def trim_map(vehicle: Vehicle, n_h: int = 13, n_V: int = 13, model: str = "cm", 
     """Trim the model on an n_h x n_V grid over the envelope and build a :class:`TrimMap`.
 
     ``model="ecm"`` (with ``notch``) gives the 11-state trim x_r' of eq. (41).
-    Raises as :func:`trim`.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        The vehicle trimmed; its envelope is the grid's extent.
+    n_h : int
+        Grid points in h (at least 4), uniform over the envelope, ends included.
+    n_V : int
+        Grid points in V (at least 4).
+    model : {"dm", "cm", "ecm"}
+        Model trimmed (:func:`trim`).
+    notch : NotchFilter, optional
+        Needed for ``model="ecm"``.
+
+    Returns
+    -------
+    TrimMap
+        The bicubic map over the grid.
+
+    Raises
+    ------
+    EnvelopeError, TrimError
+        As :func:`trim`.
+    ValueError
+        If ``n_h`` or ``n_V`` is below 4 (:class:`TrimMap`).
+
+    Examples
+    --------
+    >>> import math
+    >>> from fahv.model.vehicle import load_vehicle
+    >>> tm = trim_map(load_vehicle(), n_h=4, n_V=4)
+    >>> x_r, u_r = tm(85500.0, 7900.0)  # between grid points: the trim's 12.3816 deg
+    >>> x_r.shape, round(math.degrees(u_r[1]), 4)
+    ((9,), 12.3816)
     """
     env = vehicle.envelope
     hg = np.linspace(env.h_min, env.h_max, n_h)

@@ -34,7 +34,8 @@ import numpy as np
 import yaml
 
 from fahv.config.yamlio import load_yaml
-from fahv.errors import EnvelopeError, VehicleDataError
+from fahv.errors import VehicleDataError
+from fahv.model.envelope import Envelope
 
 # Named indices: CM / DM state (eq. 7).
 H, V, ALPHA, THETA, IQ, ETA1, ETA1_DOT, ETA2, ETA2_DOT = range(9)
@@ -84,12 +85,51 @@ _NON_NEGATIVE = ("zeta_1", "zeta_2", "h_0")
 class VehicleParams:
     """Physical parameters of eq. (1)-(3), English units per unit width.
 
-    Attributes are the paper's symbols: ``m`` [slug/ft], ``I_yy`` [slug ft^2/ft],
-    ``S`` [ft^2/ft], ``c_bar`` [ft], ``z_T`` [ft], ``g`` [ft/s^2], ``rho_0``
-    [slug/ft^3], ``h_0`` [ft], ``h_s`` [ft], aerodynamic coefficients (per rad),
-    thrust coefficients ``beta_1..beta_8`` [lbf/ft per rad^k], and the flexible
-    data ``zeta_i``, ``omega_i`` [rad/s], ``psi_i`` and ``N*`` coefficients.
-    Use :func:`dataclasses.replace` to perturb a parameter (uncertainty sampling).
+    The attributes are the paper's symbols (docs/reference/vehicle_data.md gives every
+    value and its source). Use :func:`dataclasses.replace` or :meth:`replace` to perturb
+    a parameter (uncertainty sampling).
+
+    Attributes
+    ----------
+    m : float
+        Mass [slug/ft].
+    I_yy : float
+        Pitch moment of inertia [slug ft^2/ft].
+    S : float
+        Reference area [ft^2/ft].
+    c_bar : float
+        Mean aerodynamic chord [ft].
+    z_T : float
+        Thrust moment arm [ft].
+    g : float
+        Gravitational acceleration [ft/s^2].
+    rho_0, h_0, h_s : float
+        Density rho_0 [slug/ft^3] at the altitude h_0 [ft], and the scale height h_s [ft]
+        of rho = rho_0 exp(-(h - h_0) / h_s), eq. (3).
+    C_L_alpha, C_L_de, C_L_0 : float
+        Lift coefficient C_L = C_L_alpha alpha + C_L_de delta_e + C_L_0 [1/rad, 1/rad, -].
+    C_D_alpha2, C_D_alpha, C_D_de2, C_D_de, C_D_0 : float
+        Drag coefficient, quadratic in alpha and in delta_e [1/rad^2, 1/rad, 1/rad^2,
+        1/rad, -].
+    C_M_alpha2, C_M_alpha, C_M_0 : float
+        Pitching-moment coefficient C_M,alpha(alpha), quadratic in alpha [1/rad^2, 1/rad,
+        -].
+    c_e : float
+        Elevator's pitching-moment coefficient [1/rad].
+    beta_1, beta_2, beta_3, beta_4, beta_5, beta_6, beta_7, beta_8 : float
+        Thrust T = (beta_1 Phi + beta_2) alpha^3 + (beta_3 Phi + beta_4) alpha^2 +
+        (beta_5 Phi + beta_6) alpha + beta_7 Phi + beta_8 [lbf/ft per rad^k].
+    zeta_1, omega_1, psi_1 : float
+        First flexible mode: damping ratio [-], natural frequency [rad/s] and inertial
+        coupling [slug^0.5 ft/ft].
+    zeta_2, omega_2, psi_2 : float
+        Second flexible mode, as the first.
+    N1_alpha2, N1_alpha, N1_0 : float
+        Generalised force of mode 1, N_1 = N1_alpha2 alpha^2 + N1_alpha alpha + N1_0
+        [generalised force per rad^k].
+    N2_alpha2, N2_alpha, N2_de, N2_0 : float
+        Generalised force of mode 2, N_2 = N2_alpha2 alpha^2 + N2_alpha alpha +
+        N2_de delta_e + N2_0 [generalised force per rad^k].
     """
 
     m: float
@@ -136,56 +176,45 @@ class VehicleParams:
     N2_0: float
 
     def replace(self, **changes: float) -> VehicleParams:
-        """Return a copy with some parameters changed (e.g. ``m=330.0``)."""
+        """Return a copy with some parameters changed (e.g. ``m=330.0``).
+
+        Parameters
+        ----------
+        **changes : float
+            New values by parameter name, in the units of the attributes.
+
+        Returns
+        -------
+        VehicleParams
+            The copy.
+
+        Examples
+        --------
+        >>> vp = load_vehicle().params
+        >>> heavy = vp.replace(m=1.1 * vp.m)
+        >>> round(heavy.m, 6), vp.m
+        (330.0, 300.0)
+        """
         return dataclasses.replace(self, **changes)
 
 
 @dataclass(frozen=True)
-class Envelope:
-    """Flight envelope Gamma = [h_min, h_max] x [V_min, V_max] (ft, ft/s), sec. 5.1."""
-
-    h_min: float
-    h_max: float
-    V_min: float
-    V_max: float
-
-    def contains(self, h: float, V: float, rtol: float = 1e-12) -> bool:
-        """True if (h, V) lies in the closed envelope (relative tolerance ``rtol``)."""
-        th = rtol * max(abs(self.h_max), 1.0)
-        tv = rtol * max(abs(self.V_max), 1.0)
-        return (self.h_min - th <= h <= self.h_max + th) and (
-            self.V_min - tv <= V <= self.V_max + tv
-        )
-
-    def outside(self, h: np.ndarray, V: np.ndarray) -> np.ndarray:
-        """Element-wise True where (h [ft], V [ft/s]) lies outside the closed envelope.
-
-        ``h`` and ``V`` broadcast together; NaN counts as inside (a non-finite state is
-        reported by itself).
-        """
-        h, V = np.asarray(h), np.asarray(V)
-        return (h < self.h_min) | (h > self.h_max) | (V < self.V_min) | (V > self.V_max)
-
-    def describe(self, t: float, h: float, V: float) -> str:
-        """The sentence naming where a run left the envelope (t [s], h [ft], V [ft/s])."""
-        return (
-            f"left the flight envelope at t = {t:.2f} s (h = {h:.1f} ft, V = {V:.1f} ft/s; "
-            f"envelope h in [{self.h_min:g}, {self.h_max:g}] ft, "
-            f"V in [{self.V_min:g}, {self.V_max:g}] ft/s)"
-        )
-
-    def check(self, h: float, V: float) -> None:
-        """Raise :class:`EnvelopeError` naming the envelope if (h, V) lies outside it."""
-        if not (np.isfinite(h) and np.isfinite(V)) or not self.contains(h, V):
-            raise EnvelopeError(
-                f"flight condition h = {h} ft, V = {V} ft/s lies outside the flight envelope "
-                f"h in [{self.h_min}, {self.h_max}] ft, V in [{self.V_min}, {self.V_max}] ft/s"
-            )
-
-
-@dataclass(frozen=True)
 class InputLimits:
-    """Actuator limits of sec. 5.1: Phi in [Phi_min, Phi_max], delta_e in rad."""
+    """Actuator limits of sec. 5.1: Phi in [Phi_min, Phi_max], delta_e in rad.
+
+    Attributes
+    ----------
+    Phi_min, Phi_max : float
+        Fuel-to-air ratio range [-].
+    delta_e_min, delta_e_max : float
+        Elevator range [rad].
+
+    Examples
+    --------
+    >>> lim = InputLimits(0.0, 1.5, -0.5, 0.5)
+    >>> lim.u_min.tolist(), lim.u_max.tolist()
+    ([0.0, -0.5], [1.5, 0.5])
+    """
 
     Phi_min: float
     Phi_max: float
@@ -286,6 +315,13 @@ def vehicle_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Ve
         On a missing key, a non-numeric or non-finite value, a parameter entry
         without a ``source``, an unknown parameter, or a non-physical value
         (e.g. ``m <= 0``); the message names the key.
+
+    Examples
+    --------
+    >>> vehicle_from_mapping({"parameters": {}})
+    Traceback (most recent call last):
+        ...
+    fahv.errors.VehicleDataError: <mapping>: missing key 'envelope'
     """
     if not isinstance(data, Mapping):
         raise VehicleDataError(f"{path}: top level must be a mapping, got {type(data).__name__}")
@@ -380,6 +416,20 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
     VehicleDataError
         If the file does not exist, is not valid YAML, or any entry is invalid
         (see :func:`vehicle_from_mapping`); the message names the file and key.
+
+    Examples
+    --------
+    >>> v = load_vehicle()
+    >>> v.name, v.packaged, v.params.m
+    ('parker2007-curve-fit', True, 300.0)
+    >>> v.envelope
+    Envelope(h_min=85000.0, h_max=86500.0, V_min=7700.0, V_max=8300.0)
+    >>> round(math.degrees(v.limits.delta_e_max), 6)
+    30.0
+    >>> load_vehicle("no/such/vehicle.yaml")
+    Traceback (most recent call last):
+        ...
+    fahv.errors.VehicleDataError: vehicle file not found: no/such/vehicle.yaml
     """
     if path is None:
         ref = resources.files("fahv.data").joinpath(DEFAULT_VEHICLE_FILE)
@@ -407,6 +457,25 @@ def physics_hash(vehicle: Vehicle) -> str:
     Its parameters, envelope, input limits and scales, rounded to nothing: every bit of
     every value. Comments, provenance notes and layout of the file do not enter, so a
     design stays valid when only the file's notes change. Raises nothing.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        The vehicle hashed.
+
+    Returns
+    -------
+    str
+        The first 16 hexadecimal characters of the sha256.
+
+    Examples
+    --------
+    >>> v = load_vehicle()
+    >>> digest = physics_hash(v)
+    >>> len(digest), digest == v.data_hash
+    (16, True)
+    >>> physics_hash(dataclasses.replace(v, params=v.params.replace(m=301.0))) == digest
+    False
     """
     numbers = {
         "params": dataclasses.asdict(vehicle.params),

@@ -3,7 +3,7 @@
 Z shape. The paper's box Z = {|e| <= z} (eq. 25) is RPI for e+ = A_cl,i e + w,
 w in W, iff |A_cl,i| z + w_max <= z for every vertex i (eq. 26-28 by Farkas' lemma),
 which needs the spectral radius of |A_cl,i| below 1 -- a property of the
-coordinates, not of stability. On this vehicle it fails (see :func:`box_tube`), so
+coordinates, not of stability. On this vehicle it fails (see :func:`fahv.synthesis.box_tube.box_tube`), so
 the tube used is an ellipsoid Z = {e : e' N^-1 e <= 1} designed jointly with F::
 
     [[lam N, 0,        (A_i N + B_i M)'],
@@ -91,7 +91,27 @@ class TubeDesign:
     active_set: ActiveSet | None = None
 
     def contains(self, e: np.ndarray, scale: float = 1.0) -> bool:
-        """True if the error e (n,) lies in scale * Z."""
+        """True if the error e (n,) lies in scale * Z.
+
+        Parameters
+        ----------
+        e : (n,) ndarray
+            Tube error (state units).
+        scale : float
+            Factor of the tube (1: Z itself).
+
+        Returns
+        -------
+        bool
+            e' N^-1 e <= scale^2 (to a relative 1e-9).
+
+        Examples
+        --------
+        >>> tube = design_tube(np.array([[[0.9]]]), np.array([[[1.0]]]), [0.1], np.ones(1),
+        ...                    np.ones(1), u_room=[1.0])
+        >>> tube.contains(np.zeros(1)), tube.contains(np.ones(1)), tube.contains(np.ones(1), 2.0)
+        (True, False, True)
+        """
         return float(e @ np.linalg.solve(self.N, e)) <= scale**2 * (1.0 + 1e-9)
 
 
@@ -137,6 +157,18 @@ def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
     DesignError
         If lam is not in (0, 1), the budget sum mu_j w_j^2 (+ sum mu_p,l) > 1 - lam, N is
         not positive definite, or a vertex certificate matrix has a negative eigenvalue.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> A, B, D = np.array([[[0.9]]]), np.array([[[1.0]]]), np.ones(1)
+    >>> tube = design_tube(A, B, [0.1], D, D, u_room=[1.0])
+    >>> verify_tube(A, B, tube, D, D).shape
+    (1,)
+    >>> verify_tube(A, B, dataclasses.replace(tube, lam=1.0), D, D)
+    Traceback (most recent call last):
+        ...
+    fahv.errors.DesignError: certificate failed: contraction lam = 1.0 not in (0, 1)
     """
     As, Bs = scale_vertices(A, B, Dx, Du)
     Ns = tube.N / np.outer(Dx, Dx)
@@ -185,7 +217,19 @@ class ActiveSet:
 
     @staticmethod
     def empty() -> ActiveSet:
-        """No vertex and no point."""
+        """No vertex and no point.
+
+        Returns
+        -------
+        ActiveSet
+            Empty index arrays: the constraint generation starts from its own choice.
+
+        Examples
+        --------
+        >>> empty = ActiveSet.empty()
+        >>> empty.vertices.size, empty.points.size
+        (0, 0)
+        """
         return ActiveSet(np.zeros(0, int), np.zeros(0, int))
 
 
@@ -397,6 +441,23 @@ def design_tube(
     ------
     DesignError
         If no lam gives a feasible LMI or the certificate check fails.
+
+    Examples
+    --------
+    One state, x+ = 0.9 x + u + w, |w| <= 0.1. For a closed loop a = 0.9 + F and lam the
+    S-procedure's smallest tube is N = lam w^2 / ((lam - a^2)(1 - lam)); the design sits
+    on it, and the exact level certifies it:
+
+    >>> from fahv.synthesis.rpi_level import worst_level
+    >>> A, B, D = np.array([[[0.9]]]), np.array([[[1.0]]]), np.ones(1)
+    >>> tube = design_tube(A, B, [0.1], D, D, u_room=[1.0])
+    >>> tube.lam, tube.F.shape, tube.N.shape
+    (0.9, (1, 1), (1, 1))
+    >>> a = 0.9 + float(tube.F[0, 0])
+    >>> round(float(tube.N[0, 0]) / (0.9 * 0.1**2 / ((0.9 - a**2) * (1.0 - 0.9))), 2)
+    1.0
+    >>> bool(worst_level(A, B, tube.F, tube.N, [0.1])[0] <= 1.0)
+    True
     """
     if w_ref is not None:
         reach = np.asarray(w_max, float)
@@ -473,44 +534,3 @@ def design_tube(
                 f"the bound {state_max[j]:.6g}"
             )
     return dataclasses.replace(tube, min_eigs=eigs)
-
-
-@dataclass(frozen=True)
-class BoxTubeResult:
-    """Outcome of the paper's box-shaped tube (eq. 25-28) for a given F.
-
-    Attributes
-    ----------
-    feasible : bool
-    z : (n,) ndarray or None
-        Half-widths of the minimal box RPI set (unscaled) when feasible.
-    spectral_radius_abs : (R,) ndarray
-        rho(|A_i + B_i F|) in scaled coordinates; a box exists only if all < 1.
-    """
-
-    feasible: bool
-    z: np.ndarray | None
-    spectral_radius_abs: np.ndarray
-
-
-def box_tube(A, B, F, w_max, Dx, Du) -> BoxTubeResult:
-    """Smallest box Z = {|e| <= z} with |A_cl,i| z + w_max <= z for all i (eq. 25-28).
-
-    Solved as the LP min sum z (eq. 28: Farkas' lemma turns the robust constraint (27)
-    into this linear one for a box) with cvxpy/HiGHS in scaled coordinates. The result
-    is re-checked elementwise.
-    """
-    As, Bs = scale_vertices(np.asarray(A), np.asarray(B), Dx, Du)
-    Fs = F * Dx[None, :] / Du[:, None]
-    ws = np.asarray(w_max, float) / Dx
-    absA = [np.abs(As[i] + Bs[i] @ Fs) for i in range(As.shape[0])]
-    rho = np.array([max(abs(np.linalg.eigvals(a))) for a in absA])
-    z = cp.Variable(ws.size)
-    prob = cp.Problem(cp.Minimize(cp.sum(z)), [a @ z + ws <= z for a in absA] + [z >= 0])
-    prob.solve(solver="HIGHS")
-    if prob.status != "optimal":
-        return BoxTubeResult(False, None, rho)
-    zs = z.value
-    if any(np.any(a @ zs + ws > zs * (1 + 1e-9) + 1e-12) for a in absA):
-        raise DesignError("certificate failed: box tube LP solution is not invariant")
-    return BoxTubeResult(True, zs * Dx, rho)

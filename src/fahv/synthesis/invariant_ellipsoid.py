@@ -161,6 +161,23 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
         If a returned solution fails the re-check of its blocks or budgets.
     ValueError
         On inconsistent shapes.
+
+    Examples
+    --------
+    One state, xi+ = 0.5 xi + w, |w| <= 0.25, lam = 0.9: the S-procedure's smallest P is
+    lam w^2 / ((lam - 0.5^2)(1 - lam)) = 0.865 (here within its budget margin), inside
+    the unit interval and certified by the exact level:
+
+    >>> from fahv.synthesis.rpi_level import vertex_levels
+    >>> Acl = np.array([[[0.5]]])
+    >>> def levels(P):
+    ...     return vertex_levels(Acl, P, [0.25])
+    >>> ie = invariant_ellipsoid(Acl, [0.25], [1.0], np.eye(1), np.zeros((1, 1)), [1.0],
+    ...                          levels, lam=0.9)
+    >>> round(float(ie.P[0, 0]) / (0.9 * 0.25**2 / ((0.9 - 0.25) * 0.1)), 2)
+    1.0
+    >>> bool(ie.s <= 1.0), bool(levels(ie.P)[0] <= 1.0)
+    (True, True)
     """
     Acl = np.asarray(Acl, float)
     R, n, _ = Acl.shape

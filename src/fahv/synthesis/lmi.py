@@ -32,6 +32,13 @@ def solve_lmi(prob: cp.Problem) -> bool:
     -------
     bool
         False if the solver fails or finds no (near-)optimal point.
+
+    Examples
+    --------
+    >>> x = cp.Variable()
+    >>> prob = cp.Problem(cp.Minimize(x), [x >= 1.0, x >= -5.0])
+    >>> solve_lmi(prob), round(float(prob.value), 6)
+    (True, 1.0)
     """
     try:
         prob.solve(solver=SDP_SOLVER, **SDP_OPTIONS)
@@ -63,6 +70,15 @@ def dual_support(constraints) -> np.ndarray:
     -------
     (s,) ndarray of int
         Their positions in ``constraints`` (all of them where no dual is available).
+
+    Examples
+    --------
+    >>> x = cp.Variable()
+    >>> constraints = [x >= 1.0, x >= -5.0]
+    >>> solve_lmi(cp.Problem(cp.Minimize(x), constraints))
+    True
+    >>> dual_support(constraints).tolist()  # x >= -5 does not bind
+    [0]
     """
     if not constraints:
         return np.zeros(0, int)
@@ -72,17 +88,77 @@ def dual_support(constraints) -> np.ndarray:
 
 
 def scale_vertices(A: np.ndarray, B: np.ndarray, Dx: np.ndarray, Du: np.ndarray):
-    """Scaled vertices A_s = D_x^-1 A D_x (R, n, n), B_s = D_x^-1 B D_u (R, n, m)."""
+    """Scaled vertices A_s = D_x^-1 A D_x (R, n, n), B_s = D_x^-1 B D_u (R, n, m).
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+        Vertices (unscaled).
+    Dx : (n,) ndarray
+        State scales (state units).
+    Du : (m,) ndarray
+        Input scales (input units).
+
+    Returns
+    -------
+    A_s : (R, n, n) ndarray
+    B_s : (R, n, m) ndarray
+        The vertices in scaled coordinates.
+
+    Examples
+    --------
+    >>> A, B = np.array([[[1.0, 2.0], [3.0, 4.0]]]), np.array([[[1.0], [1.0]]])
+    >>> As, Bs = scale_vertices(A, B, np.array([1.0, 10.0]), np.array([2.0]))
+    >>> As.tolist(), Bs.tolist()
+    ([[[1.0, 20.0], [0.3, 4.0]]], [[[2.0], [0.2]]])
+    """
     return A * Dx[None, None, :] / Dx[None, :, None], B * Du[None, None, :] / Dx[None, :, None]
 
 
 def min_eig(M: np.ndarray) -> float:
-    """Smallest eigenvalue of the symmetric part of M."""
+    """Smallest eigenvalue of the symmetric part of M.
+
+    Parameters
+    ----------
+    M : (k, k) ndarray
+        Square matrix.
+
+    Returns
+    -------
+    float
+        The smallest eigenvalue of (M + M') / 2.
+
+    Examples
+    --------
+    >>> round(min_eig(np.array([[2.0, 1.0], [1.0, 2.0]])), 12)
+    1.0
+    >>> round(min_eig(np.array([[1.0, 4.0], [0.0, 1.0]])), 12)  # symmetric part [[1, 2], [2, 1]]
+    -1.0
+    """
     return float(np.linalg.eigvalsh(0.5 * (M + M.T)).min())
 
 
 def psd_tolerance(M: np.ndarray, rtol: float = 1e-9) -> float:
-    """Tolerance of :func:`require_psd`: rtol max(1, max |M_ij|) (>= 0)."""
+    """Tolerance of :func:`require_psd`: rtol max(1, max |M_ij|) (>= 0).
+
+    Parameters
+    ----------
+    M : (k, k) ndarray
+        The matrix checked.
+    rtol : float
+        Relative tolerance.
+
+    Returns
+    -------
+    float
+        The largest negative eigenvalue accepted, in absolute value.
+
+    Examples
+    --------
+    >>> psd_tolerance(np.eye(2)), round(psd_tolerance(np.array([[1e3]])), 15)
+    (1e-09, 1e-06)
+    """
     return float(rtol * max(1.0, float(np.abs(M).max())))
 
 
@@ -92,10 +168,33 @@ def require_psd(M: np.ndarray, what: str, rtol: float = 1e-9) -> float:
     ``||M||`` is max(1, max |M_ij|) (:func:`psd_tolerance`): an eigenvalue that is
     negative by less than that tolerance is rounding of the solver and accepted.
 
+    Parameters
+    ----------
+    M : (k, k) ndarray
+        The matrix checked (its symmetric part).
+    what : str
+        What M is, for the error message.
+    rtol : float
+        Relative tolerance.
+
+    Returns
+    -------
+    float
+        The smallest eigenvalue of M's symmetric part (>= -tolerance).
+
     Raises
     ------
     DesignError
         Naming ``what``, the eigenvalue found and the tolerance, if the check fails.
+
+    Examples
+    --------
+    >>> require_psd(np.eye(2), "I"), require_psd(np.diag([1.0, -1e-12]), "nearly PSD")
+    (1.0, -1e-12)
+    >>> require_psd(np.diag([1.0, -1.0]), "M")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+        ...
+    fahv.errors.DesignError: certificate failed: M has eigenvalue -1.000e+00 < -1.00e-09 ...
     """
     e = min_eig(M)
     tol = psd_tolerance(M, rtol)
@@ -128,6 +227,17 @@ def invariance_blocks(AP, lam, mu, P, E) -> np.ndarray:
     Returns
     -------
     (R, 2n + p, 2n + p) ndarray
+
+    Examples
+    --------
+    One state, e+ = 0.5 e + w, P = 1, lam = 0.9: the condition holds for mu = 2, not for
+    mu = 1 (it needs mu >= 1 + 0.25 / 0.65):
+
+    >>> AP, P, E = np.array([[[0.5]]]), np.eye(1), np.eye(1)
+    >>> invariance_blocks(AP, 0.9, np.array([2.0]), P, E).shape
+    (1, 3, 3)
+    >>> [min_eig(invariance_blocks(AP, 0.9, np.array([mu]), P, E)[0]) >= 0 for mu in (2.0, 1.0)]
+    [True, False]
     """
     R, n, _ = AP.shape
     p = E.shape[1]

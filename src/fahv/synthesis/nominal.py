@@ -64,7 +64,25 @@ class NominalDesign:
     lam: float
 
     def level(self, x: np.ndarray) -> float:
-        """Level x' Q^-1 x of a nominal state x (n,): <= 1 inside E(Q)."""
+        """Level x' Q^-1 x of a nominal state x (n,): <= 1 inside E(Q).
+
+        Parameters
+        ----------
+        x : (n,) ndarray
+            Nominal state deviation (state units).
+
+        Returns
+        -------
+        float
+            The level.
+
+        Examples
+        --------
+        >>> nd = NominalDesign(K=np.array([[-0.5]]), Q=np.array([[4.0]]), s=1.0,
+        ...                    u_max=np.array([1.0]), x0=np.array([2.0]), lam=0.9995)
+        >>> nd.level(np.array([1.0])), nd.level(nd.x0)
+        (0.25, 1.0)
+        """
         return float(x @ np.linalg.solve(self.Q, x))
 
 
@@ -88,6 +106,15 @@ def contraction(A, B, K, Q) -> float:
     float
         The ellipsoid E(Q) is mapped into c E(Q) by every vertex closed loop; c < 1
         means strict invariance and a quadratic Lyapunov function x' Q^-1 x.
+
+    Examples
+    --------
+    >>> A, B = np.array([[[0.5]], [[1.2]]]), np.array([[[1.0]], [[1.0]]])
+    >>> [round(contraction(A[i : i + 1], B[i : i + 1], np.array([[-0.2]]), np.eye(1)), 9)
+    ...  for i in range(2)]  # |a_i + b_i K| for one state
+    [0.3, 1.0]
+    >>> round(contraction(A, B, np.array([[-0.2]]), np.eye(1)), 9)  # the worst vertex
+    1.0
     """
     L = np.linalg.cholesky(Q)
     return max(
@@ -110,6 +137,11 @@ def input_ratio(K, Q, u_max) -> np.ndarray:
     -------
     (m,) ndarray
         <= 1 where the input bound holds on the whole ellipsoid E(Q).
+
+    Examples
+    --------
+    >>> input_ratio(np.array([[2.0]]), np.array([[4.0]]), [8.0]).tolist()  # 2 sqrt(4) / 8
+    [0.5]
     """
     return np.sqrt(np.einsum("ij,jk,ik->i", K, Q, K)) / np.asarray(u_max, float)
 
@@ -142,6 +174,14 @@ def verify_nominal(A, B, nd: NominalDesign, Dx, Du) -> dict[str, float]:
     ------
     DesignError
         If any of them does not hold.
+
+    Examples
+    --------
+    >>> A, B, D = np.array([[[1.1]]]), np.array([[[1.0]]]), np.ones(1)
+    >>> nd = design_nominal(A, B, d=[1.0], u_max=[1.0], Dx=D, Du=D)
+    >>> checks = verify_nominal(A, B, nd, D, D)
+    >>> checks["containment"] <= 1.0, checks["contraction"] < 1.0, checks["input_ratio"] <= 1.0
+    (True, True, True)
     """
     As, Bs = scale_vertices(A, B, Dx, Du)
     Qs = nd.Q / np.outer(Dx, Dx)
@@ -250,6 +290,18 @@ def design_nominal(A, B, d, u_max, Dx, Du, lam: float = DEFAULT_LAM) -> NominalD
     x_n0 = 0.2 d with psi = sigma = I and 1e-2 I, docs/theory/certificate.md).
     Maximising the certified region instead is well posed; the reference governor
     then feeds the command in so that the nominal state stays in it.
+
+    Examples
+    --------
+    One unstable state, x+ = 1.1 x + u, |u| <= 1: a unit step fits (s at its bound 1,
+    less the relative margin) and K stabilises it:
+
+    >>> A, B, D = np.array([[[1.1]]]), np.array([[[1.0]]]), np.ones(1)
+    >>> nd = design_nominal(A, B, d=[1.0], u_max=[1.0], Dx=D, Du=D)
+    >>> round(nd.s, 6), nd.level(nd.x0) <= 1.0
+    (0.999, True)
+    >>> bool(abs(1.1 + nd.K[0, 0]) < 1.0), bool(input_ratio(nd.K, nd.Q, nd.u_max)[0] <= 1.0)
+    (True, True)
     """
     if not 0.0 < lam < 1.0:
         raise DesignError(f"nominal decay factor lam must be in (0, 1), got {lam}")
@@ -317,6 +369,19 @@ def verify_terminal(A, B, K, Q, u_lo, u_hi, u_r_path, lam: float = 1.0) -> dict:
     DesignError
         If E(Q) is not invariant for a vertex, or a trim input of the path lies
         outside the tightened limits (the set point cannot be held).
+
+    Examples
+    --------
+    One state, x+ = 0.9 x + u with K = -0.4 (a = 0.5), E(Q) = [-1, 1], limits +/-2: the
+    whole set fits around the trim 0 (alpha 1), half of it around the trim 1.8:
+
+    >>> A, B, K, Q = np.array([[[0.9]]]), np.array([[[1.0]]]), np.array([[-0.4]]), np.eye(1)
+    >>> lo, hi = np.array([-2.0]), np.array([2.0])
+    >>> out = verify_terminal(A, B, K, Q, lo, hi, np.array([[0.0]]))
+    >>> round(out["invariance"], 9), out["alpha_max"]
+    (0.5, 1.0)
+    >>> round(verify_terminal(A, B, K, Q, lo, hi, np.array([[1.8]]))["alpha_max"], 9)
+    0.5
     """
     L = np.linalg.cholesky(Q)
     L_inv = np.linalg.inv(L)

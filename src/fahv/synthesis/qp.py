@@ -40,6 +40,19 @@ def check_kkt(H, f, A_c, bl, bu, y, lam, primal_tol=PRIMAL_TOL, kkt_tol=KKT_TOL)
     -------
     str
         '' when every condition holds, else the first that failed.
+
+    Examples
+    --------
+    min 0.5 y^2 - 2 y subject to y <= 1: y = 1 with the multiplier 1 (y - 2 + 1 = 0):
+
+    >>> H, f, A_c = np.eye(1), np.array([-2.0]), np.zeros((0, 1))
+    >>> bl, bu = np.array([-1e30]), np.array([1.0])
+    >>> check_kkt(H, f, A_c, bl, bu, np.array([1.0]), np.array([1.0]))
+    ''
+    >>> check_kkt(H, f, A_c, bl, bu, np.array([1.5]), np.array([0.5]))
+    'primal infeasible by 5.00e-01'
+    >>> check_kkt(H, f, A_c, bl, bu, np.array([1.0]), np.array([0.5]))
+    'stationarity residual 5.00e-01'
     """
     r = _kkt_kernel()(
         np.ascontiguousarray(H, dtype=float), np.ascontiguousarray(f, dtype=float),

@@ -45,6 +45,15 @@ def max_on_ball(M: np.ndarray, c: np.ndarray) -> np.ndarray:
     -------
     (L,) ndarray
         Upper bounds of max_u |M u + c_l|^2.
+
+    Examples
+    --------
+    On a diagonal map the maximum lies along an axis, here (2 + 0)^2, (2 + 1)^2, (1 + 3)^2:
+
+    >>> M = np.diag([2.0, 1.0])
+    >>> c = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 3.0]])
+    >>> [round(float(v), 9) for v in max_on_ball(M, c)]
+    [4.0, 9.0, 16.0]
     """
     s, V = np.linalg.eigh(M.T @ M)
     b = np.ascontiguousarray((c @ M) @ V)  # (L, n): components of M'c in the eigenbasis
@@ -152,6 +161,16 @@ def worst_level(A, B, F, N, w_max, tau: float = 1.0, pulse=None):
         The worst one-step level (1: the boundary of the tube).
     where : tuple
         (vertex index, corner of W (and of p) as signs (n + g,)).
+
+    Examples
+    --------
+    One state: A_cl = 0.9 - 0.4 = 0.5, Z = [-2, 2] (N = 4), W = [-0.5, 0.5]; the level
+    is (|A_cl| sqrt(N) + w)^2 / N = (1 + 0.5)^2 / 4:
+
+    >>> A, B, F, N = np.array([[[0.9]]]), np.array([[[1.0]]]), np.array([[-0.4]]), np.eye(1) * 4
+    >>> level, (vertex, corner) = worst_level(A, B, F, N, [0.5])
+    >>> round(level, 9), vertex, corner.tolist()
+    (0.5625, 0, [-1.0])
     """
     A, B = np.asarray(A, float), np.asarray(B, float)
     Acl = A + B @ (tau * np.asarray(F, float))
@@ -178,6 +197,14 @@ def vertex_levels(Acl, N, w_max, pulse=None) -> np.ndarray:
     -------
     (R,) ndarray
         max over e in the set and w in W of (A_cl,i e + w)' N^-1 (A_cl,i e + w).
+
+    Examples
+    --------
+    One state, N = 1, w = 0.1: the levels are (|a_i| + 0.1)^2:
+
+    >>> levels = vertex_levels(np.array([[[0.5]], [[-0.9]]]), np.eye(1), [0.1])
+    >>> [round(float(v), 9) for v in levels]
+    [0.36, 1.0]
     """
     return _levels(np.asarray(Acl, float), np.asarray(N, float), w_max, pulse)[0]
 
@@ -240,13 +267,39 @@ def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, hi: float = 4.0) -> float:
     """Largest factor g in [0, hi] such that the tube stays RPI for g W.
 
     Bisection on :func:`worst_level` (30 halvings of [0, hi], or of [0, 1] when the
-    tube is not RPI for W itself). Arguments as :func:`worst_level`.
+    tube is not RPI for W itself).
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+        Vertices (the fault vertices included).
+    F : (m, n) ndarray
+        Tube gain.
+    N : (n, n) ndarray
+        Tube shape, Z = {e' N^-1 e <= 1}.
+    w_max : (n,) array_like
+        Half-widths of W (state units).
+    tau : float
+        Adjustable factor (eq. 54), as in :func:`worst_level`.
+    hi : float
+        Largest factor searched.
 
     Returns
     -------
     float
         The factor (to 2^-30 of the interval); 0 if the tube is not invariant even
         without a disturbance (some vertex's closed loop expands Z).
+
+    Examples
+    --------
+    One state, A_cl = 0.5, Z = [-1, 1], W = [-0.25, 0.25]: RPI while 0.5 + g 0.25 <= 1:
+
+    >>> A, B, F = np.array([[[0.5]]]), np.zeros((1, 1, 1)), np.zeros((1, 1))
+    >>> round(rpi_margin(A, B, F, np.eye(1), [0.25]), 6)
+    2.0
+    >>> rpi_margin(2.0 * A + 0.5, B, F, np.eye(1), [0.25])  # A_cl = 1.5 expands Z
+    0.0
     """
     if worst_level(A, B, F, N, 0.0 * np.asarray(w_max, float), tau)[0] > 1.0:
         return 0.0

@@ -20,7 +20,8 @@ from fahv.bounds.vertices import fault_vertices
 from fahv.errors import DesignError
 from fahv.model.trim import trim_grid
 from fahv.model.vehicle import DELTA_E
-from fahv.synthesis.feedback import BoxTubeResult, TubeDesign, box_tube, design_tube
+from fahv.synthesis.box_tube import BoxTubeResult, box_tube
+from fahv.synthesis.feedback import TubeDesign, design_tube
 
 
 def input_room(vehicle, n: int = 5, rho_f: float = 1.0) -> np.ndarray:
