@@ -3,8 +3,9 @@
 Z shape. The paper's box Z = {|e| <= z} (eq. 25) is RPI for e+ = A_cl,i e + w,
 w in W, iff |A_cl,i| z + w_max <= z for every vertex i (eq. 26-28 by Farkas' lemma),
 which needs the spectral radius of |A_cl,i| below 1 -- a property of the
-coordinates, not of stability. On this vehicle it fails (see :func:`fahv.synthesis.box_tube.box_tube`), so
-the tube used is an ellipsoid Z = {e : e' N^-1 e <= 1} designed jointly with F::
+coordinates, not of stability. On this vehicle it fails (see
+:func:`fahv.synthesis.box_tube.box_tube`), so the tube used is an ellipsoid
+Z = {e : e' N^-1 e <= 1} designed jointly with F::
 
     [[lam N, 0,        (A_i N + B_i M)'],
      [0,     diag(mu), I               ],      >= 0  for every vertex i,
