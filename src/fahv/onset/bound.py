@@ -368,6 +368,7 @@ class _OnsetModel:
         self.A, B = nv.vertices()
         A_8, B_8 = self.A[:, 1:, 1:], B[:, 1:, :]
         self.L = np.linalg.cholesky(tube_set.N_8)
+        self.L_inv = np.linalg.inv(self.L)  # one inverse for the norms of many jumps
         self.Acl_8 = A_8 + B_8 @ tube_set.F_8
         self.points = OnsetPoints(nv.box, vehicle, trim_map, uncertainty, Ts, n_sub, interior)
         self.a = float(np.linalg.norm(np.linalg.solve(self.L, self.Acl_8) @ self.L, 2,
@@ -375,7 +376,7 @@ class _OnsetModel:
 
     def z_norm(self, V):
         """Z_8 norms (S,) of the e_8 parts of rows V (S, 9)."""
-        return np.sqrt((np.linalg.solve(self.L, V[:, 1:].T) ** 2).sum(axis=0))
+        return np.sqrt(((V[:, 1:] @ self.L_inv.T) ** 2).sum(axis=1))
 
     def jumps(self, loss: float):
         """The jumps J / rho_f (S, 9) at ``loss`` and what the bound takes of them.

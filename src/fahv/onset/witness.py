@@ -9,6 +9,7 @@ analysis on the tube set's assumptions certifies that loss.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,21 +67,65 @@ def _pulse_run(Acl_8, Ninv, J_s, Jb, gamma, g_e, steps):
     """e_p over ``steps`` steps at every vertex, from the jump J_s (8,) and shares Jb (D, 8).
 
     Returns, per share and vertex, the largest Z_8 norm (D, R), its step (D, R) and the
-    error there (D, R, 8).
+    error there (D, R, 8). The recursion e_k+1 = A_cl,r e_k + p_k runs for every share
+    and vertex in one compiled loop over the vertices, spread over the cores
+    (:func:`_pulse_kernel`; in numpy it was most of an onset bound's time).
     """
-    R = Acl_8.shape[0]
-    Jr = J_s - Jb
-    e = np.broadcast_to(J_s, (len(Jb), R, 8)).copy()
-    best, e_best = _z_norm(e, Ninv), e.copy()
-    k_best = np.zeros(best.shape, int)
-    for k in range(1, steps):
-        p = (1.0 - g_e) ** k * Jb + (1.0 - gamma) ** k * Jr
-        e = np.matmul(Acl_8, e[..., None])[..., 0] + p[:, None, :]
-        n = _z_norm(e, Ninv)
-        up = n > best
-        best, k_best = np.where(up, n, best), np.where(up, k, k_best)
-        e_best[up] = e[up]
-    return best, k_best, e_best
+    Jb = np.ascontiguousarray(Jb, dtype=float)
+    P = np.array([(1.0 - g_e) ** k * Jb + (1.0 - gamma) ** k * (J_s - Jb)
+                  for k in range(steps)])  # fmt: skip
+    return _pulse_kernel()(np.ascontiguousarray(Acl_8, dtype=float), np.ascontiguousarray(Ninv),
+                           np.ascontiguousarray(J_s, dtype=float), P)  # fmt: skip
+
+
+@functools.cache
+def _pulse_kernel():
+    """The loop of :func:`_pulse_run` compiled by numba, parallel over the vertices."""
+    import numba
+
+    @numba.njit(inline="always")
+    def _quad(e, Ninv, n):  # pragma: no cover - compiled
+        """sqrt(e' N^-1 e), the Z_8 norm."""
+        acc = 0.0
+        for i in range(n):
+            row = 0.0
+            for j in range(n):
+                row += Ninv[i, j] * e[j]
+            acc += e[i] * row
+        return np.sqrt(acc)
+
+    def loop(Acl, Ninv, J_s, P):  # pragma: no cover - compiled
+        """P (steps, D, n): the pulses p_k (p_0 unused); returns best, k_best, e_best."""
+        R, n = Acl.shape[0], Acl.shape[1]
+        steps, D = P.shape[0], P.shape[1]
+        best = np.empty((D, R))
+        k_best = np.zeros((D, R), np.int64)
+        e_best = np.empty((D, R, n))
+        for r in numba.prange(R):
+            e = np.empty(n)
+            f = np.empty(n)
+            e_top = np.empty(n)
+            for d in range(D):
+                e[:] = J_s
+                e_top[:] = J_s
+                top = _quad(e, Ninv, n)
+                k_top = 0
+                for k in range(1, steps):
+                    for i in range(n):
+                        acc = P[k, d, i]
+                        for j in range(n):
+                            acc += Acl[r, i, j] * e[j]
+                        f[i] = acc
+                    e[:] = f
+                    q = _quad(e, Ninv, n)
+                    if q > top:
+                        top, k_top = q, k
+                        e_top[:] = e
+                best[d, r], k_best[d, r] = top, k_top
+                e_best[d, r, :] = e_top
+        return best, k_best, e_best
+
+    return numba.njit(cache=True, parallel=True, error_model="numpy")(loop)
 
 
 def _search(Acl_8, Ninv, bound, J8, shares, gamma, g_e, top, steps, pre_steps, candidates):
@@ -93,16 +138,21 @@ def _search(Acl_8, Ninv, bound, J8, shares, gamma, g_e, top, steps, pre_steps, c
     found = None
     for s in np.argsort(-_z_norm(J8, Ninv))[:top]:
         best, _, e_best = _pulse_run(Acl_8, Ninv, J8[s], shares[:, s], gamma, g_e, steps)
+        D = len(best)
+        # the sequence's share for the best candidates of every direction, all at once
+        cand = np.argsort(-best, axis=1)[:, :candidates]  # (D, C)
+        rows = np.arange(D)[:, None]
+        z = (e_best[rows, cand] @ Ninv) / best[rows, cand][..., None]  # (D, C, 8)
+        v, reach = z.reshape(-1, 8), np.zeros(z.shape[0] * z.shape[1])
+        At = AT[cand.ravel()]
+        for _ in range(pre_steps):
+            reach += np.abs(v) @ bound
+            v = np.matmul(At, v[:, :, None])[:, :, 0]
+        total = best[rows, cand] + reach.reshape(cand.shape)
         levels = []
-        for d in range(len(best)):  # the sequence's share for the best candidates
-            cand = np.argsort(-best[d])[:candidates]
-            z = np.einsum("ij,rj->ri", Ninv, e_best[d, cand]) / best[d, cand][:, None]
-            v, reach = z.copy(), np.zeros(len(cand))
-            for _ in range(pre_steps):
-                reach += np.abs(v) @ bound
-                v = np.einsum("rij,rj->ri", AT[cand], v)
-            i = int(np.argmax(best[d, cand] + reach))
-            levels.append((float(best[d, cand[i]] + reach[i]), int(cand[i])))
+        for d in range(D):
+            i = int(np.argmax(total[d]))
+            levels.append((float(total[d, i]), int(cand[d, i])))
         d = int(np.argmin([lv for lv, _ in levels]))  # the estimate's most favourable b
         if found is None or levels[d][0] > found[0]:
             found = (levels[d][0], int(s), d, levels[d][1])
