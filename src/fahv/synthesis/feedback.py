@@ -235,11 +235,13 @@ class ActiveSet:
 
 
 #: Vertex blocks and points of the first solve (each, the largest first) and added per
-#: pass of constraint generation (the most violated first): an LMI of d unknowns has a
-#: subset of at most d constraints with the same optimum, and Clarabel's time grows
-#: with the blocks held, so few are held and few added (docs: results/speed).
-GENERATION_START = 24
+#: pass of constraint generation (the most violated first), the ``active`` of
+#: :func:`design_tube`: an LMI of d unknowns has a subset of at most d constraints with
+#: the same optimum, and Clarabel's time grows with the blocks held, so few are held and
+#: few added (docs: results/speed).
 GENERATION_ADD = 12
+
+
 def _rpi_problem(As, Bs, ws, room, sw, lam, zs_max, E, Ps):
     """The tube LMI on the given vertices and points (scaled): problem, variables, blocks.
 
