@@ -112,7 +112,7 @@ def test_invariant_ellipsoid_of_the_notch_loop_holds_by_brute_force():
     D = np.r_[np.sqrt(np.diag(N)), 1e-3, 1e-3]
     ell = invariant_ellipsoid(Acl, w, D, N, K, 10 * t, lambda P: vertex_levels(Acl, P, w_xi), 0.99,
                               active=1)  # fmt: skip
-    assert ell is not None
+    assert ell.found
     assert vertex_levels(Acl, ell.P, w_xi).max() <= 1.0
     rng = np.random.default_rng(0)
     L = np.linalg.cholesky(ell.P)

@@ -182,7 +182,7 @@ class EightStateForm(TubeForm):
             spec, vehicle, model.trim, np.concatenate([model.Dx, model.Du]), dist.W.w_max, cols,
             vertex.rho_f, vertex.room_f, log, gamma=gamma, notches=notches.certified,
             stable_only=notches.stable_only, stage=tell, warm=closure_active_set(previous),
-            **estimate,
+            starts=ellipsoid_starts(previous), **estimate,
         )  # fmt: skip
         return FormTube(ts.F, ts.N, ts.tightening, ts.lam, (), ts, nominal, box, hv_box, cols,
                         tuple(tube_set_lines(ts, nominal, box)))  # fmt: skip
@@ -194,9 +194,10 @@ class EightStateForm(TubeForm):
         u_box = input_rows(offsets, tube.nominal)
         x_box = state_rows(ts.certified_range(tube.box))
         arrays = {"u_box": u_box, "hv_box": tube.hv_box, "x_box": x_box}
-        if ts.active_set is not None:  # where the next design of this file starts its LMI
+        if ts.active_set is not None:  # where the next design of this file starts its LMIs
             arrays.update(closure_vertices=ts.active_set.vertices,
                           closure_points=ts.active_set.points)  # fmt: skip
+        arrays.update({ELLIPSOID_VERTICES + k: v for k, v in ts.ellipsoid_vertices.items()})
         for v, F_8v in ts.notch_gains.items():  # a gain designed for a variant's notch loop
             arrays[variant_gain_key(v)] = np.hstack([np.zeros((2, 1)), F_8v])
         summary = ts.summary(tube.nominal, tube.box)  # W_8 over its own domain
@@ -225,6 +226,30 @@ def closure_active_set(previous) -> ActiveSet | None:
         return None
     return ActiveSet(np.asarray(previous["closure_vertices"], int),
                      np.asarray(previous.get("closure_points", np.zeros(0)), int))  # fmt: skip
+
+
+#: Prefix of the stored arrays that hold the vertices an invariant ellipsoid's last LMI
+#: solve held (``ellipsoid_vertices_steady_0.995``, ``ellipsoid_vertices_notch_tube_mpc``).
+ELLIPSOID_VERTICES = "ellipsoid_vertices_"
+
+
+def ellipsoid_starts(previous) -> dict[str, np.ndarray]:
+    """The invariant ellipsoids' active sets stored in an earlier design's arrays.
+
+    Parameters
+    ----------
+    previous : Mapping[str, ndarray] or None
+        The arrays of the design the output folder held before, or None.
+
+    Returns
+    -------
+    dict[str, (a,) ndarray of int]
+        By ellipsoid name (:data:`ELLIPSOID_VERTICES` stripped); empty if none is stored.
+    """
+    if previous is None:
+        return {}
+    return {k[len(ELLIPSOID_VERTICES):]: np.asarray(v, int) for k, v in previous.items()
+            if k.startswith(ELLIPSOID_VERTICES)}  # fmt: skip
 
 
 #: The registered tube forms, by ``tube.form``.

@@ -65,8 +65,11 @@ def _contain(case: dict, box, vehicle, trim_map, unc, rho_min: float, log) -> np
     return J[:, 1:] / rho_min / kappa
 
 
-def _notch_loops(nv, tube_set: TubeSet, case: dict, notches, stable_only, log):
-    """The notch variants' loops at the tube set's vertices, and the gains designed."""
+def _notch_loops(nv, tube_set: TubeSet, case: dict, notches, stable_only, log, starts=None):
+    """The notch variants' loops at the tube set's vertices, and the gains designed.
+
+    ``starts`` maps :func:`notch_key` to the vertices an earlier design's loop held.
+    """
     s, Ts = case["eight_state"], case["Ts"]
     A, B = nv.vertices()
     A_8, B_8, iq = A[:, 1:, 1:], B[:, 1:, :], EIGHT_STATES.index("q")
@@ -75,7 +78,7 @@ def _notch_loops(nv, tube_set: TubeSet, case: dict, notches, stable_only, log):
     gains = {}
     for v, nf in (notches or {}).items():
         loop = notch_tube(A_8, B_8, tube_set.F_8, tube_set.N_8, tube_set.W_8, nf, Ts, iq,
-                          tube_set.lam, v)  # fmt: skip
+                          tube_set.lam, v, start=(starts or {}).get(notch_key(v)))  # fmt: skip
         if s["notch_gain"] == "designed" and not loop.certified:
             log(f"{notch_loop_line(loop)}; a gain is designed for this loop "
                 "(eight_state.notch_gain)")  # fmt: skip
@@ -101,6 +104,7 @@ def design_tube_set(
     stable_only=None,
     stage: Callable[[str], None] | None = None,
     warm=None,
+    starts=None,
     **estimate,
 ) -> tuple[TubeSet, SchedulingBox, SchedulingBox]:
     """The eight-state tube set of a case (``tube.form: eight_state``), closed and checked.
@@ -143,6 +147,11 @@ def design_tube_set(
         design's progress lines (:class:`fahv.design.stage_clock.StageClock`).
     warm : fahv.synthesis.feedback.ActiveSet, optional
         Where the closure's constraint generation starts (:func:`close_tube_set`).
+    starts : Mapping[str, ndarray], optional
+        Where the invariant ellipsoids' constraint generation starts: the vertices an
+        earlier design's solves held, by :func:`steady_key` and :func:`notch_key`
+        (``TubeSet.ellipsoid_vertices``). Like ``warm``, it changes how fast the design
+        runs, not what is certified.
     **estimate
         ``gamma_e``, ``directions``, ``projection_scale`` of
         :func:`fahv.onset.bound.onset_bound` (the estimate's gain along the elevator
@@ -193,15 +202,19 @@ def design_tube_set(
                                                          rho_min), gamma)  # fmt: skip
         A, B = nv.vertices()
         Acl_8 = A[:, 1:, 1:] + B[:, 1:, :] @ tube_set.F_8
-        steady = [delayed(steady_set)(Acl_8, tube_set.N_8, tube_set.F_8, bound, lam)
-                  for lam in dict.fromkeys((tube_set.lam, *STEADY_LAMS))]  # fmt: skip
+        lams = tuple(dict.fromkeys((tube_set.lam, *STEADY_LAMS)))
+        steady = [delayed(steady_set)(Acl_8, tube_set.N_8, tube_set.F_8, bound, lam,
+                                      (starts or {}).get(steady_key(lam)))
+                  for lam in lams]  # fmt: skip
+        parts["steady"] = steady
         n_ellipsoids += len(steady)
         parts["onset"] = delayed(onset_bound)(
             nv, tube_set, vehicle, trim_map, unc, gamma, case["Ts"], case["plant_substeps"],
             steady_shaped=delayed(_smallest_steady)(steady), **estimate,
         )  # fmt: skip
     for v, nf in (notches or {}).items():
-        parts[f"loop {v}"] = delayed(_notch_loops_logged)(nv, tube_set, case, {v: nf}, None)
+        parts[f"loop {v}"] = delayed(_notch_loops_logged)(nv, tube_set, case, {v: nf}, None,
+                                                          starts)  # fmt: skip
     workers = min(n_ellipsoids, os.cpu_count() or 1)
     if workers > 1:  # the cores' processes take the tasks in turn
         log(f"eight-state tube: the onset bound and the notch loops, {n_ellipsoids} invariant "
@@ -210,20 +223,35 @@ def design_tube_set(
     else:
         (got,) = dask.compute(parts, scheduler="sync")
     loops, gains = _notch_loops(nv, tube_set, case, None, stable_only, log)  # stability only
+    held = {}
     for v in notches or {}:
         got_loops, got_gains, lines = got[f"loop {v}"]
         for line in lines:
             log(line)
         loops, gains = loops + got_loops, {**gains, **got_gains}
+        held.update({notch_key(loop.variant): np.asarray(loop.active, int)
+                     for loop in got_loops if loop.active})  # fmt: skip
     tube_set = replace(tube_set, notch_loops=loops, notch_gains=gains)
     if gamma is not None:
+        held.update({steady_key(lam): active for lam, (_, _, active)
+                     in zip(lams, got["steady"], strict=True)})  # fmt: skip
         tube_set = replace(tube_set, onset=got["onset"])
-    return tube_set, nominal, box
+    return replace(tube_set, ellipsoid_vertices=held), nominal, box
+
+
+def steady_key(lam: float) -> str:
+    """The name of the onset's steady set at contraction factor lam among the ellipsoids."""
+    return f"steady_{lam:g}"
+
+
+def notch_key(variant: str) -> str:
+    """The name of a variant's notch loop among the ellipsoids."""
+    return f"notch_{variant}"
 
 
 def _smallest_steady(steady) -> float:
     """The smallest c_w of the steady sets (:func:`fahv.onset.bound.steady_set` results)."""
-    return min(c_w for c_w, _ in steady)
+    return min(c_w for c_w, _, _ in steady)
 
 
 def _jump_h(case: dict, box, vehicle, trim_map, unc, rho_min: float) -> float:
@@ -233,10 +261,10 @@ def _jump_h(case: dict, box, vehicle, trim_map, unc, rho_min: float) -> float:
     return float(np.abs(J[:, 0]).max() / rho_min)
 
 
-def _notch_loops_logged(nv, tube_set: TubeSet, case: dict, notches, stable_only):
+def _notch_loops_logged(nv, tube_set: TubeSet, case: dict, notches, stable_only, starts=None):
     """:func:`_notch_loops` with its log lines returned (it may run in another process)."""
     lines: list[str] = []
-    loops, gains = _notch_loops(nv, tube_set, case, notches, stable_only, lines.append)
+    loops, gains = _notch_loops(nv, tube_set, case, notches, stable_only, lines.append, starts)
     return loops, gains, lines
 
 

@@ -278,7 +278,8 @@ class OnsetBound:
         return out
 
 
-def steady_set(Acl_8, N_8, F_8, bound, lam: float) -> tuple[float, np.ndarray | None]:
+def steady_set(Acl_8, N_8, F_8, bound, lam: float,
+               start=None) -> tuple[float, np.ndarray | None, np.ndarray]:  # fmt: skip
     """The error's steady set shaped for the disturbance bound itself (the onset bound's c_w).
 
     Before an onset the error is driven by a disturbance inside the tube set's bound (per
@@ -304,6 +305,9 @@ def steady_set(Acl_8, N_8, F_8, bound, lam: float) -> tuple[float, np.ndarray | 
         The disturbance bound per row (state units per period).
     lam : float
         Contraction factor of the S-procedure, in (0, 1).
+    start : (a,) array_like of int, optional
+        The vertices an earlier solve of this set held (its ``active``): where the
+        constraint generation starts.
 
     Returns
     -------
@@ -311,17 +315,22 @@ def steady_set(Acl_8, N_8, F_8, bound, lam: float) -> tuple[float, np.ndarray | 
         s (inf if no ellipsoid is found or the exact re-check fails).
     P : (8, 8) ndarray or None
         The ellipsoid's shape.
+    active : (a,) ndarray of int
+        The vertices the last LMI solve held (infeasible or not).
     """
     Acl_8, N_8, F_8 = (np.asarray(v, float) for v in (Acl_8, N_8, F_8))
     bound = np.asarray(bound, float)
     tightening = np.sqrt(np.einsum("ij,jk,ik->i", F_8, N_8, F_8))
     ell = invariant_ellipsoid(Acl_8, bound, np.sqrt(np.diag(N_8)), N_8, F_8, tightening,
-                              lambda P: vertex_levels(Acl_8, P, bound), lam)  # fmt: skip
-    if ell is None or float(vertex_levels(Acl_8, ell.P, bound).max()) > 1.0:
-        return float("inf"), None
+                              lambda P: vertex_levels(Acl_8, P, bound), lam,
+                              start=start)  # fmt: skip
+    if not ell.found:
+        return float("inf"), None, ell.active
+    if float(vertex_levels(Acl_8, ell.P, bound).max()) > 1.0:
+        return float("inf"), None, ell.active
     L = np.linalg.cholesky(N_8)
     s = np.sqrt(np.linalg.eigvalsh(np.linalg.solve(L, np.linalg.solve(L, ell.P).T)).max())
-    return float(s), ell.P
+    return float(s), ell.P, ell.active
 
 
 def steady_disturbance(nv: NominalVertices, tube_set: TubeSet, jump_h: float,

@@ -28,26 +28,38 @@ from fahv.synthesis.lmi import (
 
 @dataclass(frozen=True)
 class InvariantEllipsoid:
-    """An ellipsoid RPI for a fixed closed loop and its box W (unscaled units).
+    """An ellipsoid RPI for a fixed closed loop and its box W (unscaled units), or none.
 
     Attributes
     ----------
-    P : (n, n) ndarray
-        Shape of E = {xi : xi' P^-1 xi <= 1}.
+    P : (n, n) ndarray or None
+        Shape of E = {xi : xi' P^-1 xi <= 1}; None if the LMI was infeasible (or the
+        solver failed) on the vertices held (:attr:`found` False).
     s : float
         Smallest factor with the projection of E on the first p states inside
         s {e : e' S^-1 e <= 1} (S the ``shape`` it was bounded by): the largest eigenvalue
-        of S^-1/2 P_ee S^-1/2, square-rooted.
-    supports : (m,) ndarray
+        of S^-1/2 P_ee S^-1/2, square-rooted (inf if none was found).
+    supports : (m,) ndarray or None
         max over E of |(K xi)_j| = sqrt(K_j P K_j') (the input deviation's support).
-    n_blocks : int
-        Vertex blocks the last LMI solve held (constraint generation).
+    active : (a,) ndarray of int
+        Indices of the vertices whose blocks the last LMI solve held (constraint
+        generation): where a later solve of the same problem starts (``start``).
     """
 
     P: np.ndarray
     s: float
     supports: np.ndarray
-    n_blocks: int
+    active: np.ndarray
+
+    @property
+    def n_blocks(self) -> int:
+        """Vertex blocks the last LMI solve held."""
+        return int(len(self.active))
+
+    @property
+    def found(self) -> bool:
+        """True if an ellipsoid was found (its exact level <= 1 at every vertex)."""
+        return self.P is not None
 
 
 #: A held vertex whose exact level lies below this at a solution does not bind it:
@@ -102,7 +114,8 @@ def _analysis_problem(As, E, Ss, Ks, tmax, lam):
 
 
 def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float,
-                        active: int = 24, add: int = 12) -> InvariantEllipsoid | None:  # fmt: skip
+                        active: int = 24, add: int = 12,
+                        start=None) -> InvariantEllipsoid | None:  # fmt: skip
     """Smallest ellipsoid RPI for a fixed closed loop whose projection lies in a given one.
 
     The analysis form of the tube LMI (24) for a closed loop xi+ = A_cl,i xi + E w with
@@ -121,7 +134,10 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     of largest spectral radius first, then per pass at most ``add`` of those whose
     exact level ``levels(P)`` exceeds 1, the worst first, until none does: the result's
     exact level is then at most 1 at every vertex: that exact level, not the LMI, is the
-    certificate). The blocks solved are re-checked (:func:`fahv.synthesis.lmi.require_psd`) to the
+    certificate). Started from the vertices an earlier solve of the same problem held
+    (``start``, the result's ``active``), the first solve is that solve's last: on the
+    same data and machine, the same solution in one pass. The blocks solved are
+    re-checked (:func:`fahv.synthesis.lmi.require_psd`) to the
     solver's accuracy, 1e-6 of their largest entry (a strict margin of 1e-5 in the LMI
     made case1.yaml's certified loop infeasible: its multipliers are of order 1e-4).
 
@@ -149,18 +165,24 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
         Vertices of the first solve.
     add : int
         Vertices added per pass.
+    start : (a,) array_like of int, optional
+        Vertices of the first solve in place of the ``active`` of largest spectral
+        radius (an earlier result's ``active``). It changes how fast the generation
+        ends, not what is accepted.
 
     Returns
     -------
-    InvariantEllipsoid or None
-        None if the LMI is infeasible (or the solver fails) on the vertices held.
+    InvariantEllipsoid
+        ``found`` False if the LMI is infeasible (or the solver fails) on the vertices
+        held; ``active`` is then that solve's set, from which a later design finds the
+        same answer in one solve.
 
     Raises
     ------
     DesignError
         If a returned solution fails the re-check of its blocks or budgets.
     ValueError
-        On inconsistent shapes.
+        On inconsistent shapes, or a ``start`` index outside the vertices.
 
     Examples
     --------
@@ -199,13 +221,12 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     # identity they were of order (1 - lam) / w^2, and the solves were less accurate)
     E = np.vstack([np.diag(wss), np.zeros((n - p, p))])
     budget = (1.0 - lam) * (1.0 - BUDGET_MARGIN)
-    rho = np.abs(np.linalg.eigvals(As)).max(axis=1)
-    chosen = np.sort(np.argsort(-rho)[:active])
+    chosen = _first_vertices(As, active, start)
     released = np.zeros(0, int)
     while True:
         prob, P, r, s2, blocks = _analysis_problem(As[chosen], E, Ss, Ks, tmax, lam)
         if not solve_lmi(prob):
-            return None
+            return InvariantEllipsoid(None, float("inf"), None, chosen)
         Pv = 0.5 * (P.value + P.value.T)
         P_un = Pv * np.outer(D, D)
         lev = np.asarray(levels(P_un), float)
@@ -228,7 +249,19 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     Li = np.linalg.inv(L)
     s = float(np.sqrt(np.linalg.eigvalsh(Li @ Pv[:p, :p] @ Li.T).max()))
     supports = np.sqrt(np.einsum("ij,jk,ik->i", K, P_un, K))
-    return InvariantEllipsoid(P_un, s, supports, len(chosen))
+    return InvariantEllipsoid(P_un, s, supports, chosen)
+
+
+def _first_vertices(As, active: int, start) -> np.ndarray:
+    """The sorted vertices of the first solve: ``start``, or the ``active`` of largest rho."""
+    R = As.shape[0]
+    if start is not None and len(start) > 0:
+        chosen = np.unique(np.asarray(start, int))
+        if chosen[0] < 0 or chosen[-1] >= R:
+            raise ValueError(f"invariant_ellipsoid: start holds vertex indices outside 0..{R - 1}")
+        return chosen
+    rho = np.abs(np.linalg.eigvals(As)).max(axis=1)
+    return np.sort(np.argsort(-rho)[:active])
 
 
 @dataclass(frozen=True)

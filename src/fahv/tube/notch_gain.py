@@ -167,7 +167,7 @@ def _start(A, B, F, N, w, nf, Ts, iq, tight, lam):
     Acl, K = notch_closed_loop(A, B, F, nf, Ts, iq)
     ell = invariant_ellipsoid(Acl, w, notch_loop_scale(N, nf, Ts, iq), N, K, 100.0 * tight,
                               lambda P: vertex_levels(Acl, P, w_xi), lam)  # fmt: skip
-    return None if ell is None else ell.P
+    return ell.P
 
 
 def _step(A, B, F, P, N, w, nf, Ts, iq, tight, lam, max_steps, variant, log):

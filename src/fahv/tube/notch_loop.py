@@ -65,6 +65,9 @@ class NotchLoop:
         bound over the tube set's H, then the one-step disturbance bound over the loop's own
         set of (e, u - v) per row of W as a fraction of W); None: not bounded, the tube's
         own closure applies.
+    active : tuple of int
+        The vertices the last LMI solve of :func:`notch_tube` held (constraint
+        generation; empty if none was solved): where a later design starts.
     """
 
     variant: str
@@ -79,6 +82,7 @@ class NotchLoop:
     tightening: tuple[float, ...] | None = None
     designed: bool = False
     w_ratio: tuple[float, ...] | None = None
+    active: tuple[int, ...] = ()
 
     @property
     def stable(self) -> bool:
@@ -115,7 +119,8 @@ class NotchLoop:
         """
         found = self.s is not None and np.isfinite(self.s)
         state = "found" if found else ("not sought" if self.s is None else "infeasible")
-        return {**self.__dict__, "s": self.s if found else None, "ellipsoid": state,
+        record = {k: v for k, v in self.__dict__.items() if k != "active"}
+        return {**record, "s": self.s if found else None, "ellipsoid": state,
                 "stable": self.stable, "certified": self.certified}  # fmt: skip
 
 
@@ -240,7 +245,7 @@ def notch_loop_scale(N, notch, Ts: float, iq: int) -> np.ndarray:
 
 
 def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
-               variant: str = "", active: int = 40) -> NotchLoop:  # fmt: skip
+               variant: str = "", active: int = 40, start=None) -> NotchLoop:  # fmt: skip
     """The tube loop with the notch filter on q, certified RPI in its own states.
 
     The loop of :func:`notch_closed_loop`, xi = [e; chi] with the filter's two states,
@@ -280,13 +285,17 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
         Contraction factor of the S-procedure certificate.
     variant : str
     active : int
-        Vertex blocks per pass of constraint generation.
+        Vertex blocks of the first solve of the constraint generation.
+    start : (a,) array_like of int, optional
+        The vertices an earlier design's solve held (its loop's ``active``): the first
+        solve's blocks in place of ``active`` chosen by spectral radius.
 
     Returns
     -------
     NotchLoop
-        With ``s``, ``level``, ``supports`` and ``tightening`` set when an ellipsoid was
-        found (``s`` None if the loop is unstable, inf if the LMI is infeasible).
+        With ``s``, ``level``, ``supports``, ``tightening`` and ``active`` set when an
+        ellipsoid was found (``s`` None if the loop is unstable, inf if the LMI is
+        infeasible).
 
     Raises
     ------
@@ -303,10 +312,13 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
     D = notch_loop_scale(N, notch, Ts, iq)
     w_xi = np.r_[np.asarray(w_max, float), 0.0, 0.0]
     ell = invariant_ellipsoid(Acl, w_max, D, N, K, np.asarray(tightening),
-                              lambda P: vertex_levels(Acl, P, w_xi), lam, active)  # fmt: skip
-    if ell is None:
-        return replace(loop, s=float("inf"), tightening=tightening)
-    return _recheck(loop, Acl, K, F, N, w_max, ell.P)
+                              lambda P: vertex_levels(Acl, P, w_xi), lam, active,
+                              start=start)  # fmt: skip
+    if not ell.found:
+        return replace(loop, s=float("inf"), tightening=tightening,
+                       active=tuple(int(i) for i in ell.active))  # fmt: skip
+    checked = _recheck(loop, Acl, K, F, N, w_max, ell.P)
+    return replace(checked, active=tuple(int(i) for i in ell.active))
 
 
 def notch_certificate(A, B, F, N, w_max, notch, Ts: float, iq: int, P,

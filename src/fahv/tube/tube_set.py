@@ -93,6 +93,11 @@ class TubeSet:
     active_set : fahv.synthesis.feedback.ActiveSet, optional
         The vertices and contained points the closure's last LMI solve held: where a
         later design of the same file starts its constraint generation.
+    ellipsoid_vertices : dict
+        ``{name: (a,) ndarray of int}``: the vertices the last LMI solve of each
+        invariant ellipsoid checked with the tube set held (the onset's steady sets, the
+        notch loops; :func:`fahv.design.tube_set_design.steady_key`, ``notch_key``):
+        where a later design starts theirs.
     """
 
     F_8: np.ndarray
@@ -109,6 +114,7 @@ class TubeSet:
     notch_loops: tuple[NotchLoop, ...] = ()
     notch_gains: dict = field(default_factory=dict)
     active_set: ActiveSet | None = None
+    ellipsoid_vertices: dict = field(default_factory=dict)
 
     @property
     def F(self) -> np.ndarray:
