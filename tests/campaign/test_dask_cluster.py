@@ -9,7 +9,7 @@ import socket
 
 import pytest
 
-from fahv.campaign.engine import dask_client
+from fahv.cluster import dask_client
 
 DEFAULT_PORT = 8787  # Dask's default dashboard port
 

@@ -25,7 +25,6 @@ the interruptions (only ``wall_s`` and ``session`` differ).
 from __future__ import annotations
 
 import json
-import logging
 import math
 import os
 import socket
@@ -40,6 +39,7 @@ from fahv.campaign import store
 from fahv.campaign.draws import _vehicle, draw, overrides, run_seed
 from fahv.campaign.spec import Campaign
 from fahv.certificate.verified import load_or_design
+from fahv.cluster import dask_client
 from fahv.errors import CampaignError, DesignError
 from fahv.interrupt import deferred
 from fahv.loop.batch import simulate_batch
@@ -292,48 +292,6 @@ def batches(campaign: Campaign, done: set) -> list[tuple[str, list[int]]]:
     for j in range(0, max((len(t) for t in todo.values()), default=0), size):
         out += [(v, t[j : j + size]) for v, t in todo.items() if t[j : j + size]]
     return out
-
-
-#: HTTP address of a LocalCluster without dashboard: a free port of this host. The
-#: scheduler always serves HTTP (health and metrics routes); on Dask's default port
-#: 8787 every campaign started beside another cluster would warn that it is in use.
-NO_DASHBOARD = "127.0.0.1:0"
-
-
-def dask_client(scheduler: str | None = None, workers: int | None = None,
-                dashboard: str | None = None):  # fmt: skip
-    """A Dask client: of the cluster at ``scheduler``, or of a new LocalCluster.
-
-    Parameters
-    ----------
-    scheduler : str, optional
-        Address of an existing Dask scheduler (``tcp://host:8786``).
-    workers : int, optional
-        Worker processes of the LocalCluster (one thread each; default: the cores).
-    dashboard : str, optional
-        Address of the LocalCluster's dashboard (``":8787"``, ``"127.0.0.1:0"``);
-        default: no dashboard, the scheduler's HTTP server on :data:`NO_DASHBOARD`.
-        Ignored with ``scheduler`` (that cluster serves its own).
-
-    Returns
-    -------
-    (distributed.Client, distributed.LocalCluster or None)
-        The client and the cluster started here (None with ``scheduler``); the
-        caller closes both.
-    """
-    from dask.distributed import Client, LocalCluster
-
-    if scheduler:
-        return Client(scheduler), None
-    cluster = LocalCluster(
-        n_workers=workers or os.cpu_count() or 1,
-        threads_per_worker=1,
-        processes=True,
-        silence_logs=logging.ERROR,
-        dashboard_address=dashboard or NO_DASHBOARD,
-        scheduler_kwargs={"dashboard": dashboard is not None},
-    )
-    return Client(cluster), cluster
 
 
 def run_campaign(

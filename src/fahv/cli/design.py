@@ -9,6 +9,7 @@ from pathlib import Path
 
 from fahv.certificate.verify import require_verified, verify
 from fahv.cli.common import add_vehicle_option, progress, vehicle_of
+from fahv.cluster import dask_client
 from fahv.design.pipeline import run_design
 from fahv.design.stage_clock import StageClock
 from fahv.errors import DesignError, SpecError
@@ -72,7 +73,14 @@ def cmd_design(args) -> int:
     spec = load_design_file(args.design)
     vehicle = vehicle_of(args)
     out = design_dir(spec.path, spec.name, args.out, vehicle)
-    design = design_and_store(spec, vehicle, out, cold=args.cold)
+    # the workers start while the first stages run in this process
+    client, cluster = dask_client(args.scheduler, args.workers)
+    try:
+        design = design_and_store(spec, vehicle, out, cold=args.cold)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
     prov = design.summary["provenance"]
     print(
         f"design hash {design.summary['design_hash']} (design file {prov['design_file_hash']}, "
@@ -136,6 +144,18 @@ def add_parsers(sub) -> None:
         action="store_true",
         help="start the LMIs' constraint generation from scratch, not from the active sets "
         "the design stored in the artefact folder holds (the same certificate, found slower)",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        help="address of an existing Dask scheduler for the invariant ellipsoids checked with "
+        "the tube (default: a LocalCluster of one worker process per core)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="worker processes of the LocalCluster (default: the cores)",
     )
     add_vehicle_option(p)
     p.set_defaults(func=cmd_design)

@@ -197,31 +197,27 @@ def design_tube_set(
     # steady set at each contraction factor, then the onset bound from the smallest; each
     # notch loop, independent of them
     parts, n_ellipsoids = {}, len(notches or {})
-    if gamma is not None:
+    if gamma is not None:  # the onset's chain first: it is the longest (the loops fill in)
         bound = steady_disturbance(nv, tube_set, _jump_h(case, box, vehicle, trim_map, unc,
                                                          rho_min), gamma)  # fmt: skip
         A, B = nv.vertices()
         Acl_8 = A[:, 1:, 1:] + B[:, 1:, :] @ tube_set.F_8
         lams = tuple(dict.fromkeys((tube_set.lam, *STEADY_LAMS)))
-        steady = [delayed(steady_set)(Acl_8, tube_set.N_8, tube_set.F_8, bound, lam,
-                                      (starts or {}).get(steady_key(lam)))
-                  for lam in lams]  # fmt: skip
+        with dask.annotate(priority=2):
+            steady = [delayed(steady_set)(Acl_8, tube_set.N_8, tube_set.F_8, bound, lam,
+                                          (starts or {}).get(steady_key(lam)))
+                      for lam in lams]  # fmt: skip
         parts["steady"] = steady
         n_ellipsoids += len(steady)
-        parts["onset"] = delayed(onset_bound)(
-            nv, tube_set, vehicle, trim_map, unc, gamma, case["Ts"], case["plant_substeps"],
-            steady_shaped=delayed(_smallest_steady)(steady), **estimate,
-        )  # fmt: skip
+        with dask.annotate(priority=1):
+            parts["onset"] = delayed(onset_bound)(
+                nv, tube_set, vehicle, trim_map, unc, gamma, case["Ts"], case["plant_substeps"],
+                steady_shaped=delayed(_smallest_steady)(steady), **estimate,
+            )  # fmt: skip
     for v, nf in (notches or {}).items():
         parts[f"loop {v}"] = delayed(_notch_loops_logged)(nv, tube_set, case, {v: nf}, None,
                                                           starts)  # fmt: skip
-    workers = min(n_ellipsoids, os.cpu_count() or 1)
-    if workers > 1:  # the cores' processes take the tasks in turn
-        log(f"eight-state tube: the onset bound and the notch loops, {n_ellipsoids} invariant "
-            f"ellipsoids, on {workers} processes")  # fmt: skip
-        (got,) = dask.compute(parts, scheduler="processes", num_workers=workers)
-    else:
-        (got,) = dask.compute(parts, scheduler="sync")
+    got = _compute(parts, n_ellipsoids, log)
     loops, gains = _notch_loops(nv, tube_set, case, None, stable_only, log)  # stability only
     held = {}
     for v in notches or {}:
@@ -247,6 +243,38 @@ def steady_key(lam: float) -> str:
 def notch_key(variant: str) -> str:
     """The name of a variant's notch loop among the ellipsoids."""
     return f"notch_{variant}"
+
+
+def _compute(parts: dict, n_ellipsoids: int, log):
+    """The tasks ``parts`` computed on the active Dask client, or on the cores' processes.
+
+    A distributed client (``fahv design`` starts one: a LocalCluster, or ``--scheduler``)
+    honours the tasks' priorities; without one (a library call), the local process
+    scheduler takes them in its own order.
+    """
+    client = _active_client()
+    if client is not None:
+        log(f"eight-state tube: the onset bound and the notch loops, {n_ellipsoids} invariant "
+            f"ellipsoids, on {len(client.scheduler_info()['workers'])} Dask workers")  # fmt: skip
+        return dask.compute(parts, scheduler=client, optimize_graph=False)[0]
+    workers = min(n_ellipsoids, os.cpu_count() or 1)
+    if workers > 1:  # the cores' processes take the tasks in turn
+        log(f"eight-state tube: the onset bound and the notch loops, {n_ellipsoids} invariant "
+            f"ellipsoids, on {workers} processes")  # fmt: skip
+        return dask.compute(parts, scheduler="processes", num_workers=workers)[0]
+    return dask.compute(parts, scheduler="sync")[0]
+
+
+def _active_client():
+    """The default Dask distributed client of this process, or None."""
+    try:
+        from distributed import default_client
+    except ImportError:  # pragma: no cover - distributed is a dependency
+        return None
+    try:
+        return default_client()
+    except ValueError:  # no client
+        return None
 
 
 def _smallest_steady(steady) -> float:
