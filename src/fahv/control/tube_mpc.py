@@ -154,8 +154,8 @@ class TubeMPCLaw(PaperTubeMPCLaw):
         less the filtered nominal q (class docstring).
         """
         q_ref = None
-        if self.q_filter is not None:
-            q_ref = self.q_filter.step(ref.x_r[:, IQ] + ref.x_n[:, IQ])
+        if self.q_filter is not None:  # an ended run of a batch feeds 0, not its last values
+            q_ref = self.q_filter.step(np.where(lanes.alive, ref.x_r[:, IQ] + ref.x_n[:, IQ], 0.0))
         u, e = self.tube.step(x, ref, q_ref)
         return LawStep(u, e, self.tube.tube_level(e), no_lmi_failed(e.shape[0]))
 

@@ -41,6 +41,7 @@ from fahv.msg import (
 )
 from fahv.plant.faults import FaultInjector, make_fault
 from fahv.plant.integrator import Plant
+from fahv.verdict import RunEnded
 
 
 def check_step(node: str, topic: str, msg: LoopMessage, k: int) -> None:
@@ -82,8 +83,6 @@ class PlantCore:
         ]
         self.Ts, self.n_steps, self.limits = p["Ts"], n_steps_of(p), veh.limits
         self.envelope = veh.envelope
-        # first exit from the flight envelope of each run (reason of a later divergence)
-        self.exit_reason: list[str | None] = [None] * len(runs)
         self.x0 = np.stack([np.asarray(r["x0"], float) for r in runs])
         self.plant = Plant(params, veh.limits, self.x0, p["Ts"], p["plant_substeps"])
         self.lanes = lanes
@@ -98,28 +97,33 @@ class PlantCore:
     def state(self) -> VehicleState:
         """VehicleState of the current step k.
 
+        A run whose altitude or speed left the flight envelope ends with the verdict
+        ``envelope_exit``, one whose state is not finite with ``non_finite_state``
+        (:mod:`fahv.verdict`); the state of an ended run of a batch is put back on its
+        initial state, so the batch stays finite.
+
         Raises
         ------
-        RunError
-            For a single run whose state is no longer finite (a batch records it).
+        RunEnded
+            For a single run that ends here (a batch records it).
         """
         t = self.k * self.Ts
         x = self.plant.x
         out = self.envelope.outside(x[:, H], x[:, V])
         if out.any():
-            for b in np.flatnonzero(out):
-                if self.exit_reason[b] is None:
-                    self.exit_reason[b] = self.envelope.describe(t, x[b, H], x[b, V])
+
+            def exit_at(b: int) -> RunEnded:
+                why = self.envelope.describe(t, x[b, H], x[b, V])
+                return RunEnded("envelope_exit", "plant", self.k, t, f"the vehicle {why}")
+
+            self.lanes.fail_mask(out, exit_at)
         bad = ~np.all(np.isfinite(x), axis=1)
         if bad.any():
-
-            def error(b: int) -> RunError:
-                why = self.exit_reason[b]
-                after = f" after it {why}" if why else ""
-                return RunError(f"plant: state not finite at t = {t:.2f} s{after}")
-
-            self.lanes.fail_mask(bad, error)
-            self._reset(bad)
+            self.lanes.fail_mask(bad, lambda b: RunEnded(
+                "non_finite_state", "plant", self.k, t, f"state not finite: x = {x[b]!r}"
+            ))  # fmt: skip
+        if not self.lanes.alive.all():
+            self._reset(~self.lanes.alive)
         return VehicleState.of(self.k, t, self.plant.x)
 
     def advance(self, actuator: ControlCommand) -> None:
@@ -129,16 +133,18 @@ class PlantCore:
         ------
         RunError
             If the command is not of the current step.
-        ValueError
-            For a single run whose input is not finite (a batch records it).
+        RunEnded
+            For a single run whose input is not finite (verdict ``non_finite_input``;
+            a batch records it).
         """
         check_step("plant", "actuator_command", actuator, self.k)
         u = actuator.u()
         bad = np.isnan(np.clip(u, self.limits.u_min, self.limits.u_max)).any(axis=1)
         if bad.any():
-            self.lanes.fail_mask(
-                bad, lambda b: ValueError(f"plant input must be finite, got {u[b]!r}")
-            )
+            t = self.k * self.Ts
+            self.lanes.fail_mask(bad, lambda b: RunEnded(
+                "non_finite_input", "plant", self.k, t, f"plant input not finite: u = {u[b]!r}"
+            ))  # fmt: skip
             u[bad] = self.limits.u_min
         self.plant.step(u)
         self.k += 1
