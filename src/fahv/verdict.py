@@ -22,11 +22,6 @@ COMPLETED = "completed"
 #: Every verdict, with the node that finds it and what it means.
 VERDICTS = {
     COMPLETED: ("-", "the run flew its whole duration"),
-    "envelope_exit": (
-        "plant",
-        "the vehicle's altitude or speed left the flight envelope (the domain of the "
-        "vehicle model, the trim map and every design)",
-    ),
     "non_finite_state": ("plant", "the vehicle's state is no longer finite"),
     "non_finite_input": ("plant", "an actuator command reaching the plant is not finite"),
     "nominal_out_of_domain": (

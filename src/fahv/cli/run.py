@@ -279,6 +279,7 @@ def cmd_sil(args) -> int:
     )
     if rec.metadata.get("reason"):
         status(f"reason: {rec.metadata['reason']}")
+    verdict = Verdict.from_metadata(rec.metadata)
     if run.t.size:
         table = {variant: metrics(run, vehicle.limits)}
         if args.json:
@@ -288,6 +289,9 @@ def cmd_sil(args) -> int:
 
             print(f"case {case.name}, design {design.summary['design_hash']}")
             print(format_metrics(table))
+    if verdict is not None and not verdict.completed:
+        print(verdict_line("sil", res.bag.name, verdict), file=sys.stderr)
+        return EXIT_VERDICT
     return 0 if res.returncode == 0 else 1
 
 

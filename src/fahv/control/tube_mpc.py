@@ -154,8 +154,11 @@ class TubeMPCLaw(PaperTubeMPCLaw):
         less the filtered nominal q (class docstring).
         """
         q_ref = None
-        if self.q_filter is not None:  # an ended run of a batch feeds 0, not its last values
-            q_ref = self.q_filter.step(np.where(lanes.alive, ref.x_r[:, IQ] + ref.x_n[:, IQ], 0.0))
+        if self.q_filter is not None:
+            q_nom = ref.x_r[:, IQ] + ref.x_n[:, IQ]
+            if lanes is not None:  # an ended run of a batch feeds 0, not its last values
+                q_nom = np.where(lanes.alive, q_nom, 0.0)
+            q_ref = self.q_filter.step(q_nom)
         u, e = self.tube.step(x, ref, q_ref)
         return LawStep(u, e, self.tube.tube_level(e), no_lmi_failed(e.shape[0]))
 

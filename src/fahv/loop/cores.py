@@ -83,6 +83,8 @@ class PlantCore:
         ]
         self.Ts, self.n_steps, self.limits = p["Ts"], n_steps_of(p), veh.limits
         self.envelope = veh.envelope
+        # first exit from the flight envelope of each run (reason of a later divergence)
+        self.exit_reason: list[str | None] = [None] * len(runs)
         self.x0 = np.stack([np.asarray(r["x0"], float) for r in runs])
         self.plant = Plant(params, veh.limits, self.x0, p["Ts"], p["plant_substeps"])
         self.lanes = lanes
@@ -97,9 +99,9 @@ class PlantCore:
     def state(self) -> VehicleState:
         """VehicleState of the current step k.
 
-        A run whose altitude or speed left the flight envelope ends with the verdict
-        ``envelope_exit``, one whose state is not finite with ``non_finite_state``
-        (:mod:`fahv.verdict`); the state of an ended run of a batch is put back on its
+        A run whose state is not finite ends with the verdict ``non_finite_state``
+        (:mod:`fahv.verdict`; the reason names where it left the flight envelope
+        before, if it did); the state of an ended run of a batch is put back on its
         initial state, so the batch stays finite.
 
         Raises
@@ -111,17 +113,18 @@ class PlantCore:
         x = self.plant.x
         out = self.envelope.outside(x[:, H], x[:, V])
         if out.any():
-
-            def exit_at(b: int) -> RunEnded:
-                why = self.envelope.describe(t, x[b, H], x[b, V])
-                return RunEnded("envelope_exit", "plant", self.k, t, f"the vehicle {why}")
-
-            self.lanes.fail_mask(out, exit_at)
+            for b in np.flatnonzero(out):
+                if self.exit_reason[b] is None:
+                    self.exit_reason[b] = self.envelope.describe(t, x[b, H], x[b, V])
         bad = ~np.all(np.isfinite(x), axis=1)
         if bad.any():
-            self.lanes.fail_mask(bad, lambda b: RunEnded(
-                "non_finite_state", "plant", self.k, t, f"state not finite: x = {x[b]!r}"
-            ))  # fmt: skip
+
+            def ended(b: int) -> RunEnded:
+                why = self.exit_reason[b]
+                after = f" after the vehicle {why}" if why else ""
+                return RunEnded("non_finite_state", "plant", self.k, t, f"state not finite{after}")
+
+            self.lanes.fail_mask(bad, ended)
         if not self.lanes.alive.all():
             self._reset(~self.lanes.alive)
         return VehicleState.of(self.k, t, self.plant.x)

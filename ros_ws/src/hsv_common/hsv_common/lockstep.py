@@ -12,6 +12,9 @@ A :class:`LockstepNode` declares the typed parameters of its node
 - Reliable, keep-last QoS on every loop topic (:data:`fahv.loop.graph.LOOP_QOS`).
 - Start-up, readiness, missing peers and foreign graphs: :class:`GraphStatus`, the
   one readiness logic (the plant waits for every peer before step 0).
+- A core that ends the run with a verdict (:class:`fahv.verdict.RunEnded`) stops the
+  node with exit status 6; its last status carries the verdict, and every peer stops
+  with it (:meth:`hsv_common.graph_status.GraphStatus.check_failed_peer`).
 - A wall-clock watchdog (parameter ``watchdog_s``) turns a silent input into an error
   naming the missing peer (never started, lost, exited) or, when every peer is alive,
   the topic and the node that should have sent it (exit status 3).
@@ -30,6 +33,7 @@ from rclpy.node import Node
 from fahv.loop.graph import GRAPH, NODES, PREVIOUS, n_steps_of, producer_of
 from fahv.loop.params import specs, validate
 from fahv.loop.wire import decode_message, encode, step_of
+from fahv.verdict import RunEnded
 from hsv_common.graph_status import GraphStatus
 from hsv_common.parameters import declare_graph, declare_parameters
 from hsv_common.runtime import (
@@ -164,7 +168,12 @@ class LockstepNode(Node):
                 t: decode_message(t, self.buf[t].pop(self.k)) if self.k in self.buf[t] else None
                 for t in self.inputs
             }
-            self.publish(self.on_step(self.k, inputs))
+            try:
+                outputs = self.on_step(self.k, inputs)
+            except RunEnded as exc:  # the core ended the run: the last status carries it
+                self.status.verdict = exc.verdict
+                raise
+            self.publish(outputs)
             self.after_publish(self.k)
             if self.k == 0:
                 self.status.set_state("running")
@@ -216,7 +225,11 @@ class LockstepNode(Node):
         if not self.status.ready:
             if self.status.poll_ready():
                 self.last_progress = self.t_ready = time.monotonic()
-                self.on_ready()
+                try:
+                    self.on_ready()
+                except RunEnded as exc:  # e.g. the plant's initial state outside the envelope
+                    self.status.verdict = exc.verdict
+                    raise
             return
         self.check_watchdog()
 

@@ -313,7 +313,8 @@ class TrackingMPCNominal(NominalSource):
                 "nominal_out_of_domain", "nominal_trajectory", k, t,
                 f"the nominal's operating point (h, V) = ({h:.1f} ft, {V:.1f} ft/s) left "
                 f"the trim map the QP is scheduled on (h in [{tm.h_grid[0]:g}, "
-                f"{tm.h_grid[-1]:g}] ft, V in [{tm.V_grid[0]:g}, {tm.V_grid[-1]:g}] ft/s)",
+                f"{tm.h_grid[-1]:g}] ft, V in [{tm.V_grid[0]:g}, {tm.V_grid[-1]:g}] ft/s); "
+                f"vehicle at {self._vehicle_text(b)}",
             )  # fmt: skip
         try:
             self._schedule(b, theta)
@@ -322,6 +323,12 @@ class TrackingMPCNominal(NominalSource):
                 "nominal_singular", "nominal_trajectory", k, t,
                 f"scheduling at (h, V) = ({h:.1f} ft, {V:.1f} ft/s): {exc}",
             ) from None  # fmt: skip
+
+    def _vehicle_text(self, b: int) -> str:
+        """Run b's measured altitude, speed and attitude at the current step, as text."""
+        x = self._x_now[b]
+        return (f"h = {x[0]:.1f} ft, V = {x[1]:.1f} ft/s, alpha = {np.degrees(x[2]):.2f} deg, "
+                f"theta = {np.degrees(x[3]):.2f} deg")  # fmt: skip
 
     def _copy_schedule(self, b: int) -> None:
         """Copy run b's scheduled model into the batch arrays."""
@@ -428,6 +435,7 @@ class TrackingMPCNominal(NominalSource):
 
     def _replan(self, x: np.ndarray, h_c: np.ndarray, V_c: np.ndarray) -> None:
         """Re-plan every live run (each its own QP); a run whose re-plan ends it ends alone."""
+        self._x_now = np.asarray(x, float)  # the measured states (B, 9), for a verdict's reason
         if self.h_reset:  # the nominal's altitude to the measured one (e_h = 0)
             alive = self.lanes.alive
             self.XN[alive, 0] = np.asarray(x, float)[alive, 0]
