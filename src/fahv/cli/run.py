@@ -210,7 +210,8 @@ def cmd_simulate(args) -> int:
             if not verdict.completed:
                 ended.append(verdict_line("simulate", bag.name if bag else f"{case.name} {v}",
                                           verdict))  # fmt: skip
-            print(f"[{i}/{n}] {case.name} {v}: {verdict.name} in {time.perf_counter() - t0:.1f} s",
+            how = "done" if verdict.completed else f"ended ({verdict.name})"
+            print(f"[{i}/{n}] {case.name} {v}: {how} in {time.perf_counter() - t0:.1f} s",
                   file=sys.stderr, flush=True)  # fmt: skip
     finally:
         if live is not None:

@@ -99,6 +99,7 @@ class LockstepNode(Node):
             self.outputs, key=lambda t: not loop_nodes & set(self.status.consumers(t))
         )
         self.done = False
+        self.ended: RunEnded | None = None  # the verdict of the node's core, raised by poll
         self.last_progress = time.monotonic()
         self.t_ready = time.monotonic()
 
@@ -161,7 +162,7 @@ class LockstepNode(Node):
         self._advance()
 
     def _advance(self) -> None:
-        while not self.done and all(
+        while not self.done and self.ended is None and all(
             self.k in b or (self.k == 0 and t in self.previous) for t, b in self.buf.items()
         ):
             inputs = {
@@ -170,9 +171,10 @@ class LockstepNode(Node):
             }
             try:
                 outputs = self.on_step(self.k, inputs)
-            except RunEnded as exc:  # the core ended the run: the last status carries it
-                self.status.verdict = exc.verdict
-                raise
+            except RunEnded as exc:  # the core ended the run: raised by poll, out of the
+                self.status.verdict = exc.verdict  # callback (its last status carries it)
+                self.ended = exc
+                return
             self.publish(outputs)
             self.after_publish(self.k)
             if self.k == 0:
@@ -221,7 +223,11 @@ class LockstepNode(Node):
             If the graph does not start, a peer failed, or an input stays silent.
         ForeignGraphError
             If another graph that joined first runs in the domain.
+        RunEnded
+            If the node's core ended the run with a verdict (:mod:`fahv.verdict`).
         """
+        if self.ended is not None:
+            raise self.ended
         if not self.status.ready:
             if self.status.poll_ready():
                 self.last_progress = self.t_ready = time.monotonic()

@@ -34,7 +34,7 @@ from fahv.control.command import Command, CommandSchedule
 from fahv.control.mpc.attitude import attitude_bounds
 from fahv.control.mpc.estimator import DisturbanceEstimator, estimator_gains
 from fahv.control.mpc.settings import MPC_SECTION_FIELDS, X_BOX_TO_STATE, MPCSettings
-from fahv.control.mpc.tracking import TrackingMPC
+from fahv.control.mpc.tracking import TRIM_STEP, TrackingMPC
 from fahv.control.reference import lpv_of, mv, trim_map_of
 from fahv.errors import DesignError, RunError
 from fahv.lanes import Lanes
@@ -293,12 +293,13 @@ class TrackingMPCNominal(NominalSource):
     def _reschedule(self, b: int, theta) -> None:
         """Schedule run b's QP at the nominal's operating point theta = (h, V) during a run.
 
-        The trim map is the QP's domain: outside its grid the map is clipped, its
-        Jacobian has a zero column and the own-trim rows' Gx[0:2] is singular. A nominal
-        that left the grid (it follows the disturbance estimate, which follows a vehicle
-        that diverges, e.g. under a stuck elevator) ends the run with the verdict
-        ``nominal_out_of_domain``; singular scheduling equations inside the grid with
-        ``nominal_singular`` (:mod:`fahv.verdict`).
+        The trim map is the QP's domain: it is clipped to its grid, so at a point more
+        than one difference step (:data:`~fahv.control.mpc.tracking.TRIM_STEP`) beyond
+        the grid its Jacobian has a zero column and the own-trim rows' Gx[0:2] is
+        singular. A nominal that left that domain (it follows the disturbance estimate,
+        which follows a vehicle that diverges, e.g. under a stuck elevator) ends the run
+        with the verdict ``nominal_out_of_domain``; singular scheduling equations inside
+        it with ``nominal_singular`` (:mod:`fahv.verdict`).
 
         Raises
         ------
@@ -306,14 +307,16 @@ class TrackingMPCNominal(NominalSource):
             With one of those verdicts.
         """
         k, t = self.k, self.k * self.Ts
-        tm, (h, V) = self.trim_map, (float(theta[0]), float(theta[1]))
-        inside = tm.h_grid[0] <= h <= tm.h_grid[-1] and tm.V_grid[0] <= V <= tm.V_grid[-1]
+        tm, (h, V), (dh, dV) = self.trim_map, (float(theta[0]), float(theta[1])), TRIM_STEP
+        inside = (tm.h_grid[0] - dh < h < tm.h_grid[-1] + dh
+                  and tm.V_grid[0] - dV < V < tm.V_grid[-1] + dV)  # fmt: skip
         if not inside:  # also for a non-finite h or V
             raise RunEnded(
                 "nominal_out_of_domain", "nominal_trajectory", k, t,
                 f"the nominal's operating point (h, V) = ({h:.1f} ft, {V:.1f} ft/s) left "
                 f"the trim map the QP is scheduled on (h in [{tm.h_grid[0]:g}, "
-                f"{tm.h_grid[-1]:g}] ft, V in [{tm.V_grid[0]:g}, {tm.V_grid[-1]:g}] ft/s); "
+                f"{tm.h_grid[-1]:g}] ft, V in [{tm.V_grid[0]:g}, {tm.V_grid[-1]:g}] ft/s, "
+                f"one difference step of {dh:g} ft, {dV:g} ft/s beyond); "
                 f"vehicle at {self._vehicle_text(b)}",
             )  # fmt: skip
         try:
