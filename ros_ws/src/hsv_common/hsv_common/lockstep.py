@@ -162,8 +162,12 @@ class LockstepNode(Node):
         self._advance()
 
     def _advance(self) -> None:
-        while not self.done and self.ended is None and all(
-            self.k in b or (self.k == 0 and t in self.previous) for t, b in self.buf.items()
+        while (
+            not self.done
+            and self.ended is None
+            and all(
+                self.k in b or (self.k == 0 and t in self.previous) for t, b in self.buf.items()
+            )
         ):
             inputs = {
                 t: decode_message(t, self.buf[t].pop(self.k)) if self.k in self.buf[t] else None
