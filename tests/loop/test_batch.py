@@ -146,3 +146,30 @@ def test_nonlinear_nominal_refuses_the_eleven_state_design(design_case2):
     with pytest.raises(RunError, match=r"mpc\.nominal_model 'cm' needs the 9-state CM design, "
                        r"got 11 states"):  # fmt: skip
         build_core("nominal_trajectory", p)
+
+
+def test_a_stuck_elevator_ends_simulate_and_the_batch_with_the_same_verdict():
+    """Case 1 with the elevator stuck from 1 s: the nominal MPC's operating point leaves the
+    trim map (where its Jacobian would be singular); both paths end there, the batch's
+    other run completes."""
+    from fahv.certificate.verified import load_or_design
+    from fahv.runs.workspace import ROOT
+    from fahv.verdict import RunEnded
+
+    _, case1, _ = load_or_design(ROOT / "offline_design/scenarios/case1.yaml", log=lambda *_: None)
+    stuck = {"fault_injector": {"kind": "stuck", "t_onset": 1.0}}
+    with pytest.raises(RunEnded) as alone:
+        simulate(case1, "tube_mpc", 8.0, overrides=stuck)
+    res = simulate_batch(case1, "tube_mpc", [stuck, None], 8.0)
+    v = alone.value.verdict
+    assert res[0].verdict == v
+    assert (v.name, v.node, v.step, v.t) == (
+        "nominal_out_of_domain",
+        "nominal_trajectory",
+        275,
+        5.5,
+    )
+    assert "(h, V) = (85552.7 ft, 7631.1 ft/s) left the trim map" in v.reason
+    np.testing.assert_array_equal(res[0].partial.x, alone.value.partial.x)
+    assert res[0].partial.t.size == 275 and np.isfinite(res[0].partial.x).all()
+    assert res[1].t.size == 400  # the run without fault flies its 8 s

@@ -100,3 +100,17 @@ def test_the_same_run_twice_cannot_be_told_apart():
     p.update(st("plant", 555, run="run-a", start=T0 - 100, stamp=T0 + 5))
     action, text = p.foreign_verdict(3, now=T0 + 6)
     assert action == "stop" and "a second plant of the same run 'run-a'" in text
+
+
+def test_a_peer_that_ended_the_run_with_a_verdict_is_no_failure():
+    from fahv.verdict import Verdict
+
+    v = Verdict("nominal_out_of_domain", "nominal_trajectory", 275, 5.5, "the nominal left")
+    p = table("plant")
+    assert p.run_verdict() is None
+    p.update(st("nominal_trajectory", 9, state="exited", exit_status=6, k=275,
+                reason=v.text(), verdict=v.as_dict()))  # fmt: skip
+    assert p.run_verdict() == v
+    assert p.failed() == [] and p.failed_verdict() is None  # the run ended, nobody failed
+    p.update(st("tube_mpc", 10, state="exited", exit_status=3, k=275, reason="tube_mpc: x"))
+    assert p.failed() == ["tube_mpc (exited with status 3 at step 275: tube_mpc: x)"]

@@ -159,7 +159,7 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
                 settle = settling_after(m, t_end)
                 row.update(
                     status="ok" if failure is None and exit_reason is None else "failed",
-                    reason=failure or exit_reason or "",
+                    reason="; ".join(r for r in (failure, exit_reason) if r),
                     t_command_end_s=t_end,
                     settling_after_command_s=settle,
                     **m,

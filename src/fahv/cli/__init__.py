@@ -21,7 +21,9 @@ Subcommands::
     fahv index     index of offline_design/ from the files' descriptions
 
 Every command that uses the vehicle takes ``--vehicle FILE``. Errors name the
-input at fault and exit with status 2 (bad input) or 1 (failure). Ctrl-C or SIGTERM
+input at fault and exit with status 2 (bad input) or 1 (failure). A run that ends with
+a verdict other than ``completed`` (:mod:`fahv.verdict`) is named with its verdict, step,
+time and node, and the command exits with status 3. Ctrl-C or SIGTERM
 stops a command cleanly: a run in progress is finalised (status ``interrupted``), the
 command prints ``interrupted at step k of n; run written to DIR`` and exits with 130.
 """

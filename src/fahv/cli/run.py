@@ -29,6 +29,11 @@ from fahv.runs.tools import format_metrics
 from fahv.runs.workspace import ROOT
 from fahv.runs.writer import RunWriter
 from fahv.spec.scenario import load_scenario
+from fahv.verdict import RunEnded, Verdict, completed
+
+#: Exit status of a run command (``simulate``, ``sil``) when a run ended with a verdict
+#: other than ``completed`` (:mod:`fahv.verdict`); 1 is a failure, 2 bad input.
+EXIT_VERDICT = 3
 
 
 class StepProgress:
@@ -93,6 +98,12 @@ def _simulate_recorded(design, variant: str, duration, out_dir, live=None):
     The run file also holds the run's ROS parameter file (the one a SIL run's nodes
     get), so ``fahv replay --node ...`` can start nodes against it.
 
+    Returns
+    -------
+    (RunResult or None, Verdict, Path or None)
+        What the run flew (None when it ended before its first step), its verdict
+        (:mod:`fahv.verdict`; stored in the run file's metadata), the run folder.
+
     Raises
     ------
     RunInterrupted
@@ -104,24 +115,49 @@ def _simulate_recorded(design, variant: str, duration, out_dir, live=None):
     n_steps = int(round(d / case["Ts"]))
     bag = None if out_dir is None else Path(out_dir) / run_name(case["name"], variant, "sim")
     progress = StepProgress(desc, n_steps, live=live)
+    verdict = completed(n_steps, case["Ts"])
     try:
         if bag is None:
-            return simulate(design, variant, duration, writer=progress)
-        content = run_parameter_file(design, variant, bag, duration, 10.0, source="simulate")
-        meta = recorder_metadata(content)
-        with RunWriter(bag, meta, case["Ts"], params=content) as writer:
-            progress.writer = writer
             run = simulate(design, variant, duration, writer=progress)
+        else:
+            content = run_parameter_file(design, variant, bag, duration, 10.0, source="simulate")
+            meta = recorder_metadata(content)
+            with RunWriter(bag, meta, case["Ts"], params=content) as writer:
+                progress.writer = writer
+                run = simulate(design, variant, duration, writer=progress)
     except KeyboardInterrupt:
         # The finalised file's count, not the bar's: a stop deferred to the end of a
         # write is raised after the file counted that step but before the bar did.
         w = progress.writer
         k = progress.k if w is None else int(w.metadata.get("steps_recorded", progress.k))
         raise RunInterrupted(k, n_steps, bag) from None
+    except RunEnded as exc:  # the writer recorded the verdict and closed the file
+        run, verdict = exc.partial, exc.verdict
     finally:
         progress.close()
-    print(f"{desc}: run written to {bag}")
-    return run
+    if bag is not None:
+        print(f"{desc}: run written to {bag}")
+    return run, verdict, bag
+
+
+def verdict_line(command: str, run: str, verdict) -> str:
+    """The line ``fahv`` prints for a run that ended with a verdict other than completed.
+
+    Parameters
+    ----------
+    command : str
+        Subcommand (``simulate``, ``sil``).
+    run : str
+        The run: its folder name, or ``<case> <variant>`` when it was not recorded.
+    verdict : fahv.verdict.Verdict
+
+    Returns
+    -------
+    str
+        ``fahv <command>: run <run> ended: <verdict>`` (:meth:`fahv.verdict.Verdict.text`:
+        name, simulated time, step, node and reason).
+    """
+    return f"fahv {command}: run {run} ended: {verdict.text()}"
 
 
 def selected_variants(case, requested: list[str] | None) -> list[str]:
@@ -160,6 +196,7 @@ def cmd_simulate(args) -> int:
     )  # fmt: skip
     limits = vehicle.limits
     table = {}
+    ended = []
     live = _live_view(args.live, case["Ts"])
     try:
         for i, v in enumerate(variants, 1):
@@ -167,19 +204,26 @@ def cmd_simulate(args) -> int:
             n = len(variants)
             print(f"[{i}/{n}] {case.name} {v}: simulating", file=sys.stderr, flush=True)
             t0 = time.perf_counter()
-            run = _simulate_recorded(design, v, args.duration, out, live)
-            table[v] = metrics(run, limits)
-            print(f"[{i}/{n}] {case.name} {v}: done in {time.perf_counter() - t0:.1f} s",
+            run, verdict, bag = _simulate_recorded(design, v, args.duration, out, live)
+            if run is not None:  # the metrics of what it flew, also when it ended early
+                table[v] = metrics(run, limits)
+            if not verdict.completed:
+                ended.append(verdict_line("simulate", bag.name if bag else f"{case.name} {v}",
+                                          verdict))  # fmt: skip
+            how = "done" if verdict.completed else f"ended ({verdict.name})"
+            print(f"[{i}/{n}] {case.name} {v}: {how} in {time.perf_counter() - t0:.1f} s",
                   file=sys.stderr, flush=True)  # fmt: skip
     finally:
         if live is not None:
             live.close()
     if args.json:
         print(to_json(table))
-    else:
+    elif table:
         print(f"case {case.name}, design {design.summary['design_hash']}")
         print(format_metrics(table))
-    return 0
+    for line in ended:
+        print(line, file=sys.stderr)
+    return EXIT_VERDICT if ended else 0
 
 
 def _live_view(port: int | None, Ts: float):
@@ -236,6 +280,7 @@ def cmd_sil(args) -> int:
     )
     if rec.metadata.get("reason"):
         status(f"reason: {rec.metadata['reason']}")
+    verdict = Verdict.from_metadata(rec.metadata)
     if run.t.size:
         table = {variant: metrics(run, vehicle.limits)}
         if args.json:
@@ -245,6 +290,9 @@ def cmd_sil(args) -> int:
 
             print(f"case {case.name}, design {design.summary['design_hash']}")
             print(format_metrics(table))
+    if verdict is not None and not verdict.completed:
+        print(verdict_line("sil", res.bag.name, verdict), file=sys.stderr)
+        return EXIT_VERDICT
     return 0 if res.returncode == 0 else 1
 
 
@@ -327,7 +375,11 @@ def cmd_paper_figures(args) -> int:
     for case_path in [] if args.runs else args.cases:
         case, design, _ = load_or_design(case_path, None, args.vehicle)
         for v in case["variants"]:
-            runs[(case.name, v)] = _simulate_recorded(design, v, args.duration, ROOT / "bags")
+            run, verdict, bag = _simulate_recorded(design, v, args.duration, ROOT / "bags")
+            if not verdict.completed:  # the figures show whole runs only
+                print(verdict_line("paper-figures", bag.name, verdict), file=sys.stderr)
+                return EXIT_VERDICT
+            runs[(case.name, v)] = run
     for path in paper_figures(runs, args.out):
         print(path)
     return 0

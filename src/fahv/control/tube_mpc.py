@@ -155,7 +155,10 @@ class TubeMPCLaw(PaperTubeMPCLaw):
         """
         q_ref = None
         if self.q_filter is not None:
-            q_ref = self.q_filter.step(ref.x_r[:, IQ] + ref.x_n[:, IQ])
+            q_nom = ref.x_r[:, IQ] + ref.x_n[:, IQ]
+            if lanes is not None:  # an ended run of a batch feeds 0, not its last values
+                q_nom = np.where(lanes.alive, q_nom, 0.0)
+            q_ref = self.q_filter.step(q_nom)
         u, e = self.tube.step(x, ref, q_ref)
         return LawStep(u, e, self.tube.tube_level(e), no_lmi_failed(e.shape[0]))
 

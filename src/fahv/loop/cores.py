@@ -41,6 +41,7 @@ from fahv.msg import (
 )
 from fahv.plant.faults import FaultInjector, make_fault
 from fahv.plant.integrator import Plant
+from fahv.verdict import RunEnded
 
 
 def check_step(node: str, topic: str, msg: LoopMessage, k: int) -> None:
@@ -98,10 +99,15 @@ class PlantCore:
     def state(self) -> VehicleState:
         """VehicleState of the current step k.
 
+        A run whose state is not finite ends with the verdict ``non_finite_state``
+        (:mod:`fahv.verdict`; the reason names where it left the flight envelope
+        before, if it did); the state of an ended run of a batch is put back on its
+        initial state, so the batch stays finite.
+
         Raises
         ------
-        RunError
-            For a single run whose state is no longer finite (a batch records it).
+        RunEnded
+            For a single run that ends here (a batch records it).
         """
         t = self.k * self.Ts
         x = self.plant.x
@@ -113,13 +119,14 @@ class PlantCore:
         bad = ~np.all(np.isfinite(x), axis=1)
         if bad.any():
 
-            def error(b: int) -> RunError:
+            def ended(b: int) -> RunEnded:
                 why = self.exit_reason[b]
-                after = f" after it {why}" if why else ""
-                return RunError(f"plant: state not finite at t = {t:.2f} s{after}")
+                after = f" after the vehicle {why}" if why else ""
+                return RunEnded("non_finite_state", "plant", self.k, t, f"state not finite{after}")
 
-            self.lanes.fail_mask(bad, error)
-            self._reset(bad)
+            self.lanes.fail_mask(bad, ended)
+        if not self.lanes.alive.all():
+            self._reset(~self.lanes.alive)
         return VehicleState.of(self.k, t, self.plant.x)
 
     def advance(self, actuator: ControlCommand) -> None:
@@ -129,16 +136,18 @@ class PlantCore:
         ------
         RunError
             If the command is not of the current step.
-        ValueError
-            For a single run whose input is not finite (a batch records it).
+        RunEnded
+            For a single run whose input is not finite (verdict ``non_finite_input``;
+            a batch records it).
         """
         check_step("plant", "actuator_command", actuator, self.k)
         u = actuator.u()
         bad = np.isnan(np.clip(u, self.limits.u_min, self.limits.u_max)).any(axis=1)
         if bad.any():
-            self.lanes.fail_mask(
-                bad, lambda b: ValueError(f"plant input must be finite, got {u[b]!r}")
-            )
+            t = self.k * self.Ts
+            self.lanes.fail_mask(bad, lambda b: RunEnded(
+                "non_finite_input", "plant", self.k, t, f"plant input not finite: u = {u[b]!r}"
+            ))  # fmt: skip
             u[bad] = self.limits.u_min
         self.plant.step(u)
         self.k += 1

@@ -11,6 +11,9 @@ the rules are tested without a graph):
 - which nodes are missing: never started, exited, or lost (no heartbeat for
   :data:`fahv.loop.graph.STATUS_LOST_S`), :meth:`Peers.missing`; a node whose input
   stays silent names these, not the neighbour that waits for them as well;
+- whether a peer ended the run with a verdict (:meth:`Peers.run_verdict`,
+  :mod:`fahv.verdict`): every node then stops with it, and the recorder finishes the
+  file with it;
 - whether another graph runs in the same ROS domain and which of the two joined
   second (:meth:`Peers.foreign_verdict`). Nodes of one graph share a run id (parameter
   ``run_id``, written by ``fahv sil`` for every node); a graph joined when its first
@@ -19,7 +22,8 @@ the rules are tested without a graph):
 A status::
 
     {"node": "plant", "pid": 4242, "run": "case1_tube_mpc_sil_...", "start": 1.7e9,
-     "state": "ready", "k": 0, "stamp": 1.7e9, "waiting": [], "exit": None, "reason": ""}
+     "state": "ready", "k": 0, "stamp": 1.7e9, "waiting": [], "exit": None, "reason": "",
+     "verdict": None}
 
 ``start`` and ``stamp`` are wall-clock times [s] (``time.time()``; the graph runs on
 one host). ``state`` is one of :data:`STATES`.
@@ -32,6 +36,7 @@ import time
 from dataclasses import dataclass, field
 
 from fahv.loop.graph import STATUS_LOST_S
+from fahv.verdict import Verdict
 
 #: States of a node, in order: building its core and matching its topics, every topic
 #: matched, stepping, after its last step, gone (with an exit status).
@@ -49,6 +54,7 @@ def status(
     exit_status: int | None = None,
     reason: str = "",
     stamp: float | None = None,
+    verdict: dict | None = None,
 ) -> str:
     """One status message as JSON text (the ``data`` of a std_msgs/String).
 
@@ -74,6 +80,9 @@ def status(
         Why it exited (the error message), or what it waits for.
     stamp : float, optional
         Wall time of this status [s]; now by default.
+    verdict : dict, optional
+        With ``state`` "exited": the verdict that ended the run
+        (:meth:`fahv.verdict.Verdict.as_dict`), found by this node or learnt from a peer.
 
     Raises
     ------
@@ -94,6 +103,7 @@ def status(
             "waiting": list(waiting),
             "exit": exit_status,
             "reason": reason,
+            "verdict": verdict,
         }
     )
 
@@ -193,17 +203,38 @@ class Peers:
         found = (self.describe(n, now) for n in self.peers())
         return [d for d in found if d is not None]
 
+    def run_verdict(self) -> Verdict | None:
+        """The verdict that ended this run, as a peer that exited with it announced it.
+
+        Returns
+        -------
+        fahv.verdict.Verdict or None
+            None while no peer of the run exited with a verdict (or the status is not
+            one: another program's).
+        """
+        for n in self.peers():
+            s = self.own(n)
+            if s is not None and s["state"] == "exited" and s.get("verdict"):
+                try:
+                    return Verdict.from_dict(s["verdict"])
+                except ValueError:
+                    continue
+        return None
+
     def failed(self) -> list[str]:
         """Peers that exited with a non-zero status, described (their own reasons).
 
-        Depends on the table only, so it is computed once per :attr:`version` (every
-        node asks between any two spins).
+        A peer that exited with the run's verdict (:meth:`run_verdict`) did not fail:
+        the run ended. Depends on the table only, so it is computed once per
+        :attr:`version` (every node asks between any two spins).
         """
         if self._failed[0] != self.version:
             out = []
             for n in self.peers():
                 s = self.own(n)
                 if s is not None and s["state"] == "exited" and s.get("exit"):
+                    if s.get("verdict"):
+                        continue
                     out.append(self.describe(n))
             self._failed = (self.version, tuple(out))
         return list(self._failed[1])

@@ -37,6 +37,7 @@ from fahv.msg import (
     TubeStatus,
     VehicleState,
 )
+from fahv.verdict import RunEnded
 
 #: Counters of /hsv/tube_status (``lmi_<name>``): the off-line RMPC counts its steps
 #: outside its largest ellipsoid as ``failed``.
@@ -350,9 +351,13 @@ def simulate(
 
     Raises
     ------
+    RunEnded
+        If the run ends before its duration with a verdict (:mod:`fahv.verdict`: the
+        vehicle left the flight envelope, a non-finite state or input, a nominal that
+        cannot be scheduled); the message names the verdict, the time, the step and
+        the node, ``exc.partial`` holds the steps flown before (None before step 1).
     RunError
-        On an unknown variant, or if the plant state becomes non-finite (the run
-        stops there and the message gives the time).
+        On an unknown variant.
     ParameterError
         If the design gives a node an invalid parameter.
     """
@@ -385,18 +390,22 @@ def simulate_parameters(params: dict, progress=None, writer=None, info: dict | N
 
     Raises
     ------
-    RunError
-        If the plant state becomes non-finite.
+    RunEnded
+        If the run ends before its duration with a verdict (as :func:`simulate`).
     ParameterError
         On an invalid node parameter (names the node and the key).
     """
     loop = Loop([params], Lanes(1, strict=True))
     hist = History(loop.n_steps, 1, loop.n)
     steps = range(loop.n_steps) if progress is None else progress(range(loop.n_steps))
-    for k in steps:
-        msgs = loop.step(k)
-        hist.add(*msgs[1:])
-        if writer is not None:
-            for topic, msg in zip(TOPICS, msgs, strict=True):
-                writer.write(topic, k, msg)
+    try:
+        for k in steps:
+            msgs = loop.step(k)
+            hist.add(*msgs[1:])
+            if writer is not None:
+                for topic, msg in zip(TOPICS, msgs, strict=True):
+                    writer.write(topic, k, msg)
+    except RunEnded as exc:  # what the run flew before, as the batch engine keeps it
+        exc.partial = hist.result(0, info or {}) if hist.count else None
+        raise
     return hist.result(0, info or {})

@@ -33,12 +33,13 @@ from fahv.errors import RunError
 from fahv.loop.graph import TOPICS
 from fahv.loop.simulate import RunResult, run_result
 from fahv.runs.messages import decode, decoder_of
+from fahv.verdict import METADATA_KEYS
 
 RUN_RECORD = "fahv.run"
 #: Attachment: the ROS 2 parameter file of every node of the run.
 PARAMS = "params.yaml"
 #: Metadata keys a run gets when it ends (not part of what it was made from).
-END_KEYS = ("status", "steps_recorded", "wall_time_s", "ros_domain_id")
+END_KEYS = ("status", "steps_recorded", "wall_time_s", "ros_domain_id", *METADATA_KEYS)
 
 
 def start_metadata(meta: dict) -> dict:

@@ -26,6 +26,7 @@ from fahv.msg import MSG_DIR
 from fahv.runs.bag import Recording, run_result_of, step_anomalies
 from fahv.runs.latency import TIMESTAMPS_FILE, format_latencies, run_latencies
 from fahv.runs.metrics import metrics
+from fahv.verdict import METADATA_KEYS, Verdict
 
 #: Rows of the metrics table: (key of :func:`fahv.runs.metrics.metrics`, label, format).
 METRIC_ROWS = (
@@ -405,7 +406,11 @@ def format_summary(s: dict, column: str | None = None) -> str:
     for key in SUMMARY_KEYS:
         if key in md:
             lines.append(f"{key:<13} {md[key]}")
-    extra = sorted(k for k in md if k not in SUMMARY_KEYS and not k.startswith("anomalies"))
+    verdict = Verdict.from_metadata(md)
+    if verdict is not None:  # name, time, step, node and reason on one line
+        lines.append(f"{'verdict':<13} {verdict.text()}")
+    shown = (*SUMMARY_KEYS, *METADATA_KEYS)
+    extra = sorted(k for k in md if k not in shown and not k.startswith("anomalies"))
     if extra:
         lines.append("metadata      " + ", ".join(f"{k}={md[k]}" for k in extra))
     span = s["sim_time_s"]

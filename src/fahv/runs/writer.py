@@ -26,6 +26,7 @@ from fahv.loop.graph import TOPICS
 from fahv.loop.wire import encode, typestore
 from fahv.runs.bag import PARAMS, RUN_RECORD
 from fahv.runs.messages import LOOP_QOS
+from fahv.verdict import RunEnded, Verdict, completed
 from fahv.version import code_version
 
 
@@ -135,7 +136,9 @@ class RunWriter:
     Notes
     -----
     Use as a context manager or call :meth:`close`; ``close(status=...)`` records
-    how the run ended in the metadata (complete, interrupted, failed: ...).
+    how the run ended in the metadata (complete, ended: <verdict>, interrupted,
+    failed: ...), and :meth:`set_verdict` its verdict (:mod:`fahv.verdict`; the
+    context manager records a :class:`~fahv.verdict.RunEnded` that leaves it).
     """
 
     def __init__(
@@ -219,13 +222,27 @@ class RunWriter:
         self.metadata[key] = str(value)
         self._writer.set_custom_data(key, str(value))
 
+    def set_verdict(self, verdict: Verdict) -> None:
+        """Record how the run ended, before the run is closed.
+
+        The metadata ``verdict``, ``verdict_node`` ... of
+        :meth:`fahv.verdict.Verdict.metadata`.
+
+        Parameters
+        ----------
+        verdict : fahv.verdict.Verdict
+        """
+        for key, value in verdict.metadata().items():
+            self.set_metadata(key, value)
+
     def close(self, status: str = "complete", attachments: dict | None = None) -> None:
         """Finish the file (attachments, final metadata, summary, indexes, metadata.yaml).
 
         Parameters
         ----------
         status : str
-            How the run ended (metadata ``status``).
+            How the run ended (metadata ``status``). A ``complete`` run without a
+            verdict gets ``completed`` (:meth:`set_verdict`).
         attachments : dict[str, bytes], optional
             Attachments known only at the end (the recorder's timestamps).
 
@@ -240,8 +257,11 @@ class RunWriter:
 
     def _close(self, status: str, attachments: dict | None) -> None:
         self._closed = True
+        steps = min(self.counts.values())
+        if status == "complete" and "verdict" not in self.metadata:
+            self.set_verdict(completed(steps, self.Ts_ns * 1e-9))
         self.set_metadata("status", status)
-        self.set_metadata("steps_recorded", min(self.counts.values()))
+        self.set_metadata("steps_recorded", steps)
         storage = self._writer.storage
         for name, data in (attachments or {}).items():
             storage.add_attachment(name, data, _media_type(name))
@@ -257,5 +277,8 @@ class RunWriter:
             self.close("complete")
         elif issubclass(exc_type, KeyboardInterrupt):  # Ctrl-C or SIGTERM (fahv.cli)
             self.close("interrupted")
+        elif isinstance(exc, RunEnded):  # the run ended early with its verdict
+            self.set_verdict(exc.verdict)
+            self.close(exc.verdict.status)
         else:
             self.close(f"failed: {exc_type.__name__}: {exc}")

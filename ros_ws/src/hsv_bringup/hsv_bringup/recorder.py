@@ -11,8 +11,10 @@ its own receive time, attached to the run file when it closes (``timestamps.npz`
 ``fahv inspect`` comes from them. The parameter file the graph was started with
 (``params_file``) is attached when the run starts, so the run file alone can be
 replayed and rerun. It stops by itself once every topic holds ``duration / Ts``
-steps; on SIGINT/SIGTERM, a lost graph (watchdog) or an error it still closes the
-file, with the reason in the run metadata (``status``).
+steps, or once a peer ended the run with a verdict (:mod:`fahv.verdict`) and the steps
+before it are recorded (the file then holds the verdict); on SIGINT/SIGTERM, a lost
+graph (watchdog) or an error it still closes the file, with the reason in the run
+metadata (``status``).
 
 With ``live_port`` >= 0 it also serves every message it records, the same CDR bytes,
 on a Foxglove WebSocket server (:class:`fahv.runs.live.LiveView`): the live view costs
@@ -52,6 +54,9 @@ from fahv.runs.writer import RunWriter
 #: a few steps (QOS_DEPTH steps are kept for it), and it gives the loop nodes the CPU
 #: (10 ms rather than 2 ms: a fifth less recorder CPU over a 60 s run, measured).
 DRAIN_PAUSE_S = 0.01
+#: Longest wait of the recorder, once a peer ended the run with a verdict, for the
+#: messages of the steps before it still on their way [s wall time without a message].
+VERDICT_DRAIN_S = 2.0
 
 
 class Recorder(Node):
@@ -106,6 +111,7 @@ class Recorder(Node):
         self.status.attach(self.subs, {})
         self.status.waiting = []
         self.done = False
+        self.verdict = None  # the verdict a peer ended the run with (fahv.verdict)
         self.k = 0
         self.dropped = 0
         self.last_msg = time.monotonic()
@@ -180,6 +186,8 @@ class Recorder(Node):
                 self.t_ready = time.monotonic()
                 self.get_logger().info(f"recording {len(self.subs)} topics to {self.writer.path}")
             return
+        if self._ending():
+            return
         self.status.check_failed_peer()
         self.status.check_foreign(force=False)
         if not self.started:  # the graph's step 0 is still to come
@@ -207,8 +215,25 @@ class Recorder(Node):
                 "is behind; every peer alive)"
             )
 
+    def _ending(self) -> bool:
+        """True once a peer ended the run with a verdict (then the recorder drains).
+
+        The messages of the steps before the verdict's are recorded (or none came for
+        :data:`VERDICT_DRAIN_S`), then the recorder is done and closes the file with
+        the verdict.
+        """
+        if self.verdict is None:
+            self.verdict = self.status.peers.run_verdict()
+            if self.verdict is None:
+                return False
+            self.get_logger().warning(f"run ended: {self.verdict.text()}")
+        idle = time.monotonic() - self.last_msg
+        if min(self.writer.counts.values()) >= self.verdict.step or idle > VERDICT_DRAIN_S:
+            self.done = True
+        return True
+
     def close(self, status: int, reason: str = "") -> None:
-        """Finish the file with the run status, the reason and the anomaly counts."""
+        """Finish the file with the run status (or verdict), the reason and the anomaly counts."""
         if status != 0 and not self.done:  # a peer's own reason is the better one
             failed = self.status.peers.failed()
             if failed and not reason.startswith("recorder: peer"):
@@ -220,6 +245,9 @@ class Recorder(Node):
         if reason:
             self.writer.set_metadata("reason", reason)
         status_text = end_reason(self.done, status)
+        if self.verdict is not None:
+            self.writer.set_verdict(self.verdict)
+            status_text = self.verdict.status
         self.writer.close(status_text, {TIMESTAMPS_FILE: timestamps_npz(self.stamps)})
         if self.live is not None:
             self.live.close()

@@ -9,7 +9,9 @@ every node exits 0 after the last step; the first node that exits non-zero or is
 (a node whose status is not 3 first: the cause rather than the peers that stopped
 because of it) fails the run, the others get SIGINT (the recorder closes its file),
 then SIGKILL after a grace period, and the runner exits 1 naming that node and showing
-the end of its log.
+the end of its log. A run that ends with a verdict (fahv.verdict: the node that finds it
+and then every peer exit with status 6, the recorder finishes the file with it) is no
+failure: the runner waits for every node and exits 3.
 
 Isolation: every graph runs in a DDS domain of its own. Unless ``--domain-id`` is
 given, the runner takes a free ``ROS_DOMAIN_ID`` from ROS 2's ``domain_coordinator``
@@ -55,6 +57,13 @@ EXIT_INTERRUPTED = 130
 #: Exit status of a node whose watchdog fired (hsv_common.runtime.EXIT_WATCHDOG); a node
 #: that stops because a peer failed exits so too, so the runner names another first.
 EXIT_WATCHDOG_NODE = 3
+#: Exit status of a node that ended the run with a verdict (hsv_common.runtime.EXIT_VERDICT).
+EXIT_VERDICT_NODE = 6
+#: Exit status of the runner (and of ``fahv sil``) when the run ended with a verdict
+#: other than completed (fahv.verdict): the graph ended cleanly, the run file holds it.
+EXIT_VERDICT = 3
+#: How long the nodes of a run that ended with a verdict may take to exit [s].
+VERDICT_GRACE_S = 20.0
 #: How long a watchdog exit waits for the failed peer it names to exit too [s].
 CAUSE_GRACE_S = 3.0
 #: How long a failed graph waits for a still-starting recorder to open its run file [s]
@@ -210,9 +219,11 @@ class Graph:
         -------
         (str or None, int)
             The first node that failed and its exit status; (None, 0) when every node
-            finished; (None, 130) after :meth:`on_signal`.
+            finished; (None, 130) after :meth:`on_signal`; (node, 6) when the run
+            ended with a verdict and every node exited (or :data:`VERDICT_GRACE_S`
+            passed): the first node that exited with it.
         """
-        t_watchdog = None
+        t_watchdog = t_verdict = None
         while True:
             if self.stop_signal is not None:
                 return None, EXIT_INTERRUPTED
@@ -226,6 +237,12 @@ class Graph:
                 rc = self.own_status(name, rc)
                 if rc != 0:
                     failed.append((name, rc))
+            ended = [f for f in failed if f[1] == EXIT_VERDICT_NODE]
+            failed = [f for f in failed if f[1] != EXIT_VERDICT_NODE]
+            if ended and not failed:  # the run ended: the recorder finishes its file
+                t_verdict = time.monotonic() if t_verdict is None else t_verdict
+                if running == 0 or time.monotonic() - t_verdict > VERDICT_GRACE_S:
+                    return ended[0]
             if failed:  # the cause first: a node that stopped because a peer failed says 3
                 cause = [f for f in failed if f[1] != EXIT_WATCHDOG_NODE]
                 if cause:
@@ -252,6 +269,7 @@ def describe(rc: int) -> str:
         3: "watchdog",
         4: "stopped by a signal",
         5: "foreign graph in its ROS domain",
+        6: "run ended with a verdict",
     }.get(rc, f"exit status {rc}")
 
 
@@ -314,6 +332,11 @@ def run_graph(graph: Graph, bag, quiet: bool) -> int:
         graph.stop()
         print(f"sil: run (interrupted) written to {bag or '(not recorded)'}", file=sys.stderr)
         return EXIT_INTERRUPTED
+    if rc == EXIT_VERDICT_NODE:
+        graph.stop()  # every node exited already, unless one took longer than the grace
+        print(f"sil: the run ended with a verdict (node '{failed}' first); run written to "
+              f"{bag}", file=sys.stderr)  # fmt: skip
+        return EXIT_VERDICT
     if failed is not None:
         print(f"sil: node '{failed}' failed ({describe(rc)}); stopping the graph", file=sys.stderr)
         graph.await_recording(bag)
@@ -326,7 +349,7 @@ def run_graph(graph: Graph, bag, quiet: bool) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the graph once; returns 0 on success, 1 if a node failed, 130 if interrupted."""
+    """Run the graph once; returns 0 done, 1 node failed, 3 run ended with a verdict, 130 stop."""
     ap = argparse.ArgumentParser(prog="sil", description=__doc__.split("\n\n")[0])
     ap.add_argument("--params-file", type=Path, required=True)
     ap.add_argument("--log-dir", type=Path, required=True)

@@ -15,6 +15,8 @@ building its core or solving still counts as alive), keeps the peers' statuses i
   after :data:`STARTUP_MAX_S` when every peer is alive but some are still starting;
 - **a failed peer**: a peer of the graph that exited with a non-zero status stops the
   node at once, with that peer's name and reason;
+- **the run's verdict**: a peer that ended the run with a verdict (:mod:`fahv.verdict`)
+  stops the node with the same verdict, which its last status carries on;
 - **foreign graphs**: another graph in the ROS domain (statuses of another run id, or
   more publishers on an input than the graph has producers of it) stops the graph that
   joined second; the first one goes on and ignores the other's messages (which are of
@@ -33,6 +35,7 @@ from std_msgs.msg import String
 
 from fahv.loop.graph import GRAPH, STATUS_PERIOD_S, STATUS_TOPIC, producer_of
 from fahv.loop.peers import Peers, parse_status, status
+from fahv.verdict import RunEnded
 from hsv_common.runtime import (
     STATUS_QOS,
     ForeignGraphError,
@@ -88,6 +91,8 @@ class GraphStatus:
         self.extra_since: dict[str, float] = {}  # topic -> first time it had extra publishers
         self.said_stay = False
         self._held: str | None = None
+        #: The verdict that ended the run (fahv.verdict.Verdict), announced at close.
+        self.verdict = None
         self._key: list = []
         self._lock = threading.Lock()
         self._pub = node.create_publisher(
@@ -105,9 +110,10 @@ class GraphStatus:
     # -- own status ---------------------------------------------------------------------
     def publish(self, exit_status: int | None = None, reason: str = "") -> None:
         """Publish the node's current status."""
+        verdict = None if self.verdict is None else self.verdict.as_dict()
         text = status(
             self.name, self.peers.pid, self.peers.run, self.peers.start, self.state, self.k,
-            self.waiting, exit_status, reason,
+            self.waiting, exit_status, reason, verdict=verdict,
         )  # fmt: skip
         with self._lock:
             self._pub.publish(String(data=text))
@@ -206,11 +212,22 @@ class GraphStatus:
         return "; ".join(self.peers.missing())
 
     def check_failed_peer(self) -> None:
-        """Raise :class:`WatchdogError` if a peer of the graph exited with an error.
+        """Stop if a peer ended the run with a verdict, or exited with an error.
 
-        The message is :meth:`fahv.loop.peers.Peers.failed_verdict`: the root cause
-        (a peer that never started or was lost) first.
+        Raises
+        ------
+        RunEnded
+            If a peer exited with the run's verdict (:mod:`fahv.verdict`): this node
+            ends with the same verdict.
+        WatchdogError
+            If a peer exited with an error; the message is
+            :meth:`fahv.loop.peers.Peers.failed_verdict`: the root cause (a peer that
+            never started or was lost) first.
         """
+        ended = self.peers.run_verdict()
+        if ended is not None:
+            self.verdict = ended
+            raise RunEnded.of(ended)
         verdict = self.peers.failed_verdict()
         if verdict is not None:
             raise WatchdogError(f"{self.name}: {verdict}")

@@ -12,6 +12,9 @@ A :class:`LockstepNode` declares the typed parameters of its node
 - Reliable, keep-last QoS on every loop topic (:data:`fahv.loop.graph.LOOP_QOS`).
 - Start-up, readiness, missing peers and foreign graphs: :class:`GraphStatus`, the
   one readiness logic (the plant waits for every peer before step 0).
+- A core that ends the run with a verdict (:class:`fahv.verdict.RunEnded`) stops the
+  node with exit status 6; its last status carries the verdict, and every peer stops
+  with it (:meth:`hsv_common.graph_status.GraphStatus.check_failed_peer`).
 - A wall-clock watchdog (parameter ``watchdog_s``) turns a silent input into an error
   naming the missing peer (never started, lost, exited) or, when every peer is alive,
   the topic and the node that should have sent it (exit status 3).
@@ -30,6 +33,7 @@ from rclpy.node import Node
 from fahv.loop.graph import GRAPH, NODES, PREVIOUS, n_steps_of, producer_of
 from fahv.loop.params import specs, validate
 from fahv.loop.wire import decode_message, encode, step_of
+from fahv.verdict import RunEnded
 from hsv_common.graph_status import GraphStatus
 from hsv_common.parameters import declare_graph, declare_parameters
 from hsv_common.runtime import (
@@ -95,6 +99,7 @@ class LockstepNode(Node):
             self.outputs, key=lambda t: not loop_nodes & set(self.status.consumers(t))
         )
         self.done = False
+        self.ended: RunEnded | None = None  # the verdict of the node's core, raised by poll
         self.last_progress = time.monotonic()
         self.t_ready = time.monotonic()
 
@@ -157,14 +162,24 @@ class LockstepNode(Node):
         self._advance()
 
     def _advance(self) -> None:
-        while not self.done and all(
-            self.k in b or (self.k == 0 and t in self.previous) for t, b in self.buf.items()
+        while (
+            not self.done
+            and self.ended is None
+            and all(
+                self.k in b or (self.k == 0 and t in self.previous) for t, b in self.buf.items()
+            )
         ):
             inputs = {
                 t: decode_message(t, self.buf[t].pop(self.k)) if self.k in self.buf[t] else None
                 for t in self.inputs
             }
-            self.publish(self.on_step(self.k, inputs))
+            try:
+                outputs = self.on_step(self.k, inputs)
+            except RunEnded as exc:  # the core ended the run: raised by poll, out of the
+                self.status.verdict = exc.verdict  # callback (its last status carries it)
+                self.ended = exc
+                return
+            self.publish(outputs)
             self.after_publish(self.k)
             if self.k == 0:
                 self.status.set_state("running")
@@ -212,11 +227,19 @@ class LockstepNode(Node):
             If the graph does not start, a peer failed, or an input stays silent.
         ForeignGraphError
             If another graph that joined first runs in the domain.
+        RunEnded
+            If the node's core ended the run with a verdict (:mod:`fahv.verdict`).
         """
+        if self.ended is not None:
+            raise self.ended
         if not self.status.ready:
             if self.status.poll_ready():
                 self.last_progress = self.t_ready = time.monotonic()
-                self.on_ready()
+                try:
+                    self.on_ready()
+                except RunEnded as exc:  # e.g. the plant's initial state outside the envelope
+                    self.status.verdict = exc.verdict
+                    raise
             return
         self.check_watchdog()
 

@@ -9,6 +9,8 @@ Exit status of a node (:func:`main`), also in docs/guide/sil.md:
 3   watchdog: the graph did not start, or a peer went missing or silent
 4   stopped by SIGINT / SIGTERM before the end
 5   another graph in the ROS domain that joined first (or cannot be told apart)
+6   the run ended with a verdict (:mod:`fahv.verdict`), found by this node's core
+    or learnt from a peer's last status
 ==  =====================================================================
 """
 
@@ -33,8 +35,10 @@ from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from fahv.errors import ParameterError
 from fahv.loop import graph
 from fahv.loop.graph import TEARDOWN_MARK
+from fahv.verdict import RunEnded
 
 EXIT_OK, EXIT_ERROR, EXIT_PARAM, EXIT_WATCHDOG, EXIT_SIGNAL, EXIT_FOREIGN = 0, 1, 2, 3, 4, 5
+EXIT_VERDICT = 6
 #: Longest DDS teardown (node and participant destruction) after the node closed [s].
 #: Fast DDS 2.14 can deadlock destroying a participant while its peers leave (seen in
 #: CI: the main thread spinning in DomainParticipant::set_listener while a discovery
@@ -248,6 +252,7 @@ def failure(name: str, exc: Exception) -> tuple[int, str]:
     Call it from the ``except`` clause: an unexpected error prints its traceback too.
     """
     kinds = (
+        (RunEnded, EXIT_VERDICT, "run ended"),
         (ParameterError, EXIT_PARAM, "parameter error"),
         (WatchdogError, EXIT_WATCHDOG, "watchdog"),
         (ForeignGraphError, EXIT_FOREIGN, "error"),
@@ -262,6 +267,27 @@ def failure(name: str, exc: Exception) -> tuple[int, str]:
     print(f"[{name}] error: {reason}", file=sys.stderr)
     traceback.print_exc()
     return EXIT_ERROR, reason
+
+
+def linger(node: Node, ex, stop, guard: HangGuard, linger_s: float) -> None:
+    """Spin until the node's messages are delivered (:func:`delivered`), a signal, or ``linger_s``.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+    ex : rclpy executor
+        The node's executor.
+    stop : callable
+        The signal handler of :func:`main` (its ``signal`` is set by a signal).
+    guard : HangGuard
+        Re-armed for the linger and the close after it.
+    linger_s : float
+        Longest wait [s wall time].
+    """
+    guard.arm(linger_s + 2 * HANG_S)  # the linger, then close (the recorder's file)
+    t_end = time.monotonic() + linger_s
+    while time.monotonic() < t_end and stop.signal is None and not delivered(node):
+        ex.spin_once(timeout_sec=LINGER_SPIN_S)
 
 
 def main(node_cls, args=None, linger_s: float = 10.0) -> int:
@@ -309,10 +335,10 @@ def main(node_cls, args=None, linger_s: float = 10.0) -> int:
             print(f"[{name}] {reason}", file=sys.stderr)
             status = EXIT_SIGNAL
         else:  # let reliable QoS deliver the last messages before the writers go away
-            guard.arm(linger_s + 2 * HANG_S)  # the linger, then close (the recorder's file)
-            t_end = time.monotonic() + linger_s
-            while time.monotonic() < t_end and stop.signal is None and not delivered(node):
-                ex.spin_once(timeout_sec=LINGER_SPIN_S)
+            linger(node, ex, stop, guard, linger_s)
+    except RunEnded as exc:  # the run's end: what the node published still reaches the recorder
+        status, reason = failure(name, exc)
+        linger(node, ex, stop, guard, linger_s)
     except Exception as exc:  # report any failure with the node's name
         status, reason = failure(name, exc)
     finally:

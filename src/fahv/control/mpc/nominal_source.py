@@ -34,7 +34,7 @@ from fahv.control.command import Command, CommandSchedule
 from fahv.control.mpc.attitude import attitude_bounds
 from fahv.control.mpc.estimator import DisturbanceEstimator, estimator_gains
 from fahv.control.mpc.settings import MPC_SECTION_FIELDS, X_BOX_TO_STATE, MPCSettings
-from fahv.control.mpc.tracking import TrackingMPC
+from fahv.control.mpc.tracking import TRIM_STEP, TrackingMPC
 from fahv.control.reference import lpv_of, mv, trim_map_of
 from fahv.errors import DesignError, RunError
 from fahv.lanes import Lanes
@@ -42,6 +42,7 @@ from fahv.model.notch import DiscreteNotch, NotchFilter
 from fahv.model.vehicle import load_vehicle
 from fahv.msg import NominalTrajectory
 from fahv.plant.rk4 import params_records, rk4_cm
+from fahv.verdict import RunEnded
 
 #: Node parameter ``mpc.att_max``: the bounds the design chose (alpha, theta).
 ATT_MAX_PARAMETER = Field(
@@ -287,6 +288,54 @@ class TrackingMPCNominal(NominalSource):
         """Schedule run b's QP at theta = (h, V) and copy its model into the batch arrays."""
         mpc = self.mpcs[b]
         mpc.schedule(float(theta[0]), float(theta[1]))
+        self._copy_schedule(b)
+
+    def _reschedule(self, b: int, theta) -> None:
+        """Schedule run b's QP at the nominal's operating point theta = (h, V) during a run.
+
+        The trim map is the QP's domain: it is clipped to its grid, so at a point more
+        than one difference step (:data:`~fahv.control.mpc.tracking.TRIM_STEP`) beyond
+        the grid its Jacobian has a zero column and the own-trim rows' Gx[0:2] is
+        singular. A nominal that left that domain (it follows the disturbance estimate,
+        which follows a vehicle that diverges, e.g. under a stuck elevator) ends the run
+        with the verdict ``nominal_out_of_domain``; singular scheduling equations inside
+        it with ``nominal_singular`` (:mod:`fahv.verdict`).
+
+        Raises
+        ------
+        RunEnded
+            With one of those verdicts.
+        """
+        k, t = self.k, self.k * self.Ts
+        tm, (h, V), (dh, dV) = self.trim_map, (float(theta[0]), float(theta[1])), TRIM_STEP
+        inside = (tm.h_grid[0] - dh < h < tm.h_grid[-1] + dh
+                  and tm.V_grid[0] - dV < V < tm.V_grid[-1] + dV)  # fmt: skip
+        if not inside:  # also for a non-finite h or V
+            raise RunEnded(
+                "nominal_out_of_domain", "nominal_trajectory", k, t,
+                f"the nominal's operating point (h, V) = ({h:.1f} ft, {V:.1f} ft/s) left "
+                f"the trim map the QP is scheduled on (h in [{tm.h_grid[0]:g}, "
+                f"{tm.h_grid[-1]:g}] ft, V in [{tm.V_grid[0]:g}, {tm.V_grid[-1]:g}] ft/s, "
+                f"one difference step of {dh:g} ft, {dV:g} ft/s beyond); "
+                f"vehicle at {self._vehicle_text(b)}",
+            )  # fmt: skip
+        try:
+            self._schedule(b, theta)
+        except (DesignError, np.linalg.LinAlgError) as exc:
+            raise RunEnded(
+                "nominal_singular", "nominal_trajectory", k, t,
+                f"scheduling at (h, V) = ({h:.1f} ft, {V:.1f} ft/s): {exc}",
+            ) from None  # fmt: skip
+
+    def _vehicle_text(self, b: int) -> str:
+        """Run b's measured altitude, speed and attitude at the current step, as text."""
+        x = self._x_now[b]
+        return (f"h = {x[0]:.1f} ft, V = {x[1]:.1f} ft/s, alpha = {np.degrees(x[2]):.2f} deg, "
+                f"theta = {np.degrees(x[3]):.2f} deg")  # fmt: skip
+
+    def _copy_schedule(self, b: int) -> None:
+        """Copy run b's scheduled model into the batch arrays."""
+        mpc = self.mpcs[b]
         pe = self.p_est
         self.XRS[b], self.URS[b], self.THS[b] = mpc.x_r_s, mpc.u_r_s, mpc.theta_s
         self.GX[b], self.GU[b], self.A[b], self.Bm[b] = mpc.Gx, mpc.Gu, mpc.A, mpc.B
@@ -302,8 +351,8 @@ class TrackingMPCNominal(NominalSource):
         mpc, ly = self.mpcs[b], self.mpcs[b].layout
         # schedule at the nominal operating point (h, V of X_n), not at the set point:
         # the set point may sit a steady offset away from the state it holds
-        if np.any(np.abs(self.XN[b, :2] - mpc.theta_s) > mpc.s.reschedule):
-            self._schedule(b, self.XN[b, :2])
+        if not np.all(np.abs(self.XN[b, :2] - mpc.theta_s) <= mpc.s.reschedule):
+            self._reschedule(b, self.XN[b, :2])
         if self.has_est:
             d = self.est_ss.d[b]
             x_d, u_d = self.HX[b] @ d, self.HU[b] @ d
@@ -388,7 +437,8 @@ class TrackingMPCNominal(NominalSource):
         self.has_prev = True
 
     def _replan(self, x: np.ndarray, h_c: np.ndarray, V_c: np.ndarray) -> None:
-        """Re-plan every live run (each its own QP); a run whose re-plan raises fails alone."""
+        """Re-plan every live run (each its own QP); a run whose re-plan ends it ends alone."""
+        self._x_now = np.asarray(x, float)  # the measured states (B, 9), for a verdict's reason
         if self.h_reset:  # the nominal's altitude to the measured one (e_h = 0)
             alive = self.lanes.alive
             self.XN[alive, 0] = np.asarray(x, float)[alive, 0]
@@ -397,7 +447,7 @@ class TrackingMPCNominal(NominalSource):
             try:
                 if self._plan(int(b), np.array([h_c[b], V_c[b]])):
                     moved.append(b)
-            except Exception as exc:  # noqa: BLE001 - the run fails alone
+            except RunEnded as exc:  # the run ends alone (a batch goes on)
                 self.lanes.fail(int(b), exc)
         if moved:  # the trims of the new set points, in one evaluation of the map
             self.TRX[moved], self.TRU[moved] = self.trim_map.at(*self.TH[moved].T)

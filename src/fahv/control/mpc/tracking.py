@@ -64,6 +64,10 @@ from fahv.control.mpc.settings import MPCSettings
 from fahv.errors import DesignError
 from fahv.synthesis.qp import NO_BOUND, check_kkt
 
+#: Steps (dh [ft], dV [ft/s]) of the trim map's central differences at a scheduling point.
+#: The map clips to its grid: a point farther than one step beyond the grid in h or V
+#: gets a zero column of the Jacobian (both points of the difference clip to the edge).
+TRIM_STEP = (10.0, 5.0)
 #: Solver status of a successful DAQP solve.
 DAQP_OPTIMAL = (1, 2)
 #: The QP's "no bound": a bound at or beyond it reads as none.
@@ -194,7 +198,7 @@ class TrackingMPC:
         of 10 ft and 5 ft/s (one-sided at the grid's edges). Returns x_r (n,), u_r (2,),
         Gx (n, 2), Gu (2, 2).
         """
-        dh, dV = 10.0, 5.0
+        dh, dV = TRIM_STEP
         tm = self.trim_map
         h1, h2 = max(h - dh, tm.h_grid[0]), min(h + dh, tm.h_grid[-1])
         V1, V2 = max(V - dV, tm.V_grid[0]), min(V + dV, tm.V_grid[-1])
