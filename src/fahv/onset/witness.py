@@ -63,19 +63,52 @@ def _z_norm(X, Ninv):
     return np.sqrt(np.sum((X @ Ninv) * X, axis=-1))  # (a 3-operand einsum was 10x slower)
 
 
-def _pulse_run(Acl_8, Ninv, J_s, Jb, gamma, g_e, steps):
-    """e_p over ``steps`` steps at every vertex, from the jump J_s (8,) and shares Jb (D, 8).
+def _pulse_run(Acl_8, Ninv, J_s, c, b, gamma, g_e, steps):
+    """e_p over ``steps`` steps at every vertex, for S jumps and D estimate directions.
 
-    Returns, per share and vertex, the largest Z_8 norm (D, R), its step (D, R) and the
-    error there (D, R, 8). The recursion e_k+1 = A_cl,r e_k + p_k runs for every share
-    and vertex in one compiled loop over the vertices, spread over the cores
-    (:func:`_pulse_kernel`; in numpy it was most of an onset bound's time).
+    The onset's part of the error at the vertex A, from the jump J_s of sample s with
+    the share c_s,d b_d along the estimate's direction b_d, is linear in the jump
+    (:func:`onset_witness`): e_k = u_k + c_s,d v_k, with u_0 = J_s,
+    u_k = A u_k-1 + (1 - gamma)^k J_s, and v_0 = 0, v_k = A v_k-1 + ((1 - g_e)^k -
+    (1 - gamma)^k) b_d. One recursion per sample and one per direction, combined, in
+    place of one per pair; in the coordinates z = C' e (N_8^-1 = C C'), where the Z_8
+    norm is the Euclidean one. One compiled loop over the vertices, spread over the
+    cores (:func:`_pulse_kernel`).
+
+    Parameters
+    ----------
+    Acl_8 : (R, 8, 8) ndarray
+    Ninv : (8, 8) ndarray
+        N_8^-1.
+    J_s : (S, 8) ndarray
+        The jumps.
+    c : (S, D) ndarray
+        Their shares along the directions (zero without an elevator estimate).
+    b : (D, 8) ndarray
+        The directions.
+    gamma, g_e : float
+        The estimate's gains per step (g_e along b).
+    steps : int
+
+    Returns
+    -------
+    best : (S, D, R) ndarray
+        The largest Z_8 norm of e_k over the steps.
+    k_best : (S, D, R) ndarray of int
+        Its step.
+    e_best : (S, D, R, 8) ndarray
+        The error there.
     """
-    Jb = np.ascontiguousarray(Jb, dtype=float)
-    P = np.array([(1.0 - g_e) ** k * Jb + (1.0 - gamma) ** k * (J_s - Jb)
-                  for k in range(steps)])  # fmt: skip
-    return _pulse_kernel()(np.ascontiguousarray(Acl_8, dtype=float), np.ascontiguousarray(Ninv),
-                           np.ascontiguousarray(J_s, dtype=float), P)  # fmt: skip
+    C = np.linalg.cholesky(Ninv)
+    Aw = np.ascontiguousarray(np.einsum("ji,rjk->rik", C, Acl_8) @ np.linalg.inv(C.T))
+    k = np.arange(steps)
+    a = (1.0 - gamma) ** k
+    g = (1.0 - g_e) ** k - a
+    best, k_best, z_best = _pulse_kernel()(
+        Aw, np.ascontiguousarray(J_s @ C), np.ascontiguousarray(c, dtype=float),
+        np.ascontiguousarray(b @ C), a, g,
+    )  # fmt: skip
+    return best, k_best, np.linalg.solve(C.T, z_best[..., None])[..., 0]
 
 
 @functools.cache
@@ -83,61 +116,68 @@ def _pulse_kernel():
     """The loop of :func:`_pulse_run` compiled by numba, parallel over the vertices."""
     import numba
 
-    @numba.njit(inline="always")
-    def _quad(e, Ninv, n):  # pragma: no cover - compiled
-        """sqrt(e' N^-1 e), the Z_8 norm."""
-        acc = 0.0
-        for i in range(n):
-            row = 0.0
-            for j in range(n):
-                row += Ninv[i, j] * e[j]
-            acc += e[i] * row
-        return np.sqrt(acc)
-
-    def loop(Acl, Ninv, J_s, P):  # pragma: no cover - compiled
-        """P (steps, D, n): the pulses p_k (p_0 unused); returns best, k_best, e_best."""
-        R, n = Acl.shape[0], Acl.shape[1]
-        steps, D = P.shape[0], P.shape[1]
-        best = np.empty((D, R))
-        k_best = np.zeros((D, R), np.int64)
-        e_best = np.empty((D, R, n))
+    def loop(Aw, U0, c, B, a, g):  # pragma: no cover - compiled
+        """Returns best (S, D, R), k_best (S, D, R) and z_best (S, D, R, n)."""
+        R, n = Aw.shape[0], Aw.shape[1]
+        S, D, steps = U0.shape[0], B.shape[0], a.shape[0]
+        best = np.empty((S, D, R))
+        k_best = np.zeros((S, D, R), np.int64)
+        z_best = np.empty((S, D, R, n))
         for r in numba.prange(R):
-            e = np.empty(n)
+            u = np.empty((S, n))
+            v = np.zeros((D, n))
             f = np.empty(n)
-            e_top = np.empty(n)
-            for d in range(D):
-                e[:] = J_s
-                e_top[:] = J_s
-                top = _quad(e, Ninv, n)
-                k_top = 0
-                for k in range(1, steps):
+            u[:, :] = U0
+            for s in range(S):
+                top = 0.0
+                for i in range(n):
+                    top += U0[s, i] * U0[s, i]
+                for d in range(D):
+                    best[s, d, r] = top
+                    z_best[s, d, r, :] = U0[s]
+            for k in range(1, steps):
+                for s in range(S):
                     for i in range(n):
-                        acc = P[k, d, i]
+                        acc = a[k] * U0[s, i]
                         for j in range(n):
-                            acc += Acl[r, i, j] * e[j]
+                            acc += Aw[r, i, j] * u[s, j]
                         f[i] = acc
-                    e[:] = f
-                    q = _quad(e, Ninv, n)
-                    if q > top:
-                        top, k_top = q, k
-                        e_top[:] = e
-                best[d, r], k_best[d, r] = top, k_top
-                e_best[d, r, :] = e_top
-        return best, k_best, e_best
+                    u[s, :] = f
+                for d in range(D):
+                    for i in range(n):
+                        acc = g[k] * B[d, i]
+                        for j in range(n):
+                            acc += Aw[r, i, j] * v[d, j]
+                        f[i] = acc
+                    v[d, :] = f
+                for s in range(S):
+                    for d in range(D):
+                        q = 0.0
+                        for i in range(n):
+                            x = u[s, i] + c[s, d] * v[d, i]
+                            q += x * x
+                        if q > best[s, d, r]:
+                            best[s, d, r], k_best[s, d, r] = q, k
+                            for i in range(n):
+                                z_best[s, d, r, i] = u[s, i] + c[s, d] * v[d, i]
+        return np.sqrt(best), k_best, z_best
 
     return numba.njit(cache=True, parallel=True, error_model="numpy")(loop)
 
 
-def _search(Acl_8, Ninv, bound, J8, shares, gamma, g_e, top, steps, pre_steps, candidates):
+def _search(Acl_8, Ninv, bound, J8, c, b, gamma, g_e, top, steps, pre_steps, candidates):
     """The scenario of largest level over the jump samples (:func:`onset_witness`).
 
     For each of the ``top`` samples the estimate's most favourable direction is taken;
-    returns (level, sample, direction, vertex) of the largest of those levels.
+    returns (level, sample, direction, vertex, step, error there) of the largest of
+    those levels.
     """
     AT = np.transpose(Acl_8, (0, 2, 1))
     found = None
-    for s in np.argsort(-_z_norm(J8, Ninv))[:top]:
-        best, _, e_best = _pulse_run(Acl_8, Ninv, J8[s], shares[:, s], gamma, g_e, steps)
+    tops = np.argsort(-_z_norm(J8, Ninv))[:top]
+    runs = _pulse_run(Acl_8, Ninv, J8[tops], c[tops], b, gamma, g_e, steps)
+    for i, s in enumerate(tops):
+        best, k_best, e_best = (x[i] for x in runs)
         D = len(best)
         # the sequence's share for the best candidates of every direction, all at once
         cand = np.argsort(-best, axis=1)[:, :candidates]  # (D, C)
@@ -151,11 +191,12 @@ def _search(Acl_8, Ninv, bound, J8, shares, gamma, g_e, top, steps, pre_steps, c
         total = best[rows, cand] + reach.reshape(cand.shape)
         levels = []
         for d in range(D):
-            i = int(np.argmax(total[d]))
-            levels.append((float(total[d, i]), int(cand[d, i])))
+            j = int(np.argmax(total[d]))
+            levels.append((float(total[d, j]), int(cand[d, j])))
         d = int(np.argmin([lv for lv, _ in levels]))  # the estimate's most favourable b
         if found is None or levels[d][0] > found[0]:
-            found = (levels[d][0], int(s), d, levels[d][1])
+            r = levels[d][1]
+            found = (levels[d][0], int(s), d, r, int(k_best[d, r]), e_best[d, r].copy())
     return found
 
 
@@ -181,16 +222,16 @@ def _resimulate(A, bound, J_s, Jb, z, k, pre_steps, gamma, g_e):
 
 
 def _elevator_shares(J, gamma_e, directions, projection_scale):
-    """Shares (D, S, 8) of the jumps along each elevator direction, and the gain along it."""
-    if gamma_e is None:
-        return np.zeros((1, len(J), 8)), 1.0  # no elevator part: p_k = (1 - gamma)^k J
+    """The jumps' shares c (S, D) along the elevator directions b (D, 8), and the gain."""
+    if gamma_e is None:  # no elevator part: p_k = (1 - gamma)^k J
+        return np.zeros((len(J), 1)), np.zeros((1, 8)), 1.0
     directions = np.atleast_2d(np.asarray(directions, float))
     scale = np.asarray(projection_scale, float)
     if not 0.0 < gamma_e <= 1.0 or directions.shape[1:] != (9,) or scale.shape != (9,):
         raise ValueError(f"onset_witness: gamma_e {gamma_e}, directions "
                          f"{directions.shape}, projection_scale {scale.shape}")  # fmt: skip
-    shares = np.stack([elevator_share(J, b, scale)[:, None] * b[1:] for b in directions])
-    return shares, float(gamma_e)
+    c = np.stack([elevator_share(J, b, scale) for b in directions], axis=1)
+    return c, directions[:, 1:], float(gamma_e)
 
 
 def onset_witness(Acl_8, N_8, bound, J, gamma: float, *, gamma_e: float | None = None,
@@ -258,18 +299,16 @@ def onset_witness(Acl_8, N_8, bound, J, gamma: float, *, gamma_e: float | None =
         raise ValueError(f"onset_witness: shapes Acl_8 {Acl_8.shape}, N_8 {N_8.shape}, bound "
                          f"{bound.shape}, J {J.shape}; gamma {gamma}")  # fmt: skip
     J8 = J[:, 1:]
-    shares, g_e = _elevator_shares(J, gamma_e, directions, projection_scale)
+    c, b, g_e = _elevator_shares(J, gamma_e, directions, projection_scale)
     Ninv = np.linalg.inv(N_8)
-    level, s, d, r = _search(Acl_8, Ninv, bound, J8, shares, gamma, g_e, top, steps, pre_steps,
-                             candidates)  # fmt: skip
-    Jb = shares[d, s]
-    _, k_best, e_best = _pulse_run(Acl_8, Ninv, J8[s], Jb[None], gamma, g_e, steps)
-    k = int(k_best[0, r])
-    z = Ninv @ e_best[0, r] / _z_norm(e_best[0, r], Ninv)
+    level, s, d, r, k, e_peak = _search(Acl_8, Ninv, bound, J8, c, b, gamma, g_e, top, steps,
+                                        pre_steps, candidates)  # fmt: skip
+    Jb = c[s, d] * b[d]
+    z = Ninv @ e_peak / _z_norm(e_peak, Ninv)
     e = _resimulate(Acl_8[r], bound, J8[s], Jb, z, k, pre_steps, gamma, g_e)
     simulated = float(_z_norm(e, Ninv))
     if simulated < level * (1.0 - 1e-9) or not np.isfinite(simulated):
         raise DesignError(f"onset_witness: the re-simulated level {simulated:.6f} falls short "
                           f"of the constructed {level:.6f}")  # fmt: skip
     return OnsetWitness(simulated, r, s, d if gamma_e is not None else -1, k, pre_steps,
-                        float(_z_norm(e_best[0, r], Ninv)), level)  # fmt: skip
+                        float(_z_norm(e_peak, Ninv)), level)  # fmt: skip
