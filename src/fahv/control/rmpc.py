@@ -211,9 +211,12 @@ class RMPCLaw(ControlLaw):
         Dx = np.asarray(dm.state_scale, float)[:NX]
         Ds = Dx * np.maximum(1.0, np.abs(d) / Dx)  # command-sized scales
         f = fractions(r)
+        prev = ctx.previous or {}
+        start = (prev["rmpc_guess_Q"], prev["rmpc_guess_gamma"]) \
+            if "rmpc_guess_Q" in prev and "rmpc_guess_gamma" in prev else None  # fmt: skip
         seq, cert = design_sequence(
             dmd.A, dmd.B, d, a["u_room"], np.asarray(r["psi"], float),
-            np.full(2, float(r["sigma"])), Ds, f,
+            np.full(2, float(r["sigma"])), Ds, f, start,
         )  # fmt: skip
         level0 = float((d / Ds) @ seq.P[0] @ (d / Ds))
         if not level0 <= 1.0:
@@ -238,6 +241,9 @@ class RMPCLaw(ControlLaw):
             "rmpc_Ds": Ds,
             "rmpc_d": d,
             "rmpc_z": seq.z,
+            # where a later design of the file starts each ellipsoid's solve
+            "rmpc_guess_Q": seq.guess_Q,
+            "rmpc_guess_gamma": seq.guess_gamma,
         }
 
     @classmethod

@@ -99,7 +99,8 @@ def run_design(spec: SpecFile, vehicle=None, progress=None, log=print, clock=Non
     previous : Mapping[str, ndarray], optional
         The arrays of an earlier design of the same file: where the constraint
         generation of its LMIs starts (the closure's ``closure_vertices`` and
-        ``closure_points``). It changes how fast the design runs, not what is certified
+        ``closure_points``, the invariant ellipsoids' ``ellipsoid_vertices_*``, the
+        baseline's ``rmpc_guess_*``). It changes how fast the design runs, not what is certified
         (every certificate is the exact check over every vertex).
 
     Returns
@@ -144,7 +145,8 @@ def run_design(spec: SpecFile, vehicle=None, progress=None, log=print, clock=Non
     tell("certificate")
     cert = done(certificate_stage(c, veh, model, vertex, tube, tightening, progress))
     tell("laws")
-    arrays = laws_stage(c, veh, model, dist, vertex, tube, tightening, nominal, cert, log)
+    arrays = laws_stage(c, veh, model, dist, vertex, tube, tightening, nominal, cert, log,
+                        previous)  # fmt: skip
     summary = summary_of(spec, veh, model, dist, vertex, tube, tightening, nominal, cert)
     design = Design(c, arrays, summary)
     design.summary["design_hash"] = design.content_hash()

@@ -293,11 +293,13 @@ def certificate_stage(spec: dict, vehicle: Vehicle, model: DesignModel, vertex: 
 
 def laws_stage(spec: dict, vehicle: Vehicle, model: DesignModel, dist: Disturbance,
                vertex: VertexTube, tube: FormTube, tightening: Tightening, nominal: Nominal,
-               cert: FormCertificate, log: Log) -> dict:  # fmt: skip
+               cert: FormCertificate, log: Log, previous=None) -> dict:  # fmt: skip
     """The stored arrays, then the offline part of every law a variant uses.
 
     Each law's offline part (:meth:`fahv.control.ControlLaw.design`) sees the arrays made
-    so far, the nominal parts' first, and adds its own.
+    so far, the nominal parts' first, and adds its own; ``previous``, the arrays of an
+    earlier design of the file, is where its solves may start
+    (:class:`fahv.spec.context.DesignContext`).
 
     Returns
     -------
@@ -318,7 +320,7 @@ def laws_stage(spec: dict, vehicle: Vehicle, model: DesignModel, dist: Disturban
         "att_trim_offset": np.array(t.coverage.alpha_offset_max),
         "x0": np.asarray(model.x_start[:9], float),  # the trim at the design point
     })  # fmt: skip
-    ctx = DesignContext({**spec, "command": model.step}, vehicle, arrays, log)
+    ctx = DesignContext({**spec, "command": model.step}, vehicle, arrays, log, previous)
     laws = [LAWS[name] for name in dict.fromkeys(VARIANTS[v].law for v in spec["variants"])]
     for part in (*dict.fromkeys(law.nominal for law in laws), *laws):  # nominal parts first
         arrays.update(part.design(ctx))

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 from fahv.model.vehicle import Vehicle
@@ -22,9 +22,14 @@ class DesignContext:
         Arrays designed so far (the TP model, W, F, Z, K, Q, trim map ...).
     log : callable
         Receives one line per step.
+    previous : Mapping[str, ndarray], optional
+        The arrays of an earlier design of the same file, where an offline part's solves
+        may start (its stored coordinates): it changes how fast a design runs, not what
+        it certifies. None for a scenario's own offline parts and ``fahv design --cold``.
     """
 
     spec: dict
     vehicle: Vehicle
     arrays: dict
     log: Callable[[str], None]
+    previous: Mapping | None = None

@@ -97,6 +97,11 @@ class EllipsoidSequence:
         State scales.
     u_max : (m,) ndarray
         Input bounds |u - u_r| <= u_max (unscaled); the input scales.
+    guess_Q : (N, n, n) ndarray or None
+    guess_gamma : (N,) ndarray or None
+        The coordinates (an estimate of Q_i and gamma_i) of the pass that certified each
+        ellipsoid: where a later design of the same problem starts (``start`` of
+        :func:`design_sequence`).
     """
 
     Q: np.ndarray
@@ -106,6 +111,8 @@ class EllipsoidSequence:
     z: np.ndarray
     Ds: np.ndarray
     u_max: np.ndarray
+    guess_Q: np.ndarray | None = None
+    guess_gamma: np.ndarray | None = None
 
 
 def _min_gamma(As, Bs, z, C, S, Q_outer, eps):
@@ -158,7 +165,8 @@ def _min_gamma(As, Bs, z, C, S, Q_outer, eps):
 def _solve_point(As, Bs, z, psi, sigma, Q_outer, guess):
     """Min-gamma ellipsoid of state z (scaled), twice-scaled (module notes).
 
-    ``guess`` = (Q_est, gamma_est) or None. Returns (Q, K, gamma) in the base scales.
+    ``guess`` = (Q_est, gamma_est) or None. Returns (Q, K, gamma, last guess) in the base
+    scales, the last guess being the coordinates of the pass that was certified.
     """
     if guess is None:  # first pass in the base scales, cost scaled so that gamma ~ 1
         for steps in FIRST_PASS_STEPS:  # J ~ |z|^2_psi times the steps it takes to decay
@@ -175,7 +183,7 @@ def _solve_point(As, Bs, z, psi, sigma, Q_outer, guess):
         if sol is None:
             return None
         if _holds(As, Bs, z, psi, sigma, Q_outer, *sol):
-            return sol
+            return (*sol, guess)
         guess = (sol[0], sol[2])
     return None
 
@@ -221,7 +229,8 @@ def _scaled_pass(As, Bs, z, psi, sigma, Q_outer, guess):
     return 0.5 * (Qs + Qs.T), KT @ Ti, gT / c
 
 
-def design_sequence(A, B, d, u_max, psi, sigma, Ds, fractions) -> tuple[EllipsoidSequence, dict]:
+def design_sequence(A, B, d, u_max, psi, sigma, Ds, fractions,
+                    start=None) -> tuple[EllipsoidSequence, dict]:  # fmt: skip
     """Off-line RMPC of Wan & Kothare (2003): nested ellipsoids along the command step.
 
     For z_i = f_i d / Ds (``fractions`` f_1 > f_2 > ... > 0), solve the min-gamma
@@ -247,6 +256,11 @@ def design_sequence(A, B, d, u_max, psi, sigma, Ds, fractions) -> tuple[Ellipsoi
         State scales.
     fractions : sequence of float
         f_i, strictly decreasing and positive; f_1 >= 1 puts d inside E_1.
+    start : (EllipsoidSequence.guess_Q, EllipsoidSequence.guess_gamma), optional
+        The coordinates of the certified pass of every ellipsoid of an earlier design of
+        the same problem ((N, n, n), (N,)): each ellipsoid is first solved once in them,
+        which on the same data and machine is that design's last pass (the same
+        solution); an ellipsoid they do not certify is solved as without them.
 
     Returns
     -------
@@ -268,12 +282,14 @@ def design_sequence(A, B, d, u_max, psi, sigma, Ds, fractions) -> tuple[Ellipsoi
     As, Bs = scale_vertices(np.asarray(A, float), np.asarray(B, float), Ds, u_max)
     psi, sigma = np.asarray(psi, float), np.asarray(sigma, float)
     d_s = np.asarray(d, float) / Ds
-    Qs, Ks, gs, zs = [], [], [], []
+    Qs, Ks, gs, zs, used = [], [], [], [], []
     guess = None
     for i, fi in enumerate(f):
         z = fi * d_s
         Q_outer = Qs[-1] if Qs else None
-        sol = _solve_point(As, Bs, z, psi, sigma, Q_outer, guess)
+        sol = _stored_pass(As, Bs, z, psi, sigma, Q_outer, start, i)
+        if sol is None:
+            sol = _solve_point(As, Bs, z, psi, sigma, Q_outer, guess)
         if sol is None and guess is not None:  # the guessed scales did not work: rescale
             sol = _solve_point(As, Bs, z, psi, sigma, Q_outer, None)
         if sol is None:
@@ -282,7 +298,8 @@ def design_sequence(A, B, d, u_max, psi, sigma, Ds, fractions) -> tuple[Ellipsoi
                 "infeasible or numerically unsolvable: no invariant ellipsoid holds that "
                 "state within the input bounds"
             )
-        Q, K, g = sol
+        Q, K, g, last = sol
+        used.append(last)
         Qs.append(Q)
         Ks.append(K)
         gs.append(g)
@@ -294,8 +311,24 @@ def design_sequence(A, B, d, u_max, psi, sigma, Ds, fractions) -> tuple[Ellipsoi
     K = np.stack(Ks)
     P = np.linalg.inv(Q)
     seq = EllipsoidSequence(Q, 0.5 * (P + P.transpose(0, 2, 1)), K, np.asarray(gs),
-                            np.stack(zs), Ds, u_max)  # fmt: skip
+                            np.stack(zs), Ds, u_max, np.stack([q for q, _ in used]),
+                            np.array([g for _, g in used]))  # fmt: skip
     return seq, verify_sequence(A, B, seq, psi, sigma)
+
+
+def _stored_pass(As, Bs, z, psi, sigma, Q_outer, start, i):
+    """Ellipsoid i solved once in the stored coordinates ``start`` if they certify it.
+
+    Returns (Q, K, gamma, guess) as :func:`_solve_point`, or None (no stored coordinates
+    for i, of another shape, or not certified: the caller solves as without them).
+    """
+    if start is None or i >= len(start[0]) or np.shape(start[0][i]) != As.shape[1:]:
+        return None
+    guess = (np.asarray(start[0][i], float), float(start[1][i]))
+    sol = _scaled_pass(As, Bs, z, psi, sigma, Q_outer, guess)
+    if sol is None or not _holds(As, Bs, z, psi, sigma, Q_outer, *sol):
+        return None
+    return (*sol, guess)
 
 
 def _contraction(As, Bs, K, Q) -> np.ndarray:

@@ -13,7 +13,6 @@ certificate: it trusts no solver.
 
 from __future__ import annotations
 
-import functools
 import itertools
 
 import numpy as np
@@ -27,9 +26,10 @@ def max_on_ball(M: np.ndarray, c: np.ndarray) -> np.ndarray:
     Sorensen 1983): it equals the minimum over lam >= sigma_max^2 of the convex dual
     function lam + b'(lam I - G)^-1 b + c'c, attained where |(lam I - G)^-1 b| = 1 (the
     secular equation), or at lam = sigma_max^2 in the hard case. A safeguarded Newton
-    iteration (:func:`_dual_bound`) brackets that minimiser; the dual function at any
-    lam above sigma_max^2 bounds the maximum from above (weak duality), with an error of
-    second order in the distance to the minimiser (the function's slope vanishes there).
+    iteration (:func:`fahv.synthesis.rpi_kernels.dual_bound`) brackets that minimiser;
+    the dual function at any lam above sigma_max^2 bounds the maximum from above (weak
+    duality), with an error of second order in the distance to the minimiser (the
+    function's slope vanishes there).
     A primal point of that lam, its norm filled up to 1 along the top eigenvector, is no
     bound: in the nearly hard case the fill leaves the ball and overstates a level (by
     4e-3 on a tube of this vehicle).
@@ -61,75 +61,17 @@ def max_on_ball(M: np.ndarray, c: np.ndarray) -> np.ndarray:
     return _dual_kernel()(s, b, cc, 200)
 
 
-@functools.cache
 def _dual_kernel():
-    """:func:`_dual_bound` compiled by numba (cached on disk), built at its first use.
+    """The compiled dual bound (:func:`fahv.synthesis.rpi_kernels.dual_bound`).
 
-    The iteration is up to 200 steps for each of L rows: in numpy, its per-call overhead
-    made it 70 % of an onset bound's time (benchmarks/bench_certificate.py).
+    Imported at its first use, so that numba is loaded only where a level is computed;
+    compiled once and cached on disk. The iteration is up to 200 steps for each of L
+    rows: in numpy, its per-call overhead made it 70 % of an onset bound's time
+    (benchmarks/bench_certificate.py).
     """
-    import numba
+    from fahv.synthesis.rpi_kernels import dual_bound
 
-    return numba.njit(cache=True, error_model="numpy")(_dual_bound)
-
-
-def _dual_bound(s, b, cc, steps):  # pragma: no cover - compiled
-    """The dual bound of :func:`max_on_ball` per row, in the eigenbasis of M'M.
-
-    s (n,) ascending eigenvalues, b (L, n) the rows' M'c in that basis, cc (L,) |c_l|^2,
-    ``steps`` iterations at most; returns (L,) upper bounds of the maxima. The minimiser
-    lam* > sigma_max^2 of the dual function is where psi(lam) = 1 / |x(lam)| - 1 = 0,
-    x(lam) = (lam I - G)^-1 b; psi is nearly linear in lam, so Newton's method on it
-    (Moré and Sorensen 1983) reaches lam* in a few steps. Each step is kept inside a
-    bracket [lo, hi] of lam* (|x| > 1 at lo, <= 1 at hi) and bisects it where Newton
-    would leave it; the iteration stops when the bracket or the step falls below the
-    float spacing. The dual function is evaluated at the last hi and the last iterate
-    (both above sigma_max^2, so both bound the maximum: weak duality) and the smaller
-    is returned; its error is of second order in the distance to lam*.
-    """
-    n_rows, n = b.shape
-    smax = s[n - 1]
-    out = np.empty(n_rows)
-    for r in range(n_rows):
-        bb = 0.0
-        for j in range(n):
-            bb += b[r, j] * b[r, j]
-        lo = smax
-        hi = smax + np.sqrt(bb) + 1.0  # |x(hi)| <= |b| / (hi - smax) < 1
-        lam = hi
-        for _ in range(steps):
-            norm2 = 0.0  # |x(lam)|^2, the secular function, and its slope
-            slope = 0.0
-            for j in range(n):
-                d = lam - s[j]
-                t = b[r, j] * b[r, j] / (d * d)
-                norm2 += t
-                slope -= 2.0 * t / d
-            if norm2 > 1.0:
-                lo = lam
-            else:
-                hi = lam
-            nxt = 0.5 * (lo + hi)
-            if norm2 > 0.0 and slope < 0.0:  # Newton on psi = |x|^-1 - 1
-                nrm = np.sqrt(norm2)
-                step = (1.0 / nrm - 1.0) / (-0.5 * slope / (norm2 * nrm))
-                if abs(step) <= 1e-15 * lam:  # converged to the float spacing
-                    break
-                if lo < lam - step < hi:
-                    nxt = lam - step
-            if nxt <= lo or nxt >= hi or hi - lo <= 1e-15 * hi:
-                break
-            lam = nxt
-        best = np.inf
-        for at in (hi, lam):
-            if at > smax:  # >= 0 gaps; 0 only along the top eigenvector, where b_j = 0
-                total = cc[r] + at
-                for j in range(n):
-                    if b[r, j] != 0.0:
-                        total += b[r, j] * b[r, j] / (at - s[j])
-                best = min(best, total)
-        out[r] = best
-    return out
+    return dual_bound
 
 
 def worst_level(A, B, F, N, w_max, tau: float = 1.0, pulse=None):
@@ -234,33 +176,11 @@ def _levels(Acl, Ns, w_max, pulse):
     return lev, corner, signs
 
 
-@functools.cache
 def _vertex_kernel():
-    """:func:`_vertex_bounds` compiled by numba with a parallel loop over the vertices."""
-    import numba
+    """The compiled all-vertex loop (:func:`fahv.synthesis.rpi_kernels.vertex_bounds`)."""
+    from fahv.synthesis.rpi_kernels import vertex_bounds
 
-    dual = numba.njit(cache=True, error_model="numpy")(_dual_bound)
-    body = _vertex_bounds_factory(dual)
-    return numba.njit(cache=True, parallel=True, error_model="numpy")(body)
-
-
-def _vertex_bounds_factory(dual):
-    """The all-vertex loop around the compiled per-vertex dual bound ``dual``."""
-    import numba
-
-    def _vertex_bounds(s, CM, C, cc, steps):  # pragma: no cover - compiled
-        """Worst dual bound (R,) and its corner (R,) of every vertex (:func:`_levels`)."""
-        R = s.shape[0]
-        lev = np.empty(R)
-        corner = np.empty(R, np.int64)
-        for i in numba.prange(R):
-            li = dual(s[i], C @ CM[i], cc, steps)
-            k = np.argmax(li)
-            corner[i] = k
-            lev[i] = li[k]
-        return lev, corner
-
-    return _vertex_bounds
+    return vertex_bounds
 
 
 def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, hi: float = 4.0) -> float:
