@@ -14,18 +14,18 @@ same design file, each in its own process:
 Then the scaling table (``--scaling``): the closure of the eight-state tube set (the
 tube LMI by constraint generation, W_8's bound and the exact all-vertex level) on the
 certified design's own vertex data with k = 3, 5, 7, 9 parameter directions (1024 to
-65 536 vertices), and the tube LMI alone on systems of 8, 12, 16 and 24 states: the
-eight-state vertices (a random subset) augmented with first-order input filters (the
-actuators' place) and lags of the states (the sensors' and estimator's place), W of
-1e-4 on the added states.
+65 536 vertices), and the invariant-ellipsoid LMI (the certificate of a fixed loop, as a
+joint error of estimate and tube is certified) on systems of 8, 12, 16 and 24 states:
+the eight-state closed loop on 1024 of its vertices with first-order lags appended (the
+place of actuator, sensor and estimator states).
 
 Usage::
 
     .venv/bin/python benchmarks/bench_design.py [--design offline_design/designs/cm_certified.yaml]
-        [--before fd01aef --before-file offline_design/designs/cm_certified.yaml]
+        [--before c5dd379 --before-file offline_design/designs/cm_certified.yaml]
         [--scaling] [--only-scaling] [--keep DIR] [--smoke]
 
-``--smoke`` runs the scaling code at a tiny size (256 vertices, 8 and 10 states on 64
+``--smoke`` runs the scaling code at a tiny size (256 vertices, 8 and 10 states on 32
 vertices) and no design: seconds, its figures mean nothing.
 """
 
@@ -162,62 +162,67 @@ def vertex_scaling(design_file: Path, ks, onset: bool = True) -> None:
         print(f"  {nv.n_vertices:>9} {time.perf_counter() - t0:>12.1f} {held:>12}", flush=True)
 
 
-def _augmented(A, B, extra: int):
-    """A, B (R, n, n), (R, n, m) with ``extra`` states: input filters, then state lags."""
-    R, n, m = B.shape
-    if extra == 0:
-        return A, B
-    na, a = n + extra, 0.8
-    k = min(extra, 2 * m)  # first-order filters of the inputs (two per input)
-    Aa, Ba = np.zeros((R, na, na)), np.zeros((R, na, m))
-    Aa[:, :n, :n], Ba[:, :n] = A, 0.5 * B  # half of each input direct, half filtered
-    f = min(m, extra)
-    Aa[:, :n, n : n + f] = 0.5 * B[:, :, :f]
-    Aa[:, n:, n:] = a * np.eye(extra)
-    for j in range(k):
-        Ba[:, n + j, j % m] = 1.0 - a
-        if j >= m:  # the second filter of an input follows the first
-            Aa[:, n + j, n + j - m] = 1.0 - a
-    for j in range(k, extra):  # lags of the plant's states
+def _augmented(Acl, extra: int, a: float = 0.8):
+    """Closed-loop vertices (R, n, n) with ``extra`` states appended: first-order lags.
+
+    Lag j follows the plant's state j mod n (x+ = a x + (1 - a) e_j): the place of the
+    actuator, sensor and estimator states of an output-feedback design. Block lower
+    triangular, so every vertex keeps its own eigenvalues and gains a at each lag.
+    """
+    R, n, _ = Acl.shape
+    Aa = np.zeros((R, n + extra, n + extra))
+    Aa[:, :n, :n] = Acl
+    for j in range(extra):
+        Aa[:, n + j, n + j] = a
         Aa[:, n + j, j % n] = 1.0 - a
-    return Aa, Ba
+    return Aa
 
 
 def state_scaling(dims, R: int) -> None:
-    """The tube LMI alone against the state dimension (augmented eight-state vertices)."""
+    """The invariant-ellipsoid LMI against the state dimension (augmented closed loops).
+
+    The eight-state tube set's closed loop A_8 + B_8 F_8 (the shipped F_8 and W_8) on R
+    of its vertices, with lags appended up to each dimension; the smallest ellipsoid RPI
+    for W_8 whose projection lies in Z_8 (:func:`fahv.synthesis.invariant_ellipsoid.
+    invariant_ellipsoid`: constraint generation from scratch, the exact all-vertex level
+    at every pass), the LMI a joint error of estimate and tube is certified with.
+    """
     from fahv.spec.artefacts import load_design
-    from fahv.synthesis.feedback import design_tube
+    from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid
+    from fahv.synthesis.rpi_level import vertex_levels
 
     design_file = ROOT / "offline_design/designs/cm_certified.yaml"
     _, d, nv, _ = _vertex_data(design_file, 3)
     A, B = nv.vertices()
     rng = np.random.default_rng(0)
     idx = rng.choice(A.shape[0], min(R, A.shape[0]), replace=False)
-    A8, B8 = A[idx, 1:, 1:], B[idx, 1:, :]
-    a = load_design(design_file.with_suffix("")).arrays
-    w8 = np.asarray(load_design(design_file.with_suffix("")).summary["certificate"]["W_8"])
-    print(f"tube LMI (constraint generation from scratch) on {len(idx)} vertices against the "
-          "state dimension (eight states augmented with input filters and state lags):")
-    print(f"  {'states':>7} {'LMI [s]':>9} {'blocks held':>12}")
+    cert = load_design(design_file.with_suffix("")).summary["certificate"]
+    F_8 = np.asarray(d.arrays["F"])[:, 1:]
+    N_8 = np.asarray(d.arrays["N"])[1:, 1:]
+    w8 = np.asarray(cert["W_8"])
+    Acl8 = A[idx, 1:, 1:] + B[idx, 1:, :] @ F_8
+    tightening = np.sqrt(np.einsum("ij,jk,ik->i", F_8, N_8, F_8))
+    print(f"invariant ellipsoid (constraint generation from scratch) on {len(idx)} vertices "
+          "against the state dimension (the eight-state closed loop with first-order lags):")
+    print(f"  {'states':>7} {'LMI [s]':>9} {'blocks held':>12} {'exact level':>12}")
     for n in dims:
-        extra = n - 8
-        An, Bn = _augmented(A8, B8, extra)
-        w = np.r_[w8, np.full(extra, 1e-4)]
-        Dx = np.r_[a["Dx"][1:], np.ones(extra)]
+        Aa = _augmented(Acl8, n - 8)
+        w = np.r_[w8, np.zeros(n - 8)]
+        K = np.hstack([F_8, np.zeros((2, n - 8))])
+        D = np.r_[np.sqrt(np.diag(N_8)), np.full(n - 8, np.sqrt(N_8.diagonal().mean()))]
         t0 = time.perf_counter()
-        try:
-            tube = design_tube(An, Bn, w, Dx, a["Du"], np.ones(2), (0.995,), active=12)
-            held = str(tube.n_blocks)
-        except Exception as exc:  # infeasible at that size: say so
-            held = f"failed: {str(exc)[:50]}"
-        print(f"  {n:>7} {time.perf_counter() - t0:>9.1f} {held:>12}", flush=True)
+        ell = invariant_ellipsoid(Aa, w8, D, N_8, K, 10.0 * tightening,
+                                  lambda P, Aa=Aa, w=w: vertex_levels(Aa, P, w), 0.995)  # fmt: skip
+        wall = time.perf_counter() - t0
+        level = f"{vertex_levels(Aa, ell.P, w).max():.6f}" if ell.found else "none found"
+        print(f"  {n:>7} {wall:>9.1f} {ell.n_blocks:>12} {level:>12}", flush=True)
 
 
 def main() -> int:
     """Time the designs (unless --only-scaling), then the scaling tables if asked."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--design", default="offline_design/designs/cm_certified.yaml")
-    ap.add_argument("--before", default="fd01aef", help="earlier commit ('' : skip it)")
+    ap.add_argument("--before", default="c5dd379", help="earlier commit ('' : skip it)")
     ap.add_argument("--before-file", default="offline_design/designs/cm_certified.yaml",
                     help="the design's file as the earlier commit named it")  # fmt: skip
     ap.add_argument("--keep", type=Path, default=None,
@@ -232,14 +237,14 @@ def main() -> int:
     if args.smoke:
         print("smoke: the scaling code at a tiny size, no design (the figures mean nothing)")
         vertex_scaling(design_file, (1,), onset=False)
-        state_scaling((8, 10), 64)
+        state_scaling((8, 10), 32)
         return 0
     if not args.only_scaling:
         with tempfile.TemporaryDirectory() as tmp:
             designs(args, Path(tmp))
     if args.scaling or args.only_scaling:
         vertex_scaling(design_file, (3, 5, 7, 9))
-        state_scaling((8, 12, 16, 24), 256)
+        state_scaling((8, 12, 16, 24), 1024)
     return 0
 
 
