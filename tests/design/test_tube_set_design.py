@@ -288,6 +288,7 @@ def test_the_adjustable_law_runs_tau_F_8_and_tightens_by_tau_F_8_Z_8(raw8, vehic
     r["disturbance"]["samples"] = 40
     r["certificate"] = {"schedules": 0}
     r["tube"]["tau"] = 0.8
+    r["variants"] = ["tube_mpc"]  # the law that runs tau (the RMPC baseline's minute: not here)
     design = pmod.run_design(spec_file(r, "quick8_tau.yaml"), log=lambda *_: None)
     assert taus == [0.8]
     a, lim = design.arrays, vehicle.limits
