@@ -25,8 +25,10 @@ Usage::
         [--before c5dd379 --before-file offline_design/designs/cm_certified.yaml]
         [--scaling] [--only-scaling] [--keep DIR] [--smoke]
 
-``--smoke`` runs the scaling code at a tiny size (256 vertices, 8 and 10 states on 32
-vertices) and no design: seconds, its figures mean nothing.
+``--smoke`` runs the scaling code at a tiny size and no design: three of the ten
+parameters varied (8 corners and 8 interior vehicles), one parameter direction (256
+vertices), one closure iteration, and the invariant-ellipsoid LMI on 8 and 10 states over
+16 of those vertices: seconds, its figures mean nothing.
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+#: The smoke run's vertex data: three uncertain parameters, eight interior vehicles.
+SMOKE = {"params": 3, "interior": 8}
 #: The arrays a design certifies (compared between the runs).
 CERTIFIED = ("A", "B", "w_max", "F", "N", "K", "Q", "u_lo", "u_hi", "trim_x", "trim_u")
 
@@ -102,8 +106,12 @@ def designs(args, tmp: Path) -> None:
         shutil.copytree(tmp / "warm", args.keep, dirs_exist_ok=True)
 
 
-def _vertex_data(design_file: Path, k: int):
-    """The eight-state vertex data of a design file with k parameter directions."""
+def _vertex_data(design_file: Path, k: int, params: int | None = None, interior: int = 256):
+    """The eight-state vertex data of a design file with k parameter directions.
+
+    ``params``: only the first ``params`` uncertain parameters varied (the smoke run's
+    size; None: all ten), ``interior`` vehicles inside their box besides the corners.
+    """
     from fahv.bounds.domain import nominal_box
     from fahv.bounds.vertices import nominal_vertices
     from fahv.model.trim import trim_map
@@ -118,19 +126,22 @@ def _vertex_data(design_file: Path, k: int):
     nominal, box = nominal_box(c["eight_state"], veh.envelope)
     tm = trim_map(veh, *c["trim_grid"], "cm")
     unc = {n: v * c["uncertainty"]["scale"] for n, v in PAPER_UNCERTAINTY.items()}
+    unc = dict(list(unc.items())[:params])
     a = d.arrays
     scale = np.concatenate([a["Dx"], a["Du"]])
     nv = nominal_vertices(box, veh, tm, unc, float(c["tube"]["rho_min"]), c["Ts"],
                           c["plant_substeps"], scale, k, a["w_max"],
-                          np.asarray(d.summary["certificate"]["col_scale"]))  # fmt: skip
+                          np.asarray(d.summary["certificate"]["col_scale"]),
+                          interior=interior)  # fmt: skip
     return c, d, nv, nominal
 
 
-def vertex_scaling(design_file: Path, ks, onset: bool = True) -> None:
+def vertex_scaling(design_file: Path, ks, onset: bool = True, smoke: bool = False) -> None:
     """The closure of the tube set against the number of vertices (k directions).
 
     ``onset``: Z_8 holds the onset's first jumps (66 560 plant steps to sample them), as
-    the design does; the smoke run leaves them out.
+    the design does; the smoke run leaves them out. ``smoke``: the tiny vertex data of
+    :data:`SMOKE` and one closure iteration.
     """
     from fahv.design.tube_set_design import _contain, _state_max
     from fahv.model.trim import trim_map
@@ -142,18 +153,19 @@ def vertex_scaling(design_file: Path, ks, onset: bool = True) -> None:
           "scratch, W_8's bound, exact all-vertex level):")  # fmt: skip
     print(f"  {'vertices':>9} {'closure [s]':>12} {'blocks held':>12}")
     for k in ks:
-        c, d, nv, nominal = _vertex_data(design_file, k)
+        c, d, nv, nominal = _vertex_data(design_file, k, **(SMOKE if smoke else {}))
         s, a = c["eight_state"], d.arrays
         veh = load_vehicle()
         unc = {n: v * c["uncertainty"]["scale"] for n, v in PAPER_UNCERTAINTY.items()}
         tm = trim_map(veh, *c["trim_grid"], "cm")
         contain = (_contain(c, nv.box, veh, tm, unc, float(c["tube"]["rho_min"]), lambda _: None)
                    if onset else None)  # fmt: skip
+        iterations = 1 if smoke else s["iterations"]
         t0 = time.perf_counter()
         try:
             ts = close_tube_set(nv, nominal, s["w0"] * a["w_max"][1:], a["Dx"], a["Du"],
                                 np.asarray(d.summary["tube"]["row_room"]), s["lam"],
-                                c["mpc"]["M"], grow=s["grow"], iterations=s["iterations"],
+                                c["mpc"]["M"], grow=s["grow"], iterations=iterations,
                                 w_ref=a["w_max"], state_max=_state_max(c, lambda _: None),
                                 contain=contain, log=lambda _: None)  # fmt: skip
             held = str(len(ts.active_set.vertices))
@@ -178,7 +190,7 @@ def _augmented(Acl, extra: int, a: float = 0.8):
     return Aa
 
 
-def state_scaling(dims, R: int) -> None:
+def state_scaling(dims, R: int, smoke: bool = False) -> None:
     """The invariant-ellipsoid LMI against the state dimension (augmented closed loops).
 
     The eight-state tube set's closed loop A_8 + B_8 F_8 (the shipped F_8 and W_8) on R
@@ -186,13 +198,14 @@ def state_scaling(dims, R: int) -> None:
     for W_8 whose projection lies in Z_8 (:func:`fahv.synthesis.invariant_ellipsoid.
     invariant_ellipsoid`: constraint generation from scratch, the exact all-vertex level
     at every pass), the LMI a joint error of estimate and tube is certified with.
+    ``smoke``: the vertices drawn from the tiny vertex data of :data:`SMOKE` (k = 1).
     """
     from fahv.spec.artefacts import load_design
     from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid
     from fahv.synthesis.rpi_level import vertex_levels
 
     design_file = ROOT / "offline_design/designs/cm_certified.yaml"
-    _, d, nv, _ = _vertex_data(design_file, 3)
+    _, d, nv, _ = _vertex_data(design_file, 1, **SMOKE) if smoke else _vertex_data(design_file, 3)
     A, B = nv.vertices()
     rng = np.random.default_rng(0)
     idx = rng.choice(A.shape[0], min(R, A.shape[0]), replace=False)
@@ -236,8 +249,8 @@ def main() -> int:
     design_file = ROOT / args.design
     if args.smoke:
         print("smoke: the scaling code at a tiny size, no design (the figures mean nothing)")
-        vertex_scaling(design_file, (1,), onset=False)
-        state_scaling((8, 10), 32)
+        vertex_scaling(design_file, (1,), onset=False, smoke=True)
+        state_scaling((8, 10), 16, smoke=True)
         return 0
     if not args.only_scaling:
         with tempfile.TemporaryDirectory() as tmp:

@@ -1,7 +1,8 @@
 """Issue-level requirements of the new Tube-MPC (law ``tube_mpc``) beyond Case 1.
 
-Each scenario is designed (small W sample, as every test design) and simulated for
-300 s in process; the node graph computes the same numbers (tests/runs/test_sil.py).
+Each scenario is designed (small W sample, as every test design; scenarios whose design
+part is the same share its design, :func:`_design`) and simulated for 300 s in process;
+the node graph computes the same numbers (tests/runs/test_sil.py).
 Requirements (sec. 5.1 and docs/theory/certificate.md): |h - h_c| <= 10 ft and
 |V - V_c| <= 2 ft/s within 60 s of the end of the command and held until the fault;
 back within the same bounds within 60 s of the fault and held to the end; attitude
@@ -19,7 +20,7 @@ from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.metrics import metrics
 from fahv.spec.files import spec_file
-from fahv.spec.scenario import run_spec_data
+from fahv.spec.scenario import design_part, run_spec_data, scenario_design
 
 H_TOL, V_TOL, ATT_DEG, WINDOW = 10.0, 2.0, 0.5, 60.0
 
@@ -68,6 +69,22 @@ def _case(path, **changes):
     return spec_file(d, "scenario.yaml")
 
 
+#: Designs of the scenarios' design parts, by content hash (made once per test run).
+_DESIGNS = {}
+
+
+def _design(case):
+    """``run_design(case)``: the design of the run spec's design part with the scenario's
+    arrays (as :func:`fahv.design.pipeline.run_design` forms it), the design part designed
+    once per content: the scenarios below that change only the fault, the vehicle draw or
+    nothing share Case 1's design."""
+    part = design_part(case)
+    key = part.content_hash()
+    if key not in _DESIGNS:
+        _DESIGNS[key] = run_design(part, log=lambda *_: None)
+    return scenario_design(_DESIGNS[key], case, load_vehicle(), None, lambda *_: None)
+
+
 SCENARIOS = {
     # descending step inside the envelope, Case 1 fault
     "descending step": (
@@ -91,7 +108,7 @@ def test_tube_mpc_meets_the_requirements(name):
     path, changes = SCENARIOS[name]
     case = _case(path, **changes)
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    design = run_design(case, log=lambda *_: None)
+    design = _design(case)
     run = simulate(design, "tube_mpc")
     r = requirements(run, case)
     assert r["settle_after_command_s"] <= WINDOW, r
@@ -111,7 +128,7 @@ def test_heavy_vehicle_with_a_large_loss_in_a_descent_ends_on_the_command():
 
     case = _case("offline_design/scenarios/case1_paper.yaml")
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    design = run_design(case, log=lambda *_: None)
+    design = _design(case)
     signs = {k: 0.0 for k in ("I_yy", "S", "z_T", "c_bar", "beta_1", "beta_3", "beta_5",
                               "beta_7")}  # fmt: skip
     values = {

@@ -1,6 +1,7 @@
 """The stored eight-state tube sets with their vertex data rebuilt (tube_set_records.py)."""
 
 import functools
+import pickle
 from dataclasses import replace
 
 import numpy as np
@@ -39,9 +40,31 @@ def rebuilt(design, name):
 
 
 @pytest.fixture(scope="session")
-def stored_tube_sets(design):
-    """``stored_tube_sets(name)``: :func:`rebuilt` of a record, built once per test run."""
-    return functools.cache(lambda name: rebuilt(design, name))
+def stored_tube_sets(design, tmp_path_factory, worker_id):
+    """``stored_tube_sets(name)``: :func:`rebuilt` of a record, built once per test run.
+
+    Under pytest-xdist the first worker that needs a record rebuilds it and pickles it
+    next to the workers' temporary folders (as the ``design`` fixture); the other waits
+    on the lock and loads it, so test_one_step_bound.py and test_onset.py on different
+    workers do not rebuild the same vertex data twice.
+    """
+    if worker_id == "master":  # not distributed
+        return functools.cache(lambda name: rebuilt(design, name))
+    from filelock import FileLock
+
+    shared = tmp_path_factory.getbasetemp().parent
+
+    @functools.cache
+    def shared_rebuilt(name):
+        path = shared / f"tube_set_{name.replace('.', '_')}.pickle"
+        with FileLock(f"{path}.lock"):
+            if path.exists():
+                return pickle.loads(path.read_bytes())
+            record = rebuilt(design, name)
+            path.write_bytes(pickle.dumps(record, protocol=pickle.HIGHEST_PROTOCOL))
+            return record
+
+    return shared_rebuilt
 
 
 @pytest.fixture(scope="session", params=TUBE_SETS)
