@@ -193,11 +193,23 @@ def design_tube_set(
                               iterations=s["iterations"], w_ref=w_max, state_max=state_max,
                               contain=contain, warm=warm, log=log)  # fmt: skip
     stage("tube set: onset bound, notch loops")
-    # what the closed tube set is checked with, as a graph of Dask tasks: the onset's
-    # steady set at each contraction factor, then the onset bound from the smallest; each
-    # notch loop, independent of them
-    parts, n_ellipsoids = {}, len(notches or {})
-    if gamma is not None:  # the onset's chain first: it is the longest (the loops fill in)
+    parts, lams, n_ellipsoids = _ellipsoid_tasks(
+        nv, tube_set, case, box, vehicle, trim_map, unc, rho_min, gamma, notches, starts, estimate
+    )
+    got = _compute(parts, n_ellipsoids, log)
+    return _with_ellipsoids(nv, tube_set, case, got, lams, notches, stable_only, log), nominal, box
+
+
+def _ellipsoid_tasks(nv, tube_set: TubeSet, case: dict, box, vehicle, trim_map, unc,
+                     rho_min: float, gamma, notches, starts, estimate):  # fmt: skip
+    """What the closed tube set is checked with, as a graph of Dask tasks.
+
+    The onset's steady set at each contraction factor, then the onset bound from the
+    smallest (the longest chain: first, by priority); each notch loop, independent of
+    them. Returns the tasks by name, the steady sets' factors and the ellipsoid count.
+    """
+    parts, lams, n_ellipsoids = {}, (), len(notches or {})
+    if gamma is not None:
         bound = steady_disturbance(nv, tube_set, _jump_h(case, box, vehicle, trim_map, unc,
                                                          rho_min), gamma)  # fmt: skip
         A, B = nv.vertices()
@@ -217,7 +229,12 @@ def design_tube_set(
     for v, nf in (notches or {}).items():
         parts[f"loop {v}"] = delayed(_notch_loops_logged)(nv, tube_set, case, {v: nf}, None,
                                                           starts)  # fmt: skip
-    got = _compute(parts, n_ellipsoids, log)
+    return parts, lams, n_ellipsoids
+
+
+def _with_ellipsoids(nv, tube_set: TubeSet, case: dict, got: dict, lams, notches, stable_only,
+                     log) -> TubeSet:  # fmt: skip
+    """The tube set with its notch loops, onset bound and the ellipsoids' active sets."""
     loops, gains = _notch_loops(nv, tube_set, case, None, stable_only, log)  # stability only
     held = {}
     for v in notches or {}:
@@ -228,11 +245,11 @@ def design_tube_set(
         held.update({notch_key(loop.variant): np.asarray(loop.active, int)
                      for loop in got_loops if loop.active})  # fmt: skip
     tube_set = replace(tube_set, notch_loops=loops, notch_gains=gains)
-    if gamma is not None:
+    if "onset" in got:
         held.update({steady_key(lam): active for lam, (_, _, active)
                      in zip(lams, got["steady"], strict=True)})  # fmt: skip
         tube_set = replace(tube_set, onset=got["onset"])
-    return replace(tube_set, ellipsoid_vertices=held), nominal, box
+    return replace(tube_set, ellipsoid_vertices=held)
 
 
 def steady_key(lam: float) -> str:
