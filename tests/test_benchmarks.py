@@ -64,7 +64,7 @@ FIGURES = {
         r"^smoke: the scaling code at a tiny size",
         # the closure on 256 vertices: the blocks it held, or why it does not close there
         rf"^ +256 +{NUM} +(\d+|not closed: .+)$",
-        rf"^ +10 +{NUM} +\d+$",  # the tube LMI on 10 states
+        rf"^ +10 +{NUM} +\d+ +(\d\.\d+|none found)$",  # the ellipsoid LMI on 10 states
     ],
 }
 #: Benchmarks that run the built ROS 2 workspace.
