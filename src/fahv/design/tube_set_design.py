@@ -253,12 +253,35 @@ def _with_ellipsoids(nv, tube_set: TubeSet, case: dict, got: dict, lams, notches
 
 
 def steady_key(lam: float) -> str:
-    """The name of the onset's steady set at contraction factor lam among the ellipsoids."""
+    """The name of the onset's steady set at contraction factor lam among the ellipsoids.
+
+    Parameters
+    ----------
+    lam : float
+        Contraction factor of the steady set (:func:`fahv.onset.bound.steady_set`).
+
+    Returns
+    -------
+    str
+        ``steady_<lam>`` (``TubeSet.ellipsoid_vertices``' key; the stored array is
+        ``ellipsoid_vertices_steady_<lam>``).
+    """
     return f"steady_{lam:g}"
 
 
 def notch_key(variant: str) -> str:
-    """The name of a variant's notch loop among the ellipsoids."""
+    """The name of a variant's notch loop among the ellipsoids.
+
+    Parameters
+    ----------
+    variant : str
+        A notch variant's name (:func:`fahv.tube.notch_loop.notch_tube`).
+
+    Returns
+    -------
+    str
+        ``notch_<variant>``, as :func:`steady_key`.
+    """
     return f"notch_{variant}"
 
 
