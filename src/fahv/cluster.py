@@ -52,3 +52,22 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
         scheduler_kwargs={"dashboard": dashboard is not None},
     )
     return Client(cluster), cluster
+
+
+def active_client():
+    """The default Dask distributed client of this process, or None.
+
+    Returns
+    -------
+    distributed.Client or None
+        The client a command started (``fahv design``, ``fahv campaign``) or the caller
+        made current; None in a plain library call.
+    """
+    try:
+        from distributed import default_client
+    except ImportError:  # pragma: no cover - distributed is a dependency
+        return None
+    try:
+        return default_client()
+    except ValueError:  # no client
+        return None

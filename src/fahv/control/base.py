@@ -195,6 +195,11 @@ class ControlLaw:
     #: (:func:`fahv.tube.notch_loop.notch_tube`); otherwise the measured q alone is
     #: filtered and only the loop's stability is checked.
     filters_nominal_q: ClassVar[bool] = False
+    #: True if the offline part (:meth:`design`) reads only what the design model makes
+    #: (the trim map ``trim_*``, the design point's trim ``x0``, the input room
+    #: ``u_room``): a design may then start it as soon as its model is made, on its Dask
+    #: cluster beside the tube's stages (:func:`fahv.design.stages.early_laws_stage`).
+    model_only: ClassVar[bool] = False
     #: Design-file section the law needs (required only when a variant uses the law).
     section: ClassVar[Section | None] = None
     #: Parameters of the controller node the law adds (each used only with the law).

@@ -138,6 +138,7 @@ class RMPCLaw(ControlLaw):
     node = "rmpc"
     nominal = CommandReference
     has_tube = False
+    model_only = True  # the DM model, the trim map and the input room
     section = Section(
         "rmpc",
         (

@@ -31,6 +31,7 @@ from fahv.design.results import (
 from fahv.design.stages import (
     certificate_stage,
     disturbance_stage,
+    early_laws_stage,
     laws_stage,
     model_stage,
     nominal_stage,
@@ -132,6 +133,7 @@ def run_design(spec: SpecFile, vehicle=None, progress=None, log=print, clock=Non
 
     tell("model")
     model = done(model_stage(c, veh))
+    early = early_laws_stage(c, veh, model, previous)  # on the cluster, beside the tube
     tell("disturbance")
     dist = done(disturbance_stage(c, veh, model, progress))
     tell("vertex tube")
@@ -146,7 +148,7 @@ def run_design(spec: SpecFile, vehicle=None, progress=None, log=print, clock=Non
     cert = done(certificate_stage(c, veh, model, vertex, tube, tightening, progress))
     tell("laws")
     arrays = laws_stage(c, veh, model, dist, vertex, tube, tightening, nominal, cert, log,
-                        previous)  # fmt: skip
+                        previous, early)  # fmt: skip
     summary = summary_of(spec, veh, model, dist, vertex, tube, tightening, nominal, cert)
     design = Design(c, arrays, summary)
     design.summary["design_hash"] = design.content_hash()

@@ -226,3 +226,17 @@ class FormCertificate:
     summary: dict
     arrays: dict = field(default_factory=dict)
     lines: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class EarlyLaws:
+    """Offline parts started on the design's Dask cluster right after the model stage.
+
+    Attributes
+    ----------
+    parts : dict
+        ``{law name: distributed.Future}``, each of ``(arrays, lines)``
+        (:func:`fahv.design.stages.offline_part`); empty when no Dask client is active.
+    """
+
+    parts: dict = field(default_factory=dict)

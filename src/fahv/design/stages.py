@@ -18,6 +18,10 @@ with the certificate lines it prints:
 8. :func:`laws_stage`: the stored arrays and the offline part of every law a variant
    uses (the nominal MPC's terminal check, the RMPC baseline's ellipsoids).
 
+A law's offline part that reads only the model (the RMPC baseline's) is started by
+:func:`early_laws_stage` right after stage 1 on the design's Dask cluster, and collected
+by :func:`laws_stage`: it runs on a worker while this process makes the tube.
+
 :func:`fahv.design.pipeline.run_design` calls them top to bottom.
 """
 
@@ -39,10 +43,12 @@ from fahv.certificate.report import (
     tp_model_line,
     tube_lmi_line,
 )
+from fahv.cluster import active_client
 from fahv.control import LAWS, VARIANTS, variant_notch
 from fahv.design.results import (
     DesignModel,
     Disturbance,
+    EarlyLaws,
     FormCertificate,
     FormTube,
     Nominal,
@@ -291,22 +297,105 @@ def certificate_stage(spec: dict, vehicle: Vehicle, model: DesignModel, vertex: 
     return FormCertificate(cert.summary, cert.arrays, cert.lines + notes)
 
 
+def model_arrays(model: DesignModel, vehicle: Vehicle) -> dict[str, np.ndarray]:
+    """The arrays an offline part with :attr:`fahv.control.ControlLaw.model_only` reads.
+
+    Returns
+    -------
+    dict
+        ``trim_h`` (n_h,) [ft], ``trim_V`` (n_V,) [ft/s], ``trim_x`` (n_h, n_V, n),
+        ``trim_u`` (n_h, n_V, 2): the trim map; ``x0`` (9,): the trim at the design
+        point; ``u_room`` (2,): the input room (:func:`fahv.tube.feasibility.input_room`).
+    """
+    tm = model.trim
+    return {"trim_h": tm.h_grid, "trim_V": tm.V_grid, "trim_x": tm.x_r, "trim_u": tm.u_r,
+            "x0": np.asarray(model.x_start[:9], float),  # the trim at the design point
+            "u_room": input_room(vehicle)}  # fmt: skip
+
+
+def early_laws_stage(spec: dict, vehicle: Vehicle, model: DesignModel,
+                     previous=None) -> EarlyLaws:  # fmt: skip
+    """Start the offline parts that read only the model on the design's Dask cluster.
+
+    The offline part of a law with :attr:`fahv.control.ControlLaw.model_only` (the
+    RMPC baseline's ellipsoids) depends on the model stage alone: with an active Dask
+    client (``fahv design`` starts one) it is submitted as soon as the model is made
+    and runs on a worker while this process makes the tube; :func:`laws_stage` takes
+    its result. Without a client nothing starts here and :func:`laws_stage` computes
+    every part in order.
+
+    Returns
+    -------
+    EarlyLaws
+        ``{law name: distributed.Future of (arrays, lines)}``, empty without a client.
+    """
+    client = active_client()
+    if client is None:
+        return EarlyLaws({})
+    ctx_spec = {**spec, "command": model.step}
+    arrays = model_arrays(model, vehicle)
+    names = dict.fromkeys(VARIANTS[v].law for v in spec["variants"])
+    return EarlyLaws({
+        name: client.submit(offline_part, LAWS[name], ctx_spec, vehicle, arrays, previous,
+                            pure=False, key=f"offline-{name}")  # fmt: skip
+        for name in names if LAWS[name].model_only
+    })  # fmt: skip
+
+
+def offline_part(part, spec: dict, vehicle: Vehicle, arrays: dict,
+                 previous=None) -> tuple[dict, list[str]]:  # fmt: skip
+    """An offline part (:meth:`fahv.control.ControlLaw.design`) with its log lines.
+
+    Parameters
+    ----------
+    part : type
+        A registered law (:data:`fahv.control.LAWS`) or nominal part class.
+    spec : dict
+        The validated design data with its ``command`` (a run spec's data).
+    vehicle : Vehicle
+    arrays : dict
+        The arrays the part reads.
+    previous : Mapping[str, ndarray], optional
+        An earlier design's arrays, where the part's solves start.
+
+    Returns
+    -------
+    (dict, list of str)
+        The part's arrays and the lines it logged, in order.
+
+    Raises
+    ------
+    DesignError
+        As the law's offline part.
+    """
+    lines: list[str] = []
+    ctx = DesignContext(spec, vehicle, dict(arrays), lines.append, previous)
+    return part.design(ctx), lines
+
+
 def laws_stage(spec: dict, vehicle: Vehicle, model: DesignModel, dist: Disturbance,
                vertex: VertexTube, tube: FormTube, tightening: Tightening, nominal: Nominal,
-               cert: FormCertificate, log: Log, previous=None) -> dict:  # fmt: skip
+               cert: FormCertificate, log: Log, previous=None,
+               early: EarlyLaws | None = None) -> dict:  # fmt: skip
     """The stored arrays, then the offline part of every law a variant uses.
 
     Each law's offline part (:meth:`fahv.control.ControlLaw.design`) sees the arrays made
     so far, the nominal parts' first, and adds its own; ``previous``, the arrays of an
     earlier design of the file, is where its solves may start
-    (:class:`fahv.spec.context.DesignContext`).
+    (:class:`fahv.spec.context.DesignContext`). A part started early
+    (:func:`early_laws_stage`) is collected here, its lines logged in the same place.
 
     Returns
     -------
     dict
         ``{name: array}``: what ``design.npz`` stores (:class:`fahv.spec.artefacts.Design`).
+
+    Raises
+    ------
+    DesignError
+        If a law's offline part fails (the message names which).
     """
-    tp, tm, t = model.tp, model.trim, tightening
+    tp, t = model.tp, tightening
     arrays = dict(cert.arrays)
     arrays.update({
         "A": model.disc.A, "B": model.disc.B, "h_grid": tp.h_grid, "V_grid": tp.V_grid,
@@ -314,14 +403,20 @@ def laws_stage(spec: dict, vehicle: Vehicle, model: DesignModel, dist: Disturban
         "F": tube.F, "N": tube.N, "K": nominal.design.K, "Q": nominal.design.Q,
         "u_room": vertex.room, "u_n_max": t.u_n_max,
         "u_lo": t.u_lo, "u_hi": t.u_hi,  # tightened absolute limits (eq. 30, asymmetric)
-        "trim_h": tm.h_grid, "trim_V": tm.V_grid, "trim_x": tm.x_r, "trim_u": tm.u_r,
         "omega_flex": model.omega_flex,
         # largest trim attitude offset of a parameter-box corner from the nominal trim
         "att_trim_offset": np.array(t.coverage.alpha_offset_max),
-        "x0": np.asarray(model.x_start[:9], float),  # the trim at the design point
+        **{k: v for k, v in model_arrays(model, vehicle).items() if k != "u_room"},
     })  # fmt: skip
-    ctx = DesignContext({**spec, "command": model.step}, vehicle, arrays, log, previous)
+    started = {} if early is None else early.parts
     laws = [LAWS[name] for name in dict.fromkeys(VARIANTS[v].law for v in spec["variants"])]
     for part in (*dict.fromkeys(law.nominal for law in laws), *laws):  # nominal parts first
-        arrays.update(part.design(ctx))
+        if part in laws and part.name in started:
+            made, lines = started[part.name].result()
+        else:
+            made, lines = offline_part(part, {**spec, "command": model.step}, vehicle, arrays,
+                                       previous)  # fmt: skip
+        for line in lines:
+            log(line)
+        arrays.update(made)
     return arrays

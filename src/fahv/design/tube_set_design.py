@@ -25,6 +25,7 @@ from dask import delayed
 from fahv.bounds.domain import SchedulingBox, nominal_box
 from fahv.bounds.one_step_bound import altitude_bound
 from fahv.bounds.vertices import NominalVertices, nominal_vertices
+from fahv.cluster import active_client
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.onset.bound import (
     STEADY_LAMS,
@@ -292,7 +293,7 @@ def _compute(parts: dict, n_ellipsoids: int, log):
     honours the tasks' priorities; without one (a library call), the local process
     scheduler takes them in its own order.
     """
-    client = _active_client()
+    client = active_client()
     if client is not None:
         log(f"eight-state tube: the onset bound and the notch loops, {n_ellipsoids} invariant "
             f"ellipsoids, on {len(client.scheduler_info()['workers'])} Dask workers")  # fmt: skip
@@ -303,18 +304,6 @@ def _compute(parts: dict, n_ellipsoids: int, log):
             f"ellipsoids, on {workers} processes")  # fmt: skip
         return dask.compute(parts, scheduler="processes", num_workers=workers)[0]
     return dask.compute(parts, scheduler="sync")[0]
-
-
-def _active_client():
-    """The default Dask distributed client of this process, or None."""
-    try:
-        from distributed import default_client
-    except ImportError:  # pragma: no cover - distributed is a dependency
-        return None
-    try:
-        return default_client()
-    except ValueError:  # no client
-        return None
 
 
 def _smallest_steady(steady) -> float:
