@@ -241,12 +241,13 @@ class LoopMargins:
         return self.rho < 1.0
 
 
-def frequency_grid(Ts: float, omega_flex=(), points: int = 800) -> np.ndarray:
+def frequency_grid(Ts: float, omega_flex=(), points: int = 300) -> np.ndarray:
     """Frequencies [rad/s] of the disk margins and figures: 0.01 rad/s to below Nyquist.
 
     Log-spaced, plus 41 points within 15 % of each flexible mode, where the loops change
-    fastest; 800 log-spaced points give the margins of cm_certified's loops to 0.01 dB
-    and 0.01 deg of those on 2000.
+    fastest. With 300 log-spaced points cm_certified's gain and phase margins at the
+    design point are within 0.005 dB and 0.001 deg of those on 3000, its disk margins
+    (a least value over the grid, so from above) within 0.03 dB and 0.2 deg.
 
     Parameters
     ----------
