@@ -48,6 +48,12 @@ def _mark_modes(ax, study: MarginStudy) -> None:
             ax.axvline(s.notch.omega_z, color="tab:red", ls="--", lw=0.6, alpha=0.5)
 
 
+def _critical_phases(lo: float, hi: float) -> list[float]:
+    """The phases -180 deg + k 360 deg within [lo, hi] [deg]."""
+    k0, k1 = int(np.ceil((lo + 180.0) / 360.0)), int(np.floor((hi + 180.0) / 360.0))
+    return [-180.0 + 360.0 * k for k in range(k0, k1 + 1)]
+
+
 def bode_figure(study: MarginStudy, design, break_at: str, path: Path) -> Path:
     """Bode plot of the loop broken at ``break_at``, every notch setting, at the design point.
 
@@ -82,8 +88,9 @@ def bode_figure(study: MarginStudy, design, break_at: str, path: Path) -> Path:
     for ax in (am, ph):
         _mark_modes(ax, study)
         ax.grid(True, which="both", alpha=0.3)
-    for k in range(-3, 2):
-        ph.axhline(-180.0 + 360.0 * k, color="k", lw=0.6)
+    lo, hi = ph.get_ylim()
+    for c in _critical_phases(lo, hi):
+        ph.axhline(c, color="k", lw=0.6)
     am.set_ylabel("|L| [dB]")
     ph.set_ylabel("phase of L [deg]")
     ph.set_xlabel("frequency [rad/s] (o: gain crossover of PM; s: phase crossover of GM)")
@@ -118,9 +125,7 @@ def nichols_figure(study: MarginStudy, design, path: Path) -> Path:
             (line,) = ax.plot(phase, mag, lw=1.1, label=f"notch {s.label}")
             i = int(np.argmin(np.abs(w - study.omega_flex[0])))
             ax.plot(phase[i], mag[i], "^", color=line.get_color(), ms=6)
-        lo, hi = ax.get_xlim()
-        for k in range(int(np.floor((lo + 180) / 360)), int(np.ceil((hi + 180) / 360)) + 1):
-            c = -180.0 + 360.0 * k
+        for c in _critical_phases(*ax.get_xlim()):
             ax.plot(c, 0.0, "k+", ms=10)
             ax.add_patch(plt.Rectangle((c - p, -g), 2 * p, 2 * g, fill=False, ls="--",
                                        color="tab:red", lw=0.8))  # fmt: skip
