@@ -78,6 +78,7 @@ def margin_table(rows: list[LoopMargins], markdown: bool = False) -> str:
     head = [f"{h} [{u}]" if u else h for h, u in COLUMNS]
     cells = [row_cells(r) for r in rows]
     if markdown:
+        head = [h.replace("|", "\\|") for h in head]  # |L(w_1)| inside a Markdown cell
         lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         return "\n".join(lines + ["| " + " | ".join(c) + " |" for c in cells])
     widths = [max(len(x) for x in col) for col in zip(head, *cells, strict=True)]
