@@ -36,6 +36,7 @@ TABLES = {
     "campaign-keys": ("fahv.campaign.spec", "campaign_spec"),
     "node-table": ("fahv.loop.graph", "markdown_table"),
     "registry-tables": ("fahv.loop.graph", "registry_tables"),
+    "margins-table": ("fahv.cli.margins", "docs_table"),
 }
 #: Specs whose table is ``fahv.config.spec.markdown(spec())``; the others return Markdown.
 SPECS = {"design-keys", "scenario-keys", "campaign-keys"}

@@ -8,6 +8,7 @@ Subcommands::
     fahv tube      tube feasibility study (W by source, F, Z, input room)
     fahv design    offline synthesis of a design file: certified artefacts
     fahv verify    re-check every certificate of a stored design (no solver)
+    fahv margins   gain, phase, delay and disk margins of the tube loop, with and without the notch
     fahv simulate  in-process closed loop of a scenario: metrics table per variant
     fahv sil       the ROS 2 node graph of a scenario in lockstep, recorded to MCAP
     fahv plot      paper-style figures of recorded runs, overlaid
@@ -33,7 +34,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fahv.cli import campaign, design, index, inspect, modelling, run
+from fahv.cli import campaign, design, index, inspect, margins, modelling, run
 from fahv.cli.common import stop_signals
 from fahv.errors import FahvError, RunInterrupted
 
@@ -46,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="fahv", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="command", required=True)
 
-    for group in (modelling, design, run, inspect, campaign, index):
+    for group in (modelling, design, margins, run, inspect, campaign, index):
         group.add_parsers(sub)
     return ap
 

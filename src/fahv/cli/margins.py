@@ -1,0 +1,124 @@
+"""``fahv margins``: classical loop margins of a stored design, with and without the notch."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from fahv.analysis.margin_figures import margin_figures
+from fahv.analysis.margin_report import margin_table, notch_summary
+from fahv.analysis.margin_study import margin_study
+from fahv.cli.common import add_vehicle_option, vehicle_of
+from fahv.cli.design import resolve_design_file
+from fahv.model.vehicle import load_vehicle
+from fahv.runs.workspace import ROOT
+from fahv.spec.store import stored_design
+
+#: The design whose table docs/results/margins.md shows (``<!-- margins-table -->``).
+DOCS_DESIGN = "cm_certified"
+
+
+def study_of(design: str, design_dir=None, vehicle=None, every_setting: bool = False):
+    """The margin study of a stored design given as :func:`fahv.cli.design.resolve_design_file`.
+
+    Parameters
+    ----------
+    design : str
+        Design or scenario: a file, or a name in offline_design/.
+    design_dir : str, optional
+        Artefact folder of the stored design.
+    vehicle : fahv.model.vehicle.Vehicle, optional
+        Default: the packaged vehicle.
+    every_setting : bool
+        Every notch setting over the LPV vertices (:func:`fahv.analysis.margin_study.margin_study`).
+
+    Returns
+    -------
+    (MarginStudy, Design, Path)
+        The study, the stored design and its folder.
+
+    Raises
+    ------
+    SpecError, DesignError
+        If the design does not resolve, or is missing or stale.
+    ValueError
+        If it is not a nine-state design.
+    """
+    vehicle = load_vehicle() if vehicle is None else vehicle
+    _, stored, folder = stored_design(resolve_design_file(design), design_dir, vehicle)
+    name = stored.summary.get("design_name", folder.name)
+    return margin_study(stored, vehicle, every_setting, name=name), stored, folder
+
+
+def docs_table() -> str:
+    """The Markdown table and summary ``fahv margins cm_certified --markdown`` prints.
+
+    The design file of the repository (:data:`fahv.runs.workspace.ROOT`), for the docs
+    build's hook (``docs/hooks/generated.py``, marker ``margins-table``).
+
+    Returns
+    -------
+    str
+        The Markdown the command prints, without the timing line.
+    """
+    study, _, _ = study_of(str(ROOT / "offline_design" / "designs" / f"{DOCS_DESIGN}.yaml"))
+    return _markdown(study)
+
+
+def _markdown(study) -> str:
+    """The Markdown of a study: its table, then its notch summary as a list."""
+    rows = study.table_rows()
+    return margin_table(rows, markdown=True) + "\n\n" + "\n".join(
+        f"- {line}" for line in notch_summary(rows))  # fmt: skip
+
+
+def cmd_margins(args) -> int:
+    """Print the margin table of a design and write its Bode and Nichols figures."""
+    t0 = time.monotonic()
+    study, stored, folder = study_of(args.design, args.design_dir, vehicle_of(args),
+                                     args.every_notch)  # fmt: skip
+    print(
+        f"design {study.design_name} ({folder}), hash {stored.summary['design_hash']}: "
+        f"loop u = v + F e with the constraints inactive, Ts = {study.Ts:g} s, "
+        f"omega_1 = {study.omega_flex[0]:.2f} rad/s, omega_2 = {study.omega_flex[1]:.2f} rad/s"
+    )
+    if args.markdown:
+        print(_markdown(study))
+    else:
+        print(margin_table(study.table_rows()))
+        for line in notch_summary(study.table_rows()):
+            print(line)
+    for label, rho in study.corner_rho.items():
+        print(
+            f"notch {label}: closed loop stable at {int((rho < 1).sum())} of {len(rho)} "
+            f"parameter box corners (largest spectral radius {rho.max():.6f})"
+        )
+    if args.out:
+        for path in margin_figures(study, stored, Path(args.out), args.format):
+            print(f"wrote {path}")
+    print(f"margins: {time.monotonic() - t0:.1f} s")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    """Add the parser of this command."""
+    p = sub.add_parser(
+        "margins",
+        help="gain, phase, delay and disk margins of the tube loop, with and without the notch",
+        description="Classical loop margins of a stored design's tube loop u = v + F e "
+        "(constraints inactive), broken at the elevator input delta_e and at the pitch-rate "
+        "sensor q, for every notch setting of its tube variants and the paper's eps_p: at the "
+        "design point, worst over the LPV vertices, and at the parameter box corner of the most "
+        "unstable airframe. Margins by python-control (stability_margins, disk_margins).",
+    )
+    p.add_argument("design", help="design or scenario: a file, or a name in offline_design/")
+    p.add_argument("--design-dir", default=None, help="artefact folder of the stored design")
+    p.add_argument("--out", default="figures",
+                   help="folder of the Bode and Nichols figures ('' writes none)")  # fmt: skip
+    p.add_argument("--format", choices=("png", "pdf"), default="png")
+    p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
+    p.add_argument("--every-notch", action="store_true",
+                   help="every notch setting over the LPV vertices (default: the notch at "
+                   "omega_1 as designed and no notch)")  # fmt: skip
+    add_vehicle_option(p)
+    p.set_defaults(func=cmd_margins)

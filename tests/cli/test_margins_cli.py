@@ -1,0 +1,29 @@
+"""``fahv margins``: the table of cm_certified and its figures."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from fahv.cli import main
+from fahv.runs.workspace import ROOT
+
+
+def test_margins_prints_the_table_and_writes_the_figures(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    assert main(["margins", "cm_certified", "--out", str(tmp_path), "--format", "pdf"]) == 0
+    out = capsys.readouterr().out
+    assert "GM+ [dB]" in out and "DM phase [deg]" in out
+    rows = [line.split() for line in out.splitlines() if line.startswith(("delta_e ", "q "))]
+    # 2 breaks x (4 settings at the design point and the corner, 2 over the vertices)
+    assert len(rows) == 2 * (4 * 2 + 2)
+    q_on = next(r for r in rows if r[:4] == ["q", "omega_1", "design", "point"])
+    q_off = next(r for r in rows if r[:4] == ["q", "off", "design", "point"])
+    assert float(q_on[-1]) - float(q_off[-1]) == pytest.approx(-14.0, abs=0.15)
+    assert re.search(r"break at q: .* \(-14\.0 dB\)", out)
+    assert "stable at 1024 of 1024 parameter box corners" in out
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["margins_cm_certified_bode_delta_e.pdf", "margins_cm_certified_bode_q.pdf",
+                     "margins_cm_certified_nichols.pdf"]  # fmt: skip
+    assert all((tmp_path / n).stat().st_size > 10_000 for n in names)
