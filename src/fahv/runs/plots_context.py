@@ -63,9 +63,9 @@ class PlottedRun:
 def run_labels(paths, metadata) -> list[str]:
     """Legend labels of overlaid runs: ``"<scenario> / <variant>"`` from the metadata.
 
-    Runs of the same scenario and variant are told apart by their names (the folder,
-    or the .mcap file without suffix; with the parent folder when two such names are
-    equal), a run given twice by its position (``[2]``).
+    Runs of the same scenario and variant are told apart by their names in
+    parentheses (the folder, or the .mcap file without suffix; with the parent folder
+    when two such names are equal), a run given twice by its position (``[2]``).
 
     Parameters
     ----------
@@ -94,7 +94,8 @@ def run_labels(paths, metadata) -> list[str]:
     clash = {n for n in names if len({w for w, m in zip(where, names, strict=True) if m == n}) > 1}
     names = [f"{w.parent.name}/{n}" if n in clash else n
              for w, n in zip(where, names, strict=True)]  # fmt: skip
-    out = [b if base.count(b) == 1 else f"{b} ({n})" for b, n in zip(base, names, strict=True)]
+    told = {b for b in base if len({n for c, n in zip(base, names, strict=True) if c == b}) > 1}
+    out = [f"{b} ({n})" if b in told else b for b, n in zip(base, names, strict=True)]
     return [n if out.count(n) == 1 else f"{n} [{out[:i].count(n) + 1}]"
             for i, n in enumerate(out)]  # fmt: skip
 
