@@ -104,8 +104,6 @@ def test_error_bands_are_the_requirement_constants():
             assert {-b, b} <= _hlines(ax)
             (band,) = ax.patches
             y0, y1 = band.get_y(), band.get_y() + band.get_height()  # data units
-                ::3
-            ]
             assert (y0, y1) == pytest.approx((-b, b), abs=1e-12)
         assert row[1].get_ylim() == pytest.approx((-3 * b, 3 * b))
     h_err = axes[0, 0].get_lines()[2].get_ydata()  # after the two band edges
