@@ -119,6 +119,13 @@ def add_parsers(sub) -> None:
         "plot",
         help="figures of recorded runs, overlaid: states, tracking errors with the "
         "requirement bands, inputs with their limits, input rates, tube level, spectra",
+        description="Figures of recorded runs, overlaid, written to --out: trajectory, "
+        "attitude, flexible (the states); errors (h - h_c, V - V_c, alpha - alpha_r, "
+        "theta - theta_r with the requirement bands); inputs (with the actuator and the "
+        "tightened limits); input_rates; tube (e' N^-1 e, boundary of Z at 1); spectra "
+        "(Welch PSD of q, the notch output q' and eta_1_dot, notch and flexible modes "
+        "marked). Legends name each run by scenario / variant from its metadata; a "
+        "fault's onset is a vertical line on every figure over time.",
     )
     p.add_argument("runs", nargs="+", help="run folders or .mcap files")
     p.add_argument("--out", default="figures", help="output folder")
