@@ -1,7 +1,7 @@
 """Legend labels of overlaid recorded runs (``fahv plot``): one distinct label per run.
 
-Runs of the same variant and source are told apart: each run is named after its
-folder (or .mcap file), with its variant when the runs are not all of one variant.
+Each run is labelled with its scenario and variant from its metadata; runs of the same
+scenario and variant are told apart by their folder (or .mcap file) names.
 """
 
 import shutil
@@ -11,7 +11,8 @@ import pytest
 
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import bag_paths, read_run, run_result_of
-from fahv.runs.plots import group_figure, run_labels
+from fahv.runs.plots import group_figure
+from fahv.runs.plots_context import run_labels
 from fahv.runs.writer import RunWriter
 
 T = 0.2  # simulated time of each run [s]: 10 steps of 0.02 s
@@ -47,7 +48,7 @@ def runs(design, tmp_path_factory):
 
 def _labels(paths):
     """Labels as ``fahv plot`` makes them: from the paths and the runs' metadata."""
-    return run_labels(paths, [read_run(p).metadata.get("variant") for p in paths])
+    return run_labels(paths, [read_run(p).metadata for p in paths])
 
 
 def _legend(paths, group="trajectory"):
@@ -60,24 +61,30 @@ def _legend(paths, group="trajectory"):
         plt.close(fig)
 
 
-def test_runs_of_one_variant_are_labelled_by_their_folders(runs):
+def test_runs_of_one_variant_are_told_apart_by_their_folders(runs, design):
+    c = design.case["name"]
     paths = [runs["sim_a"], runs["x/run"]]
-    assert _legend(paths) == ["sim_a", "run", "command"]
-    assert _legend(paths, "attitude") == ["sim_a", "run"]
+    assert _legend(paths) == [f"{c} / tube_mpc (sim_a)", f"{c} / tube_mpc (run)", "command"]
+    assert _legend(paths, "attitude") == [f"{c} / tube_mpc (sim_a)", f"{c} / tube_mpc (run)"]
 
 
-def test_runs_of_several_variants_carry_their_variant(runs):
+def test_runs_of_several_variants_are_labelled_by_scenario_and_variant(runs, design):
+    c = design.case["name"]
     paths = [runs["sim_a"], runs["sim_b"]]
-    assert _legend(paths, "inputs") == ["sim_a (tube_mpc)", "sim_b (tube_mpc_no_notch)"]
+    assert _legend(paths, "inputs") == [f"{c} / tube_mpc", f"{c} / tube_mpc_no_notch"]
 
 
-def test_runs_of_the_same_name_and_bare_files_are_told_apart(runs, tmp_path):
+def test_runs_of_the_same_name_and_bare_files_are_told_apart(runs, design, tmp_path):
+    c = design.case["name"]
     bare = tmp_path / "alone.mcap"
     shutil.copy(bag_paths(runs["sim_a"])[1], bare)
     paths = [runs["x/run"], runs["y/run"], bare, runs["sim_a"], runs["sim_a"]]
-    assert _legend(paths, "flexible") == ["x/run", "y/run", "alone", "sim_a [1]", "sim_a [2]"]
+    assert _legend(paths, "flexible") == [
+        f"{c} / tube_mpc (x/run)", f"{c} / tube_mpc (y/run)", f"{c} / tube_mpc (alone)",
+        f"{c} / tube_mpc (sim_a) [1]", f"{c} / tube_mpc (sim_a) [2]",
+    ]  # fmt: skip
 
 
-def test_run_labels_need_one_variant_per_run():
-    with pytest.raises(ValueError, match="2 runs but 1 variants"):
-        run_labels(["a", "b"], ["tube_mpc"])
+def test_run_labels_need_metadata_per_run():
+    with pytest.raises(ValueError, match="2 runs but 1 metadata"):
+        run_labels(["a", "b"], [{"case": "case1", "variant": "tube_mpc"}])

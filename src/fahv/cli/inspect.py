@@ -5,9 +5,17 @@ from __future__ import annotations
 from pathlib import Path
 
 from fahv.cli.common import read_run_warned, to_json
-from fahv.errors import FahvError
-from fahv.runs.bag import bag_paths, run_result_of
-from fahv.runs.plots import GROUPS, plot_group, run_labels
+from fahv.runs.bag import bag_paths
+from fahv.runs.plots import group_figure, save_figure
+from fahv.runs.plots_context import clip_runs, plotted_run, run_labels
+from fahv.runs.plots_frequency import spectra_figure
+from fahv.runs.plots_time import (
+    error_figure,
+    input_figure,
+    input_rate_figure,
+    mark_onsets,
+    tube_figure,
+)
 from fahv.runs.tools import (
     compare,
     export_run,
@@ -58,23 +66,36 @@ def cmd_compare(args) -> int:
     return 0
 
 
+#: Paper-style groups ``fahv plot`` writes (:data:`fahv.runs.plots.GROUPS`; its own
+#: input and tube figures replace the groups of those names).
+PLOT_GROUPS = ("trajectory", "attitude", "flexible")
+
+#: The engineering figures ``fahv plot`` writes: file name -> function of the runs.
+PLOT_FIGURES = {
+    "errors": error_figure,
+    "inputs": input_figure,
+    "input_rates": input_rate_figure,
+    "tube": tube_figure,
+}
+
+
 def cmd_plot(args) -> int:
-    """Paper-style figures of one or several recorded runs, overlaid."""
-    recs, results = [], []
-    for path in args.runs:
-        rec = read_run_warned(path)
-        run = run_result_of(rec)
-        if run.t.size == 0:
-            raise FahvError(f"{path}: no complete step of the loop topics to plot")
-        recs.append(rec)
-        results.append(run)
-    labels = run_labels(args.runs, [r.metadata.get("variant") for r in recs])
-    runs = list(zip(labels, results, strict=True))
-    out = Path(args.out)
-    for group in GROUPS:
-        if group == "flexible_rates":
-            continue
-        print(plot_group(group, runs, out / f"{group}.{args.format}"))
+    """Figures of one or several recorded runs, overlaid, over a time window."""
+    recs = [read_run_warned(path) for path in args.runs]
+    labels = run_labels(args.runs, [r.metadata for r in recs])
+    runs = clip_runs([plotted_run(r, lab) for r, lab in zip(recs, labels, strict=True)],
+                     args.t0, args.t1)  # fmt: skip
+    out, fmt = Path(args.out), args.format
+    for group in PLOT_GROUPS:
+        fig = group_figure(group, [(r.label, r.run) for r in runs])
+        mark_onsets(fig, runs)
+        print(save_figure(fig, out / f"{group}.{fmt}"))
+    for name, make in PLOT_FIGURES.items():
+        fig = make(runs)
+        mark_onsets(fig, runs)
+        print(save_figure(fig, out / f"{name}.{fmt}"))
+    after = args.t0 is None and args.t1 is None  # a chosen window is the spectra's
+    print(save_figure(spectra_figure(runs, after), out / f"spectra.{fmt}"))
     return 0
 
 
@@ -94,8 +115,29 @@ def add_parsers(sub) -> None:
     p.add_argument("b", help="run B (folder or .mcap)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_compare)
-    p = sub.add_parser("plot", help="paper-style figures of recorded runs, overlaid")
+    p = sub.add_parser(
+        "plot",
+        help="figures of recorded runs, overlaid: states, tracking errors with the "
+        "requirement bands, inputs with their limits, input rates, tube level, spectra",
+        description="Figures of recorded runs, overlaid, written to --out: trajectory, "
+        "attitude, flexible (the states); errors (h - h_c, V - V_c, alpha - alpha_r, "
+        "theta - theta_r with the requirement bands); inputs (with the actuator and the "
+        "tightened limits); input_rates; tube (e' N^-1 e, boundary of Z at 1); spectra "
+        "(Welch PSD of q, the notch output q' and eta_1_dot, notch and flexible modes "
+        "marked). Legends name each run by scenario / variant from its metadata; a "
+        "fault's onset is a vertical line on every figure over time.",
+    )
     p.add_argument("runs", nargs="+", help="run folders or .mcap files")
     p.add_argument("--out", default="figures", help="output folder")
     p.add_argument("--format", choices=("png", "pdf"), default="png")
+    p.add_argument(
+        "--t0",
+        type=float,
+        default=None,
+        help="start of the time window [s] (default: the run's start)",
+    )
+    p.add_argument("--t1", type=float, default=None,
+                   help="end of the time window [s] (default: the run's end); with "
+                   "--t0 or --t1 the spectra are over the window, else from the "
+                   "step's settling to the end")  # fmt: skip
     p.set_defaults(func=cmd_plot)

@@ -32,6 +32,31 @@ def _settling_time(t, err, tol, t_from):
     return float(t[bad[-1] + 1])
 
 
+def settling_times(run: RunResult) -> tuple[float, float]:
+    """Settling times of the altitude and the velocity [s] (NaN: never settled).
+
+    The first time after the case command stops moving from which |h - h_c| <=
+    ``SETTLE_TOL["h"]`` (resp. |V - V_c| <= ``SETTLE_TOL["V"]``) holds to the end of the run.
+
+    Parameters
+    ----------
+    run : RunResult
+        A run of N >= 1 steps.
+
+    Returns
+    -------
+    (float, float)
+        (t_s of h, t_s of V) [s], simulated time.
+    """
+    t = run.t
+    moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
+    t_cmd_end = float(t[moving[-1]]) if moving.size else 0.0
+    return (
+        _settling_time(t, run.x[:, H] - run.h_c, SETTLE_TOL["h"], t_cmd_end),
+        _settling_time(t, run.x[:, V] - run.V_c, SETTLE_TOL["V"], t_cmd_end),
+    )
+
+
 @functools.lru_cache(maxsize=4)
 def _vehicle(path: str):
     return load_vehicle(path or None)
@@ -158,10 +183,7 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     if t_fault is None and np.any(run.fault_active):
         t_fault = float(t[np.argmax(run.fault_active)])
     eh, eV = x[:, H] - run.h_c, x[:, V] - run.V_c
-    moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
-    t_cmd_end = float(t[moving[-1]]) if moving.size else 0.0
-    ts_h = _settling_time(t, eh, SETTLE_TOL["h"], t_cmd_end)
-    ts_V = _settling_time(t, eV, SETTLE_TOL["V"], t_cmd_end)
+    ts_h, ts_V = settling_times(run)
     t_settle = max(ts_h, ts_V) if not (math.isnan(ts_h) or math.isnan(ts_V)) else math.nan
     after = t >= (t_settle if not math.isnan(t_settle) else t[-1])
     in_run = t_fault is not None and t_fault < t[-1]

@@ -2,9 +2,11 @@
 
 Each function takes runs as ``[(label, RunResult), ...]`` (from ``fahv simulate``,
 ``fahv sil`` or a recorded file, :func:`fahv.runs.bag.run_result_of`; the labels of
-recorded runs from :func:`run_labels`), overlays them with a legend and writes one
-figure (PNG or PDF by the suffix). Drawing is matplotlib
-(Agg). Time in s, angles in deg.
+recorded runs from :func:`fahv.runs.plots_context.run_labels`), overlays them with a
+legend and writes one figure (PNG or PDF by the suffix). Drawing is matplotlib (Agg).
+Time in s, angles in deg. The engineering figures of ``fahv plot`` (errors with the
+requirement bands, inputs with their limits, spectra) are in
+:mod:`fahv.runs.plots_time` and :mod:`fahv.runs.plots_frequency`.
 """
 
 from __future__ import annotations
@@ -68,7 +70,7 @@ def group_figure(group: str, runs: list, title: str | None = None):
     group : str
         Key of :data:`GROUPS`.
     runs : list of (str, RunResult)
-        Legend label and run, in drawing order (labels from :func:`run_labels`).
+        Legend label and run, in drawing order.
     title : str, optional
         Figure title (default: the group's).
 
@@ -132,58 +134,28 @@ def plot_group(group: str, runs: list, path: str | Path, title: str | None = Non
     ValueError
         If there is no run.
     """
-    fig = group_figure(group, runs, title)
+    return save_figure(group_figure(group, runs, title), path)
+
+
+def save_figure(fig, path: str | Path) -> Path:
+    """Write a figure (PNG or PDF by the suffix, 110 dpi) and close it.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    path : path
+        Output file; its folder is created.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
-
-
-def run_name(path: str | Path) -> str:
-    """Name of a recorded run: its folder's name, or its .mcap file's name without suffix."""
-    p = Path(path)
-    return p.stem if p.suffix == ".mcap" else p.resolve().name
-
-
-def run_labels(paths, variants) -> list[str]:
-    """Legend labels that tell overlaid recorded runs apart.
-
-    Each run is labelled with its name (:func:`run_name`), followed by its variant
-    in parentheses when the runs are not all of one variant. Runs of the same name
-    are told apart by their parent folders, a run given twice by its position
-    (``[2]``).
-
-    Parameters
-    ----------
-    paths : sequence of path
-        Run folders or .mcap files, in drawing order.
-    variants : sequence of str or None
-        Variant of each run (run metadata ``variant``; None when unknown).
-
-    Returns
-    -------
-    list of str
-        One distinct label per run, in the order of ``paths``.
-
-    Raises
-    ------
-    ValueError
-        If ``paths`` and ``variants`` differ in length.
-    """
-    paths, variants = [Path(p) for p in paths], list(variants)
-    if len(paths) != len(variants):
-        raise ValueError(f"{len(paths)} runs but {len(variants)} variants")
-    where = [p.resolve() for p in paths]
-    names = [run_name(p) for p in paths]
-    # one name, several runs (<dir>/run and <other dir>/run): the parent folder tells
-    clash = {n for n in names if len({w for w, m in zip(where, names, strict=True) if m == n}) > 1}
-    names = [f"{w.parent.name}/{n}" if n in clash else n
-             for w, n in zip(where, names, strict=True)]  # fmt: skip
-    if len(set(variants)) > 1:
-        names = [n if v is None else f"{n} ({v})" for n, v in zip(names, variants, strict=True)]
-    return [n if names.count(n) == 1 else f"{n} [{names[:i].count(n) + 1}]"
-            for i, n in enumerate(names)]  # fmt: skip
 
 
 def _tube_axis(ax, runs) -> None:

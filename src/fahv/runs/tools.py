@@ -60,7 +60,7 @@ METRIC_ROWS = (
     ("delta_e_max_deg", "delta_e max [deg]", "{:.3f}"),
     ("input_limit_violations", "steps with a command beyond limits", "{}"),
     ("tube_fraction_inside", "fraction of steps with e in Z", "{:.4f}"),
-    ("tube_level_max", "max e' Z^-1 e", "{:.4f}"),
+    ("tube_level_max", "max e' N^-1 e", "{:.4f}"),
     ("tube_error_h_max_ft", "max |e_h| (altitude part of the tube error) [ft]", "{:.3f}"),
     ("rmpc_lmi_failed", "RMPC steps outside its largest ellipsoid", "{}"),
     ("nominal_alpha_dev_max_deg", "max nominal |alpha - trim at its (h, V)| [deg]", "{:.3f}"),

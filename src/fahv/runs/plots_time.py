@@ -1,0 +1,282 @@
+"""Engineering figures of runs over time: tracking errors, inputs, input rates, tube level.
+
+Each figure overlays runs given as :class:`fahv.runs.plots_context.PlottedRun` (already
+cut to the time window, :func:`fahv.runs.plots_context.clip_runs`) and returns a
+matplotlib figure the caller saves and closes. What they draw:
+
+- tracking errors h - h_c [ft], V - V_c [ft/s] against the case command, alpha -
+  alpha_r and theta - theta_r [deg] against the trim of the governed reference x_r (as
+  :func:`fahv.runs.metrics.metrics` computes them), with the requirement bands shaded:
+  +/- ``SETTLE_TOL`` (settling of h and V) and +/- ``ATTITUDE_BOUND_DEG`` (sec. 5.1);
+  the right column zooms on the bands;
+- the controller command u = (Phi, delta_e) with the actuator limits (sec. 5.1) and
+  the tightened limits u_lo, u_hi of eq. (30);
+- the rates of the applied input (after the fault injector), finite differences over
+  the step Ts;
+- the tube level e' N^-1 e (<= 1: the tube error e inside Z = {e' N^-1 e <= 1}) on a
+  logarithmic axis with the boundary at 1.
+
+:func:`mark_onsets` draws the fault onset on every panel of any of them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fahv.model.vehicle import ALPHA, THETA, H, V
+from fahv.runs.metrics import ATTITUDE_BOUND_DEG, SETTLE_TOL
+from fahv.runs.plots import LINESTYLES, plt
+
+#: Tracking-error panels: (quantity, unit, function of a RunResult -> (N,) values,
+#: requirement bound in that unit). The bounds are the metrics' requirements.
+ERROR_PANELS = (
+    ("h - h_c", "ft", lambda r: r.x[:, H] - r.h_c, SETTLE_TOL["h"]),
+    ("V - V_c", "ft/s", lambda r: r.x[:, V] - r.V_c, SETTLE_TOL["V"]),
+    ("alpha - alpha_r", "deg", lambda r: np.degrees(r.x[:, ALPHA] - r.x_r[:, ALPHA]),
+     ATTITUDE_BOUND_DEG),
+    ("theta - theta_r", "deg", lambda r: np.degrees(r.x[:, THETA] - r.x_r[:, THETA]),
+     ATTITUDE_BOUND_DEG),
+)  # fmt: skip
+
+#: Input panels: (label, column of u, factor from the stored unit to the drawn one).
+INPUT_PANELS = (("Phi [-]", 0, 1.0), ("delta_e [deg]", 1, float(np.degrees(1.0))))
+
+#: Colour of the requirement bands and of the fault onset line.
+BAND_COLOUR, ONSET_COLOUR = "tab:green", "tab:red"
+
+
+def line_style(i: int) -> dict:
+    """Line style of the i-th run (colours from the cycle, dashes to tell overlaps)."""
+    return {"lw": 1.0, "ls": LINESTYLES[i % len(LINESTYLES)], "color": f"C{i % 10}"}
+
+
+def _band(ax, bound: float, label: str | None) -> None:
+    """Shade |y| <= bound with its edges drawn."""
+    ax.axhspan(-bound, bound, color=BAND_COLOUR, alpha=0.15, lw=0, label=label)
+    for s in (-bound, bound):
+        ax.axhline(s, color=BAND_COLOUR, lw=0.8, ls="--")
+
+
+def mark_onsets(fig, runs: list) -> list[float]:
+    """Draw the fault onset of the runs as a vertical line on every panel of ``fig``.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        A figure over time (x axis: t [s]).
+    runs : list of PlottedRun
+        The runs drawn; each distinct ``t_onset`` within the time span of the runs is
+        drawn once, labelled on the first panel.
+
+    Returns
+    -------
+    list of float
+        The onset times drawn [s] (empty: no fault in the window).
+    """
+    t_lo = min(float(r.run.t[0]) for r in runs)
+    t_hi = max(float(r.run.t[-1]) for r in runs)
+    onsets = sorted({r.t_onset for r in runs if r.t_onset is not None})
+    onsets = [t for t in onsets if t_lo <= t <= t_hi]
+    for ax in fig.axes:
+        for t in onsets:
+            ax.axvline(t, color=ONSET_COLOUR, lw=1.0, ls=":", zorder=0.5)
+    if onsets and fig.axes:  # named in the legend of the first panel
+        first = fig.axes[0]
+        first.lines[-1].set_label("fault onset, t = " + ", ".join(f"{t:g}" for t in onsets) + " s")
+        if first.get_legend() is not None:
+            first.legend(loc="best", fontsize=7)
+    return onsets
+
+
+def _finish(fig, axes, title: str) -> None:
+    """Label t [s] under the bottom row, set the title, lay the figure out tightly."""
+    for ax in np.atleast_2d(axes)[-1]:
+        ax.set_xlabel("t [s]")
+    fig.suptitle(title)
+    fig.tight_layout()
+
+
+def error_figure(runs: list):
+    """Tracking errors with the requirement bands shaded; right column zoomed on them.
+
+    Parameters
+    ----------
+    runs : list of PlottedRun
+        Runs in drawing order (at least one).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        4 x 2 panels: h - h_c [ft], V - V_c [ft/s], alpha - alpha_r, theta - theta_r
+        [deg]; left the whole range, right +/- 3 bounds around zero.
+
+    Raises
+    ------
+    ValueError
+        If there is no run.
+    """
+    if not runs:
+        raise ValueError("no run to plot")
+    fig, axes = plt.subplots(len(ERROR_PANELS), 2, figsize=(11, 9), sharex=True)
+    for row, (label, unit, fn, bound) in zip(axes, ERROR_PANELS, strict=True):
+        for col, ax in enumerate(row):
+            _band(ax, bound, f"requirement +/- {bound:g} {unit}" if col == 1 else None)
+            for i, r in enumerate(runs):
+                ax.plot(r.run.t, fn(r.run), label=r.label, **line_style(i))
+            ax.grid(True, alpha=0.3)
+        row[0].set_ylabel(f"{label} [{unit}]")
+        row[1].set_ylim(-3.0 * bound, 3.0 * bound)
+        handles = row[1].get_legend_handles_labels()[0][:1]  # the band only
+        row[1].legend(loc="upper right", fontsize=7, handles=handles)
+    axes[0, 0].set_title("whole range", fontsize=9)
+    axes[0, 1].set_title("zoom: +/- 3 x the requirement", fontsize=9)
+    axes[0, 0].legend(loc="best", fontsize=7)
+    _finish(fig, axes, "Tracking errors (h, V against the command; alpha, theta against x_r)")
+    return fig
+
+
+def _limit_lines(ax, runs: list, j: int, scale: float) -> list[float]:
+    """Actuator and tightened limits of input j (drawn once per distinct value)."""
+    drawn, values = set(), []
+    for r in runs:
+        for lim, style, name in (
+            ((r.limits.u_min[j], r.limits.u_max[j]) if r.limits else None, "k--",
+             "actuator limit (sec. 5.1)"),
+            ((r.u_lo[j], r.u_hi[j]) if r.u_lo is not None else None, "m-.",
+             "tightened limit u_lo, u_hi (eq. 30)"),
+        ):  # fmt: skip
+            if lim is None or (style, *lim) in drawn:
+                continue
+            label = name if not any(s == style for s, *_ in drawn) else None
+            drawn.add((style, *lim))
+            for k, v in enumerate(lim):
+                ax.axhline(scale * v, color=style[0], ls=style[1:], lw=0.9,
+                           label=label if k == 0 else None)  # fmt: skip
+                values.append(scale * v)
+    return values
+
+
+def input_figure(runs: list):
+    """Controller command u with the actuator limits and the tightened limits.
+
+    Parameters
+    ----------
+    runs : list of PlottedRun
+        Runs in drawing order (at least one).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        2 x 2 panels: Phi [-] and delta_e [deg]; left with every limit in view, right
+        zoomed on the command.
+
+    Raises
+    ------
+    ValueError
+        If there is no run.
+    """
+    if not runs:
+        raise ValueError("no run to plot")
+    fig, axes = plt.subplots(len(INPUT_PANELS), 2, figsize=(11, 6), sharex=True)
+    for row, (label, j, scale) in zip(axes, INPUT_PANELS, strict=True):
+        for ax in row:
+            for i, r in enumerate(runs):
+                ax.plot(r.run.t, scale * r.run.u[:, j], label=r.label, **line_style(i))
+            ax.grid(True, alpha=0.3)
+        lo = min(float(scale * r.run.u[:, j].min()) for r in runs)
+        hi = max(float(scale * r.run.u[:, j].max()) for r in runs)
+        pad = 0.1 * (hi - lo) or 0.05 * max(abs(hi), 1e-3)
+        row[1].set_ylim(lo - pad, hi + pad)
+        values = _limit_lines(row[0], runs, j, scale)
+        if values:
+            span = max(values) - min(values)
+            row[0].set_ylim(min(values) - 0.05 * span, max(values) + 0.05 * span)
+        row[0].set_ylabel(label)
+    axes[0, 0].set_title("with the limits", fontsize=9)
+    axes[0, 1].set_title("zoom on the command", fontsize=9)
+    axes[0, 0].legend(loc="center right", fontsize=7)
+    _finish(fig, axes, "Control inputs (controller command u)")
+    return fig
+
+
+def input_rate_figure(runs: list):
+    """Rates of the applied input: finite differences (u_k - u_(k-1)) / Ts.
+
+    The vehicle data define no actuator rate limits, so no limit line is drawn.
+
+    Parameters
+    ----------
+    runs : list of PlottedRun
+        Runs in drawing order (at least one).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Two panels: dPhi/dt [1/s] and d delta_e/dt [deg/s], at the later step of each
+        difference.
+
+    Raises
+    ------
+    ValueError
+        If there is no run.
+    """
+    if not runs:
+        raise ValueError("no run to plot")
+    fig, axes = plt.subplots(len(INPUT_PANELS), 1, figsize=(8, 5.4), sharex=True)
+    units = ("dPhi/dt [1/s]", "d delta_e/dt [deg/s]")
+    for ax, (_, j, scale), unit in zip(axes, INPUT_PANELS, units, strict=True):
+        for i, r in enumerate(runs):
+            t, u = r.run.t, r.run.u_applied[:, j]
+            if t.size > 1:
+                ax.plot(t[1:], scale * np.diff(u) / np.diff(t), label=r.label, **line_style(i))
+        ax.set_ylabel(unit)
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="best", fontsize=7)
+    axes[-1].text(0.99, 0.02, "no rate limits in the vehicle data", transform=axes[-1].transAxes,
+                  ha="right", va="bottom", fontsize=7, color="0.4")  # fmt: skip
+    _finish(fig, axes[:, None], "Input rates (applied input, after the fault injector)")
+    return fig
+
+
+def tube_figure(runs: list):
+    """Tube level e' N^-1 e on a logarithmic axis with the boundary of Z at 1.
+
+    Parameters
+    ----------
+    runs : list of PlottedRun
+        Runs in drawing order (at least one); a run without a tube (NaN levels, the
+        RMPC) is named in a note instead of drawn.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel; levels above 1 mean the tube error left Z.
+
+    Raises
+    ------
+    ValueError
+        If there is no run.
+    """
+    if not runs:
+        raise ValueError("no run to plot")
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    ax.axhline(1.0, color="k", ls="--", lw=0.9, label="boundary of Z (level 1)")
+    no_tube, peak = [], 1e-3
+    for i, r in enumerate(runs):
+        lvl = np.asarray(r.run.tube_level, float)
+        ok = np.isfinite(lvl) & (lvl > 0)
+        if not ok.any():
+            no_tube.append(r.label)
+            continue
+        peak = max(peak, float(lvl[ok].max()))
+        ax.plot(r.run.t, np.where(ok, lvl, np.nan), label=r.label, **line_style(i))
+    ax.set_yscale("log")
+    ax.set_ylim(10.0 ** (np.floor(np.log10(peak)) - 4.0), max(2.0, 2.0 * peak))
+    ax.set_ylabel("e' N^-1 e")
+    ax.grid(True, which="both", alpha=0.3)
+    if no_tube:
+        ax.text(0.01, 0.02, "no tube: " + ", ".join(no_tube), transform=ax.transAxes,
+                fontsize=7, va="bottom")  # fmt: skip
+    ax.legend(loc="lower right", fontsize=7)
+    _finish(fig, np.array([[ax]]), "Tube level e' N^-1 e (the tube error e is inside Z at <= 1)")
+    return fig
