@@ -73,7 +73,7 @@ def _coordinates(tm, X, U):
 GAUSS = ((0.5 - 0.5 / np.sqrt(3.0), 0.5), (0.5 + 0.5 / np.sqrt(3.0), 0.5))
 
 
-def test_the_disturbance_along_the_nominal_lies_inside_W_8(tube_set):
+def test_the_disturbance_along_the_nominal_lies_inside_W_8(tube_set, request):
     """100 000 true one-step errors along the nominal lie inside W_8: at nominal points in
     the nominal box (its corners first, then inside, with q and the flexible states of the
     nominal within their half-widths), for every corner of the sec. 5.1 box at both rho_f
@@ -83,8 +83,10 @@ def test_the_disturbance_along_the_nominal_lies_inside_W_8(tube_set):
     segment (z + s e, v + s P F e), whose points must lie in the scheduling box; at each
     node J_theta is in the vertices' hull: the multilinear weights of the point and the
     carried coefficient of the vehicle's own deviation J_p - J_0 there (which must lie in
-    the vertices' range)."""
-    _check_true_errors(*tube_set)
+    the vertices' range). The earlier record of the same box (k = 5) is sampled 20 000
+    times, every vehicle corner at both rho_f ends among them."""
+    own = request.node.callspec.params["tube_set"] == "cm_certified"
+    _check_true_errors(*tube_set, chunks=10 if own else 2)
 
 
 def _samples(chunk, rng, n, names, corners, rho_min, nominal, S_corners):
@@ -104,7 +106,7 @@ def _samples(chunk, rng, n, names, corners, rho_min, nominal, S_corners):
     return frac, rho, s
 
 
-def _check_true_errors(d, veh, tm, box, scale, nv):
+def _check_true_errors(d, veh, tm, box, scale, nv, chunks: int = 10):
     """The sampling check of :func:`test_the_disturbance_along_the_nominal_lies_inside_W_8`:
     e = (e_h, e_8) with |e_h| <= H and e_8 in Z_8, F blind to e_h; rows 1-8 of w (with
     J_theta's h column times e_h, which W_8 holds) lie inside W_8, and one step's change
@@ -126,7 +128,7 @@ def _check_true_errors(d, veh, tm, box, scale, nv):
     worst, n_done, tol, h_step = np.zeros(9), 0, 1e-6 * (nv.c_hi - nv.c_lo), 0.0
     excess = np.full(nv.c_lo.size, -np.inf)
     S_corners = nominal.corners()
-    for chunk in range(10):
+    for chunk in range(chunks):  # the first: every corner of the box at both rho_f ends
         n = 10_000
         frac, rho, s = _samples(chunk, rng, n, names, corners, rho_min, nominal, S_corners)
         recs = perturbed_records(veh.params, PAPER_UNCERTAINTY, frac)
@@ -178,7 +180,7 @@ def _check_true_errors(d, veh, tm, box, scale, nv):
     print(f"{n_done} samples: max |w| / W_8 per row:", np.round(ratio, 3))
     print("largest coefficient beyond the vertices' range / its width (< 0: inside):",
           np.round(excess / (nv.c_hi - nv.c_lo), 5))  # fmt: skip
-    assert n_done == 100_000
+    assert n_done == 10_000 * chunks
     assert np.all(ratio <= 1.0), ratio
     # the samples reach into W_8, so the test is not vacuous: a tenth of W_8 in the largest
     # row and 2 % in every row (the certified design's W_8 keeps 34-71 % of design slack)
