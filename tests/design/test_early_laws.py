@@ -38,8 +38,10 @@ def model_only_law():
 def _model():
     """The parts of a DesignModel the early stage reads, with a 2 x 3 trim grid."""
     rng = np.random.default_rng(3)
-    trim = SimpleNamespace(h_grid=np.array([85e3, 86e3]), V_grid=np.array([7.7e3, 8e3, 8.3e3]),
-                           x_r=rng.normal(size=(2, 3, 9)), u_r=rng.normal(size=(2, 3, 2)))  # fmt: skip
+    trim = SimpleNamespace(h_grid=np.array([85e3, 86e3]),
+                           V_grid=np.array([7.7e3, 8e3, 8.3e3]),
+                           x_r=rng.normal(size=(2, 3, 9)),
+                           u_r=rng.normal(size=(2, 3, 2)))  # fmt: skip
     return SimpleNamespace(step={"h0": 85e3, "V0": 7.85e3, "h_c": 86e3, "V_c": 7.95e3},
                            trim=trim, x_start=rng.normal(size=9))  # fmt: skip
 
