@@ -16,7 +16,7 @@ machine whose two cores share a physical one it is well below 2.
 Usage: .venv/bin/python benchmarks/bench_campaign.py [DURATION] [BATCH] [RUNS] [--smoke]
        (defaults 30 s, 50 runs per batch, 200 runs per campaign)
 
-``--smoke`` runs the same code path at a tiny size in seconds (CI's check that the
+`--smoke` runs the same code path at a tiny size in seconds (CI's check that the
 benchmark still runs; its figures mean nothing): 1 s runs, batches of 2, a campaign of 2
 runs on one Dask worker only, and the ceiling with those batches.
 """
@@ -55,10 +55,10 @@ def line(what, runs, seconds, duration):
 
 
 def case1_runs(batch: int):
-    """The campaign's design and the overrides of its first ``batch`` runs.
+    """The campaign's design and the overrides of its first `batch` runs.
 
     The design is the campaign engine's: the scenario's stored, verified design with the
-    scenario's arrays (:func:`fahv.design.store.load_or_design`, its draws beyond the
+    scenario's arrays (`fahv.design.store.load_or_design`, its draws beyond the
     design's range allowed as the engine allows them).
     """
     c = load_campaign(CAMPAIGN)

@@ -5,18 +5,18 @@ design reproduces), its 4096 closed-loop vertices rebuilt here. Three figures, e
 best of REPEAT calls:
 
 - the exact worst one-step level of every vertex over Z_8 and the 256 corners of W_8
-  (``vertex_levels``: one trust-region dual per vertex and corner, the check behind
+  (`vertex_levels`: one trust-region dual per vertex and corner, the check behind
   every RPI certificate, the onset's steady set and the notch loops);
 - the onset jumps of a 24 % loss over the box's 64 corners x 1024 parameter corners plus
-  256 interior points (``onset_jumps``: the parameter records, two plant steps each);
-- one onset bound of the design (``onset_bound``, interior 256, 4 bisection steps).
+  256 interior points (`onset_jumps`: the parameter records, two plant steps each);
+- one onset bound of the design (`onset_bound`, interior 256, 4 bisection steps).
 
 The machine is shared: the figures move with its load (compare two versions of the code
 one right after the other).
 
 Usage: .venv/bin/python benchmarks/bench_certificate.py [REPEAT] [--smoke]   (default 3)
 
-``--smoke`` runs the same kernels at a tiny size, once each, in seconds (CI's check that
+`--smoke` runs the same kernels at a tiny size, once each, in seconds (CI's check that
 the benchmark still runs; its figures mean nothing): k = 1 parameter direction (256
 vertices), three uncertain parameters (8 parameter corners), 16 interior points and one
 bisection step.
@@ -48,7 +48,7 @@ SMOKE_PARAMETERS, SMOKE_K, SMOKE_INTERIOR = ("m", "I_yy", "c_e"), 1, 16
 
 
 def best(f, repeat):
-    """Smallest wall time [s] of ``repeat`` calls of f, and f's last result."""
+    """Smallest wall time [s] of `repeat` calls of f, and f's last result."""
     times = []
     for _ in range(repeat):
         t0 = time.perf_counter()

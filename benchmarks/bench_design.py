@@ -1,17 +1,17 @@
-"""Wall time of ``fahv design``: an earlier commit beside today's, and how it scales.
+"""Wall time of `fahv design`: an earlier commit beside today's, and how it scales.
 
 The machine's speed varies between hours and machines of the same kind, so the figures
 that mean something are those timed back to back in one session. Three designs of the
 same design file, each in its own process:
 
-- ``before``: an earlier commit, checked out into a temporary git worktree and run with
+- `before`: an earlier commit, checked out into a temporary git worktree and run with
   its own sources on the same virtual environment (its design file as it named it then);
-- ``cold``: today's code from scratch (``fahv design --cold`` into an empty folder: no
+- `cold`: today's code from scratch (`fahv design --cold` into an empty folder: no
   earlier design and no stored active set, as for a user's new vehicle);
-- ``warm``: today's code into a folder holding the shipped design, whose stored active
+- `warm`: today's code into a folder holding the shipped design, whose stored active
   sets start the LMIs' constraint generation (what re-making a design costs).
 
-Then the scaling table (``--scaling``): the closure of the eight-state tube set (the
+Then the scaling table (`--scaling`): the closure of the eight-state tube set (the
 tube LMI by constraint generation, W_8's bound and the exact all-vertex level) on the
 certified design's own vertex data with k = 3, 5, 7, 9 parameter directions (1024 to
 65 536 vertices), and the invariant-ellipsoid LMI (the certificate of a fixed loop, as a
@@ -19,13 +19,13 @@ joint error of estimate and tube is certified) on systems of 8, 12, 16 and 24 st
 the eight-state closed loop on 1024 of its vertices with first-order lags appended (the
 place of actuator, sensor and estimator states).
 
-Usage::
+Usage:
 
     .venv/bin/python benchmarks/bench_design.py [--design offline_design/designs/cm_certified.yaml]
         [--before c5dd379 --before-file offline_design/designs/cm_certified.yaml]
         [--scaling] [--only-scaling] [--keep DIR] [--smoke]
 
-``--smoke`` runs the scaling code at a tiny size and no design: three of the ten
+`--smoke` runs the scaling code at a tiny size and no design: three of the ten
 parameters varied (8 corners and 8 interior vehicles), one parameter direction (256
 vertices), one closure iteration, and the invariant-ellipsoid LMI on 8 and 10 states over
 16 of those vertices: seconds, its figures mean nothing.
@@ -53,7 +53,7 @@ CERTIFIED = ("A", "B", "w_max", "F", "N", "K", "Q", "u_lo", "u_hi", "trim_x", "t
 
 
 def run_design(src: Path, cwd: Path, design_file: str, out: Path, *extra: str) -> float:
-    """Run ``fahv design design_file --out out`` with the sources in ``src``; wall seconds."""
+    """Run `fahv design design_file --out out` with the sources in `src`; wall seconds."""
     env = {**os.environ, "PYTHONPATH": str(src), "OPENBLAS_NUM_THREADS": "1"}
     code = "import sys; from fahv.cli import main; sys.exit(main(sys.argv[1:]))"
     t0 = time.perf_counter()
@@ -109,8 +109,8 @@ def designs(args, tmp: Path) -> None:
 def _vertex_data(design_file: Path, k: int, params: int | None = None, interior: int = 256):
     """The eight-state vertex data of a design file with k parameter directions.
 
-    ``params``: only the first ``params`` uncertain parameters varied (the smoke run's
-    size; None: all ten), ``interior`` vehicles inside their box besides the corners.
+    `params`: only the first `params` uncertain parameters varied (the smoke run's
+    size; None: all ten), `interior` vehicles inside their box besides the corners.
     """
     from fahv.bounds.domain import nominal_box
     from fahv.bounds.vertices import nominal_vertices
@@ -139,9 +139,9 @@ def _vertex_data(design_file: Path, k: int, params: int | None = None, interior:
 def vertex_scaling(design_file: Path, ks, onset: bool = True, smoke: bool = False) -> None:
     """The closure of the tube set against the number of vertices (k directions).
 
-    ``onset``: Z_8 holds the onset's first jumps (66 560 plant steps to sample them), as
-    the design does; the smoke run leaves them out. ``smoke``: the tiny vertex data of
-    :data:`SMOKE` and one closure iteration.
+    `onset`: Z_8 holds the onset's first jumps (66 560 plant steps to sample them), as
+    the design does; the smoke run leaves them out. `smoke`: the tiny vertex data of
+    `SMOKE` and one closure iteration.
     """
     from fahv.design.tube_set_design import _contain, _state_max
     from fahv.model.trim import trim_map
@@ -175,7 +175,7 @@ def vertex_scaling(design_file: Path, ks, onset: bool = True, smoke: bool = Fals
 
 
 def _augmented(Acl, extra: int, a: float = 0.8):
-    """Closed-loop vertices (R, n, n) with ``extra`` states appended: first-order lags.
+    """Closed-loop vertices (R, n, n) with `extra` states appended: first-order lags.
 
     Lag j follows the plant's state j mod n (x+ = a x + (1 - a) e_j): the place of the
     actuator, sensor and estimator states of an output-feedback design. Block lower
@@ -195,10 +195,10 @@ def state_scaling(dims, R: int, smoke: bool = False) -> None:
 
     The eight-state tube set's closed loop A_8 + B_8 F_8 (the shipped F_8 and W_8) on R
     of its vertices, with lags appended up to each dimension; the smallest ellipsoid RPI
-    for W_8 whose projection lies in Z_8 (:func:`fahv.synthesis.invariant_ellipsoid.
+    for W_8 whose projection lies in Z_8 (`fahv.synthesis.invariant_ellipsoid.
     invariant_ellipsoid`: constraint generation from scratch, the exact all-vertex level
     at every pass), the LMI a joint error of estimate and tube is certified with.
-    ``smoke``: the vertices drawn from the tiny vertex data of :data:`SMOKE` (k = 1).
+    `smoke`: the vertices drawn from the tiny vertex data of `SMOKE` (k = 1).
     """
     from fahv.spec.artefacts import load_design
     from fahv.synthesis.invariant_ellipsoid import invariant_ellipsoid

@@ -3,12 +3,12 @@
 Run: .venv/bin/python benchmarks/bench_qp.py [--steps 15000] [--case SCENARIO]
      [--x-box-both] [--smoke]
 Prints the time of every nominal QP (DAQP) and of every in-process loop step of
-``fahv.loop.simulate.simulate`` (plant, notch, nominal MPC, controller, fault injector,
+`fahv.loop.simulate.simulate` (plant, notch, nominal MPC, controller, fault injector,
 and the step's messages kept in memory) over a Case 1 run (default: scenario
-offline_design/scenarios/case1_paper.yaml, on the paper's design). ``--x-box-both`` runs
-the case twice in one session, with the design's state range rows (``mpc.x_box``) and
+offline_design/scenarios/case1_paper.yaml, on the paper's design). `--x-box-both` runs
+the case twice in one session, with the design's state range rows (`mpc.x_box`) and
 without them (the parameter set to zeros), to compare the QP's cost of those rows.
-``--smoke`` runs 100 steps (4 QPs) in seconds: CI's check that the benchmark still runs
+`--smoke` runs 100 steps (4 QPs) in seconds: CI's check that the benchmark still runs
 (its figures mean nothing).
 """
 
@@ -48,7 +48,7 @@ def main() -> None:
 
 
 def _bench(design, steps_n: int, label: str, overrides) -> None:
-    """One timed run of ``steps_n`` steps with node-parameter ``overrides``; prints it."""
+    """One timed run of `steps_n` steps with node-parameter `overrides`; prints it."""
     qp_times = []
     solve = tracking.TrackingMPC.solve
 

@@ -2,21 +2,21 @@
 
 Run: .venv/bin/python benchmarks/bench_qp_solvers.py [--steps 15000] [--repeat 3] [--smoke]
 
-Records every QP the nominal MPC of ``tube_mpc`` hands to DAQP during a Case 1 run
+Records every QP the nominal MPC of `tube_mpc` hands to DAQP during a Case 1 run
 (in process; scenario offline_design/scenarios/case1_paper.yaml, on the paper's design),
 then solves the same sequence with each installed candidate, in order, the way the MPC
 would use it: a solver keeps its factorisation/workspace while H and the constraint
 matrix are unchanged (they change only when the MPC is rescheduled) and gets the vectors
 updated and the previous solution as warm start where its API allows.
-Prints per solver: median, p99 and max time per QP (best of ``--repeat`` passes), QPs
+Prints per solver: median, p99 and max time per QP (best of `--repeat` passes), QPs
 it did not solve, the worst constraint violation and the worst objective gap to DAQP.
 
 Candidates: DAQP (dual active set), OSQP (ADMM), Clarabel (interior point, no warm
 start), PIQP (proximal interior point), ProxSuite ProxQP (augmented Lagrangian).
 PIQP and ProxSuite are not project dependencies; the table says so when missing
-(``pip install piqp proxsuite`` to compare them).
+(`pip install piqp proxsuite` to compare them).
 
-``--smoke`` records 100 steps (4 QPs) and makes one pass, in seconds: CI's check that the
+`--smoke` records 100 steps (4 QPs) and makes one pass, in seconds: CI's check that the
 benchmark still runs (its figures mean nothing).
 """
 
@@ -69,7 +69,7 @@ def record(steps: int) -> list[tuple]:
             return self.model.solve()
 
     class Recorder:
-        """Stands for the ``daqp`` module in :func:`fahv.control.mpc.tracking.daqp_module`."""
+        """Stands for the `daqp` module in `fahv.control.mpc.tracking.daqp_module`."""
 
         Model = RecordingModel
 
@@ -208,9 +208,9 @@ class ProxQP:
 def run(cls, qps):
     """Times [s], solutions (None: not solved) of one pass over the sequence.
 
-    Every candidate class has ``solve(H (ny, ny), f (ny,), A (nc, ny), bu, bl (ny + nc,),
-    same)`` -> y (ny,) or None, with DAQP's conventions (the first ny bounds are simple
-    bounds on y, |bound| >= 1e29 none); ``same``: H and A are those of the previous QP.
+    Every candidate class has `solve(H (ny, ny), f (ny,), A (nc, ny), bu, bl (ny + nc,),
+    same)` -> y (ny,) or None, with DAQP's conventions (the first ny bounds are simple
+    bounds on y, |bound| >= 1e29 none); `same`: H and A are those of the previous QP.
     """
     solver = cls()
     times, ys, prev = [], [], None

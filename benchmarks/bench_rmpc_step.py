@@ -1,8 +1,8 @@
-"""Per-step cost of the off-line RMPC baseline (law ``rmpc``), Case 1, in process.
+"""Per-step cost of the off-line RMPC baseline (law `rmpc`), Case 1, in process.
 
 Times every call of the law's step (ellipsoid search, gain interpolation, command) and
 of the controller core around it (messages in and out), over a whole Case 1 run of
-``fahv.loop.simulate.simulate`` (B = 1), and the whole in-process step; then the law
+`fahv.loop.simulate.simulate` (B = 1), and the whole in-process step; then the law
 alone on the run's recorded states, each step timed in 5 passes and the minimum kept
 (what the step costs without preemption by other processes), and the law step of a
 batch of B runs (per run). Prints median, p99 and max.
@@ -11,7 +11,7 @@ Run: .venv/bin/python benchmarks/bench_rmpc_step.py [--steps 15000] [--batch 100
 Target: law step p99 <= 0.2 ms. Time it on a quiet machine.
 
 The run is scenario offline_design/scenarios/case1_paper.yaml (Case 1 on the paper's
-design, whose RMPC baseline was designed along the scenario's step). ``--smoke`` runs 50
+design, whose RMPC baseline was designed along the scenario's step). `--smoke` runs 50
 steps, a batch of 4 and 20 batch steps, in seconds: CI's check that the benchmark still
 runs (its figures mean nothing).
 """

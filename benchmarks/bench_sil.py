@@ -1,12 +1,12 @@
 """Real-time factor of the SIL node graph: the working tree against an earlier commit.
 
 Both trees run the same ROS 2 parameter file (made once by the working tree's
-``fahv sil SCENARIO --duration D --write-params``), each with its own nodes, runner
-and library: the commit is exported with ``git archive`` (the repository is not
-touched), its workspace built with its own ``scripts/build_ros.sh`` and its ``src``
-put first on ``PYTHONPATH``. The runs alternate (new, old, then old, new, ...) so that
+`fahv sil SCENARIO --duration D --write-params`), each with its own nodes, runner
+and library: the commit is exported with `git archive` (the repository is not
+touched), its workspace built with its own `scripts/build_ros.sh` and its `src`
+put first on `PYTHONPATH`. The runs alternate (new, old, then old, new, ...) so that
 the load of other processes on the machine falls on both alike. The wall time is that
-of the ``sil`` runner process, as ``fahv sil`` measures it (start-up, the steps, the
+of the `sil` runner process, as `fahv sil` measures it (start-up, the steps, the
 teardown); the real-time factor is the simulated time over it. Prints every run, the
 median of each tree and their ratio.
 
@@ -15,7 +15,7 @@ Run: .venv/bin/python benchmarks/bench_sil.py [--commit HEAD] [-n 3] [--duration
 The two trees must read the same node parameters; a commit whose nodes refuse the
 file shows as failed runs (exit status 1, the node's reason printed).
 
-``--smoke`` skips the earlier commit (nothing exported or built) and runs the working
+`--smoke` skips the earlier commit (nothing exported or built) and runs the working
 tree's graph once for 2 s simulated: CI's check that the benchmark still runs (its
 figures mean nothing). It needs the built workspace, as every SIL run.
 """
@@ -44,7 +44,7 @@ SMOKE_RUNS, SMOKE_DURATION = 1, 2.0
 
 
 def export_commit(commit: str, cache: Path) -> tuple[Path, str]:
-    """The tree of ``commit`` under ``cache/<sha>``, its workspace built (reused if there).
+    """The tree of `commit` under `cache/<sha>`, its workspace built (reused if there).
 
     Raises
     ------
@@ -74,7 +74,7 @@ def export_commit(commit: str, cache: Path) -> tuple[Path, str]:
 
 
 def tree_env(ws: Path, src: Path | None) -> dict:
-    """Environment of a sourced workspace, with ``src`` first on PYTHONPATH."""
+    """Environment of a sourced workspace, with `src` first on PYTHONPATH."""
     env = {k: v for k, v in os.environ.items() if k not in NODE_SWITCHES}
     if src is not None:
         env["PYTHONPATH"] = os.pathsep.join(p for p in (str(src), env.get("PYTHONPATH")) if p)
@@ -85,7 +85,7 @@ def tree_env(ws: Path, src: Path | None) -> dict:
 
 
 def write_params(scenario: str, duration: float, path: Path) -> dict:
-    """The run's parameter file, made by the working tree's ``fahv sil --write-params``."""
+    """The run's parameter file, made by the working tree's `fahv sil --write-params`."""
     fahv = ROOT / ".venv" / "bin" / "fahv"
     cmd = [str(fahv) if fahv.is_file() else "fahv", "sil", scenario, "--duration", str(duration)]
     r = subprocess.run(
@@ -97,7 +97,7 @@ def write_params(scenario: str, duration: float, path: Path) -> dict:
 
 
 def run_once(content: dict, ws: Path, env: dict, work: Path) -> tuple[int, float, str]:
-    """One run of a workspace's ``sil`` runner; (exit status, wall time [s], error tail)."""
+    """One run of a workspace's `sil` runner; (exit status, wall time [s], error tail)."""
     work.mkdir(parents=True)
     c = yaml.safe_load(yaml.safe_dump(content))
     c["recorder"]["ros__parameters"].update(bag=str(work / "run"), params_file="")

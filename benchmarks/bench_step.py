@@ -8,8 +8,8 @@ Usage: .venv/bin/python benchmarks/bench_step.py [--scenario SCENARIO] [--design
        [--steps 2000] [--smoke]
 
 The scenario (default offline_design/scenarios/case1_paper.yaml, Case 1 on the paper's
-design) runs on its stored design, or on the artefact folder ``--design DIR`` (as
-``fahv simulate --design``). ``--smoke`` runs 20 steps in seconds: CI's check that the
+design) runs on its stored design, or on the artefact folder `--design DIR` (as
+`fahv simulate --design`). `--smoke` runs 20 steps in seconds: CI's check that the
 benchmark still runs (its figures mean nothing).
 """
 

@@ -2,18 +2,18 @@
 
 Two kinds of generated content:
 
-- **Tables written into their pages** between ``<!-- NAME -->`` and ``<!-- /NAME -->``
+- **Tables written into their pages** between `<!-- NAME -->` and `<!-- /NAME -->`
   (the key tables of design, scenario and campaign files, the node table, the registry
   tables). The tests read them from the page; the site build checks that each equals what
-  the code generates now and fails naming the command that rewrites them::
+  the code generates now and fails naming the command that rewrites them:
 
       .venv/bin/python docs/hooks/generated.py
 
-- **The command-line reference**, made at build time from the ``fahv`` argument parser
-  where a page holds ``<!-- fahv-cli -->``; nothing of it is stored.
+- **The command-line reference**, made at build time from the `fahv` argument parser
+  where a page holds `<!-- fahv-cli -->`; nothing of it is stored.
 
 The hook also tells apart two kinds of message of the API reference build that are not
-defects of the pages (see :data:`NOT_CROSS_REFERENCES` and :data:`KNOWN_DOCSTRING_NOTES`)
+defects of the pages (see `NOT_CROSS_REFERENCES` and `KNOWN_DOCSTRING_NOTES`)
 and logs them as information, so that every other warning still fails the strict build.
 """
 
@@ -38,15 +38,15 @@ TABLES = {
     "registry-tables": ("fahv.loop.graph", "registry_tables"),
     "margins-table": ("fahv.cli.margins", "docs_table"),
 }
-#: Specs whose table is ``fahv.config.spec.markdown(spec())``; the others return Markdown.
+#: Specs whose table is `fahv.config.spec.markdown(spec())`; the others return Markdown.
 SPECS = {"design-keys", "scenario-keys", "campaign-keys"}
 
 CLI_MARKER = "<!-- fahv-cli -->"
 MARKER = re.compile(r"<!-- ([a-z-]+) -->\n(.*?)<!-- /\1 -->", re.DOTALL)
 
 #: An autorefs target holding ", " is a bracketed list in a docstring (units such as
-#: ``[ft, ft/s]`` after ``[h, V]``, an index such as ``[:, c_i]``), which Markdown reads as
-#: a reference link ``[a] [b]``; an identifier never holds ", ".
+#: `[ft, ft/s]` after `[h, V]`, an index such as `[:, c_i]`), which Markdown reads as
+#: a reference link `[a] [b]`; an identifier never holds ", ".
 NOT_CROSS_REFERENCES = re.compile(r"Could not find cross-reference target '[^']*, [^']*'")
 
 #: (source file, word) of docstrings whose closing paragraph follows the Parameters
@@ -56,9 +56,16 @@ KNOWN_DOCSTRING_NOTES: tuple = ()
 
 log = logging.getLogger("mkdocs.hooks.generated")
 
+#: What reStructuredText markup would leave in a rendered page: a Sphinx role (its name
+#: before a code span) or a literal-block marker ending a paragraph. Docstrings and pages
+#: are Markdown, which the site and `--help` both show as written.
+RST_LEFTOVERS = re.compile(
+    r":(?:py:)?(?:func|class|mod|meth|attr|data|exc|obj|const|ref):(?:`|<code>)|\w::</p>"
+)
+
 
 def table(name: str) -> str:
-    """The Markdown the code generates for the marker ``name``."""
+    """The Markdown the code generates for the marker `name`."""
     module, function = TABLES[name]
     made = getattr(import_module(module), function)()
     if name in SPECS:
@@ -69,7 +76,7 @@ def table(name: str) -> str:
 
 
 def rewrite(text: str) -> str:
-    """``text`` with every marked table replaced by the one the code generates."""
+    """`text` with every marked table replaced by the one the code generates."""
 
     def fresh(m: re.Match) -> str:
         name = m.group(1)
@@ -81,7 +88,7 @@ def rewrite(text: str) -> str:
 
 
 def stale_tables(text: str) -> list[str]:
-    """Names of the marked tables of ``text`` that differ from the code's."""
+    """Names of the marked tables of `text` that differ from the code's."""
     return [
         m.group(1)
         for m in MARKER.finditer(text)
@@ -90,7 +97,7 @@ def stale_tables(text: str) -> list[str]:
 
 
 def cli_reference() -> str:
-    """The help of ``fahv`` and of every subcommand, one section each."""
+    """The help of `fahv` and of every subcommand, one section each."""
     os.environ["COLUMNS"] = "100"  # argparse wraps at the terminal width
     from fahv.cli import build_parser
 
@@ -137,6 +144,15 @@ def on_page_markdown(markdown: str, page, **kwargs) -> str:
     if CLI_MARKER in markdown:
         markdown = markdown.replace(CLI_MARKER, cli_reference())
     return markdown
+
+
+def on_page_content(html: str, page, **kwargs) -> str:
+    """MkDocs event: fail the strict build on reStructuredText left in a rendered page."""
+    found = sorted({m.group(0) for m in RST_LEFTOVERS.finditer(html)})
+    if found:
+        log.warning("%s: reStructuredText markup in the rendered page (%s); docstrings and "
+                    "pages are Markdown", page.file.src_path, ", ".join(found[:5]))  # fmt: skip
+    return html
 
 
 def main() -> int:

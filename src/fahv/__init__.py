@@ -10,9 +10,9 @@ filter (eq. 37-39).
 import os
 
 # Reproducible numbers: one BLAS/OpenMP thread unless the environment says otherwise.
-# Set before numpy is imported by any fahv module (the ``fahv`` command, the ROS nodes
+# Set before numpy is imported by any fahv module (the `fahv` command, the ROS nodes
 # and the Dask workers import fahv first); a multi-threaded BLAS may sum in another
-# order from run to run. Recorded in every design's provenance (``blas_threads``).
+# order from run to run. Recorded in every design's provenance (`blas_threads`).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 

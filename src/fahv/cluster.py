@@ -1,9 +1,9 @@
 """The Dask cluster long computations run on: a LocalCluster, or a scheduler's address.
 
-Campaigns (:mod:`fahv.campaign.engine`) and designs (:mod:`fahv.design.pipeline`) spread
-independent work over Dask distributed workers: by default an embedded ``LocalCluster``
+Campaigns (`fahv.campaign.engine`) and designs (`fahv.design.pipeline`) spread
+independent work over Dask distributed workers: by default an embedded `LocalCluster`
 of one single-threaded worker process per core, started and stopped by the command;
-with a scheduler address (``dask scheduler`` and ``dask worker ADDRESS`` started
+with a scheduler address (`dask scheduler` and `dask worker ADDRESS` started
 elsewhere), an existing cluster.
 """
 
@@ -20,23 +20,23 @@ NO_DASHBOARD = "127.0.0.1:0"
 
 def dask_client(scheduler: str | None = None, workers: int | None = None,
                 dashboard: str | None = None):  # fmt: skip
-    """A Dask client: of the cluster at ``scheduler``, or of a new LocalCluster.
+    """A Dask client: of the cluster at `scheduler`, or of a new LocalCluster.
 
     Parameters
     ----------
     scheduler : str, optional
-        Address of an existing Dask scheduler (``tcp://host:8786``).
+        Address of an existing Dask scheduler (`tcp://host:8786`).
     workers : int, optional
         Worker processes of the LocalCluster (one thread each; default: the cores).
     dashboard : str, optional
-        Address of the LocalCluster's dashboard (``":8787"``, ``"127.0.0.1:0"``);
-        default: no dashboard, the scheduler's HTTP server on :data:`NO_DASHBOARD`.
-        Ignored with ``scheduler`` (that cluster serves its own).
+        Address of the LocalCluster's dashboard (`":8787"`, `"127.0.0.1:0"`);
+        default: no dashboard, the scheduler's HTTP server on `NO_DASHBOARD`.
+        Ignored with `scheduler` (that cluster serves its own).
 
     Returns
     -------
     (distributed.Client, distributed.LocalCluster or None)
-        The client and the cluster started here (None with ``scheduler``); the
+        The client and the cluster started here (None with `scheduler`); the
         caller closes both.
     """
     from dask.distributed import Client, LocalCluster
@@ -60,7 +60,7 @@ def active_client():
     Returns
     -------
     distributed.Client or None
-        The client a command started (``fahv design``, ``fahv campaign``) or the caller
+        The client a command started (`fahv design`, `fahv campaign`) or the caller
         made current; None in a plain library call.
     """
     try:

@@ -1,12 +1,12 @@
 """A stop (Ctrl-C, SIGTERM) that waits for the end of a write.
 
-``fahv``'s commands turn the first SIGINT or SIGTERM into a ``KeyboardInterrupt`` in
-the main thread (:func:`fahv.cli.common.stop_signals`), so that a long solve or a run
+`fahv`'s commands turn the first SIGINT or SIGTERM into a `KeyboardInterrupt` in
+the main thread (`fahv.cli.common.stop_signals`), so that a long solve or a run
 stops at once. Raised between two writes of one MCAP record, the same exception would
-leave a half record in the file: the writer's ``close`` then writes its summary after
+leave a half record in the file: the writer's `close` then writes its summary after
 it, and the run reads as truncated (measured: 3 of 16 runs interrupted at random
 times, before this module). Code that must not be cut in the middle runs inside
-:func:`deferred`; a stop requested there (:func:`request`) is raised when the
+`deferred`; a stop requested there (`request`) is raised when the
 outermost such section ends.
 
 Signal handlers run in the main thread only, so the state is the main thread's:
@@ -24,14 +24,14 @@ _pending = False
 
 
 def request() -> None:
-    """Stop now (raise ``KeyboardInterrupt``), or when the current deferred section ends.
+    """Stop now (raise `KeyboardInterrupt`), or when the current deferred section ends.
 
     Called by a signal handler (in the main thread).
 
     Raises
     ------
     KeyboardInterrupt
-        Unless the main thread is inside :func:`deferred`, where the stop is kept
+        Unless the main thread is inside `deferred`, where the stop is kept
         pending until the outermost section ends.
     """
     global _pending
@@ -43,9 +43,9 @@ def request() -> None:
 
 @contextlib.contextmanager
 def deferred():
-    """Section of code that a stop (:func:`request`) must not cut in the middle.
+    """Section of code that a stop (`request`) must not cut in the middle.
 
-    A stop requested inside is raised as ``KeyboardInterrupt`` when the outermost
+    A stop requested inside is raised as `KeyboardInterrupt` when the outermost
     section ends normally; when the section raises, its own exception propagates and
     the stop stays pending for the next section's end. Nests; costs about a
     microsecond. Outside the main thread it does nothing.

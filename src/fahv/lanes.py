@@ -2,8 +2,8 @@
 
 Every numeric kernel of the loop works on B runs (lanes) at once; a run can fail on
 its own (non-finite state, an infeasible first solve, a bad parameter of its own)
-without stopping the others. A kernel reports such a failure to :class:`Lanes`; with
-``strict=True`` (one run: ``fahv simulate``, a node of the graph) the error is raised
+without stopping the others. A kernel reports such a failure to `Lanes`; with
+`strict=True` (one run: `fahv simulate`, a node of the graph) the error is raised
 at once, as a single-run computation would raise it.
 """
 
@@ -43,12 +43,12 @@ class Lanes:
         self.failed_step: list[int | None] = [None] * self.n
 
     def fail(self, b: int, exc: Exception) -> None:
-        """Run ``b`` failed with ``exc``: raise it (strict) or record it.
+        """Run `b` failed with `exc`: raise it (strict) or record it.
 
         Raises
         ------
         Exception
-            ``exc`` itself when strict.
+            `exc` itself when strict.
         """
         if self.strict:
             raise exc
@@ -58,6 +58,6 @@ class Lanes:
             self.alive[b] = False
 
     def fail_mask(self, mask: np.ndarray, make_error) -> None:
-        """Every alive run b with ``mask[b]`` fails with ``make_error(b)``."""
+        """Every alive run b with `mask[b]` fails with `make_error(b)`."""
         for b in np.flatnonzero(np.asarray(mask) & self.alive):
             self.fail(int(b), make_error(int(b)))

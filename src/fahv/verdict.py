@@ -1,13 +1,13 @@
 """How a closed-loop run ends: its verdict, and the step, time and node that set it.
 
-Every run ends with exactly one verdict of :data:`VERDICTS`: ``completed`` when it flew
+Every run ends with exactly one verdict of `VERDICTS`: `completed` when it flew
 its whole duration, otherwise the first condition under which the loop cannot go on,
-found by the node whose computation meets it. That node raises :class:`RunEnded`
-(through :class:`fahv.lanes.Lanes`, so a campaign batch records it for that run alone);
+found by the node whose computation meets it. That node raises `RunEnded`
+(through `fahv.lanes.Lanes`, so a campaign batch records it for that run alone);
 the in-process simulator, the batch engine and the nodes of the graph turn it into the
-run file's metadata (:meth:`Verdict.metadata`), the ``fahv`` exit status and the last
-status a node publishes (:meth:`Verdict.as_dict`). The checks run inside the loop's
-node cores (:mod:`fahv.loop.cores`) and the law's nominal part, once per step, so every
+run file's metadata (`Verdict.metadata`), the `fahv` exit status and the last
+status a node publishes (`Verdict.as_dict`). The checks run inside the loop's
+node cores (`fahv.loop.cores`) and the law's nominal part, once per step, so every
 path meets the same verdict at the same step.
 """
 
@@ -35,7 +35,7 @@ VERDICTS = {
         "point (trim-map Jacobian or steady-state equations)",
     ),
 }
-#: Metadata keys of a verdict in a run file (:meth:`Verdict.metadata`).
+#: Metadata keys of a verdict in a run file (`Verdict.metadata`).
 METADATA_KEYS = ("verdict", "verdict_node", "verdict_step", "verdict_t", "verdict_reason")
 
 
@@ -46,14 +46,14 @@ class Verdict:
     Attributes
     ----------
     name : str
-        One of :data:`VERDICTS`.
+        One of `VERDICTS`.
     node : str
-        Node (or law part) that found it; ``-`` for ``completed``.
+        Node (or law part) that found it; `-` for `completed`.
     step : int
         Steps the run flew in full (the step at which it ended; the run's length for
-        ``completed``).
+        `completed`).
     t : float
-        Simulated time of that step, ``step * Ts`` [s].
+        Simulated time of that step, `step * Ts` [s].
     reason : str
         What was found, with the values that show it.
     """
@@ -70,11 +70,11 @@ class Verdict:
 
     @property
     def completed(self) -> bool:
-        """True for ``completed``."""
+        """True for `completed`."""
         return self.name == COMPLETED
 
     def text(self) -> str:
-        """One line: ``<name> at t = <t> s (step <k>, <node>): <reason>``."""
+        """One line: `<name> at t = <t> s (step <k>, <node>): <reason>`."""
         if self.completed:
             return f"{COMPLETED} at t = {self.t:.2f} s ({self.step} steps)"
         return f"{self.name} at t = {self.t:.2f} s (step {self.step}, {self.node}): {self.reason}"
@@ -85,12 +85,12 @@ class Verdict:
 
     @classmethod
     def from_dict(cls, d: dict) -> Verdict:
-        """The verdict of :meth:`as_dict`.
+        """The verdict of `as_dict`.
 
         Parameters
         ----------
         d : dict
-            ``name``, ``node``, ``step``, ``t`` and optionally ``reason``.
+            `name`, `node`, `step`, `t` and optionally `reason`.
 
         Returns
         -------
@@ -108,7 +108,7 @@ class Verdict:
             raise ValueError(f"verdict {d!r}: missing or malformed field ({exc})") from None
 
     def metadata(self) -> dict[str, str]:
-        """The run-file metadata of the verdict (:data:`METADATA_KEYS`)."""
+        """The run-file metadata of the verdict (`METADATA_KEYS`)."""
         values = (self.name, self.node, self.step, f"{self.t:.6g}", self.reason)
         return {k: str(v) for k, v in zip(METADATA_KEYS, values, strict=True)}
 
@@ -133,24 +133,24 @@ class Verdict:
 
     @property
     def status(self) -> str:
-        """The run file's ``status``: ``complete``, or ``ended: <name>``."""
+        """The run file's `status`: `complete`, or `ended: <name>`."""
         return "complete" if self.completed else f"ended: {self.name}"
 
 
 def completed(n_steps: int, Ts: float) -> Verdict:
-    """The verdict of a run that flew its ``n_steps`` steps of ``Ts`` [s]."""
+    """The verdict of a run that flew its `n_steps` steps of `Ts` [s]."""
     return Verdict(COMPLETED, "-", int(n_steps), n_steps * Ts)
 
 
 class RunEnded(RunError):
-    """A run ended with a verdict other than ``completed`` (:class:`Verdict`).
+    """A run ended with a verdict other than `completed` (`Verdict`).
 
-    Raised by the node core that finds it; the message is :meth:`Verdict.text`.
+    Raised by the node core that finds it; the message is `Verdict.text`.
 
     Parameters
     ----------
     name : str
-        One of :data:`VERDICTS` (not ``completed``).
+        One of `VERDICTS` (not `completed`).
     node : str
         The node (or law part) that found it.
     step : int
@@ -164,12 +164,12 @@ class RunEnded(RunError):
     ----------
     verdict : Verdict
     partial : fahv.loop.simulate.RunResult or None
-        What the run flew before ``step`` (set by the simulator and the batch engine).
+        What the run flew before `step` (set by the simulator and the batch engine).
 
     Raises
     ------
     ValueError
-        If ``name`` is not a verdict, or is ``completed``.
+        If `name` is not a verdict, or is `completed`.
     """
 
     def __init__(self, name: str, node: str, step: int, t: float, reason: str) -> None:

@@ -11,7 +11,7 @@ __all__ = ["__version__", "code_version"]
 
 
 def code_version() -> str:
-    """``fahv <version>`` plus the git commit (``+dirty`` when modified), if in a repository."""
+    """`fahv <version>` plus the git commit (`+dirty` when modified), if in a repository."""
     v = f"fahv {__version__}"
     try:
         here = Path(__file__).resolve().parent

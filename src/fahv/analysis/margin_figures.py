@@ -55,7 +55,7 @@ def _critical_phases(lo: float, hi: float) -> list[float]:
 
 
 def bode_figure(study: MarginStudy, design, break_at: str, path: Path) -> Path:
-    """Bode plot of the loop broken at ``break_at``, every notch setting, at the design point.
+    """Bode plot of the loop broken at `break_at`, every notch setting, at the design point.
 
     Parameters
     ----------
@@ -69,7 +69,7 @@ def bode_figure(study: MarginStudy, design, break_at: str, path: Path) -> Path:
     Returns
     -------
     Path
-        ``path``.
+        `path`.
     """
     fig, (am, ph) = plt.subplots(2, 1, figsize=(8.0, 6.5), sharex=True)
     fig.suptitle(f"{study.design_name}: loop broken at {break_at}, design point")
@@ -114,7 +114,7 @@ def nichols_figure(study: MarginStudy, design, path: Path) -> Path:
     Returns
     -------
     Path
-        ``path``.
+        `path`.
     """
     fig, axes = plt.subplots(1, len(BREAKS), figsize=(11.0, 5.0))
     g, p = REQUIREMENT["gain_db"], REQUIREMENT["phase_deg"]
@@ -144,7 +144,7 @@ def nichols_figure(study: MarginStudy, design, path: Path) -> Path:
 
 
 def margin_figures(study: MarginStudy, design, out: Path, fmt: str = "png") -> list[Path]:
-    """Write the Bode figure of each break and the Nichols figure into ``out``.
+    """Write the Bode figure of each break and the Nichols figure into `out`.
 
     Parameters
     ----------
@@ -157,8 +157,8 @@ def margin_figures(study: MarginStudy, design, out: Path, fmt: str = "png") -> l
     Returns
     -------
     list of Path
-        ``margins_<design>_bode_<break>.<fmt>`` per break, then
-        ``margins_<design>_nichols.<fmt>`` (``<design>`` the study's design name).
+        `margins_<design>_bode_<break>.<fmt>` per break, then
+        `margins_<design>_nichols.<fmt>` (`<design>` the study's design name).
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

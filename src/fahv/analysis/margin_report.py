@@ -1,10 +1,10 @@
-"""The margin table of a design (:class:`fahv.analysis.margin_study.MarginStudy`), as text.
+"""The margin table of a design (`fahv.analysis.margin_study.MarginStudy`), as text.
 
-:func:`margin_table` lays out one row per loop break, notch setting and point (the
+`margin_table` lays out one row per loop break, notch setting and point (the
 design point, the worst case over the LPV vertices, the parameter box corner of the
-most unstable airframe) as plain text or Markdown; :func:`notch_summary` answers what
+most unstable airframe) as plain text or Markdown; `notch_summary` answers what
 the notch buys at omega_1 and costs at crossover, against the requirement
-:data:`REQUIREMENT` (6 dB gain margin and 45 deg phase margin, both directions).
+`REQUIREMENT` (6 dB gain margin and 45 deg phase margin, both directions).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def _num(x: float, digits: int = 1) -> str:
 
 
 def row_cells(r: LoopMargins) -> list[str]:
-    """The cells of one row (strings, in the order of :data:`COLUMNS`).
+    """The cells of one row (strings, in the order of `COLUMNS`).
 
     Parameters
     ----------
@@ -93,7 +93,7 @@ def _at(rows, break_at, notch, point="design point"):
 
 
 def meets(r: LoopMargins) -> bool:
-    """True if a stable loop meets :data:`REQUIREMENT` (GM+ >= 6 dB, GM- <= -6 dB, |PM| >= 45).
+    """True if a stable loop meets `REQUIREMENT` (GM+ >= 6 dB, GM- <= -6 dB, |PM| >= 45).
 
     Parameters
     ----------
@@ -113,7 +113,7 @@ def notch_summary(rows: list[LoopMargins], notch: str = "omega_1") -> list[str]:
     Parameters
     ----------
     rows : list of LoopMargins
-        Rows holding the design point of ``notch`` and of "off".
+        Rows holding the design point of `notch` and of "off".
     notch : str
         The notch setting compared with "off".
 

@@ -1,7 +1,7 @@
 """The loop margins of a stored design: its notch settings over its plant points.
 
-:func:`margin_study` evaluates the loop of :mod:`fahv.analysis.margins` for every notch
-setting of the design's tube variants (:func:`notch_settings`: the notch as designed at
+`margin_study` evaluates the loop of `fahv.analysis.margins` for every notch
+setting of the design's tube variants (`notch_settings`: the notch as designed at
 omega_1, none, at omega_2, and at omega_1 with the paper's eps_p), broken at delta_e and
 at q: at the design point every setting, over the LPV vertices the variant as designed
 and no notch (every setting on request), and at the corners of the parameter box the
@@ -52,7 +52,7 @@ class NotchSetting:
     notch : fahv.model.notch.NotchFilter or None
         The filter (None: q fed back as measured).
     F : (m, n) ndarray
-        The gain the variant runs (tau F; ``F_<variant>`` if the design made one).
+        The gain the variant runs (tau F; `F_<variant>` if the design made one).
     """
 
     label: str
@@ -72,8 +72,8 @@ def notch_settings(design) -> list[NotchSetting]:
     Returns
     -------
     list of NotchSetting
-        One per tube variant (``rmpc`` has none), then, if the notch at omega_1 does not
-        already have it, that notch with eps_p = :data:`PAPER_EPS_P`.
+        One per tube variant (`rmpc` has none), then, if the notch at omega_1 does not
+        already have it, that notch with eps_p = `PAPER_EPS_P`.
 
     Raises
     ------
@@ -139,9 +139,9 @@ def vertex_plants(design) -> Plants:
 def corner_plants(design, vehicle) -> Plants:
     """One-period Jacobians of every corner vehicle of the parameter box at the design point.
 
-    Each corner of the sec. 5.1 box (times the design's ``uncertainty.scale``) linearised
+    Each corner of the sec. 5.1 box (times the design's `uncertainty.scale`) linearised
     at the nominal vehicle's trim at (h0, V0) by central differences through the plant's
-    RK4 (:func:`fahv.bounds.plant_step.jacobians`): the Jacobian of the tube error along
+    RK4 (`fahv.bounds.plant_step.jacobians`): the Jacobian of the tube error along
     the nominal, as the design forms its vertices.
 
     Parameters
@@ -154,7 +154,7 @@ def corner_plants(design, vehicle) -> Plants:
     -------
     Plants
         Points "corner 0" ... (2^10 for the sec. 5.1 box), the corners in the order of
-        :func:`fahv.analysis.margins.corner_signs` over :data:`PAPER_UNCERTAINTY`.
+        `fahv.analysis.margins.corner_signs` over `PAPER_UNCERTAINTY`.
     """
     a, case = design.arrays, design.case
     rel = {k: v * float(case["uncertainty"]["scale"]) for k, v in PAPER_UNCERTAINTY.items()}
@@ -192,7 +192,7 @@ def nominal_plant(design, vehicle) -> Plants:
 
 @dataclass
 class MarginStudy:
-    """The margins of one design (:func:`margin_study`).
+    """The margins of one design (`margin_study`).
 
     Attributes
     ----------
@@ -208,11 +208,11 @@ class MarginStudy:
         The worst case over the LPV vertices, per setting evaluated and break.
     corners : list of LoopMargins
         At the corner of the parameter box whose airframe is the most unstable (largest
-        open-loop spectral radius), per setting and break (its ``point`` names it).
+        open-loop spectral radius), per setting and break (its `point` names it).
     corner_rho : dict
         {setting label: (2^P,) closed-loop spectral radius at every corner}.
     vertex_rows : list of LoopMargins
-        Every vertex's margins (the rows of ``vertices``).
+        Every vertex's margins (the rows of `vertices`).
     """
 
     design_name: str
@@ -233,7 +233,7 @@ class MarginStudy:
 
 
 def _evaluate(plants: Plants, setting: NotchSetting, Ts, w, w1, break_at) -> list[LoopMargins]:
-    """Margins of one setting and break at every point of ``plants``."""
+    """Margins of one setting and break at every point of `plants`."""
     rho = spectral_radius(closed_loop(plants.A, plants.B, setting.F, setting.notch, Ts))
     systems = loop_systems(plants, setting.F, setting.notch, Ts, break_at)
     return [loop_margins(L, r, w, w1, (break_at, setting.label, name))

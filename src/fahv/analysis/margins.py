@@ -3,25 +3,25 @@
 With the constraints inactive the nominal part (x_r + x_n, u_r + u_n) is an internal
 model driven by the reference: the only path from the plant back to its input is the
 ancillary law F e, through the notch filter (eq. 38) on q when the variant runs one
-(:class:`fahv.control.tube_mpc.TubeMPCLaw` forms its error's q as
+(`fahv.control.tube_mpc.TubeMPCLaw` forms its error's q as
 notch(q) - notch(q_r + q_n) = notch(q - q_r - q_n), so the filter sits inside the loop).
 Linearised at a point of the plant model, x+ = A x + B u (discrete, period Ts), the loop is
-that of :func:`fahv.tube.notch_loop.notch_closed_loop`, xi = [x; chi] with the filter's
-two states chi. It is broken at one of two places (:data:`BREAKS`):
+that of `fahv.tube.notch_loop.notch_closed_loop`, xi = [x; chi] with the filter's
+two states chi. It is broken at one of two places (`BREAKS`):
 
-* ``delta_e``: at the elevator input, the Phi loop closed;
+* `delta_e`: at the elevator input, the Phi loop closed;
   L(z) = -(delta_e the law commands) / (delta_e injected);
-* ``q``: at the pitch-rate sensor, every other state fed back;
+* `q`: at the pitch-rate sensor, every other state fed back;
   L(z) = -(q measured) / (q the law receives).
 
 The sign makes L a negative-feedback loop transfer function, the convention of
-python-control's ``stability_margins`` and ``disk_margins``, which compute every margin
-(:func:`loop_margins`); the delay margin is the phase margin over its crossover frequency.
+python-control's `stability_margins` and `disk_margins`, which compute every margin
+(`loop_margins`); the delay margin is the phase margin over its crossover frequency.
 
-The plant points (:class:`Plants`): the design point (the LPV model of eq. 12 at the
-design step's (h0, V0), :func:`design_point_plant`), the design's LPV vertices A_i, B_i
-(:func:`vertex_plants`) and the corners of the sec. 5.1 parameter box
-(:func:`corner_plants`: each corner vehicle's one-period Jacobian at the nominal trim of
+The plant points (`Plants`): the design point (the LPV model of eq. 12 at the
+design step's (h0, V0), `design_point_plant`), the design's LPV vertices A_i, B_i
+(`vertex_plants`) and the corners of the sec. 5.1 parameter box
+(`corner_plants`: each corner vehicle's one-period Jacobian at the nominal trim of
 the design point, as the design forms its vertices along the nominal).
 """
 
@@ -66,7 +66,7 @@ class Plants:
 def _notch_parts(notch: NotchFilter | None, Ts: float):
     """(A_d (k, k), b (k,), C_q (k,), d) of the filter q -> q' in chi coordinates; k = 0 if off.
 
-    As :func:`fahv.tube.notch_loop.notch_closed_loop`: chi+ = A_d chi + b q,
+    As `fahv.tube.notch_loop.notch_closed_loop`: chi+ = A_d chi + b q,
     q' = C_q chi + d q, with b = A_d B_d + B_d and d = C_q B_d + D_q.
     """
     if notch is None:
@@ -125,12 +125,12 @@ def closed_loop(A, B, F, notch: NotchFilter | None, Ts: float, iq: int = IQ) -> 
 
 def open_loop(A, B, F, notch: NotchFilter | None, Ts: float, break_at: str,
               iq: int = IQ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """The loop broken at ``break_at``: L(z) = C_L (zI - A_L)^-1 B_L at every point.
+    """The loop broken at `break_at`: L(z) = C_L (zI - A_L)^-1 B_L at every point.
 
     Parameters
     ----------
     A, B, F, notch, Ts, iq
-        As :func:`closed_loop`.
+        As `closed_loop`.
     break_at : {"delta_e", "q"}
         The elevator input (Phi's loop closed) or the pitch-rate sensor (every other
         state fed back).
@@ -140,12 +140,12 @@ def open_loop(A, B, F, notch: NotchFilter | None, Ts: float, break_at: str,
     A_L : (P, n + k, n + k) ndarray
     B_L : (P, n + k, 1) ndarray
     C_L : (P, 1, n + k) ndarray
-        Negative-feedback convention: w = -y closes the loop into :func:`closed_loop`.
+        Negative-feedback convention: w = -y closes the loop into `closed_loop`.
 
     Raises
     ------
     ValueError
-        If ``break_at`` is not one of :data:`BREAKS`.
+        If `break_at` is not one of `BREAKS`.
     """
     A, B, F = (np.asarray(v, float) for v in (A, B, F))
     P, n, _ = A.shape
@@ -193,11 +193,11 @@ class LoopMargins:
     Attributes
     ----------
     break_at : str
-        :data:`BREAKS`.
+        `BREAKS`.
     notch : str
-        The notch setting's label (:class:`NotchSetting`).
+        The notch setting's label (`NotchSetting`).
     point : str
-        The plant point, or "worst of N ..." for a worst case (:func:`worst_case`).
+        The plant point, or "worst of N ..." for a worst case (`worst_case`).
     rho : float
         Closed-loop spectral radius [-] (stable below 1; no margins otherwise).
     open_unstable : int
@@ -273,10 +273,10 @@ def loop_margins(L: control.StateSpace, rho: float, omega, omega_1: float,
                  labels: tuple[str, str, str]) -> LoopMargins:  # fmt: skip
     """Margins of a discrete loop L (negative feedback) whose closed loop has radius rho.
 
-    python-control computes every margin: ``control.stability_margins`` (every
-    crossover) on L's frequency response over ``omega`` (its ``frd`` method: the
+    python-control computes every margin: `control.stability_margins` (every
+    crossover) on L's frequency response over `omega` (its `frd` method: the
     polynomial method finds crossovers that are not there on these loops, whose poles
-    lie near z = 1), and ``control.disk_margins`` (skew 0) over ``omega``. The delay
+    lie near z = 1), and `control.disk_margins` (skew 0) over `omega`. The delay
     margin at each gain crossover is the phase lag it takes to reach -180 deg (the phase
     margin modulo 360 deg) over the crossover frequency; the smallest is reported.
 
@@ -287,7 +287,7 @@ def loop_margins(L: control.StateSpace, rho: float, omega, omega_1: float,
     rho : float
         Closed-loop spectral radius [-]; at 1 or above no margin is computed.
     omega : (N,) array_like
-        Frequencies [rad/s], ascending, below pi / Ts (:func:`frequency_grid`): margins
+        Frequencies [rad/s], ascending, below pi / Ts (`frequency_grid`): margins
         between them are found, none outside them.
     omega_1 : float
         First flexible mode [rad/s].
@@ -340,19 +340,19 @@ def loop_systems(plants: Plants, F, notch, Ts: float, break_at: str) -> list:
     Returns
     -------
     list of control.StateSpace
-        One SISO loop per point, in the order of ``plants.names``.
+        One SISO loop per point, in the order of `plants.names`.
 
     Raises
     ------
     ValueError
-        If ``break_at`` is not one of :data:`BREAKS`.
+        If `break_at` is not one of `BREAKS`.
     """
     A_L, B_L, C_L = open_loop(plants.A, plants.B, F, notch, Ts, break_at)
     return [control.ss(a, b, c, 0.0, dt=Ts) for a, b, c in zip(A_L, B_L, C_L, strict=True)]
 
 
 def worst_case(rows: list[LoopMargins], point: str) -> LoopMargins:
-    """Each margin's worst value over ``rows`` (one break and notch), named ``point``.
+    """Each margin's worst value over `rows` (one break and notch), named `point`.
 
     The worst of each column may come from a different row; an unstable row makes the
     result unstable (largest rho) with no margins.
@@ -371,7 +371,7 @@ def worst_case(rows: list[LoopMargins], point: str) -> LoopMargins:
     Raises
     ------
     ValueError
-        If ``rows`` is empty.
+        If `rows` is empty.
     """
     if not rows:
         raise ValueError("worst_case: no rows")
@@ -390,7 +390,7 @@ def worst_case(rows: list[LoopMargins], point: str) -> LoopMargins:
 
 
 def corner_signs(count: int) -> np.ndarray:
-    """Every corner of a box of ``count`` parameters, (2^count, count) of -1 and +1.
+    """Every corner of a box of `count` parameters, (2^count, count) of -1 and +1.
 
     Parameters
     ----------

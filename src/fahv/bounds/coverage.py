@@ -3,8 +3,8 @@
 A vehicle with elevator effectiveness rho_f holds its trim with delta_e,r / rho_f (eq. 15;
 Phi unchanged). The tube covers a loss only if that faulty trim fits the tightened input
 set (eq. 30) for every vehicle of the parameter box (sec. 5.1) anywhere in the envelope:
-:func:`loss_coverage` trims every corner of the parameter box over the trim grid
-(:func:`corner_trims`) and bounds the trim elevator between grid points.
+`loss_coverage` trims every corner of the parameter box over the trim grid
+(`corner_trims`) and bounds the trim elevator between grid points.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from fahv.errors import DesignError
 
 #: Parameters of the parameter box (sec. 5.1) that do not enter a level-flight trim: with gamma = 0,
 #: q = 0 and eta_dot = 0 the trim rows are T cos(alpha) = D, L + T sin(alpha) = m g and
-#: M = 0 (eq. 1-2), in which I_yy does not appear (``tests/design/test_feasibility.py``
+#: M = 0 (eq. 1-2), in which I_yy does not appear (`tests/design/test_feasibility.py`
 #: checks it numerically).
 TRIM_FREE_PARAMETERS = ("I_yy",)
 
@@ -28,7 +28,7 @@ class LossCoverage:
     """Largest elevator loss whose faulty trim fits the tightened inputs over the parameter box.
 
     A vehicle with elevator effectiveness rho_f holds its trim with delta_e,r / rho_f
-    (eq. 15; Phi unchanged). :func:`loss_coverage` computes it for every corner of the
+    (eq. 15; Phi unchanged). `loss_coverage` computes it for every corner of the
     sec. 5.1 parameter box over the trim grid of the envelope.
 
     Attributes
@@ -42,7 +42,7 @@ class LossCoverage:
         Largest trim elevator [rad] over corners and grid points.
     remainder : float
         Bound [rad] on how much the trim elevator between grid points can exceed the
-        grid values (:func:`loss_coverage`, Notes).
+        grid values (`loss_coverage`, Notes).
     worst_corner : dict
         {parameter: sign in {-1, 0, +1}} of the corner that needs delta_e_max
         (0: parameters that do not enter the trim).
@@ -62,7 +62,7 @@ class LossCoverage:
         every corner (then its maximum lies on the envelope's corners).
     input_offset : (C, nh, nV, 2) ndarray
         Every corner's trim input minus the nominal vehicle's at the same grid point
-        [Phi -, delta_e rad] (:meth:`trim_offsets`).
+        [Phi -, delta_e rad] (`trim_offsets`).
     """
 
     loss: float
@@ -134,7 +134,7 @@ class LossCoverage:
 
 
 def _corner_params(vp, names, signs, rel, reps: int):
-    """Parameters with (C reps,) array fields: corner c repeated ``reps`` times (perturb's rule)."""
+    """Parameters with (C reps,) array fields: corner c repeated `reps` times (perturb's rule)."""
     return vp.replace(
         **{k: np.repeat(getattr(vp, k) * (1.0 + signs[:, j] * rel[k]), reps)
            for j, k in enumerate(names)}
@@ -152,13 +152,13 @@ def corner_trims(vehicle, rel: dict, tm, signs: np.ndarray | None = None):
     tm : fahv.model.trim.TrimMap
         Nominal trims on the grid (starting points; its grid spans the envelope).
     signs : (C, P) ndarray, optional
-        Corners to trim (signs over the parameters of ``rel`` that enter the trim, in
+        Corners to trim (signs over the parameters of `rel` that enter the trim, in
         that order); every corner by default.
 
     Returns
     -------
     names : list of str
-        The parameters that enter the trim (``rel`` minus :data:`TRIM_FREE_PARAMETERS`).
+        The parameters that enter the trim (`rel` minus `TRIM_FREE_PARAMETERS`).
     signs : (C, P) ndarray
     z : (3, C, N_h, N_V) ndarray
         alpha [rad], delta_e [rad], Phi of each corner's trim at each grid point.
@@ -224,9 +224,9 @@ def loss_coverage(vehicle, rel: dict, tm, u_lo, u_hi, path=()) -> LossCoverage:
     Notes
     -----
     Corners: a level-flight trim does not depend on I_yy
-    (:data:`TRIM_FREE_PARAMETERS`), so the 2^10 = 1024 corners of the parameter box
+    (`TRIM_FREE_PARAMETERS`), so the 2^10 = 1024 corners of the parameter box
     have 512 distinct trims; all are computed (vectorised Newton,
-    :func:`fahv.model.trim.trim_batch`).
+    `fahv.model.trim.trim_batch`).
     The worst case lies at a corner because at a fixed point every parameter enters
     the trim monotonically over the parameter box (checked by the test of this function on
     interior draws).

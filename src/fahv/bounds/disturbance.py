@@ -14,12 +14,12 @@ conditions, deviations, inputs, parameter corners and fault states, times a stat
 margin. Each source is also bounded alone, to show which dominates.
 
 Constant part. For a law that estimates a constant state disturbance online
-(:class:`fahv.control.mpc.estimator.DisturbanceEstimator`, law ``tube_mpc``), the part of
+(`fahv.control.mpc.estimator.DisturbanceEstimator`, law `tube_mpc`), the part of
 the parameter error that does not depend on the deviation -- its value at the sample's
 trim point, Delta_0 = f_p(x_r, u_r) - f(x_r, u_r) over one step -- is taken out of the
-nominal model's error by the estimate, so W (``constant="estimated"``) bounds
+nominal model's error by the estimate, so W (`constant="estimated"`) bounds
 Delta - Delta_0: the deviation part, the modelling error and the mean-free rest. The
-paper's W (``constant="bounded"``) keeps it.
+paper's W (`constant="bounded"`) keeps it.
 """
 
 from __future__ import annotations
@@ -45,11 +45,11 @@ INPUT_DEVIATIONS = np.array([0.1, np.radians(3.0)])
 
 
 def state_deviations(notch=None, q_scale: float = 1.0) -> np.ndarray:
-    """Half-widths of the state deviations :func:`sample_disturbance` draws for a model.
+    """Half-widths of the state deviations `sample_disturbance` draws for a model.
 
-    ``STATE_DEVIATIONS`` for the CM and DM (9 states). For the ECM (``notch`` given) the
-    notch filter's two states follow, at twice their steady size for a q of ``q_scale``
-    (:meth:`fahv.model.notch.NotchFilter.state_scale`).
+    `STATE_DEVIATIONS` for the CM and DM (9 states). For the ECM (`notch` given) the
+    notch filter's two states follow, at twice their steady size for a q of `q_scale`
+    (`fahv.model.notch.NotchFilter.state_scale`).
 
     Parameters
     ----------
@@ -67,7 +67,7 @@ def state_deviations(notch=None, q_scale: float = 1.0) -> np.ndarray:
     Raises
     ------
     ValueError
-        If ``q_scale`` is not a positive finite number.
+        If `q_scale` is not a positive finite number.
     """
     if notch is None:
         return STATE_DEVIATIONS.copy()
@@ -130,7 +130,7 @@ def sample_disturbance(
     Ts : float
         Sampling period [s].
     uncertainty : dict
-        Relative parameter bounds (e.g. :data:`fahv.plant.PAPER_UNCERTAINTY`).
+        Relative parameter bounds (e.g. `fahv.plant.PAPER_UNCERTAINTY`).
     rho_f : float
         Elevator effectiveness after the fault.
     dx_half : (n,) ndarray
@@ -140,7 +140,7 @@ def sample_disturbance(
         Half-widths of the input deviations u = u_s - u_r sampled.
     n_samples : int
     seed : int
-        Seed of ``numpy.random.default_rng``.
+        Seed of `numpy.random.default_rng`.
     margin : float
         Factor >= 1 applied to the sampled maximum.
     n_sub : int
@@ -148,7 +148,7 @@ def sample_disturbance(
     progress : callable, optional
         Iterable wrapper (tqdm).
     notch : fahv.model.notch.NotchFilter, optional
-        Required when ``tp.kind == "ecm"``: the one-step predictions then use the
+        Required when `tp.kind == "ecm"`: the one-step predictions then use the
         ECM (eq. 40) and the trim x_r' of eq. (41).
     constant : {"bounded", "estimated"}
         Whether W keeps the constant part Delta_0 of the parameter error (module
@@ -157,12 +157,12 @@ def sample_disturbance(
     Returns
     -------
     DisturbanceSet
-        ``parts`` also holds "constant": the largest |Delta_0_j| (no margin).
+        `parts` also holds "constant": the largest |Delta_0_j| (no margin).
 
     Raises
     ------
     ValueError
-        If margin < 1, dx_half has the wrong length or is not finite, or ``constant``
+        If margin < 1, dx_half has the wrong length or is not finite, or `constant`
         is unknown.
     """
     if margin < 1.0:

@@ -3,17 +3,17 @@
 W must bound the one-step disturbance over every state and input the closed loop can
 reach. Two tube forms state that domain differently:
 
-* the eight-state tube set (``tube.form: eight_state``) is linearised along the nominal
-  over a **scheduling box** (:class:`SchedulingBox`): the nominal points the vertices
+* the eight-state tube set (`tube.form: eight_state`) is linearised along the nominal
+  over a **scheduling box** (`SchedulingBox`): the nominal points the vertices
   cover, s = (h, V, alpha - alpha_r, theta - theta_r, Phi - Phi_r, delta_e - delta_e,r)
   with the trim (x_r, u_r) at (h, V), and half-widths of q and the flexible states. The
-  design's **nominal box** is the part the nominal MPC keeps (:func:`nominal_box`); the
-  error adds the **product set** {|e_h| <= H} x Z_8 (:func:`product_supports`), so the
-  scheduling box must hold the nominal box grown by it (:func:`box_shortfall`); the
+  design's **nominal box** is the part the nominal MPC keeps (`nominal_box`); the
+  error adds the **product set** {|e_h| <= H} x Z_8 (`product_supports`), so the
+  scheduling box must hold the nominal box grown by it (`box_shortfall`); the
   nominal points the certificate covers are the scheduling box less the tube
-  (:func:`certified_range`);
-* the paper's vertex tube (``tube.form: vertices``) is checked around the scheduling trim
-  of the nominal MPC (:class:`CertificateDomain`): scheduling points over the envelope,
+  (`certified_range`);
+* the paper's vertex tube (`tube.form: vertices`) is checked around the scheduling trim
+  of the nominal MPC (`CertificateDomain`): scheduling points over the envelope,
   the nominal deviations the QP allows plus Z's supports, the inputs of the tightened set
   plus F Z, every corner of the sec. 5.1 parameter box, rho_f at both ends of
   [rho_min, 1].
@@ -67,10 +67,10 @@ class SchedulingBox:
             raise ValueError(f"scheduling box: need finite lo <= hi, got {lo} and {hi}")
 
     def margin_to(self, inner: SchedulingBox) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """How far this box reaches beyond ``inner``, in the coordinates' units.
+        """How far this box reaches beyond `inner`, in the coordinates' units.
 
         Returns the lo side (6,), the hi side (6,) and other_half - inner.other_half (5,);
-        negative where ``inner`` is not inside.
+        negative where `inner` is not inside.
         """
         return (
             np.asarray(inner.lo, float) - np.asarray(self.lo, float),
@@ -79,7 +79,7 @@ class SchedulingBox:
         )
 
     def corners(self) -> np.ndarray:
-        """The 64 corners (64, 6), in :func:`itertools.product` order (lo first)."""
+        """The 64 corners (64, 6), in `itertools.product` order (lo first)."""
         return np.array(list(itertools.product(*zip(self.lo, self.hi, strict=True))))
 
     def points(self, trim_map, s) -> tuple[np.ndarray, np.ndarray]:
@@ -92,7 +92,7 @@ class SchedulingBox:
         return X, np.array(u_r, float) + s[:, 4:6]
 
     def summary(self) -> dict:
-        """JSON-ready record: ``lo``, ``hi``, ``other_half`` as lists."""
+        """JSON-ready record: `lo`, `hi`, `other_half` as lists."""
         return {
             "lo": np.asarray(self.lo).tolist(),
             "hi": np.asarray(self.hi).tolist(),
@@ -101,12 +101,12 @@ class SchedulingBox:
 
 
 def nominal_box(section: dict, envelope) -> tuple[SchedulingBox, SchedulingBox]:
-    """The nominal box and the scheduling box of a design's ``eight_state`` section.
+    """The nominal box and the scheduling box of a design's `eight_state` section.
 
     Parameters
     ----------
     section : dict
-        The validated ``eight_state`` section (:mod:`fahv.spec.schema`).
+        The validated `eight_state` section (`fahv.spec.schema`).
     envelope : fahv.model.envelope.Envelope
         The flight envelope (h, V ranges).
 
@@ -115,7 +115,7 @@ def nominal_box(section: dict, envelope) -> tuple[SchedulingBox, SchedulingBox]:
     nominal, box : SchedulingBox
         The nominal's ranges (h, V: the envelope shrunk by the margins; attitude, input
         deviations from the trim and q, flexible half-widths as given) and the scheduling
-        box: the envelope in h, V, the nominal ranges grown by ``reach`` elsewhere.
+        box: the envelope in h, V, the nominal ranges grown by `reach` elsewhere.
 
     Raises
     ------
@@ -153,8 +153,8 @@ def joint_shape(F_8, N_8) -> np.ndarray:
     support of r'(e_8, u - v) over it is sqrt(r' C r). A loop whose input deviation is
     not F_8 e_8 (the tube loop through the notch filter, u - v = K xi over an ellipsoid
     E(P) of xi = [e_8; chi]) has its own joint shape, [[I, 0], K] P [[I, 0], K]' (the
-    ``joint`` argument of :func:`product_supports` and of the one-step bounds of
-    :mod:`fahv.bounds.one_step_bound`).
+    `joint` argument of `product_supports` and of the one-step bounds of
+    `fahv.bounds.one_step_bound`).
 
     Parameters
     ----------
@@ -181,13 +181,13 @@ def joint_shape(F_8, N_8) -> np.ndarray:
 
 
 def joint_of(F_8, N_8, joint=None) -> np.ndarray:
-    """The joint shape of (e_8, u - v): ``joint`` checked, or the tube set's own.
+    """The joint shape of (e_8, u - v): `joint` checked, or the tube set's own.
 
     Parameters
     ----------
     F_8 : (2, 8) array_like
     N_8 : (8, 8) array_like
-        The tube set (:func:`joint_shape` when ``joint`` is None).
+        The tube set (`joint_shape` when `joint` is None).
     joint : (10, 10) array_like, optional
         A loop's own joint shape; symmetrised.
 
@@ -198,7 +198,7 @@ def joint_of(F_8, N_8, joint=None) -> np.ndarray:
     Raises
     ------
     ValueError
-        If ``joint`` is not a finite (10, 10) matrix, or the tube set is malformed.
+        If `joint` is not a finite (10, 10) matrix, or the tube set is malformed.
     """
     if joint is None:
         return joint_shape(F_8, N_8)
@@ -218,7 +218,7 @@ def product_supports(F_8, N_8, H: float, joint=None) -> tuple[np.ndarray, np.nda
     H : float
         Altitude error bound [ft].
     joint : (10, 10) array_like, optional
-        Joint shape of (e_8, u - v) in place of the tube set's (:func:`joint_shape`).
+        Joint shape of (e_8, u - v) in place of the tube set's (`joint_shape`).
 
     Returns
     -------
@@ -231,7 +231,7 @@ def product_supports(F_8, N_8, H: float, joint=None) -> tuple[np.ndarray, np.nda
     Raises
     ------
     ValueError
-        On a malformed ``joint`` or tube set.
+        On a malformed `joint` or tube set.
     """
     s = np.sqrt(np.maximum(np.diag(joint_of(F_8, N_8, joint)), 0.0))
     return np.concatenate([[H], s[:3], s[8:]]), s[3:8]
@@ -240,7 +240,7 @@ def product_supports(F_8, N_8, H: float, joint=None) -> tuple[np.ndarray, np.nda
 def box_shortfall(box: SchedulingBox, nominal: SchedulingBox, F_8, N_8, H: float) -> dict:
     """Where the scheduling box does not hold the nominal box grown by the product set.
 
-    The integral form of the one-step bound (:mod:`fahv.bounds.one_step_bound`) holds for
+    The integral form of the one-step bound (`fahv.bounds.one_step_bound`) holds for
     every segment from a nominal point to the plant inside the scheduling box: the box
     must hold the nominal box grown by the supports of {|e_h| <= H} x Z_8 and F_8 Z_8.
 
@@ -249,7 +249,7 @@ def box_shortfall(box: SchedulingBox, nominal: SchedulingBox, F_8, N_8, H: float
     box, nominal : SchedulingBox
         The scheduling box and the nominal box.
     F_8, N_8, H
-        The tube set and its altitude bound, as in :func:`product_supports`.
+        The tube set and its altitude bound, as in `product_supports`.
 
     Returns
     -------
@@ -269,18 +269,18 @@ def certified_range(box: SchedulingBox, F_8, N_8, H: float) -> SchedulingBox:
     """The nominal points the tube set's certificate covers: the scheduling box less the tube.
 
     The vertices and W_8's bound hold for every segment from a nominal point to the plant
-    inside the scheduling box (the integral form, :mod:`fahv.bounds.one_step_bound`), so
+    inside the scheduling box (the integral form, `fahv.bounds.one_step_bound`), so
     the certificate needs the nominal inside the box shrunk by the product set's
     supports (H in h, Z_8's in the states, F_8 Z_8's in the inputs); the nominal box of
-    the design is a part of it (:func:`box_shortfall` checks that).
+    the design is a part of it (`box_shortfall` checks that).
 
     Parameters
     ----------
     box : SchedulingBox
-        The scheduling box (coordinates :data:`BOX_COORDINATES`, then q and the
+        The scheduling box (coordinates `BOX_COORDINATES`, then q and the
         flexible states as half-widths).
     F_8, N_8, H
-        The tube set and its altitude bound, as in :func:`product_supports`.
+        The tube set and its altitude bound, as in `product_supports`.
 
     Returns
     -------
@@ -315,7 +315,7 @@ class CertificateDomain:
         Half-widths of x - x_rs: the nominal deviation the nominal MPC allows from its
         scheduling trim plus Z's supports [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s].
     nominal_half : (9,) ndarray
-        The nominal part of ``x_half`` (without Z), for the report.
+        The nominal part of `x_half` (without Z), for the report.
     u_lo, u_hi : (2,) ndarray
         Absolute input range [Phi, delta_e rad]: the tightened nominal set plus the
         support of tau F Z (the actuator limits when the design is consistent).
@@ -364,14 +364,14 @@ def nominal_half_widths(mpc: dict, x_default: np.ndarray) -> tuple[np.ndarray, t
 
     h and V: the rescheduling threshold plus half a set-point move (the nominal model
     is re-scheduled at a plan when its h, V left the threshold; between plans it moves
-    on); alpha, theta: the attitude rows of the QP (``mpc.att_max``, from the nominal
+    on); alpha, theta: the attitude rows of the QP (`mpc.att_max`, from the nominal
     trim) plus the same margin as h, V of the trim map's slope; q and the flexible
-    states: ``x_default`` (no QP row bounds them: stated as an assumption).
+    states: `x_default` (no QP row bounds them: stated as an assumption).
 
     Parameters
     ----------
     mpc : dict
-        The design's ``mpc`` section (``reschedule``, ``dtheta_max``, ``att_max``).
+        The design's `mpc` section (`reschedule`, `dtheta_max`, `att_max`).
     x_default : (9,) array_like
         Assumed half-widths of the states no QP row bounds.
 

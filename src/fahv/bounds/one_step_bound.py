@@ -1,29 +1,29 @@
 """Bounds of the one-step disturbance W over a domain, deterministic (no sampling).
 
-Two forms, one per tube form (:mod:`fahv.bounds.domain` states their domains):
+Two forms, one per tube form (`fahv.bounds.domain` states their domains):
 
 **Taylor form** (the paper's vertex tube around the scheduling trim,
-:func:`bound_disturbance`). In deviation coordinates around the scheduling trim
+`bound_disturbance`). In deviation coordinates around the scheduling trim
 (x_rs, u_rs) of the nominal MPC, with A_s, B_s the scheduled discrete model and
-P = diag(1, rho_f)::
+P = diag(1, rho_f):
 
     Delta(z, p, rho_f) = Phi_p(x_rs + z_x, P (u_rs + z_u)) - x_rs - A_s z_x - B_s P z_u
                          - [Phi_p(x_rs, P u_rs) - x_rs]
 
 is the one-step error of the vertex model with the constant part at the trim (which
-the online estimate removes, ``disturbance.constant: estimated``) taken out; Phi_p is
-one control period of the plant (:func:`fahv.bounds.plant_step.plant_step`). It is
+the online estimate removes, `disturbance.constant: estimated`) taken out; Phi_p is
+one control period of the plant (`fahv.bounds.plant_step.plant_step`). It is
 bounded over the domain by a second-order Taylor model with an interval bound over the
 box, plus a third-order remainder measured at every corner of the box.
 
-**Integral form** (the eight-state tube set along the nominal, :func:`product_bound`,
-:func:`altitude_bound`). The error along the nominal is exactly a vertex combination of
+**Integral form** (the eight-state tube set along the nominal, `product_bound`,
+`altitude_bound`). The error along the nominal is exactly a vertex combination of
 the one-period Jacobians averaged along the segment from the nominal to the plant
-(:mod:`fahv.bounds.vertices` (1)), up to what the vertices leave: each vehicle's
+(`fahv.bounds.vertices` (1)), up to what the vertices leave: each vehicle's
 parameter residual and the interpolation remainder. Both are first order in the tube,
 and their supports are exact over the product set {|e_h| <= H} x Z_8. The altitude error
 is held by the nominal's reset of its h to the measured one every M fast steps
-(``mpc.h_reset``), which makes e_h = 0 there::
+(`mpc.h_reset`), which makes e_h = 0 there:
 
     |e_h| <= H = M (step + w_h),                                                 (1)
     step = max over the vertices of max over Z_8 of |a_h,8 e_8 + b_h F_8 e_8|,
@@ -49,7 +49,7 @@ from fahv.plant.rk4 import perturbed_records
 
 @dataclass(frozen=True)
 class DisturbanceBound:
-    """Bound of the one-step disturbance over a :class:`~fahv.bounds.domain.CertificateDomain`.
+    """Bound of the one-step disturbance over a `fahv.bounds.domain.CertificateDomain`.
 
     Attributes
     ----------
@@ -128,7 +128,7 @@ def _scheduled(disc, tp, h, V):
 
 
 def _quadratic_bounds(domain, disc, tp, trim_map, recs_all, progress):
-    """The quadratic part of :func:`bound_disturbance`: per row the largest Taylor bound.
+    """The quadratic part of `bound_disturbance`: per row the largest Taylor bound.
 
     Returns the bound (9,), per row the data of its schedule, corner and rho_f, the
     Taylor models by (schedule, rho_f, corner) and the plant steps made.
@@ -208,7 +208,7 @@ def bound_disturbance(domain: CertificateDomain, vehicle, tp, trim_map, progress
     an interval bound of the quadratic model). The third-order remainder is measured
     as the largest mismatch between the exact Delta and the quadratic model at all
     2^11 corners of the box, for the parameter corner and rho_f that give the largest
-    quadratic bound of each row, and added times :data:`fahv.bounds.plant_step.REMAINDER_FACTOR`.
+    quadratic bound of each row, and added times `fahv.bounds.plant_step.REMAINDER_FACTOR`.
 
     Parameters
     ----------
@@ -216,7 +216,7 @@ def bound_disturbance(domain: CertificateDomain, vehicle, tp, trim_map, progress
     vehicle : fahv.model.vehicle.Vehicle
         Nominal vehicle (parameters perturbed here).
     tp : fahv.model.tp_model.TPModel
-        The continuous TP model (discretised at ``domain.Ts``), CM (9 states).
+        The continuous TP model (discretised at `domain.Ts`), CM (9 states).
     trim_map : fahv.model.trim.TrimMap
         Scheduling trims (x_rs, u_rs).
     progress : callable, optional
@@ -260,7 +260,7 @@ def disturbance_at(domain: CertificateDomain, vehicle, tp, trim_map, schedule, Z
     ----------
     domain : CertificateDomain
     vehicle, tp, trim_map
-        As :func:`bound_disturbance`.
+        As `bound_disturbance`.
     schedule : (2,) array_like
         Scheduling point (h, V).
     Z : (L, 11) ndarray
@@ -294,22 +294,22 @@ def product_bound(
     applied to [e; P F e], P = diag(1, rho_f), at every box corner, for rho_f at both
     ends of [rho_min, 1] (exact for the product set: |r_h| H plus the ellipsoid's
     support). The interpolation part is the elementwise remainder bound times the
-    product set's supports in e and F e. With ``joint`` the set of (e_8, u - v) is the
+    product set's supports in e and F e. With `joint` the set of (e_8, u - v) is the
     ellipsoid of that shape in place of {(e_8, F_8 e_8) : e_8 in Z_8}. Without it and
-    with ``nv.tau`` < 1 (the adjustable law, eq. 48), u - v = tau' F_8 e_8 for any
+    with `nv.tau` < 1 (the adjustable law, eq. 48), u - v = tau' F_8 e_8 for any
     tau' in [tau, 1]: the parameter part is the larger of its values at the two ends
     (each support is convex in tau'), and F_8 Z_8 holds every tau' F_8 Z_8.
 
     Parameters
     ----------
     nv : NominalVertices
-        Vertex data over the scheduling box (:func:`fahv.bounds.vertices.nominal_vertices`).
+        Vertex data over the scheduling box (`fahv.bounds.vertices.nominal_vertices`).
     F_8 : (2, 8) array_like
     N_8 : (8, 8) array_like
     H : float
         Altitude error bound [ft].
     joint : (10, 10) array_like, optional
-        A loop's joint shape of (e_8, u - v) (:func:`fahv.bounds.domain.joint_shape`).
+        A loop's joint shape of (e_8, u - v) (`fahv.bounds.domain.joint_shape`).
 
     Returns
     -------
@@ -319,7 +319,7 @@ def product_bound(
     Raises
     ------
     ValueError
-        On a malformed ``joint`` or tube set, or a ``joint`` with ``nv.tau`` < 1.
+        On a malformed `joint` or tube set, or a `joint` with `nv.tau` < 1.
     """
     C = joint_of(F_8, N_8, joint)
     if joint is not None and nv.tau < 1.0:
@@ -374,14 +374,14 @@ def altitude_bound(nv: NominalVertices, A, B, F_8, N_8, moves: int, joint=None) 
     nv : NominalVertices
     A : (R, 9, 9) array_like
     B : (R, 9, 2) array_like
-        The vertices (:meth:`fahv.bounds.vertices.NominalVertices.vertices`).
+        The vertices (`fahv.bounds.vertices.NominalVertices.vertices`).
     F_8 : (2, 8) array_like
     N_8 : (8, 8) array_like
     moves : int
         Fast steps between the nominal's altitude resets.
     joint : (10, 10) array_like, optional
         Joint shape of (e_8, u - v) in place of the tube set's
-        (:func:`fahv.bounds.domain.joint_shape`): the step of (1) is then the support of
+        (`fahv.bounds.domain.joint_shape`): the step of (1) is then the support of
         a_h,8 e_8 + b_h (u - v) over it.
 
     Returns
@@ -394,7 +394,7 @@ def altitude_bound(nv: NominalVertices, A, B, F_8, N_8, moves: int, joint=None) 
         If the iteration for H does not converge (the h row's own disturbance grows with
         H as fast as the reset allows).
     ValueError
-        On a malformed ``joint`` or tube set.
+        On a malformed `joint` or tube set.
     """
     A, B = np.asarray(A, float), np.asarray(B, float)
     C = joint_of(F_8, N_8, joint)

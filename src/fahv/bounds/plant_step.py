@@ -2,7 +2,7 @@
 
 Every bound of the design is a bound of this map: x+ = Phi_p(x, u), one control period
 Ts of the CM (eq. 1-3) for the vehicle of parameter record p, integrated by the plant's
-own RK4 with its sub-steps (:func:`fahv.plant.rk4.rk4_cm`), batched over points.
+own RK4 with its sub-steps (`fahv.plant.rk4.rk4_cm`), batched over points.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def plant_step(X, U, recs, Ts: float, n_sub: int) -> np.ndarray:
     U : (L, 2) array_like
         Applied inputs (Phi -, delta_e rad).
     recs : (L,) ndarray
-        Parameter records of the vehicles (:func:`fahv.plant.rk4.params_records`).
+        Parameter records of the vehicles (`fahv.plant.rk4.params_records`).
     Ts : float
         Control period [s].
     n_sub : int

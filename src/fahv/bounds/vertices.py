@@ -1,22 +1,22 @@
 """Vertex sets of the tube LMI (24): faults, adjustable gains, the error along the nominal.
 
-* :func:`fault_vertices`: every vertex with the elevator at full and at reduced
+* `fault_vertices`: every vertex with the elevator at full and at reduced
   effectiveness, eq. (15);
-* :func:`gain_vertices`: every vertex with the gain tau' F at both ends of [tau, 1],
+* `gain_vertices`: every vertex with the gain tau' F at both ends of [tau, 1],
   eq. (48);
-* :func:`nominal_vertices`: the vertices of the tube error along the nominal, and what
+* `nominal_vertices`: the vertices of the tube error along the nominal, and what
   they leave to W.
 
 **The error along the nominal.** With the nominal state moving by the nominal vehicle's
 nonlinear CM, z+ = f_0(z, v) + d, and the plant x+ = f_p(x, P u) under u = v + F e
 (P = diag(1, rho_f), eq. 15), the tube error e = x - z obeys, once the estimate d holds
-the constant part at the nominal point, by the mean-value theorem in integral form::
+the constant part at the nominal point, by the mean-value theorem in integral form:
 
     e+ = f_p(z + e, P (v + F e)) - f_p(z, P v)
        = [int_0^1 J_p(z + s e, P (v + s F e)) ds] [e; P F e]                 (1)
 
 with J_p the one-period Jacobian [A, B] of the perturbed vehicle. If the segment lies in
-the scheduling box (:class:`fahv.bounds.domain.SchedulingBox`), the averaged Jacobian
+the scheduling box (`fahv.bounds.domain.SchedulingBox`), the averaged Jacobian
 lies in the convex hull of J_p over the box. The vertices cover it:
 
 * the nominal vehicle's J_0 at the 64 corners of the box, each shifted along k
@@ -31,7 +31,7 @@ lies in the convex hull of J_p over the box. The vertices cover it:
   parameter residual.
 
 The residual and the interpolation remainder are what W bounds
-(:mod:`fahv.bounds.one_step_bound`); both are first order in the size of the tube.
+(`fahv.bounds.one_step_bound`); both are first order in the size of the tube.
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ def gain_vertices(A: np.ndarray, B: np.ndarray, tau: float):
 
     A tube LMI (24) solved over both sets makes Z RPI for W under u = tau' F e for every
     tau' in [tau, 1]: A_i + tau' B_i F is affine in tau', so the LMI, affine in the
-    closed loop, holds on the segment once it holds at its ends. ``tau`` = 1 returns
+    closed loop, holds on the segment once it holds at its ends. `tau` = 1 returns
     (A, B) unchanged.
 
     Parameters
@@ -114,8 +114,8 @@ class NominalVertices:
     dirs : (k, 9, 11) ndarray
         Parameter directions (unscaled).
     c_lo, c_hi : (k,) ndarray
-        Coefficient range over every vehicle and corner, widened by ``coef_margin`` of
-        :func:`nominal_vertices`.
+        Coefficient range over every vehicle and corner, widened by `coef_margin` of
+        `nominal_vertices`.
     residual : (64, C, 9, 11) ndarray
         Each vehicle's Jacobian deviation minus its carried part, per corner.
     interp : (9, 11) ndarray
@@ -123,11 +123,11 @@ class NominalVertices:
         of the nominal's q and flexible deviations.
     rho_min : float
     n_vehicles : tuple of int
-        Corners of the parameter box and interior vehicles in ``residual``.
+        Corners of the parameter box and interior vehicles in `residual`.
     tau : float
         Smallest factor of the ancillary gain tau' F the vertices cover, tau' in [tau, 1]
         (1: the baseline law, eq. 36; below 1: the adjustable law, eq. 48). Set it with
-        :func:`dataclasses.replace`.
+        `dataclasses.replace`.
     """
 
     box: SchedulingBox
@@ -143,15 +143,15 @@ class NominalVertices:
 
     @property
     def n_vertices(self) -> int:
-        """R, the number of vertices :meth:`vertices` returns (without building them)."""
+        """R, the number of vertices `vertices` returns (without building them)."""
         return self.J0.shape[0] * 2 ** len(self.c_lo) * 2 * (2 if self.tau < 1.0 else 1)
 
     def vertices(self) -> tuple[np.ndarray, np.ndarray]:
         """(A, B) vertex arrays (R, 9, 9), (R, 9, 2) of the tube LMI (24).
 
         R = 64 2^k 2 (box corners, parameter directions, rho_f at both ends of
-        [rho_min, 1]); with ``tau`` < 1 twice that, [A_i, B_i] and [A_i, tau B_i]
-        (:func:`gain_vertices`, eq. 48): every closed loop A_i + tau' B_i F with tau' in
+        [rho_min, 1]); with `tau` < 1 twice that, [A_i, B_i] and [A_i, tau B_i]
+        (`gain_vertices`, eq. 48): every closed loop A_i + tau' B_i F with tau' in
         [tau, 1] is a convex combination of them.
         """
         As, Bs = [], []

@@ -1,27 +1,27 @@
 """The dispersed values of run i, a function of (campaign seed, i) only, and their overrides.
 
-Random streams: run ``i`` draws each group of values from its own generator
-``numpy.random.default_rng(SeedSequence(seed, spawn_key=(i, stream)))`` (stream 0:
-uncertainty, 1: fault, 2: command, 3: initial trim), i.e. the ``i``-th child of the
-campaign's seed sequence (:meth:`numpy.random.SeedSequence.spawn` gives the same
+Random streams: run `i` draws each group of values from its own generator
+`numpy.random.default_rng(SeedSequence(seed, spawn_key=(i, stream)))` (stream 0:
+uncertainty, 1: fault, 2: command, 3: initial trim), i.e. the `i`-th child of the
+campaign's seed sequence (`numpy.random.SeedSequence.spawn` gives the same
 children), split once more by group. So a run's values do not depend on which other
 runs exist, in which order or on which worker they run, and adding a dispersion group
 to a campaign file does not change the values of the others.
 
 Uncertainty (sec. 5.1): p = p_nominal (1 + s_p scale rel_p) for each drawn parameter
-p (:data:`fahv.plant.uncertainty.PAPER_UNCERTAINTY`), with s_p
+p (`fahv.plant.uncertainty.PAPER_UNCERTAINTY`), with s_p
 
-- ``uniform``: s_p ~ U(-1, 1), independent;
-- ``corners``: s_p = +1 if bit j of (i mod 2^d) is set, else -1 (parameter j of the
+- `uniform`: s_p ~ U(-1, 1), independent;
+- `corners`: s_p = +1 if bit j of (i mod 2^d) is set, else -1 (parameter j of the
   list, d parameters): runs 0 .. 2^d - 1 visit every corner of the box once;
-- ``lhs``: row i of a scrambled Latin hypercube of ``runs`` points in d dimensions
-  (:class:`scipy.stats.qmc.LatinHypercube`, generator ``SeedSequence(seed,
-  spawn_key=(2^32 - 1,))``), mapped to [-1, 1]; a run's values depend on the
-  campaign's ``runs`` as well, as every stratified design does.
+- `lhs`: row i of a scrambled Latin hypercube of `runs` points in d dimensions
+  (`scipy.stats.qmc.LatinHypercube`, generator `SeedSequence(seed,
+  spawn_key=(2^32 - 1,))`), mapped to [-1, 1]; a run's values depend on the
+  campaign's `runs` as well, as every stratified design does.
 
 Fault, command and initial trim: each range is drawn uniformly (one uniform number
 each, always drawn, so that the stream does not depend on the fault kind drawn); the
-fault kind with equal probability among ``kinds``.
+fault kind with equal probability among `kinds`.
 """
 
 from __future__ import annotations
@@ -43,12 +43,12 @@ LHS_KEY = 2**32 - 1
 
 
 def run_rng(seed: int, index: int, stream: str) -> np.random.Generator:
-    """Generator of one group of values of run ``index`` (see the module notes)."""
+    """Generator of one group of values of run `index` (see the module notes)."""
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(index, STREAMS[stream])))
 
 
 def run_seed(seed: int, index: int) -> int:
-    """First 32-bit word of run ``index``'s seed sequence (recorded, for reference)."""
+    """First 32-bit word of run `index`'s seed sequence (recorded, for reference)."""
     ss = np.random.SeedSequence(seed, spawn_key=(index,))
     return int(ss.generate_state(1, np.uint32)[0])
 
@@ -76,7 +76,7 @@ def dispersed_groups(data: dict) -> list[str]:
 
 
 def _uniform(rng: np.random.Generator, rng_range, default: float) -> float:
-    """Value lo + (hi - lo) u, u ~ U[0, 1) (always drawn); ``default`` if the range is empty."""
+    """Value lo + (hi - lo) u, u ~ U[0, 1) (always drawn); `default` if the range is empty."""
     u = float(rng.random())
     if not rng_range:
         return float(default)
@@ -85,12 +85,12 @@ def _uniform(rng: np.random.Generator, rng_range, default: float) -> float:
 
 
 def draw(data: dict, case: dict, index: int) -> dict:
-    """The dispersed values of run ``index`` (columns of the results table).
+    """The dispersed values of run `index` (columns of the results table).
 
     Parameters
     ----------
     data : dict
-        Validated campaign (:func:`fahv.campaign.spec.campaign_spec`).
+        Validated campaign (`fahv.campaign.spec.campaign_spec`).
     case : dict
         Validated data of its case.
     index : int
@@ -99,16 +99,16 @@ def draw(data: dict, case: dict, index: int) -> dict:
     Returns
     -------
     dict
-        Per dispersed group: ``s.<p>`` (s_p in [-1, 1]) of the drawn uncertain
-        parameters; ``fault.kind``, ``fault.t_onset`` [s], ``fault.loss``,
-        ``fault.rho_f``, ``fault.bias_deg`` [deg]; ``command.dh`` [ft], ``command.dV``
-        [ft/s], ``command.h_c``, ``command.V_c``; ``initial.h0`` [ft], ``initial.V0``
+        Per dispersed group: `s.<p>` (s_p in [-1, 1]) of the drawn uncertain
+        parameters; `fault.kind`, `fault.t_onset` [s], `fault.loss`,
+        `fault.rho_f`, `fault.bias_deg` [deg]; `command.dh` [ft], `command.dV`
+        [ft/s], `command.h_c`, `command.V_c`; `initial.h0` [ft], `initial.V0`
         [ft/s].
 
     Raises
     ------
     ValueError
-        If ``index`` is outside [0, runs).
+        If `index` is outside [0, runs).
     """
     if not 0 <= index < data["runs"]:
         raise ValueError(f"run index must be in [0, {data['runs']}), got {index}")
@@ -160,12 +160,12 @@ def _vehicle(path: str):
 
 
 def overrides(values: dict, design, variant: str) -> dict:
-    """Node parameter overrides ``{node: {name: value}}`` of one run's dispersed values.
+    """Node parameter overrides `{node: {name: value}}` of one run's dispersed values.
 
     Parameters
     ----------
     values : dict
-        From :func:`draw`.
+        From `draw`.
     design : fahv.spec.artefacts.Design
         The case's design (its trim map gives the initial trim state; its vehicle
         file the nominal parameters).
@@ -175,9 +175,9 @@ def overrides(values: dict, design, variant: str) -> dict:
     Returns
     -------
     dict
-        ``plant``: ``params.<p>`` of all ten uncertain parameters (the drawn ones
-        perturbed, the others nominal) and ``x0`` of the initial trim;
-        ``fault_injector``: kind, onset and size; ``nominal_trajectory``: the command
+        `plant`: `params.<p>` of all ten uncertain parameters (the drawn ones
+        perturbed, the others nominal) and `x0` of the initial trim;
+        `fault_injector`: kind, onset and size; `nominal_trajectory`: the command
         and its initial state. Groups that are not dispersed are left out, so the
         run keeps the scenario's values (its seeded parameter draw, fault, command,
         start).

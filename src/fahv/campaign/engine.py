@@ -1,25 +1,25 @@
 """Campaign engine: batches of runs as Dask tasks, results written as they finish.
 
-The engine is Dask distributed: by default an embedded ``LocalCluster`` (one
+The engine is Dask distributed: by default an embedded `LocalCluster` (one
 single-threaded worker process per core, started and stopped here); with a scheduler
-address, an existing cluster (``dask scheduler`` and ``dask worker ADDRESS`` started
+address, an existing cluster (`dask scheduler` and `dask worker ADDRESS` started
 elsewhere, docs/guide/campaigns.md). There is no pool, queue or retry logic of our own:
-tasks go to ``Client.submit`` and come back through ``as_completed``; a worker that
+tasks go to `Client.submit` and come back through `as_completed`; a worker that
 dies takes its task with it and the scheduler runs it again elsewhere; an exception
-inside a task is retried by Dask (``retries``).
+inside a task is retried by Dask (`retries`).
 
-One task = one batch (:func:`run_batch`): up to ``batch_size`` run indices of one
-variant, simulated together by :func:`fahv.loop.batch.simulate_batch`. A run that
+One task = one batch (`run_batch`): up to `batch_size` run indices of one
+variant, simulated together by `fahv.loop.batch.simulate_batch`. A run that
 raises, diverges (non-finite state) or leaves the flight envelope is a row with
-status ``failed`` and its reason; it never fails the task. The client writes each
-finished batch as one Parquet file (:mod:`fahv.campaign.store`), so an interrupted
+status `failed` and its reason; it never fails the task. The client writes each
+finished batch as one Parquet file (`fahv.campaign.store`), so an interrupted
 campaign (Ctrl-C, a killed worker, a lost scheduler) keeps every finished batch, and
-``resume`` runs exactly the (index, variant) pairs that are missing.
+`resume` runs exactly the (index, variant) pairs that are missing.
 
 Every value of a run depends on (campaign seed, run index, variant) only, and the
 batched simulator gives a run the same bits whatever batch it is in, so tables of
 the same campaign are identical whatever the number of workers, the batching, or
-the interruptions (only ``wall_s`` and ``session`` differ).
+the interruptions (only `wall_s` and `session` differ).
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ TRAJECTORY_DT = 0.5
 
 
 def command_end(run: RunResult) -> float:
-    """Time the command stops moving [s] (as :func:`fahv.runs.metrics.metrics` takes it)."""
+    """Time the command stops moving [s] (as `fahv.runs.metrics.metrics` takes it)."""
     moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
     return float(run.t[moving[-1]]) if moving.size else 0.0
 
@@ -62,8 +62,8 @@ def command_end(run: RunResult) -> float:
 def settling_after(m: dict, t_end: float) -> float:
     """Settling time of h and V together after the command stopped moving [s].
 
-    NaN unless both settle (``settling_time_h_s`` and ``settling_time_V_s`` of the
-    metrics, absolute times); ``t_end`` from :func:`command_end`.
+    NaN unless both settle (`settling_time_h_s` and `settling_time_V_s` of the
+    metrics, absolute times); `t_end` from `command_end`.
     """
     ts = (m["settling_time_h_s"], m["settling_time_V_s"])
     return math.nan if any(map(math.isnan, ts)) else max(ts) - t_end
@@ -82,8 +82,8 @@ def envelope_exit(run: RunResult, envelope) -> str | None:
 def trajectory(run: RunResult, dt: float = TRAJECTORY_DT) -> dict:
     """Decimated histories of a run for the report's figures (lists of float32 values).
 
-    Keys: ``t`` [s], ``h_err`` [ft], ``V_err`` [ft/s], ``alpha_err_deg``,
-    ``theta_err_deg``, ``Phi``, ``delta_e_deg``, ``tube_level``.
+    Keys: `t` [s], `h_err` [ft], `V_err` [ft/s], `alpha_err_deg`,
+    `theta_err_deg`, `Phi`, `delta_e_deg`, `tube_level`.
     """
     Ts = float(run.t[1] - run.t[0]) if run.t.size > 1 else dt
     s = slice(None, None, max(1, round(dt / Ts)))
@@ -102,7 +102,7 @@ def trajectory(run: RunResult, dt: float = TRAJECTORY_DT) -> dict:
 
 
 def run_batch(design, data: dict, variant: str, indices: list[int], duration: float) -> dict:
-    """One Dask task: the runs ``indices`` of ``variant``, their rows and trajectories.
+    """One Dask task: the runs `indices` of `variant`, their rows and trajectories.
 
     Parameters
     ----------
@@ -119,10 +119,10 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
     Returns
     -------
     dict
-        ``rows`` (one dict per run: index, variant, seeds, dispersed values, status,
-        reason, every metric of :func:`fahv.runs.metrics.metrics`, ``t_command_end_s``,
-        ``settling_after_command_s``, ``wall_s``), ``trajectories`` (per completed
-        run), ``wall_s`` of the batch, ``host``.
+        `rows` (one dict per run: index, variant, seeds, dispersed values, status,
+        reason, every metric of `fahv.runs.metrics.metrics`, `t_command_end_s`,
+        `settling_after_command_s`, `wall_s`), `trajectories` (per completed
+        run), `wall_s` of the batch, `host`.
     """
     t0 = time.perf_counter()
     case, seed = design.case, data["seed"]
@@ -174,7 +174,7 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
 
 @dataclass
 class Outcome:
-    """What one call of :func:`run_campaign` did.
+    """What one call of `run_campaign` did.
 
     Attributes
     ----------
@@ -186,13 +186,13 @@ class Outcome:
     new : int
         Runs finished and written by this call.
     failed : int
-        Of those, runs with status ``failed``.
+        Of those, runs with status `failed`.
     wall_s : float
         Wall time of the call [s] (cluster start to last write).
     interrupted : bool
         Stopped by Ctrl-C (KeyboardInterrupt).
     errors : list of str
-        Tasks that failed as a whole (their runs stay missing for ``resume``).
+        Tasks that failed as a whole (their runs stay missing for `resume`).
     """
 
     out_dir: Path
@@ -213,14 +213,14 @@ class Outcome:
 def prepare(campaign: Campaign, out_dir: Path, resume: bool, vehicle=None, log=print):
     """Create or check the campaign folder and return its design.
 
-    The design is the one saved in ``out_dir/design`` (a resumed campaign must keep
+    The design is the one saved in `out_dir/design` (a resumed campaign must keep
     it), else the stored, verified design of the campaign's scenario with the
-    scenario's arrays (:func:`fahv.certificate.verified.load_or_design`; nothing is designed).
+    scenario's arrays (`fahv.certificate.verified.load_or_design`; nothing is designed).
 
     Raises
     ------
     CampaignError
-        If the folder holds results and ``resume`` is False, if it belongs to another
+        If the folder holds results and `resume` is False, if it belongs to another
         campaign or case content, or if its design no longer matches the code.
     """
     out = Path(out_dir)
@@ -306,7 +306,7 @@ def run_campaign(
     log=print,
     dashboard: str | None = None,
 ) -> Outcome:
-    """Run (or complete) a campaign on Dask, writing each finished batch to ``out_dir``.
+    """Run (or complete) a campaign on Dask, writing each finished batch to `out_dir`.
 
     One concept, kept whole: the Dask client's lifetime, the interruption and the
     manifest update are one try/finally around the batches.
@@ -315,9 +315,9 @@ def run_campaign(
     ----------
     campaign : Campaign
     out_dir : path
-        Campaign folder (created; see :mod:`fahv.campaign.store`).
+        Campaign folder (created; see `fahv.campaign.store`).
     scheduler : str, optional
-        Address of an existing Dask scheduler (``tcp://host:8786``); default: a
+        Address of an existing Dask scheduler (`tcp://host:8786`); default: a
         LocalCluster started and stopped here.
     workers : int, optional
         Worker processes of the LocalCluster (default: the machine's cores).
@@ -326,14 +326,14 @@ def run_campaign(
     progress : bool
         Progress bar (runs done, failures, rate, ETA) on stderr.
     on_batch : callable, optional
-        ``on_batch(client, runs_written)`` after each written batch (tests use it to
+        `on_batch(client, runs_written)` after each written batch (tests use it to
         kill a worker).
     vehicle : fahv.model.vehicle.Vehicle, optional
     log : callable
         Receives progress lines (and the dashboard's address).
     dashboard : str, optional
-        Address of the LocalCluster's Dask dashboard (e.g. ``":8787"``); default none
-        (:func:`dask_client`).
+        Address of the LocalCluster's Dask dashboard (e.g. `":8787"`); default none
+        (`dask_client`).
 
     Returns
     -------
@@ -342,7 +342,7 @@ def run_campaign(
     Raises
     ------
     CampaignError
-        From :func:`prepare`.
+        From `prepare`.
     """
     from dask.distributed import as_completed
     from tqdm import tqdm

@@ -1,11 +1,11 @@
 """Paired comparison of two variants of a campaign on common random numbers.
 
 Every run index draws the same dispersed values whatever its variant
-(:mod:`fahv.campaign.draws`), so run i of variant A and run i of variant B face the
+(`fahv.campaign.draws`), so run i of variant A and run i of variant B face the
 same plant, fault and command: their difference is a paired sample. For each metric
 below, over the indices where both runs completed, this gives the mean of the
-differences B - A with a 95 % confidence interval (paired t, ``scipy.stats.ttest_rel``,
-and a percentile bootstrap of the mean, ``scipy.stats.bootstrap``, 10 000 resamples,
+differences B - A with a 95 % confidence interval (paired t, `scipy.stats.ttest_rel`,
+and a percentile bootstrap of the mean, `scipy.stats.bootstrap`, 10 000 resamples,
 seed 0), the median difference, and the fraction of runs in which B is larger.
 Settling is censored (a run that never settles has no time): it is compared as the
 fraction settled in each variant, and the time difference over the runs settled in
@@ -84,9 +84,9 @@ def _has_metrics(r: dict) -> bool:
 def pairs(rows: list[dict], a: str, b: str, completed: bool = True) -> list[tuple[dict, dict]]:
     """(row of A, row of B) of every run index present in both variants.
 
-    ``completed``: only indices whose runs both completed (status ``ok``); otherwise
+    `completed`: only indices whose runs both completed (status `ok`); otherwise
     every index where both runs have metrics (a run that left the flight envelope
-    keeps its metrics, :mod:`fahv.campaign.engine`).
+    keeps its metrics, `fahv.campaign.engine`).
     """
     keep = (lambda r: r["status"] == "ok") if completed else _has_metrics
     ra = {r["index"]: r for r in rows if r["variant"] == a and keep(r)}
@@ -100,8 +100,8 @@ def completion(rows: list[dict], a: str, b: str) -> dict:
     Returns
     -------
     dict
-        ``both``, ``only_a``, ``only_b``, ``neither`` (counts of indices by which
-        variant completed), ``n``, and ``p_mcnemar``: exact McNemar test (two-sided
+        `both`, `only_a`, `only_b`, `neither` (counts of indices by which
+        variant completed), `n`, and `p_mcnemar`: exact McNemar test (two-sided
         binomial test on the discordant pairs) of equal completion probabilities.
     """
     from scipy.stats import binomtest
@@ -126,21 +126,21 @@ def paired_stats(
     Parameters
     ----------
     rows : list of dict
-        Result rows of a campaign (:func:`fahv.campaign.store.read_rows`).
+        Result rows of a campaign (`fahv.campaign.store.read_rows`).
     a, b : str
         Variants; differences are b - a.
     confidence : float
         Level of the intervals.
     completed : bool
         Pairs of completed runs only (default), or every pair with metrics
-        (:func:`pairs`).
+        (`pairs`).
 
     Returns
     -------
     dict
-        ``n_pairs``, ``completed`` (the flag), ``completion`` (:func:`completion`),
-        ``settled`` ((fraction of A, fraction of B) over the pairs), ``stats`` {key:
-        PairedStat}, ``values`` {key: (x_a (n,), x_b (n,))}.
+        `n_pairs`, `completed` (the flag), `completion` (`completion`),
+        `settled` ((fraction of A, fraction of B) over the pairs), `stats` {key:
+        PairedStat}, `values` {key: (x_a (n,), x_b (n,))}.
     """
     from scipy import stats
 
@@ -187,7 +187,7 @@ def _g(v: float) -> str:
 
 
 def paired_text(res: dict, a: str, b: str) -> list[str]:
-    """Markdown lines of a paired comparison (:func:`paired_stats`)."""
+    """Markdown lines of a paired comparison (`paired_stats`)."""
     sa, sb = res["settled"]
     c = res["completion"]
     which = (

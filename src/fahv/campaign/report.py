@@ -1,11 +1,11 @@
 """Campaign report: pass rate per requirement, failure-probability bounds, worst runs, figures.
 
-Requirements (bounds from the campaign file's ``requirements``), per variant, on
+Requirements (bounds from the campaign file's `requirements`), per variant, on
 every run of the dataset:
 
 ==============  ===============================================================
 completes       the run ends without exception, with a finite state, inside the
-                flight envelope (status ``ok``)
+                flight envelope (status `ok`)
 attitude        max |alpha - alpha_r| and max |theta - theta_r| <= attitude_deg
 input_limits    no step with a command beyond the actuator limits (sec. 5.1)
 tube            tube error inside Z (tau Z) at every step (n/a for laws without tube)
@@ -16,10 +16,10 @@ final_V         |V - V_c| at the end <= V_final_fps
 ==============  ===============================================================
 
 With two or more variants, each other variant is compared with the first run by run
-on the same draws (:mod:`fahv.campaign.paired`: paired differences with confidence
+on the same draws (`fahv.campaign.paired`: paired differences with confidence
 intervals, figures). A run without metrics (it raised) fails every requirement. Failure-probability
 bound: with k failures in n runs, the one-sided Clopper-Pearson upper bound at
-confidence C, ``beta.ppf(C, k + 1, n - k)``; for k = 0 it is the zero-failure bound
+confidence C, `beta.ppf(C, k + 1, n - k)`; for k = 0 it is the zero-failure bound
 1 - (1 - C)^(1/n) (n runs without a failure show p < that bound at confidence C).
 """
 
@@ -56,8 +56,8 @@ REQUIREMENTS = (
 )
 
 #: The nominal's largest deviations "nominal_range" checks: (metric key, the certified
-#: range's field and index, metric in degrees). Attitude against ``lo``/``hi`` (its
-#: smaller side), q and the flexible states against ``other_half``.
+#: range's field and index, metric in degrees). Attitude against `lo`/`hi` (its
+#: smaller side), q and the flexible states against `other_half`.
 _NOMINAL_DEV = (
     ("nominal_alpha_dev_max_deg", "lohi", 2, True),
     ("nominal_theta_dev_max_deg", "lohi", 3, True),
@@ -86,7 +86,7 @@ WORST_METRICS = (
 def failure_bound(k: int, n: int, confidence: float) -> float:
     """One-sided upper bound on the failure probability, k failures in n runs.
 
-    Clopper-Pearson at ``confidence`` C: ``beta.ppf(C, k + 1, n - k)``, 1 when k = n,
+    Clopper-Pearson at `confidence` C: `beta.ppf(C, k + 1, n - k)`, 1 when k = n,
     NaN when n = 0. For k = 0 this is 1 - (1 - C)^(1/n).
     """
     if n == 0:
@@ -106,8 +106,8 @@ def _num(row: dict, key: str) -> float:
 def verdicts(row: dict, req: dict, certified: dict | None = None) -> dict[str, bool | None]:
     """Pass (True), fail (False) or not applicable (None) of each requirement for one run.
 
-    ``certified`` is the design's certified nominal range (``certificate.certified_range``
-    of an eight-state design's summary, :func:`fahv.bounds.domain.certified_range`):
+    `certified` is the design's certified nominal range (`certificate.certified_range`
+    of an eight-state design's summary, `fahv.bounds.domain.certified_range`):
     "nominal_range" checks the run's nominal against it (None without it, or for a run
     without a nominal). It is the tube's assumption, not one of the requirements "all"
     combines.
@@ -128,9 +128,9 @@ def nominal_in_range(row: dict, certified: dict | None) -> bool | None:
     Parameters
     ----------
     row : dict
-        A dataset row (:func:`fahv.runs.metrics.metrics`' nominal keys).
+        A dataset row (`fahv.runs.metrics.metrics`' nominal keys).
     certified : dict or None
-        ``{"lo": (6,), "hi": (6,), "other_half": (5,)}`` in the scheduling box's
+        `{"lo": (6,), "hi": (6,), "other_half": (5,)}` in the scheduling box's
         coordinates (h ft, V ft/s, alpha, theta rad, Phi, delta_e; q rad/s, flexible).
 
     Returns
@@ -150,7 +150,7 @@ def nominal_in_range(row: dict, certified: dict | None) -> bool | None:
 
 
 def _each(row: dict, req: dict) -> dict[str, bool | None]:
-    """The verdicts of :func:`verdicts` but "all"."""
+    """The verdicts of `verdicts` but "all"."""
     att = max(_num(row, "alpha_err_max_deg"), _num(row, "theta_err_max_deg"))
     tube = _num(row, "tube_fraction_inside")
     settle = _num(row, "settling_after_command_s")
@@ -172,9 +172,9 @@ class Report:
     Attributes
     ----------
     text : str
-        Markdown (also written to ``DIR/report/report.md``).
+        Markdown (also written to `DIR/report/report.md`).
     table : dict
-        ``{variant: {requirement: (passed, applicable, bound)}}``.
+        `{variant: {requirement: (passed, applicable, bound)}}`.
     figures : list of Path
     n_runs : int
         Rows in the dataset.
@@ -188,7 +188,7 @@ class Report:
     def summary(self) -> str:
         """A few lines for the terminal: runs, then each requirement's pass count per variant.
 
-        The whole report (worst runs, figures) is the file ``DIR/report/report.md``.
+        The whole report (worst runs, figures) is the file `DIR/report/report.md`.
         """
         variants = list(self.table)
         width = max(len(k) for k, _ in REQUIREMENTS)
@@ -222,7 +222,7 @@ def _certified_range(out: Path) -> dict | None:
 
 
 def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Report:
-    """Read a campaign folder's dataset and write its report (``DIR/report/``).
+    """Read a campaign folder's dataset and write its report (`DIR/report/`).
 
     Parameters
     ----------
@@ -319,7 +319,7 @@ def pass_rate_lines(data: dict, per_variant: dict, certified) -> tuple[dict, lis
     Returns
     -------
     table : dict
-        ``{variant: {requirement: (passed, runs, failure-probability bound)}}``.
+        `{variant: {requirement: (passed, runs, failure-probability bound)}}`.
     lines : list of str
     """
     req = data["requirements"]
@@ -356,7 +356,7 @@ def pass_rate_lines(data: dict, per_variant: dict, certified) -> tuple[dict, lis
 
 
 def worst_lines(data: dict, per_variant: dict, shown: list[str], worst: int) -> list[str]:
-    """The tables of the ``worst`` runs per metric and variant."""
+    """The tables of the `worst` runs per metric and variant."""
     lines = ["", f"## Worst {worst} runs per metric", ""]
     for key, label, worse, _ in WORST_METRICS:
         for v in data["variants"]:
@@ -438,7 +438,7 @@ def draw_figures(out: Path, data: dict, per_variant: dict, cols: list[str]) -> l
 
 
 def worst_indices(per_variant: dict, n: int = 5) -> list[tuple[int, str]]:
-    """(index, variant) of up to ``n`` worst runs: the worst of each metric in turn."""
+    """(index, variant) of up to `n` worst runs: the worst of each metric in turn."""
     ranked = []
     for key, _, worse, _ in WORST_METRICS[:5]:
         for v, rs in per_variant.items():
@@ -460,7 +460,7 @@ def worst_indices(per_variant: dict, n: int = 5) -> list[tuple[int, str]]:
 
 
 def _worst_trajectories(out: Path, data: dict, per_variant: dict, plt) -> Path | None:
-    """Overlay of the worst runs' decimated histories (from ``trajectories/``)."""
+    """Overlay of the worst runs' decimated histories (from `trajectories/`)."""
     keys = worst_indices(per_variant)
     trajs = {(r["index"], r["variant"]): r for r in store.read_rows(out, store.TRAJECTORIES)}
     keys = [k for k in keys if k in trajs]

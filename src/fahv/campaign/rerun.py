@@ -1,17 +1,17 @@
 """One run of a campaign again, recorded as a run folder (MCAP) for inspect, plot, replay.
 
-Run ``i`` of variant ``v`` is rebuilt from the campaign folder alone: the campaign
-data in ``campaign.json`` gives its dispersed values (:func:`fahv.campaign.draws.draw`,
-a function of (seed, i)), ``design/`` the design it ran with. In process it goes
-through :func:`fahv.loop.simulate.simulate` with the run's overrides, recorded by
-:class:`fahv.runs.writer.RunWriter`; the batched simulator of the campaign gives the same
-bits, so the metrics equal the recorded row exactly. With ``sil=True`` the same
-parameters go through the ROS 2 node graph (:func:`fahv.runs.sil.run_sil`). The run
-file records the run's own values: its fault in the run metadata (``fault_*``), the
+Run `i` of variant `v` is rebuilt from the campaign folder alone: the campaign
+data in `campaign.json` gives its dispersed values (`fahv.campaign.draws.draw`,
+a function of (seed, i)), `design/` the design it ran with. In process it goes
+through `fahv.loop.simulate.simulate` with the run's overrides, recorded by
+`fahv.runs.writer.RunWriter`; the batched simulator of the campaign gives the same
+bits, so the metrics equal the recorded row exactly. With `sil=True` the same
+parameters go through the ROS 2 node graph (`fahv.runs.sil.run_sil`). The run
+file records the run's own values: its fault in the run metadata (`fault_*`), the
 campaign, its hash and seed, the run index and every dispersed value
-(``dispersed.<column>``), and the parameter file of every node.
+(`dispersed.<column>`), and the parameter file of every node.
 
-:func:`rerun_file` reruns any run from its file alone (the parameter file it holds),
+`rerun_file` reruns any run from its file alone (the parameter file it holds),
 whoever wrote it, and compares the metrics with the recorded run's.
 """
 
@@ -37,7 +37,7 @@ from fahv.spec.artefacts import load_design
 
 @dataclass
 class Rerun:
-    """Result of :func:`rerun`.
+    """Result of `rerun`.
 
     Attributes
     ----------
@@ -48,7 +48,7 @@ class Rerun:
     recorded : dict or None
         The campaign's row of the run (None if the dataset does not hold it).
     differences : dict
-        ``{metric: (recorded, rerun)}`` of every metric that differs (NaN equals NaN).
+        `{metric: (recorded, rerun)}` of every metric that differs (NaN equals NaN).
     error : str
         Exception of the rerun ("" if none), to compare with the recorded reason.
     """
@@ -80,7 +80,7 @@ def rerun(
     watchdog_s: float = 10.0,
     quiet: bool = True,
 ) -> Rerun:
-    """Re-simulate run ``index`` of a campaign folder and record it.
+    """Re-simulate run `index` of a campaign folder and record it.
 
     Parameters
     ----------
@@ -93,8 +93,8 @@ def rerun(
     sil : bool
         Through the ROS 2 node graph instead of in process.
     bags : path
-        Folder of the run folder (``<campaign>_<index>_<variant>_rerun_<time>/``, with
-        ``_sil`` before the time for a SIL rerun).
+        Folder of the run folder (`<campaign>_<index>_<variant>_rerun_<time>/`, with
+        `_sil` before the time for a SIL rerun).
     watchdog_s : float
         Node watchdog of a SIL run [s].
     quiet : bool
@@ -175,10 +175,10 @@ def rerun_file(
     """Rerun a recorded run from its file alone and compare the metrics with it.
 
     The run's parameter file (every node, stored in the run file by every writer)
-    is simulated in process (:func:`fahv.loop.simulate.simulate_parameters`), or with
-    ``sil=True`` run through the node graph; the new run is recorded to
-    ``bags/<run>_rerun[_sil]_<time>/`` with the recorded run's metadata (source
-    ``rerun``, ``rerun_of``).
+    is simulated in process (`fahv.loop.simulate.simulate_parameters`), or with
+    `sil=True` run through the node graph; the new run is recorded to
+    `bags/<run>_rerun[_sil]_<time>/` with the recorded run's metadata (source
+    `rerun`, `rerun_of`).
 
     Parameters
     ----------
@@ -196,7 +196,7 @@ def rerun_file(
     Returns
     -------
     Rerun
-        ``recorded``: the metrics of the recorded run; ``differences`` those that
+        `recorded`: the metrics of the recorded run; `differences` those that
         differ in the rerun.
 
     Raises

@@ -1,13 +1,13 @@
 """Campaign files: a scenario, its dispersions, the variants, the requirements.
 
-Declared once in the configuration language (:mod:`fahv.config`), validated once by
-:func:`load_campaign`; every error names the file and the dotted key, e.g.
-``mc.yaml: key 'dispersions.fault.loss' must be in [0, 1), got 1.2``. A range is a
-list ``[low, high]`` (uniform draw, ``low == high`` fixes the value); an absent range
+Declared once in the configuration language (`fahv.config`), validated once by
+`load_campaign`; every error names the file and the dotted key, e.g.
+`mc.yaml: key 'dispersions.fault.loss' must be in [0, 1), got 1.2`. A range is a
+list `[low, high]` (uniform draw, `low == high` fixes the value); an absent range
 leaves the scenario's value. The generated key table is in docs/reference/configuration.md.
 
 Checks beyond the field ranges (made here, with the run spec and the vehicle at hand):
-``low <= high``; the variants are among the scenario's; every fault kind drawn has its
+`low <= high`; the variants are among the scenario's; every fault kind drawn has its
 size and onset (from the campaign or the scenario); initial trims and commanded points
 stay inside the vehicle's flight envelope for every value of their ranges.
 """
@@ -150,11 +150,11 @@ class Campaign:
     path : Path
         File it was read from.
     data : dict
-        Validated content, defaults filled in (see :func:`campaign_spec`).
+        Validated content, defaults filled in (see `campaign_spec`).
     run_spec : fahv.spec.files.SpecFile
         The run spec of the scenario file it names.
     vehicle : fahv.model.vehicle.Vehicle
-        The vehicle its envelope and range checks used (``--vehicle``, or the packaged
+        The vehicle its envelope and range checks used (`--vehicle`, or the packaged
         one).
     """
 
@@ -179,7 +179,7 @@ class Campaign:
 
     @property
     def warnings(self) -> list[str]:
-        """What the campaign does that its author may not expect (``fahv campaign`` prints it).
+        """What the campaign does that its author may not expect (`fahv campaign` prints it).
 
         Fault onsets drawn (or the scenario's onset) beyond the run's duration: those runs
         end before their fault, i.e. without one.
@@ -312,7 +312,7 @@ def campaign_from_mapping(data, source: str = "<mapping>", run_spec: SpecFile | 
         Name used in messages.
     run_spec : SpecFile, optional
         The scenario's run spec, when already loaded (otherwise that of the scenario file
-        ``data['scenario']``, relative to ``base``).
+        `data['scenario']`, relative to `base`).
     base : Path, optional
         Folder the scenario path is relative to (the campaign file's folder).
     vehicle : fahv.model.vehicle.Vehicle, optional
@@ -323,7 +323,7 @@ def campaign_from_mapping(data, source: str = "<mapping>", run_spec: SpecFile | 
     CampaignError
         Naming the source and the dotted key (unknown key, out of range, wrong
         type, missing, cross-check); a scenario that does not load is reported under
-        the key ``scenario``.
+        the key `scenario`.
     """
     v = validate(campaign_spec(), data, source, CampaignError)
     if run_spec is None:
@@ -338,7 +338,7 @@ def campaign_from_mapping(data, source: str = "<mapping>", run_spec: SpecFile | 
 
 
 def scenario_path(name: str, base: Path | None = None) -> Path:
-    """A campaign's scenario: a path relative to ``base``, or a name in scenarios/."""
+    """A campaign's scenario: a path relative to `base`, or a name in scenarios/."""
     p = Path(base or ".") / name
     if not p.suffix and not p.is_file():
         p = Path("offline_design") / "scenarios" / f"{name}.yaml"
@@ -348,8 +348,8 @@ def scenario_path(name: str, base: Path | None = None) -> Path:
 def load_campaign(path: str | Path, vehicle=None, scenario: str | None = None) -> Campaign:
     """Read and validate a campaign file (and its scenario file).
 
-    ``scenario`` (a path or a name in offline_design/scenarios/) replaces the file's
-    own ``scenario``: the same dispersions around another scenario or design.
+    `scenario` (a path or a name in offline_design/scenarios/) replaces the file's
+    own `scenario`: the same dispersions around another scenario or design.
 
     Raises
     ------

@@ -1,6 +1,6 @@
 """The campaign folder and its Parquet dataset.
 
-Layout of ``DIR`` (``campaigns/<name>/`` by default)::
+Layout of `DIR` (`campaigns/<name>/` by default):
 
     campaign.json          campaign and case content, their hash, code version, start time
     design/                the design every run used (artefacts of fahv.design)
@@ -8,11 +8,11 @@ Layout of ``DIR`` (``campaigns/<name>/`` by default)::
     trajectories/part-G-B.parquet  decimated histories of the same runs (report figures)
     report/                report.md and the PNG figures
 
-``results/`` is one Parquet dataset (``pyarrow.dataset.dataset(DIR / "results")``
+`results/` is one Parquet dataset (`pyarrow.dataset.dataset(DIR / "results")`
 reads it whole). Each file is written to a temporary name and renamed into place when
 complete, so an interrupted campaign holds only complete batches, and the rows of a
-run index appear once. ``G`` counts the sessions (the first run and each
-``--resume``), ``B`` the batch within the session.
+run index appear once. `G` counts the sessions (the first run and each
+`--resume`), `B` the batch within the session.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ MANIFEST = "campaign.json"
 
 
 def write_part(out_dir: Path, sub: str, name: str, rows: list[dict]) -> Path | None:
-    """Write ``rows`` as ``out_dir/sub/name.parquet`` atomically (None when no rows).
+    """Write `rows` as `out_dir/sub/name.parquet` atomically (None when no rows).
 
     Rows may hold different keys (a failed run has no metrics): the columns are their
     union, absent values null.
@@ -49,7 +49,7 @@ def write_part(out_dir: Path, sub: str, name: str, rows: list[dict]) -> Path | N
 
 
 def read_table(out_dir: Path, sub: str = RESULTS) -> pa.Table | None:
-    """Every complete part of ``out_dir/sub`` as one table (None if there is none).
+    """Every complete part of `out_dir/sub` as one table (None if there is none).
 
     Columns are unified across parts (a column missing in a part is null there).
     """
@@ -86,13 +86,13 @@ def next_session(out_dir: Path) -> int:
 
 
 def read_manifest(out_dir: Path) -> dict | None:
-    """``campaign.json`` of a campaign folder (None if absent)."""
+    """`campaign.json` of a campaign folder (None if absent)."""
     p = Path(out_dir) / MANIFEST
     return json.loads(p.read_text()) if p.is_file() else None
 
 
 def write_manifest(out_dir: Path, manifest: dict) -> None:
-    """Write ``campaign.json`` atomically."""
+    """Write `campaign.json` atomically."""
     p = Path(out_dir) / MANIFEST
     tmp = p.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(manifest, indent=2, default=str))

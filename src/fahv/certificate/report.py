@@ -2,11 +2,11 @@
 
 Every function here formats a result computed elsewhere and computes nothing; no
 computation imports this module (the design's stages call it, an import-linter contract
-holds it). The eight-state tube set: :func:`tube_set_lines` (with :func:`range_line`,
-:func:`onset_lines` and the notch loops' lines). The paper's vertex tube checked over its
-domain: :func:`vertex_certificate_lines`. The stages' own lines follow. The two lines the
+holds it). The eight-state tube set: `tube_set_lines` (with `range_line`,
+`onset_lines` and the notch loops' lines). The paper's vertex tube checked over its
+domain: `vertex_certificate_lines`. The stages' own lines follow. The two lines the
 tube's computations print while they run (a closure iteration, a notch loop's verdict)
-are :mod:`fahv.tube.lines`.
+are `fahv.tube.lines`.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from fahv.tube.tube_set import ASSUMPTIONS, EIGHT_STATES
 
 
 def range_line(cert: SchedulingBox, nominal: SchedulingBox) -> str:
-    """The line of the certified nominal range (:func:`fahv.bounds.domain.certified_range`)."""
+    """The line of the certified nominal range (`fahv.bounds.domain.certified_range`)."""
     deg = np.degrees
     o = cert.other_half
     return (
@@ -76,10 +76,10 @@ def tube_set_lines(tube_set, nominal: SchedulingBox, box: SchedulingBox) -> list
 
 
 def onset_lines(onset) -> list[str]:
-    """The design log's lines of an onset bound (:class:`fahv.onset.bound.OnsetBound`).
+    """The design log's lines of an onset bound (`fahv.onset.bound.OnsetBound`).
 
     The level bound at the design's loss with its verdict, the largest certified losses,
-    the first jump state by state and, with a lower bound, :func:`witness_line`.
+    the first jump state by state and, with a lower bound, `witness_line`.
     """
     ok = onset.peak <= 1.0
     gains = f"estimate gain {onset.gamma:.3f} per step"
@@ -108,7 +108,7 @@ def onset_lines(onset) -> list[str]:
 
 
 def witness_line(onset) -> str:
-    """The design log's line of the onset's lower bound (requires ``onset.witness``)."""
+    """The design log's line of the onset's lower bound (requires `onset.witness`)."""
     w = onset.witness
     refuted = w.level_any_column > 1.0
     return (
@@ -126,7 +126,7 @@ def witness_line(onset) -> str:
 
 def rpi_check_line(level: float, n_vertices: int, n_corners: int, growth: float,
                    tau: float) -> str:  # fmt: skip
-    """The vertex tube's exact RPI check (:func:`fahv.synthesis.rpi_level.worst_level`).
+    """The vertex tube's exact RPI check (`fahv.synthesis.rpi_level.worst_level`).
 
     Parameters
     ----------
@@ -135,7 +135,7 @@ def rpi_check_line(level: float, n_vertices: int, n_corners: int, growth: float,
     n_vertices, n_corners : int
         Vertices (the gains tau' F included) and corners of W checked.
     growth : float
-        The factor W may grow by (:func:`fahv.synthesis.rpi_level.rpi_margin`).
+        The factor W may grow by (`fahv.synthesis.rpi_level.rpi_margin`).
     tau : float
         Adjustable factor (eq. 48).
     """
@@ -160,7 +160,7 @@ def adjustable_tube_line(tau: float, level_t: float, w_prime: float) -> str:
 
 
 def domain_line(dom, n_schedules: int) -> str:
-    """The vertex tube's domain (:class:`fahv.bounds.domain.CertificateDomain`)."""
+    """The vertex tube's domain (`fahv.bounds.domain.CertificateDomain`)."""
     return (
         f"certificate domain: {n_schedules} scheduling point(s) over the envelope; x - x_rs "
         f"within nominal + Z = +/-[{_join(dom.x_half, '.3g', ', ')}]; inputs Phi in "
@@ -172,7 +172,7 @@ def domain_line(dom, n_schedules: int) -> str:
 
 
 def domain_bound_line(n_evaluations: int, ratio, slack) -> str:
-    """W against the bound over the domain (:mod:`fahv.bounds.one_step_bound`)."""
+    """W against the bound over the domain (`fahv.bounds.one_step_bound`)."""
     return (
         "W over the domain (Taylor bound + corner remainder, "
         f"{n_evaluations} plant steps): bound / W per row = "
@@ -196,7 +196,7 @@ def closed_line(closed: bool, ratio, growth: float) -> str:
 
 
 def vertex_onset_line(rho_min: float, delta_e: float, est_tau, level_max: float) -> str:
-    """The vertex tube's onset of a loss (:func:`fahv.tube.vertex_tube.onset_levels`)."""
+    """The vertex tube's onset of a loss (`fahv.tube.vertex_tube.onset_levels`)."""
     return (
         f"onset of a {100 * (1 - rho_min):.0f} % loss at delta_e = "
         f"{np.degrees(delta_e):.1f} deg (estimate time constant {est_tau} s): "
@@ -215,10 +215,10 @@ def vertex_certificate_lines(cert) -> list[str]:
     Returns
     -------
     list of str
-        The exact RPI check (:func:`rpi_check_line`; :func:`adjustable_tube_line` for
-        tau < 1), then the domain (:func:`domain_line`), the bound over it
-        (:func:`domain_bound_line`), whether it closes (:func:`closed_line`) and the onset
-        (:func:`vertex_onset_line`), or why the domain was not checked.
+        The exact RPI check (`rpi_check_line`; `adjustable_tube_line` for
+        tau < 1), then the domain (`domain_line`), the bound over it
+        (`domain_bound_line`), whether it closes (`closed_line`) and the onset
+        (`vertex_onset_line`), or why the domain was not checked.
     """
     r = cert.rpi
     lines = [rpi_check_line(r.level, r.n_vertices, r.n_corners, r.growth, r.tau)]
@@ -273,7 +273,7 @@ def tightening_line(room, tightening, tau: float) -> str:
 
 
 def coverage_line(coverage, rho_f: float) -> str:
-    """The loss coverage's line (:class:`fahv.bounds.coverage.LossCoverage`)."""
+    """The loss coverage's line (`fahv.bounds.coverage.LossCoverage`)."""
     c = coverage
     return (
         f"largest elevator loss whose faulty trim fits the tightened inputs for every one of "
@@ -288,7 +288,7 @@ def coverage_line(coverage, rho_f: float) -> str:
 
 
 def input_rows_line(offsets, nominal: SchedulingBox, u_box) -> str:
-    """The line of the QP's rows on the nominal input (``mpc.u_box``, :mod:`fahv.tube.rows`)."""
+    """The line of the QP's rows on the nominal input (`mpc.u_box`, `fahv.tube.rows`)."""
     off_lo, off_hi = offsets
     deg = np.degrees
     return (
@@ -305,7 +305,7 @@ def input_rows_line(offsets, nominal: SchedulingBox, u_box) -> str:
 
 
 def nominal_range_line(hv_box) -> str:
-    """The line of the nominal's h, V range (``mpc.hv_box``)."""
+    """The line of the nominal's h, V range (`mpc.hv_box`)."""
     return (
         f"nominal range (mpc.hv_box): h {hv_box[0, 0]:.0f}..{hv_box[1, 0]:.0f} ft, V "
         f"{hv_box[0, 1]:.2f}..{hv_box[1, 1]:.2f} ft/s: the QP keeps its set point and its "
@@ -314,7 +314,7 @@ def nominal_range_line(hv_box) -> str:
 
 
 def state_rows_line(x_box) -> str:
-    """The line of the nominal's other states' range (``mpc.x_box``)."""
+    """The line of the nominal's other states' range (`mpc.x_box`)."""
     xd = np.degrees(x_box[:, :3])
     return (
         f"nominal state range (mpc.x_box): alpha {xd[0, 0]:+.3f}..{xd[1, 0]:+.3f} deg, theta "

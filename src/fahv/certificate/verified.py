@@ -1,11 +1,11 @@
 """The stored design a scenario runs on: verified, inside its certified range, with its arrays.
 
-:func:`load_or_design` never designs: it takes the stored design of the scenario's design
-file (refused when missing or stale, :func:`fahv.spec.store.stored_design`), re-checks
-its certificate once per content (:func:`fahv.certificate.verify.verified_design`),
+`load_or_design` never designs: it takes the stored design of the scenario's design
+file (refused when missing or stale, `fahv.spec.store.stored_design`), re-checks
+its certificate once per content (`fahv.certificate.verify.verified_design`),
 refuses what the scenario asks beyond the design's certified range
-(:func:`fahv.spec.scenario.uncertified`) and adds the scenario's own arrays
-(:func:`fahv.spec.scenario.scenario_design`).
+(`fahv.spec.scenario.uncertified`) and adds the scenario's own arrays
+(`fahv.spec.scenario.scenario_design`).
 """
 
 from __future__ import annotations
@@ -36,20 +36,20 @@ def load_or_design(
     """The run spec of a scenario file and the stored, verified design it runs on.
 
     The design is never made here: a missing or stale design is refused with the
-    command that makes it (:func:`fahv.spec.store.stored_design`); a stored design is
-    verified once per content (:func:`fahv.certificate.verify.verified_design`). What the
+    command that makes it (`fahv.spec.store.stored_design`); a stored design is
+    verified once per content (`fahv.certificate.verify.verified_design`). What the
     scenario asks beyond the design's certified range
-    (:func:`fahv.spec.scenario.uncertified`) is refused, or with ``allow_uncertified``
+    (`fahv.spec.scenario.uncertified`) is refused, or with `allow_uncertified`
     reported as a warning.
 
-    ``variants`` (all of the scenario's by default) are the variants that will run: what
+    `variants` (all of the scenario's by default) are the variants that will run: what
     only another variant needs (the baseline's ellipsoids along a new step) is not made.
 
     Returns
     -------
     (SpecFile, Design, Vehicle)
         The scenario's run spec, the design with the scenario's arrays
-        (:func:`fahv.spec.scenario.scenario_design`), the vehicle.
+        (`fahv.spec.scenario.scenario_design`), the vehicle.
 
     Raises
     ------

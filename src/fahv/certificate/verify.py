@@ -1,36 +1,36 @@
 """Verification of a stored design: every certificate re-checked from its arrays, no solver.
 
-``fahv design`` synthesises (LMIs, the W-Z iteration); this module re-checks what it
+`fahv design` synthesises (LMIs, the W-Z iteration); this module re-checks what it
 certified, from the stored arrays and the current model code, and trusts no solver
 status. Each check gives one line with its margin (the distance to the bound it must
 respect; negative when it fails):
 
-``model``
+`model`
     The TP vertices, weighting functions, scales and trim map, rebuilt from the vehicle
-    file with the current model code, equal the stored ones (:data:`MODEL_RTOL`). A model
+    file with the current model code, equal the stored ones (`MODEL_RTOL`). A model
     change that moves the vertices fails here, before any certificate is trusted.
-``tightening`` (eq. 30)
+`tightening` (eq. 30)
     The stored tightened input limits equal the true limits less the support of
     tau F Z, sqrt(F_j N F_j') per input, recomputed from F and N.
-``tube RPI`` (LMI 24)
+`tube RPI` (LMI 24)
     Exact worst one-step level of the tube under its gain over every vertex (fault
     vertices included) and every corner of W: at most 1.
-``W_8 over the domain``, ``scheduling box`` (eight-state tube)
+`W_8 over the domain`, `scheduling box` (eight-state tube)
     The one-step bound of the nonlinear, perturbed plant over the tube's own domain
     lies inside W_8, and the scheduling box holds the nominal box grown by the tube
-    (:func:`check_eight_state`); the exact level is then taken over those vertices.
-``attitude``
+    (`check_eight_state`); the exact level is then taken over those vertices.
+`attitude`
     The attitude requirement (0.5 deg) follows from the QP's rows plus the support of Z
     in alpha and theta, where the design claimed it.
-``nominal K`` (LMI 33-35)
+`nominal K` (LMI 33-35)
     The nominal ellipsoid E(Q) contracts under K at every vertex and K keeps the
     nominal input inside u_n,max on E(Q).
-``terminal set``
+`terminal set`
     E(Q) is invariant under K at every vertex (the tracking MPC's terminal set).
-``RMPC`` (Wan & Kothare 2003)
+`RMPC` (Wan & Kothare 2003)
     Every ellipsoid of the baseline's sequence: contraction, input bound, nesting.
 
-:func:`verify` runs them; :func:`verified_design` caches a pass by content hash
+`verify` runs them; `verified_design` caches a pass by content hash
 (design hash, code hash, vehicle hash), so that a design is re-checked once per code
 version, not once per run.
 """
@@ -51,7 +51,7 @@ from fahv.errors import DesignError
 from fahv.spec.artefacts import Design, code_hash
 
 #: Relative tolerance of the model check, per array. The model is built on one BLAS
-#: thread (:mod:`fahv.model.blas`): the rebuild is then bit-identical to the design on
+#: thread (`fahv.model.blas`): the rebuild is then bit-identical to the design on
 #: one machine (measured 0 for every array with OPENBLAS_NUM_THREADS 1 and 2, numpy
 #: imported before or after fahv). Not pinned, two threads moved W_V by 1.02e-8, W_h by
 #: 4.4e-14 and A, B by 1.3e-10 (cm_certified); each tolerance is 100 times that, so
@@ -71,7 +71,7 @@ class CheckResult:
     Attributes
     ----------
     name : str
-        Which certificate (``model``, ``tightening``, ``tube RPI``, ...).
+        Which certificate (`model`, `tightening`, `tube RPI`, ...).
     ok : bool
         True if it holds.
     margin : float
@@ -86,7 +86,7 @@ class CheckResult:
     line: str
 
     def text(self) -> str:
-        """The printed line: ``name: line  OK`` or ``... FAILED``."""
+        """The printed line: `name: line  OK` or `... FAILED`."""
         return f"{self.name}: {self.line}  {'OK' if self.ok else 'FAILED'}"
 
 
@@ -232,7 +232,7 @@ def check_attitude(design: Design) -> CheckResult:
     """The attitude requirement from the tube: the QP's rows plus Z's support in alpha, theta.
 
     Recomputes the support sqrt(N_jj) and the rows' bounds from the stored N and the
-    design's ``mpc.att_max`` (:func:`fahv.control.mpc.attitude.attitude_bounds`), compares
+    design's `mpc.att_max` (`fahv.control.mpc.attitude.attitude_bounds`), compares
     the rows with the stored ones, and states whether the requirement follows from the
     certificate, as the design claimed. A design that claimed it must still have it; one
     that did not (the paper's) is reported, not failed.
@@ -263,7 +263,7 @@ def checks_of(design: Design, vehicle) -> list[tuple[str, Callable[[], object]]]
     -------
     list of (str, callable)
         The certificate's name and its check bound to its arguments; calling it gives a
-        :class:`CheckResult` or a list of them.
+        `CheckResult` or a list of them.
     """
     from fahv.control import VARIANTS
 
@@ -290,7 +290,7 @@ def check_eight_state(design: Design, vehicle) -> list[CheckResult]:
     """The eight-state tube's certificate over its own domain, from the stored F_8, N_8, W_8.
 
     The vertices along the nominal over the scheduling box are rebuilt from the design
-    file's ``eight_state`` section with the current model code (the sampled W and the
+    file's `eight_state` section with the current model code (the sampled W and the
     column scale of the parameter directions are the stored ones); F_8, N_8 are the
     stored F, N without their h row and column, W_8 the stored certificate's. Three
     lines: the one-step bound of the nonlinear plant over the domain inside W_8 (every
@@ -351,7 +351,7 @@ def verify(design: Design, vehicle, log: Callable[[str], None] = print) -> list[
     Parameters
     ----------
     design : Design
-        A stored design (its ``case`` is the design file's data).
+        A stored design (its `case` is the design file's data).
     vehicle : fahv.model.vehicle.Vehicle
         The vehicle the design was made for.
     log : callable
@@ -361,7 +361,7 @@ def verify(design: Design, vehicle, log: Callable[[str], None] = print) -> list[
     -------
     list of CheckResult
         In the order checked; the caller decides what a failure means
-        (:func:`require_verified` raises).
+        (`require_verified` raises).
     """
     out = []
     for name, check in checks_of(design, vehicle):
@@ -377,7 +377,7 @@ def verify(design: Design, vehicle, log: Callable[[str], None] = print) -> list[
 
 
 def require_verified(results: list[CheckResult], name: str) -> None:
-    """Raise :class:`DesignError` naming every failed certificate of design ``name``."""
+    """Raise `DesignError` naming every failed certificate of design `name`."""
     bad = [r for r in results if not r.ok]
     if bad:
         raise DesignError(
@@ -394,9 +394,9 @@ def verdict_key(design: Design, vehicle) -> str:
 
 
 def verified_design(design: Design, vehicle, folder: Path, log=print) -> list[CheckResult] | None:
-    """Verify a stored design unless a pass for the same content is recorded in ``folder``.
+    """Verify a stored design unless a pass for the same content is recorded in `folder`.
 
-    A pass is recorded as ``folder/.verified-<key>`` (:func:`verdict_key`): it holds
+    A pass is recorded as `folder/.verified-<key>` (`verdict_key`): it holds
     for these arrays, this library code and this vehicle file only.
 
     Returns

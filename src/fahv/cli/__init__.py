@@ -1,6 +1,6 @@
-"""The ``fahv`` command line.
+"""The `fahv` command line.
 
-Subcommands::
+Subcommands:
 
     fahv trim      trim table at a point or over a grid of the envelope
     fahv tp        TP model transformation report (singular values, error)
@@ -21,12 +21,12 @@ Subcommands::
     fahv campaign  Monte Carlo campaign on Dask; campaign report DIR; campaign rerun DIR INDEX
     fahv index     index of offline_design/ from the files' descriptions
 
-Every command that uses the vehicle takes ``--vehicle FILE``. Errors name the
+Every command that uses the vehicle takes `--vehicle FILE`. Errors name the
 input at fault and exit with status 2 (bad input) or 1 (failure). A run that ends with
-a verdict other than ``completed`` (:mod:`fahv.verdict`) is named with its verdict, step,
+a verdict other than `completed` (`fahv.verdict`) is named with its verdict, step,
 time and node, and the command exits with status 3. Ctrl-C or SIGTERM
-stops a command cleanly: a run in progress is finalised (status ``interrupted``), the
-command prints ``interrupted at step k of n; run written to DIR`` and exits with 130.
+stops a command cleanly: a run in progress is finalised (status `interrupted`), the
+command prints `interrupted at step k of n; run written to DIR` and exits with 130.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ EXIT_INTERRUPTED = 130
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Argument parser of the ``fahv`` command."""
+    """Argument parser of the `fahv` command."""
     ap = argparse.ArgumentParser(prog="fahv", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="command", required=True)
 
@@ -53,7 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``fahv``; returns the exit status."""
+    """Entry point of `fahv`; returns the exit status."""
     args = build_parser().parse_args(argv)
     with stop_signals():
         try:

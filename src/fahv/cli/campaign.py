@@ -1,6 +1,4 @@
-"""``fahv campaign``: Monte Carlo campaigns on Dask, their report, and reruns of one run.
-
-::
+"""`fahv campaign`: Monte Carlo campaigns on Dask, their report, and reruns of one run.
 
     fahv campaign CAMPAIGN.yaml [--scenario S] [--out DIR] [--scheduler ADDRESS] [--workers N]
                   [--resume] [--dashboard [ADDRESS]]
@@ -8,7 +6,7 @@
     fahv campaign rerun DIR INDEX [--variant V] [--sil] [--out BAGS]
     fahv campaign rerun RUN [--sil] [--out BAGS]
 
-``rerun RUN`` reruns any recorded run (folder or .mcap) from the parameter file its
+`rerun RUN` reruns any recorded run (folder or .mcap) from the parameter file its
 run file holds, and compares the metrics with the recorded run's.
 """
 
@@ -35,7 +33,7 @@ def _err(line: str) -> None:
 
 
 def cmd_run(args) -> int:
-    """Run (or ``--resume``) a campaign file; print the report's summary and path at the end."""
+    """Run (or `--resume`) a campaign file; print the report's summary and path at the end."""
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     campaign = load_campaign(args.target, scenario=args.scenario)
     for line in campaign.warnings:
@@ -107,7 +105,7 @@ def cmd_rerun(args) -> int:
 
 
 def _dispatch(args) -> int:
-    """``campaign FILE`` / ``campaign report DIR`` / ``campaign rerun DIR INDEX``."""
+    """`campaign FILE` / `campaign report DIR` / `campaign rerun DIR INDEX`."""
     rest = args.rest
     if args.target == "report":
         if len(rest) != 1:
@@ -130,7 +128,7 @@ def _dispatch(args) -> int:
 
 
 def add_parsers(sub) -> None:
-    """Add the ``campaign`` parser."""
+    """Add the `campaign` parser."""
     p = sub.add_parser(
         "campaign",
         help="Monte Carlo campaign on Dask (campaign FILE | report DIR | rerun DIR INDEX)",

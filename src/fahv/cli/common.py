@@ -19,12 +19,12 @@ from fahv.runs.bag import read_run
 
 
 def vehicle_of(args):
-    """The vehicle of ``--vehicle FILE`` (the packaged one when not given)."""
+    """The vehicle of `--vehicle FILE` (the packaged one when not given)."""
     return load_vehicle(args.vehicle)
 
 
 def add_vehicle_option(p: argparse.ArgumentParser) -> None:
-    """Add ``--vehicle FILE`` to a command."""
+    """Add `--vehicle FILE` to a command."""
     p.add_argument(
         "--vehicle",
         metavar="FILE",
@@ -35,7 +35,7 @@ def add_vehicle_option(p: argparse.ArgumentParser) -> None:
 
 
 def shape_arg(s: str) -> tuple[int, int]:
-    """Argument type ``AxB`` -> (A, B)."""
+    """Argument type `AxB` -> (A, B)."""
     try:
         a, b = (int(v) for v in s.lower().split("x"))
     except ValueError:
@@ -74,10 +74,10 @@ def to_json(obj) -> str:
 def stop_signals():
     """SIGINT and SIGTERM as one clean stop while a command runs.
 
-    The first SIGINT or SIGTERM raises ``KeyboardInterrupt`` in the main thread (at
-    once, or at the end of a :func:`fahv.interrupt.deferred` section, such as a record
+    The first SIGINT or SIGTERM raises `KeyboardInterrupt` in the main thread (at
+    once, or at the end of a `fahv.interrupt.deferred` section, such as a record
     being written to a run file), so a command finalises its run (the run writer
-    closes with status ``interrupted``, ``fahv sil`` forwards the stop to its graph);
+    closes with status `interrupted`, `fahv sil` forwards the stop to its graph);
     every further one only prints a note,
     so that a second Ctrl-C cannot cut the finalisation short. After a stop the
     signals stay ignored (the command is ending; a late Ctrl-C must not turn exit
@@ -108,8 +108,8 @@ def progress(iterable=None, **kwargs) -> tqdm:
     """A tqdm progress bar on stderr that also shows in logs (count, rate, ETA).
 
     On a terminal it updates in place (every 0.5 s at most); when stderr is not a
-    terminal (CI, ``> log``) it writes a line every 10 s instead of staying silent.
-    ``kwargs`` go to ``tqdm`` (``desc``, ``total``, ``unit``, ``leave`` ...).
+    terminal (CI, `> log`) it writes a line every 10 s instead of staying silent.
+    `kwargs` go to `tqdm` (`desc`, `total`, `unit`, `leave` ...).
     """
     kwargs.setdefault("mininterval", 0.5 if sys.stderr.isatty() else 10.0)
     return tqdm(iterable, **kwargs)

@@ -1,4 +1,4 @@
-"""``fahv design`` (synthesis of a design file) and ``fahv verify`` (its re-check)."""
+"""`fahv design` (synthesis of a design file) and `fahv verify` (its re-check)."""
 
 from __future__ import annotations
 
@@ -20,14 +20,14 @@ from fahv.spec.store import design_dir, stored_design
 
 
 def design_and_store(spec, vehicle, out_dir: Path, log=print, cold: bool = False):
-    """Design a design file (``spec``) for ``vehicle`` and store it with its certificate lines.
+    """Design a design file (`spec`) for `vehicle` and store it with its certificate lines.
 
-    Writes ``design.npz``, ``design.json`` and ``certificate.txt`` (every line the
-    design printed) into ``out_dir`` atomically. A progress line names the stage at
+    Writes `design.npz`, `design.json` and `certificate.txt` (every line the
+    design printed) into `out_dir` atomically. A progress line names the stage at
     least every 10 s, with the time left estimated from the stage times of the design
-    ``out_dir`` held before (:class:`fahv.design.stage_clock.StageClock`). The LMIs'
+    `out_dir` held before (`fahv.design.stage_clock.StageClock`). The LMIs'
     constraint generation starts from the active sets that design stored, unless
-    ``cold`` (``previous`` of :func:`fahv.design.pipeline.run_design`).
+    `cold` (`previous` of `fahv.design.pipeline.run_design`).
 
     Returns
     -------
@@ -61,7 +61,7 @@ def design_and_store(spec, vehicle, out_dir: Path, log=print, cold: bool = False
 
 
 def _previous_design(folder: Path):
-    """The design stored in ``folder`` (None if none is, or it does not load)."""
+    """The design stored in `folder` (None if none is, or it does not load)."""
     try:
         return load_design(folder)
     except DesignError:
@@ -91,12 +91,12 @@ def cmd_design(args) -> int:
 
 
 def resolve_design_file(path: str | Path) -> Path:
-    """The design file of ``path``: a design file, a scenario file, or a design name.
+    """The design file of `path`: a design file, a scenario file, or a design name.
 
     Raises
     ------
     SpecError
-        If ``path`` is none of them.
+        If `path` is none of them.
     """
     p = Path(path)
     if not p.suffix:  # a name

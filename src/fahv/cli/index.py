@@ -1,9 +1,9 @@
-"""``fahv index``: the index of offline_design/, generated from the files' own descriptions.
+"""`fahv index`: the index of offline_design/, generated from the files' own descriptions.
 
 One table per kind of file: the designs (what each certifies, from its stored summary,
 and how long it took to make), the scenarios (the design each runs on, its variants) and
-the campaigns (the scenario, the runs). ``fahv index --write`` writes it to
-``offline_design/README.md``; a test checks that the committed index is current.
+the campaigns (the scenario, the runs). `fahv index --write` writes it to
+`offline_design/README.md`; a test checks that the committed index is current.
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ TABLES = (
 
 
 def index_markdown(root: Path = ROOT) -> str:
-    """The index of ``root`` (designs, scenarios, campaigns) as Markdown."""
+    """The index of `root` (designs, scenarios, campaigns) as Markdown."""
     out = [HEAD.rstrip("\n")]
     for title, folder, columns, row in TABLES:
         out += ["", f"## {title}", "", f"| {' | '.join(columns)} |",
@@ -103,7 +103,7 @@ def cmd_index(args) -> int:
 
 
 def add_parsers(sub) -> None:
-    """Add the ``index`` parser."""
+    """Add the `index` parser."""
     p = sub.add_parser("index", help="index of offline_design/ from the files' descriptions")
     p.add_argument("--root", default=str(ROOT), help="the folder indexed (default offline_design)")
     p.add_argument("--write", action="store_true", help="write it to ROOT/README.md")

@@ -1,4 +1,4 @@
-"""``fahv inspect``, ``export``, ``compare``, ``plot``: tools on recorded runs."""
+"""`fahv inspect`, `export`, `compare`, `plot`: tools on recorded runs."""
 
 from __future__ import annotations
 
@@ -66,11 +66,11 @@ def cmd_compare(args) -> int:
     return 0
 
 
-#: Paper-style groups ``fahv plot`` writes (:data:`fahv.runs.plots.GROUPS`; its own
+#: Paper-style groups `fahv plot` writes (`fahv.runs.plots.GROUPS`; its own
 #: input and tube figures replace the groups of those names).
 PLOT_GROUPS = ("trajectory", "attitude", "flexible")
 
-#: The engineering figures ``fahv plot`` writes: file name -> function of the runs.
+#: The engineering figures `fahv plot` writes: file name -> function of the runs.
 PLOT_FIGURES = {
     "errors": error_figure,
     "inputs": input_figure,

@@ -1,4 +1,4 @@
-"""``fahv margins``: classical loop margins of a stored design, with and without the notch."""
+"""`fahv margins`: classical loop margins of a stored design, with and without the notch."""
 
 from __future__ import annotations
 
@@ -14,12 +14,12 @@ from fahv.model.vehicle import load_vehicle
 from fahv.runs.workspace import ROOT
 from fahv.spec.store import stored_design
 
-#: The design whose table docs/results/margins.md shows (``<!-- margins-table -->``).
+#: The design whose table docs/results/margins.md shows (`<!-- margins-table -->`).
 DOCS_DESIGN = "cm_certified"
 
 
 def study_of(design: str, design_dir=None, vehicle=None, every_setting: bool = False):
-    """The margin study of a stored design given as :func:`fahv.cli.design.resolve_design_file`.
+    """The margin study of a stored design given as `fahv.cli.design.resolve_design_file`.
 
     Parameters
     ----------
@@ -30,7 +30,7 @@ def study_of(design: str, design_dir=None, vehicle=None, every_setting: bool = F
     vehicle : fahv.model.vehicle.Vehicle, optional
         Default: the packaged vehicle.
     every_setting : bool
-        Every notch setting over the LPV vertices (:func:`fahv.analysis.margin_study.margin_study`).
+        Every notch setting over the LPV vertices (`fahv.analysis.margin_study.margin_study`).
 
     Returns
     -------
@@ -51,10 +51,10 @@ def study_of(design: str, design_dir=None, vehicle=None, every_setting: bool = F
 
 
 def docs_table() -> str:
-    """The Markdown table and summary ``fahv margins cm_certified --markdown`` prints.
+    """The Markdown table and summary `fahv margins cm_certified --markdown` prints.
 
-    The design file of the repository (:data:`fahv.runs.workspace.ROOT`), for the docs
-    build's hook (``docs/hooks/generated.py``, marker ``margins-table``).
+    The design file of the repository (`fahv.runs.workspace.ROOT`), for the docs
+    build's hook (`docs/hooks/generated.py`, marker `margins-table`).
 
     Returns
     -------

@@ -1,4 +1,4 @@
-"""``fahv trim``, ``tp``, ``figures``, ``tube``: modelling layer and tube feasibility study."""
+"""`fahv trim`, `tp`, `figures`, `tube`: modelling layer and tube feasibility study."""
 
 from __future__ import annotations
 

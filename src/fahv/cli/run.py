@@ -1,4 +1,4 @@
-"""``fahv simulate``, ``sil``, ``replay``, ``paper-figures``: runs of the closed loop."""
+"""`fahv simulate`, `sil`, `replay`, `paper-figures`: runs of the closed loop."""
 
 from __future__ import annotations
 
@@ -31,15 +31,15 @@ from fahv.runs.writer import RunWriter
 from fahv.spec.scenario import load_scenario
 from fahv.verdict import RunEnded, Verdict, completed
 
-#: Exit status of a run command (``simulate``, ``sil``) when a run ended with a verdict
-#: other than ``completed`` (:mod:`fahv.verdict`); 1 is a failure, 2 bad input.
+#: Exit status of a run command (`simulate`, `sil`) when a run ended with a verdict
+#: other than `completed` (`fahv.verdict`); 1 is a failure, 2 bad input.
 EXIT_VERDICT = 3
 
 
 class StepProgress:
     """Progress of an in-process run: a tqdm bar of steps with rate and ETA.
 
-    Passed to :func:`fahv.loop.simulate.simulate` as its ``writer``: it sees every
+    Passed to `fahv.loop.simulate.simulate` as its `writer`: it sees every
     message of every step, forwards it to the run writer (if any), advances the bar
     once per step. On a terminal the bar
     updates in place; in a log it writes a line every 10 s.
@@ -56,7 +56,7 @@ class StepProgress:
         Serves every message (the same CDR bytes) to Foxglove.
     """
 
-    #: The last topic of a step (:data:`fahv.loop.graph.TOPICS` order).
+    #: The last topic of a step (`fahv.loop.graph.TOPICS` order).
     LAST_TOPIC = list(TOPICS)[-1]
 
     def __init__(self, desc: str, n_steps: int, writer=None, live=None) -> None:
@@ -83,7 +83,7 @@ class StepProgress:
         self.bar.close()
 
 
-#: Cases of ``fahv results`` and ``fahv paper-figures``: Case 1 (certified), the paper's
+#: Cases of `fahv results` and `fahv paper-figures`: Case 1 (certified), the paper's
 #: vertex design of Case 1 (the paper's law), Case 2.
 DEFAULT_CASES = (
     "offline_design/scenarios/case1.yaml",
@@ -93,16 +93,16 @@ DEFAULT_CASES = (
 
 
 def _simulate_recorded(design, variant: str, duration, out_dir, live=None):
-    """simulate() with a progress bar, recorded to ``out_dir/<run>/`` unless it is None.
+    """simulate() with a progress bar, recorded to `out_dir/<run>/` unless it is None.
 
     The run file also holds the run's ROS parameter file (the one a SIL run's nodes
-    get), so ``fahv replay --node ...`` can start nodes against it.
+    get), so `fahv replay --node ...` can start nodes against it.
 
     Returns
     -------
     (RunResult or None, Verdict, Path or None)
         What the run flew (None when it ended before its first step), its verdict
-        (:mod:`fahv.verdict`; stored in the run file's metadata), the run folder.
+        (`fahv.verdict`; stored in the run file's metadata), the run folder.
 
     Raises
     ------
@@ -141,29 +141,29 @@ def _simulate_recorded(design, variant: str, duration, out_dir, live=None):
 
 
 def verdict_line(command: str, run: str, verdict) -> str:
-    """The line ``fahv`` prints for a run that ended with a verdict other than completed.
+    """The line `fahv` prints for a run that ended with a verdict other than completed.
 
     Parameters
     ----------
     command : str
-        Subcommand (``simulate``, ``sil``).
+        Subcommand (`simulate`, `sil`).
     run : str
-        The run: its folder name, or ``<case> <variant>`` when it was not recorded.
+        The run: its folder name, or `<case> <variant>` when it was not recorded.
     verdict : fahv.verdict.Verdict
 
     Returns
     -------
     str
-        ``fahv <command>: run <run> ended: <verdict>`` (:meth:`fahv.verdict.Verdict.text`:
+        `fahv <command>: run <run> ended: <verdict>` (`fahv.verdict.Verdict.text`:
         name, simulated time, step, node and reason).
     """
     return f"fahv {command}: run {run} ended: {verdict.text()}"
 
 
 def selected_variants(case, requested: list[str] | None) -> list[str]:
-    """Variants a command runs: the case's default (its first) unless ``requested``.
+    """Variants a command runs: the case's default (its first) unless `requested`.
 
-    ``requested`` lists variant names of the case, or is ``["all"]`` for every variant
+    `requested` lists variant names of the case, or is `["all"]` for every variant
     of the case in its order.
 
     Raises
@@ -227,7 +227,7 @@ def cmd_simulate(args) -> int:
 
 
 def _live_view(port: int | None, Ts: float):
-    """The in-process live view of ``fahv simulate --live`` (None without ``--live``)."""
+    """The in-process live view of `fahv simulate --live` (None without `--live`)."""
     if port is None:
         return None
     from fahv.runs.live import LiveView, live_hint
@@ -297,7 +297,7 @@ def cmd_sil(args) -> int:
 
 
 def _write_params_only(args, design, variant: str) -> int:
-    """``fahv sil --write-params FILE``: the run's parameter file and how to start the nodes."""
+    """`fahv sil --write-params FILE`: the run's parameter file and how to start the nodes."""
     from fahv.runs.workspace import ensure_built
 
     ensure_built()  # the nodes started by hand are those of the current sources
@@ -319,7 +319,7 @@ def free_domain() -> int:
     """A ROS domain ID no other graph of this host holds now (ROS 2's domain_coordinator).
 
     The ID is released again at once: it is a suggestion for a graph started by hand.
-    Without the ROS wheels (no ``domain_coordinator``) 42 is suggested.
+    Without the ROS wheels (no `domain_coordinator`) 42 is suggested.
     """
     try:
         import domain_coordinator

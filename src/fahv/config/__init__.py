@@ -1,6 +1,6 @@
 """Configuration: the one declaration language (fields, sections), YAML, registries.
 
-The bottom layer of fahv with :mod:`fahv.synthesis`: no vehicle, no control law.
+The bottom layer of fahv with `fahv.synthesis`: no vehicle, no control law.
 """
 
 from fahv.config.registry import Registry

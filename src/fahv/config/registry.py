@@ -29,12 +29,12 @@ class Registry(Generic[T]):
         self._entries: dict[str, T] = {}
 
     def register(self, name: str, entry: T, replace: bool = False) -> T:
-        """Add ``entry`` under ``name`` and return it.
+        """Add `entry` under `name` and return it.
 
         Raises
         ------
         ConfigError
-            If the name is taken (unless ``replace``) or not an identifier.
+            If the name is taken (unless `replace`) or not an identifier.
         """
         if not name.isidentifier():
             raise ConfigError(f"{self.what} name must be an identifier, got {name!r}")
@@ -48,7 +48,7 @@ class Registry(Generic[T]):
         self._entries.pop(name, None)
 
     def __getitem__(self, name: str) -> T:
-        """The entry of ``name``.
+        """The entry of `name`.
 
         Raises
         ------
@@ -63,7 +63,7 @@ class Registry(Generic[T]):
             ) from None
 
     def get(self, name: str, default: T | None = None) -> T | None:
-        """The entry of ``name``, or ``default`` when it is not registered."""
+        """The entry of `name`, or `default` when it is not registered."""
         return self._entries.get(name, default)
 
     def __contains__(self, name: object) -> bool:

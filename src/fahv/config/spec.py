@@ -1,16 +1,16 @@
 """The one configuration language of fahv: declare a value once, validate it once.
 
-A :class:`Field` declares one value: type, unit, range, default (or required),
-description and the paper equation it enters. A :class:`Section` groups fields (and
+A `Field` declares one value: type, unit, range, default (or required),
+description and the paper equation it enters. A `Section` groups fields (and
 sections) of a YAML mapping, is required always or only when another value asks for
-it, and carries cross-field checks. Case files (:mod:`fahv.spec.schema`), campaign
-files and the node parameters of the SIL graph (:mod:`fahv.loop.params`) are declared
+it, and carries cross-field checks. Case files (`fahv.spec.schema`), campaign
+files and the node parameters of the SIL graph (`fahv.loop.params`) are declared
 this way; the ROS nodes generate their parameter descriptors (type, description,
 range) from the same fields, so a range is written in exactly one place.
 
 Validation fails with the caller's error class and a message that names the source
-(file or node) and the dotted key, e.g. ``case1.yaml: key 'fault.rho_f' must be in
-(0, 1], got 1.5``.
+(file or node) and the dotted key, e.g. `case1.yaml: key 'fault.rho_f' must be in
+(0, 1], got 1.5`.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ class _Required:
 REQUIRED: Any = _Required()
 
 #: Value types: scalars, lists of scalars, and matrices (node parameters only: a flat
-#: float array ``name`` plus its integer shape ``name_shape``).
+#: float array `name` plus its integer shape `name_shape`).
 TYPES = ("float", "int", "str", "bool", "floats", "ints", "strs", "matrix")
 _SCALAR = {"float": float, "int": int, "str": str, "bool": bool}
 _ITEM = {"floats": float, "ints": int, "strs": str}
@@ -45,18 +45,18 @@ class Field:
     Parameters
     ----------
     name : str
-        Key (a dotted name for flat node parameters, e.g. ``command.h0``).
+        Key (a dotted name for flat node parameters, e.g. `command.h0`).
     type : str
-        One of :data:`TYPES`.
+        One of `TYPES`.
     description : str
-        Meaning, shown in docs and by ``ros2 param describe``.
+        Meaning, shown in docs and by `ros2 param describe`.
     unit : str
         Physical unit ("" for dimensionless).
     default : object
-        Value used when the key is absent; :data:`REQUIRED` if it must be given.
+        Value used when the key is absent; `REQUIRED` if it must be given.
     lo, hi : float, optional
-        Range of a number (of every item of a list); inclusive unless ``lo_open`` /
-        ``hi_open``.
+        Range of a number (of every item of a list); inclusive unless `lo_open` /
+        `hi_open`.
     choices : tuple or callable, optional
         Admissible strings; a callable returning them (a registry's names).
     length : int, optional
@@ -64,8 +64,8 @@ class Field:
     equation : str
         Paper equation(s) the value enters, e.g. "eq. (38)".
     when : callable, optional
-        ``when(root) -> bool`` on the validated document: the value is used (and, if
-        required, must be given) only when it returns True; ``when_text`` says when.
+        `when(root) -> bool` on the validated document: the value is used (and, if
+        required, must be given) only when it returns True; `when_text` says when.
     """
 
     name: str
@@ -99,7 +99,7 @@ class Field:
         return tuple(self.choices() if callable(self.choices) else self.choices)
 
     def range_text(self) -> str:
-        """The range in interval notation, e.g. ``(0, 0.1]`` ("" if unbounded)."""
+        """The range in interval notation, e.g. `(0, 0.1]` ("" if unbounded)."""
         if self.lo is None and self.hi is None:
             return ""
         lo = "-inf" if self.lo is None else f"{self.lo:g}"
@@ -124,12 +124,12 @@ class Field:
         return " ".join(parts)
 
     def check(self, value: Any, where: str, error: type[Exception]) -> Any:
-        """Return ``value`` converted to the field's type.
+        """Return `value` converted to the field's type.
 
         Raises
         ------
         error
-            Naming ``where`` (source and key): wrong type, non-finite number, out of
+            Naming `where` (source and key): wrong type, non-finite number, out of
             range, not an admissible choice, or a list of the wrong length.
         """
         if self.type == "matrix":
@@ -165,7 +165,7 @@ class Field:
 
 @dataclass(frozen=True)
 class Check:
-    """A cross-field check: ``ok(root)`` must hold, else the error names ``key``."""
+    """A cross-field check: `ok(root)` must hold, else the error names `key`."""
 
     key: str
     ok: Callable[[Mapping], bool]
@@ -183,8 +183,8 @@ class Section:
     entries : tuple of Field or Section
     description : str
     when : callable, optional
-        ``when(root) -> bool``: the section is required only when it returns True
-        (``when_text`` says when); absent and not required, it is left out.
+        `when(root) -> bool`: the section is required only when it returns True
+        (`when_text` says when); absent and not required, it is left out.
     checks : tuple of Check
         Cross-field checks run after every value is validated.
     """
@@ -217,7 +217,7 @@ class Section:
 
 @dataclass
 class Validated:
-    """Result of :func:`validate`: the typed values and the defaults that were used."""
+    """Result of `validate`: the typed values and the defaults that were used."""
 
     values: dict
     defaults_used: dict[str, Any]
@@ -226,7 +226,7 @@ class Validated:
 def validate(
     spec: Section, data: Any, source: str, error: type[Exception] = ConfigError
 ) -> Validated:
-    """Validate a nested mapping against ``spec``.
+    """Validate a nested mapping against `spec`.
 
     Parameters
     ----------
@@ -237,12 +237,12 @@ def validate(
     source : str
         File name (or other origin) used in every message.
     error : type
-        Exception class raised (a :class:`fahv.errors.ConfigError` subclass).
+        Exception class raised (a `fahv.errors.ConfigError` subclass).
 
     Returns
     -------
     Validated
-        Typed values (defaults filled in) and ``{dotted key: default}`` of each
+        Typed values (defaults filled in) and `{dotted key: default}` of each
         default used.
 
     Raises
@@ -342,7 +342,7 @@ def _value(f: Field, data: Mapping, key: str, source: str, error, defaults) -> A
 
 
 def defaults_text(defaults: Mapping[str, Any]) -> str:
-    """``key = value`` lines of the defaults used (for design reports)."""
+    """`key = value` lines of the defaults used (for design reports)."""
     return "\n".join(f"  {k} = {v!r}" for k, v in sorted(defaults.items()))
 
 
@@ -370,7 +370,7 @@ def markdown(spec: Section, prefix: str = "") -> str:
 
 
 def check_matrix(f: Field, values: Mapping, where: str, error: type[Exception]):
-    """A matrix parameter: flat doubles ``values[f.name]`` reshaped by ``values[f.name_shape]``.
+    """A matrix parameter: flat doubles `values[f.name]` reshaped by `values[f.name_shape]`.
 
     Returns
     -------
@@ -380,7 +380,7 @@ def check_matrix(f: Field, values: Mapping, where: str, error: type[Exception]):
     Raises
     ------
     error
-        Naming ``where`` and the key: missing value or shape, wrong count, non-finite.
+        Naming `where` and the key: missing value or shape, wrong count, non-finite.
     """
     import numpy as np
 
@@ -412,7 +412,7 @@ def validate_flat(
     """Validate flat parameters (ROS node parameters: dotted names, matrices flattened).
 
     A value of None counts as absent (a declared ROS parameter that was not set).
-    Unknown names are ignored (ROS passes ``use_sim_time`` and others).
+    Unknown names are ignored (ROS passes `use_sim_time` and others).
 
     Returns
     -------
@@ -422,7 +422,7 @@ def validate_flat(
     Raises
     ------
     error
-        Naming ``where`` (the node) and the parameter.
+        Naming `where` (the node) and the parameter.
     """
     out: dict = {}
     for f in fields:

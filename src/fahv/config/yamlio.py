@@ -1,8 +1,8 @@
-"""YAML reading with YAML 1.2 number syntax (``5.0e5`` is a float, not a string).
+"""YAML reading with YAML 1.2 number syntax (`5.0e5` is a float, not a string).
 
 PyYAML implements YAML 1.1, whose float pattern needs a sign in the exponent and
-a dot in the mantissa; vehicle and case files written by people use ``5.0e5`` and
-``1e-3``. The resolver below is the one documented in the PyYAML issue tracker for
+a dot in the mantissa; vehicle and case files written by people use `5.0e5` and
+`1e-3`. The resolver below is the one documented in the PyYAML issue tracker for
 this case, restricted to the safe loader.
 """
 

@@ -1,11 +1,11 @@
-"""Control laws and their nominal parts behind one interface each (:mod:`fahv.control.base`).
+"""Control laws and their nominal parts behind one interface each (`fahv.control.base`).
 
 The registry entries of the built-in laws and nominal parts are the imports below: a
 new law is its module plus one line here (and, if it brings its own nominal part, that
 module and one line more). Laws, nominal parts and fault kinds kept outside the
-library are *plugins*: modules named in the environment variable ``FAHV_PLUGINS``
-(comma-separated, importable from ``PYTHONPATH``) are imported right after the
-built-ins, by every process that imports this package -- ``fahv`` commands, campaign
+library are *plugins*: modules named in the environment variable `FAHV_PLUGINS`
+(comma-separated, importable from `PYTHONPATH`) are imported right after the
+built-ins, by every process that imports this package -- `fahv` commands, campaign
 workers and every node of the ROS graph alike -- so their registry entries exist
 everywhere a run is built.
 """
@@ -53,7 +53,7 @@ PLUGINS_ENV = "FAHV_PLUGINS"
 
 
 def load_plugins() -> list[str]:
-    """Import the modules named in ``FAHV_PLUGINS``; returns their names.
+    """Import the modules named in `FAHV_PLUGINS`; returns their names.
 
     Raises
     ------

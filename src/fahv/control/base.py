@@ -1,27 +1,27 @@
 """The interfaces of the control layer and their registries: laws, nominal parts, variants.
 
-A control law is one module: a subclass of :class:`ControlLaw` registered with
-:func:`register_law`. It declares
+A control law is one module: a subclass of `ControlLaw` registered with
+`register_law`. It declares
 
-- its nominal part, a registered :class:`NominalSource` class (:attr:`ControlLaw.nominal`),
+- its nominal part, a registered `NominalSource` class (`ControlLaw.nominal`),
   which runs in the nominal_trajectory node and gives the reference (x_r, u_r) and the
   nominal trajectory (x_n, u_n) of every step,
-- the design-file section it needs (:attr:`ControlLaw.section`, required only when a
+- the design-file section it needs (`ControlLaw.section`, required only when a
   variant of the design uses the law),
 - the parameters its controller node takes beyond the common ones
-  (:attr:`ControlLaw.parameters`, generated into ROS descriptors),
-- its offline part (:meth:`ControlLaw.design`: extra certified arrays) and how the
-  design fills its parameters (:meth:`ControlLaw.node_values`),
-- its online part: ``step(k, x, ref, lanes) -> LawStep`` over a batch of B runs, the
+  (`ControlLaw.parameters`, generated into ROS descriptors),
+- its offline part (`ControlLaw.design`: extra certified arrays) and how the
+  design fills its parameters (`ControlLaw.node_values`),
+- its online part: `step(k, x, ref, lanes) -> LawStep` over a batch of B runs, the
   one call the in-process simulator (B = 1), the campaign batches and the controller
   node (B = 1) make.
 
 A nominal part has the same shape (section, parameters, offline design and checks,
-node values, a batched ``step``) and its own registry, so a new law that brings a
+node values, a batched `step`) and its own registry, so a new law that brings a
 new nominal part is its module(s) plus two registry entries.
 
 A *variant* is what a design file lists and a run is made of: a law plus a notch setting
-(``tube_mpc_no_notch`` is the law ``tube_mpc`` with the notch off).
+(`tube_mpc_no_notch` is the law `tube_mpc` with the notch off).
 """
 
 from __future__ import annotations
@@ -51,20 +51,20 @@ class NominalSource:
         Validated parameters of the nominal_trajectory node of the first run; the
         values every run of a batch shares (design arrays, settings).
     runs : sequence of dict
-        Validated parameters of each of the B runs: their own command (``command.*``)
-        and initial measured state ``x0``.
+        Validated parameters of each of the B runs: their own command (`command.*`)
+        and initial measured state `x0`.
     lanes : fahv.lanes.Lanes
         Where a run's failure goes.
     """
 
-    #: Registry name (node parameter ``nominal``).
+    #: Registry name (node parameter `nominal`).
     name: ClassVar[str] = ""
     #: Design-file section of the nominal part (required when a variant's law uses it).
     section: ClassVar[Section | None] = None
     #: Parameters of the nominal_trajectory node it adds (used only with it).
     parameters: ClassVar[tuple[Field, ...]] = ()
     #: True when the nominal part estimates the constant disturbance (so W may leave
-    #: the constant part of the parameter error out, ``disturbance.constant: estimated``).
+    #: the constant part of the parameter error out, `disturbance.constant: estimated`).
     estimates_disturbance: ClassVar[bool] = False
 
     def __init__(self, p: dict, runs: Sequence[dict], lanes: Lanes) -> None:
@@ -77,8 +77,8 @@ class NominalSource:
         Parameters
         ----------
         ctx : fahv.spec.context.DesignContext
-            ``spec`` (the design data and its command), ``vehicle``, the ``arrays``
-            designed so far, ``log``.
+            `spec` (the design data and its command), `vehicle`, the `arrays`
+            designed so far, `log`.
 
         Raises
         ------
@@ -89,13 +89,13 @@ class NominalSource:
 
     @classmethod
     def node_values(cls, arrays: dict, case: dict) -> dict[str, Any]:
-        """Values of :attr:`parameters` from the design arrays and the case data."""
+        """Values of `parameters` from the design arrays and the case data."""
         return {}
 
     def step(self, k: int, t: float, x: np.ndarray, u_prev: np.ndarray | None) -> NominalTrajectory:
         """Reference and nominal trajectory of step k for the B runs, then advance.
 
-        :meth:`output` then :meth:`advance`: the simulator and the batch call this; the
+        `output` then `advance`: the simulator and the batch call this; the
         node publishes the output before it advances (the advance is off the step's
         critical path), with the same arithmetic.
 
@@ -121,14 +121,14 @@ class NominalSource:
     def output(
         self, k: int, t: float, x: np.ndarray, u_prev: np.ndarray | None
     ) -> NominalTrajectory:
-        """Reference and nominal trajectory of step k (arguments as :meth:`step`).
+        """Reference and nominal trajectory of step k (arguments as `step`).
 
-        Must be followed by :meth:`advance` before the output of step k + 1.
+        Must be followed by `advance` before the output of step k + 1.
         """
         raise NotImplementedError
 
     def advance(self) -> None:
-        """Move the nominal to step k + 1 after :meth:`output` of step k (default: nothing)."""
+        """Move the nominal to step k + 1 after `output` of step k (default: nothing)."""
 
 
 @dataclass(frozen=True)
@@ -156,12 +156,12 @@ class LawStep:
 
 @functools.cache
 def no_lmi_failed(n_runs: int) -> np.ndarray:
-    """Zero ``LawStep.lmi_failed`` (n_runs,) of a law without ellipsoids (read-only, shared).
+    """Zero `LawStep.lmi_failed` (n_runs,) of a law without ellipsoids (read-only, shared).
 
     Raises
     ------
     ValueError
-        If ``n_runs`` is negative.
+        If `n_runs` is negative.
     """
     out = np.zeros(n_runs, dtype=np.int64)
     out.setflags(write=False)
@@ -175,13 +175,13 @@ class ControlLaw:
     ----------
     p : dict
         Validated parameters of the controller node (shared by the runs of a batch):
-        the common ones (``Ts``, ``law``, ``tau``, ``F`` (2, n), ``N`` (n, n)) and the
-        law's own :attr:`parameters`.
+        the common ones (`Ts`, `law`, `tau`, `F` (2, n), `N` (n, n)) and the
+        law's own `parameters`.
     n_runs : int
         Number of runs B the law steps together.
     """
 
-    #: Registry name (node parameter ``law``).
+    #: Registry name (node parameter `law`).
     name: ClassVar[str] = ""
     #: Controller node (executable) that runs the law.
     node: ClassVar[str] = "tube_mpc"
@@ -190,15 +190,15 @@ class ControlLaw:
     #: False for a law without a tube (its tau is 1 and its tube level NaN).
     has_tube: ClassVar[bool] = True
     #: True if the law can form its error's q through the notch (the nominal's q through
-    #: a replica of the filter, with the case key ``tube.filter_nominal_q``), so that the
+    #: a replica of the filter, with the case key `tube.filter_nominal_q`), so that the
     #: design may certify the loop through the notch
-    #: (:func:`fahv.tube.notch_loop.notch_tube`); otherwise the measured q alone is
+    #: (`fahv.tube.notch_loop.notch_tube`); otherwise the measured q alone is
     #: filtered and only the loop's stability is checked.
     filters_nominal_q: ClassVar[bool] = False
-    #: True if the offline part (:meth:`design`) reads only what the design model makes
-    #: (the trim map ``trim_*``, the design point's trim ``x0``, the input room
-    #: ``u_room``): a design may then start it as soon as its model is made, on its Dask
-    #: cluster beside the tube's stages (:func:`fahv.design.stages.early_laws_stage`).
+    #: True if the offline part (`design`) reads only what the design model makes
+    #: (the trim map `trim_*`, the design point's trim `x0`, the input room
+    #: `u_room`): a design may then start it as soon as its model is made, on its Dask
+    #: cluster beside the tube's stages (`fahv.design.stages.early_laws_stage`).
     model_only: ClassVar[bool] = False
     #: Design-file section the law needs (required only when a variant uses the law).
     section: ClassVar[Section | None] = None
@@ -215,9 +215,9 @@ class ControlLaw:
         Parameters
         ----------
         ctx : object
-            The design context of :func:`fahv.design.pipeline.run_design`
-            (:class:`fahv.spec.context.DesignContext`: ``spec`` data, ``vehicle``,
-            the ``arrays`` designed so far, ``log``).
+            The design context of `fahv.design.pipeline.run_design`
+            (`fahv.spec.context.DesignContext`: `spec` data, `vehicle`,
+            the `arrays` designed so far, `log`).
 
         Returns
         -------
@@ -228,7 +228,7 @@ class ControlLaw:
 
     @classmethod
     def node_values(cls, arrays: dict, case: dict) -> dict[str, Any]:
-        """Values of :attr:`parameters` from the design arrays and the case data."""
+        """Values of `parameters` from the design arrays and the case data."""
         return {}
 
     def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
@@ -279,18 +279,18 @@ def variant_notch(design_notch, setting: str, omega_flex) -> dict | None:
     Parameters
     ----------
     design_notch : mapping
-        The design's ``notch`` section (``enabled``, ``omega_z``, ``eps_z``, ``omega_p``,
-        ``eps_p``; rad/s and -).
+        The design's `notch` section (`enabled`, `omega_z`, `eps_z`, `omega_p`,
+        `eps_p`; rad/s and -).
     setting : {"design", "off", "mode2"}
-        :attr:`Variant.notch`.
+        `Variant.notch`.
     omega_flex : (2,) array_like
-        Flexible mode frequencies of the design [rad/s]; ``mode2`` centres the notch on
+        Flexible mode frequencies of the design [rad/s]; `mode2` centres the notch on
         the second.
 
     Returns
     -------
     dict or None
-        ``omega_z``, ``eps_z``, ``omega_p``, ``eps_p`` as floats; None when the notch is
+        `omega_z`, `eps_z`, `omega_p`, `eps_p` as floats; None when the notch is
         off (in the design or by the variant).
     """
     if not design_notch["enabled"] or setting == "off":
@@ -309,7 +309,7 @@ NOMINAL_SOURCES: Registry[type[NominalSource]] = Registry("nominal source")
 
 
 def register_nominal(cls: type[NominalSource]) -> type[NominalSource]:
-    """Register a nominal part under its ``name``; returns ``cls``.
+    """Register a nominal part under its `name`; returns `cls`.
 
     Raises
     ------
@@ -326,7 +326,7 @@ VARIANTS: Registry[Variant] = Registry("variant")
 
 
 def register_law(cls: type[ControlLaw], variants: tuple[Variant, ...] = ()) -> type[ControlLaw]:
-    """Register a law, a variant of the same name, and ``variants``; returns ``cls``.
+    """Register a law, a variant of the same name, and `variants`; returns `cls`.
 
     Raises
     ------

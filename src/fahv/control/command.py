@@ -54,7 +54,7 @@ class Command:
 
     @classmethod
     def of_parameters(cls, p: dict) -> Command:
-        """The command of a nominal_trajectory node's parameters (``command.*``)."""
+        """The command of a nominal_trajectory node's parameters (`command.*`)."""
         c = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith("command.")}
         return cls(c["h0"], c["V0"], c["h_c"], c["V_c"], c["t_start"], c["kind"], c["t_ramp"])
 
@@ -65,7 +65,7 @@ class Command:
 
 
 class CommandSchedule:
-    """The commands of B runs, evaluated together (the one formula of :class:`Command`).
+    """The commands of B runs, evaluated together (the one formula of `Command`).
 
     Parameters
     ----------

@@ -1,13 +1,13 @@
 """Nominal parts of the paper's law and of the RMPC baseline, over B runs at once.
 
-* :class:`ReferenceGovernor` (``governor``): the nominal system of eq. (20)/(46) under
+* `ReferenceGovernor` (`governor`): the nominal system of eq. (20)/(46) under
   u_n = K x_n (K of LMIs 33-35) with an incremental reference governor; the nominal
-  part of the paper's Tube-MPC (``tube_mpc_paper``).
-* :class:`CommandReference` (``command``): the trim of the raw command, x_n = 0; the
+  part of the paper's Tube-MPC (`tube_mpc_paper`).
+* `CommandReference` (`command`): the trim of the raw command, x_n = 0; the
   reference of the traditional robust MPC of sec. 5.2.
 
-Both are :class:`fahv.control.base.NominalSource` s: the nominal_trajectory node (B = 1),
-``fahv simulate`` (B = 1) and a campaign batch call the same ``step``.
+Both are `fahv.control.base.NominalSource` s: the nominal_trajectory node (B = 1),
+`fahv simulate` (B = 1) and a campaign batch call the same `step`.
 """
 
 from __future__ import annotations
@@ -36,12 +36,12 @@ def trim_map_of(p: dict) -> TrimMap:
 
 
 def quad(x: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """x_b' M x_b (B,) for x (B, n): each run's ``x @ M @ x`` (the same BLAS calls)."""
+    """x_b' M x_b (B,) for x (B, n): each run's `x @ M @ x` (the same BLAS calls)."""
     return (np.matmul(x[:, None, :], M) @ x[:, :, None])[:, 0, 0]
 
 
 def mv(M: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """M @ x_b (B, m) for x (B, n): each run's ``M @ x`` (a stacked matrix-vector product)."""
+    """M @ x_b (B, m) for x (B, n): each run's `M @ x` (a stacked matrix-vector product)."""
     return np.matmul(M, x[:, :, None])[..., 0]
 
 
@@ -57,7 +57,7 @@ class ReferenceGovernor(NominalSource):
     The nominal state is X_n = x_r(g) + x_n. Each step it moves by the nominal LPV
     model scheduled at the governed reference g, and g moves toward the command
     c(t) by the largest fraction s in [0, 1] that keeps x_n in the certified
-    ellipsoid E(Q) of :func:`fahv.synthesis.nominal.design_nominal` (incremental
+    ellipsoid E(Q) of `fahv.synthesis.nominal.design_nominal` (incremental
     reference governor, Gilbert & Kolmanovsky 2002: the full step if admissible,
     else a 30-halving bisection on s). Since E(Q) is invariant with contraction
     < 1, s = 0 is always admissible, so x_n stays in E(Q) and |u_n,j| <= u_n,max,j at
@@ -66,8 +66,8 @@ class ReferenceGovernor(NominalSource):
     Parameters
     ----------
     p, runs, lanes
-        As :class:`~fahv.control.base.NominalSource`; uses ``A``, ``B``, the TP weights,
-        ``K``, ``Q``, ``level_max``, the trim map, each run's command and ``x0``.
+        As `fahv.control.base.NominalSource`; uses `A`, `B`, the TP weights,
+        `K`, `Q`, `level_max`, the trim map, each run's command and `x0`.
 
     Raises
     ------
@@ -161,7 +161,7 @@ class CommandReference(NominalSource):
     Parameters
     ----------
     p, runs, lanes
-        As :class:`~fahv.control.base.NominalSource`; uses the trim map and each run's
+        As `fahv.control.base.NominalSource`; uses the trim map and each run's
         command.
     """
 

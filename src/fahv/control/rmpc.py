@@ -3,9 +3,9 @@
 The paper compares its Tube-MPC with the "traditional" robust MPC of Kothare,
 Balakrishnan & Morari (1996) on the DM LPV model: at each step, the min-gamma problem
 (32)-(35) with the current state. This law is the off-line formulation of that
-controller by Wan & Kothare (2003): ``fahv design`` solves the same problem for a
+controller by Wan & Kothare (2003): `fahv design` solves the same problem for a
 sequence of states along the case's set-point change, with nested ellipsoids, and
-re-checks every certificate (:mod:`fahv.synthesis.offline_rmpc`); on line the law
+re-checks every certificate (`fahv.synthesis.offline_rmpc`); on line the law
 finds the smallest stored ellipsoid that holds the state deviation and interpolates
 the gain in closed form (no solver, a few stacked products per step, for B runs).
 """
@@ -46,7 +46,7 @@ class OfflineRMPC:
     ----------
     P : (N, n, n) ndarray
         Inverses of the ellipsoids, scaled units
-        (:class:`~fahv.synthesis.offline_rmpc.EllipsoidSequence`).
+        (`fahv.synthesis.offline_rmpc.EllipsoidSequence`).
     K : (N, m, n) ndarray
         Gains, scaled units (v = K z, u - u_r = u_max v).
     Ds : (n,) ndarray
@@ -125,12 +125,12 @@ def fractions(case_rmpc: dict) -> np.ndarray:
 class RMPCLaw(ControlLaw):
     """Kothare robust MPC (1996), the paper's baseline, off-line form (Wan & Kothare 2003).
 
-    Offline (``fahv design``): the DM polytopic LPV model (the model of the baseline in
-    the paper, ``rmpc.vertices``), and N nested invariant ellipsoids with their gains
+    Offline (`fahv design`): the DM polytopic LPV model (the model of the baseline in
+    the paper, `rmpc.vertices`), and N nested invariant ellipsoids with their gains
     from the min-gamma LMIs (32)-(35) at N states along the case's set-point change
-    (:func:`fahv.synthesis.offline_rmpc.design_sequence`, every certificate re-checked).
+    (`fahv.synthesis.offline_rmpc.design_sequence`, every certificate re-checked).
     Online: u = u_r + K(x) (x - x_r), K(x) interpolated between the two ellipsoids
-    around x (:class:`OfflineRMPC`); x_r, u_r the trim of the raw command (no governor,
+    around x (`OfflineRMPC`); x_r, u_r the trim of the raw command (no governor,
     no tube).
     """
 
@@ -195,7 +195,7 @@ class RMPCLaw(ControlLaw):
         ------
         DesignError
             If an ellipsoid cannot be solved or a certificate fails
-            (:func:`fahv.synthesis.offline_rmpc.design_sequence`).
+            (`fahv.synthesis.offline_rmpc.design_sequence`).
         """
         # offline only: the nodes and the campaign workers never import cvxpy (0.6 s each)
         from fahv.synthesis.offline_rmpc import design_sequence
@@ -260,7 +260,7 @@ class RMPCLaw(ControlLaw):
     def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
         """Commands of step k for B runs (closed form, no solver; no tube).
 
-        ``LawStep.lmi_failed`` holds the steps so far with the state outside E_1.
+        `LawStep.lmi_failed` holds the steps so far with the state outside E_1.
         """
         x = np.asarray(x, float)
         dx = x[:, :NX] - ref.x_r[:, :NX]

@@ -1,14 +1,14 @@
 """Tube-MPC control laws: ancillary law eq. (36) / (54) around two kinds of nominal part.
 
-* ``tube_mpc`` (default): the nominal part is the online tracking MPC of
-  :mod:`fahv.control.mpc` (a QP in the nominal_trajectory node, on the
+* `tube_mpc` (default): the nominal part is the online tracking MPC of
+  `fahv.control.mpc` (a QP in the nominal_trajectory node, on the
   asymmetric tightened input set, with a state-disturbance estimate).
-* ``tube_mpc_paper``: the paper's law as published, nominal u_n = K x_n with the offline
+* `tube_mpc_paper`: the paper's law as published, nominal u_n = K x_n with the offline
   K of LMIs (33)-(35) and the incremental reference governor
-  (:class:`fahv.control.reference.ReferenceGovernor`).
+  (`fahv.control.reference.ReferenceGovernor`).
 
 With tau < 1 (Case 2) either is the adjustable law, eq. (54): the feedback is tau F e,
-and the design (:mod:`fahv.design.pipeline`) solves the tube LMI over the gains tau' F,
+and the design (`fahv.design.pipeline`) solves the tube LMI over the gains tau' F,
 tau' in [tau, 1] (eq. 48), so that Z is RPI for the whole W under it and the input
 deviation tau F e stays in tau F Z, the tightening of eq. (53). The tube level is
 therefore measured in Z, the set the certificate covers (the paper's smaller tube tau Z
@@ -62,8 +62,8 @@ class TubeMPC:
     def error(self, x: np.ndarray, ref: NominalTrajectory, q_ref=None) -> np.ndarray:
         """Tube errors e = x - x_r - x_n (B, n) for the states x (B, n).
 
-        With ``q_ref`` (B,) [rad/s], the reference pitch rate that the error's q is taken
-        from in place of q_r + q_n (the filtered nominal q of :class:`TubeMPCLaw`).
+        With `q_ref` (B,) [rad/s], the reference pitch rate that the error's q is taken
+        from in place of q_r + q_n (the filtered nominal q of `TubeMPCLaw`).
         """
         x = np.asarray(x, float)
         e = x - ref.x_r - ref.x_n
@@ -79,7 +79,7 @@ class TubeMPC:
              q_ref=None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """Commands u (B, 2) [Phi, delta_e rad] and errors e (B, n) for the states x (B, n).
 
-        ``q_ref`` as :meth:`error`.
+        `q_ref` as `error`.
 
         Raises
         ------
@@ -97,7 +97,7 @@ class PaperTubeMPCLaw(ControlLaw):
     """Tube-MPC as published, eq. (36)/(54): nominal u_n = K x_n and the reference governor.
 
     The nominal part (x_r, u_r, x_n, u_n) comes from the nominal_trajectory node
-    (:class:`~fahv.control.reference.ReferenceGovernor`); the law adds the ancillary
+    (`fahv.control.reference.ReferenceGovernor`); the law adds the ancillary
     feedback tau F on the tube error and reports the tube level e' N^-1 e.
     """
 
@@ -110,7 +110,7 @@ class PaperTubeMPCLaw(ControlLaw):
         self.tube = TubeMPC(p["F"], p["N"], p["tau"])
 
     def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
-        """Commands and tube status of step k (see :meth:`ControlLaw.step`)."""
+        """Commands and tube status of step k (see `ControlLaw.step`)."""
         u, e = self.tube.step(x, ref)
         return LawStep(u, e, self.tube.tube_level(e), no_lmi_failed(e.shape[0]))
 
@@ -119,17 +119,17 @@ class TubeMPCLaw(PaperTubeMPCLaw):
     """Tube-MPC with an online nominal tracking MPC (QP), eq. (36)/(54) as ancillary law.
 
     Same ancillary law u = u_r + u_n + tau F (x - x_r - x_n); the nominal part is
-    :class:`fahv.control.mpc.nominal_source.TrackingMPCNominal` (offline it re-checks the
+    `fahv.control.mpc.nominal_source.TrackingMPCNominal` (offline it re-checks the
     terminal ingredients against the tightened limits u_lo, u_hi of eq. 30).
 
-    With ``filter_nominal_q`` (case key ``tube.filter_nominal_q``) the error's pitch
+    With `filter_nominal_q` (case key `tube.filter_nominal_q`) the error's pitch
     rate is formed through the notch when the notch is on: the q of
     the measured states is q' (the notch_filter node), and the nominal's q (x_r + x_n)
     goes through a replica of the same filter, both from rest, so that
 
         e'_q = notch(q) - notch(q_r + q_n) = notch(q - q_r - q_n),
 
-    the loop the notch certificate covers (:func:`fahv.tube.notch_loop.notch_tube`,
+    the loop the notch certificate covers (`fahv.tube.notch_loop.notch_tube`,
     xi = [e; chi]). Without the replica, e'_q would also carry (notch - 1)(q_r + q_n), a
     term of the nominal's manoeuvre neither W nor the filter's certificate holds
     (docs/theory/notch.md, "The notch loop certified in its own states"). The 11-state
@@ -148,9 +148,9 @@ class TubeMPCLaw(PaperTubeMPCLaw):
             self.q_filter = DiscreteNotch(nf, p["Ts"], np.zeros(n_runs))
 
     def step(self, k: int, x: np.ndarray, ref: NominalTrajectory, lanes: Lanes) -> LawStep:
-        """Commands and tube status of step k (see :meth:`ControlLaw.step`).
+        """Commands and tube status of step k (see `ControlLaw.step`).
 
-        With ``filter_nominal_q`` and the notch on (9-state design), the error's q is q'
+        With `filter_nominal_q` and the notch on (9-state design), the error's q is q'
         less the filtered nominal q (class docstring).
         """
         q_ref = None

@@ -1,17 +1,17 @@
 """Offline design: a design file -> certified artefacts with their provenance.
 
-:func:`run_design` runs the stages of :mod:`fahv.design.stages` top to bottom, as the
+`run_design` runs the stages of `fahv.design.stages` top to bottom, as the
 paper builds its controller (sec. 3-4, Algorithm 1): the design model and its LPV form
 (sec. 3.1) -> the disturbance set W (eq. 13-19) -> F and Z (LMI 24-28) and the tube the
-law runs on (``tube.form``) -> the tightened inputs (eq. 30) -> the nominal gain and
+law runs on (`tube.form`) -> the tightened inputs (eq. 30) -> the nominal gain and
 ellipsoid (eq. 32-35) -> the certificate over the tube's own domain -> the offline part
 of every law a variant uses. Each stage returns a frozen record
-(:mod:`fahv.design.results`) that the later stages read.
+(`fahv.design.results`) that the later stages read.
 
 Every certificate is re-checked where it is made and printed with its margin (the lines
-are formatted by :mod:`fahv.certificate.report`); nothing is written unless all hold.
+are formatted by `fahv.certificate.report`); nothing is written unless all hold.
 What depends on a scenario (its x0, its vehicle draw) is not designed here
-(:mod:`fahv.spec.scenario`).
+(`fahv.spec.scenario`).
 """
 
 from __future__ import annotations
@@ -81,13 +81,13 @@ def summary_of(spec: SpecFile, vehicle, model: DesignModel, dist: Disturbance,
 
 def run_design(spec: SpecFile, vehicle=None, progress=None, log=print, clock=None,
                previous=None) -> Design:  # fmt: skip
-    """Run every stage of :mod:`fahv.design.stages` on a design file; the certified design.
+    """Run every stage of `fahv.design.stages` on a design file; the certified design.
 
     Parameters
     ----------
     spec : SpecFile
-        A validated design file (:func:`fahv.spec.files.load_design_file`), or a run spec
-        (a design's entries with a scenario's, :func:`fahv.spec.schema.run_spec`).
+        A validated design file (`fahv.spec.files.load_design_file`), or a run spec
+        (a design's entries with a scenario's, `fahv.spec.schema.run_spec`).
     vehicle : fahv.model.vehicle.Vehicle, optional
         The vehicle to design for; the packaged vehicle file by default.
     progress : callable, optional
@@ -99,18 +99,18 @@ def run_design(spec: SpecFile, vehicle=None, progress=None, log=print, clock=Non
         lines and the stage times.
     previous : Mapping[str, ndarray], optional
         The arrays of an earlier design of the same file: where the constraint
-        generation of its LMIs starts (the closure's ``closure_vertices`` and
-        ``closure_points``, the invariant ellipsoids' ``ellipsoid_vertices_*``, the
-        baseline's ``rmpc_guess_*``). It changes how fast the design runs, not what is certified
+        generation of its LMIs starts (the closure's `closure_vertices` and
+        `closure_points`, the invariant ellipsoids' `ellipsoid_vertices_*`, the
+        baseline's `rmpc_guess_*`). It changes how fast the design runs, not what is certified
         (every certificate is the exact check over every vertex).
 
     Returns
     -------
     Design
-        For a design file, its stored form (``case``: the design data). For a run spec,
-        its design part (:func:`fahv.spec.scenario.design_part`) designed with the run
+        For a design file, its stored form (`case`: the design data). For a run spec,
+        its design part (`fahv.spec.scenario.design_part`) designed with the run
         spec's command as design step, carrying the run spec and its scenario arrays
-        (:func:`fahv.spec.scenario.scenario_design`), ready to run.
+        (`fahv.spec.scenario.scenario_design`), ready to run.
 
     Raises
     ------

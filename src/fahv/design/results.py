@@ -1,9 +1,9 @@
 """What each stage of a design makes: one frozen record per stage, in the paper's order.
 
-The stages of :mod:`fahv.design.stages` are functions of these records, so that what a
+The stages of `fahv.design.stages` are functions of these records, so that what a
 stage reads is its arguments and what it makes is its result (units unscaled unless
-stated). Every record carries the certificate lines its stage prints (``lines``,
-formatted by :mod:`fahv.certificate.report`); the pipeline logs them in order.
+stated). Every record carries the certificate lines its stage prints (`lines`,
+formatted by `fahv.certificate.report`); the pipeline logs them in order.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ class DesignModel:
     Dx, Du : ndarray
         State and input scaling of the LMIs.
     step : dict
-        The design step as a step command (:func:`fahv.design.stages.step_command`).
+        The design step as a step command (`fahv.design.stages.step_command`).
     omega_flex : (2,) ndarray
         Flexible mode frequencies at the design point [rad/s].
     trim : TrimMap
@@ -72,7 +72,7 @@ class Disturbance:
     ----------
     uncertainty : dict[str, float]
         Relative half-widths of the parameter box (the sec. 5.1 box times
-        ``uncertainty.scale``).
+        `uncertainty.scale`).
     W : DisturbanceSet
     lines : tuple of str
     """
@@ -89,7 +89,7 @@ class VertexTube:
     Attributes
     ----------
     rho_f : float
-        Smallest elevator effectiveness the tube covers (``tube.rho_min``).
+        Smallest elevator effectiveness the tube covers (`tube.rho_min`).
     Af, Bf : ndarray
         The TP vertices with the elevator at full and at rho_f effectiveness.
     room : (2,) ndarray
@@ -100,7 +100,7 @@ class VertexTube:
         Adjustable factor (eq. 48).
     tube : TubeDesign
     eigs : ndarray
-        Eigenvalues of the re-checked LMI blocks (:func:`fahv.synthesis.feedback.verify_tube`).
+        Eigenvalues of the re-checked LMI blocks (`fahv.synthesis.feedback.verify_tube`).
     lines : tuple of str
     """
 
@@ -122,9 +122,9 @@ class NotchVariants:
     Attributes
     ----------
     certified : dict
-        ``{variant: NotchFilter}`` whose loop is certified in its own states.
+        `{variant: NotchFilter}` whose loop is certified in its own states.
     stable_only : dict
-        ``{variant: NotchFilter}`` whose loop is checked for stability only.
+        `{variant: NotchFilter}` whose loop is checked for stability only.
     """
 
     certified: dict = field(default_factory=dict)
@@ -133,7 +133,7 @@ class NotchVariants:
 
 @dataclass(frozen=True)
 class FormTube:
-    """The tube the law runs on, as the design's tube form made it (``tube.form``).
+    """The tube the law runs on, as the design's tube form made it (`tube.form`).
 
     Attributes
     ----------
@@ -148,11 +148,11 @@ class FormTube:
     notch_loops : tuple of fahv.tube.notch_loop.NotchLoop
         The vertex tube's loops through a notch (the tube set keeps its own).
     tube_set : TubeSet or None
-        The eight-state tube set (``tube.form: eight_state``).
+        The eight-state tube set (`tube.form: eight_state`).
     nominal, box : SchedulingBox or None
         With the tube set: the nominal box and the scheduling box it is closed over.
     hv_box : (2, 2) ndarray or None
-        With the tube set: the nominal's h, V range (``mpc.hv_box``).
+        With the tube set: the nominal's h, V range (`mpc.hv_box`).
     col_scale : (11,) ndarray or None
         With the tube set: the column scale of its parameter directions.
     lines : tuple of str
@@ -201,7 +201,7 @@ class Nominal:
     ----------
     design : NominalDesign
     certificate : dict
-        Its re-check (:func:`fahv.synthesis.nominal.verify_nominal`).
+        Its re-check (`fahv.synthesis.nominal.verify_nominal`).
     lines : tuple of str
     """
 
@@ -217,7 +217,7 @@ class FormCertificate:
     Attributes
     ----------
     summary : dict
-        The design summary's ``certificate`` (JSON-able).
+        The design summary's `certificate` (JSON-able).
     arrays : dict
         Arrays the law needs from it (the QP's rows, a gain designed for a notch loop).
     lines : tuple of str
@@ -235,8 +235,8 @@ class EarlyLaws:
     Attributes
     ----------
     parts : dict
-        ``{law name: distributed.Future}``, each of ``(arrays, lines)``
-        (:func:`fahv.design.stages.offline_part`); empty when no Dask client is active.
+        `{law name: distributed.Future}`, each of `(arrays, lines)`
+        (`fahv.design.stages.offline_part`); empty when no Dask client is active.
     """
 
     parts: dict = field(default_factory=dict)

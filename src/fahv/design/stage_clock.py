@@ -1,9 +1,9 @@
 """Progress of a design while it runs: its stage, the time in it, and the time left.
 
 A design spends minutes in a single LMI or bisection with no loop to put a progress bar
-on. :class:`StageClock` prints a line at least every :data:`PERIOD_S` seconds from a
+on. `StageClock` prints a line at least every `PERIOD_S` seconds from a
 timer thread, whatever the stage is doing, and estimates the time left from the stage
-times of the last design of the same file (stored in its summary, ``stage_times_s``,
+times of the last design of the same file (stored in its summary, `stage_times_s`,
 outside the design hash). Without such a record it says so rather than guess.
 """
 
@@ -27,10 +27,10 @@ def _minutes(seconds: float) -> str:
 
 
 class StageClock:
-    """Stage times of one design and a progress line every ``period_s`` seconds.
+    """Stage times of one design and a progress line every `period_s` seconds.
 
-    Call :meth:`stage` at the start of each stage and :meth:`close` at the end (or use
-    the clock as a context manager); :attr:`times` holds the stage times [s] so far.
+    Call `stage` at the start of each stage and `close` at the end (or use
+    the clock as a context manager); `times` holds the stage times [s] so far.
 
     Parameters
     ----------
@@ -59,7 +59,7 @@ class StageClock:
         self._thread.start()
 
     def stage(self, name: str) -> None:
-        """End the current stage (its time recorded) and start stage ``name``."""
+        """End the current stage (its time recorded) and start stage `name`."""
         now = time.monotonic()
         if self.current is not None:
             spent = self.times.get(self.current, 0.0) + now - self.t_stage
@@ -81,7 +81,7 @@ class StageClock:
         self.close()
 
     def left(self) -> float | None:
-        """Estimated time left [s] from :attr:`previous`; None if it has no such estimate."""
+        """Estimated time left [s] from `previous`; None if it has no such estimate."""
         if not self.previous or self.current not in self.previous:
             return None
         names = list(self.previous)

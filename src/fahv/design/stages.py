@@ -1,28 +1,28 @@
 """The stages of a design, in the paper's order: each a function of the records before it.
 
-Every stage takes the validated design data (``spec``), the vehicle and the frozen
-records of the stages it needs (:mod:`fahv.design.results`), and returns its own record
+Every stage takes the validated design data (`spec`), the vehicle and the frozen
+records of the stages it needs (`fahv.design.results`), and returns its own record
 with the certificate lines it prints:
 
-1. :func:`model_stage` (sec. 3.1, eq. 11): the TP model of the design model,
+1. `model_stage` (sec. 3.1, eq. 11): the TP model of the design model,
    discretised; the flexible modes at the design point; the trim map;
-2. :func:`disturbance_stage` (eq. 13-19): the disturbance set W by sampling;
-3. :func:`vertex_tube_stage` (LMI 24-28): F and Z over the healthy and faulty vertices
+2. `disturbance_stage` (eq. 13-19): the disturbance set W by sampling;
+3. `vertex_tube_stage` (LMI 24-28): F and Z over the healthy and faulty vertices
    (eq. 15) and the adjustable gains (eq. 48);
-4. :func:`tube_form_stage`: the tube the law runs on, by ``tube.form``
-   (:data:`fahv.design.tube_forms.TUBE_FORMS`);
-5. :func:`tightening_stage` (eq. 30, 53): the tightened inputs and the elevator loss
+4. `tube_form_stage`: the tube the law runs on, by `tube.form`
+   (`fahv.design.tube_forms.TUBE_FORMS`);
+5. `tightening_stage` (eq. 30, 53): the tightened inputs and the elevator loss
    they cover over the parameter box;
-6. :func:`nominal_stage` (eq. 32-35): the nominal gain K and ellipsoid E(Q);
-7. :func:`certificate_stage`: the form's certificate over its own domain;
-8. :func:`laws_stage`: the stored arrays and the offline part of every law a variant
+6. `nominal_stage` (eq. 32-35): the nominal gain K and ellipsoid E(Q);
+7. `certificate_stage`: the form's certificate over its own domain;
+8. `laws_stage`: the stored arrays and the offline part of every law a variant
    uses (the nominal MPC's terminal check, the RMPC baseline's ellipsoids).
 
 A law's offline part that reads only the model (the RMPC baseline's) is started by
-:func:`early_laws_stage` right after stage 1 on the design's Dask cluster, and collected
-by :func:`laws_stage`: it runs on a worker while this process makes the tube.
+`early_laws_stage` right after stage 1 on the design's Dask cluster, and collected
+by `laws_stage`: it runs on a worker while this process makes the tube.
 
-:func:`fahv.design.pipeline.run_design` calls them top to bottom.
+`fahv.design.pipeline.run_design` calls them top to bottom.
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ Log = Callable[[str], None]
 
 
 def step_command(step: dict) -> dict:
-    """The design step (``design_step``) as the step command the laws' offline parts see.
+    """The design step (`design_step`) as the step command the laws' offline parts see.
 
     The nominal ellipsoid E(Q) (eq. 33) and the baseline's ellipsoids are sized for this
     step; x0 is the trim at its start.
@@ -83,10 +83,10 @@ def step_command(step: dict) -> dict:
 
 
 def design_rho_f(spec) -> float:
-    """Smallest elevator effectiveness the tube is designed for (eq. 15): ``tube.rho_min``.
+    """Smallest elevator effectiveness the tube is designed for (eq. 15): `tube.rho_min`.
 
-    The design covers every loss of effectiveness up to ``1 - rho_min``; a scenario's
-    fault beyond it is reported by :func:`fahv.spec.scenario.uncertified`.
+    The design covers every loss of effectiveness up to `1 - rho_min`; a scenario's
+    fault beyond it is reported by `fahv.spec.scenario.uncertified`.
     """
     return float(spec["tube"]["rho_min"])
 
@@ -178,15 +178,15 @@ def tube_notches(spec: dict, omega_flex) -> dict[str, NotchFilter]:
     Parameters
     ----------
     spec : dict
-        Validated design data (``variants``, ``notch``).
+        Validated design data (`variants`, `notch`).
     omega_flex : (2,) array_like
-        Flexible mode frequencies [rad/s] (``mode2`` notches).
+        Flexible mode frequencies [rad/s] (`mode2` notches).
 
     Returns
     -------
     dict
-        ``{variant: NotchFilter}`` for every variant whose law has a tube and whose
-        notch is on (:func:`fahv.control.variant_notch`).
+        `{variant: NotchFilter}` for every variant whose law has a tube and whose
+        notch is on (`fahv.control.variant_notch`).
     """
     out = {}
     for name in spec["variants"]:
@@ -201,23 +201,23 @@ def notch_checks(spec: dict, notches: dict) -> NotchVariants:
     """Split the tube's notch variants into those certified and those checked for stability.
 
     A law that forms its error's q with the same filter on the nominal's q as on the
-    measured one (``LAWS[law].filters_nominal_q`` with the design key
-    ``tube.filter_nominal_q`` true) runs the loop :func:`fahv.tube.notch_loop.notch_tube`
+    measured one (`LAWS[law].filters_nominal_q` with the design key
+    `tube.filter_nominal_q` true) runs the loop `fahv.tube.notch_loop.notch_tube`
     certifies in its own states, [e; chi]. Any other notch variant filters the measured q
     alone: its error also carries (notch - 1)(q_r + q_n), which no certificate covers, so
-    only its stability is checked (:func:`fahv.tube.notch_loop.notch_loop`).
+    only its stability is checked (`fahv.tube.notch_loop.notch_loop`).
 
     Parameters
     ----------
     spec : dict
-        Validated design data (``tube.filter_nominal_q``).
+        Validated design data (`tube.filter_nominal_q`).
     notches : dict
-        ``{variant: NotchFilter}`` (:func:`tube_notches`).
+        `{variant: NotchFilter}` (`tube_notches`).
 
     Returns
     -------
     NotchVariants
-        The two parts of ``notches``, in its order.
+        The two parts of `notches`, in its order.
     """
     filtered = bool(spec["tube"]["filter_nominal_q"])
     certified = {
@@ -229,12 +229,12 @@ def notch_checks(spec: dict, notches: dict) -> NotchVariants:
 def tube_form_stage(spec: dict, vehicle: Vehicle, model: DesignModel, dist: Disturbance,
                     vertex: VertexTube, log: Log, tell: Log,
                     previous=None) -> FormTube:  # fmt: skip
-    """The tube the law runs on, made by the design's tube form (:data:`TUBE_FORMS`).
+    """The tube the law runs on, made by the design's tube form (`TUBE_FORMS`).
 
-    ``log`` receives the progress lines of the form's long computations; ``tell`` is told
-    the start of each of its parts (the stage clock); ``previous``, the arrays of an
+    `log` receives the progress lines of the form's long computations; `tell` is told
+    the start of each of its parts (the stage clock); `previous`, the arrays of an
     earlier design of the file, is where the form's LMIs start
-    (:meth:`fahv.design.tube_forms.TubeForm.design`).
+    (`fahv.design.tube_forms.TubeForm.design`).
     """
     # ECM: the filter is modelled; otherwise certified (notch_tube) or stability (notch_loop)
     found = tube_notches(spec, model.omega_flex) if spec["design_model"] != "ecm" else {}
@@ -298,14 +298,14 @@ def certificate_stage(spec: dict, vehicle: Vehicle, model: DesignModel, vertex: 
 
 
 def model_arrays(model: DesignModel, vehicle: Vehicle) -> dict[str, np.ndarray]:
-    """The arrays an offline part with :attr:`fahv.control.ControlLaw.model_only` reads.
+    """The arrays an offline part with `fahv.control.ControlLaw.model_only` reads.
 
     Returns
     -------
     dict
-        ``trim_h`` (n_h,) [ft], ``trim_V`` (n_V,) [ft/s], ``trim_x`` (n_h, n_V, n),
-        ``trim_u`` (n_h, n_V, 2): the trim map; ``x0`` (9,): the trim at the design
-        point; ``u_room`` (2,): the input room (:func:`fahv.tube.feasibility.input_room`).
+        `trim_h` (n_h,) [ft], `trim_V` (n_V,) [ft/s], `trim_x` (n_h, n_V, n),
+        `trim_u` (n_h, n_V, 2): the trim map; `x0` (9,): the trim at the design
+        point; `u_room` (2,): the input room (`fahv.tube.feasibility.input_room`).
     """
     tm = model.trim
     return {"trim_h": tm.h_grid, "trim_V": tm.V_grid, "trim_x": tm.x_r, "trim_u": tm.u_r,
@@ -317,17 +317,17 @@ def early_laws_stage(spec: dict, vehicle: Vehicle, model: DesignModel,
                      previous=None) -> EarlyLaws:  # fmt: skip
     """Start the offline parts that read only the model on the design's Dask cluster.
 
-    The offline part of a law with :attr:`fahv.control.ControlLaw.model_only` (the
+    The offline part of a law with `fahv.control.ControlLaw.model_only` (the
     RMPC baseline's ellipsoids) depends on the model stage alone: with an active Dask
-    client (``fahv design`` starts one) it is submitted as soon as the model is made
-    and runs on a worker while this process makes the tube; :func:`laws_stage` takes
-    its result. Without a client nothing starts here and :func:`laws_stage` computes
+    client (`fahv design` starts one) it is submitted as soon as the model is made
+    and runs on a worker while this process makes the tube; `laws_stage` takes
+    its result. Without a client nothing starts here and `laws_stage` computes
     every part in order.
 
     Returns
     -------
     EarlyLaws
-        ``{law name: distributed.Future of (arrays, lines)}``, empty without a client.
+        `{law name: distributed.Future of (arrays, lines)}`, empty without a client.
     """
     client = active_client()
     if client is None:
@@ -344,14 +344,14 @@ def early_laws_stage(spec: dict, vehicle: Vehicle, model: DesignModel,
 
 def offline_part(part, spec: dict, vehicle: Vehicle, arrays: dict,
                  previous=None) -> tuple[dict, list[str]]:  # fmt: skip
-    """An offline part (:meth:`fahv.control.ControlLaw.design`) with its log lines.
+    """An offline part (`fahv.control.ControlLaw.design`) with its log lines.
 
     Parameters
     ----------
     part : type
-        A registered law (:data:`fahv.control.LAWS`) or nominal part class.
+        A registered law (`fahv.control.LAWS`) or nominal part class.
     spec : dict
-        The validated design data with its ``command`` (a run spec's data).
+        The validated design data with its `command` (a run spec's data).
     vehicle : Vehicle
     arrays : dict
         The arrays the part reads.
@@ -379,16 +379,16 @@ def laws_stage(spec: dict, vehicle: Vehicle, model: DesignModel, dist: Disturban
                early: EarlyLaws | None = None) -> dict:  # fmt: skip
     """The stored arrays, then the offline part of every law a variant uses.
 
-    Each law's offline part (:meth:`fahv.control.ControlLaw.design`) sees the arrays made
-    so far, the nominal parts' first, and adds its own; ``previous``, the arrays of an
+    Each law's offline part (`fahv.control.ControlLaw.design`) sees the arrays made
+    so far, the nominal parts' first, and adds its own; `previous`, the arrays of an
     earlier design of the file, is where its solves may start
-    (:class:`fahv.spec.context.DesignContext`). A part started early
-    (:func:`early_laws_stage`) is collected here, its lines logged in the same place.
+    (`fahv.spec.context.DesignContext`). A part started early
+    (`early_laws_stage`) is collected here, its lines logged in the same place.
 
     Returns
     -------
     dict
-        ``{name: array}``: what ``design.npz`` stores (:class:`fahv.spec.artefacts.Design`).
+        `{name: array}`: what `design.npz` stores (`fahv.spec.artefacts.Design`).
 
     Raises
     ------

@@ -1,21 +1,21 @@
-"""Tube forms: the registered ways a design makes and certifies its tube (``tube.form``).
+"""Tube forms: the registered ways a design makes and certifies its tube (`tube.form`).
 
 Every form starts from the vertex tube (F, Z from LMI 24 over the TP vertices for the
-sampled W, :class:`fahv.design.results.VertexTube`) and the trim map, and makes, through
+sampled W, `fahv.design.results.VertexTube`) and the trim map, and makes, through
 two calls:
 
-* :meth:`TubeForm.design`: the tube the law runs on (F, N, its tightening, its notch
-  loops), before the inputs are tightened (eq. 30): a :class:`~fahv.design.results.FormTube`;
-* :meth:`TubeForm.certify`: the certificate over the tube's own domain, once the
+* `TubeForm.design`: the tube the law runs on (F, N, its tightening, its notch
+  loops), before the inputs are tightened (eq. 30): a `fahv.design.results.FormTube`;
+* `TubeForm.certify`: the certificate over the tube's own domain, once the
   tightened inputs and the loss coverage are known, with the arrays the QP needs: a
-  :class:`~fahv.design.results.FormCertificate`.
+  `fahv.design.results.FormCertificate`.
 
-Forms: ``vertices`` (:class:`VerticesForm`, the paper's Z over the TP vertices for a
-sampled W, checked over its domain by :func:`fahv.tube.vertex_tube.certify_tube`) and
-``eight_state`` (:class:`EightStateForm`, the tube set (W_8, Z_8) along the nominal,
-closed over its own domain by :func:`fahv.design.tube_set_design.design_tube_set`).
-A new form subclasses :class:`TubeForm` and is added with :func:`register_tube_form`.
-The eight-state form runs the onset bound (:mod:`fahv.onset`) on its closed tube set,
+Forms: `vertices` (`VerticesForm`, the paper's Z over the TP vertices for a
+sampled W, checked over its domain by `fahv.tube.vertex_tube.certify_tube`) and
+`eight_state` (`EightStateForm`, the tube set (W_8, Z_8) along the nominal,
+closed over its own domain by `fahv.design.tube_set_design.design_tube_set`).
+A new form subclasses `TubeForm` and is added with `register_tube_form`.
+The eight-state form runs the onset bound (`fahv.onset`) on its closed tube set,
 which is why the forms sit in the design package, above the tube and the onset.
 """
 
@@ -61,7 +61,7 @@ Tell = Callable[[str], None]
 
 
 class TubeForm:
-    """Interface of a tube form (module docstring); subclasses set :attr:`name`."""
+    """Interface of a tube form (module docstring); subclasses set `name`."""
 
     name: ClassVar[str] = ""
 
@@ -85,7 +85,7 @@ class TubeForm:
             Told the start of each part of the form's design (the stage clock).
         previous : Mapping[str, ndarray], optional
             The arrays of an earlier design of the same file: where the form's LMIs start
-            their constraint generation (e.g. :func:`closure_active_set`).
+            their constraint generation (e.g. `closure_active_set`).
 
         Returns
         -------
@@ -96,14 +96,14 @@ class TubeForm:
     def certify(self, spec: dict, vehicle: Vehicle, model: DesignModel, vertex: VertexTube,
                 tube: FormTube, tightening: Tightening,
                 progress=None) -> FormCertificate:  # fmt: skip
-        """The certificate over the tube's domain (the summary's ``certificate``).
+        """The certificate over the tube's domain (the summary's `certificate`).
 
         Parameters
         ----------
         spec, vehicle, model, vertex
-            As :meth:`design`.
+            As `design`.
         tube : FormTube
-            What :meth:`design` made.
+            What `design` made.
         tightening : Tightening
             The tightened inputs and the loss coverage (eq. 30).
         progress : callable, optional
@@ -120,8 +120,8 @@ class VerticesForm(TubeForm):
     """The paper's tube: Z over the TP vertices for the sampled W (LMI 24, eq. 25-28).
 
     Its notch loops are checked at the fault vertices (stability, or certified in the
-    loop's own states, :mod:`fahv.tube.notch_loop`); its certificate is checked over
-    its domain (:func:`fahv.tube.vertex_tube.certify_tube`): for a sampled W it is
+    loop's own states, `fahv.tube.notch_loop`); its certificate is checked over
+    its domain (`fahv.tube.vertex_tube.certify_tube`): for a sampled W it is
     reported as not closed, with the measured factor.
     """
 
@@ -129,7 +129,7 @@ class VerticesForm(TubeForm):
 
     def design(self, spec, vehicle, model, dist, vertex, notches, log, tell,
                previous=None) -> FormTube:  # fmt: skip
-        """F, N of the vertex tube; its notch loops checked (``previous`` is not used)."""
+        """F, N of the vertex tube; its notch loops checked (`previous` is not used)."""
         t, tau, Ts = vertex.tube, vertex.tau, spec["Ts"]
         Af, Bf = vertex.Af, vertex.Bf
         loops = [notch_loop(Af, Bf, tau * t.F, nf, Ts, IQ, v)
@@ -140,7 +140,7 @@ class VerticesForm(TubeForm):
                         lines=tuple(notch_loop_line(loop) for loop in loops))  # fmt: skip
 
     def certify(self, spec, vehicle, model, vertex, tube, tightening, progress=None):
-        """W over the tube's domain and the exact RPI level (:func:`certify_tube`)."""
+        """W over the tube's domain and the exact RPI level (`certify_tube`)."""
         domain_spec = spec
         if "mpc" in spec:  # the domain of the certificate: the attitude rows the QP will use
             att = attitude_bounds(vertex.tube.N, spec["mpc"]["att_max"])
@@ -157,8 +157,8 @@ class EightStateForm(TubeForm):
 
     W_8 is bounded over the tube's own domain (the nominal box, the tube, every corner
     of the parameter box, the fault range) and closed with Z_8
-    (:func:`fahv.design.tube_set_design.design_tube_set`); the QP's rows (``mpc.u_box``,
-    ``mpc.hv_box``, ``mpc.x_box``) keep the nominal inside the range it covers.
+    (`fahv.design.tube_set_design.design_tube_set`); the QP's rows (`mpc.u_box`,
+    `mpc.hv_box`, `mpc.x_box`) keep the nominal inside the range it covers.
     """
 
     name = "eight_state"
@@ -215,8 +215,8 @@ def closure_active_set(previous) -> ActiveSet | None:
     Parameters
     ----------
     previous : Mapping[str, ndarray] or None
-        The arrays of the design the output folder held before (``closure_vertices``,
-        ``closure_points``), or None.
+        The arrays of the design the output folder held before (`closure_vertices`,
+        `closure_points`), or None.
 
     Returns
     -------
@@ -229,7 +229,7 @@ def closure_active_set(previous) -> ActiveSet | None:
 
 
 #: Prefix of the stored arrays that hold the vertices an invariant ellipsoid's last LMI
-#: solve held (``ellipsoid_vertices_steady_0.995``, ``ellipsoid_vertices_notch_tube_mpc``).
+#: solve held (`ellipsoid_vertices_steady_0.995`, `ellipsoid_vertices_notch_tube_mpc`).
 ELLIPSOID_VERTICES = "ellipsoid_vertices_"
 
 
@@ -244,7 +244,7 @@ def ellipsoid_starts(previous) -> dict[str, np.ndarray]:
     Returns
     -------
     dict[str, (a,) ndarray of int]
-        By ellipsoid name (:data:`ELLIPSOID_VERTICES` stripped); empty if none is stored.
+        By ellipsoid name (`ELLIPSOID_VERTICES` stripped); empty if none is stored.
     """
     if previous is None:
         return {}
@@ -252,12 +252,12 @@ def ellipsoid_starts(previous) -> dict[str, np.ndarray]:
             if k.startswith(ELLIPSOID_VERTICES)}  # fmt: skip
 
 
-#: The registered tube forms, by ``tube.form``.
+#: The registered tube forms, by `tube.form`.
 TUBE_FORMS: dict[str, TubeForm] = {}
 
 
 def register_tube_form(form: TubeForm) -> TubeForm:
-    """Add a tube form to :data:`TUBE_FORMS` under its :attr:`TubeForm.name`.
+    """Add a tube form to `TUBE_FORMS` under its `TubeForm.name`.
 
     Raises
     ------
@@ -278,19 +278,19 @@ def command_range(spec: dict, envelope) -> np.ndarray:
     """The eight-state tube's nominal h, V range, checked against the design step.
 
     The tube set is certified for a nominal inside its nominal box (the envelope less
-    ``eight_state.h_margin`` / ``V_margin``, :func:`fahv.bounds.domain.nominal_box`);
-    the QP keeps its set point and prediction in that range (``mpc.hv_box``).
+    `eight_state.h_margin` / `V_margin`, `fahv.bounds.domain.nominal_box`);
+    the QP keeps its set point and prediction in that range (`mpc.hv_box`).
 
     Parameters
     ----------
     spec : dict
-        The validated design data (its ``eight_state`` and ``design_step`` sections).
+        The validated design data (its `eight_state` and `design_step` sections).
     envelope : fahv.model.envelope.Envelope
 
     Returns
     -------
     (2, 2) ndarray
-        ``[[h lo, V lo], [h hi, V hi]]`` in ft, ft/s.
+        `[[h lo, V lo], [h hi, V hi]]` in ft, ft/s.
 
     Raises
     ------

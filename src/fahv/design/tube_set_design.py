@@ -1,12 +1,12 @@
-"""The eight-state tube set of a case (``tube.form: eight_state``), designed and checked.
+"""The eight-state tube set of a case (`tube.form: eight_state`), designed and checked.
 
-From the case's ``eight_state`` section: the nominal and scheduling boxes
-(:func:`fahv.bounds.domain.nominal_box`), the vertices along the nominal
-(:func:`fahv.bounds.vertices.nominal_vertices`), the closure of W_8 and Z_8
-(:func:`fahv.tube.closure.close_tube_set`), the onset of the design's loss as a
-transient (:func:`fahv.onset.bound.onset_bound`) and the loops of the variants that
-feed q through a notch (:mod:`fahv.tube.notch_loop`, with a gain designed for the loop
-when the case asks for one, :func:`designed_notch_loop`). The onset bound and the notch
+From the case's `eight_state` section: the nominal and scheduling boxes
+(`fahv.bounds.domain.nominal_box`), the vertices along the nominal
+(`fahv.bounds.vertices.nominal_vertices`), the closure of W_8 and Z_8
+(`fahv.tube.closure.close_tube_set`), the onset of the design's loss as a
+transient (`fahv.onset.bound.onset_bound`) and the loops of the variants that
+feed q through a notch (`fahv.tube.notch_loop`, with a gain designed for the loop
+when the case asks for one, `designed_notch_loop`). The onset bound and the notch
 loops both start from the closed tube set and not from each other: their invariant
 ellipsoids (the onset's steady set at each contraction factor, each notch loop) are
 Dask tasks spread over the cores' processes.
@@ -69,7 +69,7 @@ def _contain(case: dict, box, vehicle, trim_map, unc, rho_min: float, log) -> np
 def _notch_loops(nv, tube_set: TubeSet, case: dict, notches, stable_only, log, starts=None):
     """The notch variants' loops at the tube set's vertices, and the gains designed.
 
-    ``starts`` maps :func:`notch_key` to the vertices an earlier design's loop held.
+    `starts` maps `notch_key` to the vertices an earlier design's loop held.
     """
     s, Ts = case["eight_state"], case["Ts"]
     A, B = nv.vertices()
@@ -108,13 +108,13 @@ def design_tube_set(
     starts=None,
     **estimate,
 ) -> tuple[TubeSet, SchedulingBox, SchedulingBox]:
-    """The eight-state tube set of a case (``tube.form: eight_state``), closed and checked.
+    """The eight-state tube set of a case (`tube.form: eight_state`), closed and checked.
 
     Parameters
     ----------
     case : dict
-        Validated case data (its ``eight_state``, ``uncertainty``, ``tube.tau``,
-        ``mpc.M``, ``mpc.att_max``, ``Ts``, ``plant_substeps``).
+        Validated case data (its `eight_state`, `uncertainty`, `tube.tau`,
+        `mpc.M`, `mpc.att_max`, `Ts`, `plant_substeps`).
     vehicle : fahv.model.vehicle.Vehicle
         The nominal vehicle.
     trim_map : fahv.model.trim.TrimMap
@@ -122,7 +122,7 @@ def design_tube_set(
         Design scaling (Dx, Du).
     w_max : (9,) array_like
         The sampled W (eq. 19): the row scale of the parameter directions and the unit of
-        ``eight_state.w0``.
+        `eight_state.w0`.
     col_scale : (11,) array_like
         Supports of e and F e over the vertex tube: the column scale of the directions.
     rho_min : float
@@ -132,30 +132,30 @@ def design_tube_set(
     log : callable
     gamma : float, optional
         The case's estimator gain per step: the onset of the design loss is then bounded
-        as a transient of the tube set (:func:`fahv.onset.bound.onset_bound`,
-        ``tube_set.onset``).
+        as a transient of the tube set (`fahv.onset.bound.onset_bound`,
+        `tube_set.onset`).
     notches : dict, optional
-        ``{variant: NotchFilter}``: the tube variants that feed q through a notch; their
+        `{variant: NotchFilter}`: the tube variants that feed q through a notch; their
         loops are certified in their own states at the tube set's vertices
-        (:func:`fahv.tube.notch_loop.notch_tube`, a few minutes each;
-        ``tube_set.notch_loops``).
+        (`fahv.tube.notch_loop.notch_tube`, a few minutes each;
+        `tube_set.notch_loops`).
     stable_only : dict, optional
-        ``{variant: NotchFilter}``: notch variants whose error filters the measured q
+        `{variant: NotchFilter}`: notch variants whose error filters the measured q
         alone; their loops with F_8 are checked for stability only
-        (:func:`fahv.tube.notch_loop.notch_loop`, also in ``tube_set.notch_loops``).
+        (`fahv.tube.notch_loop.notch_loop`, also in `tube_set.notch_loops`).
     stage : callable, optional
         Told the start of each part (vertices, closure, onset and notch loops): the
-        design's progress lines (:class:`fahv.design.stage_clock.StageClock`).
+        design's progress lines (`fahv.design.stage_clock.StageClock`).
     warm : fahv.synthesis.feedback.ActiveSet, optional
-        Where the closure's constraint generation starts (:func:`close_tube_set`).
+        Where the closure's constraint generation starts (`close_tube_set`).
     starts : Mapping[str, ndarray], optional
         Where the invariant ellipsoids' constraint generation starts: the vertices an
-        earlier design's solves held, by :func:`steady_key` and :func:`notch_key`
-        (``TubeSet.ellipsoid_vertices``). Like ``warm``, it changes how fast the design
+        earlier design's solves held, by `steady_key` and `notch_key`
+        (`TubeSet.ellipsoid_vertices`). Like `warm`, it changes how fast the design
         runs, not what is certified.
     **estimate
-        ``gamma_e``, ``directions``, ``projection_scale`` of
-        :func:`fahv.onset.bound.onset_bound` (the estimate's gain along the elevator
+        `gamma_e`, `directions`, `projection_scale` of
+        `fahv.onset.bound.onset_bound` (the estimate's gain along the elevator
         column).
 
     Returns
@@ -168,7 +168,7 @@ def design_tube_set(
     ------
     DesignError
         If the boxes are malformed, a plant step leaves the model, or the tube set does
-        not close (:func:`fahv.tube.closure.close_tube_set`).
+        not close (`fahv.tube.closure.close_tube_set`).
     """
     stage = stage or (lambda name: None)
     s = case["eight_state"]
@@ -259,13 +259,13 @@ def steady_key(lam: float) -> str:
     Parameters
     ----------
     lam : float
-        Contraction factor of the steady set (:func:`fahv.onset.bound.steady_set`).
+        Contraction factor of the steady set (`fahv.onset.bound.steady_set`).
 
     Returns
     -------
     str
-        ``steady_<lam>`` (``TubeSet.ellipsoid_vertices``' key; the stored array is
-        ``ellipsoid_vertices_steady_<lam>``).
+        `steady_<lam>` (`TubeSet.ellipsoid_vertices`' key; the stored array is
+        `ellipsoid_vertices_steady_<lam>`).
     """
     return f"steady_{lam:g}"
 
@@ -276,20 +276,20 @@ def notch_key(variant: str) -> str:
     Parameters
     ----------
     variant : str
-        A notch variant's name (:func:`fahv.tube.notch_loop.notch_tube`).
+        A notch variant's name (`fahv.tube.notch_loop.notch_tube`).
 
     Returns
     -------
     str
-        ``notch_<variant>``, as :func:`steady_key`.
+        `notch_<variant>`, as `steady_key`.
     """
     return f"notch_{variant}"
 
 
 def _compute(parts: dict, n_ellipsoids: int, log):
-    """The tasks ``parts`` computed on the active Dask client, or on the cores' processes.
+    """The tasks `parts` computed on the active Dask client, or on the cores' processes.
 
-    A distributed client (``fahv design`` starts one: a LocalCluster, or ``--scheduler``)
+    A distributed client (`fahv design` starts one: a LocalCluster, or `--scheduler`)
     honours the tasks' priorities; without one (a library call), the local process
     scheduler takes them in its own order.
     """
@@ -307,7 +307,7 @@ def _compute(parts: dict, n_ellipsoids: int, log):
 
 
 def _smallest_steady(steady) -> float:
-    """The smallest c_w of the steady sets (:func:`fahv.onset.bound.steady_set` results)."""
+    """The smallest c_w of the steady sets (`fahv.onset.bound.steady_set` results)."""
     return min(c_w for c_w, _, _ in steady)
 
 
@@ -319,7 +319,7 @@ def _jump_h(case: dict, box, vehicle, trim_map, unc, rho_min: float) -> float:
 
 
 def _notch_loops_logged(nv, tube_set: TubeSet, case: dict, notches, stable_only, starts=None):
-    """:func:`_notch_loops` with its log lines returned (it may run in another process)."""
+    """`_notch_loops` with its log lines returned (it may run in another process)."""
     lines: list[str] = []
     loops, gains = _notch_loops(nv, tube_set, case, notches, stable_only, lines.append, starts)
     return loops, gains, lines
@@ -338,39 +338,39 @@ def designed_notch_loop(
 ) -> tuple[NotchLoop, np.ndarray] | None:
     """A gain designed for the tube set's loop through the notch, closed on W_8 (or None).
 
-    The loop u - v = F e' through the notch (:func:`fahv.tube.notch_gain.notch_gain`,
+    The loop u - v = F e' through the notch (`fahv.tube.notch_gain.notch_gain`,
     from F_8, with the tube set's Z_8 and tightening) keeps e_8 in Z_8 and the applied
     input within the tightening, but its input deviation is K xi, not F_8 e_8: W_8's
     bound over the product set is therefore recomputed for the loop's own joint set of
-    (e_8, u - v) (:func:`fahv.bounds.one_step_bound.altitude_bound` with ``joint``); the
+    (e_8, u - v) (`fahv.bounds.one_step_bound.altitude_bound` with `joint`); the
     loop is closed if its altitude bound is at most the tube set's H (the scheduling box
-    holds that) and its bound lies inside W_8 (``NotchLoop.w_ratio`` = (H / the tube
+    holds that) and its bound lies inside W_8 (`NotchLoop.w_ratio` = (H / the tube
     set's H, bound / W_8), every entry <= 1).
 
     Parameters
     ----------
     nv : NominalVertices
     A, B : (R, 9, 9), (R, 9, 2) ndarray
-        The tube set's vertices (``nv.vertices()``).
+        The tube set's vertices (`nv.vertices()`).
     tube_set : TubeSet
     notch : fahv.model.notch.NotchFilter
     Ts : float
         Control period [s].
     variant : str
     continuation : sequence of float
-        ``eight_state.notch_continuation``.
+        `eight_state.notch_continuation`.
     log : callable
 
     Returns
     -------
     (NotchLoop, (2, 8) ndarray) or None
-        The certified loop's re-check (``designed``, ``w_ratio``) and its gain; None if no
+        The certified loop's re-check (`designed`, `w_ratio`) and its gain; None if no
         gain was certified and closed at the case's eps_p (the variant keeps F_8).
 
     Raises
     ------
     DesignError
-        As :func:`fahv.tube.notch_gain.notch_gain`.
+        As `fahv.tube.notch_gain.notch_gain`.
     """
     iq = EIGHT_STATES.index("q")
     got = notch_gain(A[:, 1:, 1:], B[:, 1:, :], tube_set.F_8, tube_set.N_8, tube_set.W_8, notch,

@@ -1,25 +1,25 @@
 """Many runs of one variant at once: the runs are stacked, the loop is the one of simulate.
 
 A Monte Carlo campaign runs the same designed case hundreds of times with other plant
-parameters, faults, commands and initial trims (node parameter ``overrides``, as
-:func:`fahv.loop.simulate.simulate` takes them). :func:`simulate_batch` stacks such
-runs and steps them together through :class:`fahv.loop.simulate.Loop`, the very loop
-of ``simulate``: every node core works on a leading axis of B runs (the plant's RK4
+parameters, faults, commands and initial trims (node parameter `overrides`, as
+`fahv.loop.simulate.simulate` takes them). `simulate_batch` stacks such
+runs and steps them together through `fahv.loop.simulate.Loop`, the very loop
+of `simulate`: every node core works on a leading axis of B runs (the plant's RK4
 compiled, the QPs of the nominal MPC a loop over the runs inside their class), so
 the Python overhead of a step is paid once per batch and a run's numbers are those
-of ``simulate`` -- by construction, there is no second implementation (the tests
-still compare the two with ``array_equal``).
+of `simulate` -- by construction, there is no second implementation (the tests
+still compare the two with `array_equal`).
 
 Grouping
-    Runs share a batch when every parameter except their own (:data:`PER_RUN`: the
+    Runs share a batch when every parameter except their own (`PER_RUN`: the
     plant's parameters and initial state, the command and the initial measured state
     of the nominal part, the whole fault) is the same; other runs go to other groups.
 
 Failures
     A run that fails (non-finite state, an infeasible first solve, a bad override)
     gets its exception in the result list; the others go on. The exception of a run
-    that failed while stepping carries what it flew before: ``exc.partial`` is the
-    :class:`~fahv.loop.simulate.RunResult` of its steps before the failing one (for
+    that failed while stepping carries what it flew before: `exc.partial` is the
+    `fahv.loop.simulate.RunResult` of its steps before the failing one (for
     its metrics and figures; None when it failed before step 0 or was never built).
 """
 
@@ -49,7 +49,7 @@ def _own(node: str, name: str) -> bool:
 
 
 def shared_signature(p: dict) -> bytes:
-    """Bytes of every parameter a run shares with the others of its batch (:data:`PER_RUN`)."""
+    """Bytes of every parameter a run shares with the others of its batch (`PER_RUN`)."""
     parts = []
     for node in sorted(p):
         for name in sorted(p[node]):
@@ -78,19 +78,19 @@ def simulate_batch(
     variant : str, optional
         One of the case's variants; its first by default.
     overrides : sequence of dict or None
-        Per run, node parameter overrides ``{node: {name: value}}`` (as
-        :func:`~fahv.loop.simulate.simulate` takes them); B = its length.
+        Per run, node parameter overrides `{node: {name: value}}` (as
+        `fahv.loop.simulate.simulate` takes them); B = its length.
     duration : float, optional
         Simulated time of every run [s]; the case's by default.
 
     Returns
     -------
     list
-        Per run, in order: its :class:`~fahv.loop.simulate.RunResult` (identical to
-        ``simulate(design, variant, duration, overrides=...)``), or the exception
-        that run raised (:class:`~fahv.errors.RunError` for a non-finite state,
-        :class:`~fahv.errors.ParameterError` naming the node and key of a bad
-        override, ...) with ``partial`` set (see Failures above). One failing run
+        Per run, in order: its `fahv.loop.simulate.RunResult` (identical to
+        `simulate(design, variant, duration, overrides=...)`), or the exception
+        that run raised (`fahv.errors.RunError` for a non-finite state,
+        `fahv.errors.ParameterError` naming the node and key of a bad
+        override, ...) with `partial` set (see Failures above). One failing run
         never stops the others.
     """
     variant = design.case["variants"][0] if variant is None else variant
@@ -114,7 +114,7 @@ def simulate_batch(
 
 
 def _run_group(runs: list[dict], design, variant: str) -> list[RunResult | Exception]:
-    """The runs of one group through one :class:`Loop` (failures per run)."""
+    """The runs of one group through one `Loop` (failures per run)."""
     lanes = Lanes(len(runs), strict=False)
     try:
         loop = Loop(runs, lanes)

@@ -1,18 +1,18 @@
 """The per-step computations of the SIL graph, one class per node, for B runs at once.
 
-Each ``*Core`` is built from the validated parameters of its node for each of B runs
-(:func:`build_core`; the runs of one batch share every design value and differ only in
+Each `*Core` is built from the validated parameters of its node for each of B runs
+(`build_core`; the runs of one batch share every design value and differ only in
 their own plant parameters, initial state, command and fault) and maps the typed
-step-k input messages (:mod:`fahv.msg`, fields with a leading axis of B runs) to its
-step-k output messages. The ROS nodes in ``ros_ws/`` call exactly these methods with
-B = 1; the in-process simulator (:mod:`fahv.loop.simulate`) calls them in the graph's
-order with B = 1 (``fahv simulate``) or B runs (a campaign batch). One implementation::
+step-k input messages (`fahv.msg`, fields with a leading axis of B runs) to its
+step-k output messages. The ROS nodes in `ros_ws/` call exactly these methods with
+B = 1; the in-process simulator (`fahv.loop.simulate`) calls them in the graph's
+order with B = 1 (`fahv simulate`) or B runs (a campaign batch). One implementation:
 
     plant.state(k) -> notch.on_state -> nominal.on_state -> controller.on_inputs
                    -> fault.on_command -> plant.advance(k, actuator)
 
 A run that fails (non-finite state, an infeasible first solve, ...) is reported to the
-:class:`fahv.lanes.Lanes` of the batch: raised at once for a single run, recorded for a
+`fahv.lanes.Lanes` of the batch: raised at once for a single run, recorded for a
 batch, whose other runs go on (the failed run's plant is reset to finite values).
 """
 
@@ -45,18 +45,18 @@ from fahv.verdict import RunEnded
 
 
 def check_step(node: str, topic: str, msg: LoopMessage, k: int) -> None:
-    """Raise :class:`RunError` unless ``msg`` is of step ``k``."""
+    """Raise `RunError` unless `msg` is of step `k`."""
     if msg.k != k:
         raise RunError(f"{node}: {topic} of step {msg.k} used at step {k}")
 
 
 class PlantCore:
-    """Plant node: the nonlinear CM of each run with its perturbed parameters (:class:`Plant`).
+    """Plant node: the nonlinear CM of each run with its perturbed parameters (`Plant`).
 
     Parameters
     ----------
     runs : sequence of dict
-        Validated parameters of node ``plant`` of each run.
+        Validated parameters of node `plant` of each run.
     lanes : fahv.lanes.Lanes
     vehicles : dict, optional
         Cache of loaded vehicle files by name (shared by the batches of a worker).
@@ -99,8 +99,8 @@ class PlantCore:
     def state(self) -> VehicleState:
         """VehicleState of the current step k.
 
-        A run whose state is not finite ends with the verdict ``non_finite_state``
-        (:mod:`fahv.verdict`; the reason names where it left the flight envelope
+        A run whose state is not finite ends with the verdict `non_finite_state`
+        (`fahv.verdict`; the reason names where it left the flight envelope
         before, if it did); the state of an ended run of a batch is put back on its
         initial state, so the batch stays finite.
 
@@ -137,7 +137,7 @@ class PlantCore:
         RunError
             If the command is not of the current step.
         RunEnded
-            For a single run whose input is not finite (verdict ``non_finite_input``;
+            For a single run whose input is not finite (verdict `non_finite_input`;
             a batch records it).
         """
         check_step("plant", "actuator_command", actuator, self.k)
@@ -154,7 +154,7 @@ class PlantCore:
 
 
 class NotchCore:
-    """Notch filter node on q (eq. 38-39, :class:`fahv.model.notch.DiscreteNotch`)."""
+    """Notch filter node on q (eq. 38-39, `fahv.model.notch.DiscreteNotch`)."""
 
     def __init__(self, runs: Sequence[dict], lanes: Lanes) -> None:
         p = runs[0]
@@ -184,7 +184,7 @@ class NominalCore:
     """Nominal-trajectory node: the law's nominal part (a registered NominalSource).
 
     Inputs of step k: the VehicleState of step k (the trigger) and the controller's
-    command of step k - 1 (``None`` at k = 0).
+    command of step k - 1 (`None` at k = 0).
     """
 
     def __init__(self, runs: Sequence[dict], lanes: Lanes) -> None:
@@ -195,14 +195,14 @@ class NominalCore:
     def on_state(self, state: VehicleState, previous: ControlCommand | None = None):
         """NominalTrajectory of step k from VehicleState k and ControlCommand k - 1.
 
-        :meth:`output` then :meth:`advance` (the node publishes between the two).
+        `output` then `advance` (the node publishes between the two).
         """
         out = self.output(state, previous)
         self.advance()
         return out
 
     def output(self, state: VehicleState, previous: ControlCommand | None = None):
-        """NominalTrajectory of step k; :meth:`advance` must follow before step k + 1."""
+        """NominalTrajectory of step k; `advance` must follow before step k + 1."""
         check_step("nominal_trajectory", "state", state, self.k)
         u_prev = None
         if previous is not None:
@@ -211,13 +211,13 @@ class NominalCore:
         return self.source.output(state.k, state.t, state.x(), u_prev)
 
     def advance(self) -> None:
-        """Move the nominal part to step k + 1 (:meth:`fahv.control.NominalSource.advance`)."""
+        """Move the nominal part to step k + 1 (`fahv.control.NominalSource.advance`)."""
         self.source.advance()
         self.k += 1
 
 
 class ControllerCore:
-    """Controller node: the registered control law named by parameter ``law``.
+    """Controller node: the registered control law named by parameter `law`.
 
     Raises
     ------
@@ -273,7 +273,7 @@ class ControllerCore:
 
 
 class FaultCore:
-    """Fault-injector node (:class:`fahv.plant.faults.FaultInjector`), each run its fault."""
+    """Fault-injector node (`fahv.plant.faults.FaultInjector`), each run its fault."""
 
     def __init__(self, runs: Sequence[dict], lanes: Lanes) -> None:
         self.injector = inj = FaultInjector([make_fault(r["kind"], r["t_onset"], r) for r in runs])
@@ -309,12 +309,12 @@ CORES = {
 
 
 def build_core(node: str, raw, lanes: Lanes | None = None):
-    """Validate the raw parameters of ``node`` (once per run) and build its core.
+    """Validate the raw parameters of `node` (once per run) and build its core.
 
     Parameters
     ----------
     node : str
-        A loop node (key of :data:`CORES`).
+        A loop node (key of `CORES`).
     raw : dict or sequence of dict
         Raw parameters of one run, or of each run of a batch.
     lanes : fahv.lanes.Lanes, optional

@@ -1,14 +1,14 @@
 r"""The SIL graph, written once: loop topics, their message types, and the node table.
 
-One control step k (t_k = k Ts) flows through the nodes in this order::
+One control step k (t_k = k Ts) flows through the nodes in this order:
 
     plant --state_k--> notch_filter --q'_k--> tube_mpc --u_k--> fault_injector --u_f,k--> plant
       \--state_k--> nominal_trajectory --(x_r, u_r, x_n, u_n)_k--/
 
-:data:`NODES` is the only description of the graph: the ROS nodes take their topics
+`NODES` is the only description of the graph: the ROS nodes take their topics
 from it, the SIL runner its executables and start order, the recorder its topics,
-:func:`fahv.loop.simulate.simulate` its call order, and ``docs/reference/architecture.md`` its
-table (:func:`markdown_table`, checked by a test).
+`fahv.loop.simulate.simulate` its call order, and `docs/reference/architecture.md` its
+table (`markdown_table`, checked by a test).
 """
 
 from __future__ import annotations
@@ -43,8 +43,8 @@ class QoS:
     """A DDS quality-of-service profile, as numbers (the library imports no ROS code).
 
     History is always keep-last; liveliness automatic, deadlines and lifespans
-    infinite. ``hsv_common`` turns it into an ``rclpy`` profile, the run writer into
-    the ``offered_qos_profiles`` of each MCAP channel.
+    infinite. `hsv_common` turns it into an `rclpy` profile, the run writer into
+    the `offered_qos_profiles` of each MCAP channel.
 
     Attributes
     ----------
@@ -61,15 +61,15 @@ class QoS:
     transient_local: bool = False
 
 
-#: QoS of every loop topic: reliable, keep-last :data:`QOS_DEPTH`, volatile.
+#: QoS of every loop topic: reliable, keep-last `QOS_DEPTH`, volatile.
 LOOP_QOS = QoS(QOS_DEPTH)
 
 #: Topic on which every node of a graph publishes its status (std_msgs/String, JSON of
-#: :func:`fahv.loop.graph.node_status`): once when it starts, on every change of state,
-#: and every :data:`STATUS_PERIOD_S` as a heartbeat. Readiness, the start of step 0, the
+#: `fahv.loop.graph.node_status`): once when it starts, on every change of state,
+#: and every `STATUS_PERIOD_S` as a heartbeat. Readiness, the start of step 0, the
 #: name of a missing or lost peer and the foreign-graph check all read it.
 STATUS_TOPIC = "/hsv/node_status"
-#: QoS of :data:`STATUS_TOPIC`: reliable, transient local, the latest statuses of each node
+#: QoS of `STATUS_TOPIC`: reliable, transient local, the latest statuses of each node
 #: (a node that joins later still learns the state of every peer).
 STATUS_QOS = QoS(20, reliable=True, transient_local=True)
 #: Heartbeat period of the node status [s wall time].
@@ -85,11 +85,11 @@ class NodeSpec:
     Attributes
     ----------
     name : str
-        Node name and executable name (``<prefix>/lib/<package>/<name>``).
+        Node name and executable name (`<prefix>/lib/<package>/<name>`).
     package : str
         ROS 2 package that installs the executable.
     inputs, outputs : tuple of str
-        Loop topics consumed and produced at each step (keys of :data:`TOPICS`).
+        Loop topics consumed and produced at each step (keys of `TOPICS`).
     previous : tuple of str
         Loop topics consumed from the previous step k - 1 (none at k = 0).
     kind : {"loop", "controller", "recorder", "replay"}
@@ -151,7 +151,7 @@ def graph_nodes(controller: str = "tube_mpc", record: bool = True) -> list[str]:
     Raises
     ------
     RunError
-        If ``controller`` is not one of :data:`CONTROLLER_NODES`.
+        If `controller` is not one of `CONTROLLER_NODES`.
     """
     if controller not in CONTROLLER_NODES:
         raise RunError(f"controller node must be one of {CONTROLLER_NODES}, got {controller!r}")
@@ -159,12 +159,12 @@ def graph_nodes(controller: str = "tube_mpc", record: bool = True) -> list[str]:
     return [n.name for n in NODES.values() if n.kind in keep or n.name == controller]
 
 
-#: Nodes of the full graph in start order, the default of parameter ``graph_nodes``.
+#: Nodes of the full graph in start order, the default of parameter `graph_nodes`.
 DEFAULT_GRAPH = graph_nodes()
 
 
 def producer_of(topic: str, nodes=None) -> str:
-    """Name of the loop node that publishes ``topic`` (among ``nodes``; '?' if none)."""
+    """Name of the loop node that publishes `topic` (among `nodes`; '?' if none)."""
     for n in NODES.values():
         if n.kind != "replay" and topic in n.outputs and (nodes is None or n.name in nodes):
             return n.name
@@ -172,7 +172,7 @@ def producer_of(topic: str, nodes=None) -> str:
 
 
 def replay_topics(nodes) -> tuple[list[str], list[str]]:
-    """(inputs to replay, outputs to capture) for testing ``nodes`` against a run.
+    """(inputs to replay, outputs to capture) for testing `nodes` against a run.
 
     The inputs are the loop topics the nodes consume and do not produce themselves;
     the outputs are what they produce.
@@ -180,7 +180,7 @@ def replay_topics(nodes) -> tuple[list[str], list[str]]:
     Raises
     ------
     RunError
-        On a node that is not a loop node of :data:`NODES`.
+        On a node that is not a loop node of `NODES`.
     """
     testable = sorted(n.name for n in NODES.values() if n.kind in ("loop", "controller"))
     unknown = [n for n in nodes if n not in testable]
@@ -193,7 +193,7 @@ def replay_topics(nodes) -> tuple[list[str], list[str]]:
 
 
 def markdown_table() -> str:
-    """The node table as Markdown (the table of ``docs/reference/architecture.md``)."""
+    """The node table as Markdown (the table of `docs/reference/architecture.md`)."""
     rows = ["| node | package | consumes | produces | does |", "|---|---|---|---|---|"]
     for n in NODES.values():
         cons = (
@@ -224,9 +224,9 @@ def clock_msg(k: int, Ts: float) -> dict:
 def registry_tables() -> str:
     """The registries of laws, nominal parts, variants and fault kinds as Markdown.
 
-    The tables of ``docs/reference/architecture.md`` (checked by a test), generated from
-    :data:`fahv.control.LAWS`, :data:`fahv.control.NOMINAL_SOURCES`,
-    :data:`fahv.control.VARIANTS` and :data:`fahv.plant.faults.FAULTS`.
+    The tables of `docs/reference/architecture.md` (checked by a test), generated from
+    `fahv.control.LAWS`, `fahv.control.NOMINAL_SOURCES`,
+    `fahv.control.VARIANTS` and `fahv.plant.faults.FAULTS`.
     """
     from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
     from fahv.plant.faults import FAULTS
@@ -261,7 +261,7 @@ def registry_tables() -> str:
     return "\n".join(out)
 
 
-#: Line a node process prints (``[name] closed with exit status S; DDS teardown``) after
+#: Line a node process prints (`[name] closed with exit status S; DDS teardown`) after
 #: its close, before the DDS teardown that a C-level timer bounds (hsv_common.runtime).
 TEARDOWN_MARK = "closed with exit status"
 
@@ -269,8 +269,8 @@ TEARDOWN_MARK = "closed with exit status"
 def teardown_hung(log: str) -> int | None:
     """The node's own exit status if its log shows a hung DDS teardown, else None.
 
-    ``log`` is the node's output; a hung teardown is the line ``[name] closed with exit
-    status S; DDS teardown`` followed by faulthandler's ``Timeout (...)!`` dump.
+    `log` is the node's output; a hung teardown is the line `[name] closed with exit
+    status S; DDS teardown` followed by faulthandler's `Timeout (...)!` dump.
     """
     i = log.rfind(TEARDOWN_MARK)
     if i < 0 or "Timeout (" not in log[i:]:

@@ -1,18 +1,18 @@
 """Node parameters of the SIL graph: declarations, validation, and their values per run.
 
-Every parameter is a :class:`fahv.config.Field`; the run spec's values reuse the fields
-of the design and scenario files (:mod:`fahv.spec.schema`: the loop imports the files'
+Every parameter is a `fahv.config.Field`; the run spec's values reuse the fields
+of the design and scenario files (`fahv.spec.schema`: the loop imports the files'
 package, no design code), so Ts, the command, the notch and the fault have one range
-everywhere. :func:`specs` lists the parameters of each node (the controller's include
+everywhere. `specs` lists the parameters of each node (the controller's include
 every registered law's own parameters, the fault injector's every registered fault
 kind's); the ROS nodes generate their descriptors from it
-(``hsv_common``) and call :func:`validate` once at start-up, as the in-process
+(`hsv_common`) and call `validate` once at start-up, as the in-process
 simulator does on the same dictionaries, so both build the same objects from the
 same numbers.
 
-A design becomes parameters with :func:`node_parameters`: one standard ROS 2
-parameter file (``<node>: ros__parameters: {...}``) per run; matrices are flattened
-row-major with their shape in ``<name>_shape``. No ROS import here.
+A design becomes parameters with `node_parameters`: one standard ROS 2
+parameter file (`<node>: ros__parameters: {...}`) per run; matrices are flattened
+row-major with their shape in `<name>_shape`. No ROS import here.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def specs() -> dict[str, tuple[Field, ...]]:
     Returns
     -------
     dict
-        ``{node: (Field, ...)}`` for plant, fault_injector, notch_filter,
+        `{node: (Field, ...)}` for plant, fault_injector, notch_filter,
         nominal_trajectory and each controller node name.
     """
     controller = (
@@ -166,15 +166,15 @@ def _check_shapes(node: str, v: dict) -> None:
 
 
 def validate(node: str, values: dict) -> dict:
-    """Check every parameter of ``node`` and return them typed (the one validation).
+    """Check every parameter of `node` and return them typed (the one validation).
 
     Parameters
     ----------
     node : str
-        A key of :func:`specs`.
+        A key of `specs`.
     values : dict
         Parameter name -> value as loaded from the parameter file (flat names with
-        dots, matrices flattened plus ``<name>_shape``). Unknown names are ignored.
+        dots, matrices flattened plus `<name>_shape`). Unknown names are ignored.
 
     Returns
     -------
@@ -196,10 +196,10 @@ def validate(node: str, values: dict) -> dict:
 
 
 def flat_parameter(name: str, value) -> dict:
-    """A node parameter as the parameter files hold it: ``{name: value}``.
+    """A node parameter as the parameter files hold it: `{name: value}`.
 
-    An array (any shape) becomes ``{name: flat list, name_shape: shape}`` (how F, N,
-    u_lo, ... reach the nodes; e.g. for ``simulate(..., overrides=...)``); other values
+    An array (any shape) becomes `{name: flat list, name_shape: shape}` (how F, N,
+    u_lo, ... reach the nodes; e.g. for `simulate(..., overrides=...)`); other values
     are kept as given. Raises nothing.
     """
     if isinstance(value, np.ndarray):
@@ -215,19 +215,19 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     ----------
     design : fahv.spec.artefacts.Design
     variant : str, optional
-        A variant of the run spec (:data:`fahv.control.VARIANTS`; default: its
+        A variant of the run spec (`fahv.control.VARIANTS`; default: its
         first). The variant gives the law (its controller node, the nominal node's
         mode, the law's own parameters), the notch setting (as in the design, off, or
-        centred on flexible mode 2) and the gain F: the design's ``F_<variant>`` if it
-        designed one for the variant's loop through the notch, else ``F``.
+        centred on flexible mode 2) and the gain F: the design's `F_<variant>` if it
+        designed one for the variant's loop through the notch, else `F`.
     watchdog_s : float
         Wall-clock watchdog of every node [s].
 
     Returns
     -------
     dict
-        ``{node: {name: value}}`` with matrices flattened (lists) plus ``<name>_shape``;
-        wrap each in ``{"ros__parameters": ...}`` for a ROS 2 parameter file.
+        `{node: {name: value}}` with matrices flattened (lists) plus `<name>_shape`;
+        wrap each in `{"ros__parameters": ...}` for a ROS 2 parameter file.
 
     Raises
     ------
@@ -326,7 +326,7 @@ def controller_node(params: dict) -> str:
     Raises
     ------
     ParameterError
-        If none of :data:`fahv.loop.graph.CONTROLLER_NODES` is among them.
+        If none of `fahv.loop.graph.CONTROLLER_NODES` is among them.
     """
     for name in CONTROLLER_NODES:
         if name in params:
@@ -335,5 +335,5 @@ def controller_node(params: dict) -> str:
 
 
 def parameter_file(nodes: dict) -> dict:
-    """``{node: {"ros__parameters": params}}``: the layout of a ROS 2 parameter file."""
+    """`{node: {"ros__parameters": params}}`: the layout of a ROS 2 parameter file."""
     return {k: {"ros__parameters": v} for k, v in nodes.items()}

@@ -1,32 +1,32 @@
 """What a node of the SIL graph knows about its peers: readiness, missing nodes, foreign graphs.
 
-Every node of a graph publishes its status on :data:`fahv.loop.graph.STATUS_TOPIC`
-(a JSON object, :func:`status`) when it starts, whenever its state changes, and every
-:data:`fahv.loop.graph.STATUS_PERIOD_S` as a heartbeat; it exits with a last status
-that carries its exit status and reason. :class:`Peers` keeps the latest status of
+Every node of a graph publishes its status on `fahv.loop.graph.STATUS_TOPIC`
+(a JSON object, `status`) when it starts, whenever its state changes, and every
+`fahv.loop.graph.STATUS_PERIOD_S` as a heartbeat; it exits with a last status
+that carries its exit status and reason. `Peers` keeps the latest status of
 every node instance it heard of and answers, from them alone (no ROS code here, so
 the rules are tested without a graph):
 
-- which nodes of the graph are not ready yet, and why (:meth:`Peers.not_ready`);
+- which nodes of the graph are not ready yet, and why (`Peers.not_ready`);
 - which nodes are missing: never started, exited, or lost (no heartbeat for
-  :data:`fahv.loop.graph.STATUS_LOST_S`), :meth:`Peers.missing`; a node whose input
+  `fahv.loop.graph.STATUS_LOST_S`), `Peers.missing`; a node whose input
   stays silent names these, not the neighbour that waits for them as well;
-- whether a peer ended the run with a verdict (:meth:`Peers.run_verdict`,
-  :mod:`fahv.verdict`): every node then stops with it, and the recorder finishes the
+- whether a peer ended the run with a verdict (`Peers.run_verdict`,
+  `fahv.verdict`): every node then stops with it, and the recorder finishes the
   file with it;
 - whether another graph runs in the same ROS domain and which of the two joined
-  second (:meth:`Peers.foreign_verdict`). Nodes of one graph share a run id (parameter
-  ``run_id``, written by ``fahv sil`` for every node); a graph joined when its first
+  second (`Peers.foreign_verdict`). Nodes of one graph share a run id (parameter
+  `run_id`, written by `fahv sil` for every node); a graph joined when its first
   node started.
 
-A status::
+A status:
 
     {"node": "plant", "pid": 4242, "run": "case1_tube_mpc_sil_...", "start": 1.7e9,
      "state": "ready", "k": 0, "stamp": 1.7e9, "waiting": [], "exit": None, "reason": "",
      "verdict": None}
 
-``start`` and ``stamp`` are wall-clock times [s] (``time.time()``; the graph runs on
-one host). ``state`` is one of :data:`STATES`.
+`start` and `stamp` are wall-clock times [s] (`time.time()`; the graph runs on
+one host). `state` is one of `STATES`.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def status(
     stamp: float | None = None,
     verdict: dict | None = None,
 ) -> str:
-    """One status message as JSON text (the ``data`` of a std_msgs/String).
+    """One status message as JSON text (the `data` of a std_msgs/String).
 
     Parameters
     ----------
@@ -69,20 +69,20 @@ def status(
     start : float
         Wall time when the node started [s].
     state : str
-        One of :data:`STATES`.
+        One of `STATES`.
     k : int
         Current step.
     waiting : sequence of str
         What the node still waits for (unmatched topics, peers).
     exit_status : int, optional
-        Exit status, with ``state`` "exited".
+        Exit status, with `state` "exited".
     reason : str
         Why it exited (the error message), or what it waits for.
     stamp : float, optional
         Wall time of this status [s]; now by default.
     verdict : dict, optional
-        With ``state`` "exited": the verdict that ended the run
-        (:meth:`fahv.verdict.Verdict.as_dict`), found by this node or learnt from a peer.
+        With `state` "exited": the verdict that ended the run
+        (`fahv.verdict.Verdict.as_dict`), found by this node or learnt from a peer.
 
     Raises
     ------
@@ -139,7 +139,7 @@ class Peers:
     start : float
         Its start [s wall time].
     graph_nodes : sequence of str
-        Nodes of its graph (parameter ``graph_nodes``).
+        Nodes of its graph (parameter `graph_nodes`).
     lost_s : float
         A peer whose latest status is older than this is lost [s].
     """
@@ -151,7 +151,7 @@ class Peers:
     graph_nodes: list
     lost_s: float = STATUS_LOST_S
     table: dict = field(default_factory=dict)
-    #: Count of changes of :attr:`table` by :meth:`update` (keys the cache of :meth:`failed`).
+    #: Count of changes of `table` by `update` (keys the cache of `failed`).
     version: int = field(default=0, init=False, compare=False)
     _failed: tuple = field(default=(-1, ()), init=False, repr=False, compare=False)
 
@@ -173,7 +173,7 @@ class Peers:
         return s["state"] != "exited" and now - s["stamp"] <= self.lost_s
 
     def own(self, name: str) -> dict | None:
-        """Latest status of node ``name`` of this node's run (None if never heard of)."""
+        """Latest status of node `name` of this node's run (None if never heard of)."""
         mine = [s for (n, _, r), s in self.table.items() if n == name and r == self.run]
         return max(mine, key=lambda s: s["stamp"]) if mine else None
 
@@ -182,10 +182,10 @@ class Peers:
         return [n for n in self.graph_nodes if n != self.node]
 
     def describe(self, name: str, now: float | None = None) -> str | None:
-        """Why peer ``name`` is missing (None if it is alive).
+        """Why peer `name` is missing (None if it is alive).
 
-        Returns e.g. ``fault_injector (never started)``, ``tube_mpc (lost: no status
-        for 6.1 s, last at step 812)``, ``tube_mpc (exited with status 3: ...)``.
+        Returns e.g. `fault_injector (never started)`, `tube_mpc (lost: no status
+        for 6.1 s, last at step 812)`, `tube_mpc (exited with status 3: ...)`.
         """
         now = time.time() if now is None else now
         s = self.own(name)
@@ -224,9 +224,9 @@ class Peers:
     def failed(self) -> list[str]:
         """Peers that exited with a non-zero status, described (their own reasons).
 
-        A peer that exited with the run's verdict (:meth:`run_verdict`) did not fail:
+        A peer that exited with the run's verdict (`run_verdict`) did not fail:
         the run ended. Depends on the table only, so it is computed once per
-        :attr:`version` (every node asks between any two spins).
+        `version` (every node asks between any two spins).
         """
         if self._failed[0] != self.version:
             out = []
@@ -244,15 +244,15 @@ class Peers:
 
         The root cause comes first: the peers that never started or were lost (a
         failed peer may have stopped because of them). When every failed peer names
-        one of those in its own reason, they are only listed (``stopped with plant,
-        which exited for it too``); otherwise the first failed peer with a reason of
+        one of those in its own reason, they are only listed (`stopped with plant,
+        which exited for it too`); otherwise the first failed peer with a reason of
         its own is described.
 
         Returns
         -------
         str or None
-            E.g. ``missing fault_injector (never started); stopped with plant, which
-            exited for it too`` or ``peer tube_mpc (exited with status 2 at step 0: ...)``.
+            E.g. `missing fault_injector (never started); stopped with plant, which
+            exited for it too` or `peer tube_mpc (exited with status 2 at step 0: ...)`.
         """
         failed = self.failed()
         if not failed:
@@ -277,7 +277,7 @@ class Peers:
         return out
 
     def ready(self, name: str) -> bool:
-        """True if peer ``name`` of this run announced itself ready (or is further)."""
+        """True if peer `name` of this run announced itself ready (or is further)."""
         s = self.own(name)
         return s is not None and s["state"] in ("ready", "running", "done")
 
@@ -307,9 +307,9 @@ class Peers:
         Returns
         -------
         None or (str, str)
-            None when no other graph is seen; ``("stop", message)`` when this graph
+            None when no other graph is seen; `("stop", message)` when this graph
             joined second, or when the two cannot be told apart (the same run id twice);
-            ``("stay", message)`` when the other graph joined after this one (it stops
+            `("stay", message)` when the other graph joined after this one (it stops
             by itself; this node ignores its messages, which are of earlier steps).
         """
         now = time.time() if now is None else now
@@ -341,7 +341,7 @@ class Peers:
         )
 
     def explains(self, producer: str, now: float | None = None) -> bool:
-        """True if an extra publisher of ``producer``'s topic is a later graph's node."""
+        """True if an extra publisher of `producer`'s topic is a later graph's node."""
         mine = self.joined(self.run)
         for run, nodes in self.foreign(now).items():
             if self.joined(run) > mine and any(s["node"] == producer for s in nodes):

@@ -1,8 +1,8 @@
 """In-process closed loop: the node computations of the SIL graph, called in its order.
 
 One step k (t_k = k Ts), the order of the node graph (docs/reference/architecture.md), each line one
-``*Core`` of :mod:`fahv.loop.cores` built from that node's parameters
-(:func:`fahv.loop.params.node_parameters`), for B runs at once::
+`*Core` of `fahv.loop.cores` built from that node's parameters
+(`fahv.loop.params.node_parameters`), for B runs at once:
 
     state_k   = plant.state()                               (plant, + /clock)
     q'_k      = notch.on_state(state_k)                     (notch_filter)
@@ -11,11 +11,11 @@ One step k (t_k = k Ts), the order of the node graph (docs/reference/architectur
     u_f,k, f_k = fault.on_command(u_k)                      (fault_injector)
     plant.advance(u_f,k): integrate [t_k, t_k+1], saturated u_f,k held (ZOH).
 
-:func:`simulate` runs one run (B = 1) and can write every message to a run file
-(:class:`fahv.runs.writer.RunWriter`) with the topics and types of the SIL recorder; the
-campaign engine runs batches of runs through the same :class:`Loop`
-(:func:`fahv.loop.batch.simulate_batch`). :class:`History` turns the messages of
-either kind of run, simulated or recorded, into :class:`RunResult` arrays.
+`simulate` runs one run (B = 1) and can write every message to a run file
+(`fahv.runs.writer.RunWriter`) with the topics and types of the SIL recorder; the
+campaign engine runs batches of runs through the same `Loop`
+(`fahv.loop.batch.simulate_batch`). `History` turns the messages of
+either kind of run, simulated or recorded, into `RunResult` arrays.
 """
 
 from __future__ import annotations
@@ -39,10 +39,10 @@ from fahv.msg import (
 )
 from fahv.verdict import RunEnded
 
-#: Counters of /hsv/tube_status (``lmi_<name>``): the off-line RMPC counts its steps
-#: outside its largest ellipsoid as ``failed``.
+#: Counters of /hsv/tube_status (`lmi_<name>`): the off-line RMPC counts its steps
+#: outside its largest ellipsoid as `failed`.
 LMI_COUNTS = ("failed",)
-#: Counters of the nominal MPC's QP in /hsv/nominal (``qp_<name>``).
+#: Counters of the nominal MPC's QP in /hsv/nominal (`qp_<name>`).
 QP_COUNTS = ("solves", "fallback", "terminal", "recovered")
 #: Loop nodes in the order of one step (the controller node is added per run).
 LOOP_NODES = ("plant", "notch_filter", "nominal_trajectory", "fault_injector")
@@ -69,20 +69,20 @@ class RunResult:
     u_applied : (N, 2) ndarray
         Input after the fault injector (the plant saturates it).
     h_c, V_c : (N,) ndarray
-        Case command [ft, ft/s]; ``h_g``, ``V_g`` the governed reference.
+        Case command [ft, ft/s]; `h_g`, `V_g` the governed reference.
     tube_level : (N,) ndarray
         e' N^-1 e (<= 1 inside the tube Z; NaN for the RMPC).
     fault_active : (N,) bool ndarray
         Fault applied at the step.
     lmi_counts : (1,) int ndarray
         (RMPC) steps with the state outside its largest ellipsoid over the run
-        (:data:`LMI_COUNTS`; zero for the tube laws).
+        (`LMI_COUNTS`; zero for the tube laws).
     info : dict
         Variant, case name, metadata.
     qp_counts : (4,) int ndarray
         Nominal MPC QPs accepted, nominal steps on the shifted plan and on the
         terminal law, re-plans by the recovery QP over the run (zeros without the
-        online MPC; :data:`QP_COUNTS`).
+        online MPC; `QP_COUNTS`).
     """
 
     t: np.ndarray
@@ -104,7 +104,7 @@ class RunResult:
 
 
 class History:
-    """The arrays of :class:`RunResult` for B runs, filled one step at a time.
+    """The arrays of `RunResult` for B runs, filled one step at a time.
 
     Parameters
     ----------
@@ -172,7 +172,7 @@ class History:
         self.count += 1
 
     def counts(self, b: int) -> tuple[np.ndarray, np.ndarray]:
-        """LMI (1,) and QP (4,) counters of run ``b`` at the last stored step (zeros before)."""
+        """LMI (1,) and QP (4,) counters of run `b` at the last stored step (zeros before)."""
         if self._counters is None:
             return np.zeros(len(LMI_COUNTS), dtype=int), np.zeros(4, dtype=int)
         tube, nom = self._counters
@@ -181,7 +181,7 @@ class History:
         return np.array([c[b] for c in lmi], dtype=int), np.array([c[b] for c in qp], dtype=int)
 
     def result(self, b: int, info: dict, n: int | None = None) -> RunResult:
-        """:class:`RunResult` of run ``b`` over its first ``n`` steps (all stored ones)."""
+        """`RunResult` of run `b` over its first `n` steps (all stored ones)."""
         n = self.count if n is None else min(int(n), self.count)
         col = {k: np.ascontiguousarray(v[:n, b]) for k, v in self.a.items()}
         lmi, qp = self.counts(b)
@@ -189,16 +189,16 @@ class History:
 
 
 def run_result(records: dict, info: dict | None = None) -> RunResult:
-    """:class:`RunResult` of one recorded run from its step-aligned messages.
+    """`RunResult` of one recorded run from its step-aligned messages.
 
     Parameters
     ----------
     records : dict[str, list[dict]]
-        Per loop topic (:data:`fahv.loop.graph.TOPICS`), the message fields (lane form,
-        :meth:`fahv.msg.LoopMessage.lane`) of steps 0..N-1 in order (e.g. from
-        :func:`fahv.runs.bag.step_arrays`).
+        Per loop topic (`fahv.loop.graph.TOPICS`), the message fields (lane form,
+        `fahv.msg.LoopMessage.lane`) of steps 0..N-1 in order (e.g. from
+        `fahv.runs.bag.step_arrays`).
     info : dict, optional
-        Stored as ``RunResult.info``.
+        Stored as `RunResult.info`.
 
     Raises
     ------
@@ -232,12 +232,12 @@ def run_parameters(design, variant: str | None, duration, overrides: dict | None
     duration : float or None
         Simulated time [s] (the case's by default).
     overrides : dict or None
-        ``{node: {name: value}}`` applied last.
+        `{node: {name: value}}` applied last.
 
     Returns
     -------
     dict
-        ``{node: {name: value}}`` (flat, unvalidated: :func:`fahv.loop.cores.build_core`
+        `{node: {name: value}}` (flat, unvalidated: `fahv.loop.cores.build_core`
         validates them).
 
     Raises
@@ -266,7 +266,7 @@ class Loop:
     Parameters
     ----------
     runs : sequence of dict
-        Per run, its raw node parameters ``{node: {name: value}}`` (:func:`run_parameters`);
+        Per run, its raw node parameters `{node: {name: value}}` (`run_parameters`);
         the runs share every design value and the controller node.
     lanes : fahv.lanes.Lanes
         The runs' alive flags (strict: a single run that raises).
@@ -290,7 +290,7 @@ class Loop:
         self.cmd: ControlCommand | None = None
 
     def step(self, k: int) -> tuple:
-        """Messages of step k in topic order (:data:`fahv.loop.graph.TOPICS`)."""
+        """Messages of step k in topic order (`fahv.loop.graph.TOPICS`)."""
         self.lanes.step = k
         state = self.plant.state()
         qf = self.notch.on_state(state)
@@ -303,11 +303,11 @@ class Loop:
 
 
 def run_info(design, variant: str, Ts: float, plant: dict | None = None) -> dict:
-    """``RunResult.info`` of a run: variant, case name, Ts and the case's fault.
+    """`RunResult.info` of a run: variant, case name, Ts and the case's fault.
 
-    With the run's ``plant`` node parameters also ``plant_params`` ({name: value} of
-    its perturbed parameters) and ``vehicle_file``: what the metric of the attitude
-    from the dispersed vehicle's own trim needs (:func:`fahv.runs.metrics.metrics`).
+    With the run's `plant` node parameters also `plant_params` ({name: value} of
+    its perturbed parameters) and `vehicle_file`: what the metric of the attitude
+    from the dispersed vehicle's own trim needs (`fahv.runs.metrics.metrics`).
     """
     case = design.case
     info = {"variant": variant, "case": case["name"], "Ts": Ts, "fault": case["fault"]}
@@ -333,17 +333,17 @@ def simulate(
     ----------
     design : fahv.spec.artefacts.Design
     variant : str, optional
-        One of the case's variants (:data:`fahv.control.VARIANTS`); the first by default.
+        One of the case's variants (`fahv.control.VARIANTS`); the first by default.
     duration : float, optional
         Simulated time [s]; the case duration by default.
     progress : callable, optional
         Iterable wrapper (tqdm).
     writer : fahv.runs.writer.RunWriter, optional
-        Receives every message of every step (the SIL graph's topics): ``write(topic,
-        k, msg)`` with a :class:`fahv.msg.LoopMessage` of one run (the Clock as fields).
+        Receives every message of every step (the SIL graph's topics): `write(topic,
+        k, msg)` with a `fahv.msg.LoopMessage` of one run (the Clock as fields).
     overrides : dict, optional
-        Node parameter overrides ``{node: {name: value}}`` applied last (e.g.
-        ``{"plant": {"params.m": 1.05 * m}}``); validated like every parameter.
+        Node parameter overrides `{node: {name: value}}` applied last (e.g.
+        `{"plant": {"params.m": 1.05 * m}}`); validated like every parameter.
 
     Returns
     -------
@@ -352,10 +352,10 @@ def simulate(
     Raises
     ------
     RunEnded
-        If the run ends before its duration with a verdict (:mod:`fahv.verdict`: the
+        If the run ends before its duration with a verdict (`fahv.verdict`: the
         vehicle left the flight envelope, a non-finite state or input, a nominal that
         cannot be scheduled); the message names the verdict, the time, the step and
-        the node, ``exc.partial`` holds the steps flown before (None before step 1).
+        the node, `exc.partial` holds the steps flown before (None before step 1).
     RunError
         On an unknown variant.
     ParameterError
@@ -371,18 +371,18 @@ def simulate(
 def simulate_parameters(params: dict, progress=None, writer=None, info: dict | None = None):
     """Run one run in process from its node parameters alone (B = 1).
 
-    The loop of :func:`simulate`, for a run given by its parameter file rather than a
-    design (e.g. the one a run file holds: ``fahv campaign rerun RUN``).
+    The loop of `simulate`, for a run given by its parameter file rather than a
+    design (e.g. the one a run file holds: `fahv campaign rerun RUN`).
 
     Parameters
     ----------
     params : dict
-        ``{node: {name: value}}`` of every loop node and the controller node
-        (:func:`run_parameters`; other sections, e.g. the recorder's, are ignored).
+        `{node: {name: value}}` of every loop node and the controller node
+        (`run_parameters`; other sections, e.g. the recorder's, are ignored).
     progress, writer
-        As :func:`simulate`.
+        As `simulate`.
     info : dict, optional
-        ``RunResult.info``.
+        `RunResult.info`.
 
     Returns
     -------
@@ -391,7 +391,7 @@ def simulate_parameters(params: dict, progress=None, writer=None, info: dict | N
     Raises
     ------
     RunEnded
-        If the run ends before its duration with a verdict (as :func:`simulate`).
+        If the run ends before its duration with a verdict (as `simulate`).
     ParameterError
         On an invalid node parameter (names the node and the key).
     """

@@ -1,10 +1,10 @@
 """The wire codec of the loop topics: typed messages <-> CDR bytes, one codec for all.
 
-The message definitions are those of ``src/fahv/msg/*.msg`` (also the sources of the
-``hsv_interfaces`` package), registered in a ``rosbags`` type store. :func:`encode`
-serialises a loop message (:mod:`fahv.msg`) to the CDR bytes (little-endian XCDR1) the
-SIL nodes publish and the run files hold, :func:`decode_message` reads them back into the
-typed message of one run, and :func:`step_of` reads a message's step index alone (for the
+The message definitions are those of `src/fahv/msg/*.msg` (also the sources of the
+`hsv_interfaces` package), registered in a `rosbags` type store. `encode`
+serialises a loop message (`fahv.msg`) to the CDR bytes (little-endian XCDR1) the
+SIL nodes publish and the run files hold, `decode_message` reads them back into the
+typed message of one run, and `step_of` reads a message's step index alone (for the
 recorder, which stores bytes undecoded). rclpy reads these bytes as the generated
 messages, and the nodes read the bytes rclpy writes (a test checks both ways).
 """
@@ -24,7 +24,7 @@ from fahv.msg import MESSAGES, MSG_DIR, PKG, STEP_FIELDS, LoopMessage
 
 @functools.cache
 def typestore():
-    """Typestore (rosbags) of ROS 2 Jazzy plus the ``hsv_interfaces`` messages.
+    """Typestore (rosbags) of ROS 2 Jazzy plus the `hsv_interfaces` messages.
 
     Raises
     ------
@@ -68,7 +68,7 @@ _SCALARS = {"float64": np.float64, "int64": np.int64, "bool": np.bool_}
 def _layout(msgtype: str) -> tuple:
     """(typed class, rosbags class, ((name, kind), ...)) of a loop message type.
 
-    ``kind`` is ``step`` for k and t, else the field's ROS type.
+    `kind` is `step` for k and t, else the field's ROS type.
     """
     cls = MESSAGES[msgtype]
     fields = tuple(
@@ -81,21 +81,21 @@ def encode(topic: str, msg) -> bytes:
     """CDR bytes of a loop-topic message: the one conversion to the wire format.
 
     The nodes publish these bytes, the recorder writes them, and the in-process
-    writer (:mod:`fahv.runs.writer`) writes the same bytes for the same message.
+    writer (`fahv.runs.writer`) writes the same bytes for the same message.
 
     Parameters
     ----------
     topic : str
-        A loop topic (:data:`fahv.loop.graph.TOPICS`).
+        A loop topic (`fahv.loop.graph.TOPICS`).
     msg : fahv.msg.LoopMessage or dict
         A message of one run (its lane 0 is written), or the fields as a dict (the
-        lane form of :meth:`fahv.msg.LoopMessage.lane`, or the Clock's fields of
-        :func:`fahv.loop.graph.clock_msg`).
+        lane form of `fahv.msg.LoopMessage.lane`, or the Clock's fields of
+        `fahv.loop.graph.clock_msg`).
 
     Raises
     ------
     KeyError
-        If ``topic`` is not a loop topic, or a field is missing from a dict.
+        If `topic` is not a loop topic, or a field is missing from a dict.
     """
     ts = typestore()
     msgtype = TOPICS[topic]
@@ -113,16 +113,16 @@ def encode(topic: str, msg) -> bytes:
 
 
 def decode_message(topic: str, data: bytes):
-    """CDR bytes of a loop topic -> its :mod:`fahv.msg` message of one run (B = 1).
+    """CDR bytes of a loop topic -> its `fahv.msg` message of one run (B = 1).
 
-    The inverse of :func:`encode` for a typed message: ``k`` an int, ``t`` a float,
+    The inverse of `encode` for a typed message: `k` an int, `t` a float,
     a scalar field a (1,) array of its dtype, a float64[] field a (1, n) float array,
     a string a 1-tuple. Little- and big-endian CDR are read (the header says which).
 
     Raises
     ------
     KeyError
-        If ``topic`` is not a loop topic of a typed message (``/clock`` is not).
+        If `topic` is not a loop topic of a typed message (`/clock` is not).
     """
     cls, _, fields = _layout(TOPICS[topic])
     wire = typestore().deserialize_cdr(data, TOPICS[topic])
@@ -143,8 +143,8 @@ def decode_message(topic: str, data: bytes):
 def step_of(topic: str, data: bytes, Ts_ns: int) -> int:
     """Step index k of a serialised loop message, without decoding the rest of it.
 
-    Every ``hsv_interfaces`` loop message starts with ``int64 k`` (aligned at the start
-    of the payload, after the 4-byte CDR header); ``/clock`` carries t_k = k Ts. The
+    Every `hsv_interfaces` loop message starts with `int64 k` (aligned at the start
+    of the payload, after the 4-byte CDR header); `/clock` carries t_k = k Ts. The
     recorder stores the bytes undecoded, so it reads k alone.
 
     Parameters
@@ -154,7 +154,7 @@ def step_of(topic: str, data: bytes, Ts_ns: int) -> int:
     data : bytes
         The message's CDR bytes (little- or big-endian).
     Ts_ns : int
-        Sample time Ts [ns] (only ``/clock`` needs it).
+        Sample time Ts [ns] (only `/clock` needs it).
     """
     endian = "<" if data[1] & 1 else ">"
     if topic == "/clock":

@@ -2,10 +2,10 @@
 
 A multi-threaded BLAS may sum in another order from run to run and from thread count to
 thread count. The TP model's convex hull manipulation is sensitive to that: measured on
-``cm_certified``, two OpenBLAS threads instead of one moved its weighting functions W_V
+`cm_certified`, two OpenBLAS threads instead of one moved its weighting functions W_V
 by 1.0e-8 and its vertices A, B by 1.3e-10 (relative). The model is therefore built on
-one BLAS thread by every path (``fahv design``, ``fahv verify``, a user's script that set
-``OPENBLAS_NUM_THREADS`` or imported numpy first), through threadpoolctl, which limits
+one BLAS thread by every path (`fahv design`, `fahv verify`, a user's script that set
+`OPENBLAS_NUM_THREADS` or imported numpy first), through threadpoolctl, which limits
 the BLAS libraries loaded in the process (numpy's and scipy's OpenBLAS).
 """
 
@@ -21,7 +21,7 @@ T = TypeVar("T")
 
 
 def one_blas_thread(func: Callable[..., T]) -> Callable[..., T]:
-    """Run ``func`` with every loaded BLAS library limited to one thread.
+    """Run `func` with every loaded BLAS library limited to one thread.
 
     Parameters
     ----------

@@ -26,20 +26,20 @@ from fahv.model.vehicle import (
 def density(h, vp: VehicleParams):
     """Air density rho(h) [slug/ft^3], eq. (3) with the exponent (h - h_0)/h_s.
 
-    The paper prints ``exp(-h-h_s/h_0)``; the exponential model of Parker et al.
-    2007 is ``rho_0 exp(-(h - h_0)/h_s)`` (docs/reference/vehicle_data.md).
+    The paper prints `exp(-h-h_s/h_0)`; the exponential model of Parker et al.
+    2007 is `rho_0 exp(-(h - h_0)/h_s)` (docs/reference/vehicle_data.md).
 
     Parameters
     ----------
     h : float or ndarray
         Altitude [ft], real or complex (complex-step differentiation).
     vp : VehicleParams
-        Uses ``rho_0`` [slug/ft^3], ``h_0`` [ft] and ``h_s`` [ft].
+        Uses `rho_0` [slug/ft^3], `h_0` [ft] and `h_s` [ft].
 
     Returns
     -------
     float or ndarray
-        Density [slug/ft^3], of the shape of ``h``.
+        Density [slug/ft^3], of the shape of `h`.
 
     Examples
     --------
@@ -141,7 +141,7 @@ def cm_rhs(x, u, vp: VehicleParams) -> np.ndarray:
     Notes
     -----
     The two coupled flexible equations of eq. (1) are solved exactly as one linear
-    system in (eta_1_ddot, eta_2_ddot)::
+    system in (eta_1_ddot, eta_2_ddot):
 
         [k_1             psi_1 psi_2/I] [eta_1_ddot]   [r_1]
         [psi_1 psi_2/I   k_2          ] [eta_2_ddot] = [r_2],
@@ -195,7 +195,7 @@ def _flexible_accelerations(x, M, N1, N2, vp: VehicleParams):
 def dm_rhs(x, u, vp: VehicleParams) -> np.ndarray:
     """Decoupled model DM, eq. (4): CM without the inertial coupling psi_i.
 
-    Shapes and units as :func:`cm_rhs`. q_dot = M / I_yy and
+    Shapes and units as `cm_rhs`. q_dot = M / I_yy and
     eta_i_ddot = -2 zeta_i omega_i eta_i_dot - omega_i^2 eta_i + N_i.
 
     Parameters
@@ -288,7 +288,7 @@ def ecm_rhs(x, u, vp: VehicleParams, A_q, B_q, C_q, D_q) -> np.ndarray:
 
 
 #: The functions of the CM right-hand side, in call order: compiled for the plant's batch
-#: kernel (:mod:`fahv.plant.rk4`), so keep them free of Python-only constructs.
+#: kernel (`fahv.plant.rk4`), so keep them free of Python-only constructs.
 JITABLE = (density, forces, _rigid_kinematics, _flexible_accelerations, cm_rhs)
 
 MODEL_KINDS = ("dm", "cm", "ecm")
@@ -358,7 +358,7 @@ class Model:
         Parameters
         ----------
         vehicle : Vehicle
-            Its ``state_scale`` (9,) [state units].
+            Its `state_scale` (9,) [state units].
         notch : NotchFilter, optional
             Required for "ecm": the scales of the filter's two states.
 
@@ -370,7 +370,7 @@ class Model:
         Raises
         ------
         ValueError
-            For "ecm" without ``notch``.
+            For "ecm" without `notch`.
         """
         if self.kind != "ecm":
             return vehicle.state_scale.copy()
@@ -380,7 +380,7 @@ class Model:
 
 
 def make_model(kind: str, vehicle: Vehicle | VehicleParams, notch=None) -> Model:
-    """Build a :class:`Model` of the given kind.
+    """Build a `Model` of the given kind.
 
     Parameters
     ----------

@@ -39,7 +39,7 @@ class Envelope:
     V_max: float
 
     def contains(self, h: float, V: float, rtol: float = 1e-12) -> bool:
-        """True if (h, V) lies in the closed envelope (relative tolerance ``rtol``).
+        """True if (h, V) lies in the closed envelope (relative tolerance `rtol`).
 
         Parameters
         ----------
@@ -64,7 +64,7 @@ class Envelope:
     def outside(self, h: np.ndarray, V: np.ndarray) -> np.ndarray:
         """Element-wise True where (h [ft], V [ft/s]) lies outside the closed envelope.
 
-        ``h`` and ``V`` broadcast together; NaN counts as inside (a non-finite state is
+        `h` and `V` broadcast together; NaN counts as inside (a non-finite state is
         reported by itself).
 
         Parameters
@@ -77,7 +77,7 @@ class Envelope:
         Returns
         -------
         ndarray of bool
-            Of the broadcast shape of ``h`` and ``V``.
+            Of the broadcast shape of `h` and `V`.
         """
         h, V = np.asarray(h), np.asarray(V)
         return (h < self.h_min) | (h > self.h_max) | (V < self.V_min) | (V > self.V_max)
@@ -106,7 +106,7 @@ class Envelope:
         )
 
     def check(self, h: float, V: float) -> None:
-        """Raise :class:`EnvelopeError` naming the envelope if (h, V) lies outside it.
+        """Raise `EnvelopeError` naming the envelope if (h, V) lies outside it.
 
         Parameters
         ----------

@@ -65,7 +65,7 @@ def pole_map(vehicle: Vehicle, h: float, V: float, path: Path) -> Path:
     Returns
     -------
     Path
-        ``path``, the PNG written.
+        `path`, the PNG written.
     """
     lm = linearize(vehicle, h, V, "cm")
     modes = classify_modes(lm.A, vehicle.params.omega_1, vehicle.params.omega_2)
@@ -113,8 +113,8 @@ def bode_model_vs_lpv(
 ) -> Path:
     """Bode of the Jacobian linearisation vs the polytopic LPV model at an off-grid p.
 
-    Paper Fig. 2 (``tp.kind == "dm"``) and Fig. 8 (``tp.kind == "ecm"``, codesigned
-    model; ``notch`` required). Channels q (or q') / delta_e, alpha / delta_e, V / Phi.
+    Paper Fig. 2 (`tp.kind == "dm"`) and Fig. 8 (`tp.kind == "ecm"`, codesigned
+    model; `notch` required). Channels q (or q') / delta_e, alpha / delta_e, V / Phi.
 
     Parameters
     ----------
@@ -129,12 +129,12 @@ def bode_model_vs_lpv(
     path : Path
         PNG file to write.
     notch : NotchFilter, optional
-        The notch of the ECM; required when ``tp.kind == "ecm"``.
+        The notch of the ECM; required when `tp.kind == "ecm"`.
 
     Returns
     -------
     Path
-        ``path``, the PNG written.
+        `path`, the PNG written.
     """
     kind = tp.kind
     lm = linearize(vehicle, h, V, kind, notch)
@@ -196,7 +196,7 @@ def notch_effect(
     Returns
     -------
     Path
-        ``path``, the PNG written.
+        `path`, the PNG written.
     """
     lm = linearize(vehicle, h, V, "cm")
     fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
@@ -258,7 +258,7 @@ def notch_modes(
     Returns
     -------
     Path
-        ``path``, the PNG written.
+        `path`, the PNG written.
     """
     lm = linearize(vehicle, h, V, "cm")
     fig, am, ph = _bode_axes(

@@ -42,9 +42,9 @@ def jacobian_complex_step(fun: Callable[[np.ndarray], np.ndarray], z: np.ndarray
 def jacobian_central_difference(
     fun: Callable[[np.ndarray], np.ndarray], z: np.ndarray, step: np.ndarray
 ) -> np.ndarray:
-    """Jacobian by central differences with per-coordinate steps ``step`` (n,).
+    """Jacobian by central differences with per-coordinate steps `step` (n,).
 
-    Used only to check :func:`jacobian_complex_step`; truncation error O(step^2).
+    Used only to check `jacobian_complex_step`; truncation error O(step^2).
 
     Parameters
     ----------
@@ -53,7 +53,7 @@ def jacobian_central_difference(
     z : (n,) array_like
         Point of evaluation.
     step : (n,) array_like
-        Step per coordinate, in the units of ``z``.
+        Step per coordinate, in the units of `z`.
 
     Returns
     -------

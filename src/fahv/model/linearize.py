@@ -3,7 +3,7 @@
 Derivatives are exact to machine precision by complex-step differentiation
 (Squire & Trapp 1998; Martins, Sturdza & Alonso 2003): for a real-analytic f,
 df/dx_i = Im f(x + i h e_i) / h with no subtractive cancellation, so h = 1e-30 can
-be used. The model functions in :mod:`fahv.model.vehicle` are written to be analytic.
+be used. The model functions in `fahv.model.vehicle` are written to be analytic.
 They are checked against central finite differences in the tests.
 """
 
@@ -29,7 +29,7 @@ class LinearModel:
     u_r : (2,) ndarray
         Trim input.
     h, V : float
-        Scheduling variables p = ``[h, V]`` in ft, ft/s.
+        Scheduling variables p = `[h, V]` in ft, ft/s.
     kind : str
         "dm", "cm" or "ecm".
     """
@@ -44,7 +44,7 @@ class LinearModel:
 
 
 def linearize(vehicle, h: float, V: float, kind: str = "dm", notch=None) -> LinearModel:
-    """Trim at p = (h, V) and linearise the model ``kind`` there, eq. (6)-(9).
+    """Trim at p = (h, V) and linearise the model `kind` there, eq. (6)-(9).
 
     Parameters
     ----------
@@ -62,7 +62,7 @@ def linearize(vehicle, h: float, V: float, kind: str = "dm", notch=None) -> Line
     Raises
     ------
     EnvelopeError, TrimError
-        As :func:`fahv.model.trim.trim`.
+        As `fahv.model.trim.trim`.
 
     Examples
     --------

@@ -18,7 +18,7 @@ class PolytopicLPV:
         Discrete vertices A_i, B_i (unscaled, deviation coordinates).
     h_grid, V_grid : ndarray
     W_h, W_V : ndarray
-        Sampled weighting functions (see :func:`fahv.model.tp_model.tp_weights`).
+        Sampled weighting functions (see `fahv.model.tp_model.tp_weights`).
 
     Examples
     --------
@@ -66,7 +66,7 @@ class PolytopicLPV:
 
         Notes
         -----
-        The weights are those of :func:`fahv.model.tp_model.tp_weights` (eq. 11); each
+        The weights are those of `fahv.model.tp_model.tp_weights` (eq. 11); each
         point's sum is one (1, R) @ (R, n n) product, so a point's matrices do not
         depend on the other points.
         """
@@ -86,7 +86,7 @@ class PolytopicLPV:
         return A, B
 
     def system(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
-        """(A(p) (n, n), B(p) (n, m)) at one point p = (h, V): :meth:`systems` of one point.
+        """(A(p) (n, n), B(p) (n, m)) at one point p = (h, V): `systems` of one point.
 
         Parameters
         ----------

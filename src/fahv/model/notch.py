@@ -1,12 +1,12 @@
 """Notch filter on the pitch-rate channel, eq. (37)-(39) of Yang et al. 2022.
 
-Continuous transfer function (eq. 38)::
+Continuous transfer function (eq. 38):
 
     H(s) = (s^2/omega_z^2 + 2 eps_z s/omega_z + 1) / (s^2/omega_p^2 + 2 eps_p s/omega_p + 1)
 
 The transfer function, the discretisation and the frequency responses come from
 python-control. The state-space form of eq. (39) is the controllable canonical
-realisation, written out (equal bit for bit to ``control.tf2ss``, tested) together with
+realisation, written out (equal bit for bit to `control.tf2ss`, tested) together with
 the per-sample update used by the simulator, the batch and the nodes: a node builds its
 filter without python-control, whose import (with scipy.signal and matplotlib) took
 0.9 s of each filtering node's start-up (docs/guide/sil.md). python-control is imported
@@ -48,7 +48,7 @@ class NotchFilter:
 
     Examples
     --------
-    The notch of ``cm_certified``: at its centre the gain is eps_z / eps_p, at 0 it is 1.
+    The notch of `cm_certified`: at its centre the gain is eps_z / eps_p, at 0 it is 1.
 
     >>> nf = NotchFilter(omega_z=19.05, eps_z=0.02, omega_p=19.05, eps_p=0.1)
     >>> num, den = nf.coefficients()
@@ -110,11 +110,11 @@ class NotchFilter:
         """State-space form of eq. (39): A_q (2, 2), B_q (2,), C_q (2,), D_q scalar.
 
         The controllable canonical realisation of eq. (38) (the one of
-        ``control.tf2ss`` and ``scipy.signal.tf2ss``, equal to them bit for bit, tested),
+        `control.tf2ss` and `scipy.signal.tf2ss`, equal to them bit for bit, tested),
         written out so that a node builds its filter without importing python-control:
         with n(s) = n_0 s^2 + n_1 s + n_2 and d(s) = d_0 s^2 + d_1 s + d_2 divided by d_0,
         A_q = [[-d_1, -d_2], [1, 0]], B_q = (1, 0), C_q = (n_1 - n_0 d_1, n_2 - n_0 d_2),
-        D_q = n_0; with ``omega_z = omega_p`` D_q = 1.
+        D_q = n_0; with `omega_z = omega_p` D_q = 1.
 
         Returns
         -------
@@ -138,9 +138,9 @@ class NotchFilter:
         return A, np.array([1.0, 0.0]), n[1:] - n[0] * d[1:], float(n[0])
 
     def state_scale(self, q_scale: float) -> np.ndarray:
-        """Typical magnitudes of (x_q1, x_q2) for a pitch-rate magnitude ``q_scale``.
+        """Typical magnitudes of (x_q1, x_q2) for a pitch-rate magnitude `q_scale`.
 
-        In the controllable canonical form of :meth:`ss` x_q2 is q filtered by
+        In the controllable canonical form of `ss` x_q2 is q filtered by
         1/(s^2 + 2 eps_p omega_p s + omega_p^2) and x_q1 its derivative, so
         x_q1 ~ q/omega_p and x_q2 ~ q/omega_p^2; used to scale the ECM.
 
@@ -219,7 +219,7 @@ class NotchFilter:
             )
 
     def magnitude(self, omega) -> np.ndarray:
-        """|H(j omega)| of the continuous filter at the frequencies ``omega``.
+        """|H(j omega)| of the continuous filter at the frequencies `omega`.
 
         Parameters
         ----------
@@ -257,14 +257,14 @@ class DiscreteNotch:
     Notes
     -----
     Tustin (bilinear) discretisation prewarped at omega_z, written as the trapezoidal
-    rule on the continuous state of eq. (39) with alpha = tan(omega_z Ts / 2) / omega_z::
+    rule on the continuous state of eq. (39) with alpha = tan(omega_z Ts / 2) / omega_z:
 
         x_q(k) = (I - alpha A_q)^-1 [(I + alpha A_q) x_q(k-1) + alpha B_q (q(k-1) + q(k))]
         q'(k)  = C_q x_q(k) + D_q q(k)
 
-    Its transfer function is that of ``NotchFilter.discretize`` (python-control's
-    ``c2d(..., "tustin", prewarp_frequency=omega_z)``, checked in the tests), and its
-    state ``x_q`` (B, 2) is in the coordinates of the continuous filter, i.e. the
+    Its transfer function is that of `NotchFilter.discretize` (python-control's
+    `c2d(..., "tustin", prewarp_frequency=omega_z)`, checked in the tests), and its
+    state `x_q` (B, 2) is in the coordinates of the continuous filter, i.e. the
     x_q1, x_q2 of the ECM state (eq. 43) that the adjustable Tube-MPC feeds back.
     Each run's products are the BLAS calls of one (2, 2) @ (2,) product, so a run's
     output does not depend on B.

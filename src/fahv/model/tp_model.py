@@ -159,7 +159,7 @@ class TPModel:
         Returns
         -------
         (R,) ndarray
-            tau_i(p), i = a r_V + b (:func:`tp_weights`).
+            tau_i(p), i = a r_V + b (`tp_weights`).
 
         Examples
         --------
@@ -197,7 +197,7 @@ class TPModel:
     def discretize(self, Ts: float) -> DiscretePolytope:
         """ZOH discretisation of every vertex with period Ts [s], eq. (12).
 
-        Uses ``scipy.signal.cont2discrete``.
+        Uses `scipy.signal.cont2discrete`.
 
         Parameters
         ----------
@@ -304,7 +304,7 @@ def _min_volume_simplex(Y: np.ndarray) -> np.ndarray:
 
 
 def _mode_weights(D: np.ndarray, axis: int, r: int) -> tuple[np.ndarray, np.ndarray]:
-    """SN/NN weighting functions (N_axis, r) of tensor D along ``axis``; singular values."""
+    """SN/NN weighting functions (N_axis, r) of tensor D along `axis`; singular values."""
     unf = np.moveaxis(D, axis, 0).reshape(D.shape[axis], -1)
     cen = unf - unf.mean(axis=0, keepdims=True)
     U, sv, _ = np.linalg.svd(cen, full_matrices=False)
@@ -345,7 +345,7 @@ def tp_transform(
     kind : str
         Label of the linearised model.
     progress : callable, optional
-        Wrapper for an iterable (e.g. ``tqdm.tqdm``) to show sampling progress.
+        Wrapper for an iterable (e.g. `tqdm.tqdm`) to show sampling progress.
 
     Returns
     -------
@@ -416,15 +416,15 @@ def approximation_error(tp: TPModel, sample, test_points) -> dict[str, float]:
     ----------
     tp : TPModel
     sample : callable
-        sample(h, V) -> (A, B) as in :func:`tp_transform`.
+        sample(h, V) -> (A, B) as in `tp_transform`.
     test_points : iterable of (h, V)
         Off-grid points [ft, ft/s].
 
     Returns
     -------
     dict
-        ``max_rel``/``mean_rel``: ||S_tp - S||_F / ||S||_F in scaled coordinates;
-        ``max_abs_scaled``: largest entry error of S_tp - S in scaled coordinates.
+        `max_rel`/`mean_rel`: ||S_tp - S||_F / ||S||_F in scaled coordinates;
+        `max_abs_scaled`: largest entry error of S_tp - S in scaled coordinates.
 
     Examples
     --------
@@ -458,7 +458,7 @@ def approximation_error(tp: TPModel, sample, test_points) -> dict[str, float]:
 def build_tp_model(
     vehicle, kind: str, r_h: int, r_V: int, n_h: int = 21, n_V: int = 21, notch=None, progress=None
 ) -> TPModel:
-    """Sample the Jacobian linearisation of ``kind`` over the envelope and TP-transform it.
+    """Sample the Jacobian linearisation of `kind` over the envelope and TP-transform it.
 
     Parameters
     ----------
@@ -517,9 +517,9 @@ def build_tp_model(
 
 
 def offgrid_points(tp: TPModel, n_random: int = 50, seed: int = 0) -> list[tuple[float, float]]:
-    """Test points off the sampling grid: all cell centres plus ``n_random`` uniform points.
+    """Test points off the sampling grid: all cell centres plus `n_random` uniform points.
 
-    The random points are drawn with ``numpy.random.default_rng(seed)``.
+    The random points are drawn with `numpy.random.default_rng(seed)`.
 
     Parameters
     ----------

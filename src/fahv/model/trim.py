@@ -99,15 +99,15 @@ def trim(
     ----------
     vehicle : Vehicle
     h : float
-        Altitude [ft], inside ``vehicle.envelope``.
+        Altitude [ft], inside `vehicle.envelope`.
     V : float
-        Speed [ft/s], inside ``vehicle.envelope``.
+        Speed [ft/s], inside `vehicle.envelope`.
     model : {"dm", "cm", "ecm"}
         Model whose full residual is checked (the equilibrium is the same).
     guess : (alpha rad, delta_e rad, Phi), optional
         Starting point of the Newton iteration.
     notch : NotchFilter, optional
-        Needed for ``model="ecm"``.
+        Needed for `model="ecm"`.
 
     Returns
     -------
@@ -118,12 +118,12 @@ def trim(
     EnvelopeError
         If (h, V) is outside the envelope (the message gives the envelope).
     TrimError
-        If the solver does not converge, the residual exceeds ``TRIM_TOL``
+        If the solver does not converge, the residual exceeds `TRIM_TOL`
         (scaled), or the trim input violates the input limits.
 
     Examples
     --------
-    The design point of ``cm_certified`` (alpha and delta_e in deg):
+    The design point of `cm_certified` (alpha and delta_e in deg):
 
     >>> import math
     >>> from fahv.model.vehicle import load_vehicle
@@ -188,7 +188,7 @@ def trim(
 
 
 def _level_residual(z, h, V, vp, zs):
-    """Scaled rigid residual of level flight at (h, V) for L points: (3, L), as :func:`trim`."""
+    """Scaled rigid residual of level flight at (h, V) for L points: (3, L), as `trim`."""
     alpha, de, Phi = z[0] * zs[0], z[1] * zs[1], z[2] * zs[2]
     L, D, T, M, _, _ = forces((h, V, alpha), (Phi, de), vp)
     V_dot = (T * np.cos(alpha) - D) / vp.m
@@ -202,7 +202,7 @@ def trim_batch(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Level-flight trims of L vehicles at L points at once (vectorised Newton, eq. 5).
 
-    The rigid equations of :func:`trim` (V_dot = alpha_dot = q_dot = 0 at theta = alpha,
+    The rigid equations of `trim` (V_dot = alpha_dot = q_dot = 0 at theta = alpha,
     q = 0) solved by Newton's method with the exact complex-step Jacobian, every point
     at once. For trims of many perturbed vehicles (the corners of the sec. 5.1 box)
     over a grid: about 1e5 trims per second.
@@ -211,7 +211,7 @@ def trim_batch(
     ----------
     params : VehicleParams
         Parameters whose fields are floats or (L,) arrays (one vehicle per point,
-        e.g. ``dataclasses.replace(vp, m=m_array)``).
+        e.g. `dataclasses.replace(vp, m=m_array)`).
     h, V : (L,) array_like
         Altitude [ft] and speed [ft/s] of each point.
     guess : (3, L) array_like
@@ -225,7 +225,7 @@ def trim_batch(
         (alpha rad, delta_e rad, Phi) of each trim.
     residual : (L,) ndarray
         Scaled rigid residual of each, max |(V_dot / 10 ft/s^2, alpha_dot / 1 deg/s,
-        q_dot / 1 deg/s^2)| (the rows :func:`trim` solves).
+        q_dot / 1 deg/s^2)| (the rows `trim` solves).
 
     Raises
     ------
@@ -281,19 +281,19 @@ def trim_grid(vehicle: Vehicle, h_grid, V_grid, model: str = "dm", notch=None):
     V_grid : (N_V,) array_like
         Speeds [ft/s], inside the envelope.
     model : {"dm", "cm", "ecm"}
-        Model whose full residual is checked (:func:`trim`).
+        Model whose full residual is checked (`trim`).
     notch : NotchFilter, optional
-        Needed for ``model="ecm"``.
+        Needed for `model="ecm"`.
 
     Returns
     -------
     list of list of TrimPoint
-        ``[[TrimPoint for V in V_grid] for h in h_grid]``.
+        `[[TrimPoint for V in V_grid] for h in h_grid]`.
 
     Raises
     ------
     EnvelopeError, TrimError
-        As :func:`trim`.
+        As `trim`.
     """
     rows = []
     for h in h_grid:
@@ -323,8 +323,8 @@ class TrimMap:
 
     Notes
     -----
-    Bicubic interpolating splines (``scipy.interpolate.RectBivariateSpline``) of each
-    component, evaluated together as one ``scipy.interpolate.NdBSpline``.
+    Bicubic interpolating splines (`scipy.interpolate.RectBivariateSpline`) of each
+    component, evaluated together as one `scipy.interpolate.NdBSpline`.
     (h, V) is clipped to the grid, which covers the envelope.
     """
 
@@ -392,16 +392,16 @@ class TrimMap:
         return v[:, :n], v[:, n:]
 
     def __call__(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
-        """(x_r (n,), u_r (2,)) at one point (h [ft], V [ft/s]): :meth:`at` of one point."""
+        """(x_r (n,), u_r (2,)) at one point (h [ft], V [ft/s]): `at` of one point."""
         x, u = self.at(h, V)
         return x[0], u[0]
 
 
 @one_blas_thread
 def trim_map(vehicle: Vehicle, n_h: int = 13, n_V: int = 13, model: str = "cm", notch=None):
-    """Trim the model on an n_h x n_V grid over the envelope and build a :class:`TrimMap`.
+    """Trim the model on an n_h x n_V grid over the envelope and build a `TrimMap`.
 
-    ``model="ecm"`` (with ``notch``) gives the 11-state trim x_r' of eq. (41).
+    `model="ecm"` (with `notch`) gives the 11-state trim x_r' of eq. (41).
 
     Parameters
     ----------
@@ -412,9 +412,9 @@ def trim_map(vehicle: Vehicle, n_h: int = 13, n_V: int = 13, model: str = "cm", 
     n_V : int
         Grid points in V (at least 4).
     model : {"dm", "cm", "ecm"}
-        Model trimmed (:func:`trim`).
+        Model trimmed (`trim`).
     notch : NotchFilter, optional
-        Needed for ``model="ecm"``.
+        Needed for `model="ecm"`.
 
     Returns
     -------
@@ -424,9 +424,9 @@ def trim_map(vehicle: Vehicle, n_h: int = 13, n_V: int = 13, model: str = "cm", 
     Raises
     ------
     EnvelopeError, TrimError
-        As :func:`trim`.
+        As `trim`.
     ValueError
-        If ``n_h`` or ``n_V`` is below 4 (:class:`TrimMap`).
+        If `n_h` or `n_V` is below 4 (`TrimMap`).
 
     Examples
     --------

@@ -1,21 +1,21 @@
 """Vehicle data and the longitudinal models CM (eq. 1-3), DM (eq. 4) and ECM (eq. 40).
 
-State vector of CM and DM (eq. 5, 7), shape (9,), units ft, ft/s, rad, rad/s::
+State vector of CM and DM (eq. 5, 7), shape (9,), units ft, ft/s, rad, rad/s:
 
     x = [h, V, alpha, theta, q, eta_1, eta_1_dot, eta_2, eta_2_dot]
 
-Input vector, shape (2,)::
+Input vector, shape (2,):
 
     u = [Phi, delta_e]        (fuel-to-air ratio [-], elevator deflection [rad])
 
-State vector of ECM (eq. 43), shape (11,)::
+State vector of ECM (eq. 43), shape (11,):
 
     x' = [h, V, alpha, theta, q', eta_1, eta_1_dot, eta_2, eta_2_dot, x_q1, x_q2]
 
 where q' is the notch-filtered pitch rate and x_q1, x_q2 the notch states (eq. 39).
 
 All model functions accept real or complex arrays (complex-step differentiation in
-:mod:`fahv.model.linearize` relies on it), and never use ``abs`` or branches on the state.
+`fahv.model.linearize` relies on it), and never use `abs` or branches on the state.
 """
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ class VehicleParams:
     """Physical parameters of eq. (1)-(3), English units per unit width.
 
     The attributes are the paper's symbols (docs/reference/vehicle_data.md gives every
-    value and its source). Use :func:`dataclasses.replace` or :meth:`replace` to perturb
+    value and its source). Use `dataclasses.replace` or `replace` to perturb
     a parameter (uncertainty sampling).
 
     Attributes
@@ -176,7 +176,7 @@ class VehicleParams:
     N2_0: float
 
     def replace(self, **changes: float) -> VehicleParams:
-        """Return a copy with some parameters changed (e.g. ``m=330.0``).
+        """Return a copy with some parameters changed (e.g. `m=330.0`).
 
         Parameters
         ----------
@@ -251,11 +251,11 @@ class Vehicle:
     representative : tuple of str
         Names of parameters that are representative, not published.
     source_file : str
-        Path of the file the data came from (``<packaged>/...`` for the packaged one).
+        Path of the file the data came from (`<packaged>/...` for the packaged one).
     name : str
         Vehicle name from the file.
     data_hash : str
-        sha256 of the vehicle's numbers (:func:`physics_hash`; "" when built from a
+        sha256 of the vehicle's numbers (`physics_hash`; "" when built from a
         mapping).
     """
 
@@ -295,13 +295,13 @@ def _entry(section: Mapping[str, Any], key: str, path: str, prefix: str) -> Mapp
 
 
 def vehicle_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Vehicle:
-    """Build a :class:`Vehicle` from the parsed YAML structure of a vehicle file.
+    """Build a `Vehicle` from the parsed YAML structure of a vehicle file.
 
     Parameters
     ----------
     data : mapping
-        Parsed file with sections ``parameters``, ``envelope``, ``input_limits``,
-        ``scales`` (see ``src/fahv/data/vehicle_parker2007.yaml``).
+        Parsed file with sections `parameters`, `envelope`, `input_limits`,
+        `scales` (see `src/fahv/data/vehicle_parker2007.yaml`).
     path : str
         Name used in error messages.
 
@@ -313,8 +313,8 @@ def vehicle_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Ve
     ------
     VehicleDataError
         On a missing key, a non-numeric or non-finite value, a parameter entry
-        without a ``source``, an unknown parameter, or a non-physical value
-        (e.g. ``m <= 0``); the message names the key.
+        without a `source`, an unknown parameter, or a non-physical value
+        (e.g. `m <= 0`); the message names the key.
 
     Examples
     --------
@@ -404,8 +404,8 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
     Parameters
     ----------
     path : str or Path, optional
-        Vehicle file; ``None`` loads the packaged Parker et al. 2007 curve fit with
-        representative flexible data (``fahv/data/vehicle_parker2007.yaml``).
+        Vehicle file; `None` loads the packaged Parker et al. 2007 curve fit with
+        representative flexible data (`fahv/data/vehicle_parker2007.yaml`).
 
     Returns
     -------
@@ -415,7 +415,7 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
     ------
     VehicleDataError
         If the file does not exist, is not valid YAML, or any entry is invalid
-        (see :func:`vehicle_from_mapping`); the message names the file and key.
+        (see `vehicle_from_mapping`); the message names the file and key.
 
     Examples
     --------

@@ -1,22 +1,22 @@
-"""The loop messages, written once: typed, batch-first, and the source of the ``.msg`` files.
+"""The loop messages, written once: typed, batch-first, and the source of the `.msg` files.
 
 Every message of the SIL loop is one dataclass here. Its fields are the fields of the
-ROS 2 message of the same name (package ``hsv_interfaces``), in order, each declared
-with its ROS type and comment; the ``*.msg`` files beside this module are generated
-from these classes (:func:`msg_text`, checked by a test), and they are the sources
+ROS 2 message of the same name (package `hsv_interfaces`), in order, each declared
+with its ROS type and comment; the `*.msg` files beside this module are generated
+from these classes (`msg_text`, checked by a test), and they are the sources
 the colcon package builds.
 
 Batch axis
-    A message holds one step k of B runs at once: ``k`` and ``t`` are shared; every
-    other field has a leading axis of B lanes (``float64`` -> (B,) float, ``float64[]``
-    -> (B, n) float, ``bool`` -> (B,) bool, ``int64`` -> (B,) int, ``string`` -> tuple
+    A message holds one step k of B runs at once: `k` and `t` are shared; every
+    other field has a leading axis of B lanes (`float64` -> (B,) float, `float64[]`
+    -> (B, n) float, `bool` -> (B,) bool, `int64` -> (B,) int, `string` -> tuple
     of B str). The nodes of the graph and the in-process simulator use B = 1, a
     campaign batch B = 50-100; the same classes serve all of them.
 
 Lane form
-    :meth:`LoopMessage.lane` gives one run's fields as plain values (the form the ROS
+    `LoopMessage.lane` gives one run's fields as plain values (the form the ROS
     codec, the MCAP writer and the Foxglove server serialise), and
-    :meth:`LoopMessage.from_lanes` is its inverse, so no code builds a message by hand.
+    `LoopMessage.from_lanes` is its inverse, so no code builds a message by hand.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-#: Folder of the generated ``*.msg`` files (also the hsv_interfaces sources).
+#: Folder of the generated `*.msg` files (also the hsv_interfaces sources).
 MSG_DIR = Path(__file__).resolve().parent
 #: ROS 2 package of the loop messages.
 PKG = "hsv_interfaces"
@@ -38,7 +38,7 @@ STEP_FIELDS = ("k", "t")
 
 
 def _f(ros: str, doc: str) -> Any:
-    """A message field: its ROS 2 type and its comment in the ``.msg`` file."""
+    """A message field: its ROS 2 type and its comment in the `.msg` file."""
     return field(metadata={"ros": ros, "doc": doc})
 
 
@@ -49,9 +49,9 @@ _STEP_T = "simulated time t_k [s]"
 class LoopMessage:
     """Base of the loop messages (see the module notes for shapes).
 
-    Subclasses are frozen dataclasses whose fields carry ``metadata["ros"]`` (ROS 2
-    type) and ``metadata["doc"]`` (comment), and set :attr:`HEADER` (the comment
-    lines that open the ``.msg`` file).
+    Subclasses are frozen dataclasses whose fields carry `metadata["ros"]` (ROS 2
+    type) and `metadata["doc"]` (comment), and set `HEADER` (the comment
+    lines that open the `.msg` file).
     """
 
     HEADER: ClassVar[tuple[str, ...]] = ()
@@ -66,7 +66,7 @@ class LoopMessage:
 
     @classmethod
     def ros_type(cls) -> str:
-        """Full ROS 2 type name, e.g. ``hsv_interfaces/msg/VehicleState``."""
+        """Full ROS 2 type name, e.g. `hsv_interfaces/msg/VehicleState`."""
         return f"{PKG}/msg/{cls.__name__}"
 
     @property
@@ -78,12 +78,12 @@ class LoopMessage:
         return 1
 
     def lane(self, b: int = 0) -> dict:
-        """Fields of run ``b`` as plain values: int, float, bool, str, or a (n,) ndarray.
+        """Fields of run `b` as plain values: int, float, bool, str, or a (n,) ndarray.
 
         Raises
         ------
         IndexError
-            If ``b`` is not a lane of the message.
+            If `b` is not a lane of the message.
         """
         out = {}
         for name, ros, _ in self.ros_fields():
@@ -104,9 +104,9 @@ class LoopMessage:
 
     @classmethod
     def from_lanes(cls, lanes: list[dict]):
-        """Message of B = len(lanes) runs from their lane forms (:meth:`lane`).
+        """Message of B = len(lanes) runs from their lane forms (`lane`).
 
-        ``k`` and ``t`` are taken from the first lane. Variable-length arrays must have
+        `k` and `t` are taken from the first lane. Variable-length arrays must have
         the same length in every lane.
 
         Raises
@@ -114,7 +114,7 @@ class LoopMessage:
         KeyError
             Naming a missing field.
         ValueError
-            If ``lanes`` is empty or an array field has different lengths.
+            If `lanes` is empty or an array field has different lengths.
         """
         if not lanes:
             raise ValueError(f"{cls.__name__}: a message needs at least one lane")
@@ -311,7 +311,7 @@ class FaultStatus(LoopMessage):
     delta_e_out: np.ndarray = _f("float64", "elevator after the fault [rad]")
 
 
-#: Every loop message class, by ROS 2 type name (``hsv_interfaces/msg/...``).
+#: Every loop message class, by ROS 2 type name (`hsv_interfaces/msg/...`).
 MESSAGES: dict[str, type[LoopMessage]] = {
     c.ros_type(): c
     for c in (VehicleState, FilteredPitchRate, NominalTrajectory, ControlCommand, TubeStatus,
@@ -320,7 +320,7 @@ MESSAGES: dict[str, type[LoopMessage]] = {
 
 
 def msg_text(cls: type[LoopMessage]) -> str:
-    """The ``.msg`` file of a message class (header comments, fields with comments)."""
+    """The `.msg` file of a message class (header comments, fields with comments)."""
     lines = [f"# {h}" for h in cls.HEADER]
     for name, ros, doc in cls.ros_fields():
         lines.append(f"{f'{ros} {name}':<21} # {doc}")
@@ -328,7 +328,7 @@ def msg_text(cls: type[LoopMessage]) -> str:
 
 
 def write_msg_files(folder: Path = MSG_DIR) -> list[Path]:
-    """Write every ``<Name>.msg`` into ``folder``; returns the paths written."""
+    """Write every `<Name>.msg` into `folder`; returns the paths written."""
     out = []
     for cls in MESSAGES.values():
         path = Path(folder) / f"{cls.__name__}.msg"

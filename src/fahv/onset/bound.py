@@ -2,13 +2,13 @@
 
 At the step a loss of 1 - rho_f starts, the plant moves by J = f_p(x, P u) - f_p(x, u)
 more than the nominal (with the estimate of the step before) expects
-(:func:`onset_jumps`); as the controller's command grows to delta_e / rho_f the residual
+(`onset_jumps`); as the controller's command grows to delta_e / rho_f the residual
 grows on to J / rho_f. The estimate removes what it has seen at its gain per step, so
 its error is a sum of such jumps, each decaying geometrically. The error dynamics are
 linear along any sequence of the vertices, so the error splits into the part the
 disturbance drives (in a steady set) and the part the jumps drive (bounded by a norm
-recursion, :func:`pulse_peak`): :func:`onset_bound` bounds their sum, and the loss it
-certifies. Its lower bound is :func:`fahv.onset.witness.onset_witness`.
+recursion, `pulse_peak`): `onset_bound` bounds their sum, and the loss it
+certifies. Its lower bound is `fahv.onset.witness.onset_witness`.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from fahv.synthesis.rpi_level import vertex_levels
 if TYPE_CHECKING:
     from fahv.tube.tube_set import TubeSet
 
-#: Contraction factors tried for the onset bound's steady set (:func:`steady_set`): the
+#: Contraction factors tried for the onset bound's steady set (`steady_set`): the
 #: smallest ellipsoid RPI for the bound at one factor may not exist at another (on
 #: case1.yaml's tube set of 16384 vertices: none at 0.995, 0.419 Z_8 at one of the others).
 STEADY_LAMS = (0.995, 0.993, 0.998)
@@ -48,7 +48,7 @@ def onset_jumps(box: SchedulingBox, vehicle, trim_map, uncertainty: dict, rho_f:
     adds to the plant's step at the state x and applied input u of a box point, for the
     dispersed vehicle p. Sampled at the box's 64 corners (q and the flexible states at
     the trim's) with every one of the 2^P corners of the parameter box, then at
-    ``interior`` points inside with q and the flexible states anywhere in their ranges
+    `interior` points inside with q and the flexible states anywhere in their ranges
     and, with probability 1/2 each, a corner or an interior vehicle (seeded).
 
     Parameters
@@ -88,11 +88,11 @@ def onset_jumps(box: SchedulingBox, vehicle, trim_map, uncertainty: dict, rho_f:
 
 
 class OnsetPoints:
-    """The box points, applied inputs and vehicles of :func:`onset_jumps`, stepped once.
+    """The box points, applied inputs and vehicles of `onset_jumps`, stepped once.
 
     The healthy step f_p(x, u) of every point does not depend on the loss: it is taken
     once here, so that the jumps at another loss (a bisection over the loss) cost one
-    plant step per point instead of two. Arguments as :func:`onset_jumps`.
+    plant step per point instead of two. Arguments as `onset_jumps`.
     """
 
     def __init__(self, box: SchedulingBox, vehicle, trim_map, uncertainty: dict, Ts: float,
@@ -144,7 +144,7 @@ def pulse_peak(a: float, j0: float, parts, steps: int = 100_000) -> float:
     of the jump each removed by the estimate at its own gain per step. d bounds the norm
     of the part of the error the jump drives when every vertex's closed loop contracts
     the norm by at most a. The sequence rises to its peak and then falls (p_k falls).
-    The norm recursion of :func:`onset_bound`. For one part (j, gamma) with j0 = j, the
+    The norm recursion of `onset_bound`. For one part (j, gamma) with j0 = j, the
     peak per unit jump is max_k (a^k - b^k) / (a - b), b = 1 - gamma.
 
     Parameters
@@ -185,7 +185,7 @@ def pulse_peak(a: float, j0: float, parts, steps: int = 100_000) -> float:
 
 @dataclass(frozen=True)
 class OnsetBound:
-    """The onset of an elevator loss as a transient of a closed tube set (:func:`onset_bound`).
+    """The onset of an elevator loss as a transient of a closed tube set (`onset_bound`).
 
     Attributes
     ----------
@@ -202,10 +202,10 @@ class OnsetBound:
         c: the level the error holds at with the disturbance inside the bound (the largest
         bound / W_8, at the altitude bound grown by the onset): c Z_8 is RPI for c W_8.
     steady_shaped : float
-        c_w: the same for an ellipsoid shaped for the bound itself (:func:`steady_set`):
+        c_w: the same for an ellipsoid shaped for the bound itself (`steady_set`):
         the Z_8 radius of the smallest ellipsoid RPI for the bound's own box at every
         vertex, exactly re-checked (inf if none is found). The level the bound starts
-        from is min(c, c_w) (:attr:`level0`).
+        from is min(c, c_w) (`level0`).
     jump : float
         j: the largest Z_8 norm of J_8 / rho_f at the design loss over the scheduling box
         and every corner of the parameter box.
@@ -216,7 +216,7 @@ class OnsetBound:
     interior_ratio : float
         The interior samples' largest norm over the corners' (<= 1: the corners hold it).
     peak : float
-        min(c, c_w) + the jump's pulse peak (:func:`pulse_peak`): the level bound at the
+        min(c, c_w) + the jump's pulse peak (`pulse_peak`): the level bound at the
         design loss with the case's estimate (certified when <= 1).
     certified_loss, certified_loss_one_step : float
         The largest loss whose level bound is <= 1 with the case's estimate, and with an
@@ -234,13 +234,13 @@ class OnsetBound:
     jump_rigid_q : float
         The same with only the bending modes left out (V, alpha, theta and q).
     witness : OnsetWitness or None
-        The lower bound at the design's loss (:func:`fahv.onset.witness.onset_witness`;
+        The lower bound at the design's loss (`fahv.onset.witness.onset_witness`;
         None: not computed).
     ceiling : float
-        With ``witness``: the smallest loss found whose lower bound exceeds 1, bisected
-        between ``certified_loss`` and the design's loss (an upper bound of what any
+        With `witness`: the smallest loss found whose lower bound exceeds 1, bisected
+        between `certified_loss` and the design's loss (an upper bound of what any
         analysis on the tube set's assumptions can certify); the design's loss when its
-        own lower bound is at most 1; nan without ``witness``.
+        own lower bound is at most 1; nan without `witness`.
     """
 
     loss: float
@@ -269,7 +269,7 @@ class OnsetBound:
         return min(self.steady, self.steady_shaped)
 
     def summary(self) -> dict:
-        """JSON-ready record (the attributes; ``jump_share`` as a list)."""
+        """JSON-ready record (the attributes; `jump_share` as a list)."""
         out = {k: [float(x) for x in v] if isinstance(v, tuple) else float(v)
                for k, v in self.__dict__.items() if k != "witness"}  # fmt: skip
         if self.witness is not None:
@@ -283,14 +283,14 @@ def steady_set(Acl_8, N_8, F_8, bound, lam: float,
     """The error's steady set shaped for the disturbance bound itself (the onset bound's c_w).
 
     Before an onset the error is driven by a disturbance inside the tube set's bound (per
-    row, ``bound`` <= W_8) from e = 0. c Z_8 (c = the largest bound / W_8) is RPI for it,
+    row, `bound` <= W_8) from e = 0. c Z_8 (c = the largest bound / W_8) is RPI for it,
     but the bound's rows are far from uniform (V 0.85-0.88 of W_8, the others 0.28-0.55),
-    so a smaller set is: the smallest ellipsoid E(P) RPI for the box ``bound`` at every
+    so a smaller set is: the smallest ellipsoid E(P) RPI for the box `bound` at every
     closed-loop vertex with its projection in s Z_8, s minimised
-    (:func:`fahv.synthesis.invariant_ellipsoid.invariant_ellipsoid`, the analysis form of LMI (24),
+    (`fahv.synthesis.invariant_ellipsoid.invariant_ellipsoid`, the analysis form of LMI (24),
     constraint generation over the vertices). Accepted only on the exact re-check, the
     worst one-step level over every vertex and every corner of the box at most 1
-    (:func:`fahv.synthesis.rpi_level.vertex_levels`); s is then the largest eigenvalue of
+    (`fahv.synthesis.rpi_level.vertex_levels`); s is then the largest eigenvalue of
     N_8^-1/2 P N_8^-1/2, square-rooted.
 
     Parameters
@@ -306,7 +306,7 @@ def steady_set(Acl_8, N_8, F_8, bound, lam: float,
     lam : float
         Contraction factor of the S-procedure, in (0, 1).
     start : (a,) array_like of int, optional
-        The vertices an earlier solve of this set held (its ``active``): where the
+        The vertices an earlier solve of this set held (its `active`): where the
         constraint generation starts.
 
     Returns
@@ -337,17 +337,17 @@ def steady_disturbance(nv: NominalVertices, tube_set: TubeSet, jump_h: float,
                        gamma: float) -> np.ndarray:  # fmt: skip
     """The disturbance bound before an onset, at the altitude bound the onset grows.
 
-    W_8's bound over the product set (:func:`fahv.bounds.one_step_bound.product_bound`)
+    W_8's bound over the product set (`fahv.bounds.one_step_bound.product_bound`)
     with |e_h| <= H + jump_h / gamma: the altitude error takes up to jump_h per step
     until the estimate removes it, at most 1 / gamma of it between resets
-    (:func:`onset_bound`).
+    (`onset_bound`).
 
     Parameters
     ----------
     nv : NominalVertices
     tube_set : TubeSet
     jump_h : float
-        [ft] largest |J_h| / rho_f at the design loss (:func:`onset_jumps`).
+        [ft] largest |J_h| / rho_f at the design loss (`onset_jumps`).
     gamma : float
         The estimator's gain per step, in (0, 1].
 
@@ -363,7 +363,7 @@ def steady_disturbance(nv: NominalVertices, tube_set: TubeSet, jump_h: float,
 
 
 class _OnsetModel:
-    """The closed loop and the jumps of one onset bound (:func:`onset_bound`).
+    """The closed loop and the jumps of one onset bound (`onset_bound`).
 
     Holds the tube set's closed-loop vertices, their contraction a in Z_8's norm, and
     computes the jumps at any loss with their Z_8 norms and shares.
@@ -388,7 +388,7 @@ class _OnsetModel:
         return np.sqrt(((V[:, 1:] @ self.L_inv.T) ** 2).sum(axis=1))
 
     def jumps(self, loss: float):
-        """The jumps J / rho_f (S, 9) at ``loss`` and what the bound takes of them.
+        """The jumps J / rho_f (S, 9) at `loss` and what the bound takes of them.
 
         Returns J, its Z_8 norms (S,), the corner count, the largest |J_h| / rho_f and the
         largest norms of the shares along and off the elevator column (0 without gamma_e).
@@ -406,7 +406,7 @@ class _OnsetModel:
         return J, norm, n_c, float(np.abs(J[:, 0]).max()), jb, jr
 
     def peak(self, j, jb, jr, one_step=False):
-        """The pulse part's peak (:func:`pulse_peak`); j alone for a one-step estimate."""
+        """The pulse part's peak (`pulse_peak`); j alone for a one-step estimate."""
         if one_step:
             return j
         parts = [(j, self.gamma)] if self.gamma_e is None else [(jb, self.gamma_e),
@@ -437,7 +437,7 @@ def _certified_loss(model: _OnsetModel, c0, loss, j, jb, jr, one_step, iteration
 
 
 def _refuted_loss(witness, model: _OnsetModel, J, loss, certified, iterations):
-    """The lower bound at ``loss`` and the smallest loss it refutes (bisected), or nan."""
+    """The lower bound at `loss` and the smallest loss it refutes (bisected), or nan."""
     found = witness(J) if iterations > 0 else None
     ceiling = float("nan") if found is None else loss
     if found is not None and found.level_any_column > 1.0:  # the smallest loss refuted
@@ -475,28 +475,28 @@ def onset_bound(nv: NominalVertices, tube_set: TubeSet, vehicle, trim_map,
     """Bound the onset of an elevator loss as a transient of the tube set.
 
     The jumps (module docstring) are taken over the scheduling box at every corner of the
-    parameter box (:func:`onset_jumps`). The error dynamics are linear along any sequence
+    parameter box (`onset_jumps`). The error dynamics are linear along any sequence
     of the vertices (rho_f at both ends of [rho_min, 1] among them), so e = e_w + e_p:
     e_w, driven by the disturbance inside the bound from the error at the onset, stays in
     c Z_8 if it starts there (c Z_8 is RPI for c W_8); e_p, driven by the estimate's error
     from 0, has the Z_8 norm at most pulse_peak(a, j, [(j, gamma)]),
     j = max ||J_8 / rho_f||_Z_8 (the jumps arriving later only delay part of it). With a
-    gain gamma_e along the elevator column b (:class:`fahv.control.mpc.estimator.
+    gain gamma_e along the elevator column b (`fahv.control.mpc.estimator.
     DisturbanceEstimator`), the jump's share along b, P_b J, decays at gamma_e and the
     rest at gamma: pulse_peak(a, j, [(j_b, gamma_e), (j_r, gamma)]) with j_b, j_r the
     largest norms of P_b J and J - P_b J over the samples and the estimate's possible
     directions b. e stays in Z_8 if c + that peak <= 1. The altitude error takes
     |J_h| / rho_f per step on top of H, at most 1 / gamma of it between resets; the
     bound of c is taken at that H. e_w also stays in the ellipsoid RPI for that bound
-    itself, which lies in c_w Z_8 (:func:`steady_set`); the bound starts from
+    itself, which lies in c_w Z_8 (`steady_set`); the bound starts from
     min(c, c_w).
 
     The bound is an upper one. Its matching lower bound
-    (:func:`fahv.onset.witness.onset_witness`) builds the worst onset the same
+    (`fahv.onset.witness.onset_witness`) builds the worst onset the same
     model allows at one vertex held throughout, re-simulated: if its level exceeds 1 at
     the design's loss, no analysis on the tube set's assumptions certifies that loss, and
-    the smallest loss it so refutes is bisected (``ceiling``): the loss certifiable on
-    this tube set lies between ``certified_loss`` and it.
+    the smallest loss it so refutes is bisected (`ceiling`): the loss certifiable on
+    this tube set lies between `certified_loss` and it.
 
     Parameters
     ----------
@@ -520,13 +520,13 @@ def onset_bound(nv: NominalVertices, tube_set: TubeSet, vehicle, trim_map,
         With gamma_e: the elevator columns the estimate may project on (the scheduled
         model's, e.g. its LPV vertices' B_i[:, 1]).
     projection_scale : (9,) array_like, optional
-        With gamma_e: the state scale of the estimate's projection metric (its ``scale``).
+        With gamma_e: the state scale of the estimate's projection metric (its `scale`).
     interior : int
         Interior samples of the jumps besides the corners.
     iterations : int
         Bisection steps for each certified loss.
     steady_shaped : float, optional
-        c_w when already computed for this tube set and bound (:func:`steady_set`, a
+        c_w when already computed for this tube set and bound (`steady_set`, a
         minute or two over 4096 vertices); computed here by default.
     steady_lams : sequence of float, optional
         Contraction factors tried for that ellipsoid (the smallest c_w is kept; a minute

@@ -1,7 +1,7 @@
 """A lower bound of the onset transient: the worst onset a tube set's assumptions allow.
 
-The onset bound (:func:`fahv.onset.bound.onset_bound`) is an upper bound of the error's
-Z_8 norm after the onset of an elevator loss. :func:`onset_witness` is the matching lower
+The onset bound (`fahv.onset.bound.onset_bound`) is an upper bound of the error's
+Z_8 norm after the onset of an elevator loss. `onset_witness` is the matching lower
 bound on the same model: an explicit scenario, re-simulated step by step, that every
 certificate on those assumptions must cover. If its level exceeds 1 at a loss, no
 analysis on the tube set's assumptions certifies that loss.
@@ -23,9 +23,9 @@ class OnsetWitness:
     """An onset scenario inside a tube set's own assumptions that leaves Z_8 (or comes closest).
 
     A lower bound of what any analysis of the onset on the tube set's assumptions can
-    certify (:func:`onset_witness`): one closed-loop vertex held throughout, a
+    certify (`onset_witness`): one closed-loop vertex held throughout, a
     disturbance sequence inside the bound's box, one nonlinear jump sample and the
-    estimate's most favourable elevator direction. ``level`` is the Z_8 norm of the
+    estimate's most favourable elevator direction. `level` is the Z_8 norm of the
     error that sequence reaches, re-simulated step by step.
 
     Attributes
@@ -44,7 +44,7 @@ class OnsetWitness:
         disturbance sequence's).
     level_any_column : float
         The level a scenario of the search reaches whichever column the estimate projects
-        on (the smallest over the columns of z' e at each column's peak, <= ``level``):
+        on (the smallest over the columns of z' e at each column's peak, <= `level`):
         > 1 shows that no certificate on these assumptions keeps e in Z_8.
     """
 
@@ -64,16 +64,16 @@ def _z_norm(X, Ninv):
 
 
 def _pulse_run(Acl_8, Ninv, J_s, c, b, gamma, g_e, steps):
-    """e_p over ``steps`` steps at every vertex, for S jumps and D estimate directions.
+    """e_p over `steps` steps at every vertex, for S jumps and D estimate directions.
 
     The onset's part of the error at the vertex A, from the jump J_s of sample s with
     the share c_s,d b_d along the estimate's direction b_d, is linear in the jump
-    (:func:`onset_witness`): e_k = u_k + c_s,d v_k, with u_0 = J_s,
+    (`onset_witness`): e_k = u_k + c_s,d v_k, with u_0 = J_s,
     u_k = A u_k-1 + (1 - gamma)^k J_s, and v_0 = 0, v_k = A v_k-1 + ((1 - g_e)^k -
     (1 - gamma)^k) b_d. One recursion per sample and one per direction, combined, in
     place of one per pair; in the coordinates z = C' e (N_8^-1 = C C'), where the Z_8
     norm is the Euclidean one. One compiled loop over the vertices, spread over the
-    cores (:func:`_pulse_kernel`).
+    cores (`_pulse_kernel`).
 
     Parameters
     ----------
@@ -113,7 +113,7 @@ def _pulse_run(Acl_8, Ninv, J_s, c, b, gamma, g_e, steps):
 
 @functools.cache
 def _pulse_kernel():
-    """The loop of :func:`_pulse_run` compiled by numba, parallel over the vertices."""
+    """The loop of `_pulse_run` compiled by numba, parallel over the vertices."""
     import numba
 
     def loop(Aw, U0, c, B, a, g):  # pragma: no cover - compiled
@@ -166,9 +166,9 @@ def _pulse_kernel():
 
 
 def _search(Acl_8, Ninv, bound, J8, c, b, gamma, g_e, top, steps, pre_steps, candidates):
-    """The scenario of largest level over the jump samples (:func:`onset_witness`).
+    """The scenario of largest level over the jump samples (`onset_witness`).
 
-    For each of the ``top`` samples the estimate's most favourable direction is taken;
+    For each of the `top` samples the estimate's most favourable direction is taken;
     returns (level, sample, direction, vertex, step, error there) of the largest of
     those levels.
     """
@@ -203,7 +203,7 @@ def _search(Acl_8, Ninv, bound, J8, c, b, gamma, g_e, top, steps, pre_steps, can
 def _resimulate(A, bound, J_s, Jb, z, k, pre_steps, gamma, g_e):
     """The scenario step by step from e = 0 at the vertex A, the error it reaches.
 
-    w = sign(z' A^t) bound at t steps before the target, the jump J_s at ``k`` steps
+    w = sign(z' A^t) bound at t steps before the target, the jump J_s at `k` steps
     before it and the estimate's remaining error after.
     """
     signs, v = [], z.copy()
@@ -240,20 +240,20 @@ def onset_witness(Acl_8, N_8, bound, J, gamma: float, *, gamma_e: float | None =
     """The worst onset of a loss the tube set's own assumptions allow, found explicitly.
 
     The model is the onset bound's own: e = e_w + e_p along any vertex sequence, e_w
-    driven by w in the box ``bound``, e_p from 0 by the jump J at the onset's step and
+    driven by w in the box `bound`, e_p from 0 by the jump J at the onset's step and
     then by what the estimate has not yet removed, p_k = (1 - gamma_e)^k J_b +
     (1 - gamma)^k J_r (J_b = the share of J along the estimate's elevator direction b,
     J_r the rest; p_k = (1 - gamma)^k J without gamma_e). Held at one vertex A, e_p is
-    computed exactly for each of the ``top`` jumps of largest Z_8 norm and every
-    direction b, for ``steps`` steps; at its largest Z_8 norm, at step k with direction
+    computed exactly for each of the `top` jumps of largest Z_8 norm and every
+    direction b, for `steps` steps; at its largest Z_8 norm, at step k with direction
     z = N_8^-1 e_p / ||e_p||, the disturbance w_(k-1-t) = sign(z' A^t) * bound for
-    t < ``pre_steps`` (the last ``pre_steps`` steps up to k) adds sum_t |z' A^t| . bound
+    t < `pre_steps` (the last `pre_steps` steps up to k) adds sum_t |z' A^t| . bound
     to z' e. The direction b is taken as the most favourable (the smallest such level
-    over the vertices searched): that level, ``level_any_column``, is reached whichever
+    over the vertices searched): that level, `level_any_column`, is reached whichever
     elevator column the estimate projects on. The winning scenario is re-simulated step
-    by step from e = 0 (its norm ``level`` is at least z' e). Every ingredient (vertex,
+    by step from e = 0 (its norm `level` is at least z' e). Every ingredient (vertex,
     jump sample, w inside the box, the estimate's model) is one the certificate must
-    cover, so ``level_any_column`` above 1 shows that no analysis on these assumptions
+    cover, so `level_any_column` above 1 shows that no analysis on these assumptions
     keeps e in Z_8 at this loss.
 
     Parameters
@@ -266,12 +266,12 @@ def onset_witness(Acl_8, N_8, bound, J, gamma: float, *, gamma_e: float | None =
         Half-widths of the disturbance box (state units per period).
     J : (S, 9) ndarray
         Jump samples J / rho_f, h first (state units per period), e.g. from
-        :func:`fahv.onset.bound.onset_jumps`; the estimate's share is taken of all nine
+        `fahv.onset.bound.onset_jumps`; the estimate's share is taken of all nine
         rows, as it computes it, and the error of the last eight.
     gamma : float
         The estimate's gain per step, in (0, 1].
     gamma_e, directions, projection_scale
-        As :func:`fahv.onset.bound.onset_bound` (directions (D, 9), scale (9,)).
+        As `fahv.onset.bound.onset_bound` (directions (D, 9), scale (9,)).
     top : int
         Jump samples tried (largest Z_8 norm first).
     steps : int

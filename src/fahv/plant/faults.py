@@ -1,11 +1,11 @@
 """Actuator faults: the registry of fault kinds and the injector between controller and plant.
 
-A fault kind is one class (subclass of :class:`FaultKind`) registered in
-:data:`FAULTS`: its name, the parameters it takes (declared as config fields, so the
+A fault kind is one class (subclass of `FaultKind`) registered in
+`FAULTS`: its name, the parameters it takes (declared as config fields, so the
 case file, the fault-injector node and the docs read them from here), and
-:meth:`FaultKind.apply`, the input that reaches the actuators while it is active.
-Built-in kinds: ``none``, ``loss_of_effectiveness`` (eq. 15), ``bias``, ``stuck``,
-``dropout``.
+`FaultKind.apply`, the input that reaches the actuators while it is active.
+Built-in kinds: `none`, `loss_of_effectiveness` (eq. 15), `bias`, `stuck`,
+`dropout`.
 """
 
 from __future__ import annotations
@@ -24,21 +24,21 @@ from fahv.model.vehicle import DELTA_E
 
 
 class FaultKind:
-    """An actuator fault of one or more runs (lanes), active from ``t_onset`` on.
+    """An actuator fault of one or more runs (lanes), active from `t_onset` on.
 
-    A fault kind is a subclass that sets :attr:`name` and :attr:`parameters` and
-    implements :meth:`apply` over lanes. An instance describes the fault of n >= 1
-    runs of that kind: ``t_onset`` and every parameter are (n,) arrays (a scalar
-    makes n = 1); :meth:`stack` joins the faults of several runs into one instance.
+    A fault kind is a subclass that sets `name` and `parameters` and
+    implements `apply` over lanes. An instance describes the fault of n >= 1
+    runs of that kind: `t_onset` and every parameter are (n,) arrays (a scalar
+    makes n = 1); `stack` joins the faults of several runs into one instance.
     The fault injector of a single run (B = 1) and of a campaign batch call the same
-    :meth:`apply`, so the two paths agree by construction.
+    `apply`, so the two paths agree by construction.
 
     Parameters
     ----------
     t_onset : float or (n,) array_like
         Onset time [s].
     **params
-        Values of :attr:`parameters` (float or (n,) array_like; validated by the caller).
+        Values of `parameters` (float or (n,) array_like; validated by the caller).
 
     Raises
     ------
@@ -46,9 +46,9 @@ class FaultKind:
         If a parameter of the kind is missing, or the parameters have different lengths.
     """
 
-    #: Registry name (``fault.kind`` of a case file).
+    #: Registry name (`fault.kind` of a case file).
     name: ClassVar[str] = ""
-    #: Parameters the kind takes, beyond ``kind`` and ``t_onset``.
+    #: Parameters the kind takes, beyond `kind` and `t_onset`.
     parameters: ClassVar[tuple[Field, ...]] = ()
 
     def __init__(self, t_onset=math.inf, **params) -> None:
@@ -71,7 +71,7 @@ class FaultKind:
 
     @classmethod
     def stack(cls, faults: Sequence[FaultKind]) -> FaultKind:
-        """One instance of the runs of ``faults`` (all of this kind), in order."""
+        """One instance of the runs of `faults` (all of this kind), in order."""
         t_onset = np.concatenate([f.t_onset for f in faults])
         params = {
             p.name: np.concatenate([f.params[p.name] for f in faults]) for p in cls.parameters
@@ -84,7 +84,7 @@ class FaultKind:
         return self.name
 
     def active(self, t: float) -> np.ndarray:
-        """(n,) bool: True once t >= t_onset [s] (never for ``none``)."""
+        """(n,) bool: True once t >= t_onset [s] (never for `none`)."""
         if self.name == "none":
             return np.zeros(self.lanes, dtype=bool)
         return t >= self.t_onset - 1e-12
@@ -104,7 +104,7 @@ class FaultKind:
         return np.zeros(self.lanes)
 
     def apply(self, u: np.ndarray, held: np.ndarray | None, lanes: np.ndarray) -> np.ndarray:
-        """Inputs at the actuators of the active runs ``lanes``.
+        """Inputs at the actuators of the active runs `lanes`.
 
         Parameters
         ----------
@@ -127,7 +127,7 @@ FAULTS: Registry[type[FaultKind]] = Registry("fault kind")
 
 
 def register_fault(cls: type[FaultKind]) -> type[FaultKind]:
-    """Class decorator: register a :class:`FaultKind` under its ``name``."""
+    """Class decorator: register a `FaultKind` under its `name`."""
     FAULTS.register(cls.name, cls)
     return cls
 
@@ -224,13 +224,13 @@ class Dropout(FaultKind):
 
 
 def fault_kind_of(root) -> str | None:
-    """``kind`` of a case's fault section (``fault.kind``) or of flat node parameters."""
+    """`kind` of a case's fault section (`fault.kind`) or of flat node parameters."""
     return lookup(root, "fault.kind") or lookup(root, "kind")
 
 
-#: Fault kind (case key ``fault.kind``, fault-injector parameter ``kind``).
+#: Fault kind (case key `fault.kind`, fault-injector parameter `kind`).
 FAULT_KIND = Field("kind", "str", "actuator fault kind", choices=FAULTS.names)
-#: Onset time, used by every kind but ``none``.
+#: Onset time, used by every kind but `none`.
 T_ONSET = Field(
     "t_onset", "float", "fault onset time", unit="s", lo=0.0, default=math.inf,
     when=lambda r: fault_kind_of(r) not in (None, "none"), when_text="kind is not none",
@@ -251,7 +251,7 @@ def fault_fields() -> list[Field]:
 def make_fault(kind: str, t_onset: float, params: dict) -> FaultKind:
     """The fault of one run, of a registered kind, with the parameters it takes.
 
-    Other entries of ``params`` are ignored.
+    Other entries of `params` are ignored.
 
     Raises
     ------

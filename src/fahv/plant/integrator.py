@@ -1,8 +1,8 @@
 """Plant: the nonlinear CM (eq. 1-3) of B vehicles, ZOH input, saturation, fixed-step RK4.
 
-One class serves every path: the plant node (B = 1), ``fahv simulate`` (B = 1) and a
+One class serves every path: the plant node (B = 1), `fahv simulate` (B = 1) and a
 campaign batch (B runs with their own parameters); the integration is the compiled
-kernel :func:`fahv.plant.rk4.rk4_cm` (imported when the first plant is built, so that
+kernel `fahv.plant.rk4.rk4_cm` (imported when the first plant is built, so that
 the other nodes of the graph start without numba).
 """
 
@@ -19,7 +19,7 @@ def rk4_step(f, x: np.ndarray, u: np.ndarray, Ts: float, n_sub: int) -> np.ndarr
     """Integrate x_dot = f(x, u) over Ts with n_sub classical RK4 steps, u held (ZOH).
 
     The generic numpy integrator of the offline design (any model function); the
-    closed loop uses the compiled :func:`fahv.plant.rk4.rk4_cm`.
+    closed loop uses the compiled `fahv.plant.rk4.rk4_cm`.
 
     Parameters
     ----------

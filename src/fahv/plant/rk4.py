@@ -1,25 +1,25 @@
 """Compiled RK4 of the coupling model CM, eq. (1)-(3), over a batch of vehicles (numba).
 
 The plant is the only loop computation whose cost is dominated by numpy's per-call
-overhead: 20 evaluations of :func:`fahv.model.dynamics.cm_rhs` per control step, each
+overhead: 20 evaluations of `fahv.model.dynamics.cm_rhs` per control step, each
 some 60 small array operations. Here the very functions of
-:mod:`fahv.model.dynamics` (no second copy of the model) are compiled with numba
-(``register_jitable``) and integrated lane by lane in one compiled loop.
+`fahv.model.dynamics` (no second copy of the model) are compiled with numba
+(`register_jitable`) and integrated lane by lane in one compiled loop.
 
 Numerics
     Every lane is integrated with the same scalar operations in the same order, so a
     run's result does not depend on its batch or its place in it. Compiled without
     fast-math (no reassociation, no fused multiply-add) and without Intel SVML (set
     off below before numba is imported), the arithmetic is IEEE 754 double as in
-    numpy; sin and cos give numpy's bits, but ``exp`` (air density, eq. 3) is the C
+    numpy; sin and cos give numpy's bits, but `exp` (air density, eq. 3) is the C
     library's, which differs from numpy's vectorised exp on AVX-512 machines by at
     most one unit in the last place in about 5 % of arguments. That is the whole
     difference between this kernel and the numpy model (docs/reference/architecture.md states
     the resulting tolerance on closed-loop results).
 
 Cache
-    Compiled code is cached on disk (``cache=True``) in a folder named after the
-    sha256 of this file, of :mod:`fahv.model.dynamics` and of the numba version, so a
+    Compiled code is cached on disk (`cache=True`) in a folder named after the
+    sha256 of this file, of `fahv.model.dynamics` and of the numba version, so a
     change of the model's source always recompiles (numba's own cache would only
     watch this file).
 """
@@ -59,7 +59,7 @@ PARAMS_DTYPE = np.dtype([(f, np.float64) for f in VehicleParams.__dataclass_fiel
 
 
 def params_records(params) -> np.ndarray:
-    """Structured array (B,) of :data:`PARAMS_DTYPE` from B VehicleParams.
+    """Structured array (B,) of `PARAMS_DTYPE` from B VehicleParams.
 
     Raises
     ------
@@ -77,7 +77,7 @@ def params_records(params) -> np.ndarray:
 def perturbed_records(params: VehicleParams, uncertainty: dict, signs) -> np.ndarray:
     """Records (B,) of B vehicles of the parameter box: p (1 + s_bp rel_p) (sec. 5.1).
 
-    The vectorised form of :func:`fahv.plant.uncertainty.perturb` over many vehicles,
+    The vectorised form of `fahv.plant.uncertainty.perturb` over many vehicles,
     with the same arithmetic (the same bits).
 
     Parameters
@@ -87,7 +87,7 @@ def perturbed_records(params: VehicleParams, uncertainty: dict, signs) -> np.nda
     uncertainty : dict[str, float]
         Relative half-widths rel_p of the box, by parameter name (P entries).
     signs : (B, P) array_like
-        Fractions s_bp in [-1, 1], columns in the order of ``uncertainty``.
+        Fractions s_bp in [-1, 1], columns in the order of `uncertainty`.
 
     Returns
     -------
@@ -96,7 +96,7 @@ def perturbed_records(params: VehicleParams, uncertainty: dict, signs) -> np.nda
     Raises
     ------
     ValueError
-        If a name is not a parameter, ``signs`` is not (B, P), or a fraction is NaN or
+        If a name is not a parameter, `signs` is not (B, P), or a fraction is NaN or
         outside [-1, 1].
     """
     names = list(uncertainty)

@@ -43,8 +43,8 @@ def perturb(vp: VehicleParams, rel: dict[str, float], signs: dict[str, float]) -
 def perturbed_params(vehicle, seed: int, scale: float) -> dict[str, float]:
     """Seeded parameter set inside the parameter box of sec. 5.1.
 
-    Each parameter p of :data:`fahv.plant.PAPER_UNCERTAINTY` becomes
-    p (1 + s_p scale rel_p), s_p ~ U(-1, 1) from ``numpy.random.default_rng(seed)``
+    Each parameter p of `fahv.plant.PAPER_UNCERTAINTY` becomes
+    p (1 + s_p scale rel_p), s_p ~ U(-1, 1) from `numpy.random.default_rng(seed)`
     in the order of that table. Returns {name: value}.
     """
     rng = np.random.default_rng(seed)

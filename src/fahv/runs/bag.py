@@ -1,17 +1,17 @@
 """Recorded runs: the loop topics, their message types, and rosbag2/MCAP files.
 
-A run is a rosbag2 bag (as ``ros2 bag record -s mcap`` writes it): a folder
-``bags/<run>/`` holding one ``<run>.mcap`` (ros2 profile: ``ros2msg`` schemas with the
-full definition, ``cdr`` messages, ``offered_qos_profiles`` channel metadata,
-summary with statistics and indexes, a ``rosbag2`` metadata record) and
-``metadata.yaml``. Log time is simulated time. Files are written with the
-``rosbags`` library's rosbag2 writer, so rosbag2 (``ros2 bag info``), Foxglove and
-``rosbags`` open them; the run metadata (case, design hash, code version, variant,
-fault, source) is in the bag's ``custom_data``.
+A run is a rosbag2 bag (as `ros2 bag record -s mcap` writes it): a folder
+`bags/<run>/` holding one `<run>.mcap` (ros2 profile: `ros2msg` schemas with the
+full definition, `cdr` messages, `offered_qos_profiles` channel metadata,
+summary with statistics and indexes, a `rosbag2` metadata record) and
+`metadata.yaml`. Log time is simulated time. Files are written with the
+`rosbags` library's rosbag2 writer, so rosbag2 (`ros2 bag info`), Foxglove and
+`rosbags` open them; the run metadata (case, design hash, code version, variant,
+fault, source) is in the bag's `custom_data`.
 
 The SIL recorder writes the raw CDR bytes it receives; the in-process simulator
-serialises the same dicts (:mod:`fahv.loop.cores`) with the same definitions
-(``src/fahv/msg/*.msg``, also the sources of the ``hsv_interfaces`` package).
+serialises the same dicts (`fahv.loop.cores`) with the same definitions
+(`src/fahv/msg/*.msg`, also the sources of the `hsv_interfaces` package).
 """
 
 from __future__ import annotations
@@ -53,10 +53,10 @@ def start_metadata(meta: dict) -> dict:
 def bag_paths(run: str | Path) -> tuple[Path, Path]:
     """(bag folder, .mcap file) of a run given either of them.
 
-    A folder's file is the one its ``metadata.yaml`` names (rosbag2's
-    ``relative_file_paths``, relative to the folder), else the only ``.mcap`` in it,
+    A folder's file is the one its `metadata.yaml` names (rosbag2's
+    `relative_file_paths`, relative to the folder), else the only `.mcap` in it,
     so a renamed or copied folder is read like the original. A folder without any
-    gives ``<folder>/<folder name>.mcap`` (which then does not exist).
+    gives `<folder>/<folder name>.mcap` (which then does not exist).
 
     Raises
     ------
@@ -112,16 +112,16 @@ class Recording:
     metadata : dict[str, str]
         Run metadata (bag custom data, or run.json for a file without summary).
     records : dict[str, list[dict]]
-        Decoded messages of each loop topic (:data:`TOPICS`), in file order.
+        Decoded messages of each loop topic (`TOPICS`), in file order.
     topics : dict[str, dict]
-        Every topic of the file: ``type``, ``count``, ``first_ns``, ``last_ns``
+        Every topic of the file: `type`, `count`, `first_ns`, `last_ns`
         (unknown topics included, not decoded).
     truncated : bool
         The file ended before its footer; what was complete was read.
     schemas : dict[str, str]
         Stored message definition of each topic's type.
     attachments : dict[str, bytes]
-        Attachments of the file by name (``params.yaml``, ``timestamps.npz`` ...).
+        Attachments of the file by name (`params.yaml`, `timestamps.npz` ...).
     """
 
     path: Path
@@ -146,7 +146,7 @@ class Recording:
             return None
 
     def params(self) -> dict | None:
-        """The run's ROS 2 parameter file (``{node: {"ros__parameters": ...}}``), or None.
+        """The run's ROS 2 parameter file (`{node: {"ros__parameters": ...}}`), or None.
 
         Raises
         ------
@@ -175,7 +175,7 @@ def _bag_custom_data(serialized: str) -> dict:
 
 
 class _Stream:
-    """MCAP records of a run file in file order; ``complete`` once the footer was read.
+    """MCAP records of a run file in file order; `complete` once the footer was read.
 
     A file that ends early stops the iteration at its last complete record.
 
@@ -207,7 +207,7 @@ class _Stream:
                 return  # truncated: keep what was complete, the caller warns
 
     def warn_if_truncated(self, n: int, stacklevel: int = 3) -> None:
-        """TruncatedRunWarning if the footer was not reached (``n`` messages read)."""
+        """TruncatedRunWarning if the footer was not reached (`n` messages read)."""
         if not self.complete:
             warnings.warn(
                 f"{self.path} is truncated (recorder stopped before closing it): read {n} "
@@ -310,8 +310,8 @@ def run_attachments(run: str | Path) -> dict[str, bytes]:
 def run_params(run: str | Path) -> dict | None:
     """The ROS 2 parameter file a run was made with, or None if it holds none.
 
-    From the run file (attachment ``params.yaml``); for a run of an earlier version,
-    the ``params.yaml`` in its run folder.
+    From the run file (attachment `params.yaml`); for a run of an earlier version,
+    the `params.yaml` in its run folder.
 
     Raises
     ------
@@ -333,7 +333,7 @@ def read_run(run: str | Path) -> Recording:
     """Read a run (bag folder or .mcap file) in one pass.
 
     A file that ends early (recorder killed) is read up to its last complete
-    chunk and a :class:`TruncatedRunWarning` says so. Topics that are not loop
+    chunk and a `TruncatedRunWarning` says so. Topics that are not loop
     topics are listed with their counts, not decoded; a loop topic recorded with
     an older definition is decoded with the stored one.
 
@@ -412,13 +412,13 @@ def iter_raw(run: str | Path, topics=None):
     Yields
     ------
     (topic, msgtype, log_time_ns, data) : (str, str, int, bytes)
-        ``data`` is the CDR payload as recorded.
+        `data` is the CDR payload as recorded.
 
     Raises
     ------
     RunError
         If the file is missing or not an MCAP file. A truncated file ends the
-        iteration early with a :class:`TruncatedRunWarning`.
+        iteration early with a `TruncatedRunWarning`.
     """
     stream = _Stream(run)
     wanted = None if topics is None else set(topics)
@@ -442,8 +442,8 @@ def step_anomalies(rec: Recording) -> dict[str, dict[str, int]]:
     Returns
     -------
     dict
-        Per loop topic: ``duplicate`` (a step index seen again), ``out_of_order``
-        (a step index lower than one already seen) and ``missing`` (indices absent
+        Per loop topic: `duplicate` (a step index seen again), `out_of_order`
+        (a step index lower than one already seen) and `missing` (indices absent
         between 0 and the highest seen).
     """
     out = {}
@@ -486,6 +486,6 @@ def step_arrays(rec: Recording) -> tuple[int, dict]:
 
 
 def run_result_of(rec: Recording) -> RunResult:
-    """:class:`RunResult` of a recorded run (complete steps only)."""
+    """`RunResult` of a recorded run (complete steps only)."""
     n, aligned = step_arrays(rec)
     return run_result(aligned, {**rec.metadata, "steps": n})

@@ -2,9 +2,9 @@
 
 The SIL recorder keeps, for every message it records, the DDS source timestamp (wall
 clock when the producing node published it) and its own receive time, and attaches them
-to the run file when it closes the run (attachment ``timestamps.npz``,
-:func:`timestamps_npz`; runs of earlier versions have the same file in the run folder). From
-them, :func:`hop_latencies` gives for every loop node of the step
+to the run file when it closes the run (attachment `timestamps.npz`,
+`timestamps_npz`; runs of earlier versions have the same file in the run folder). From
+them, `hop_latencies` gives for every loop node of the step
 
     latency(node, k) = source time of its output of step k
                        - latest source time of its inputs of step k
@@ -18,7 +18,7 @@ other along the critical path (plant -> notch_filter | nominal_trajectory -> con
 recorder's own receive delay (receive - source) estimates one DDS hop without any
 computation.
 
-Runs of ``fahv simulate`` have no such file: their timing is not a graph's.
+Runs of `fahv simulate` have no such file: their timing is not a graph's.
 """
 
 from __future__ import annotations
@@ -46,18 +46,18 @@ def _arrays(stamps: dict) -> dict[str, np.ndarray]:
 
 
 def timestamps_npz(stamps: dict) -> bytes:
-    """The recorder's timestamps of a run as the bytes of a compressed ``.npz`` file.
+    """The recorder's timestamps of a run as the bytes of a compressed `.npz` file.
 
     Parameters
     ----------
     stamps : dict
-        Topic -> flat int64 sequence ``k, source_ns, received_ns`` per message
+        Topic -> flat int64 sequence `k, source_ns, received_ns` per message
         (array of 3 N values, or an (N, 3) array); wall-clock nanoseconds.
 
     Returns
     -------
     bytes
-        The attachment ``timestamps.npz`` of the run file (:func:`load_timestamps`
+        The attachment `timestamps.npz` of the run file (`load_timestamps`
         reads it back).
     """
     buf = io.BytesIO()
@@ -66,14 +66,14 @@ def timestamps_npz(stamps: dict) -> bytes:
 
 
 def save_timestamps(folder: str | Path, stamps: dict) -> Path:
-    """Write the timestamps to ``<folder>/timestamps.npz`` (the layout of earlier runs).
+    """Write the timestamps to `<folder>/timestamps.npz` (the layout of earlier runs).
 
     Parameters
     ----------
     folder : path
         Folder (exists).
     stamps : dict
-        As :func:`timestamps_npz`.
+        As `timestamps_npz`.
 
     Returns
     -------
@@ -96,13 +96,13 @@ def load_timestamps(source: str | Path | bytes | None) -> dict[str, np.ndarray] 
     Parameters
     ----------
     source : bytes, path or None
-        The attachment's bytes (:func:`timestamps_npz`), or a run folder of an earlier
-        version holding ``timestamps.npz``.
+        The attachment's bytes (`timestamps_npz`), or a run folder of an earlier
+        version holding `timestamps.npz`.
 
     Returns
     -------
     dict or None
-        ``{topic: timestamps}``; None when there are no (readable) timestamps.
+        `{topic: timestamps}`; None when there are no (readable) timestamps.
     """
     if source is None:
         return None
@@ -115,10 +115,10 @@ def load_timestamps(source: str | Path | bytes | None) -> dict[str, np.ndarray] 
 
 
 def run_controller(params: dict | str | Path | None) -> str:
-    """Controller node of a run from its parameter file (``tube_mpc`` if unknown).
+    """Controller node of a run from its parameter file (`tube_mpc` if unknown).
 
-    ``params``: the parsed parameter file (``{node: {"ros__parameters": ...}}``), or a
-    run folder of an earlier version holding ``params.yaml``.
+    `params`: the parsed parameter file (`{node: {"ros__parameters": ...}}`), or a
+    run folder of an earlier version holding `params.yaml`.
     """
     if params is not None and not isinstance(params, dict):
         try:
@@ -151,18 +151,18 @@ def hop_latencies(stamps: dict[str, np.ndarray], controller: str = "tube_mpc") -
     Parameters
     ----------
     stamps : dict
-        :func:`load_timestamps` of the run.
+        `load_timestamps` of the run.
     controller : str
-        Controller node of the run (one of :data:`fahv.loop.graph.CONTROLLER_NODES`).
+        Controller node of the run (one of `fahv.loop.graph.CONTROLLER_NODES`).
 
     Returns
     -------
     dict
-        ``hops``: one entry per loop node in graph order, with ``node``, ``inputs``,
-        ``output`` (the output the next node waits for) and the statistics over the
-        steps: ``n``, ``median_ms``, ``p90_ms``, ``max_ms`` [ms of wall time];
-        ``step``: the same statistics of the step period (state k -> state k + 1);
-        ``dds_hop``: the recorder's receive delay over every loop topic (one DDS hop
+        `hops`: one entry per loop node in graph order, with `node`, `inputs`,
+        `output` (the output the next node waits for) and the statistics over the
+        steps: `n`, `median_ms`, `p90_ms`, `max_ms` [ms of wall time];
+        `step`: the same statistics of the step period (state k -> state k + 1);
+        `dds_hop`: the recorder's receive delay over every loop topic (one DDS hop
         without computation).
     """
     nodes = [n for n in graph_nodes(controller, record=False) if n in GRAPH]
@@ -193,15 +193,15 @@ def hop_latencies(stamps: dict[str, np.ndarray], controller: str = "tube_mpc") -
 
 
 def run_latencies(run: bytes | str | Path | None, params=None) -> dict | None:
-    """:func:`hop_latencies` of a run, or None if it has no timestamps.
+    """`hop_latencies` of a run, or None if it has no timestamps.
 
     Parameters
     ----------
     run : bytes, path or None
         The timestamps attachment itself, or a run (folder or .mcap: its attachment;
-        a run folder of an earlier version: its ``timestamps.npz``).
+        a run folder of an earlier version: its `timestamps.npz`).
     params : dict, optional
-        The run's parameter file (:func:`run_controller`); by default the run's.
+        The run's parameter file (`run_controller`); by default the run's.
     """
     if run is None or isinstance(run, bytes):
         stamps = load_timestamps(run)
@@ -224,7 +224,7 @@ def run_latencies(run: bytes | str | Path | None, params=None) -> dict | None:
 
 
 def format_latencies(lat: dict) -> str:
-    """Text table of :func:`hop_latencies`: median, 90th percentile and max per hop [ms]."""
+    """Text table of `hop_latencies`: median, 90th percentile and max per hop [ms]."""
 
     def row(label: str, s: dict) -> str:
         f = [("-" if s[k] is None else f"{s[k]:.3f}") for k in ("median_ms", "p90_ms", "max_ms")]

@@ -1,14 +1,14 @@
 """Live view: the loop topics on a Foxglove WebSocket server while a run runs.
 
-``fahv sil --live`` (in the recorder process, which receives every loop message anyway,
-so the server adds no DDS reader and stays out of the lockstep) and ``fahv simulate
---live`` (in process) serve every loop topic through the ``foxglove-sdk`` server on
-localhost: one channel per topic with the ``ros2msg`` schema (the full definition, as
-in the run's MCAP file) and ``cdr`` message encoding, so the bytes sent are exactly
+`fahv sil --live` (in the recorder process, which receives every loop message anyway,
+so the server adds no DDS reader and stays out of the lockstep) and `fahv simulate
+--live` (in process) serve every loop topic through the `foxglove-sdk` server on
+localhost: one channel per topic with the `ros2msg` schema (the full definition, as
+in the run's MCAP file) and `cdr` message encoding, so the bytes sent are exactly
 those recorded. Message timestamps and the server's broadcast time are simulated time
-(t_k = k Ts), the log time of the recorded run. Open ``ws://localhost:PORT`` in
+(t_k = k Ts), the log time of the recorded run. Open `ws://localhost:PORT` in
 Foxglove ("Open connection", "Foxglove WebSocket") and import the layout
-``ros_ws/src/hsv_bringup/config/foxglove_layout.json``.
+`ros_ws/src/hsv_bringup/config/foxglove_layout.json`.
 """
 
 from __future__ import annotations
@@ -24,10 +24,10 @@ LAYOUT = WS / "src" / "hsv_bringup" / "config" / "foxglove_layout.json"
 
 
 def schema_text(topic: str) -> str:
-    """The ``ros2msg`` schema of a loop topic's type, as the run writer stores it.
+    """The `ros2msg` schema of a loop topic's type, as the run writer stores it.
 
     The definition of the type followed by those it uses, in the rosbag2/MCAP
-    concatenated form (``MSG:`` sections).
+    concatenated form (`MSG:` sections).
     """
     from fahv.loop.wire import typestore
 
@@ -41,7 +41,7 @@ class LiveView:
     Parameters
     ----------
     port : int
-        TCP port on 127.0.0.1; 0 takes a free one (see :attr:`port`).
+        TCP port on 127.0.0.1; 0 takes a free one (see `port`).
     Ts : float
         Control period [s]: the timestamp of step k is k Ts [ns].
     name : str
@@ -50,7 +50,7 @@ class LiveView:
     Raises
     ------
     RunError
-        If ``foxglove-sdk`` is missing or the server cannot listen on the port.
+        If `foxglove-sdk` is missing or the server cannot listen on the port.
     """
 
     def __init__(self, port: int, Ts: float, name: str = "fahv") -> None:
@@ -93,7 +93,7 @@ class LiveView:
 
     @property
     def url(self) -> str:
-        """``ws://127.0.0.1:PORT``, to open in Foxglove."""
+        """`ws://127.0.0.1:PORT`, to open in Foxglove."""
         return f"ws://127.0.0.1:{self.port}"
 
     def log(self, topic: str, k: int, data: bytes) -> None:

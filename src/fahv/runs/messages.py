@@ -1,9 +1,9 @@
 """The loop topics' messages in a run file: their QoS and their decoding to dicts.
 
-The CDR bytes in a run file are those of the wire codec :mod:`fahv.loop.wire` (the bytes
-the nodes publish); :func:`decode` reads them back as message dicts, and
-:func:`file_typestore` reads a definition stored in a run file (a run recorded before a
-message changed). :data:`LOOP_QOS` is the channels' ``offered_qos_profiles``.
+The CDR bytes in a run file are those of the wire codec `fahv.loop.wire` (the bytes
+the nodes publish); `decode` reads them back as message dicts, and
+`file_typestore` reads a definition stored in a run file (a run recorded before a
+message changed). `LOOP_QOS` is the channels' `offered_qos_profiles`.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ _INF = QosTime(2147483647, 4294967295)
 
 
 def offered_qos(q: graph.QoS) -> Qos:
-    """rosbag2 ``offered_qos_profiles`` entry of a :class:`fahv.loop.graph.QoS`."""
+    """rosbag2 `offered_qos_profiles` entry of a `fahv.loop.graph.QoS`."""
     return Qos(
         QosHistory.KEEP_LAST,
         q.depth,
@@ -44,7 +44,7 @@ def offered_qos(q: graph.QoS) -> Qos:
     )
 
 
-#: The loop topics' QoS (:data:`fahv.loop.graph.LOOP_QOS`) as the channels offer it.
+#: The loop topics' QoS (`fahv.loop.graph.LOOP_QOS`) as the channels offer it.
 LOOP_QOS = offered_qos(graph.LOOP_QOS)
 
 
@@ -59,10 +59,10 @@ def _to_dict(obj) -> dict:
 
 
 def decode(topic: str, data: bytes, ts=None) -> dict:
-    """Message dict of CDR bytes on a loop topic (inverse of :func:`encode`).
+    """Message dict of CDR bytes on a loop topic (inverse of `encode`).
 
-    ``ts``: typestore to decode with (default :func:`typestore`; a run written with
-    an older definition is decoded with its own, see :func:`file_typestore`).
+    `ts`: typestore to decode with (default `typestore`; a run written with
+    an older definition is decoded with its own, see `file_typestore`).
     """
     ts = typestore() if ts is None else ts
     return _to_dict(ts.deserialize_cdr(bytes(data), TOPICS[topic]))
@@ -70,7 +70,7 @@ def decode(topic: str, data: bytes, ts=None) -> dict:
 
 @functools.cache
 def file_typestore(msgtype: str, msgdef: str):
-    """Typestore that decodes ``msgtype`` with the definition stored in a run file.
+    """Typestore that decodes `msgtype` with the definition stored in a run file.
 
     Runs keep the full definition of every schema, so a run recorded before a
     message gained a field still decodes (the missing field is then absent from

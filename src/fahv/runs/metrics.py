@@ -36,7 +36,7 @@ def settling_times(run: RunResult) -> tuple[float, float]:
     """Settling times of the altitude and the velocity [s] (NaN: never settled).
 
     The first time after the case command stops moving from which |h - h_c| <=
-    ``SETTLE_TOL["h"]`` (resp. |V - V_c| <= ``SETTLE_TOL["V"]``) holds to the end of the run.
+    `SETTLE_TOL["h"]` (resp. |V - V_c| <= `SETTLE_TOL["V"]`) holds to the end of the run.
 
     Parameters
     ----------
@@ -68,10 +68,10 @@ def _trim_map(path: str):
 
 
 #: The nominal's states whose deviation from the nominal vehicle's trim at its own (h, V)
-#: :func:`nominal_deviation` measures (the eight-state tube's nominal box coordinates).
+#: `nominal_deviation` measures (the eight-state tube's nominal box coordinates).
 NOMINAL_STATES = ("alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
 
-#: Metric keys of the nominal's largest |deviation| per state of :data:`NOMINAL_STATES`.
+#: Metric keys of the nominal's largest |deviation| per state of `NOMINAL_STATES`.
 NOMINAL_KEYS = (
     "nominal_alpha_dev_max_deg", "nominal_theta_dev_max_deg", "nominal_q_dev_max_degps",
     "nominal_eta_1_dev_max", "nominal_eta_1_dot_dev_max", "nominal_eta_2_dev_max",
@@ -85,10 +85,10 @@ def nominal_deviation(run: RunResult) -> np.ndarray:
     The nominal state is x_r + x_n (the reference's trim plus the nominal deviation the
     nominal_trajectory node publishes); the trim is the packaged (or the run's) vehicle
     file's nominal vehicle, trimmed on a 13 x 13 grid over the envelope and interpolated
-    (:func:`fahv.model.trim.trim_map`) at the nominal's (h, V), clipped to the envelope.
-    Columns :data:`NOMINAL_STATES` [rad, rad, rad/s, -, 1/s, -, 1/s]: the coordinates
+    (`fahv.model.trim.trim_map`) at the nominal's (h, V), clipped to the envelope.
+    Columns `NOMINAL_STATES` [rad, rad, rad/s, -, 1/s, -, 1/s]: the coordinates
     of the eight-state tube's nominal box, whose range the certificate assumes
-    (:func:`fahv.bounds.domain.certified_range`).
+    (`fahv.bounds.domain.certified_range`).
 
     Raises
     ------
@@ -109,10 +109,10 @@ def own_trim_attitude(run: RunResult) -> np.ndarray | None:
     """Angle of attack and pitch [rad] (N, 2) of the dispersed vehicle's own trim, eq. (5).
 
     The trim (eq. 5) of the vehicle with the run's perturbed parameters
-    (``run.info["plant_params"]``) at each step's governed reference / artificial set
+    (`run.info["plant_params"]`) at each step's governed reference / artificial set
     point (h_g, V_g), clipped to the envelope; one trim per distinct set point
-    (vectorised, :func:`fahv.model.trim.trim_batch`). The parameters come from
-    ``run.info["plant_params"]`` (a simulated run) or the ``plant_params.<p>`` entries of a
+    (vectorised, `fahv.model.trim.trim_batch`). The parameters come from
+    `run.info["plant_params"]` (a simulated run) or the `plant_params.<p>` entries of a
     recorded run's metadata; None if the run carries neither (a run recorded before).
 
     Raises
@@ -157,24 +157,24 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     Returns
     -------
     dict
-        Keys and units as in ``fahv simulate`` (ft, ft/s, deg, s; NaN where a value
+        Keys and units as in `fahv simulate` (ft, ft/s, deg, s; NaN where a value
         does not exist, e.g. a settling time that is never reached).
 
     Attitude errors are against the trim of the governed reference x_r (the
     equilibrium the vehicle is steered to), the nominal vehicle's (the requirement of
-    sec. 5.1 as the project measures it); ``alpha_err_own_trim_max_deg`` and
-    ``theta_err_own_trim_max_deg`` are against the dispersed vehicle's own trim at the
-    same point (:func:`own_trim_attitude`; only for runs that carry their parameters).
-    For runs with a tube (finite tube level) :data:`NOMINAL_KEYS` (deg, deg, deg/s for
+    sec. 5.1 as the project measures it); `alpha_err_own_trim_max_deg` and
+    `theta_err_own_trim_max_deg` are against the dispersed vehicle's own trim at the
+    same point (`own_trim_attitude`; only for runs that carry their parameters).
+    For runs with a tube (finite tube level) `NOMINAL_KEYS` (deg, deg, deg/s for
     alpha, theta, q) are the nominal's largest deviations from the nominal vehicle's
-    trim at its own (h, V) (:func:`nominal_deviation`) and ``nominal_h_min_ft`` ...
-    ``nominal_V_max_fps`` its range: what the tube's certificate assumes of the nominal
+    trim at its own (h, V) (`nominal_deviation`) and `nominal_h_min_ft` ...
+    `nominal_V_max_fps` its range: what the tube's certificate assumes of the nominal
     (the campaign report checks them against the design's certified range).
     Tracking errors are against the case command. Flexible RMS values are over
-    t >= t_fault (the whole run without fault); ``t_fault_s`` is the onset within the
+    t >= t_fault (the whole run without fault); `t_fault_s` is the onset within the
     run (NaN: no fault within the run, so the "after fault" values are over the whole
-    run). ``tube_error_h_max_ft`` is the largest altitude part of the tube error,
-    |h - h_r - h_n| (with ``mpc.h_reset`` it returns to 0 at every re-plan; NaN
+    run). `tube_error_h_max_ft` is the largest altitude part of the tube error,
+    |h - h_r - h_n| (with `mpc.h_reset` it returns to 0 at every re-plan; NaN
     without a tube).
     """
     t, x = run.t, run.x

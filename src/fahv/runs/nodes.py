@@ -14,7 +14,7 @@ _WATCHDOG = Field("watchdog_s", "float", "wall time without any message that end
                   unit="s", lo=0.1, hi=3600.0, default=10.0)  # fmt: skip
 _METADATA = Field("metadata_json", "str", "run metadata as a JSON object", default="{}")
 
-#: Parameters of the ``recorder`` node.
+#: Parameters of the `recorder` node.
 RECORDER = (
     Field("bag", "str", "run folder to create (bags/<run>)"),
     TS,
@@ -27,7 +27,7 @@ RECORDER = (
           "0: any free port, -1: no live view)", lo=-1, hi=65535, default=-1),
 )  # fmt: skip
 
-#: Parameters of the ``replay`` node.
+#: Parameters of the `replay` node.
 REPLAY = (
     Field("run", "str", "run to replay (bag folder or .mcap)"),
     Field("topics", "strs", "topics to republish (default: every loop topic of the run)",

@@ -1,12 +1,12 @@
 """Paper-style figures of closed-loop runs (Yang et al. 2022, Fig. 9-17).
 
-Each function takes runs as ``[(label, RunResult), ...]`` (from ``fahv simulate``,
-``fahv sil`` or a recorded file, :func:`fahv.runs.bag.run_result_of`; the labels of
-recorded runs from :func:`fahv.runs.plots_context.run_labels`), overlays them with a
+Each function takes runs as `[(label, RunResult), ...]` (from `fahv simulate`,
+`fahv sil` or a recorded file, `fahv.runs.bag.run_result_of`; the labels of
+recorded runs from `fahv.runs.plots_context.run_labels`), overlays them with a
 legend and writes one figure (PNG or PDF by the suffix). Drawing is matplotlib (Agg).
-Time in s, angles in deg. The engineering figures of ``fahv plot`` (errors with the
+Time in s, angles in deg. The engineering figures of `fahv plot` (errors with the
 requirement bands, inputs with their limits, spectra) are in
-:mod:`fahv.runs.plots_time` and :mod:`fahv.runs.plots_frequency`.
+`fahv.runs.plots_time` and `fahv.runs.plots_frequency`.
 """
 
 from __future__ import annotations
@@ -63,12 +63,12 @@ GROUPS = {
 
 
 def group_figure(group: str, runs: list, title: str | None = None):
-    """The figure of one group (:data:`GROUPS`) with several runs overlaid.
+    """The figure of one group (`GROUPS`) with several runs overlaid.
 
     Parameters
     ----------
     group : str
-        Key of :data:`GROUPS`.
+        Key of `GROUPS`.
     runs : list of (str, RunResult)
         Legend label and run, in drawing order.
     title : str, optional
@@ -110,12 +110,12 @@ def group_figure(group: str, runs: list, title: str | None = None):
 
 
 def plot_group(group: str, runs: list, path: str | Path, title: str | None = None) -> Path:
-    """Write one figure group (:data:`GROUPS`) of several runs overlaid.
+    """Write one figure group (`GROUPS`) of several runs overlaid.
 
     Parameters
     ----------
     group : str
-        Key of :data:`GROUPS`.
+        Key of `GROUPS`.
     runs : list of (str, RunResult)
     path : path
         Output file (.png or .pdf).
@@ -177,8 +177,8 @@ def _tube_axis(ax, runs) -> None:
 
 
 #: The paper's simulation figures: number -> (case, group, variants, title). A variant
-#: written ``other_case/variant`` is that case's run (the paper's law runs on the vertex
-#: tube of ``case1_paper``, Case 1's certified design has no such variant).
+#: written `other_case/variant` is that case's run (the paper's law runs on the vertex
+#: tube of `case1_paper`, Case 1's certified design has no such variant).
 PAPER_FIGURES = {
     9: (
         "case1",
@@ -231,9 +231,9 @@ LINESTYLES = ("-", (0, (5, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)))
 
 
 def paper_figures(runs: dict, out_dir: str | Path) -> list[Path]:
-    """Write Fig. 9-17 from ``{(case, variant): RunResult}``; skips a figure with no run.
+    """Write Fig. 9-17 from `{(case, variant): RunResult}`; skips a figure with no run.
 
-    A run missing from ``runs`` is left out of its figure; a run of another case than
+    A run missing from `runs` is left out of its figure; a run of another case than
     the figure's is labelled with that case.
     """
     out = []

@@ -1,12 +1,12 @@
 """A run as its figures need it: legend label, limits, notch, fault onset, time window.
 
-``fahv plot`` reads each run once into a :class:`PlottedRun`: the closed-loop histories
-(:class:`fahv.loop.simulate.RunResult`) with what the figures mark on them, taken from
+`fahv plot` reads each run once into a `PlottedRun`: the closed-loop histories
+(`fahv.loop.simulate.RunResult`) with what the figures mark on them, taken from
 the run itself: the actuator limits of the vehicle it was made with (sec. 5.1), the
 tightened input limits u_lo, u_hi of eq. (30) and the notch filter (eq. 38) from its
 parameter file, the flexible-mode frequencies omega_flex from its design, the onset
-of its fault (``fault_t_onset`` of the metadata, none for the fault kind ``none``).
-The legend label is the run's scenario and variant (:func:`run_labels`).
+of its fault (`fault_t_onset` of the metadata, none for the fault kind `none`).
+The legend label is the run's scenario and variant (`run_labels`).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ class PlottedRun:
     Attributes
     ----------
     label : str
-        Legend label (:func:`run_labels`).
+        Legend label (`run_labels`).
     run : RunResult
         The run's histories, N steps.
     limits : InputLimits or None
@@ -42,7 +42,7 @@ class PlottedRun:
         for a law without them or a run without its parameter file).
     omega_z : float or None
         Centre frequency of the notch filter on q (eq. 38) [rad/s]; None when the run
-        has no notch (``notch_filter`` disabled).
+        has no notch (`notch_filter` disabled).
     omega_flex : (2,) ndarray or None
         Flexible-mode frequencies of the run's design at its initial trim [rad/s]
         (None when the design is not found).
@@ -61,29 +61,29 @@ class PlottedRun:
 
 
 def run_labels(paths, metadata) -> list[str]:
-    """Legend labels of overlaid runs: ``"<scenario> / <variant>"`` from the metadata.
+    """Legend labels of overlaid runs: `"<scenario> / <variant>"` from the metadata.
 
     Runs of the same scenario and variant are told apart by their names in
     parentheses (the folder, or the .mcap file without suffix; with the parent folder
-    when two such names are equal), a run given twice by its position (``[2]``).
+    when two such names are equal), a run given twice by its position (`[2]`).
 
     Parameters
     ----------
     paths : sequence of path
         Run folders or .mcap files, in drawing order.
     metadata : sequence of mapping
-        Run metadata of each run (keys ``case``, the scenario name, and ``variant``;
-        ``?`` where missing).
+        Run metadata of each run (keys `case`, the scenario name, and `variant`;
+        `?` where missing).
 
     Returns
     -------
     list of str
-        One distinct label per run, in the order of ``paths``.
+        One distinct label per run, in the order of `paths`.
 
     Raises
     ------
     ValueError
-        If ``paths`` and ``metadata`` differ in length.
+        If `paths` and `metadata` differ in length.
     """
     paths, metadata = [Path(p) for p in paths], list(metadata)
     if len(paths) != len(metadata):
@@ -101,7 +101,7 @@ def run_labels(paths, metadata) -> list[str]:
 
 
 def _node(params: dict | None, node: str) -> dict:
-    """The ``ros__parameters`` of one node of a parameter file ({} if absent)."""
+    """The `ros__parameters` of one node of a parameter file ({} if absent)."""
     return ((params or {}).get(node) or {}).get("ros__parameters") or {}
 
 
@@ -126,12 +126,12 @@ def fault_onset(metadata: dict) -> float | None:
     Parameters
     ----------
     metadata : mapping
-        Run metadata (``fault_kind``, ``fault_t_onset``).
+        Run metadata (`fault_kind`, `fault_t_onset`).
 
     Returns
     -------
     float or None
-        ``fault_t_onset`` unless the fault kind is ``none`` or the onset is not finite.
+        `fault_t_onset` unless the fault kind is `none` or the onset is not finite.
     """
     if metadata.get("fault_kind", "none") in ("none", None):
         return None
@@ -143,7 +143,7 @@ def fault_onset(metadata: dict) -> float | None:
 
 
 def plotted_run(rec, label: str) -> PlottedRun:
-    """The :class:`PlottedRun` of a recorded run.
+    """The `PlottedRun` of a recorded run.
 
     Parameters
     ----------
@@ -156,7 +156,7 @@ def plotted_run(rec, label: str) -> PlottedRun:
     -------
     PlottedRun
         Limits from the run's vehicle file (packaged if none recorded), u_lo, u_hi and
-        the notch from its parameter file (``nominal_trajectory``, ``notch_filter``),
+        the notch from its parameter file (`nominal_trajectory`, `notch_filter`),
         omega_flex from its design, the onset from the metadata.
 
     Raises
@@ -227,7 +227,7 @@ def clip_run(run: RunResult, t0: float | None = None, t1: float | None = None) -
 
 
 def clip_runs(runs: list, t0: float | None = None, t1: float | None = None) -> list:
-    """Each :class:`PlottedRun` with its run cut to [t0, t1] (:func:`clip_run`).
+    """Each `PlottedRun` with its run cut to [t0, t1] (`clip_run`).
 
     Parameters
     ----------

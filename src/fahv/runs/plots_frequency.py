@@ -1,13 +1,13 @@
 """Frequency view of runs: spectra of q, the filtered q' and eta_1_dot, what the notch does.
 
-Power spectral densities by Welch's method (``scipy.signal.welch``, Hann window, mean
+Power spectral densities by Welch's method (`scipy.signal.welch`, Hann window, mean
 removed) of the pitch rate q, the notch filter's output q' (eq. 38; the
-``/hsv/q_filtered`` topic, ``RunResult.q_f``; q' = q without a notch) and the rate of
+`/hsv/q_filtered` topic, `RunResult.q_f`; q' = q without a notch) and the rate of
 the first flexible coordinate eta_1_dot, over frequency omega [rad/s] up to the
 Nyquist frequency pi / Ts. The notch frequency omega_z and the flexible-mode
 frequencies omega_flex of the design are marked: with the notch, q' is q with its
 mode-1 component removed; overlaying a run without the notch (variant
-``tube_mpc_no_notch``) shows how much of the first mode then enters the feedback and
+`tube_mpc_no_notch`) shows how much of the first mode then enters the feedback and
 the vehicle.
 """
 
@@ -82,7 +82,7 @@ def spectrum_window(run, after_transient: bool = True) -> tuple[float, float]:
         N >= 1 steps.
     after_transient : bool
         From the settling of the step (the later of the settling times of h and V,
-        :func:`fahv.runs.metrics.settling_times`; the run's second half if it never
+        `fahv.runs.metrics.settling_times`; the run's second half if it never
         settles) to its end; False: the whole run (a window already chosen).
 
     Returns
@@ -110,7 +110,7 @@ def _mark_frequencies(ax, runs: list) -> None:
 
 
 def _run_spectra(run, after_transient: bool) -> tuple[tuple[float, float], float, list]:
-    """((t0, t1), Ts, [(omega, S) per panel of :data:`SPECTRUM_PANELS`]) of one run."""
+    """((t0, t1), Ts, [(omega, S) per panel of `SPECTRUM_PANELS`]) of one run."""
     t0, t1 = spectrum_window(run, after_transient)
     keep = (run.t >= t0) & (run.t <= t1)
     Ts = float(np.median(np.diff(run.t))) if run.t.size > 1 else 0.0
@@ -125,7 +125,7 @@ def spectra_figure(runs: list, after_transient: bool = True):
     runs : list of PlottedRun
         Runs in drawing order (at least one, each of 2 steps or more).
     after_transient : bool
-        Each run's spectrum over :func:`spectrum_window` (from the step's settling);
+        Each run's spectrum over `spectrum_window` (from the step's settling);
         False: over the whole (already windowed) run.
 
     Returns

@@ -1,13 +1,13 @@
 """Engineering figures of runs over time: tracking errors, inputs, input rates, tube level.
 
-Each figure overlays runs given as :class:`fahv.runs.plots_context.PlottedRun` (already
-cut to the time window, :func:`fahv.runs.plots_context.clip_runs`) and returns a
+Each figure overlays runs given as `fahv.runs.plots_context.PlottedRun` (already
+cut to the time window, `fahv.runs.plots_context.clip_runs`) and returns a
 matplotlib figure the caller saves and closes. What they draw:
 
 - tracking errors h - h_c [ft], V - V_c [ft/s] against the case command, alpha -
   alpha_r and theta - theta_r [deg] against the trim of the governed reference x_r (as
-  :func:`fahv.runs.metrics.metrics` computes them), with the requirement bands shaded:
-  +/- ``SETTLE_TOL`` (settling of h and V) and +/- ``ATTITUDE_BOUND_DEG`` (sec. 5.1);
+  `fahv.runs.metrics.metrics` computes them), with the requirement bands shaded:
+  +/- `SETTLE_TOL` (settling of h and V) and +/- `ATTITUDE_BOUND_DEG` (sec. 5.1);
   the right column zooms on the bands;
 - the controller command u = (Phi, delta_e) with the actuator limits (sec. 5.1) and
   the tightened limits u_lo, u_hi of eq. (30);
@@ -16,7 +16,7 @@ matplotlib figure the caller saves and closes. What they draw:
 - the tube level e' N^-1 e (<= 1: the tube error e inside Z = {e' N^-1 e <= 1}) on a
   logarithmic axis with the boundary at 1.
 
-:func:`mark_onsets` draws the fault onset on every panel of any of them.
+`mark_onsets` draws the fault onset on every panel of any of them.
 """
 
 from __future__ import annotations
@@ -58,14 +58,14 @@ def _band(ax, bound: float, label: str | None) -> None:
 
 
 def mark_onsets(fig, runs: list) -> list[float]:
-    """Draw the fault onset of the runs as a vertical line on every panel of ``fig``.
+    """Draw the fault onset of the runs as a vertical line on every panel of `fig`.
 
     Parameters
     ----------
     fig : matplotlib.figure.Figure
         A figure over time (x axis: t [s]).
     runs : list of PlottedRun
-        The runs drawn; each distinct ``t_onset`` within the time span of the runs is
+        The runs drawn; each distinct `t_onset` within the time span of the runs is
         drawn once, labelled on the first panel.
 
     Returns

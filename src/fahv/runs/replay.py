@@ -1,12 +1,12 @@
-"""``fahv replay``: republish a recorded run over DDS, optionally into nodes under test.
+"""`fahv replay`: republish a recorded run over DDS, optionally into nodes under test.
 
-With nodes under test, the ``replay`` node publishes the recorded inputs of those
+With nodes under test, the `replay` node publishes the recorded inputs of those
 nodes and captures their outputs in lockstep; its output run holds the captured
 topics and, for every other loop topic, the recorded messages, so it is a complete
-run (metrics, ``fahv compare``). :func:`compare_outputs` then says whether every
+run (metrics, `fahv compare`). `compare_outputs` then says whether every
 captured message equals the recorded one, byte for byte.
 
-Only complete steps are replayed (:func:`recorded_steps`): a recording cut short (its
+Only complete steps are replayed (`recorded_steps`): a recording cut short (its
 recorder killed) may hold the last steps on some topics only, and a node under test
 cannot answer a step whose inputs were never recorded.
 """
@@ -41,18 +41,18 @@ from fahv.runs.workspace import WS, ensure_built, ros_env
 
 @dataclass
 class RecordedSteps:
-    """Steps of a recorded run as a replay sees them (:func:`recorded_steps`).
+    """Steps of a recorded run as a replay sees them (`recorded_steps`).
 
     Attributes
     ----------
     complete : int
-        Steps 0 .. complete - 1 hold a message on every topic in ``topics``.
+        Steps 0 .. complete - 1 hold a message on every topic in `topics`.
     recorded : int
         Steps with a message on any loop topic.
     topics : list of str
         Topics a step needs.
     missing : list of str
-        Topics without a message at step ``complete`` (empty when every step is complete).
+        Topics without a message at step `complete` (empty when every step is complete).
     file_truncated : bool
         The file ends before its summary (the recorder was killed).
     """
@@ -65,11 +65,11 @@ class RecordedSteps:
 
     @property
     def truncated(self) -> bool:
-        """Some recorded step is not complete: only ``complete`` steps can be replayed."""
+        """Some recorded step is not complete: only `complete` steps can be replayed."""
         return self.complete < self.recorded
 
     def summary(self, name: str) -> str:
-        """One line on what of recording ``name`` can be replayed."""
+        """One line on what of recording `name` can be replayed."""
         cut = " (the file ends before its summary)" if self.file_truncated else ""
         if not self.truncated:
             return f"{name}: {self.complete} complete steps{cut}"
@@ -83,7 +83,7 @@ class RecordedSteps:
 def recorded_steps(run: str | Path, topics=None) -> RecordedSteps:
     """Count the complete steps of a recorded run: those with every needed topic.
 
-    A step is the set of loop messages of one log time (as the ``replay`` node groups
+    A step is the set of loop messages of one log time (as the `replay` node groups
     them), numbered in time order; it is complete when each needed topic has a
     message at that time. The count stops at the first step that is not.
 
@@ -120,7 +120,7 @@ def recorded_steps(run: str | Path, topics=None) -> RecordedSteps:
 
 
 def steps_of(at: dict[int, set], topics=None, file_truncated: bool = False) -> RecordedSteps:
-    """:class:`RecordedSteps` of a run from the topics recorded at each log time.
+    """`RecordedSteps` of a run from the topics recorded at each log time.
 
     Parameters
     ----------
@@ -142,7 +142,7 @@ def steps_of(at: dict[int, set], topics=None, file_truncated: bool = False) -> R
 
 @dataclass
 class OutputCheck:
-    """Captured outputs of a replay against the recorded ones (:func:`compare_outputs`).
+    """Captured outputs of a replay against the recorded ones (`compare_outputs`).
 
     Attributes
     ----------
@@ -172,7 +172,7 @@ class OutputCheck:
         return self.compared > 0 and self.equal == self.compared
 
     def summary(self) -> str:
-        """One line: ``outputs identical: ...`` or ``outputs differ: ...``."""
+        """One line: `outputs identical: ...` or `outputs differ: ...`."""
         where = ", ".join(self.topics)
         cut = "" if self.truncated_at is None else (
             f" (recording truncated at step {self.truncated_at}: later steps not compared)"
@@ -254,14 +254,14 @@ def compare_outputs(recorded: str | Path, replayed: str | Path, topics, steps: i
 
 @dataclass
 class ReplayRun:
-    """Outcome of one replay (:func:`run_replay`).
+    """Outcome of one replay (`run_replay`).
 
     Attributes
     ----------
     out : Path or None
         Run folder written by the replay node (None when not recorded).
     returncode : int
-        Exit status of the ``sil`` runner: 0 when the replay and every node finished.
+        Exit status of the `sil` runner: 0 when the replay and every node finished.
     wall_s : float
         Wall time of the whole replay, start-up included [s].
     log_dir : Path
@@ -272,7 +272,7 @@ class ReplayRun:
         The captured outputs against the recorded ones (None without captured topics
         or when the replay did not finish).
     recorded : RecordedSteps or None
-        The complete steps of the replayed run (:func:`recorded_steps`).
+        The complete steps of the replayed run (`recorded_steps`).
     """
 
     out: Path | None
@@ -290,9 +290,9 @@ def _ros_list(values) -> list[str]:
 
 
 def _node_parameters(mcap: Path, nodes, params, steps: int) -> dict:
-    """Parameter file sections of the nodes under test: the run's, for ``steps`` steps.
+    """Parameter file sections of the nodes under test: the run's, for `steps` steps.
 
-    From ``params`` (a parameter file) if given, else from the run file.
+    From `params` (a parameter file) if given, else from the run file.
 
     Raises
     ------
@@ -340,30 +340,30 @@ def run_replay(
     log=print,
     params: str | Path | None = None,
 ) -> ReplayRun:
-    """Republish a recorded run (``replay`` node), optionally into nodes under test.
+    """Republish a recorded run (`replay` node), optionally into nodes under test.
 
     Parameters
     ----------
     run : path
         Run folder (or its .mcap file, alone or in a renamed folder).
     nodes : sequence of str
-        Nodes to start against the replay (e.g. ``["tube_mpc"]``), with the
+        Nodes to start against the replay (e.g. `["tube_mpc"]`), with the
         parameters the run was made with (the parameter file in the run file).
     topics : sequence of str, optional
-        Topics to republish; default: the inputs of ``nodes`` they do not produce
-        (:func:`fahv.loop.replay_topics`), or every loop topic without nodes.
+        Topics to republish; default: the inputs of `nodes` they do not produce
+        (`fahv.loop.replay_topics`), or every loop topic without nodes.
     capture : sequence of str, optional
-        Topics to capture (lockstep on them); default: the outputs of ``nodes``.
+        Topics to capture (lockstep on them); default: the outputs of `nodes`.
     out : path, optional
         Run folder to write: the captured topics and the recorded messages of every
-        other loop topic. With captured topics and no ``out``, the run is written to
+        other loop topic. With captured topics and no `out`, the run is written to
         the replay's log folder (the comparison needs it).
     rate : float
         1: recorded timing, r: r times faster, 0: as fast as possible.
     steps : int
         Steps to replay (0: all); the nodes under test run that many steps. Never more
-        than the complete steps of the run (:func:`recorded_steps`): of a truncated
-        recording, the steps before the truncation, which ``log`` names.
+        than the complete steps of the run (`recorded_steps`): of a truncated
+        recording, the steps before the truncation, which `log` names.
     watchdog_s : float
         Wall-clock watchdog of every node [s].
     quiet : bool
@@ -378,7 +378,7 @@ def run_replay(
     Returns
     -------
     ReplayRun
-        ``returncode`` 0 when the replay (and every node) finished; ``outputs`` compares
+        `returncode` 0 when the replay (and every node) finished; `outputs` compares
         the captured messages with the recorded ones.
 
     Raises

@@ -1,10 +1,10 @@
 """The README's results tables: every variant of Cases 1 and 2, metrics and reference.
 
-``fahv results`` runs (in process, :func:`fahv.loop.simulate.simulate`) every variant
+`fahv results` runs (in process, `fahv.loop.simulate.simulate`) every variant
 of each case file on its design (designed first if missing or stale), prints the
 results table in the README's layout and can write the metrics as a JSON reference;
-:func:`compare_reference` checks a new set of metrics against such a file within
-:data:`TOLERANCES` (the CI test ``tests/runs/test_results_reference.py`` does so for
+`compare_reference` checks a new set of metrics against such a file within
+`TOLERANCES` (the CI test `tests/runs/test_results_reference.py` does so for
 every variant of Case 1).
 """
 
@@ -65,7 +65,7 @@ def run_case(design, variants, limits, log=print) -> dict[str, dict]:
     Returns
     -------
     dict
-        variant -> metrics (:func:`fahv.runs.metrics.metrics`) plus ``wall_s``.
+        variant -> metrics (`fahv.runs.metrics.metrics`) plus `wall_s`.
     """
     out = {}
     for i, v in enumerate(variants, 1):
@@ -79,13 +79,13 @@ def run_case(design, variants, limits, log=print) -> dict[str, dict]:
 
 
 def compare_reference(new: dict, ref: dict) -> list[str]:
-    """Differences of metrics beyond :data:`TOLERANCES` (empty list: within them).
+    """Differences of metrics beyond `TOLERANCES` (empty list: within them).
 
     Parameters
     ----------
     new, ref : dict
-        ``{case: {variant: metrics}}``; every (case, variant) of ``ref`` must be in
-        ``new``. NaN (or null) matches only NaN.
+        `{case: {variant: metrics}}`; every (case, variant) of `ref` must be in
+        `new`. NaN (or null) matches only NaN.
 
     Returns
     -------
@@ -162,7 +162,7 @@ def markdown_table(results: dict) -> str:
 
 
 def write_reference(results: dict, path: str | Path) -> Path:
-    """Write ``{case: {variant: metrics}}`` as JSON (NaN as null), keys sorted."""
+    """Write `{case: {variant: metrics}}` as JSON (NaN as null), keys sorted."""
 
     def clean(v):
         if isinstance(v, dict):
@@ -182,7 +182,7 @@ def write_reference(results: dict, path: str | Path) -> Path:
 
 
 def read_reference(path: str | Path) -> dict:
-    """Read a reference written by :func:`write_reference` (null back to NaN)."""
+    """Read a reference written by `write_reference` (null back to NaN)."""
 
     def back(v):
         if isinstance(v, dict):

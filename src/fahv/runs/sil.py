@@ -1,18 +1,18 @@
-"""``fahv sil``: run a designed case through the ROS 2 node graph and record it.
+"""`fahv sil`: run a designed case through the ROS 2 node graph and record it.
 
 This module imports no ROS code: it builds the colcon workspace when needed
-(``scripts/build_ros.sh``), writes the run's parameter file (the design's node
-parameters for the variant, the recorder's section, and ``graph_nodes`` /
-``use_sim_time`` for every node, see :data:`USE_SIM_TIME`), starts the ``sil`` runner
-of ``hsv_bringup`` in the workspace's environment, and reads the recorded run back.
-The runner isolates the graph: a free ``ROS_DOMAIN_ID`` from ``domain_coordinator``
-(whatever the shell exports) and ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``; the
-recorder stores the domain in the run metadata (``ros_domain_id``).
+(`scripts/build_ros.sh`), writes the run's parameter file (the design's node
+parameters for the variant, the recorder's section, and `graph_nodes` /
+`use_sim_time` for every node, see `USE_SIM_TIME`), starts the `sil` runner
+of `hsv_bringup` in the workspace's environment, and reads the recorded run back.
+The runner isolates the graph: a free `ROS_DOMAIN_ID` from `domain_coordinator`
+(whatever the shell exports) and `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`; the
+recorder stores the domain in the run metadata (`ros_domain_id`).
 
-Interruption: a ``KeyboardInterrupt`` while the runner works (Ctrl-C, or SIGTERM turned
-into one by ``fahv.cli``) is forwarded to the runner as SIGINT; the runner stops every
-node, the recorder finalises the run (status ``interrupted``), and the result says
-``interrupted``. Further interrupts while the graph stops are ignored.
+Interruption: a `KeyboardInterrupt` while the runner works (Ctrl-C, or SIGTERM turned
+into one by `fahv.cli`) is forwarded to the runner as SIGINT; the runner stops every
+node, the recorder finalises the run (status `interrupted`), and the result says
+`interrupted`. Further interrupts while the graph stops are ignored.
 """
 
 from __future__ import annotations
@@ -33,11 +33,11 @@ from fahv.plant.faults import FAULTS
 from fahv.runs.workspace import ROOT, WS, ensure_built, ros_env
 from fahv.version import code_version
 
-#: ``use_sim_time`` of the graph's nodes. The loop runs on the step index k and t_k that
+#: `use_sim_time` of the graph's nodes. The loop runs on the step index k and t_k that
 #: every message carries and reads no clock, so the nodes need no ROS time; with
-#: ``use_sim_time`` each node subscribes to ``/clock`` and wakes up once more per step,
+#: `use_sim_time` each node subscribes to `/clock` and wakes up once more per step,
 #: just when the notch filter and the nominal trajectory need the CPU (about 12 % of
-#: the step on this 2-core machine, docs/guide/sil.md). The plant still publishes ``/clock``
+#: the step on this 2-core machine, docs/guide/sil.md). The plant still publishes `/clock`
 #: for the recorder and for tools.
 USE_SIM_TIME = False
 
@@ -54,18 +54,18 @@ class SilRun:
 
 
 def run_name(case: str, variant: str, source: str) -> str:
-    """``<case>_<variant>_<source>_<YYYYmmdd-HHMMSS>``."""
+    """`<case>_<variant>_<source>_<YYYYmmdd-HHMMSS>`."""
     return f"{case}_{variant}_{source}_{time.strftime('%Y%m%d-%H%M%S')}"
 
 
 def fault_metadata(fault_params: dict) -> dict:
-    """``fault_<key>`` metadata of the fault a run's ``fault_injector`` applies.
+    """`fault_<key>` metadata of the fault a run's `fault_injector` applies.
 
     Parameters
     ----------
     fault_params : dict
-        The node's parameters (after every override): ``kind``, ``t_onset`` and the
-        parameters of its kind (:data:`fahv.plant.faults.FAULTS`).
+        The node's parameters (after every override): `kind`, `t_onset` and the
+        parameters of its kind (`fahv.plant.faults.FAULTS`).
     """
     kind = fault_params["kind"]
     keys = ("kind", "t_onset", *(f.name for f in FAULTS[kind].parameters))
@@ -82,7 +82,7 @@ def run_metadata(
     """Metadata recorded with every run: case, variant, design hash and provenance, fault.
 
     The provenance (case hash, vehicle file and hash, design code hash) lets
-    ``fahv inspect`` say exactly what a run was made from, and the metrics use the
+    `fahv inspect` say exactly what a run was made from, and the metrics use the
     recorded vehicle's limits.
 
     Parameters
@@ -92,10 +92,10 @@ def run_metadata(
     duration : float
         Simulated time [s].
     nodes : dict, optional
-        The run's node parameters ``{node: {name: value}}`` after every override: the
-        fault is the one its ``fault_injector`` applies (a campaign run's own), not
-        the case file's; ``plant_params.<p>`` are its ``plant`` node's perturbed
-        parameters (the design's draw without ``nodes``), from which the metrics
+        The run's node parameters `{node: {name: value}}` after every override: the
+        fault is the one its `fault_injector` applies (a campaign run's own), not
+        the case file's; `plant_params.<p>` are its `plant` node's perturbed
+        parameters (the design's draw without `nodes`), from which the metrics
         compute the attitude from the vehicle's own trim.
     """
     params = dict(design.summary.get("plant_params", {}))
@@ -129,9 +129,9 @@ def reserve_run(name: str, work_root: Path, out_dir=None) -> tuple[str, Path]:
     """A run name no other run uses, with its work folder created atomically.
 
     Two runs started in the same second with the same case and variant (e.g. two
-    ``fahv sil`` at once) would otherwise share the name, the work folder (parameter
-    file, logs) and the run folder. The work folder ``work_root/<name>`` is created
-    with an exclusive ``mkdir``; if it, or ``out_dir/<name>``, exists, ``-2``, ``-3``
+    `fahv sil` at once) would otherwise share the name, the work folder (parameter
+    file, logs) and the run folder. The work folder `work_root/<name>` is created
+    with an exclusive `mkdir`; if it, or `out_dir/<name>`, exists, `-2`, `-3`
     ... is appended.
 
     Returns
@@ -164,7 +164,7 @@ def run_parameter_file(
     params_file: Path | None = None,
     live_port: int | None = None,
 ) -> dict:
-    """The ROS 2 parameter file of one run (every node, the recorder's section, ``/**``).
+    """The ROS 2 parameter file of one run (every node, the recorder's section, `/**`).
 
     Parameters
     ----------
@@ -177,23 +177,23 @@ def run_parameter_file(
     watchdog_s : float
         Wall-clock watchdog of every node [s].
     overrides : dict, optional
-        ``{node: {name: value}}`` applied to the nodes before the run metadata is made
+        `{node: {name: value}}` applied to the nodes before the run metadata is made
         (a campaign run's dispersed values; tests inject faults or bad values).
     source : str
-        ``source`` of the run metadata.
+        `source` of the run metadata.
     metadata : dict, optional
         Further run metadata (a campaign run: campaign, index, dispersed values).
     params_file : Path, optional
         Where this content is written: the recorder attaches that file to the run.
     live_port : int, optional
         The recorder serves the live view on this port (0: any free port; None: no
-        live view, :mod:`fahv.runs.live`).
+        live view, `fahv.runs.live`).
 
     Returns
     -------
     dict
-        ``{node: {"ros__parameters": {...}}}``; the recorder's ``metadata_json`` holds
-        the run metadata, with the fault of the (overridden) ``fault_injector``.
+        `{node: {"ros__parameters": {...}}}`; the recorder's `metadata_json` holds
+        the run metadata, with the fault of the (overridden) `fault_injector`.
 
     Raises
     ------
@@ -202,7 +202,7 @@ def run_parameter_file(
 
     Notes
     -----
-    Every node gets ``graph_nodes`` and ``run_id`` (the run folder's name: it tells
+    Every node gets `graph_nodes` and `run_id` (the run folder's name: it tells
     this graph's nodes from another graph's in the same ROS domain).
     """
     nodes = node_parameters(design, variant, watchdog_s=watchdog_s)
@@ -252,9 +252,9 @@ def write_run_params(
     overrides: dict | None = None,
     metadata: dict | None = None,
 ) -> dict:
-    """Write the parameter file of one SIL run to ``path`` and return its content.
+    """Write the parameter file of one SIL run to `path` and return its content.
 
-    :func:`run_parameter_file` with ``params_file = path``: the recorder attaches the
+    `run_parameter_file` with `params_file = path`: the recorder attaches the
     file to the run, so the run file holds every node's parameters.
     """
     content = run_parameter_file(
@@ -266,7 +266,7 @@ def write_run_params(
 
 
 def _runner(work: Path, args: list[str], quiet: bool, domain_id: int | None = None) -> list[str]:
-    """Command line of the hsv_bringup ``sil`` runner for a run folder ``work``."""
+    """Command line of the hsv_bringup `sil` runner for a run folder `work`."""
     exe = WS / "install" / "hsv_bringup" / "lib" / "hsv_bringup" / "sil"
     cmd = [str(exe), "--params-file", str(work / "params.yaml"), "--log-dir", str(work / "logs")]
     if domain_id is not None:
@@ -279,12 +279,12 @@ EXIT_INTERRUPTED = 130
 
 
 def run_runner(cmd: list[str], env: dict) -> tuple[int, bool]:
-    """Run the ``sil`` runner to its end; forward an interrupt to it.
+    """Run the `sil` runner to its end; forward an interrupt to it.
 
     Parameters
     ----------
     cmd : list of str
-        Command line (:func:`_runner`).
+        Command line (`_runner`).
     env : dict
         Environment of the sourced workspace.
 
@@ -292,7 +292,7 @@ def run_runner(cmd: list[str], env: dict) -> tuple[int, bool]:
     -------
     (int, bool)
         The runner's exit status and whether the run was interrupted (a
-        ``KeyboardInterrupt`` here, or the runner's own status 130).
+        `KeyboardInterrupt` here, or the runner's own status 130).
     """
     proc = subprocess.Popen(cmd, env=env)
     try:
@@ -308,7 +308,7 @@ def run_runner(cmd: list[str], env: dict) -> tuple[int, bool]:
 
 
 def recorder_metadata(content: dict) -> dict:
-    """The run metadata in a run's parameter file (the recorder's ``metadata_json``)."""
+    """The run metadata in a run's parameter file (the recorder's `metadata_json`)."""
     return json.loads(content["recorder"]["ros__parameters"]["metadata_json"])
 
 
@@ -336,7 +336,7 @@ def run_sil(
     duration : float, optional
         Simulated time [s]; the case's by default.
     out_dir : path
-        Where the run folder ``<case>_<variant>_sil_<time>/`` is created.
+        Where the run folder `<case>_<variant>_sil_<time>/` is created.
     watchdog_s : float
         Wall-clock watchdog of every node [s].
     overrides : dict, optional
@@ -347,19 +347,19 @@ def run_sil(
         Receives the lines about the build and the run folder.
     domain_id : int, optional
         ROS_DOMAIN_ID of the graph; by default the runner takes a free one from
-        ``domain_coordinator`` (an exported ``ROS_DOMAIN_ID`` is not used).
+        `domain_coordinator` (an exported `ROS_DOMAIN_ID` is not used).
     name : str, optional
-        Run name without the time stamp (default ``<case>_<variant>_sil``); the
-        folder is ``<name>_<time>``.
+        Run name without the time stamp (default `<case>_<variant>_sil`); the
+        folder is `<name>_<time>`.
     metadata : dict, optional
-        Further run metadata (:func:`run_parameter_file`).
+        Further run metadata (`run_parameter_file`).
     live_port : int, optional
         Serve the live view on this port (0: any free one); None: no live view.
 
     Returns
     -------
     SilRun
-        ``returncode`` 0 when every node finished (130 when interrupted); the bag is
+        `returncode` 0 when every node finished (130 when interrupted); the bag is
         readable in any case.
 
     Raises
@@ -398,12 +398,12 @@ def run_graph(
     Parameters
     ----------
     content : dict
-        The run's parameter file (:func:`run_parameter_file`, or the one stored in a
-        run file); the recorder's ``bag`` and ``params_file`` are set here.
+        The run's parameter file (`run_parameter_file`, or the one stored in a
+        run file); the recorder's `bag` and `params_file` are set here.
     name : str
-        Run name (``-2`` ... appended if it is taken).
+        Run name (`-2` ... appended if it is taken).
     out_dir, quiet, log, domain_id
-        As :func:`run_sil`.
+        As `run_sil`.
 
     Returns
     -------

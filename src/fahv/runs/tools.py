@@ -1,13 +1,13 @@
-"""Inspect, export and compare recorded runs (``fahv inspect``, ``export``, ``compare``).
+"""Inspect, export and compare recorded runs (`fahv inspect`, `export`, `compare`).
 
-Works on every run file with our loop topics (:data:`fahv.loop.graph.TOPICS`): runs of
+Works on every run file with our loop topics (`fahv.loop.graph.TOPICS`): runs of
 the SIL node graph and of the in-process simulator alike. Topics of other programs
 are listed, never decoded; a truncated run is used up to its last complete chunk.
 
 Column names and units of the exported tables come from the message definitions
-(``src/fahv/msg/*.msg``: ``type name  # description [unit]``); array fields are
+(`src/fahv/msg/*.msg`: `type name  # description [unit]`); array fields are
 split into one column per component named after the state or input
-(``x_r.alpha``, ``u_n.delta_e``).
+(`x_r.alpha`, `u_n.delta_e`).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from fahv.runs.latency import TIMESTAMPS_FILE, format_latencies, run_latencies
 from fahv.runs.metrics import metrics
 from fahv.verdict import METADATA_KEYS, Verdict
 
-#: Rows of the metrics table: (key of :func:`fahv.runs.metrics.metrics`, label, format).
+#: Rows of the metrics table: (key of `fahv.runs.metrics.metrics`, label, format).
 METRIC_ROWS = (
     ("settling_time_h_s", "settling time h (10 ft) [s]", "{:.1f}"),
     ("settling_time_V_s", "settling time V (2 ft/s) [s]", "{:.1f}"),
@@ -112,7 +112,7 @@ AFTER_FAULT = ("eta_1_dot_rms_after_fault", "eta_2_dot_rms_after_fault")
 
 
 def _no_fault(m: dict) -> bool:
-    """The run's metrics say it holds no fault (``t_fault_s`` NaN; unknown: False)."""
+    """The run's metrics say it holds no fault (`t_fault_s` NaN; unknown: False)."""
     v = m.get("t_fault_s")
     return isinstance(v, float) and math.isnan(v)
 
@@ -123,14 +123,14 @@ def format_metrics(table: dict[str, dict]) -> str:
     Parameters
     ----------
     table : dict[str, dict]
-        Column name -> metrics dict (:func:`fahv.runs.metrics.metrics`); a missing key or
-        None prints as ``-``.
+        Column name -> metrics dict (`fahv.runs.metrics.metrics`); a missing key or
+        None prints as `-`.
 
     Notes
     -----
     The "after fault" rows of a run without a fault within it are over the whole run:
-    their label says so when no column has a fault, a ``*`` marks such a cell
-    otherwise. A fault onset NaN prints as ``none in the run``.
+    their label says so when no column has a fault, a `*` marks such a cell
+    otherwise. A fault onset NaN prints as `none in the run`.
     """
     names = list(table)
     none = [n for n in names if _no_fault(table[n])]
@@ -166,12 +166,12 @@ def field_units(msgtype: str) -> dict[str, tuple[str, str]]:
     Parameters
     ----------
     msgtype : str
-        ``hsv_interfaces/msg/<Name>`` or ``rosgraph_msgs/msg/Clock``.
+        `hsv_interfaces/msg/<Name>` or `rosgraph_msgs/msg/Clock`.
 
     Raises
     ------
     RunError
-        If the definition file of an ``hsv_interfaces`` type is missing.
+        If the definition file of an `hsv_interfaces` type is missing.
     """
     if msgtype == "rosgraph_msgs/msg/Clock":
         return {"t": ("s", "simulated time t_k")}
@@ -204,7 +204,7 @@ def topic_table(rec: Recording, topic: str) -> tuple[dict, dict]:
     Raises
     ------
     RunError
-        If ``topic`` is not a loop topic.
+        If `topic` is not a loop topic.
     """
     if topic not in TOPICS:
         raise RunError(f"{topic} is not a loop topic: {list(TOPICS)}")
@@ -243,7 +243,7 @@ def topic_table(rec: Recording, topic: str) -> tuple[dict, dict]:
 
 
 def table_name(topic: str) -> str:
-    """File stem of a topic's table: ``/hsv/state`` -> ``hsv_state``."""
+    """File stem of a topic's table: `/hsv/state` -> `hsv_state`."""
     return topic.strip("/").replace("/", "_")
 
 
@@ -262,8 +262,8 @@ def export_run(rec: Recording, out_dir: str | Path, fmt: str = "csv") -> list[Pa
     Returns
     -------
     list of Path
-        Files written: ``<topic>.csv|parquet`` per loop topic present,
-        ``columns.csv`` (topic, column, unit, description) and ``run.json``
+        Files written: `<topic>.csv|parquet` per loop topic present,
+        `columns.csv` (topic, column, unit, description) and `run.json`
         (metadata, topics, schemas).
 
     Raises
@@ -336,19 +336,19 @@ def run_metrics(rec: Recording, limits) -> tuple[dict | None, str]:
 
 
 def summarize(rec: Recording, limits) -> dict:
-    """Everything ``fahv inspect`` reports about a run, as plain JSON-able data.
+    """Everything `fahv inspect` reports about a run, as plain JSON-able data.
 
     Returns
     -------
     dict
-        ``file``, ``size_bytes``, ``complete`` (footer read), ``metadata``,
-        ``topics`` (type, count, first_s, last_s, rate_hz in simulated time,
-        ``loop`` whether it is one of ours), ``sim_time_s`` [first, last],
-        ``recorder_anomalies`` (out-of-order arrivals counted by the SIL recorder),
-        ``step_anomalies`` (duplicate / out-of-order / missing step indices per
-        loop topic, from the messages), ``metrics`` (or None) and ``metrics_note``,
-        ``latency`` (per-hop wall-clock latency of a SIL run,
-        :func:`fahv.runs.latency.hop_latencies`; None without recorded timestamps).
+        `file`, `size_bytes`, `complete` (footer read), `metadata`,
+        `topics` (type, count, first_s, last_s, rate_hz in simulated time,
+        `loop` whether it is one of ours), `sim_time_s` [first, last],
+        `recorder_anomalies` (out-of-order arrivals counted by the SIL recorder),
+        `step_anomalies` (duplicate / out-of-order / missing step indices per
+        loop topic, from the messages), `metrics` (or None) and `metrics_note`,
+        `latency` (per-hop wall-clock latency of a SIL run,
+        `fahv.runs.latency.hop_latencies`; None without recorded timestamps).
     """
     topics = {}
     for name, t in rec.topics.items():
@@ -385,7 +385,7 @@ def summarize(rec: Recording, limits) -> dict:
     }
 
 
-#: Metadata keys ``fahv inspect`` prints on their own line.
+#: Metadata keys `fahv inspect` prints on their own line.
 SUMMARY_KEYS = ("case", "variant", "source", "status", "design_hash", "code_version", "fault")
 
 
@@ -394,9 +394,9 @@ def _fmt(v, spec: str = "{:g}") -> str:
 
 
 def format_summary(s: dict, column: str | None = None) -> str:
-    """Text report of :func:`summarize` (the metrics table as ``fahv sil`` prints it).
+    """Text report of `summarize` (the metrics table as `fahv sil` prints it).
 
-    ``column``: header of the metrics column (default: the run's variant).
+    `column`: header of the metrics column (default: the run's variant).
     """
     md = s["metadata"]
     lines = [
@@ -454,15 +454,15 @@ def compare(a: dict, b: dict, names: tuple[str, str]) -> dict:
     Parameters
     ----------
     a, b : dict
-        :func:`summarize` of each run (metrics must exist).
+        `summarize` of each run (metrics must exist).
     names : (str, str)
         Column names of the runs.
 
     Returns
     -------
     dict
-        ``table``: {name_a: metrics, name_b: metrics, "B - A": differences of the
-        numeric metrics}; ``metadata``: keys whose values differ, as (a, b).
+        `table`: {name_a: metrics, name_b: metrics, "B - A": differences of the
+        numeric metrics}; `metadata`: keys whose values differ, as (a, b).
 
     Raises
     ------
@@ -492,7 +492,7 @@ def compare(a: dict, b: dict, names: tuple[str, str]) -> dict:
 
 
 def run_vehicle(rec: Recording):
-    """The vehicle a recorded run was made with (metadata ``vehicle_file``; packaged if "").
+    """The vehicle a recorded run was made with (metadata `vehicle_file`; packaged if "").
 
     Raises
     ------

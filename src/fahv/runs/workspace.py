@@ -20,10 +20,10 @@ PACKAGES = ("hsv_interfaces", "hsv_common", "hsv_plant", "hsv_ctrl", "hsv_bringu
 
 
 def sources_hash(ws: Path = WS) -> str:
-    """SHA-256 over every source file of ``ws/src`` (message files included).
+    """SHA-256 over every source file of `ws/src` (message files included).
 
-    The packages are installed as copies (no ``--symlink-install``), so a changed
-    node or message needs a rebuild; :func:`workspace_built` compares this hash
+    The packages are installed as copies (no `--symlink-install`), so a changed
+    node or message needs a rebuild; `workspace_built` compares this hash
     with the one the last build recorded.
     """
     h = hashlib.sha256()
@@ -34,12 +34,12 @@ def sources_hash(ws: Path = WS) -> str:
 
 
 def write_build_stamp(ws: Path = WS) -> None:
-    """Record :func:`sources_hash` after a successful build (``scripts/build_ros.sh``)."""
+    """Record `sources_hash` after a successful build (`scripts/build_ros.sh`)."""
     (ws / "install" / ".fahv_sources").write_text(sources_hash(ws))
 
 
 def workspace_built(ws: Path = WS) -> bool:
-    """True if every hsv package is installed in ``ws/install`` from the current sources."""
+    """True if every hsv package is installed in `ws/install` from the current sources."""
     stamp = ws / "install" / ".fahv_sources"
     return (
         (ws / "install" / "setup.bash").is_file()
@@ -68,7 +68,7 @@ def ensure_built(ws: Path = WS, log=print) -> None:
 
 
 def ros_env(ws: Path = WS) -> dict:
-    """Environment of ``source ws/install/setup.bash`` with this venv first on PATH.
+    """Environment of `source ws/install/setup.bash` with this venv first on PATH.
 
     Raises
     ------

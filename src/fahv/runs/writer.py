@@ -1,11 +1,11 @@
 """Writing a run file: the rosbag2 folder with one MCAP file, in the ros2 profile.
 
-:class:`RunWriter` writes the loop topics of one run (the SIL recorder's raw CDR bytes or
-the in-process simulator's serialised messages) with their ``ros2msg`` schemas, the
-channels' ``offered_qos_profiles``, log time = simulated time, the run metadata as a
-metadata record and the bag's ``custom_data``, and the parameter files as attachments;
+`RunWriter` writes the loop topics of one run (the SIL recorder's raw CDR bytes or
+the in-process simulator's serialised messages) with their `ros2msg` schemas, the
+channels' `offered_qos_profiles`, log time = simulated time, the run metadata as a
+metadata record and the bag's `custom_data`, and the parameter files as attachments;
 closing finishes the file (summary, statistics, indexes) and the folder's
-``metadata.yaml``. Reading is :mod:`fahv.runs.bag`.
+`metadata.yaml`. Reading is `fahv.runs.bag`.
 """
 
 from __future__ import annotations
@@ -31,14 +31,14 @@ from fahv.version import code_version
 
 
 class _McapStorage:
-    """rosbag2 storage of :class:`RunWriter`: the MCAP file, written with the ``mcap`` package.
+    """rosbag2 storage of `RunWriter`: the MCAP file, written with the `mcap` package.
 
-    The storage protocol of ``rosbags.rosbag2.Writer`` (which keeps the connections,
-    message definitions, QoS and ``metadata.yaml``) on :class:`mcap.writer.Writer`, so
+    The storage protocol of `rosbags.rosbag2.Writer` (which keeps the connections,
+    message definitions, QoS and `metadata.yaml`) on `mcap.writer.Writer`, so
     the run file can also hold metadata records and attachments. ros2 profile,
-    ``ros2msg`` schemas, ``cdr`` messages, ``offered_qos_profiles`` channel metadata,
+    `ros2msg` schemas, `cdr` messages, `offered_qos_profiles` channel metadata,
     uncompressed 1 MiB chunks, summary with statistics and indexes, and the
-    ``rosbag2`` metadata record at the end, as rosbag2's MCAP plugin writes them.
+    `rosbag2` metadata record at the end, as rosbag2's MCAP plugin writes them.
     """
 
     def __init__(self, path: Path, compression) -> None:
@@ -66,7 +66,7 @@ class _McapStorage:
         )
 
     def write(self, connection, timestamp: int, data) -> None:
-        """Append one message (log and publish time: ``timestamp``)."""
+        """Append one message (log and publish time: `timestamp`)."""
         self._mcap.add_message(self._channels[connection.id], timestamp, bytes(data), timestamp)
 
     def add_metadata(self, name: str, data: dict) -> None:
@@ -78,7 +78,7 @@ class _McapStorage:
         self._mcap.add_attachment(time.time_ns(), 0, name, media_type, bytes(data))
 
     def close(self, version: int, metadata: str) -> None:
-        """The ``rosbag2`` record (bag metadata as YAML), summary and footer."""
+        """The `rosbag2` record (bag metadata as YAML), summary and footer."""
         self._mcap.add_metadata("rosbag2", {"serialized_metadata": metadata})
         self._mcap.finish()
         self._file.close()
@@ -89,7 +89,7 @@ class _McapStorage:
 
 
 class _Bag(Writer):
-    """rosbags' rosbag2 writer with :class:`_McapStorage` as its MCAP storage."""
+    """rosbags' rosbag2 writer with `_McapStorage` as its MCAP storage."""
 
     STORAGE_PLUGINS = {StoragePlugin.MCAP: _McapStorage}
 
@@ -106,25 +106,25 @@ def _media_type(name: str) -> str:
 class RunWriter:
     """Writer of one run: a rosbag2 bag with one MCAP file that holds everything of the run.
 
-    The file holds every loop topic, the run metadata (the bag's ``custom_data`` and
-    an MCAP metadata record :data:`RUN_RECORD`, written when the run starts, so a file
+    The file holds every loop topic, the run metadata (the bag's `custom_data` and
+    an MCAP metadata record `RUN_RECORD`, written when the run starts, so a file
     cut short still has it, and again when it closes) and the run's attachments: the
-    parameter file of every node (:data:`PARAMS`), and what the writer adds at the end
-    (the recorder: ``timestamps.npz``). The folder can be renamed or copied, or the
-    ``.mcap`` used alone: nothing else is needed.
+    parameter file of every node (`PARAMS`), and what the writer adds at the end
+    (the recorder: `timestamps.npz`). The folder can be renamed or copied, or the
+    `.mcap` used alone: nothing else is needed.
 
     Parameters
     ----------
     path : str or Path
-        Bag folder to create (must not exist); the file is ``<path>/<name>.mcap``.
+        Bag folder to create (must not exist); the file is `<path>/<name>.mcap`.
     metadata : dict[str, str]
         Run metadata (case, design_hash, code_version, variant, source, fault ...);
         values are converted to str.
     Ts : float
         Control period [s]: message log time is k Ts in nanoseconds.
     params : dict, str, Path or None
-        The run's ROS 2 parameter file: its content (``{node: {"ros__parameters":
-        ...}}``) or the path of the file (the recorder gets it as a parameter).
+        The run's ROS 2 parameter file: its content (`{node: {"ros__parameters":
+        ...}}`) or the path of the file (the recorder gets it as a parameter).
     attachments : dict[str, bytes], optional
         Further attachments by name.
 
@@ -135,10 +135,10 @@ class RunWriter:
 
     Notes
     -----
-    Use as a context manager or call :meth:`close`; ``close(status=...)`` records
+    Use as a context manager or call `close`; `close(status=...)` records
     how the run ended in the metadata (complete, ended: <verdict>, interrupted,
-    failed: ...), and :meth:`set_verdict` its verdict (:mod:`fahv.verdict`; the
-    context manager records a :class:`~fahv.verdict.RunEnded` that leaves it).
+    failed: ...), and `set_verdict` its verdict (`fahv.verdict`; the
+    context manager records a `fahv.verdict.RunEnded` that leaves it).
     """
 
     def __init__(
@@ -206,7 +206,7 @@ class RunWriter:
     def write_raw(self, topic: str, k: int, data: bytes) -> None:
         """Append serialised CDR bytes of step k on a loop topic.
 
-        A stop (:mod:`fahv.interrupt`) during the write is raised after it, so the
+        A stop (`fahv.interrupt`) during the write is raised after it, so the
         file never holds half a record.
         """
         with deferred():
@@ -214,7 +214,7 @@ class RunWriter:
             self.counts[topic] += 1
 
     def write(self, topic: str, k: int, fields: dict) -> None:
-        """Serialise a message dict (:mod:`fahv.loop.cores` field names) and append it."""
+        """Serialise a message dict (`fahv.loop.cores` field names) and append it."""
         self.write_raw(topic, k, encode(topic, fields))
 
     def set_metadata(self, key: str, value) -> None:
@@ -225,8 +225,8 @@ class RunWriter:
     def set_verdict(self, verdict: Verdict) -> None:
         """Record how the run ended, before the run is closed.
 
-        The metadata ``verdict``, ``verdict_node`` ... of
-        :meth:`fahv.verdict.Verdict.metadata`.
+        The metadata `verdict`, `verdict_node` ... of
+        `fahv.verdict.Verdict.metadata`.
 
         Parameters
         ----------
@@ -241,8 +241,8 @@ class RunWriter:
         Parameters
         ----------
         status : str
-            How the run ended (metadata ``status``). A ``complete`` run without a
-            verdict gets ``completed`` (:meth:`set_verdict`).
+            How the run ended (metadata `status`). A `complete` run without a
+            verdict gets `completed` (`set_verdict`).
         attachments : dict[str, bytes], optional
             Attachments known only at the end (the recorder's timestamps).
 

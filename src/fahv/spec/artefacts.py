@@ -1,11 +1,11 @@
 """Design artefacts: the certified arrays of one design, their provenance, saving and loading.
 
-A design records where it came from (:func:`provenance`): the design file and its
+A design records where it came from (`provenance`): the design file and its
 content hash, the vehicle data file and its hash, and the version and hash of the library
-code that made it. :func:`stale_reason` compares a stored design with its design file and
+code that made it. `stale_reason` compares a stored design with its design file and
 vehicle, so a design whose inputs changed is refused (with the command that re-makes it),
 never used. Whether the current code still certifies a stored design is what
-``fahv verify`` re-checks (:mod:`fahv.certificate.verify`).
+`fahv verify` re-checks (`fahv.certificate.verify`).
 """
 
 from __future__ import annotations
@@ -33,18 +33,18 @@ class Design:
     ----------
     case : dict
         The validated design file data; for a run, the scenario's case
-        (:func:`fahv.spec.scenario.scenario_design`).
+        (`fahv.spec.scenario.scenario_design`).
     arrays : dict[str, ndarray]
-        ``A``, ``B`` (R, n, n/m) discrete nominal vertices; ``h_grid``, ``V_grid``,
-        ``W_h``, ``W_V`` TP weighting functions; ``Dx``, ``Du`` scales; ``w_max`` (n,)
-        W; ``F`` (2, n), ``N`` (n, n) tube; ``K`` (2, n), ``Q`` (n, n) nominal;
-        ``u_room``, ``u_n_max`` (2,); ``trim_h``, ``trim_V``, ``trim_x`` (Nh, NV, n),
-        ``trim_u`` (Nh, NV, 2); ``rmpc_A``, ``rmpc_B`` (DM vertices), ``rmpc_Q``,
-        ``rmpc_P``, ``rmpc_K``, ``rmpc_gamma``, ``rmpc_z``, ``rmpc_Ds``, ``rmpc_d`` (the
+        `A`, `B` (R, n, n/m) discrete nominal vertices; `h_grid`, `V_grid`,
+        `W_h`, `W_V` TP weighting functions; `Dx`, `Du` scales; `w_max` (n,)
+        W; `F` (2, n), `N` (n, n) tube; `K` (2, n), `Q` (n, n) nominal;
+        `u_room`, `u_n_max` (2,); `trim_h`, `trim_V`, `trim_x` (Nh, NV, n),
+        `trim_u` (Nh, NV, 2); `rmpc_A`, `rmpc_B` (DM vertices), `rmpc_Q`,
+        `rmpc_P`, `rmpc_K`, `rmpc_gamma`, `rmpc_z`, `rmpc_Ds`, `rmpc_d` (the
         RMPC's nested ellipsoids, gains, cost bounds, design states, scales, step);
-        ``omega_flex`` (2,) flexible-mode frequencies at the initial trim [rad/s];
-        ``F_<variant>`` (2, n), a gain designed for that variant's loop through the notch
-        (:func:`variant_gain_key`), which the variant runs in place of ``F``.
+        `omega_flex` (2,) flexible-mode frequencies at the initial trim [rad/s];
+        `F_<variant>` (2, n), a gain designed for that variant's loop through the notch
+        (`variant_gain_key`), which the variant runs in place of `F`.
     summary : dict
         Scalars: certificates, W breakdown, plant parameters, hash.
     """
@@ -75,11 +75,11 @@ class Design:
 
 
 def save_design(design: Design, out_dir: str | Path, extra: dict | None = None) -> Path:
-    """Write ``design.npz``, ``design.json`` and ``extra`` files into out_dir atomically.
+    """Write `design.npz`, `design.json` and `extra` files into out_dir atomically.
 
-    ``extra`` maps file names to text (the CLI adds the ROS 2 parameter file).
+    `extra` maps file names to text (the CLI adds the ROS 2 parameter file).
 
-    The files are written to a temporary sibling folder that replaces ``out_dir`` only
+    The files are written to a temporary sibling folder that replaces `out_dir` only
     when all of them are complete, so a failure never leaves half an artefact set.
     Returns out_dir.
     """
@@ -103,7 +103,7 @@ def save_design(design: Design, out_dir: str | Path, extra: dict | None = None) 
 
 
 def load_design(out_dir: str | Path) -> Design:
-    """Read the artefacts written by :func:`save_design`.
+    """Read the artefacts written by `save_design`.
 
     Raises
     ------
@@ -132,7 +132,7 @@ DESIGN_PACKAGES = ("config", "synthesis", "model", "plant", "control", "spec", "
 
 
 def save_arrays(arrays: dict, path: str | Path) -> Path:
-    """Write ``{name: array}`` to ``path`` (.npz) atomically (a temporary file renamed)."""
+    """Write `{name: array}` to `path` (.npz) atomically (a temporary file renamed)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".npz", dir=path.parent)
@@ -147,7 +147,7 @@ def save_arrays(arrays: dict, path: str | Path) -> Path:
 
 
 def load_arrays(path: str | Path) -> dict:
-    """The arrays of a .npz file written by :func:`save_arrays`.
+    """The arrays of a .npz file written by `save_arrays`.
 
     Raises
     ------
@@ -179,7 +179,7 @@ def provenance(case, vehicle) -> dict:
     case : fahv.spec.files.SpecFile
         The validated design file.
     vehicle : fahv.model.vehicle.Vehicle
-        The vehicle the design is made for (its ``source_file`` is recorded).
+        The vehicle the design is made for (its `source_file` is recorded).
     """
     from fahv.version import __version__
 
@@ -200,8 +200,8 @@ def stale_reason(design: Design, case, vehicle) -> str | None:
     """Why a stored design does not belong to (design file, vehicle); None if it does.
 
     Compares the design file's content hash and the vehicle file's hash with those in the
-    design's provenance. A change of the library code is not a reason by itself: ``fahv
-    verify`` re-checks every certificate of the stored arrays with the current code.
+    design's provenance. A change of the library code is not a reason by itself: `fahv
+    verify` re-checks every certificate of the stored arrays with the current code.
 
     Parameters
     ----------
@@ -221,10 +221,10 @@ def stale_reason(design: Design, case, vehicle) -> str | None:
 
 
 def variant_gain_key(variant: str) -> str:
-    """Array name of the gain a variant runs in place of ``F`` (``F_<variant>``), if designed.
+    """Array name of the gain a variant runs in place of `F` (`F_<variant>`), if designed.
 
     Written by the design for a variant whose loop through the notch has its own certified
-    gain (``eight_state.notch_gain: designed``); read by
-    :func:`fahv.loop.params.node_parameters`. Raises nothing.
+    gain (`eight_state.notch_gain: designed`); read by
+    `fahv.loop.params.node_parameters`. Raises nothing.
     """
     return f"F_{variant}"

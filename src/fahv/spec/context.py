@@ -10,12 +10,12 @@ from fahv.model.vehicle import Vehicle
 
 @dataclass(frozen=True)
 class DesignContext:
-    """What a control law's offline part (:meth:`fahv.control.ControlLaw.design`) sees.
+    """What a control law's offline part (`fahv.control.ControlLaw.design`) sees.
 
     Attributes
     ----------
     spec : dict
-        The validated design data with the ``command`` the offline part is sized for
+        The validated design data with the `command` the offline part is sized for
         (the design step as a step command, or a scenario's command: a run spec's data).
     vehicle : fahv.model.vehicle.Vehicle
     arrays : dict
@@ -25,7 +25,7 @@ class DesignContext:
     previous : Mapping[str, ndarray], optional
         The arrays of an earlier design of the same file, where an offline part's solves
         may start (its stored coordinates): it changes how fast a design runs, not what
-        it certifies. None for a scenario's own offline parts and ``fahv design --cold``.
+        it certifies. None for a scenario's own offline parts and `fahv design --cold`.
     """
 
     spec: dict

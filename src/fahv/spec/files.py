@@ -1,11 +1,11 @@
 """Reading and validating design files, scenario files and run specs.
 
-A validated file is a :class:`SpecFile`: its path, its content with every default filled
-in, and the defaults it relied on. :func:`spec_file` validates a mapping against a
-schema of :mod:`fahv.spec.schema` (the run spec's by default), :func:`load_design_file`
+A validated file is a `SpecFile`: its path, its content with every default filled
+in, and the defaults it relied on. `spec_file` validates a mapping against a
+schema of `fahv.spec.schema` (the run spec's by default), `load_design_file`
 reads a design file; a scenario file and the run spec it forms are read by
-:func:`fahv.spec.scenario.load_scenario`. Every failure is a
-:class:`fahv.errors.SpecError` naming the file and the dotted key.
+`fahv.spec.scenario.load_scenario`. Every failure is a
+`fahv.errors.SpecError` naming the file and the dotted key.
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ class SpecFile:
     path : Path
         File it was read from (for a run spec: its scenario file).
     data : dict
-        Validated content, defaults filled in (see :mod:`fahv.spec.schema`).
+        Validated content, defaults filled in (see `fahv.spec.schema`).
     defaults_used : dict
-        ``{dotted key: value}`` of every default the file relied on.
+        `{dotted key: value}` of every default the file relied on.
     """
 
     path: Path
@@ -56,7 +56,7 @@ class SpecFile:
 
 
 def spec_file(data: Any, path: str = "<mapping>", spec: Section | None = None) -> SpecFile:
-    """Validate a mapping against ``spec`` (:func:`fahv.spec.schema.run_spec` by default).
+    """Validate a mapping against `spec` (`fahv.spec.schema.run_spec` by default).
 
     Raises
     ------
@@ -73,7 +73,7 @@ def read_yaml_file(path: str | Path, what: str) -> Any:
     Raises
     ------
     SpecError
-        If the file is missing or is not YAML (naming the file, ``what`` it should be).
+        If the file is missing or is not YAML (naming the file, `what` it should be).
     """
     p = Path(path)
     if not p.is_file():
@@ -85,7 +85,7 @@ def read_yaml_file(path: str | Path, what: str) -> Any:
 
 
 def load_design_file(path: str | Path) -> SpecFile:
-    """Read and validate a design file (:func:`fahv.spec.schema.design_spec`).
+    """Read and validate a design file (`fahv.spec.schema.design_spec`).
 
     Raises
     ------

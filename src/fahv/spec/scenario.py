@@ -1,19 +1,19 @@
 """Scenarios: one thing to fly on a stored design, checked against what the design certifies.
 
-A scenario file (:func:`fahv.spec.schema.scenario_spec`) names a design and gives the
+A scenario file (`fahv.spec.schema.scenario_spec`) names a design and gives the
 command, the fault instance, the simulated vehicle draw, the duration and the variants.
-:func:`load_scenario` reads it, finds its design file, and forms the **run spec** the
-loop runs on (the design's entries with the scenario's, :func:`form_run_spec`;
-:func:`design_part` goes back); :func:`scenario_design` adds to a stored design what
+`load_scenario` reads it, finds its design file, and forms the **run spec** the
+loop runs on (the design's entries with the scenario's, `form_run_spec`;
+`design_part` goes back); `scenario_design` adds to a stored design what
 depends on the scenario, in seconds and without re-designing:
 
-* ``x0``, the plant's initial state: the design's trim map at (h0, V0);
-* the simulated vehicle's perturbed parameters (``summary['plant_params']``);
+* `x0`, the plant's initial state: the design's trim map at (h0, V0);
+* the simulated vehicle's perturbed parameters (`summary['plant_params']`);
 * the RMPC baseline's ellipsoids along the scenario's step, when its step differs from
   the design step (Wan & Kothare 2003 re-solved, then cached by content hash).
 
-:func:`certified_range` states what the design certifies (nominal h, V range, fault
-range, parameter box) and :func:`uncertified` lists what a scenario asks beyond it.
+`certified_range` states what the design certifies (nominal h, V range, fault
+range, parameter box) and `uncertified` lists what a scenario asks beyond it.
 """
 
 from __future__ import annotations
@@ -49,13 +49,13 @@ class Scenario:
     path : Path
         The scenario file.
     data : dict
-        Its validated entries (:func:`fahv.spec.schema.scenario_spec`).
+        Its validated entries (`fahv.spec.schema.scenario_spec`).
     design_file : Path
         The design file it names.
     design : SpecFile
         The validated design file.
     run_spec : SpecFile
-        The design's entries with the scenario's (:func:`fahv.spec.schema.run_spec`).
+        The design's entries with the scenario's (`fahv.spec.schema.run_spec`).
     """
 
     path: Path
@@ -73,10 +73,10 @@ class Scenario:
 def design_file_of(scenario_path: str | Path, design: str) -> Path:
     """The design file a scenario names.
 
-    ``design`` is a design name, looked up as ``designs/<design>.yaml`` beside the
-    scenario's folder (``offline_design/scenarios/x.yaml`` ->
-    ``offline_design/designs/<design>.yaml``), then under ``offline_design/designs/`` of
-    the working folder; or a path to a ``.yaml`` file, relative to the scenario file.
+    `design` is a design name, looked up as `designs/<design>.yaml` beside the
+    scenario's folder (`offline_design/scenarios/x.yaml` ->
+    `offline_design/designs/<design>.yaml`), then under `offline_design/designs/` of
+    the working folder; or a path to a `.yaml` file, relative to the scenario file.
 
     Raises
     ------
@@ -105,10 +105,10 @@ def form_run_spec(design: SpecFile, scenario: dict, path: str | Path) -> SpecFil
     Parameters
     ----------
     design : SpecFile
-        A validated design file (:func:`fahv.spec.files.load_design_file`).
+        A validated design file (`fahv.spec.files.load_design_file`).
     scenario : dict
-        Validated scenario entries (``command``, ``fault``, ``uncertainty``,
-        ``duration``, ``variants``, ``name``, ``description``).
+        Validated scenario entries (`command`, `fault`, `uncertainty`,
+        `duration`, `variants`, `name`, `description`).
     path : str or Path
         Named in errors.
 
@@ -134,7 +134,7 @@ def form_run_spec(design: SpecFile, scenario: dict, path: str | Path) -> SpecFil
 def design_part(run_spec: SpecFile) -> SpecFile:
     """The design file of a run spec: its entries less the scenario's, its command as step.
 
-    The inverse of :func:`form_run_spec` for a run spec whose command is the design step.
+    The inverse of `form_run_spec` for a run spec whose command is the design step.
 
     Raises
     ------
@@ -164,7 +164,7 @@ def scenario_from_mapping(data, path: str | Path = "<mapping>") -> Scenario:
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Read a scenario file (``offline_design/scenarios/<name>.yaml``).
+    """Read a scenario file (`offline_design/scenarios/<name>.yaml`).
 
     Raises
     ------
@@ -197,11 +197,11 @@ def certified_range(design: Design) -> dict:
     Returns
     -------
     dict
-        ``hv_box`` ((2, 2) ``[[h lo, V lo], [h hi, V hi]]`` in ft, ft/s, the nominal range of
+        `hv_box` ((2, 2) `[[h lo, V lo], [h hi, V hi]]` in ft, ft/s, the nominal range of
         the eight-state tube; None for the vertex tube, which covers the envelope),
-        ``rho_min`` (smallest elevator effectiveness of the fault range),
-        ``uncertainty_scale`` (the parameter box's fraction of the sec. 5.1 box), ``u_lo``,
-        ``u_hi`` ((2,) tightened input limits, eq. 30).
+        `rho_min` (smallest elevator effectiveness of the fault range),
+        `uncertainty_scale` (the parameter box's fraction of the sec. 5.1 box), `u_lo`,
+        `u_hi` ((2,) tightened input limits, eq. 30).
     """
     hv = design.arrays.get("hv_box")
     return {
@@ -217,8 +217,8 @@ def uncertified(design: Design, spec: dict, vehicle) -> list[str]:
     """What a scenario asks beyond the range its design certifies, one sentence each.
 
     Checks the initial point and the command against the envelope and the design's
-    nominal range (``hv_box``), their trim inputs against the tightened input set
-    (eq. 30), the fault's effectiveness against the fault range (``tube.rho_min``) and
+    nominal range (`hv_box`), their trim inputs against the tightened input set
+    (eq. 30), the fault's effectiveness against the fault range (`tube.rho_min`) and
     the simulated vehicle's draw against the parameter box.
 
     Parameters
@@ -226,7 +226,7 @@ def uncertified(design: Design, spec: dict, vehicle) -> list[str]:
     design : Design
         The stored design.
     spec : dict
-        The run spec's data (``command``, ``fault``, ``uncertainty``).
+        The run spec's data (`command`, `fault`, `uncertainty`).
     vehicle : fahv.model.vehicle.Vehicle
 
     Returns
@@ -295,10 +295,10 @@ def scenario_arrays(
 ) -> dict:
     """The arrays of a run that depend on its scenario.
 
-    ``x0`` (9,): the trim at (h0, V0) from the design's trim map. When the scenario runs
+    `x0` (9,): the trim at (h0, V0) from the design's trim map. When the scenario runs
     the RMPC baseline on another step than the design step, the baseline's ellipsoids
-    (``rmpc_*``) are designed along the scenario's step (its offline LMIs, Wan & Kothare
-    2003) and cached in ``cache`` by :func:`scenario_key`; only when one of ``variants``
+    (`rmpc_*`) are designed along the scenario's step (its offline LMIs, Wan & Kothare
+    2003) and cached in `cache` by `scenario_key`; only when one of `variants`
     (all of the run spec's by default) runs the baseline.
 
     Raises
@@ -342,11 +342,11 @@ def scenario_design(
     design : Design
         The stored, verified design.
     run_spec : SpecFile
-        The scenario's run spec (:attr:`Scenario.run_spec`).
+        The scenario's run spec (`Scenario.run_spec`).
     vehicle : fahv.model.vehicle.Vehicle
         The nominal vehicle (its parameters are perturbed by the scenario's draw).
     cache : Path, optional
-        Folder of the scenario arrays designed earlier (:func:`scenario_arrays`).
+        Folder of the scenario arrays designed earlier (`scenario_arrays`).
     variants : list of str, optional
         The variants that will run (all of the run spec's by default): the baseline's
         ellipsoids along a new step are designed only if one of them runs it.
@@ -354,10 +354,10 @@ def scenario_design(
     Returns
     -------
     Design
-        ``case``: the run spec's data; ``arrays``: the design's with the scenario's;
-        ``summary``: the design's, with ``plant_params`` of the vehicle draw,
-        ``scenario_hash`` and ``content_hash`` (of this run's design, checked by
-        :func:`fahv.spec.artefacts.load_design`). ``summary['design_hash']`` stays the
+        `case`: the run spec's data; `arrays`: the design's with the scenario's;
+        `summary`: the design's, with `plant_params` of the vehicle draw,
+        `scenario_hash` and `content_hash` (of this run's design, checked by
+        `fahv.spec.artefacts.load_design`). `summary['design_hash']` stays the
         stored design's.
     """
     c = run_spec.data

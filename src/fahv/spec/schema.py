@@ -1,20 +1,20 @@
 """Design, scenario and run-spec schemas: what a design certifies and what a scenario flies.
 
-A **design file** (:func:`design_spec`, ``offline_design/designs/<name>.yaml``) holds what
-``fahv design`` synthesises and certifies: design model, parameter box, fault range,
+A **design file** (`design_spec`, `offline_design/designs/<name>.yaml`) holds what
+`fahv design` synthesises and certifies: design model, parameter box, fault range,
 tube, nominal MPC, notch and baseline settings. A **scenario file**
-(:func:`scenario_spec`, ``offline_design/scenarios/<name>.yaml``) names a design and holds
+(`scenario_spec`, `offline_design/scenarios/<name>.yaml`) names a design and holds
 one thing to fly on it: command, fault instance, simulated vehicle draw, duration,
-variants. The **run spec** (:func:`run_spec`) is the two together, what the loop runs on.
+variants. The **run spec** (`run_spec`) is the two together, what the loop runs on.
 
-Each schema is declared once in the configuration language (:mod:`fahv.config`), with
-the fault kinds of :data:`fahv.plant.faults.FAULTS` and the sections of the control laws
-of :data:`fahv.control.LAWS` (a law's section is required only when a listed variant
+Each schema is declared once in the configuration language (`fahv.config`), with
+the fault kinds of `fahv.plant.faults.FAULTS` and the sections of the control laws
+of `fahv.control.LAWS` (a law's section is required only when a listed variant
 uses the law). Numerical knobs (sample counts, seeds, margins, trim grid, LMI factors)
 have defaults, and the defaults a design used are reported by it. The node parameters of
-the SIL graph reuse the same fields (:mod:`fahv.loop.params`), so a range is written once.
+the SIL graph reuse the same fields (`fahv.loop.params`), so a range is written once.
 
-Loading (:mod:`fahv.spec.files`) fails with :class:`fahv.errors.SpecError` naming the
+Loading (`fahv.spec.files`) fails with `fahv.errors.SpecError` naming the
 file and the dotted key.
 """
 
@@ -58,7 +58,7 @@ COMMAND = (
           when=lambda r: lookup(r, "command.kind") == "ramp", when_text="command.kind is ramp"),
 )  # fmt: skip
 
-#: Forms of the tube (``tube.form``).
+#: Forms of the tube (`tube.form`).
 TUBE_FORMS = ("vertices", "eight_state")
 
 
@@ -66,7 +66,7 @@ def _eight_state(root) -> bool:
     return lookup(root, "tube.form") == "eight_state"
 
 
-#: The eight-state tube (:mod:`fahv.design.tube_set_design`): vertex data, the nominal box
+#: The eight-state tube (`fahv.design.tube_set_design`): vertex data, the nominal box
 #: (the ranges of the nominal the certificate covers), the scheduling box beyond it and
 #: the W_8-Z_8 iteration. Defaults: the tube set of docs/theory/certificate.md.
 EIGHT_STATE = (
@@ -168,7 +168,7 @@ UNCERTAINTY = (
 
 
 def fault_section() -> Section:
-    """The ``fault`` section: kind (from the fault registry), onset, the kind's parameters."""
+    """The `fault` section: kind (from the fault registry), onset, the kind's parameters."""
     return Section("fault", (FAULT_KIND, T_ONSET, *fault_fields()), "actuator fault (eq. 15 ...)")
 
 
@@ -294,7 +294,7 @@ def _command_section() -> Section:
 def run_spec() -> Section:
     """The run spec: a design's entries with one scenario's (what the loop runs on).
 
-    A run spec is never written by hand: :func:`fahv.spec.scenario.load_scenario` forms
+    A run spec is never written by hand: `fahv.spec.scenario.load_scenario` forms
     it from a scenario file and the design it names, and validates it against this spec.
     """
     return Section(
@@ -318,10 +318,10 @@ def run_spec() -> Section:
 
 
 def design_spec() -> Section:
-    """A design file (``offline_design/designs/<name>.yaml``): what ``fahv design`` certifies.
+    """A design file (`offline_design/designs/<name>.yaml`): what `fahv design` certifies.
 
-    The vehicle's envelope and parameter box (``uncertainty.scale``), the fault range
-    (``tube.rho_min``), the design model, tube, nominal MPC, notch and baseline settings,
+    The vehicle's envelope and parameter box (`uncertainty.scale`), the fault range
+    (`tube.rho_min`), the design model, tube, nominal MPC, notch and baseline settings,
     the design step, and the variants whose offline parts it prepares. Nothing of a
     scenario (command, fault instance, vehicle draw, duration) enters it.
     """
@@ -345,7 +345,7 @@ def design_spec() -> Section:
 
 
 def scenario_spec() -> Section:
-    """A scenario file (``offline_design/scenarios/<name>.yaml``): one thing to fly on a design."""
+    """A scenario file (`offline_design/scenarios/<name>.yaml`): one thing to fly on a design."""
     return Section(
         "",
         (

@@ -1,10 +1,10 @@
 """Stored designs: where they live, and refusing stale ones.
 
-A design made by ``fahv design`` is stored beside its design file
-(``offline_design/designs/<name>/``) and committed. :func:`stored_design` loads it and
+A design made by `fahv design` is stored beside its design file
+(`offline_design/designs/<name>/`) and committed. `stored_design` loads it and
 refuses it when its design file or vehicle changed (naming the command that re-makes
 it). Nothing here designs or verifies; a scenario is given its stored design after the
-design verified by :func:`fahv.certificate.verified.load_or_design`.
+design verified by `fahv.certificate.verified.load_or_design`.
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ from fahv.spec.files import load_design_file
 
 
 def design_dir(design_file: Path, name: str, out=None, vehicle=None) -> Path:
-    """Artefact folder of a design: ``<design file's folder>/<name>`` (shipped beside it).
+    """Artefact folder of a design: `<design file's folder>/<name>` (shipped beside it).
 
-    ``out`` if given. For a vehicle file other than the packaged one,
-    ``<name>@<vehicle file stem>-<data hash>``, so designs for several vehicles do not
+    `out` if given. For a vehicle file other than the packaged one,
+    `<name>@<vehicle file stem>-<data hash>`, so designs for several vehicles do not
     overwrite each other.
     """
     if out:
@@ -37,9 +37,9 @@ def stored_design(design_file: Path, design_folder=None, vehicle=None):
     Parameters
     ----------
     design_file : Path
-        The design file (``offline_design/designs/<name>.yaml``).
+        The design file (`offline_design/designs/<name>.yaml`).
     design_folder : Path, optional
-        Where the design is stored (default :func:`design_dir`).
+        Where the design is stored (default `design_dir`).
     vehicle : fahv.model.vehicle.Vehicle, optional
         The vehicle it was made for (default: the packaged one).
 

@@ -4,7 +4,7 @@ For a box W, Z is robust positively invariant under e+ = A_cl,i e + w at every v
 iff |A_cl,i| z + w_max <= z elementwise (Farkas' lemma turns the robust constraint (27)
 into this linear one), which needs the spectral radius of |A_cl,i| below 1: a property
 of the coordinates, not of stability. On this vehicle it fails, which is why the tube
-used is the ellipsoid of :mod:`fahv.synthesis.feedback`.
+used is the ellipsoid of `fahv.synthesis.feedback`.
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ Z shape. The paper's box Z = {|e| <= z} (eq. 25) is RPI for e+ = A_cl,i e + w,
 w in W, iff |A_cl,i| z + w_max <= z for every vertex i (eq. 26-28 by Farkas' lemma),
 which needs the spectral radius of |A_cl,i| below 1 -- a property of the
 coordinates, not of stability. On this vehicle it fails (see
-:func:`fahv.synthesis.box_tube.box_tube`), so the tube used is an ellipsoid
-Z = {e : e' N^-1 e <= 1} designed jointly with F::
+`fahv.synthesis.box_tube.box_tube`), so the tube used is an ellipsoid
+Z = {e : e' N^-1 e <= 1} designed jointly with F:
 
     [[lam N, 0,        (A_i N + B_i M)'],
      [0,     diag(mu), I               ],      >= 0  for every vertex i,
@@ -75,7 +75,7 @@ class TubeDesign:
         Their S-procedure multipliers (scaled coordinates).
     active_set : ActiveSet or None
         The vertices and points that support the solution (constraint generation), the
-        start of a later design of the same vertex set (``warm`` of :func:`design_tube`).
+        start of a later design of the same vertex set (`warm` of `design_tube`).
     """
 
     F: np.ndarray
@@ -136,7 +136,7 @@ def _generators(n: int, G) -> np.ndarray:
 
 
 def verify_tube(A, B, tube: TubeDesign, Dx, Du) -> np.ndarray:
-    """Re-check the RPI certificate of ``tube`` numerically for every vertex.
+    """Re-check the RPI certificate of `tube` numerically for every vertex.
 
     Parameters
     ----------
@@ -202,7 +202,7 @@ def _levels(P: np.ndarray, N: np.ndarray) -> np.ndarray:
 class ActiveSet:
     """The vertex blocks and points a tube LMI's last solve held (constraint generation).
 
-    Started from again (``warm`` of :func:`design_tube`), the first solve is the last one
+    Started from again (`warm` of `design_tube`), the first solve is the last one
     of the design that stored it: on the same data and machine, the same solution.
 
     Attributes
@@ -210,7 +210,7 @@ class ActiveSet:
     vertices : (a,) ndarray of int
         Indices of the vertices whose blocks the last solve held.
     points : (b,) ndarray of int
-        Indices of the ``contain`` points it held.
+        Indices of the `contain` points it held.
     """
 
     vertices: np.ndarray
@@ -235,8 +235,8 @@ class ActiveSet:
 
 
 #: Vertex blocks and points of the first solve (each, the largest first) and added per
-#: pass of constraint generation (the most violated first), the ``active`` of
-#: :func:`design_tube`: an LMI of d unknowns has a subset of at most d constraints with
+#: pass of constraint generation (the most violated first), the `active` of
+#: `design_tube`: an LMI of d unknowns has a subset of at most d constraints with
 #: the same optimum, and Clarabel's time grows with the blocks held, so few are held and
 #: few added (docs: results/speed).
 GENERATION_ADD = 12
@@ -245,7 +245,7 @@ GENERATION_ADD = 12
 def _rpi_problem(As, Bs, ws, room, sw, lam, zs_max, E, Ps):
     """The tube LMI on the given vertices and points (scaled): problem, variables, blocks.
 
-    The S-procedure block of :func:`_rpi_blocks` with its middle diag(mu) eliminated by
+    The S-procedure block of `_rpi_blocks` with its middle diag(mu) eliminated by
     a Schur complement: with nu = 1 / mu (mu > 0 wherever w_j != 0),
     [[lam N, (A N + B M)'], [A N + B M, N - E diag(nu) E']] >= 0, linear in (N, M, nu),
     and the budget sum_j w_j^2 / nu_j (+ sum_l 1 / nu_p,l) <= 1 - lam, convex in nu:
@@ -285,7 +285,7 @@ def _rpi_problem(As, Bs, ws, room, sw, lam, zs_max, E, Ps):
 
 
 def _reduced_min_eigs(As, Bs, N, M, nu, lam, E) -> np.ndarray:
-    """Smallest eigenvalue (R,) of each vertex's reduced block (:func:`_rpi_problem`)."""
+    """Smallest eigenvalue (R,) of each vertex's reduced block (`_rpi_problem`)."""
     n = N.shape[0]
     AN = As @ N + Bs @ M
     blk = np.empty((As.shape[0], 2 * n, 2 * n))
@@ -297,7 +297,7 @@ def _reduced_min_eigs(As, Bs, N, M, nu, lam, E) -> np.ndarray:
 
 
 def _most(values, candidates, count) -> np.ndarray:
-    """The ``count`` candidates of largest ``values`` (sorted indices)."""
+    """The `count` candidates of largest `values` (sorted indices)."""
     return np.sort(candidates[np.argsort(-values[candidates], kind="stable")[:count]])
 
 
@@ -305,19 +305,19 @@ def _solve_rpi_lmi(As, Bs, ws, room, sw, lam, state_max, Dx, active, Gs=None, Ps
                    warm=None):  # fmt: skip
     """Solve the tube LMI for one lam (scaled data); (value, lam, N, M, mu, blocks, set) or None.
 
-    With ``active`` (an int: the blocks and points added per pass) the vertex blocks and
-    the points are generated: the LMI is solved on the ``warm`` set (an
-    :class:`ActiveSet`, e.g. the one a stored design ended with) or else on the
-    ``active`` vertices of largest open-loop norm and points of largest norm; every block
-    and point is then evaluated at the solution; the ``active`` most violated of each are
+    With `active` (an int: the blocks and points added per pass) the vertex blocks and
+    the points are generated: the LMI is solved on the `warm` set (an
+    `ActiveSet`, e.g. the one a stored design ended with) or else on the
+    `active` vertices of largest open-loop norm and points of largest norm; every block
+    and point is then evaluated at the solution; the `active` most violated of each are
     added, and the held ones outside the solution's support (a zero dual,
-    :func:`fahv.synthesis.lmi.dual_support`) are released, each at most once, until every
+    `fahv.synthesis.lmi.dual_support`) are released, each at most once, until every
     block holds with half the strict margin and every point lies in Z (constraint
-    generation). The blocks solved hold with the full margin ``LMI_MARGIN``, the ones
+    generation). The blocks solved hold with the full margin `LMI_MARGIN`, the ones
     left out with at least half of it, so the result is the full LMI's optimum up to that
-    margin (not exactly); :func:`verify_tube` re-checks every one of the R blocks either
-    way. ``Gs`` (g, n): pulse generators (scaled), the last g multipliers of the
-    returned mu. ``Ps`` (S, n): points Z must contain (scaled), p' N^-1 p <= 1, entered
+    margin (not exactly); `verify_tube` re-checks every one of the R blocks either
+    way. `Gs` (g, n): pulse generators (scaled), the last g multipliers of the
+    returned mu. `Ps` (S, n): points Z must contain (scaled), p' N^-1 p <= 1, entered
     as [[1 - 1e-5, p'], [p, N]] >= 0 (a margin for the solver's accuracy, as the
     budget's).
     """
@@ -394,7 +394,7 @@ def design_tube(
         State and input scaling.
     u_room : (m,) array_like
         Room of each input row (unscaled): the distance from the trim input to the
-        binding side of the asymmetric input set (:func:`fahv.tube.feasibility.input_room`).
+        binding side of the asymmetric input set (`fahv.tube.feasibility.input_room`).
         The objective is sum_j (max_Z |F_j e| / u_room_j)^2: the tightening of eq. (30),
         row by row, relative to the room that row has.
     lam_grid : sequence of float
@@ -409,15 +409,15 @@ def design_tube(
     w_ref : (n,) array_like, optional
         Reference size of W. The RPI condition is homogeneous (Z is RPI for W iff s Z
         is for s W), so the LMI is solved for W / s with s = max_j w_j / w_ref,j (w_j plus
-        the pulses' |G_lj| with ``pulse``) and Z scaled back by s: a W far smaller or
+        the pulses' |G_lj| with `pulse`) and Z scaled back by s: a W far smaller or
         larger than w_ref would otherwise meet the fixed strictness margins of the LMI at
         another scale (measured: a W of 1/100 of the design's gave the tube of W / 10).
-        With ``state_max`` the bound is scaled with W (s Z has s times Z's supports).
+        With `state_max` the bound is scaled with W (s Z has s times Z's supports).
     active : int, optional
         Vertex blocks and points added per pass of constraint generation, for large
         vertex sets: the LMI is solved on a subset of the vertices and points, grown by
         the most violated and cleared of those outside the solution's support, until
-        every block holds at the solution (:func:`_solve_rpi_lmi`); None: all blocks at
+        every block holds at the solution (`_solve_rpi_lmi`); None: all blocks at
         once.
     pulse : (g, n) array_like, optional
         Pulse generators G (unscaled): Z is made RPI for w + G' p, |w| <= w_max,
@@ -427,18 +427,18 @@ def design_tube(
         Points Z must contain (unscaled), e' N^-1 e <= 1 for each row, entered as
         [[1, e'], [e, N]] >= 0 (linear in N) and generated like the vertex blocks; e.g.
         the one-step jumps of a loss's onset over the level they may use, so that the
-        error stays in Z through the onset (:func:`fahv.tube.closure.close_tube_set`).
+        error stays in Z through the onset (`fahv.tube.closure.close_tube_set`).
         Re-checked exactly.
     warm : ActiveSet, optional
         Vertices and points to start the constraint generation from (e.g. the
-        ``active_set`` of an earlier design of the same vertex set); indices beyond the
+        `active_set` of an earlier design of the same vertex set); indices beyond the
         vertex or point count are ignored. It changes how fast the solve gets there, not
         what is certified.
 
     Returns
     -------
     TubeDesign
-        Certified by :func:`verify_tube`.
+        Certified by `verify_tube`.
 
     Raises
     ------

@@ -1,11 +1,11 @@
 """Invariant ellipsoids of a fixed closed loop, and a static output-feedback step.
 
-:func:`invariant_ellipsoid` is the analysis form of the tube LMI (24) for a given loop
+`invariant_ellipsoid` is the analysis form of the tube LMI (24) for a given loop
 xi+ = A_cl,i xi + E w (a tube gain through a notch filter, the disturbance's steady set):
 the smallest ellipsoid RPI for the box W whose projection lies in a given one.
-:func:`output_feedback_step` designs a gain u = F T xi of such a loop together with its
+`output_feedback_step` designs a gain u = F T xi of such a loop together with its
 ellipsoid by one convex step (dilated RPI condition, output structure on the slack).
-Every result is re-checked by its exact level (:mod:`fahv.synthesis.rpi_level`), which,
+Every result is re-checked by its exact level (`fahv.synthesis.rpi_level`), which,
 not the LMI, is the certificate.
 """
 
@@ -34,16 +34,16 @@ class InvariantEllipsoid:
     ----------
     P : (n, n) ndarray or None
         Shape of E = {xi : xi' P^-1 xi <= 1}; None if the LMI was infeasible (or the
-        solver failed) on the vertices held (:attr:`found` False).
+        solver failed) on the vertices held (`found` False).
     s : float
         Smallest factor with the projection of E on the first p states inside
-        s {e : e' S^-1 e <= 1} (S the ``shape`` it was bounded by): the largest eigenvalue
+        s {e : e' S^-1 e <= 1} (S the `shape` it was bounded by): the largest eigenvalue
         of S^-1/2 P_ee S^-1/2, square-rooted (inf if none was found).
     supports : (m,) ndarray or None
         max over E of |(K xi)_j| = sqrt(K_j P K_j') (the input deviation's support).
     active : (a,) ndarray of int
         Indices of the vertices whose blocks the last LMI solve held (constraint
-        generation): where a later solve of the same problem starts (``start``).
+        generation): where a later solve of the same problem starts (`start`).
     """
 
     P: np.ndarray
@@ -66,7 +66,7 @@ class InvariantEllipsoid:
 #: constraint generation releases it (at most once) for the next pass.
 RELEASE_LEVEL = 0.999
 
-#: Share of the budget 1 - lam :func:`invariant_ellipsoid` leaves unused, so that its
+#: Share of the budget 1 - lam `invariant_ellipsoid` leaves unused, so that its
 #: blocks, solved without a strict margin, leave room for the exact re-check.
 BUDGET_MARGIN = 4e-3
 
@@ -75,8 +75,8 @@ def _s_procedure_block(top, AX, E, mu, P):
     """The cvxpy block [[top, 0, AX'], [0, diag(mu), E'], [AX, E, P]], symmetrised.
 
     The S-procedure form of the RPI condition for a box W (LMI 24 in analysis form):
-    ``top`` is lam P (:func:`invariant_ellipsoid`) or lam (G + G' - P) in the dilated
-    form (:func:`output_feedback_step`); AX (n, n) the closed loop times P or G; E (n, p).
+    `top` is lam P (`invariant_ellipsoid`) or lam (G + G' - P) in the dilated
+    form (`output_feedback_step`); AX (n, n) the closed loop times P or G; E (n, p).
     """
     n, p = E.shape
     blk = cp.bmat([[top, np.zeros((n, p)), AX.T],
@@ -86,7 +86,7 @@ def _s_procedure_block(top, AX, E, mu, P):
 
 
 def _analysis_problem(As, E, Ss, Ks, tmax, lam):
-    """The LMI of :func:`invariant_ellipsoid` on the vertices As (scaled): its parts.
+    """The LMI of `invariant_ellipsoid` on the vertices As (scaled): its parts.
 
     Each vertex's S-procedure block with its middle diag(mu_i) eliminated by a Schur
     complement, mu_i,j = b / r_i,j (b the budget (1 - lam)(1 - BUDGET_MARGIN)):
@@ -121,7 +121,7 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     The analysis form of the tube LMI (24) for a closed loop xi+ = A_cl,i xi + E w with
     E = [diag(w_max); 0] and w in the unit box (W = {|w_j| <= w_max,j} on the first p
     states), in the shape P of E = {xi' P^-1 xi <= 1}, with S-procedure multipliers mu_i
-    per vertex::
+    per vertex:
 
         [[lam P, 0, P A_cl,i'], [0, diag(mu_i), E'], [A_cl,i P, E, P]] >= 0,
         sum_j mu_i,j <= (1 - lam) (1 - BUDGET_MARGIN)      every vertex i,
@@ -130,14 +130,14 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     minimising s^2: E is RPI for W at every vertex, its projection on the first p states
     lies in s {e' S^-1 e <= 1}, and the input deviation K xi stays within support_max.
     Linear in (P, mu_i, s^2) for the fixed lam and loop. Solved in the coordinates xi / D
-    on a growing subset of the vertices (constraint generation: the ``active`` vertices
-    of largest spectral radius first, then per pass at most ``add`` of those whose
-    exact level ``levels(P)`` exceeds 1, the worst first, until none does: the result's
+    on a growing subset of the vertices (constraint generation: the `active` vertices
+    of largest spectral radius first, then per pass at most `add` of those whose
+    exact level `levels(P)` exceeds 1, the worst first, until none does: the result's
     exact level is then at most 1 at every vertex: that exact level, not the LMI, is the
     certificate). Started from the vertices an earlier solve of the same problem held
-    (``start``, the result's ``active``), the first solve is that solve's last: on the
+    (`start`, the result's `active`), the first solve is that solve's last: on the
     same data and machine, the same solution in one pass. The blocks solved are
-    re-checked (:func:`fahv.synthesis.lmi.require_psd`) to the
+    re-checked (`fahv.synthesis.lmi.require_psd`) to the
     solver's accuracy, 1e-6 of their largest entry (a strict margin of 1e-5 in the LMI
     made case1.yaml's certified loop infeasible: its multipliers are of order 1e-4).
 
@@ -156,9 +156,9 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     support_max : (m,) array_like
         Largest support of K xi per row.
     levels : callable
-        ``levels(P) -> (R,)``: the exact worst one-step level of each vertex for the
+        `levels(P) -> (R,)`: the exact worst one-step level of each vertex for the
         ellipsoid of shape P (unscaled), e.g.
-        :func:`fahv.synthesis.rpi_level.vertex_levels`.
+        `fahv.synthesis.rpi_level.vertex_levels`.
     lam : float
         Contraction factor in (0, 1).
     active : int
@@ -166,15 +166,15 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     add : int
         Vertices added per pass.
     start : (a,) array_like of int, optional
-        Vertices of the first solve in place of the ``active`` of largest spectral
-        radius (an earlier result's ``active``). It changes how fast the generation
+        Vertices of the first solve in place of the `active` of largest spectral
+        radius (an earlier result's `active`). It changes how fast the generation
         ends, not what is accepted.
 
     Returns
     -------
     InvariantEllipsoid
-        ``found`` False if the LMI is infeasible (or the solver fails) on the vertices
-        held; ``active`` is then that solve's set, from which a later design finds the
+        `found` False if the LMI is infeasible (or the solver fails) on the vertices
+        held; `active` is then that solve's set, from which a later design finds the
         same answer in one solve.
 
     Raises
@@ -182,7 +182,7 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     DesignError
         If a returned solution fails the re-check of its blocks or budgets.
     ValueError
-        On inconsistent shapes, or a ``start`` index outside the vertices.
+        On inconsistent shapes, or a `start` index outside the vertices.
 
     Examples
     --------
@@ -253,7 +253,7 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
 
 
 def _first_vertices(As, active: int, start) -> np.ndarray:
-    """The sorted vertices of the first solve: ``start``, or the ``active`` of largest rho."""
+    """The sorted vertices of the first solve: `start`, or the `active` of largest rho."""
     R = As.shape[0]
     if start is not None and len(start) > 0:
         chosen = np.unique(np.asarray(start, int))
@@ -266,7 +266,7 @@ def _first_vertices(As, active: int, start) -> np.ndarray:
 
 @dataclass(frozen=True)
 class OutputFeedbackStep:
-    """One convex step of :func:`output_feedback_step` (unscaled units).
+    """One convex step of `output_feedback_step` (unscaled units).
 
     Attributes
     ----------
@@ -274,10 +274,10 @@ class OutputFeedbackStep:
         Static output-feedback gain, u - v = F T xi.
     P : (n, n) ndarray
         Ellipsoid E = {xi : xi' P^-1 xi <= 1} RPI for the loop with F at every vertex
-        (exact level <= 1, checked by the ``levels`` callable at every vertex).
+        (exact level <= 1, checked by the `levels` callable at every vertex).
     gamma : float
         The step's objective: the projection of E lies in gamma S and the input supports
-        within gamma ``support_max`` (as solved; the caller re-checks both exactly).
+        within gamma `support_max` (as solved; the caller re-checks both exactly).
     n_blocks : int
         Vertex blocks the last solve held (constraint generation).
     """
@@ -293,9 +293,9 @@ def output_feedback_step(A0, B0, T, w_max, F0, P0, shape, support_max, levels, l
     """One convex step of a static output-feedback gain and its RPI ellipsoid, together.
 
     For the loop xi+ = (A0_i + B0_i F T) xi + E w, E = [diag(w_max); 0], w in the unit
-    box, the RPI condition of :func:`invariant_ellipsoid` is bilinear in (F, P). This
+    box, the RPI condition of `invariant_ellipsoid` is bilinear in (F, P). This
     step uses its dilated form (de Oliveira, Bernussou & Geromel 1999, discrete time),
-    with a slack G in place of P where the loop acts::
+    with a slack G in place of P where the loop acts:
 
         [[lam (G + G' - P), 0, (A0_i G + B0_i Y T)'], [0, diag(mu_i), E'],
          [A0_i G + B0_i Y T, E, P]] >= 0,       sum_j mu_i,j <= (1 - lam)(1 - BUDGET_MARGIN),
@@ -311,9 +311,9 @@ def output_feedback_step(A0, B0, T, w_max, F0, P0, shape, support_max, levels, l
     where (G, P, M, Y) = (P0, P0, I, F0) is feasible whenever P0 is RPI for F0: the step
     starts from the last certificate and can only lower gamma (without the whitening
     cond(M) reached 4e6 on the notch loop; without the slack the steps stalled). The
-    vertices are held by constraint generation: the ``active`` worst of the start (by
-    spectral radius and by exact level) first, then per pass at most ``add`` of those
-    whose exact level ``levels(F, P)`` exceeds 1, until none does; that exact level over
+    vertices are held by constraint generation: the `active` worst of the start (by
+    spectral radius and by exact level) first, then per pass at most `add` of those
+    whose exact level `levels(F, P)` exceeds 1, until none does; that exact level over
     every vertex, not the solver's status, is what the result is accepted on.
 
     Parameters
@@ -334,9 +334,9 @@ def output_feedback_step(A0, B0, T, w_max, F0, P0, shape, support_max, levels, l
     support_max : (m,) array_like
         t_j, the input deviation's support bound per row.
     levels : callable
-        ``levels(F, P) -> (R,)``: the exact worst one-step level of every vertex of the
+        `levels(F, P) -> (R,)`: the exact worst one-step level of every vertex of the
         loop with gain F for the ellipsoid of shape P (e.g. built on
-        :func:`fahv.synthesis.rpi_level.vertex_levels`).
+        `fahv.synthesis.rpi_level.vertex_levels`).
     lam : float
         Contraction factor in (0, 1).
     active, add : int

@@ -20,7 +20,7 @@ LMI_MARGIN = 1e-5
 
 
 def solve_lmi(prob: cp.Problem) -> bool:
-    """Solve an LMI problem with :data:`SDP_SOLVER`.
+    """Solve an LMI problem with `SDP_SOLVER`.
 
     "optimal_inaccurate" counts as solved: every caller re-checks its certificate.
 
@@ -48,7 +48,7 @@ def solve_lmi(prob: cp.Problem) -> bool:
 
 
 #: A constraint whose dual is below this share of the largest one is not in the
-#: solution's support (:func:`dual_support`): constraint generation releases it.
+#: solution's support (`dual_support`): constraint generation releases it.
 SUPPORT_RTOL = 1e-6
 
 
@@ -56,7 +56,7 @@ def dual_support(constraints) -> np.ndarray:
     """Positions of the constraints whose dual carries the solution.
 
     The activity of a constraint is the trace of its dual (a scalar's dual for a scalar
-    constraint); those above :data:`SUPPORT_RTOL` of the largest are the support. Of a
+    constraint); those above `SUPPORT_RTOL` of the largest are the support. Of a
     convex problem in d unknowns, at most d constraints support the optimum; the rest
     can be left out without changing it, which constraint generation uses to keep its
     LMIs small.
@@ -69,7 +69,7 @@ def dual_support(constraints) -> np.ndarray:
     Returns
     -------
     (s,) ndarray of int
-        Their positions in ``constraints`` (all of them where no dual is available).
+        Their positions in `constraints` (all of them where no dual is available).
 
     Examples
     --------
@@ -140,7 +140,7 @@ def min_eig(M: np.ndarray) -> float:
 
 
 def psd_tolerance(M: np.ndarray, rtol: float = 1e-9) -> float:
-    """Tolerance of :func:`require_psd`: rtol max(1, max |M_ij|) (>= 0).
+    """Tolerance of `require_psd`: rtol max(1, max |M_ij|) (>= 0).
 
     Parameters
     ----------
@@ -165,7 +165,7 @@ def psd_tolerance(M: np.ndarray, rtol: float = 1e-9) -> float:
 def require_psd(M: np.ndarray, what: str, rtol: float = 1e-9) -> float:
     """Check M >= -rtol ||M|| I; return the smallest eigenvalue.
 
-    ``||M||`` is max(1, max |M_ij|) (:func:`psd_tolerance`): an eigenvalue that is
+    `||M||` is max(1, max |M_ij|) (`psd_tolerance`): an eigenvalue that is
     negative by less than that tolerance is rounding of the solver and accepted.
 
     Parameters
@@ -185,7 +185,7 @@ def require_psd(M: np.ndarray, what: str, rtol: float = 1e-9) -> float:
     Raises
     ------
     DesignError
-        Naming ``what``, the eigenvalue found and the tolerance, if the check fails.
+        Naming `what`, the eigenvalue found and the tolerance, if the check fails.
 
     Examples
     --------

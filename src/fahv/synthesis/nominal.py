@@ -1,7 +1,7 @@
 """Nominal gain K from the LMI problem (33)-(35) (Kothare et al. 1996, ref. [37]).
 
 For the nominal system x_n(k+1) = A(p) x_n + B(p) u_n (eq. 20/46), with Q > 0, Y,
-X = diag(X_jj)::
+X = diag(X_jj):
 
     [[1, x_n0'], [x_n0, Q]] >= 0                                            (33)
     [[lam Q, (A_i Q + B_i Y)'], [A_i Q + B_i Y, Q]] >= 0   for every vertex  (34')
@@ -10,7 +10,7 @@ X = diag(X_jj)::
 K = Y Q^-1. (34') is the paper's (34) with the cost terms replaced by a decay factor
 lam < 1 (its limit gamma_n -> infinity with V+ <= lam V); it makes the invariance of
 E(Q) = {x' Q^-1 x <= 1} strict, so the certificate survives the solver tolerance and
-leaves room for the reference governor of :mod:`fahv.control`.
+leaves room for the reference governor of `fahv.control`.
 
 E(Q) contains x_n0, is invariant for every vertex and keeps |K_j x| <= u_n,max,j inside
 it, so a K computed once stays valid along the whole nominal trajectory as long as the
@@ -162,12 +162,12 @@ def verify_nominal(A, B, nd: NominalDesign, Dx, Du) -> dict[str, float]:
     Returns
     -------
     dict
-        ``containment`` = x0' Q^-1 x0 (<= 1); ``contraction`` (< 1, see
-        :func:`contraction`); ``lmi34_min_eig``: smallest eigenvalue of the blocks
-        (34') over the vertices with Y = K Q, and ``lmi34_tol`` the tolerance it was
-        checked against (>= -lmi34_tol, :func:`fahv.synthesis.lmi.psd_tolerance` of
-        that vertex's block: 1e-9 relative); ``input_ratio`` =
-        max_j sqrt(K_j Q K_j') / u_max,j (<= 1); ``spectral_radius`` = max_i
+        `containment` = x0' Q^-1 x0 (<= 1); `contraction` (< 1, see
+        `contraction`); `lmi34_min_eig`: smallest eigenvalue of the blocks
+        (34') over the vertices with Y = K Q, and `lmi34_tol` the tolerance it was
+        checked against (>= -lmi34_tol, `fahv.synthesis.lmi.psd_tolerance` of
+        that vertex's block: 1e-9 relative); `input_ratio` =
+        max_j sqrt(K_j Q K_j') / u_max,j (<= 1); `spectral_radius` = max_i
         rho(A_i + B_i K) (< 1).
 
     Raises
@@ -274,7 +274,7 @@ def design_nominal(A, B, d, u_max, Dx, Du, lam: float = DEFAULT_LAM) -> NominalD
     -------
     NominalDesign
         With x0 = s d (s <= 1, shrunk by a relative margin), certified by
-        :func:`verify_nominal`.
+        `verify_nominal`.
 
     Raises
     ------
@@ -341,7 +341,7 @@ def verify_terminal(A, B, K, Q, u_lo, u_hi, u_r_path, lam: float = 1.0) -> dict:
 
     E(Q) invariant under u = K x for every vertex: Q^-1/2 (A_i + B_i K) Q^1/2 has
     spectral norm <= lam (<= 1); the inscribed box of the QP lies inside E(Q); and at
-    every trim input of ``u_r_path`` the steady input with the full set
+    every trim input of `u_r_path` the steady input with the full set
     (u_r +/- sqrt(K_j Q K_j')) fits the tightened limits, or at least the trim does
     (alpha = 0).
 
@@ -361,7 +361,7 @@ def verify_terminal(A, B, K, Q, u_lo, u_hi, u_r_path, lam: float = 1.0) -> dict:
     Returns
     -------
     dict
-        ``invariance`` (largest norm over vertices), ``alpha_max`` (largest alpha
+        `invariance` (largest norm over vertices), `alpha_max` (largest alpha
         admissible at every path point, in [0, 1]).
 
     Raises

@@ -25,7 +25,7 @@ that holds the Case 1 step is close to the largest admissible one, so only gains
 close to K_1 keep it invariant), and imposing it as an LMI (slack-variable form, K =
 Y G^-1) made every ellipsoid collapse onto E_1 (measured, docs/theory/rmpc.md).
 So it is measured and reported, and what the law needs is checked directly:
-:func:`verify_sequence` requires every interpolated ellipsoid E(a) to be contracted by
+`verify_sequence` requires every interpolated ellipsoid E(a) to be contracted by
 the interpolated gain at every vertex and to keep the input bound, on a grid of
 101 values of a per pair (numerical evidence between grid points, not a proof).
 
@@ -34,11 +34,11 @@ step lies near the edge of feasibility, where gamma ~ 1e5-1e6 while the smallest
 axes of Q are O(10) in the design scales; solved as written, an interior-point
 solver's tolerance is larger than the Lyapunov decrease it must certify. Each
 ellipsoid is therefore solved twice: once in the base scales (states by
-``Ds``, inputs by their bounds) with the cost scaled so that gamma ~ 1, and again in
+`Ds`, inputs by their bounds) with the cost scaled so that gamma ~ 1, and again in
 the coordinates of that first solution (z = T^-1 x, Q_est = T T', cost rescaled
 by 1 / gamma_est), where Q ~ I and gamma ~ 1, with strict margins on every LMI that
 are larger than the solver's tolerance. Every result is re-checked numerically in
-the base scales by :func:`verify_sequence`.
+the base scales by `verify_sequence`.
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ ALPHA_GRID = 101
 class EllipsoidSequence:
     """Nested invariant ellipsoids and gains of the off-line RMPC, in scaled units.
 
-    States are scaled by ``Ds`` (z = x / Ds), inputs by their bounds (v = u / u_max,
+    States are scaled by `Ds` (z = x / Ds), inputs by their bounds (v = u / u_max,
     so |v_j| <= 1).
 
     Attributes
@@ -100,8 +100,8 @@ class EllipsoidSequence:
     guess_Q : (N, n, n) ndarray or None
     guess_gamma : (N,) ndarray or None
         The coordinates (an estimate of Q_i and gamma_i) of the pass that certified each
-        ellipsoid: where a later design of the same problem starts (``start`` of
-        :func:`design_sequence`).
+        ellipsoid: where a later design of the same problem starts (`start` of
+        `design_sequence`).
     """
 
     Q: np.ndarray
@@ -118,8 +118,8 @@ class EllipsoidSequence:
 def _min_gamma(As, Bs, z, C, S, Q_outer, eps):
     """One min-gamma problem (32)-(35) in given coordinates; (Q, K, gamma) or None.
 
-    Inputs are scaled so that the bounds are 1. ``C`` and ``S`` are the factors of the
-    state and input cost (cost z' C'C z + v' S'S v). ``Q_outer``: the previous
+    Inputs are scaled so that the bounds are 1. `C` and `S` are the factors of the
+    state and input cost (cost z' C'C z + v' S'S v). `Q_outer`: the previous
     ellipsoid (nesting Q <= (1 - NEST) Q_outer) or None. K = Y Q^-1.
     """
     R, n, m = Bs.shape
@@ -165,7 +165,7 @@ def _min_gamma(As, Bs, z, C, S, Q_outer, eps):
 def _solve_point(As, Bs, z, psi, sigma, Q_outer, guess):
     """Min-gamma ellipsoid of state z (scaled), twice-scaled (module notes).
 
-    ``guess`` = (Q_est, gamma_est) or None. Returns (Q, K, gamma, last guess) in the base
+    `guess` = (Q_est, gamma_est) or None. Returns (Q, K, gamma, last guess) in the base
     scales, the last guess being the coordinates of the pass that was certified.
     """
     if guess is None:  # first pass in the base scales, cost scaled so that gamma ~ 1
@@ -189,7 +189,7 @@ def _solve_point(As, Bs, z, psi, sigma, Q_outer, guess):
 
 
 def _holds(As, Bs, z, psi, sigma, Q_outer, Q, K, g) -> bool:
-    """The certificates of one ellipsoid (as :func:`verify_sequence` checks them)."""
+    """The certificates of one ellipsoid (as `verify_sequence` checks them)."""
     try:
         P = np.linalg.inv(Q)
         ok = _contraction(As, Bs, K, Q).max() < 1.0
@@ -210,7 +210,7 @@ def _holds(As, Bs, z, psi, sigma, Q_outer, Q, K, g) -> bool:
 
 
 def _scaled_pass(As, Bs, z, psi, sigma, Q_outer, guess):
-    """The min-gamma problem in the coordinates of ``guess`` = (Q_est, gamma_est)."""
+    """The min-gamma problem in the coordinates of `guess` = (Q_est, gamma_est)."""
     Q_est, g_est = guess
     T = np.linalg.cholesky(0.5 * (Q_est + Q_est.T))
     Ti = np.linalg.inv(T)
@@ -233,11 +233,11 @@ def design_sequence(A, B, d, u_max, psi, sigma, Ds, fractions,
                     start=None) -> tuple[EllipsoidSequence, dict]:  # fmt: skip
     """Off-line RMPC of Wan & Kothare (2003): nested ellipsoids along the command step.
 
-    For z_i = f_i d / Ds (``fractions`` f_1 > f_2 > ... > 0), solve the min-gamma
+    For z_i = f_i d / Ds (`fractions` f_1 > f_2 > ... > 0), solve the min-gamma
     problem (32)-(35) with x_i = z_i and, for i > 1, the nesting Q_i <= (1 - 1e-3)
-    Q_{i-1}; K_i = Y_i Q_i^-1. Then :func:`verify_sequence`. Every solve uses
-    Clarabel with :data:`SOLVER_SETTINGS` and strict margins (:data:`EPS_34`,
-    :data:`MARGIN`, :data:`NEST`), so the result does not depend on solver defaults.
+    Q_{i-1}; K_i = Y_i Q_i^-1. Then `verify_sequence`. Every solve uses
+    Clarabel with `SOLVER_SETTINGS` and strict margins (`EPS_34`,
+    `MARGIN`, `NEST`), so the result does not depend on solver defaults.
 
     Parameters
     ----------
@@ -266,7 +266,7 @@ def design_sequence(A, B, d, u_max, psi, sigma, Ds, fractions,
     -------
     seq : EllipsoidSequence
     certificate : dict
-        What :func:`verify_sequence` measured.
+        What `verify_sequence` measured.
 
     Raises
     ------
@@ -317,9 +317,9 @@ def design_sequence(A, B, d, u_max, psi, sigma, Ds, fractions,
 
 
 def _stored_pass(As, Bs, z, psi, sigma, Q_outer, start, i):
-    """Ellipsoid i solved once in the stored coordinates ``start`` if they certify it.
+    """Ellipsoid i solved once in the stored coordinates `start` if they certify it.
 
-    Returns (Q, K, gamma, guess) as :func:`_solve_point`, or None (no stored coordinates
+    Returns (Q, K, gamma, guess) as `_solve_point`, or None (no stored coordinates
     for i, of another shape, or not certified: the caller solves as without them).
     """
     if start is None or i >= len(start[0]) or np.shape(start[0][i]) != As.shape[1:]:
@@ -345,12 +345,12 @@ def _input_ratio(K, Q, v_max) -> np.ndarray:
 def verify_sequence(A, B, seq: EllipsoidSequence, psi, sigma) -> dict:
     """Re-check every certificate of an off-line RMPC sequence numerically.
 
-    Per ellipsoid i, in the scales of ``seq``: Q_i positive definite; contraction
+    Per ellipsoid i, in the scales of `seq`: Q_i positive definite; contraction
     max_r ||L_i^-1 (A_r + B_r K_i) L_i|| < 1 at every vertex r (invariance, strict);
     the Lyapunov inequality of (34), P_i - (A_r + B_r K_i)' P_i (A_r + B_r K_i) -
     (psi + K_i' sigma K_i) / gamma_i >= 0 at every vertex (the cost bound); the input
     bound sqrt(K_ij Q_i K_ij') <= u_max,j (35); z_i in E_i (33). Per pair (i, i+1):
-    nesting, max eig(P_i^1/2 Q_{i+1} P_i^1/2) < 1; and, on a grid of ``ALPHA_GRID``
+    nesting, max eig(P_i^1/2 Q_{i+1} P_i^1/2) < 1; and, on a grid of `ALPHA_GRID`
     values of a in [0, 1], the interpolated ellipsoid {z' (a P_i + (1 - a) P_{i+1}) z
     <= 1} is contracted by a K_i + (1 - a) K_{i+1} at every vertex and keeps the input
     bound. The sufficient condition (WK) of Wan & Kothare (K_{i+1} contracts E_i) is
@@ -369,10 +369,10 @@ def verify_sequence(A, B, seq: EllipsoidSequence, psi, sigma) -> dict:
     Returns
     -------
     dict
-        ``contraction`` (N,), ``lyapunov_min_eig`` (N,) (relative to ||P_i||),
-        ``input_ratio`` (N,), ``containment`` (N,), ``nesting`` (N - 1,), ``wk`` (N - 1,)
-        (largest contraction of E_i under K_{i+1}), ``interp_contraction`` and
-        ``interp_input_ratio`` (largest over the grid, N - 1 each).
+        `contraction` (N,), `lyapunov_min_eig` (N,) (relative to ||P_i||),
+        `input_ratio` (N,), `containment` (N,), `nesting` (N - 1,), `wk` (N - 1,)
+        (largest contraction of E_i under K_{i+1}), `interp_contraction` and
+        `interp_input_ratio` (largest over the grid, N - 1 each).
 
     Raises
     ------

@@ -28,7 +28,7 @@ def check_kkt(H, f, A_c, bl, bu, y, lam, primal_tol=PRIMAL_TOL, kkt_tol=KKT_TOL)
     f : (ny,) ndarray
     A_c : (nc, ny) ndarray
     bl, bu : (ny + nc,) ndarray
-        Bounds on [y; A_c y]; ``|b| >= NO_BOUND`` means none.
+        Bounds on [y; A_c y]; `|b| >= NO_BOUND` means none.
     y : (ny,) ndarray
         Primal solution.
     lam : (ny + nc,) ndarray
@@ -74,7 +74,7 @@ def check_kkt(H, f, A_c, bl, bu, y, lam, primal_tol=PRIMAL_TOL, kkt_tol=KKT_TOL)
 
 @functools.cache
 def _kkt_kernel():
-    """:func:`_kkt_measures` compiled by numba (cached on disk), built at its first use.
+    """`_kkt_measures` compiled by numba (cached on disk), built at its first use.
 
     A process that never checks a QP (most nodes) does not import numba (0.16 s).
     """
@@ -84,7 +84,7 @@ def _kkt_kernel():
 
 
 def _kkt_measures(H, f, A_c, bl, bu, y, lam, big, primal_tol, kkt_tol):  # pragma: no cover
-    """The numbers :func:`check_kkt` compares (compiled: a QP per re-plan and run).
+    """The numbers `check_kkt` compares (compiled: a QP per re-plan and run).
 
     Returns (largest bound violation, max |[y; A_c y]|, largest stationarity residual,
     its scale, an upper-bound complementarity failure, a lower-bound one).

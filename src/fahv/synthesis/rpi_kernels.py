@@ -1,6 +1,6 @@
-"""The compiled kernels of the exact RPI level (:mod:`fahv.synthesis.rpi_level`).
+"""The compiled kernels of the exact RPI level (`fahv.synthesis.rpi_level`).
 
-Module-level numba functions, cached on disk (``cache=True``): compiled once per
+Module-level numba functions, cached on disk (`cache=True`): compiled once per
 machine, loaded in every later process (a design's Dask workers included). Imported
 only where a level is computed, so that the loop and the nodes never load numba.
 """
@@ -13,11 +13,11 @@ import numpy as np
 
 @numba.njit(cache=True, error_model="numpy")
 def dual_bound(s, b, cc, steps):  # pragma: no cover - compiled
-    """The dual bound of :func:`fahv.synthesis.rpi_level.max_on_ball` per row.
+    """The dual bound of `fahv.synthesis.rpi_level.max_on_ball` per row.
 
     In the eigenbasis of M'M:
     s (n,) ascending eigenvalues, b (L, n) the rows' M'c in that basis, cc (L,) |c_l|^2,
-    ``steps`` iterations at most; returns (L,) upper bounds of the maxima. The minimiser
+    `steps` iterations at most; returns (L,) upper bounds of the maxima. The minimiser
     lam* > sigma_max^2 of the dual function is where psi(lam) = 1 / |x(lam)| - 1 = 0,
     x(lam) = (lam I - G)^-1 b; psi is nearly linear in lam, so Newton's method on it
     (Moré and Sorensen 1983) reaches lam* in a few steps. Each step is kept inside a
@@ -76,7 +76,7 @@ def dual_bound(s, b, cc, steps):  # pragma: no cover - compiled
 def vertex_bounds(s, CM, C, cc, steps):  # pragma: no cover - compiled
     """Worst dual bound (R,) and its corner (R,) of every vertex.
 
-    The loop of :func:`fahv.synthesis.rpi_level.vertex_levels`, parallel over the vertices.
+    The loop of `fahv.synthesis.rpi_level.vertex_levels`, parallel over the vertices.
     """
     R = s.shape[0]
     lev = np.empty(R)

@@ -6,7 +6,7 @@ e+ = A_cl,i e + w, w in the box W, at every vertex i exactly when
     level = max_i max_{e in Z, w in W} (A_cl,i e + w)' N^-1 (A_cl,i e + w) <= 1.
 
 The level is convex in (e, w), so over the box W its maximum lies at a corner; over the
-ellipsoid it is a trust-region subproblem, solved through its dual (:func:`max_on_ball`,
+ellipsoid it is a trust-region subproblem, solved through its dual (`max_on_ball`,
 compiled with numba). Whatever found N (an LMI, a scaling, a file), this level is the
 certificate: it trusts no solver.
 """
@@ -26,7 +26,7 @@ def max_on_ball(M: np.ndarray, c: np.ndarray) -> np.ndarray:
     Sorensen 1983): it equals the minimum over lam >= sigma_max^2 of the convex dual
     function lam + b'(lam I - G)^-1 b + c'c, attained where |(lam I - G)^-1 b| = 1 (the
     secular equation), or at lam = sigma_max^2 in the hard case. A safeguarded Newton
-    iteration (:func:`fahv.synthesis.rpi_kernels.dual_bound`) brackets that minimiser;
+    iteration (`fahv.synthesis.rpi_kernels.dual_bound`) brackets that minimiser;
     the dual function at any lam above sigma_max^2 bounds the maximum from above (weak
     duality), with an error of second order in the distance to the minimiser (the
     function's slope vanishes there).
@@ -62,7 +62,7 @@ def max_on_ball(M: np.ndarray, c: np.ndarray) -> np.ndarray:
 
 
 def _dual_kernel():
-    """The compiled dual bound (:func:`fahv.synthesis.rpi_kernels.dual_bound`).
+    """The compiled dual bound (`fahv.synthesis.rpi_kernels.dual_bound`).
 
     Imported at its first use, so that numba is loaded only where a level is computed;
     compiled once and cached on disk. The iteration is up to 200 steps for each of L
@@ -78,7 +78,7 @@ def worst_level(A, B, F, N, w_max, tau: float = 1.0, pulse=None):
     """Exact max of (A_cl,i e + w)' (tau^2 N)^-1 (A_cl,i e + w) over e in tau Z, w in W.
 
     The level is convex in (e, w), so over the box W its maximum lies at a corner; over
-    the ellipsoid the trust-region subproblem of :func:`max_on_ball` is solved by its
+    the ellipsoid the trust-region subproblem of `max_on_ball` is solved by its
     dual (an upper bound, exact up to the bisection's rounding). The tube is RPI for W
     if the result is at most 1.
 
@@ -122,7 +122,7 @@ def worst_level(A, B, F, N, w_max, tau: float = 1.0, pulse=None):
 
 
 def vertex_levels(Acl, N, w_max, pulse=None) -> np.ndarray:
-    """Exact worst one-step level of each closed-loop vertex (:func:`worst_level`).
+    """Exact worst one-step level of each closed-loop vertex (`worst_level`).
 
     Parameters
     ----------
@@ -133,7 +133,7 @@ def vertex_levels(Acl, N, w_max, pulse=None) -> np.ndarray:
     w_max : (n,) array_like
         Half-widths of W (a zero row: no disturbance there).
     pulse : (g, n) ndarray, optional
-        Pulse generators, as in :func:`worst_level`.
+        Pulse generators, as in `worst_level`.
 
     Returns
     -------
@@ -157,7 +157,7 @@ def _levels(Acl, Ns, w_max, pulse):
     The vertices' maps M_i = L^-1 A_cl,i L (N = L L') and the eigen-decompositions of
     M_i' M_i are batched in numpy; the dual bound of every corner at every vertex runs
     in one compiled loop over the vertices, spread over the cores
-    (:func:`_vertex_kernel`): the same bound as :func:`max_on_ball`, vertex by vertex.
+    (`_vertex_kernel`): the same bound as `max_on_ball`, vertex by vertex.
     """
     L = np.linalg.cholesky(Ns)
     Linv = np.linalg.inv(L)
@@ -177,7 +177,7 @@ def _levels(Acl, Ns, w_max, pulse):
 
 
 def _vertex_kernel():
-    """The compiled all-vertex loop (:func:`fahv.synthesis.rpi_kernels.vertex_bounds`)."""
+    """The compiled all-vertex loop (`fahv.synthesis.rpi_kernels.vertex_bounds`)."""
     from fahv.synthesis.rpi_kernels import vertex_bounds
 
     return vertex_bounds
@@ -186,7 +186,7 @@ def _vertex_kernel():
 def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, hi: float = 4.0) -> float:
     """Largest factor g in [0, hi] such that the tube stays RPI for g W.
 
-    Bisection on :func:`worst_level` (30 halvings of [0, hi], or of [0, 1] when the
+    Bisection on `worst_level` (30 halvings of [0, hi], or of [0, 1] when the
     tube is not RPI for W itself).
 
     Parameters
@@ -201,7 +201,7 @@ def rpi_margin(A, B, F, N, w_max, tau: float = 1.0, hi: float = 4.0) -> float:
     w_max : (n,) array_like
         Half-widths of W (state units).
     tau : float
-        Adjustable factor (eq. 54), as in :func:`worst_level`.
+        Adjustable factor (eq. 54), as in `worst_level`.
     hi : float
         Largest factor searched.
 

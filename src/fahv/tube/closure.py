@@ -2,12 +2,12 @@
 
 Z_8 is designed for W_8 (the tube LMI (24) over the vertices along the nominal), and
 W_8 must bound the one-step disturbance over the product set of that Z_8
-(:func:`fahv.bounds.one_step_bound.altitude_bound`). :func:`close_tube_set` iterates
+(`fahv.bounds.one_step_bound.altitude_bound`). `close_tube_set` iterates
 W_8 <- max(W_8, grow x bound) with the LMI re-solved until the bound lies inside W_8,
 checks that the scheduling box holds the nominal box grown by the product set's supports
-(the integral form's segment condition, :func:`fahv.bounds.domain.box_shortfall`), and
+(the integral form's segment condition, `fahv.bounds.domain.box_shortfall`), and
 re-checks the exact worst one-step level over the vertices and the corners of W_8
-(:func:`fahv.synthesis.rpi_level.worst_level`).
+(`fahv.synthesis.rpi_level.worst_level`).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def close_tube_set(
     warm: ActiveSet | None = None,
     log: Callable[[str], None] = print,
 ) -> TubeSet:
-    """Iterate W_8 and Z_8 to a closed tube set over the vertices ``nv`` (module docstring).
+    """Iterate W_8 and Z_8 to a closed tube set over the vertices `nv` (module docstring).
 
     Parameters
     ----------
@@ -60,30 +60,30 @@ def close_tube_set(
     input_scale : (2,) array_like
         Design input scaling (Du).
     room : (2,) array_like
-        Input room of each row (:func:`fahv.tube.feasibility.input_room`).
+        Input room of each row (`fahv.tube.feasibility.input_room`).
     lam : float
         Contraction factor of the tube LMI (24).
     moves : int
-        Fast steps between the nominal's altitude resets (M of ``mpc``).
+        Fast steps between the nominal's altitude resets (M of `mpc`).
     grow : float
         W_8 <- max(W_8, grow x bound) between iterations.
     iterations : int
     w_ref : (9,) array_like, optional
-        Reference size of W for the LMI's scaling (:func:`fahv.synthesis.feedback.design_tube`);
+        Reference size of W for the LMI's scaling (`fahv.synthesis.feedback.design_tube`);
         its eight entries after h are used.
     active : int
         Vertex blocks and points added per pass of constraint generation
-        (:func:`fahv.synthesis.feedback.design_tube`).
+        (`fahv.synthesis.feedback.design_tube`).
     state_max : (8,) array_like, optional
         Largest supports of Z_8 along e_8's axes (V, alpha, theta, ...; unscaled, inf: no
         bound), e.g. 0.5 deg less the QP's attitude rows in alpha and theta, so that the
         attitude requirement follows from the tube set; passed to
-        :func:`fahv.synthesis.feedback.design_tube`.
+        `fahv.synthesis.feedback.design_tube`.
     contain : (S, 8) array_like, optional
-        Errors Z_8 must contain (``contain`` of :func:`fahv.synthesis.feedback.design_tube`),
+        Errors Z_8 must contain (`contain` of `fahv.synthesis.feedback.design_tube`),
         e.g. the onset's jumps over the level they may use.
     warm : ActiveSet, optional
-        The vertices and points the constraint generation starts from (the ``active_set``
+        The vertices and points the constraint generation starts from (the `active_set`
         of an earlier design of this file); it changes how fast the LMI is solved, not
         what is certified.
     log : callable

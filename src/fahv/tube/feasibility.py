@@ -2,8 +2,8 @@
 
 Two ways of treating the elevator loss of effectiveness are compared:
 
-* ``"box"`` -- the paper's eq. (16)-(19): the fault is part of the box W.
-* ``"polytopic"`` -- the deviation part of the fault, B (P - I) u of eq. (16), is
+* `"box"` -- the paper's eq. (16)-(19): the fault is part of the box W.
+* `"polytopic"` -- the deviation part of the fault, B (P - I) u of eq. (16), is
   exact polytopic uncertainty in B (vertices with rho_f and with 1), and W bounds
   only modelling error and parameter uncertainty. The trim part of the fault,
   (rho_f - 1) delta_e,r, is then NOT covered by W (it is a constant offset).
@@ -50,7 +50,7 @@ def input_room(vehicle, n: int = 5, rho_f: float = 1.0) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FeasibilityResult:
-    """Outcome of :func:`tube_feasibility` for one fault treatment.
+    """Outcome of `tube_feasibility` for one fault treatment.
 
     Attributes
     ----------
@@ -99,8 +99,8 @@ def tube_feasibility(
 ) -> FeasibilityResult:
     """Sample W, design F and Z, try the box tube, report the input room left.
 
-    Parameters are those of :func:`fahv.bounds.disturbance.sample_disturbance` and
-    :func:`fahv.synthesis.feedback.design_tube`; ``treatment`` is "box" or "polytopic".
+    Parameters are those of `fahv.bounds.disturbance.sample_disturbance` and
+    `fahv.synthesis.feedback.design_tube`; `treatment` is "box" or "polytopic".
     """
     if treatment not in ("box", "polytopic"):
         raise ValueError(f"fault treatment must be 'box' or 'polytopic', got {treatment!r}")

@@ -1,10 +1,10 @@
 """The lines the tube's computations print while they run: formatting only.
 
 The closure of the eight-state tube set prints one line per W_8-Z_8 iteration
-(:func:`closure_iteration_line`) and every tube loop through a notch prints its verdict
-(:func:`notch_loop_line`) as it is found, from the processes that compute them. Both
+(`closure_iteration_line`) and every tube loop through a notch prints its verdict
+(`notch_loop_line`) as it is found, from the processes that compute them. Both
 format a result computed elsewhere and import nothing of the computations; the lines of
-the certificate a design prints are :mod:`fahv.certificate.report`.
+the certificate a design prints are `fahv.certificate.report`.
 """
 
 from __future__ import annotations
@@ -13,12 +13,12 @@ import numpy as np
 
 
 def join(values, fmt: str, sep: str = " ") -> str:
-    """``values`` formatted with ``fmt`` and joined with ``sep``."""
+    """`values` formatted with `fmt` and joined with `sep`."""
     return sep.join(format(v, fmt) for v in values)
 
 
 def closure_iteration_line(it: int, tightening, N_8, ab, ratio) -> str:
-    """The design log's line of one W_8-Z_8 iteration (:mod:`fahv.tube.closure`).
+    """The design log's line of one W_8-Z_8 iteration (`fahv.tube.closure`).
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """A tube gain designed for the loop through the notch on q, with its certificate.
 
-:func:`fahv.tube.notch_loop.notch_tube` certifies the loop u = F e' for the tube's own
-F. :func:`notch_gain` designs the gain on e' (q' = notch(q) for q) together with the
+`fahv.tube.notch_loop.notch_tube` certifies the loop u = F e' for the tube's own
+F. `notch_gain` designs the gain on e' (q' = notch(q) for q) together with the
 loop's ellipsoid, by convex steps in continuation over the notch's pole damping.
 """
 
@@ -23,7 +23,7 @@ from fahv.tube.notch_loop import (
 
 @dataclass(frozen=True)
 class NotchGain:
-    """A tube gain designed for the loop through the notch and its check (:func:`notch_gain`).
+    """A tube gain designed for the loop through the notch and its check (`notch_gain`).
 
     Attributes
     ----------
@@ -31,11 +31,11 @@ class NotchGain:
         Gain on e' (e with q' = notch(q) for q) [(-, rad) per state unit].
     P : (n + 2, n + 2) ndarray
         Its ellipsoid in xi = [e; chi] (coordinates of
-        :func:`fahv.tube.notch_loop.notch_closed_loop`).
+        `fahv.tube.notch_loop.notch_closed_loop`).
     loop : NotchLoop
         The exact re-check at the case's notch
-        (:func:`fahv.tube.notch_loop.notch_certificate` against the tightening the
-        design applies), ``designed`` set.
+        (`fahv.tube.notch_loop.notch_certificate` against the tightening the
+        design applies), `designed` set.
     steps : tuple of (float, float)
         (eps_p, gamma) of every convex step taken, in order.
     """
@@ -48,7 +48,7 @@ class NotchGain:
     def joint(self, notch, Ts: float, iq: int) -> np.ndarray:
         """Shape (n + m, n + m) of (e, u - v) over E(P): [[I, 0], K] P [[I, 0], K]'.
 
-        ``notch``, ``Ts``, ``iq`` as :func:`fahv.tube.notch_loop.notch_closed_loop` (the
+        `notch`, `Ts`, `iq` as `fahv.tube.notch_loop.notch_closed_loop` (the
         case's notch).
         """
         m, n = self.F.shape
@@ -62,7 +62,7 @@ def notch_gain(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
                log=print) -> NotchGain | None:  # fmt: skip
     """Design the tube gain of the loop through the notch on q together with its certificate.
 
-    :func:`fahv.tube.notch_loop.notch_tube` certifies the loop u = F e' for the tube's own
+    `fahv.tube.notch_loop.notch_tube` certifies the loop u = F e' for the tube's own
     F; a gain that
     tolerates the filter's lag less well than the loop needs (the eight-state tube set with
     its attitude supports bounded: spectral radius above 1 through deep notches) has no
@@ -70,15 +70,15 @@ def notch_gain(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
     whose loop has an ellipsoid RPI for W with its projection in Z and its input
     support within the tightening the nominal QP applies: the gain on e' is free. It is
     a static output feedback of the loop in xi = [e; chi], u - v = F T xi, designed by
-    convex steps in (F, P) (:func:`fahv.synthesis.invariant_ellipsoid.output_feedback_step`: the
+    convex steps in (F, P) (`fahv.synthesis.invariant_ellipsoid.output_feedback_step`: the
     dilated RPI condition, the output structure on the slack, whitened by the last
-    ellipsoid), in continuation over the notch's pole damping: from ``F``'s own ellipsoid
-    at the first eps_p of ``continuation`` (one is sought with a 100 x looser input
-    support bound), each certified gain starts the next, the case's ``notch.eps_p``
+    ellipsoid), in continuation over the notch's pole damping: from `F`'s own ellipsoid
+    at the first eps_p of `continuation` (one is sought with a 100 x looser input
+    support bound), each certified gain starts the next, the case's `notch.eps_p`
     last. Each eps_p is stepped until the exact re-check
-    (:func:`fahv.tube.notch_loop.notch_certificate`: level over every vertex and corner
+    (`fahv.tube.notch_loop.notch_certificate`: level over every vertex and corner
     of W, s, the supports against the tightening) certifies it, or gamma gains less than
-    1e-3 (stalled), or ``max_steps`` steps; each eps_p before the case's must end
+    1e-3 (stalled), or `max_steps` steps; each eps_p before the case's must end
     certified. A start certified as it is is kept
     (steps that only shrink the ellipsoid were measured not to carry a gain further).
 
@@ -108,14 +108,14 @@ def notch_gain(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
     variant : str
     tightening : (m,) array_like, optional
         The tightening the nominal QP applies, which the loop's input supports must keep
-        within; default F Z's support (the tube's, when ``F`` is the tube's gain).
+        within; default F Z's support (the tube's, when `F` is the tube's gain).
     log : callable
         One line per step.
 
     Returns
     -------
     NotchGain or None
-        The last gain reached at the case's eps_p with its re-check (``loop.certified``
+        The last gain reached at the case's eps_p with its re-check (`loop.certified`
         says whether it is certified); None if an earlier eps_p of the continuation was
         not certified or no start ellipsoid exists.
 
@@ -126,7 +126,7 @@ def notch_gain(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
         case's eps_p.
     DesignError
         If a solve's slack is singular
-        (:func:`fahv.synthesis.invariant_ellipsoid.output_feedback_step`).
+        (`fahv.synthesis.invariant_ellipsoid.output_feedback_step`).
     """
     A, B, F, N = (np.asarray(v, float) for v in (A, B, F, N))
     path = [float(v) for v in continuation] + [float(notch.eps_p)]
@@ -159,9 +159,9 @@ def notch_gain(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
 
 
 def _start(A, B, F, N, w, nf, Ts, iq, tight, lam):
-    """F's own ellipsoid of the loop through the notch ``nf``, or None if there is none.
+    """F's own ellipsoid of the loop through the notch `nf`, or None if there is none.
 
-    Its input support is bounded 100 x looser than ``tight``.
+    Its input support is bounded 100 x looser than `tight`.
     """
     w_xi = np.r_[w, 0.0, 0.0]
     Acl, K = notch_closed_loop(A, B, F, nf, Ts, iq)
@@ -171,7 +171,7 @@ def _start(A, B, F, N, w, nf, Ts, iq, tight, lam):
 
 
 def _step(A, B, F, P, N, w, nf, Ts, iq, tight, lam, max_steps, variant, log):
-    """Convex steps from (F, P) at the notch ``nf`` until certified, stalled or ``max_steps``.
+    """Convex steps from (F, P) at the notch `nf` until certified, stalled or `max_steps`.
 
     Returns the last (F, P), its re-check and the (eps_p, gamma) of the steps taken.
     """

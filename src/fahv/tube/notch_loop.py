@@ -3,11 +3,11 @@
 The RPI certificate (LMI 24, the exact level) is for e+ = (A_i + B_i F) e + w: the gain
 acts on the measured q. A variant with the notch (eq. 38) on the q feedback runs u = F e'
 with q' = notch(q) in e', which adds the filter's two states to the loop
-(:func:`notch_closed_loop`). :func:`notch_loop` checks its stability at every vertex (a
-necessary condition); :func:`notch_tube` seeks an ellipsoid of the loop RPI for W whose
+(`notch_closed_loop`). `notch_loop` checks its stability at every vertex (a
+necessary condition); `notch_tube` seeks an ellipsoid of the loop RPI for W whose
 projection lies in Z and whose input support lies within the tightening, and
-:func:`notch_certificate` re-checks a given one exactly. A gain designed for the loop is
-:func:`fahv.tube.notch_gain.notch_gain`.
+`notch_certificate` re-checks a given one exactly. A gain designed for the loop is
+`fahv.tube.notch_gain.notch_gain`.
 """
 
 from __future__ import annotations
@@ -30,9 +30,9 @@ class NotchLoop:
     gain acts on the measured q. A variant with the notch (eq. 38) on the q feedback
     runs u = F e' with q' = notch(q) in e', which adds the filter's two states to the
     loop. Always: the loop's stability at every vertex with the filter in it, a
-    *necessary* condition for any tube to hold (:func:`notch_loop`). With
-    :func:`notch_tube` (or :func:`notch_certificate`): an RPI certificate of that loop in
-    its own states, ``s``, ``level`` and ``supports`` below.
+    *necessary* condition for any tube to hold (`notch_loop`). With
+    `notch_tube` (or `notch_certificate`): an RPI certificate of that loop in
+    its own states, `s`, `level` and `supports` below.
 
     Attributes
     ----------
@@ -44,29 +44,29 @@ class NotchLoop:
     rho_q : float
         The same on the measured q (the loop the certificate is for).
     vertex : int
-        Vertex of ``rho``.
+        Vertex of `rho`.
     s : float or None
-        With an RPI certificate of the loop with the filter (:func:`notch_tube`): the
+        With an RPI certificate of the loop with the filter (`notch_tube`): the
         projection of its invariant ellipsoid on e lies in s Z (None: not sought; inf:
         no ellipsoid found).
     level : float or None
         That ellipsoid's exact worst one-step level over the vertices and the corners
-        of W (:func:`fahv.synthesis.rpi_level.worst_level`).
+        of W (`fahv.synthesis.rpi_level.worst_level`).
     supports : tuple of float or None
         The input deviation's support over it, per input [-, rad] (through q').
     tightening : tuple of float or None
         The tightening the design applies, F Z's support per input [-, rad].
     designed : bool
         True if the loop runs a gain designed for it
-        (:func:`fahv.tube.notch_gain.notch_gain`), not the tube's.
+        (`fahv.tube.notch_gain.notch_gain`), not the tube's.
     w_ratio : tuple of float or None
         With a designed gain: the closure of the loop on W's assumptions, every entry
-        <= 1 (:func:`fahv.design.tube_set_design.designed_notch_loop`: the loop's altitude
+        <= 1 (`fahv.design.tube_set_design.designed_notch_loop`: the loop's altitude
         bound over the tube set's H, then the one-step disturbance bound over the loop's own
         set of (e, u - v) per row of W as a fraction of W); None: not bounded, the tube's
         own closure applies.
     active : tuple of int
-        The vertices the last LMI solve of :func:`notch_tube` held (constraint
+        The vertices the last LMI solve of `notch_tube` held (constraint
         generation; empty if none was solved): where a later design starts.
     """
 
@@ -91,7 +91,7 @@ class NotchLoop:
 
     @property
     def certified(self) -> bool:
-        """True if the loop with the filter is certified (:func:`notch_tube`).
+        """True if the loop with the filter is certified (`notch_tube`).
 
         An ellipsoid of the loop with the filter is RPI for W (exact level <= 1),
         projects into Z (s <= 1) and keeps the input deviation within the tightening:
@@ -108,14 +108,14 @@ class NotchLoop:
         )  # fmt: skip
 
     def line(self) -> str:
-        """The design log's line of the loop (:func:`fahv.tube.lines.notch_loop_line`)."""
+        """The design log's line of the loop (`fahv.tube.lines.notch_loop_line`)."""
         return notch_loop_line(self)
 
     def summary(self) -> dict:
-        """JSON-ready record: the attributes, ``stable``, ``certified`` and ``ellipsoid``.
+        """JSON-ready record: the attributes, `stable`, `certified` and `ellipsoid`.
 
-        ``ellipsoid`` says whether one was sought and found ("not sought", "infeasible",
-        "found"); ``s`` is None unless one was found (strict JSON has no inf).
+        `ellipsoid` says whether one was sought and found ("not sought", "infeasible",
+        "found"); `s` is None unless one was found (strict JSON has no inf).
         """
         found = self.s is not None and np.isfinite(self.s)
         state = "found" if found else ("not sought" if self.s is None else "infeasible")
@@ -125,13 +125,13 @@ class NotchLoop:
 
 
 def notch_closed_loop(A, B, F, notch, Ts: float, iq: int) -> tuple[np.ndarray, np.ndarray]:
-    """The tube loop with the notch filter on q, in the states xi = [e; chi] (:func:`notch_loop`).
+    """The tube loop with the notch filter on q, in the states xi = [e; chi] (`notch_loop`).
 
     The filter is eq. (38) in the state-space form of eq. (39), discretised as the
-    notch_filter node runs it (:class:`fahv.model.notch.DiscreteNotch`), in the
+    notch_filter node runs it (`fahv.model.notch.DiscreteNotch`), in the
     coordinates chi(k) = x_q(k) - B_d q(k) (a standard state space of the same recursion):
     chi+ = A_d chi + (A_d B_d + B_d) q, q' = C_q chi + (C_q B_d + D_q) q. With u = F e'
-    (e' is e with q' for e_q)::
+    (e' is e with q' for e_q):
 
         xi+ = A_xi,i xi + [I; 0] w,   A_xi,i = [[A_i + B_i F S, B_i F_q C_q], [b E_q, A_d]],
         u = K xi,                     K = [F S, F_q C_q],
@@ -161,7 +161,7 @@ def notch_closed_loop(A, B, F, notch, Ts: float, iq: int) -> tuple[np.ndarray, n
     Raises
     ------
     ValueError
-        If the shapes disagree or ``iq`` is out of range.
+        If the shapes disagree or `iq` is out of range.
     """
     A, B, F = (np.asarray(v, float) for v in (A, B, F))
     R, n, _ = A.shape
@@ -180,15 +180,15 @@ def notch_closed_loop(A, B, F, notch, Ts: float, iq: int) -> tuple[np.ndarray, n
 
 
 def notch_loop(A, B, F, notch, Ts: float, iq: int, variant: str = "") -> NotchLoop:
-    """Stability of the tube loop with the notch filter on q at every vertex (:class:`NotchLoop`).
+    """Stability of the tube loop with the notch filter on q at every vertex (`NotchLoop`).
 
-    The spectral radius of each vertex of :func:`notch_closed_loop`, next to the loop's
+    The spectral radius of each vertex of `notch_closed_loop`, next to the loop's
     on the measured q (A_i + B_i F).
 
     Parameters
     ----------
     A, B, F, notch, Ts, iq
-        As :func:`notch_closed_loop`.
+        As `notch_closed_loop`.
     variant : str
         Name for the report.
 
@@ -199,13 +199,13 @@ def notch_loop(A, B, F, notch, Ts: float, iq: int, variant: str = "") -> NotchLo
     Raises
     ------
     ValueError
-        If the shapes disagree or ``iq`` is out of range.
+        If the shapes disagree or `iq` is out of range.
     """
     return _notch_loop(A, B, F, notch, Ts, iq, variant)[0]
 
 
 def _notch_loop(A, B, F, notch, Ts, iq, variant):
-    """:func:`notch_loop` with the loop's A_xi and K of :func:`notch_closed_loop`."""
+    """`notch_loop` with the loop's A_xi and K of `notch_closed_loop`."""
     Acl, K = notch_closed_loop(A, B, F, notch, Ts, iq)
     A, B, F = (np.asarray(v, float) for v in (A, B, F))
     rho = np.abs(np.linalg.eigvals(Acl)).max(axis=1)
@@ -217,11 +217,11 @@ def _notch_loop(A, B, F, notch, Ts, iq, variant):
 
 
 def notch_loop_scale(N, notch, Ts: float, iq: int) -> np.ndarray:
-    """Scaling (n + 2,) of the loop's states xi = [e; chi] for its LMIs (:func:`notch_tube`).
+    """Scaling (n + 2,) of the loop's states xi = [e; chi] for its LMIs (`notch_tube`).
 
     e by Z's supports sqrt(diag N); the filter's two states chi at their steady size for a
     constant q of Z's q support, |(I - A_d)^-1 (A_d B_d + B_d)| (plus 1e-3, so that
-    neither is zero), in the coordinates of :func:`notch_closed_loop`.
+    neither is zero), in the coordinates of `notch_closed_loop`.
 
     Parameters
     ----------
@@ -244,7 +244,7 @@ def notch_loop_scale(N, notch, Ts: float, iq: int) -> np.ndarray:
     return np.r_[z, (gain + 1e-3) * z[iq]]
 
 
-#: Vertices :func:`notch_tube` adds per pass of its constraint generation: its loop has
+#: Vertices `notch_tube` adds per pass of its constraint generation: its loop has
 #: ten states (55 unknowns in P), and its last solves hold 100-140 blocks; 24 per pass
 #: took 0.66 of the time of 12 per pass from scratch on cm_certified's notch loop.
 NOTCH_ADD = 24
@@ -254,21 +254,21 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
                variant: str = "", active: int = 40, start=None) -> NotchLoop:  # fmt: skip
     """The tube loop with the notch filter on q, certified RPI in its own states.
 
-    The loop of :func:`notch_closed_loop`, xi = [e; chi] with the filter's two states,
+    The loop of `notch_closed_loop`, xi = [e; chi] with the filter's two states,
     under u = F e' (q' = notch(q) in e'), is checked as it runs: an ellipsoid
     E = {xi' P^-1 xi <= 1} RPI for the box W on e at every vertex is sought with the
-    S-procedure (:func:`fahv.synthesis.invariant_ellipsoid.invariant_ellipsoid`), its
+    S-procedure (`fahv.synthesis.invariant_ellipsoid.invariant_ellipsoid`), its
     projection on e bounded by s Z and its input deviation K xi by F Z's support (the
     tightening of eq. 30) per input. The solver's answer is then re-checked exactly: the
     worst one-step level of E over every vertex and every corner of W
-    (:func:`fahv.synthesis.rpi_level.vertex_levels`).
+    (`fahv.synthesis.rpi_level.vertex_levels`).
     If the level is at most 1, s at most 1 and the supports within the tightening, every
     assumption W was bounded under (e in Z, the applied input within the tightening)
-    holds with the filter in the loop (:attr:`NotchLoop.certified`).
+    holds with the filter in the loop (`NotchLoop.certified`).
 
     This is the loop the law runs because its error's q is formed with the same filter
     on the nominal's q as well, q' - notch(q_r + q_n) = notch(q - q_r - q_n)
-    (:class:`fahv.control.tube_mpc.TubeMPCLaw`); with the measured q filtered alone the
+    (`fahv.control.tube_mpc.TubeMPCLaw`); with the measured q filtered alone the
     error would also carry (notch - 1)(q_r + q_n), which this certificate does not cover.
 
     Parameters
@@ -293,14 +293,14 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
     active : int
         Vertex blocks of the first solve of the constraint generation.
     start : (a,) array_like of int, optional
-        The vertices an earlier design's solve held (its loop's ``active``): the first
-        solve's blocks in place of ``active`` chosen by spectral radius.
+        The vertices an earlier design's solve held (its loop's `active`): the first
+        solve's blocks in place of `active` chosen by spectral radius.
 
     Returns
     -------
     NotchLoop
-        With ``s``, ``level``, ``supports``, ``tightening`` and ``active`` set when an
-        ellipsoid was found (``s`` None if the loop is unstable, inf if the LMI is
+        With `s`, `level`, `supports`, `tightening` and `active` set when an
+        ellipsoid was found (`s` None if the loop is unstable, inf if the LMI is
         infeasible).
 
     Raises
@@ -329,22 +329,22 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
 
 def notch_certificate(A, B, F, N, w_max, notch, Ts: float, iq: int, P,
                       variant: str = "", tightening=None) -> NotchLoop:  # fmt: skip
-    """Re-check a given ellipsoid of the tube loop with the notch (:func:`notch_tube`).
+    """Re-check a given ellipsoid of the tube loop with the notch (`notch_tube`).
 
     Exact, whatever found P: the worst one-step level of E = {xi' P^-1 xi <= 1} over
     every vertex of the loop in [e; chi] and every corner of W
-    (:func:`fahv.synthesis.rpi_level.vertex_levels`), the factor s of its projection on e
+    (`fahv.synthesis.rpi_level.vertex_levels`), the factor s of its projection on e
     into Z, and its input support through q' against F Z's (the tightening). Arguments
-    as :func:`notch_tube`; ``P`` is (n + 2, n + 2) in the coordinates of
-    :func:`notch_closed_loop`. ``tightening`` (m,), if given, is the tightening the
+    as `notch_tube`; `P` is (n + 2, n + 2) in the coordinates of
+    `notch_closed_loop`. `tightening` (m,), if given, is the tightening the
     supports are compared with in place of F Z's: for a gain designed for the loop
-    (:func:`fahv.tube.notch_gain.notch_gain`) it is the tube set's, which the nominal QP
+    (`fahv.tube.notch_gain.notch_gain`) it is the tube set's, which the nominal QP
     applies.
 
     Returns
     -------
     NotchLoop
-        ``certified`` if level <= 1, s <= 1 and every support within the tightening.
+        `certified` if level <= 1, s <= 1 and every support within the tightening.
 
     Raises
     ------
@@ -356,7 +356,7 @@ def notch_certificate(A, B, F, N, w_max, notch, Ts: float, iq: int, P,
 
 
 def _recheck(loop, Acl, K, F, N, w_max, P, tightening=None) -> NotchLoop:
-    """The exact re-check of :func:`notch_certificate` on a built loop (A_xi, K)."""
+    """The exact re-check of `notch_certificate` on a built loop (A_xi, K)."""
     F, N, P = (np.asarray(v, float) for v in (F, N, P))
     n = N.shape[0]
     if P.shape != (n + 2, n + 2):

@@ -1,10 +1,10 @@
 """Rows of the nominal QP that keep the nominal inside the ranges the tube set assumes.
 
 The eight-state tube set is certified for a nominal inside its certified range
-(:func:`fahv.bounds.domain.certified_range`) with its applied input inside the nominal
+(`fahv.bounds.domain.certified_range`) with its applied input inside the nominal
 box. The design turns both into rows of the nominal MPC's QP, so that the assumption
-holds by construction: :func:`input_rows` (``mpc.u_box``) and :func:`state_rows`
-(``mpc.x_box``).
+holds by construction: `input_rows` (`mpc.u_box`) and `state_rows`
+(`mpc.x_box`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from fahv.errors import DesignError
 
 
 def input_rows(trim_offsets, nominal: SchedulingBox) -> np.ndarray:
-    """Rows of the QP on the manoeuvre part of the nominal input (``mpc.u_box``).
+    """Rows of the QP on the manoeuvre part of the nominal input (`mpc.u_box`).
 
     The nominal box bounds the input the plant applies minus the nominal vehicle's trim
     (where the vertices' Jacobians are taken). At steady state the plant applies its own
@@ -28,14 +28,14 @@ def input_rows(trim_offsets, nominal: SchedulingBox) -> np.ndarray:
     ----------
     trim_offsets : tuple of (2,) ndarray
         (lo, hi) of the corners' trim inputs minus the nominal trim [Phi -, delta_e rad]
-        (:meth:`fahv.bounds.coverage.LossCoverage.trim_offsets`).
+        (`fahv.bounds.coverage.LossCoverage.trim_offsets`).
     nominal : SchedulingBox
         The nominal box (its Phi and delta_e coordinates).
 
     Returns
     -------
     (2, 2) ndarray
-        ``[[Phi lo, delta_e lo], [Phi hi, delta_e hi]]`` in -, rad; lo < 0 < hi.
+        `[[Phi lo, delta_e lo], [Phi hi, delta_e hi]]` in -, rad; lo < 0 < hi.
 
     Raises
     ------
@@ -55,13 +55,13 @@ def input_rows(trim_offsets, nominal: SchedulingBox) -> np.ndarray:
 
 
 def state_rows(cert: SchedulingBox) -> np.ndarray:
-    """Rows of the QP on the nominal's states besides h, V and the inputs (``mpc.x_box``).
+    """Rows of the QP on the nominal's states besides h, V and the inputs (`mpc.x_box`).
 
     The certificate covers a nominal inside the certified range
-    (:func:`fahv.bounds.domain.certified_range`): its alpha and theta between the range's
+    (`fahv.bounds.domain.certified_range`): its alpha and theta between the range's
     bounds and q and the bending modes within its half-widths, all from the nominal
     vehicle's trim at the nominal's own (h, V). The QP keeps its prediction there
-    (:class:`fahv.control.mpc.settings.MPCSettings`, ``x_box``), so the assumption holds by
+    (`fahv.control.mpc.settings.MPCSettings`, `x_box`), so the assumption holds by
     construction instead of being measured per run.
 
     Parameters

@@ -6,13 +6,13 @@ through theta and q, and its disturbance grows with the box. The tube set takes 
 the tube's RPI condition. The tube (F_8, Z_8 = {e_8' N_8^-1 e_8 <= 1}) is designed on the
 other eight states e_8 = (V, alpha, theta, q, eta_1, eta_1_dot, eta_2, eta_2_dot) with
 the ancillary gain blind to e_h, and the altitude error is bounded by the nominal MPC's
-reset of its h to the measured altitude at every re-plan (``mpc.h_reset``, M fast steps
-apart): |e_h| <= H (:func:`fahv.bounds.one_step_bound.altitude_bound`, eq. (1) there).
+reset of its h to the measured altitude at every re-plan (`mpc.h_reset`, M fast steps
+apart): |e_h| <= H (`fahv.bounds.one_step_bound.altitude_bound`, eq. (1) there).
 
 W_8 bounds the one-step disturbance over the product set {|e_h| <= H} x Z_8 in the
-integral form (:mod:`fahv.bounds.one_step_bound`); the closure iterates W_8 and Z_8 until
-the bound lies inside W_8 (:mod:`fahv.tube.closure`). What the tube set assumes besides
-the vertices' own assumptions is :data:`ASSUMPTIONS`.
+integral form (`fahv.bounds.one_step_bound`); the closure iterates W_8 and Z_8 until
+the bound lies inside W_8 (`fahv.tube.closure`). What the tube set assumes besides
+the vertices' own assumptions is `ASSUMPTIONS`.
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ class TubeSet:
     W_8 : (8,) ndarray
         Half-widths of W_8 (state units per period Ts).
     H : float
-        Altitude error bound [ft] (:func:`fahv.bounds.one_step_bound.altitude_bound`).
+        Altitude error bound [ft] (`fahv.bounds.one_step_bound.altitude_bound`).
     lam : float
         Contraction factor of the tube LMI (24).
     bound : (8,) ndarray
@@ -81,22 +81,22 @@ class TubeSet:
         The h row's disturbance over the product set [ft].
     onset : fahv.onset.bound.OnsetBound, optional
         The onset of a loss as a transient of the tube set
-        (:func:`fahv.onset.bound.onset_bound`, which takes a closed tube set: the onset
+        (`fahv.onset.bound.onset_bound`, which takes a closed tube set: the onset
         package sits above this one, so the type is not imported here).
     notch_loops : tuple of NotchLoop
         The tube variants that feed q through a notch, their loops certified in their
-        own states at the tube set's vertices (:func:`fahv.tube.notch_loop.notch_tube`).
+        own states at the tube set's vertices (`fahv.tube.notch_loop.notch_tube`).
     notch_gains : dict
-        ``{variant: (2, 8) ndarray}``: the gains designed for those loops and certified
-        (``eight_state.notch_gain: designed``, :func:`fahv.tube.notch_gain.notch_gain`);
+        `{variant: (2, 8) ndarray}`: the gains designed for those loops and certified
+        (`eight_state.notch_gain: designed`, `fahv.tube.notch_gain.notch_gain`);
         such a variant runs its own gain in place of F_8.
     active_set : fahv.synthesis.feedback.ActiveSet, optional
         The vertices and contained points the closure's last LMI solve held: where a
         later design of the same file starts its constraint generation.
     ellipsoid_vertices : dict
-        ``{name: (a,) ndarray of int}``: the vertices the last LMI solve of each
+        `{name: (a,) ndarray of int}`: the vertices the last LMI solve of each
         invariant ellipsoid checked with the tube set held (the onset's steady sets, the
-        notch loops; :func:`fahv.design.tube_set_design.steady_key`, ``notch_key``):
+        notch loops; `fahv.design.tube_set_design.steady_key`, `notch_key`):
         where a later design starts theirs.
     """
 
@@ -143,9 +143,9 @@ class TubeSet:
         return 1.0 - self.bound / self.W_8
 
     def certified_range(self, box: SchedulingBox) -> SchedulingBox:
-        """The nominal points the certificate covers: ``box`` less the tube.
+        """The nominal points the certificate covers: `box` less the tube.
 
-        :func:`fahv.bounds.domain.certified_range` of this tube set.
+        `fahv.bounds.domain.certified_range` of this tube set.
         """
         return certified_range(box, self.F_8, self.N_8, self.H)
 
@@ -154,7 +154,7 @@ class TubeSet:
 
         The smallest over the coordinates after h of the box's margin beyond the nominal
         box (its nearer side) over the product set's support there
-        (:func:`fahv.bounds.domain.product_supports`), and that coordinate's name; at
+        (`fahv.bounds.domain.product_supports`), and that coordinate's name; at
         least 1 when the box holds the nominal box grown by the tube.
         """
         s_lo, s_oth = product_supports(self.F_8, self.N_8, self.H)
@@ -165,11 +165,11 @@ class TubeSet:
         return float(room[worst]), names[worst]
 
     def summary(self, nominal: SchedulingBox, box: SchedulingBox) -> dict:
-        """JSON-ready record of the tube set for the design summary (``certificate``).
+        """JSON-ready record of the tube set for the design summary (`certificate`).
 
         Units as the attributes; the boxes in their coordinates
-        (:data:`fahv.bounds.domain.BOX_COORDINATES`); ``certified_range`` is
-        :meth:`certified_range` of the scheduling box.
+        (`fahv.bounds.domain.BOX_COORDINATES`); `certified_range` is
+        `certified_range` of the scheduling box.
         """
         return {
             "form": "eight_state",

@@ -1,14 +1,14 @@
-"""The paper's vertex tube (``tube.form: vertices``) checked against its own assumptions.
+"""The paper's vertex tube (`tube.form: vertices`) checked against its own assumptions.
 
 The tube Z = {e : e' N^-1 e <= 1} of LMI (24) is RPI for e+ = (A_i + B_i F) e + w, w in
 the sampled box W, at every TP vertex i. That statement is only as true as W: W must
 bound the one-step disturbance of the perturbed, faulty nonlinear plant over every state
-and input the closed loop can reach. :func:`certify_tube` states that domain
-(:class:`fahv.bounds.domain.CertificateDomain`), bounds the disturbance over it
-(:func:`fahv.bounds.one_step_bound.bound_disturbance`), computes the exact RPI level and
-its margin (:mod:`fahv.synthesis.rpi_level`), and bounds the onset of a loss by the level
-recursion of the S-procedure certificate (:func:`onset_levels`). It reports
-(:class:`VertexCertificate`, its lines in :mod:`fahv.certificate.report`); it does not
+and input the closed loop can reach. `certify_tube` states that domain
+(`fahv.bounds.domain.CertificateDomain`), bounds the disturbance over it
+(`fahv.bounds.one_step_bound.bound_disturbance`), computes the exact RPI level and
+its margin (`fahv.synthesis.rpi_level`), and bounds the onset of a loss by the level
+recursion of the S-procedure certificate (`onset_levels`). It reports
+(`VertexCertificate`, its lines in `fahv.certificate.report`); it does not
 refuse a design.
 """
 
@@ -48,7 +48,7 @@ def onset_levels(lam, mu, w_base, pulse, gamma, n_steps, level0=1.0) -> np.ndarr
     mu : (n,) ndarray
         Certificate of the tube (scaled coordinates).
     w_base, pulse : (n,) ndarray
-        Steady bound and jump, scaled like ``mu``.
+        Steady bound and jump, scaled like `mu`.
     gamma : float
         Estimator gain Ts / est_tau (1: no estimate memory).
     n_steps : int
@@ -93,17 +93,17 @@ def fault_jump(vehicle, trim_map, u_hi_abs: float, rho: float, Ts, n_sub) -> np.
 
 @dataclass(frozen=True)
 class RPICheck:
-    """The exact RPI level of the vertex tube for W over every gain tau' F (:func:`rpi_check`).
+    """The exact RPI level of the vertex tube for W over every gain tau' F (`rpi_check`).
 
     Attributes
     ----------
     level : float
         Worst one-step level over the vertices (the gains tau' F included) and the
-        corners of W (:func:`fahv.synthesis.rpi_level.worst_level`).
+        corners of W (`fahv.synthesis.rpi_level.worst_level`).
     n_vertices, n_corners : int
         Vertices and corners of W checked.
     growth : float
-        The factor W may grow by (:func:`fahv.synthesis.rpi_level.rpi_margin`).
+        The factor W may grow by (`fahv.synthesis.rpi_level.rpi_margin`).
     tau : float
         Adjustable factor (eq. 48).
     level_tau, w_prime : float or None
@@ -136,7 +136,7 @@ def rpi_check(A, B, tube, tau) -> RPICheck:
 
 @dataclass(frozen=True)
 class VertexCertificate:
-    """The vertex tube checked against its own assumptions (:func:`certify_tube`).
+    """The vertex tube checked against its own assumptions (`certify_tube`).
 
     Attributes
     ----------
@@ -144,7 +144,7 @@ class VertexCertificate:
     skipped : str or None
         Why the check over the domain was not made (None: it was).
     n_schedules : int
-        Scheduling points of the domain (``certificate.schedules``).
+        Scheduling points of the domain (`certificate.schedules`).
     domain : CertificateDomain or None
     bound : fahv.bounds.one_step_bound.DisturbanceBound or None
         The one-step bound over the domain.
@@ -153,9 +153,9 @@ class VertexCertificate:
     rho_min : float
         Smallest elevator effectiveness of the fault range.
     est_tau : float or None
-        The disturbance estimate's time constant [s] (``mpc.est_tau``).
+        The disturbance estimate's time constant [s] (`mpc.est_tau`).
     onset_level_max : float or None
-        Largest level bound after the onset of the loss 1 - rho_min (:func:`onset_levels`).
+        Largest level bound after the onset of the loss 1 - rho_min (`onset_levels`).
     """
 
     rpi: RPICheck
@@ -184,12 +184,12 @@ class VertexCertificate:
         return bool(np.all(self.bound.w_bound <= self.w_max))
 
     def summary(self) -> dict:
-        """JSON-able record (the design summary's ``certificate``).
+        """JSON-able record (the design summary's `certificate`).
 
-        ``certified`` (bool), ``rpi_level``, ``rpi_growth``; for tau < 1 ``rpi_level_tau``
-        and ``w_prime``; then either ``domain`` (why it was skipped) or the bound per row
-        (``w_bound``, ``w_ratio``, ``slack``, ``corner_max``, ``worst``),
-        ``onset_level_max`` and the ``domain``.
+        `certified` (bool), `rpi_level`, `rpi_growth`; for tau < 1 `rpi_level_tau`
+        and `w_prime`; then either `domain` (why it was skipped) or the bound per row
+        (`w_bound`, `w_ratio`, `slack`, `corner_max`, `worst`),
+        `onset_level_max` and the `domain`.
         """
         r = self.rpi
         out = {"rpi_level": r.level, "rpi_growth": r.growth, "certified": False}
@@ -226,26 +226,26 @@ def certify_tube(spec: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi,
     """Check the tube certificate against its own assumptions (no exception).
 
     Computes: the exact worst one-step level over the vertices and the corners of W and
-    the factor by which W may grow (:func:`rpi_check`); the stated domain; the bound of
+    the factor by which W may grow (`rpi_check`); the stated domain; the bound of
     the one-step disturbance over it per row, as a multiple of W; whether the
     certificate is closed (the bound inside W); the onset of a loss of 1 - rho_min at the
-    largest elevator of the domain (:func:`onset_levels`). Its lines, with margins, are
-    :func:`fahv.certificate.report.vertex_certificate_lines`.
+    largest elevator of the domain (`onset_levels`). Its lines, with margins, are
+    `fahv.certificate.report.vertex_certificate_lines`.
 
     Parameters
     ----------
     spec : dict
-        Validated design data (``mpc``, ``certificate``, ``uncertainty``, ``Ts``,
-        ``plant_substeps``).
+        Validated design data (`mpc`, `certificate`, `uncertainty`, `Ts`,
+        `plant_substeps`).
     vehicle, tp, trim_map
-        As :func:`fahv.bounds.one_step_bound.bound_disturbance`.
+        As `fahv.bounds.one_step_bound.bound_disturbance`.
     A : (R, n, n) ndarray
     B : (R, n, m) ndarray
         Vertices of the tube certificate (fault vertices included).
     tube : fahv.synthesis.feedback.TubeDesign
     tau : float
         Adjustable factor (eq. 48). The RPI check covers every gain tau' F, tau' in
-        [tau, 1] (:func:`fahv.bounds.vertices.gain_vertices`); for tau < 1 it also
+        [tau, 1] (`fahv.bounds.vertices.gain_vertices`); for tau < 1 it also
         reports the factor g for which eq. (53)'s tau Z is RPI (W' = g W, eq. 47).
     u_lo, u_hi : (2,) ndarray
         Tightened nominal input limits (absolute).
@@ -260,7 +260,7 @@ def certify_tube(spec: dict, vehicle, tp, trim_map, A, B, tube, tau, u_lo, u_hi,
     Returns
     -------
     VertexCertificate
-        Its :meth:`VertexCertificate.summary` is the design summary's ``certificate``.
+        Its `VertexCertificate.summary` is the design summary's `certificate`.
     """
     rpi = rpi_check(A, B, tube, tau)
     n_s = spec["certificate"]["schedules"]

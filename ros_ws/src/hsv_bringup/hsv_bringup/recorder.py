@@ -1,30 +1,30 @@
-"""``recorder`` node: every loop topic, raw (no deserialisation), into one rosbag2/MCAP run.
+"""`recorder` node: every loop topic, raw (no deserialisation), into one rosbag2/MCAP run.
 
 Raw subscriptions hand over the CDR bytes as received; the recorder reads only the
 step index k at the head of each message (or the /clock stamp) to set the log time to
-simulated time t_k = k Ts, and writes through :class:`fahv.runs.writer.RunWriter` (ros2
+simulated time t_k = k Ts, and writes through `fahv.runs.writer.RunWriter` (ros2
 profile, full message definitions, offered QoS, summary with statistics and indexes,
-run metadata, the ROS domain of the graph as ``ros_domain_id``). With every message it
+run metadata, the ROS domain of the graph as `ros_domain_id`). With every message it
 keeps the DDS source timestamp (wall clock when the producing node published it) and
-its own receive time, attached to the run file when it closes (``timestamps.npz``,
-:func:`fahv.runs.latency.timestamps_npz`): the per-hop latency breakdown of
-``fahv inspect`` comes from them. The parameter file the graph was started with
-(``params_file``) is attached when the run starts, so the run file alone can be
-replayed and rerun. It stops by itself once every topic holds ``duration / Ts``
-steps, or once a peer ended the run with a verdict (:mod:`fahv.verdict`) and the steps
+its own receive time, attached to the run file when it closes (`timestamps.npz`,
+`fahv.runs.latency.timestamps_npz`): the per-hop latency breakdown of
+`fahv inspect` comes from them. The parameter file the graph was started with
+(`params_file`) is attached when the run starts, so the run file alone can be
+replayed and rerun. It stops by itself once every topic holds `duration / Ts`
+steps, or once a peer ended the run with a verdict (`fahv.verdict`) and the steps
 before it are recorded (the file then holds the verdict); on SIGINT/SIGTERM, a lost
 graph (watchdog) or an error it still closes the file, with the reason in the run
-metadata (``status``).
+metadata (`status`).
 
-With ``live_port`` >= 0 it also serves every message it records, the same CDR bytes,
-on a Foxglove WebSocket server (:class:`fahv.runs.live.LiveView`): the live view costs
+With `live_port` >= 0 it also serves every message it records, the same CDR bytes,
+on a Foxglove WebSocket server (`fahv.runs.live.LiveView`): the live view costs
 the loop no extra DDS reader. Messages of a step already recorded on a topic (another
 graph's, later in the same domain) are counted as anomalies and not recorded.
 
-Parameters: ``bag`` (folder to create), ``Ts``, ``duration``, ``watchdog_s``,
-``metadata_json`` (JSON object of run metadata: case, design_hash, variant, ...),
-``params_file`` (the run's parameter file, attached to the run); ``live_port``;
-``graph_nodes`` and ``run_id`` like every node of the graph.
+Parameters: `bag` (folder to create), `Ts`, `duration`, `watchdog_s`,
+`metadata_json` (JSON object of run metadata: case, design_hash, variant, ...),
+`params_file` (the run's parameter file, attached to the run); `live_port`;
+`graph_nodes` and `run_id` like every node of the graph.
 """
 
 from __future__ import annotations
@@ -123,7 +123,7 @@ class Recorder(Node):
 
         The executor rebuilds its wait set for each ready entity it hands out, which
         costs far more than a take: draining every topic's queue here (and pausing
-        :data:`DRAIN_PAUSE_S` between spins, :meth:`poll`) records the messages of one
+        `DRAIN_PAUSE_S` between spins, `poll`) records the messages of one
         or more whole steps per wake-up (the loop's writers keep up to QOS_DEPTH steps
         for a lagging reader). Each topic is taken in order, so its steps stay in order.
         """
@@ -177,7 +177,7 @@ class Recorder(Node):
         ------
         WatchdogError
             If the graph does not start, a peer failed, or no message came for
-            ``watchdog_s`` (naming the missing peers).
+            `watchdog_s` (naming the missing peers).
         ForeignGraphError
             If another graph that joined first runs in the domain.
         """
@@ -219,7 +219,7 @@ class Recorder(Node):
         """True once a peer ended the run with a verdict (then the recorder drains).
 
         The messages of the steps before the verdict's are recorded (or none came for
-        :data:`VERDICT_DRAIN_S`), then the recorder is done and closes the file with
+        `VERDICT_DRAIN_S`), then the recorder is done and closes the file with
         the verdict.
         """
         if self.verdict is None:
@@ -255,5 +255,5 @@ class Recorder(Node):
 
 
 def run(args=None) -> None:
-    """Entry point ``ros2 run hsv_bringup recorder``."""
+    """Entry point `ros2 run hsv_bringup recorder`."""
     sys.exit(main(Recorder, args, linger_s=0.0))

@@ -1,20 +1,20 @@
-"""``replay`` node: republish recorded loop topics (raw CDR) from a run file.
+"""`replay` node: republish recorded loop topics (raw CDR) from a run file.
 
 Reads a run (rosbag2 folder or .mcap; a truncated file up to its last complete
 chunk) and publishes the selected topics step by step, exactly the bytes that were
-recorded, with the loop QoS. Timing: ``rate`` 1.0 follows the recorded simulated
+recorded, with the loop QoS. Timing: `rate` 1.0 follows the recorded simulated
 time in wall time, r > 0 is r times faster, 0 is as fast as possible.
 
-Regression use: with ``capture`` topics (the outputs of the node(s) under test),
+Regression use: with `capture` topics (the outputs of the node(s) under test),
 the replay runs in lockstep: step k + 1 is published only after every captured topic
 that has a publisher delivered step k, so nothing is dropped however slow the node
-is. With ``out`` the captured messages and the recorded ones of every other loop
+is. With `out` the captured messages and the recorded ones of every other loop
 topic are written to a new run (same format as the recorder's, with the replayed
 run's parameter file), a complete run to compare with the original.
 
-Parameters: ``run`` (file to replay), ``topics`` (default every loop topic of the
-run), ``rate``, ``capture``, ``out``, ``wait_for`` (nodes that must say they are
-ready on /hsv/node_status before step 0), ``steps`` (0: all), ``watchdog_s``.
+Parameters: `run` (file to replay), `topics` (default every loop topic of the
+run), `rate`, `capture`, `out`, `wait_for` (nodes that must say they are
+ready on /hsv/node_status before step 0), `steps` (0: all), `watchdog_s`.
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def load_steps(
     ([(log_ns, [(topic, data), ...]), ...], Ts [s], topics selected)
         The steps hold every loop topic of the run (the output run copies the ones
         that are neither published nor captured). A recording cut short keeps its
-        complete steps (:func:`fahv.runs.replay.steps_of`), and says so.
+        complete steps (`fahv.runs.replay.steps_of`), and says so.
 
     Raises
     ------
@@ -208,5 +208,5 @@ class Replay(Node):
 
 
 def run(args=None) -> None:
-    """Entry point ``ros2 run hsv_bringup replay``."""
+    """Entry point `ros2 run hsv_bringup replay`."""
     sys.exit(main(Replay, args, linger_s=0.5))

@@ -1,22 +1,22 @@
-"""A minimal stand-in for the ``ros2`` command, for machines without ros2cli.
+"""A minimal stand-in for the `ros2` command, for machines without ros2cli.
 
 The ROS 2 Jazzy wheels this project installs from PyPI do not include ros2cli, so
-there is no ``ros2`` command after ``source ros_ws/install/setup.bash``. This module
+there is no `ros2` command after `source ros_ws/install/setup.bash`. This module
 provides the few verbs the project's users need, with the same syntax as ros2cli:
 
-``ros2 run PACKAGE EXECUTABLE [ARGS ...]``
-    Finds ``<prefix>/lib/PACKAGE/EXECUTABLE`` through the ament index (the prefix of
-    PACKAGE on ``AMENT_PREFIX_PATH``, as ros2run does) and replaces this process with
-    it, so ``--ros-args ...`` and signals reach the node unchanged.
-``ros2 pkg executables [PACKAGE]``
-    The executables of a package (or of every package), as ``PACKAGE EXECUTABLE``.
-``ros2 bag info RUN``
-    ``fahv inspect RUN``: topics, counts, metadata, anomalies and metrics of a run.
-``ros2 topic list [-t]`` and ``ros2 topic echo TOPIC [--once]``
-    Through rclpy, in the domain of ``ROS_DOMAIN_ID``.
+`ros2 run PACKAGE EXECUTABLE [ARGS ...]`
+    Finds `<prefix>/lib/PACKAGE/EXECUTABLE` through the ament index (the prefix of
+    PACKAGE on `AMENT_PREFIX_PATH`, as ros2run does) and replaces this process with
+    it, so `--ros-args ...` and signals reach the node unchanged.
+`ros2 pkg executables [PACKAGE]`
+    The executables of a package (or of every package), as `PACKAGE EXECUTABLE`.
+`ros2 bag info RUN`
+    `fahv inspect RUN`: topics, counts, metadata, anomalies and metrics of a run.
+`ros2 topic list [-t]` and `ros2 topic echo TOPIC [--once]`
+    Through rclpy, in the domain of `ROS_DOMAIN_ID`.
 
-Where a real ros2cli is importable, ``ros2`` hands over to it unchanged (and the
-package installs ``bin/ros2`` only when ros2cli is absent at build time).
+Where a real ros2cli is importable, `ros2` hands over to it unchanged (and the
+package installs `bin/ros2` only when ros2cli is absent at build time).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from ament_index_python.packages import (
 
 
 def executables(package: str) -> list[str]:
-    """Executables installed by ``package`` (sorted file names in ``<prefix>/lib/<pkg>``).
+    """Executables installed by `package` (sorted file names in `<prefix>/lib/<pkg>`).
 
     Raises
     ------
@@ -55,7 +55,7 @@ def executables(package: str) -> list[str]:
 
 
 def executable_path(package: str, executable: str) -> str:
-    """Path of ``executable`` of ``package``, found through the ament index.
+    """Path of `executable` of `package`, found through the ament index.
 
     Raises
     ------
@@ -75,7 +75,7 @@ def executable_path(package: str, executable: str) -> str:
 
 
 def cmd_run(args) -> int:
-    """``ros2 run``: replace this process with the node executable."""
+    """`ros2 run`: replace this process with the node executable."""
     try:
         path = executable_path(args.package, args.executable)
     except LookupError as exc:
@@ -86,7 +86,7 @@ def cmd_run(args) -> int:
 
 
 def cmd_pkg_executables(args) -> int:
-    """``ros2 pkg executables``: ``PACKAGE EXECUTABLE`` lines."""
+    """`ros2 pkg executables`: `PACKAGE EXECUTABLE` lines."""
     packages = [args.package] if args.package else sorted(get_packages_with_prefixes())
     for pkg in packages:
         try:
@@ -99,7 +99,7 @@ def cmd_pkg_executables(args) -> int:
 
 
 def cmd_bag_info(args) -> int:
-    """``ros2 bag info RUN``: ``fahv inspect RUN``."""
+    """`ros2 bag info RUN`: `fahv inspect RUN`."""
     from fahv.cli import main as fahv_main
 
     return fahv_main(["inspect", args.bag_path])
@@ -107,19 +107,19 @@ def cmd_bag_info(args) -> int:
 
 #: topics every rclpy node (this one too) publishes: seeing only these means no peer yet
 OWN_TOPICS = frozenset({"/rosout", "/parameter_events"})
-#: discovery of ``list`` goes on until the topic set has not changed for this long [s]
+#: discovery of `list` goes on until the topic set has not changed for this long [s]
 SETTLE_S = 1.0
 
 
 def _discover(
     node, spin_time: float, want: str | None = None, longest: float | None = None
 ) -> dict[str, list[str]]:
-    """Topic names and types seen by ``node`` through DDS discovery.
+    """Topic names and types seen by `node` through DDS discovery.
 
-    With ``want`` (``echo``): spins until that topic is seen or ``spin_time`` [s] has
-    passed. Without it (``list``): spins at least ``spin_time``, then on while the topic
-    set still changes (until it has been the same for ``SETTLE_S``) or while no peer's
-    topic has been seen yet, ``longest`` [s] at most. A loaded host can answer a new
+    With `want` (`echo`): spins until that topic is seen or `spin_time` [s] has
+    passed. Without it (`list`): spins at least `spin_time`, then on while the topic
+    set still changes (until it has been the same for `SETTLE_S`) or while no peer's
+    topic has been seen yet, `longest` [s] at most. A loaded host can answer a new
     participant's discovery late (Fast DDS repeats its announcements every few seconds),
     and a fixed short window then lists an empty graph.
     """
@@ -157,7 +157,7 @@ def to_plain(msg):
 
 
 def message_class(type_name: str):
-    """Message class of ``pkg/msg/Name`` (the workspace must be sourced).
+    """Message class of `pkg/msg/Name` (the workspace must be sourced).
 
     Raises
     ------
@@ -172,7 +172,7 @@ def message_class(type_name: str):
 
 
 def cmd_topic(args) -> int:
-    """``ros2 topic list`` and ``ros2 topic echo`` through rclpy."""
+    """`ros2 topic list` and `ros2 topic echo` through rclpy."""
     import rclpy
     import yaml
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -215,7 +215,7 @@ def cmd_topic(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Parser of the stand-in: ``run``, ``pkg executables``, ``bag info``, ``topic``."""
+    """Parser of the stand-in: `run`, `pkg executables`, `bag info`, `topic`."""
     ap = argparse.ArgumentParser(
         prog="ros2",
         description="minimal ros2 stand-in of the fahv workspace (no ros2cli on this machine)",
@@ -258,7 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point ``ros2``: ros2cli if it is installed, else this stand-in."""
+    """Entry point `ros2`: ros2cli if it is installed, else this stand-in."""
     if importlib.util.find_spec("ros2cli") is not None:  # a real ROS 2 install
         from ros2cli.cli import main as ros2cli_main
 
@@ -268,5 +268,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run() -> None:
-    """Console script ``ros2`` (``lib/hsv_bringup/ros2``, called by ``bin/ros2``)."""
+    """Console script `ros2` (`lib/hsv_bringup/ros2`, called by `bin/ros2`)."""
     sys.exit(main())

@@ -1,8 +1,8 @@
-"""``sil`` runner: start the node graph of one run, supervise it, stop every node.
+"""`sil` runner: start the node graph of one run, supervise it, stop every node.
 
-There is no ``launch`` among the ROS 2 wheels this project installs, so this runner starts the
+There is no `launch` among the ROS 2 wheels this project installs, so this runner starts the
 installed executables itself, each with the run's parameter file, in the order of the
-node table (:data:`fahv.loop.graph.NODES`: recorder, notch_filter, nominal_trajectory,
+node table (`fahv.loop.graph.NODES`: recorder, notch_filter, nominal_trajectory,
 controller, fault_injector, plant; the plant waits until every other node has announced
 itself, so the order only saves time). It watches the processes: the run succeeds when
 every node exits 0 after the last step; the first node that exits non-zero or is killed
@@ -13,22 +13,22 @@ the end of its log. A run that ends with a verdict (fahv.verdict: the node that 
 and then every peer exit with status 6, the recorder finishes the file with it) is no
 failure: the runner waits for every node and exits 3.
 
-Isolation: every graph runs in a DDS domain of its own. Unless ``--domain-id`` is
-given, the runner takes a free ``ROS_DOMAIN_ID`` from ROS 2's ``domain_coordinator``
+Isolation: every graph runs in a DDS domain of its own. Unless `--domain-id` is
+given, the runner takes a free `ROS_DOMAIN_ID` from ROS 2's `domain_coordinator`
 (unique among the processes of this host that use it, held until the runner exits),
-whatever ``ROS_DOMAIN_ID`` the shell exports, and restricts discovery to this host
-(``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), and prints the domain with the line to
-type in another shell to see the graph (:func:`watch_line`). Should another graph join
+whatever `ROS_DOMAIN_ID` the shell exports, and restricts discovery to this host
+(`ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`), and prints the domain with the line to
+type in another shell to see the graph (`watch_line`). Should another graph join
 the domain anyway, the one that joined second stops (exit status 5, see
-``hsv_common.graph_status``). The recorder's live-view address (``--live``) is passed
+`hsv_common.graph_status`). The recorder's live-view address (`--live`) is passed
 on to stderr.
 
 Interruption: SIGINT (Ctrl-C) or SIGTERM stops every node with SIGINT (the recorder
-closes its file with status ``interrupted``) and the runner exits 130; a second signal
+closes its file with status `interrupted`) and the runner exits 130; a second signal
 while the graph stops only prints a note.
 
-Usually started by ``fahv sil CASE`` (or ``fahv replay``), which writes the parameter
-file; by hand::
+Usually started by `fahv sil CASE` (or `fahv replay`), which writes the parameter
+file; by hand:
 
     sil --params-file RUN_PARAMS.yaml --log-dir DIR [--controller tube_mpc|rmpc]
     sil --params-file REPLAY_PARAMS.yaml --log-dir DIR --nodes replay tube_mpc
@@ -52,14 +52,14 @@ from tqdm import tqdm
 
 from fahv.loop.graph import CONTROLLER_NODES, NODES, graph_nodes, teardown_hung
 
-#: Exit status of the runner (and of ``fahv sil``) after SIGINT / SIGTERM (128 + SIGINT).
+#: Exit status of the runner (and of `fahv sil`) after SIGINT / SIGTERM (128 + SIGINT).
 EXIT_INTERRUPTED = 130
 #: Exit status of a node whose watchdog fired (hsv_common.runtime.EXIT_WATCHDOG); a node
 #: that stops because a peer failed exits so too, so the runner names another first.
 EXIT_WATCHDOG_NODE = 3
 #: Exit status of a node that ended the run with a verdict (hsv_common.runtime.EXIT_VERDICT).
 EXIT_VERDICT_NODE = 6
-#: Exit status of the runner (and of ``fahv sil``) when the run ended with a verdict
+#: Exit status of the runner (and of `fahv sil`) when the run ended with a verdict
 #: other than completed (fahv.verdict): the graph ended cleanly, the run file holds it.
 EXIT_VERDICT = 3
 #: How long the nodes of a run that ended with a verdict may take to exit [s].
@@ -75,7 +75,7 @@ SUPERVISE_S = 0.02
 
 
 def executable(name: str) -> Path:
-    """Installed executable ``<prefix>/lib/<pkg>/<name>`` found on AMENT_PREFIX_PATH.
+    """Installed executable `<prefix>/lib/<pkg>/<name>` found on AMENT_PREFIX_PATH.
 
     Raises
     ------
@@ -163,10 +163,10 @@ class Graph:
                 p.wait()
 
     def await_recording(self, bag: str | None, timeout_s: float = RECORDING_START_S) -> None:
-        """Wait until the recording node (recorder or replay) has opened ``bag``.
+        """Wait until the recording node (recorder or replay) has opened `bag`.
 
         Returns at once without a recording node or run folder, when the folder exists,
-        when that node has exited, or after ``timeout_s``; the node then records why the
+        when that node has exited, or after `timeout_s`; the node then records why the
         graph stopped (a peer's failure) when it is stopped.
         """
         rec = next((self.procs[n] for n in ("recorder", "replay") if n in self.procs), None)
@@ -179,7 +179,7 @@ class Graph:
             time.sleep(0.1)
 
     def own_status(self, name: str, rc: int) -> int:
-        """Exit status of node ``name`` as the node meant it.
+        """Exit status of node `name` as the node meant it.
 
         A node whose DDS teardown hung after it closed is ended by its teardown timer
         with status 1 (hsv_common.runtime.TEARDOWN_S); its own status is then the one
@@ -203,7 +203,7 @@ class Graph:
         return own
 
     def on_signal(self, signum: int, frame) -> None:
-        """Handler of SIGINT / SIGTERM: the first one ends :meth:`supervise`.
+        """Handler of SIGINT / SIGTERM: the first one ends `supervise`.
 
         Later ones only print a note (the nodes are already stopping, the run stays intact).
         """
@@ -219,8 +219,8 @@ class Graph:
         -------
         (str or None, int)
             The first node that failed and its exit status; (None, 0) when every node
-            finished; (None, 130) after :meth:`on_signal`; (node, 6) when the run
-            ended with a verdict and every node exited (or :data:`VERDICT_GRACE_S`
+            finished; (None, 130) after `on_signal`; (node, 6) when the run
+            ended with a verdict and every node exited (or `VERDICT_GRACE_S`
             passed): the first node that exited with it.
         """
         t_watchdog = t_verdict = None
@@ -274,7 +274,7 @@ def describe(rc: int) -> str:
 
 
 def watch_line(domain: int) -> str:
-    """The line to type in another shell to list the topics of a graph in ``domain``."""
+    """The line to type in another shell to list the topics of a graph in `domain`."""
     prefix = os.environ.get("COLCON_PREFIX_PATH", "").split(os.pathsep)[0]
     setup = Path(prefix) / "setup.bash" if prefix else Path("ros_ws/install/setup.bash")
     return (
@@ -407,5 +407,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run() -> None:
-    """Entry point ``ros2 run hsv_bringup sil``."""
+    """Entry point `ros2 run hsv_bringup sil`."""
     sys.exit(main())

@@ -1,21 +1,21 @@
 """The one readiness logic of every node: its status on the graph, its view of the peers.
 
-:class:`GraphStatus` publishes the node's status on :data:`fahv.loop.graph.STATUS_TOPIC`
+`GraphStatus` publishes the node's status on `fahv.loop.graph.STATUS_TOPIC`
 (at start, on every change, and as a heartbeat from a thread of its own, so a node busy
 building its core or solving still counts as alive), keeps the peers' statuses in a
-:class:`fahv.loop.peers.Peers` table, and decides:
+`fahv.loop.peers.Peers` table, and decides:
 
 - **ready**: every subscription sees its publisher, every publisher sees each subscriber
-  the node table expects among ``graph_nodes``, every peer listed in ``wait_for`` (the
+  the node table expects among `graph_nodes`, every peer listed in `wait_for` (the
   plant: all of them) announced itself ready, and no foreign publisher is on an input;
 - **start-up watchdog**: a node that is not ready, or waits for its first step, and
   sees no progress in the graph's start (a peer appearing or changing state, a topic
-  matched) stops with :class:`WatchdogError`: after ``watchdog_s`` when a peer is
+  matched) stops with `WatchdogError`: after `watchdog_s` when a peer is
   missing (never started, lost, exited), naming it before the topics it waits for;
-  after :data:`STARTUP_MAX_S` when every peer is alive but some are still starting;
+  after `STARTUP_MAX_S` when every peer is alive but some are still starting;
 - **a failed peer**: a peer of the graph that exited with a non-zero status stops the
   node at once, with that peer's name and reason;
-- **the run's verdict**: a peer that ended the run with a verdict (:mod:`fahv.verdict`)
+- **the run's verdict**: a peer that ended the run with a verdict (`fahv.verdict`)
   stops the node with the same verdict, which its last status carries on;
 - **foreign graphs**: another graph in the ROS domain (statuses of another run id, or
   more publishers on an input than the graph has producers of it) stops the graph that
@@ -135,7 +135,7 @@ class GraphStatus:
     def close(self, exit_status: int, reason: str) -> None:
         """Stop the heartbeat; announce the exit with its status and reason.
 
-        An error exit waits (at most :data:`EXIT_ACK_S`) until the peers acknowledged it:
+        An error exit waits (at most `EXIT_ACK_S`) until the peers acknowledged it:
         they stop naming this node's reason. A clean exit does not wait: the peers
         already know the node is done.
         """
@@ -165,7 +165,7 @@ class GraphStatus:
         ]
 
     def finished(self, name: str, n_steps: int) -> bool:
-        """True if peer ``name`` of this run finished its ``n_steps`` steps.
+        """True if peer `name` of this run finished its `n_steps` steps.
 
         It announced them done (or exited cleanly after them): it took every message of
         every step it consumes.
@@ -178,7 +178,7 @@ class GraphStatus:
         )
 
     def consumers_finished(self, topics, n_steps: int) -> bool:
-        """True if every consumer of ``topics`` in the graph finished its ``n_steps`` steps.
+        """True if every consumer of `topics` in the graph finished its `n_steps` steps.
 
         Then every message of these topics reached its readers, whether or not the DDS
         writer has seen their acknowledgements yet (which may take a heartbeat period of
@@ -187,7 +187,7 @@ class GraphStatus:
         return all(self.finished(n, n_steps) for t in topics for n in self.consumers(t))
 
     def unmatched(self) -> list[str]:
-        """What the node's topics still wait for, e.g. ``/hsv/state (from plant)``."""
+        """What the node's topics still wait for, e.g. `/hsv/state (from plant)`."""
         out = []
         for t, sub in self.inputs.items():
             producer = producer_of(t, self.graph_nodes)
@@ -217,11 +217,11 @@ class GraphStatus:
         Raises
         ------
         RunEnded
-            If a peer exited with the run's verdict (:mod:`fahv.verdict`): this node
+            If a peer exited with the run's verdict (`fahv.verdict`): this node
             ends with the same verdict.
         WatchdogError
             If a peer exited with an error; the message is
-            :meth:`fahv.loop.peers.Peers.failed_verdict`: the root cause (a peer that
+            `fahv.loop.peers.Peers.failed_verdict`: the root cause (a peer that
             never started or was lost) first.
         """
         ended = self.peers.run_verdict()
@@ -239,7 +239,7 @@ class GraphStatus:
         Raises
         ------
         WatchdogError
-            If the graph's start made no progress for ``watchdog_s``, or a peer failed.
+            If the graph's start made no progress for `watchdog_s`, or a peer failed.
         ForeignGraphError
             If another graph that joined first runs in the domain.
         """
@@ -279,14 +279,14 @@ class GraphStatus:
         """Whether the graph's start has stalled (before the first step of this node).
 
         A start makes progress while peers appear or change state. With a peer missing
-        (never started, lost, exited) it has stalled after ``watchdog_s`` without
+        (never started, lost, exited) it has stalled after `watchdog_s` without
         progress; with every peer alive but some still starting (building their core,
-        waiting for others) only after :data:`STARTUP_MAX_S`.
+        waiting for others) only after `STARTUP_MAX_S`.
 
         Parameters
         ----------
         since : float
-            ``time.monotonic()`` from which this node waits.
+            `time.monotonic()` from which this node waits.
 
         Returns
         -------
@@ -306,7 +306,7 @@ class GraphStatus:
 
     # -- foreign graphs -------------------------------------------------------------------
     def check_foreign(self, force: bool = True) -> str | None:
-        """Foreign-graph check (at most every :data:`FOREIGN_CHECK_S` unless ``force``).
+        """Foreign-graph check (at most every `FOREIGN_CHECK_S` unless `force`).
 
         Returns
         -------
@@ -318,8 +318,8 @@ class GraphStatus:
         ------
         ForeignGraphError
             If this graph joined second, the two cannot be told apart, or an input has
-            extra publishers that no node status explains for :data:`FOREIGN_GRACE_S`
-            (or that a later graph still holds after ``watchdog_s``).
+            extra publishers that no node status explains for `FOREIGN_GRACE_S`
+            (or that a later graph still holds after `watchdog_s`).
         """
         now = time.monotonic()
         if not force and now < self.next_foreign:

@@ -1,27 +1,27 @@
 """The lockstep state machine shared by every loop node (no model or control maths).
 
-A :class:`LockstepNode` declares the typed parameters of its node
-(:mod:`hsv_common.parameters`), builds the library object it adapts
-(:meth:`LockstepNode.make_core`), and then only moves messages:
+A `LockstepNode` declares the typed parameters of its node
+(`hsv_common.parameters`), builds the library object it adapts
+(`LockstepNode.make_core`), and then only moves messages:
 
-- Inputs are buffered per step index k; the node calls :meth:`LockstepNode.on_step`
+- Inputs are buffered per step index k; the node calls `LockstepNode.on_step`
   once it holds every input of its current step, publishes the outputs of that step
   and moves to k + 1. A message of an already processed step (stale) is counted and
   logged, never used; a second message of a buffered step (duplicate) means a second
   sender of the same steps and stops the node (exit status 5).
-- Reliable, keep-last QoS on every loop topic (:data:`fahv.loop.graph.LOOP_QOS`).
-- Start-up, readiness, missing peers and foreign graphs: :class:`GraphStatus`, the
+- Reliable, keep-last QoS on every loop topic (`fahv.loop.graph.LOOP_QOS`).
+- Start-up, readiness, missing peers and foreign graphs: `GraphStatus`, the
   one readiness logic (the plant waits for every peer before step 0).
-- A core that ends the run with a verdict (:class:`fahv.verdict.RunEnded`) stops the
+- A core that ends the run with a verdict (`fahv.verdict.RunEnded`) stops the
   node with exit status 6; its last status carries the verdict, and every peer stops
-  with it (:meth:`hsv_common.graph_status.GraphStatus.check_failed_peer`).
-- A wall-clock watchdog (parameter ``watchdog_s``) turns a silent input into an error
+  with it (`hsv_common.graph_status.GraphStatus.check_failed_peer`).
+- A wall-clock watchdog (parameter `watchdog_s`) turns a silent input into an error
   naming the missing peer (never started, lost, exited) or, when every peer is alive,
   the topic and the node that should have sent it (exit status 3).
 
-The process around the node (exit codes, signals, executor) is :mod:`hsv_common.runtime`,
+The process around the node (exit codes, signals, executor) is `hsv_common.runtime`,
 the conversion between typed messages and their CDR bytes the library's codec
-(:mod:`fahv.loop.wire`).
+(`fahv.loop.wire`).
 """
 
 from __future__ import annotations
@@ -51,8 +51,8 @@ from hsv_common.topics import msg_type_of
 class LockstepNode(Node):
     """Base of every loop node: parameters, buffering by step, readiness, watchdog.
 
-    Subclasses set ``ROLE`` (a key of :data:`fahv.loop.graph.GRAPH`) and implement
-    :meth:`make_core` and :meth:`on_step`. ``WAIT_FOR_PEERS`` (the plant) makes the
+    Subclasses set `ROLE` (a key of `fahv.loop.graph.GRAPH`) and implement
+    `make_core` and `on_step`. `WAIT_FOR_PEERS` (the plant) makes the
     node ready only once every other node of the graph is.
     """
 
@@ -109,13 +109,13 @@ class LockstepNode(Node):
         return self.get_name()
 
     def make_core(self, p: dict) -> None:
-        """Build the library object(s) from the validated parameters ``p``."""
+        """Build the library object(s) from the validated parameters `p`."""
         raise NotImplementedError
 
     def on_step(self, k: int, inputs: dict) -> list[tuple[str, object]]:
         """Outputs (topic, message) of step k given {topic: message} of its inputs.
 
-        Messages are :mod:`fahv.msg` messages of one run (the Clock as its fields).
+        Messages are `fahv.msg` messages of one run (the Clock as its fields).
         """
         raise NotImplementedError
 
@@ -219,7 +219,7 @@ class LockstepNode(Node):
         return self.status.consumers_finished(self.outputs, self.n_steps) or all_acked(self)
 
     def poll(self) -> None:
-        """Called between spins: readiness (then :meth:`on_ready`), checks, the watchdog.
+        """Called between spins: readiness (then `on_ready`), checks, the watchdog.
 
         Raises
         ------
@@ -228,7 +228,7 @@ class LockstepNode(Node):
         ForeignGraphError
             If another graph that joined first runs in the domain.
         RunEnded
-            If the node's core ended the run with a verdict (:mod:`fahv.verdict`).
+            If the node's core ended the run with a verdict (`fahv.verdict`).
         """
         if self.ended is not None:
             raise self.ended
@@ -257,7 +257,7 @@ class LockstepNode(Node):
         Raises
         ------
         WatchdogError
-            If a peer failed, or no step was completed for ``watchdog_s`` seconds of
+            If a peer failed, or no step was completed for `watchdog_s` seconds of
             wall time: naming the missing peers, else the silent input and its producer.
         ForeignGraphError
             If another graph that joined first runs in the domain.

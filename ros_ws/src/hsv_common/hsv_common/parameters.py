@@ -1,11 +1,11 @@
 """ROS parameters of the nodes, generated from the library's configuration fields.
 
-Every node declares its parameters from :class:`fahv.config.Field` declarations
-(:data:`fahv.loop.params.specs` for the loop nodes, :mod:`fahv.runs.nodes` for the
+Every node declares its parameters from `fahv.config.Field` declarations
+(`fahv.loop.params.specs` for the loop nodes, `fahv.runs.nodes` for the
 recorder and the replay): typed, with a description (unit, range, equation) and the
 numeric range in the descriptor, and validates them once with
-:func:`fahv.config.spec.validate_flat`. A bad value raises
-:class:`fahv.errors.ParameterError` naming the node and the key (exit status 2).
+`fahv.config.spec.validate_flat`. A bad value raises
+`fahv.errors.ParameterError` naming the node and the key (exit status 2).
 """
 
 from __future__ import annotations
@@ -55,10 +55,10 @@ def descriptor(f: Field) -> ParameterDescriptor:
 def declare_parameters(node: Node, fields) -> dict:
     """Declare typed parameters from config fields; return their raw values.
 
-    Matrices are declared as a double array plus ``<name>_shape``. A parameter the
+    Matrices are declared as a double array plus `<name>_shape`. A parameter the
     parameter file does not set is None (absent: its default or "missing" is decided
-    by :func:`fahv.config.spec.validate_flat`, the one validation). String arrays drop
-    empty strings (``[""]`` stands for an empty list, since a YAML ``[]`` has no
+    by `fahv.config.spec.validate_flat`, the one validation). String arrays drop
+    empty strings (`[""]` stands for an empty list, since a YAML `[]` has no
     parameter type).
 
     Raises
@@ -109,10 +109,10 @@ def declare_validated(node: Node, fields) -> dict:
 
 
 def declare_graph(node: Node) -> tuple[list[str], str]:
-    """Parameters every node of a graph shares: ``graph_nodes`` and ``run_id``.
+    """Parameters every node of a graph shares: `graph_nodes` and `run_id`.
 
-    ``graph_nodes`` lists the nodes of the running graph (readiness, the start of
-    step 0, the names of missing peers); ``run_id`` tells this graph's nodes from
+    `graph_nodes` lists the nodes of the running graph (readiness, the start of
+    step 0, the names of missing peers); `run_id` tells this graph's nodes from
     another graph's in the same ROS domain ("" when the parameter file sets none).
 
     Returns
@@ -134,7 +134,7 @@ def declare_graph(node: Node) -> tuple[list[str], str]:
 
 
 def run_metadata_param(node_name: str, text: str) -> dict:
-    """Parameter ``metadata_json`` as a dict, with ``code_version`` filled in.
+    """Parameter `metadata_json` as a dict, with `code_version` filled in.
 
     Raises
     ------

@@ -1,15 +1,15 @@
-"""Process runtime of every node: QoS profiles, exit codes, executor, signals, ``main``.
+"""Process runtime of every node: QoS profiles, exit codes, executor, signals, `main`.
 
-Exit status of a node (:func:`main`), also in docs/guide/sil.md:
+Exit status of a node (`main`), also in docs/guide/sil.md:
 
 ==  =====================================================================
 0   done: every step, and every subscriber acknowledged the last messages
 1   any other error (the traceback follows the message)
-2   bad parameter (:class:`fahv.errors.ParameterError`)
+2   bad parameter (`fahv.errors.ParameterError`)
 3   watchdog: the graph did not start, or a peer went missing or silent
 4   stopped by SIGINT / SIGTERM before the end
 5   another graph in the ROS domain that joined first (or cannot be told apart)
-6   the run ended with a verdict (:mod:`fahv.verdict`), found by this node's core
+6   the run ended with a verdict (`fahv.verdict`), found by this node's core
     or learnt from a peer's last status
 ==  =====================================================================
 """
@@ -44,21 +44,21 @@ EXIT_VERDICT = 6
 #: CI: the main thread spinning in DomainParticipant::set_listener while a discovery
 #: thread waits for a lock it holds, with the GIL held). A C-level timer
 #: (faulthandler) then dumps every thread's traceback and ends the process with status
-#: 1 after the line ``TEARDOWN_MARK``; the runner reads that as a hung teardown, not a
+#: 1 after the line `TEARDOWN_MARK`; the runner reads that as a hung teardown, not a
 #: failure, when the node had closed with status 0. A teardown takes 12 ms (median,
 #: 36 ms at most, 18 node teardowns under a load of 7 on 2 cores, measured); the
 #: runner waits for the stalled one, so the deadline is short.
 TEARDOWN_S = 2.0
 #: Longest a node's main thread may stay away from its spin loop, beyond its watchdog [s].
-#: Every callback returns within ``watchdog_s`` in a working graph (the peers' watchdogs
+#: Every callback returns within `watchdog_s` in a working graph (the peers' watchdogs
 #: fail the run otherwise); a main thread stuck in a C call is ended by the same C-level
 #: timer as the teardown: faulthandler dumps every thread's traceback and exits with 1.
 #: (A plant that never exited with every peer done had its DDS entities destroyed after
-#: this guard, when the EventsExecutor was freed: :func:`teardown` now runs under it.)
+#: this guard, when the EventsExecutor was freed: `teardown` now runs under it.)
 HANG_S = 10.0
 #: Longest wait of one spin of a node's main loop [s]: signals, the peers' statuses and
 #: the watchdog are looked at least this often (and a spin is never unbounded, see
-#: :func:`make_executor`).
+#: `make_executor`).
 SPIN_S = 0.05
 #: Longest wait of one spin while a node waits for its last messages to be delivered [s].
 LINGER_SPIN_S = 0.01
@@ -67,7 +67,7 @@ LINGER_SPIN_S = 0.01
 class HangGuard:
     """A C-level deadline on the main thread (faulthandler), re-armed from the spin loop.
 
-    ``arm(timeout)`` sets the deadline ``timeout`` seconds ahead; :meth:`beat` re-arms
+    `arm(timeout)` sets the deadline `timeout` seconds ahead; `beat` re-arms
     the last timeout at most once per second (re-arming restarts faulthandler's
     watchdog thread). When the deadline passes, every thread's traceback goes to stderr
     and the process exits with status 1: a hung node ends, and says where it hung.
@@ -78,7 +78,7 @@ class HangGuard:
         self.t_armed = -1e9
 
     def arm(self, timeout: float) -> None:
-        """Deadline ``timeout`` seconds from now (replaces any earlier one)."""
+        """Deadline `timeout` seconds from now (replaces any earlier one)."""
         self.timeout = float(timeout)
         self.t_armed = time.monotonic()
         faulthandler.dump_traceback_later(self.timeout, exit=True, file=sys.stderr)
@@ -99,11 +99,11 @@ START_PARAMETER_SERVICES = os.environ.get("HSV_PARAM_SERVICES", "0") == "1"
 
 
 def node_options() -> dict:
-    """Keyword arguments of every node's ``Node.__init__``: no services unless asked.
+    """Keyword arguments of every node's `Node.__init__`: no services unless asked.
 
-    The six parameter services and rclpy's type description service serve ``ros2 param``
-    and ``ros2 topic info`` on a full ROS install; the SingleThreadedExecutor (the
-    recorder's) puts every service into its wait set at every spin. ``HSV_PARAM_SERVICES=1``
+    The six parameter services and rclpy's type description service serve `ros2 param`
+    and `ros2 topic info` on a full ROS install; the SingleThreadedExecutor (the
+    recorder's) puts every service into its wait set at every spin. `HSV_PARAM_SERVICES=1`
     starts them all.
     """
     return {
@@ -115,7 +115,7 @@ def node_options() -> dict:
 
 
 def qos_profile(q: graph.QoS) -> QoSProfile:
-    """The rclpy profile of a :class:`fahv.loop.graph.QoS` (the library owns the numbers)."""
+    """The rclpy profile of a `fahv.loop.graph.QoS` (the library owns the numbers)."""
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
         depth=q.depth,
@@ -137,13 +137,13 @@ def quiet_publisher() -> PublisherEventCallbacks:
 
 
 def quiet_subscription() -> SubscriptionEventCallbacks:
-    """Event callbacks of a subscription without the default handlers (:func:`quiet_publisher`)."""
+    """Event callbacks of a subscription without the default handlers (`quiet_publisher`)."""
     return SubscriptionEventCallbacks(use_default_callbacks=False)
 
 
-#: Loop topics (:data:`fahv.loop.graph.LOOP_QOS`).
+#: Loop topics (`fahv.loop.graph.LOOP_QOS`).
 LOOP_QOS = qos_profile(graph.LOOP_QOS)
-#: Node status topic (:data:`fahv.loop.graph.STATUS_QOS`).
+#: Node status topic (`fahv.loop.graph.STATUS_QOS`).
 STATUS_QOS = qos_profile(graph.STATUS_QOS)
 
 
@@ -158,8 +158,8 @@ class ForeignGraphError(RuntimeError):
 def end_reason(done: bool, status: int) -> str:
     """Run status for a recorded run: complete, interrupted, or with the exit status.
 
-    ``interrupted`` when the run stopped early on a signal (or with status 0), else
-    ``interrupted (exit status N)`` (N: the node's exit status, e.g. 3 watchdog).
+    `interrupted` when the run stopped early on a signal (or with status 0), else
+    `interrupted (exit status N)` (N: the node's exit status, e.g. 3 watchdog).
     """
     if done:
         return "complete"
@@ -169,38 +169,38 @@ def end_reason(done: bool, status: int) -> str:
 
 
 def make_executor(message_info: bool = False):
-    """Executor of a node: rclpy's EventsExecutor unless ``HSV_EXECUTOR=single``.
+    """Executor of a node: rclpy's EventsExecutor unless `HSV_EXECUTOR=single`.
 
     The EventsExecutor (a C++ event queue fed by the middleware's callbacks) runs the
     lockstep graph about 1.5x faster than the SingleThreadedExecutor, which rebuilds a
     wait set for every callback it hands out. Two properties of the Jazzy wheel (rclpy
-    7.1.6, built for manylinux_2_28) decide how :func:`main` uses it:
+    7.1.6, built for manylinux_2_28) decide how `main` uses it:
 
-    - **Only bounded spins.** ``spin()``, ``spin_once()`` without a timeout and
-      ``spin_until_future_complete(f)`` wait for ``steady_clock::time_point::max()``.
-      The wheel's libstdc++ has no ``pthread_cond_clockwait``, converts that deadline to
-      the system clock, overflows to a negative ``abstime`` (``tv_sec = -7.4e9``,
+    - **Only bounded spins.** `spin()`, `spin_once()` without a timeout and
+      `spin_until_future_complete(f)` wait for `steady_clock::time_point::max()`.
+      The wheel's libstdc++ has no `pthread_cond_clockwait`, converts that deadline to
+      the system clock, overflows to a negative `abstime` (`tv_sec = -7.4e9`,
       measured in gdb), so every wait returns at once and the queue's predicate loop
       spins: 100 % CPU in C++ with the GIL released. A Python signal handler only sets a
       flag for the main thread, which never comes back to the interpreter, so SIGTERM
-      and SIGINT are ignored. :func:`main` therefore only calls ``spin_once`` with a
-      timeout (:data:`SPIN_S`), and wakes up at least that often.
+      and SIGINT are ignored. `main` therefore only calls `spin_once` with a
+      timeout (`SPIN_S`), and wakes up at least that often.
     - **Tear down the executor first.** It keeps every subscription and service of its
-      nodes in use, so ``node.destroy_node()`` only marks the DDS entities for
+      nodes in use, so `node.destroy_node()` only marks the DDS entities for
       destruction; they went away when the executor object was freed, after the hang
       guard was cancelled, with the GIL held, where a Fast DDS teardown stall (see
-      :data:`TEARDOWN_S`) left a process that never exited and ignored SIGTERM.
-      :func:`main` calls ``ex.shutdown()`` (it releases the entities) before
-      ``destroy_node``, both under the teardown deadline.
+      `TEARDOWN_S`) left a process that never exited and ignored SIGTERM.
+      `main` calls `ex.shutdown()` (it releases the entities) before
+      `destroy_node`, both under the teardown deadline.
 
-    ``message_info=True`` (the recorder: it keeps the DDS source timestamps) always takes
+    `message_info=True` (the recorder: it keeps the DDS source timestamps) always takes
     the SingleThreadedExecutor: the Jazzy EventsExecutor calls a callback that takes the
     message info with one argument (SystemError, measured).
 
     Raises
     ------
     ParameterError
-        If ``HSV_EXECUTOR`` is neither ``events`` nor ``single``.
+        If `HSV_EXECUTOR` is neither `events` nor `single`.
     """
     kind = os.environ.get("HSV_EXECUTOR", "events")
     if kind not in ("single", "events"):
@@ -228,7 +228,7 @@ def all_acked(node: Node) -> bool:
 def delivered(node: Node) -> bool:
     """True when the node's messages need no more waiting.
 
-    ``node.delivered()`` if the node has one, else :func:`all_acked`.
+    `node.delivered()` if the node has one, else `all_acked`.
     """
     check = getattr(node, "delivered", None)
     return check() if check is not None else all_acked(node)
@@ -237,8 +237,8 @@ def delivered(node: Node) -> bool:
 def teardown(ex, node: Node | None) -> None:
     """Release the executor's hold on the node's entities, then destroy the node.
 
-    ``ex.shutdown()`` first: the EventsExecutor keeps every subscription and service in
-    use until then, and ``destroy_node`` would only mark them (:func:`make_executor`).
+    `ex.shutdown()` first: the EventsExecutor keeps every subscription and service in
+    use until then, and `destroy_node` would only mark them (`make_executor`).
     """
     if ex is not None:
         ex.shutdown(timeout_sec=TEARDOWN_S)
@@ -247,9 +247,9 @@ def teardown(ex, node: Node | None) -> None:
 
 
 def failure(name: str, exc: Exception) -> tuple[int, str]:
-    """Exit status and reason of the exception that stopped node ``name``; prints them.
+    """Exit status and reason of the exception that stopped node `name`; prints them.
 
-    Call it from the ``except`` clause: an unexpected error prints its traceback too.
+    Call it from the `except` clause: an unexpected error prints its traceback too.
     """
     kinds = (
         (RunEnded, EXIT_VERDICT, "run ended"),
@@ -270,7 +270,7 @@ def failure(name: str, exc: Exception) -> tuple[int, str]:
 
 
 def linger(node: Node, ex, stop, guard: HangGuard, linger_s: float) -> None:
-    """Spin until the node's messages are delivered (:func:`delivered`), a signal, or ``linger_s``.
+    """Spin until the node's messages are delivered (`delivered`), a signal, or `linger_s`.
 
     Parameters
     ----------
@@ -278,7 +278,7 @@ def linger(node: Node, ex, stop, guard: HangGuard, linger_s: float) -> None:
     ex : rclpy executor
         The node's executor.
     stop : callable
-        The signal handler of :func:`main` (its ``signal`` is set by a signal).
+        The signal handler of `main` (its `signal` is set by a signal).
     guard : HangGuard
         Re-armed for the linger and the close after it.
     linger_s : float
@@ -293,18 +293,18 @@ def linger(node: Node, ex, stop, guard: HangGuard, linger_s: float) -> None:
 def main(node_cls, args=None, linger_s: float = 10.0) -> int:
     """Run one node until its last step, a signal, or an error; returns the exit status.
 
-    The node class provides ``done`` (bool), ``k`` (step), ``poll()`` (called between
-    spins; raises to stop), ``close(status, reason)`` (called once at the end, with
+    The node class provides `done` (bool), `k` (step), `poll()` (called between
+    spins; raises to stop), `close(status, reason)` (called once at the end, with
     the exit status and the error message, "" when none) and optionally
-    ``delivered()`` (:func:`delivered`).
+    `delivered()` (`delivered`).
 
     After the last step the node stays until its messages are delivered (every
     consumer finished its steps, or every subscriber acknowledged them: the recorder
-    may lag behind the loop), at most ``linger_s`` seconds: a reliable writer that goes
+    may lag behind the loop), at most `linger_s` seconds: a reliable writer that goes
     away earlier loses what is still unacknowledged. SIGINT and SIGTERM stop the spin
-    loop cleanly (the node's ``close`` runs, so the recorder finishes its file). Every
-    spin is bounded (:data:`SPIN_S`), and the executor is shut down before the node is
-    destroyed, under the teardown deadline (:func:`make_executor`).
+    loop cleanly (the node's `close` runs, so the recorder finishes its file). Every
+    spin is bounded (`SPIN_S`), and the executor is shut down before the node is
+    destroyed, under the teardown deadline (`make_executor`).
     """
     stop = _Stop()
     rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)

@@ -1,7 +1,7 @@
 """The generated ROS message class of each loop topic.
 
 The nodes publish and receive the loop messages as CDR bytes, converted by the library's
-one codec (:func:`fahv.loop.wire.encode`, :func:`fahv.loop.wire.decode_message`);
+one codec (`fahv.loop.wire.encode`, `fahv.loop.wire.decode_message`);
 rclpy still needs each topic's generated class to create its publishers and
 subscriptions, and this module names it.
 """
@@ -15,14 +15,14 @@ from fahv.loop.graph import TOPICS
 
 @functools.cache
 def msg_type_of(topic: str):
-    """ROS message class of a loop topic (rosgraph_msgs/Clock for ``/clock``).
+    """ROS message class of a loop topic (rosgraph_msgs/Clock for `/clock`).
 
     Raises
     ------
     KeyError
-        If ``topic`` is not a loop topic of :data:`fahv.loop.graph.TOPICS`.
+        If `topic` is not a loop topic of `fahv.loop.graph.TOPICS`.
     ImportError
-        If the message package is not built (``bash scripts/build_ros.sh``).
+        If the message package is not built (`bash scripts/build_ros.sh`).
     """
     pkg, _, name = TOPICS[topic].split("/")
     module = __import__(f"{pkg}.msg", fromlist=[name])

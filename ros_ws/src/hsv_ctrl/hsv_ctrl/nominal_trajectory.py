@@ -1,9 +1,9 @@
-"""``nominal_trajectory`` node: reference x_r, u_r and nominal x_n, u_n of each step.
+"""`nominal_trajectory` node: reference x_r, u_r and nominal x_n, u_n of each step.
 
-Runs the nominal part of the run's law (parameter ``nominal``, a registered
-``fahv.control.NominalSource``: ``mpc`` the online tracking MPC with its disturbance
-estimate, ``governor`` the paper's nominal system with the reference governor,
-``command`` the trim of the raw command for the RMPC baseline). It takes the
+Runs the nominal part of the run's law (parameter `nominal`, a registered
+`fahv.control.NominalSource`: `mpc` the online tracking MPC with its disturbance
+estimate, `governor` the paper's nominal system with the reference governor,
+`command` the trim of the raw command for the RMPC baseline). It takes the
 controller's command of the previous step as well as the state.
 """
 
@@ -19,7 +19,7 @@ from fahv.loop.cores import NominalCore
 
 
 class NominalTrajectoryNode(LockstepNode):
-    """Adapter of :class:`fahv.loop.NominalCore`."""
+    """Adapter of `fahv.loop.NominalCore`."""
 
     ROLE = "nominal_trajectory"
 
@@ -38,5 +38,5 @@ class NominalTrajectoryNode(LockstepNode):
 
 
 def run(args=None) -> None:
-    """Entry point ``ros2 run hsv_ctrl nominal_trajectory``."""
+    """Entry point `ros2 run hsv_ctrl nominal_trajectory`."""
     sys.exit(main(NominalTrajectoryNode, args))

@@ -1,4 +1,4 @@
-"""``notch_filter`` node: the notch filter on the pitch rate (eq. 38-39), q -> q'."""
+"""`notch_filter` node: the notch filter on the pitch rate (eq. 38-39), q -> q'."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from fahv.loop.cores import NotchCore
 
 
 class NotchFilterNode(LockstepNode):
-    """Adapter of :class:`fahv.loop.NotchCore`."""
+    """Adapter of `fahv.loop.NotchCore`."""
 
     ROLE = "notch_filter"
 
@@ -26,5 +26,5 @@ class NotchFilterNode(LockstepNode):
 
 
 def run(args=None) -> None:
-    """Entry point ``ros2 run hsv_ctrl notch_filter``."""
+    """Entry point `ros2 run hsv_ctrl notch_filter`."""
     sys.exit(main(NotchFilterNode, args))

@@ -1,9 +1,9 @@
-"""``tube_mpc`` node: the control law of the run (parameter ``law``), one step at a time.
+"""`tube_mpc` node: the control law of the run (parameter `law`), one step at a time.
 
-Any registered ``fahv.control.ControlLaw``: ``tube_mpc`` and ``tube_mpc_paper``,
-u = u_r + u_n + tau F (x - x_r - x_n) (eq. 36; the adjustable eq. 54 when ``tau`` < 1
-on the 11-state ECM design), or ``rmpc`` (the Kothare baseline; also started as the
-``rmpc`` executable). Publishes the command and the tube status of each step.
+Any registered `fahv.control.ControlLaw`: `tube_mpc` and `tube_mpc_paper`,
+u = u_r + u_n + tau F (x - x_r - x_n) (eq. 36; the adjustable eq. 54 when `tau` < 1
+on the 11-state ECM design), or `rmpc` (the Kothare baseline; also started as the
+`rmpc` executable). Publishes the command and the tube status of each step.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from fahv.loop.cores import ControllerCore
 
 
 class TubeMPCNode(LockstepNode):
-    """Adapter of :class:`fahv.loop.ControllerCore`."""
+    """Adapter of `fahv.loop.ControllerCore`."""
 
     ROLE = "tube_mpc"
 
@@ -35,16 +35,16 @@ class TubeMPCNode(LockstepNode):
 
 
 class RMPCNode(TubeMPCNode):
-    """The same adapter under node name ``rmpc`` (parameters of the ``rmpc`` section)."""
+    """The same adapter under node name `rmpc` (parameters of the `rmpc` section)."""
 
     ROLE = "rmpc"
 
 
 def run(args=None) -> None:
-    """Entry point ``ros2 run hsv_ctrl tube_mpc``."""
+    """Entry point `ros2 run hsv_ctrl tube_mpc`."""
     sys.exit(main(TubeMPCNode, args))
 
 
 def run_rmpc(args=None) -> None:
-    """Entry point ``ros2 run hsv_ctrl rmpc``."""
+    """Entry point `ros2 run hsv_ctrl rmpc`."""
     sys.exit(main(RMPCNode, args))

@@ -1,7 +1,7 @@
-"""``fault_injector`` node: actuator faults between the controller and the plant.
+"""`fault_injector` node: actuator faults between the controller and the plant.
 
 Loss of elevator effectiveness (rho_f, onset, eq. 15), stuck elevator, elevator bias
-and dropped commands (``kind`` parameter), applied by ``fahv.loop.FaultCore``; the
+and dropped commands (`kind` parameter), applied by `fahv.loop.FaultCore`; the
 fault applied at every step is announced on /hsv/fault_status.
 """
 
@@ -17,7 +17,7 @@ from fahv.loop.cores import FaultCore
 
 
 class FaultInjectorNode(LockstepNode):
-    """Adapter of :class:`fahv.loop.FaultCore`."""
+    """Adapter of `fahv.loop.FaultCore`."""
 
     ROLE = "fault_injector"
 
@@ -36,5 +36,5 @@ class FaultInjectorNode(LockstepNode):
 
 
 def run(args=None) -> None:
-    """Entry point ``ros2 run hsv_plant fault_injector``."""
+    """Entry point `ros2 run hsv_plant fault_injector`."""
     sys.exit(main(FaultInjectorNode, args))

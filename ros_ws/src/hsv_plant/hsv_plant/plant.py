@@ -1,7 +1,7 @@
-"""``plant`` node: nonlinear CM of the vehicle, lockstep master, publisher of /clock.
+"""`plant` node: nonlinear CM of the vehicle, lockstep master, publisher of /clock.
 
 Publishes /clock and /hsv/state for step k, integrates [t_k, t_k+1] when
-/hsv/actuator_command of step k arrives (``fahv.loop.PlantCore``), and starts step 0
+/hsv/actuator_command of step k arrives (`fahv.loop.PlantCore`), and starts step 0
 only when every node of the graph has announced itself on /hsv/ready.
 """
 
@@ -19,7 +19,7 @@ from fahv.msg import ControlCommand
 
 
 class PlantNode(LockstepNode):
-    """Adapter of :class:`fahv.loop.PlantCore`; the lockstep master.
+    """Adapter of `fahv.loop.PlantCore`; the lockstep master.
 
     It is ready (and publishes step 0) only when every other node of the graph
     announced itself ready; until then it logs which peers it still waits for.
@@ -56,5 +56,5 @@ class PlantNode(LockstepNode):
 
 
 def run(args=None) -> None:
-    """Entry point ``ros2 run hsv_plant plant``."""
+    """Entry point `ros2 run hsv_plant plant`."""
     sys.exit(main(PlantNode, args))

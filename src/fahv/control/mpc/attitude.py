@@ -4,7 +4,7 @@ The plant's attitude deviation from the set point's trim is the nominal one plus
 tube error, so the nominal QP bounds |alpha_n - alpha_r| and |theta_n - theta_r| by the
 attitude requirement of sec. 5.1 of Yang et al. (2022) (0.5 deg) minus the support of
 the tube Z (the robust invariant set of eq. 25-26) along alpha and theta.
-:func:`attitude_bounds` computes those bounds from the tube shape; :class:`AttitudeBounds`
+`attitude_bounds` computes those bounds from the tube shape; `AttitudeBounds`
 holds them with the line the design log prints (certified or not, and by how much).
 """
 
@@ -20,7 +20,7 @@ from fahv.errors import DesignError
 
 @dataclass(frozen=True)
 class AttitudeBounds:
-    """Attitude rows of the nominal QP against the requirement (:func:`attitude_bounds`).
+    """Attitude rows of the nominal QP against the requirement (`attitude_bounds`).
 
     Attributes
     ----------
@@ -30,14 +30,14 @@ class AttitudeBounds:
         Requirement minus support [rad]: the largest nominal deviation for which
         nominal + tube stays within the requirement (may be negative).
     used : (2,) ndarray
-        Bounds the QP uses [rad]: ``certified`` by default, or the case's value.
+        Bounds the QP uses [rad]: `certified` by default, or the case's value.
     given : bool
-        Whether the case gave the bound (``mpc.att_max`` > 0).
+        Whether the case gave the bound (`mpc.att_max` > 0).
     trim_offset : float
         Largest attitude offset of a parameter-box corner's own trim from the nominal
         trim [rad] (0: not known). The nominal must hold it at steady state; where it
         exceeds the rows, the QP widens them to the plant's own trim
-        (:meth:`~fahv.control.mpc.tracking.TrackingMPC.solve`, ``x_off``), beyond what
+        (`fahv.control.mpc.tracking.TrackingMPC.solve`, `x_off`), beyond what
         the certificate covers.
     """
 
@@ -108,10 +108,10 @@ def attitude_bounds(N, att_max_deg: float = 0.0, trim_offset: float = 0.0) -> At
     N : (n, n) array_like
         Tube shape (state order h, V, alpha, theta, ...; rad).
     att_max_deg : float
-        The case's ``mpc.att_max`` [deg]; 0 uses the certified bound.
+        The case's `mpc.att_max` [deg]; 0 uses the certified bound.
     trim_offset : float
         Largest attitude offset of a box corner's trim from the nominal trim [rad]
-        (:attr:`AttitudeBounds.trim_offset`; 0: not checked).
+        (`AttitudeBounds.trim_offset`; 0: not checked).
 
     Returns
     -------

@@ -1,14 +1,14 @@
 """State-disturbance estimate of the nominal model and the steady-state shift it implies.
 
 The nominal model is z+ = A z + B u + d with d a constant additive state disturbance
-estimated from the measured steps (:class:`DisturbanceEstimator`, a first-order filter
-per run with gains of :func:`estimator_gains`, faster along the elevator column of B,
-:func:`elevator_share`). d collects the constant part of the parameter uncertainty
+estimated from the measured steps (`DisturbanceEstimator`, a first-order filter
+per run with gains of `estimator_gains`, faster along the elevator column of B,
+`elevator_share`). d collects the constant part of the parameter uncertainty
 (sec. 5.1 of Yang et al. 2022), the trim part (rho_f - 1) delta_e,r of a loss of
 elevator effectiveness (eq. 15-16) and the mean modelling error, so that the tracking is
 offset-free and the tube only holds what is left. The steady state of the set point
 moves by (x_d, u_d) = (H_x d, H_u d), the solution of (A - I) x_d + B u_d + d = 0 with
-h_d = V_d = 0 (:func:`steady_state_shift`), as for the offset-free tracking MPC with an
+h_d = V_d = 0 (`steady_state_shift`), as for the offset-free tracking MPC with an
 artificial steady state of Limon et al. (2010).
 """
 
@@ -22,16 +22,16 @@ from fahv.control.reference import mv
 def estimator_gains(
     Ts: float, est_tau: float, est_tau_elevator: float = 0.0
 ) -> tuple[float, float | None]:
-    """Gains per step of the disturbance estimate (:class:`DisturbanceEstimator`).
+    """Gains per step of the disturbance estimate (`DisturbanceEstimator`).
 
     Parameters
     ----------
     Ts : float
         Control period [s].
     est_tau : float
-        Time constant of the estimate [s] (``mpc.est_tau``; 0: no estimate).
+        Time constant of the estimate [s] (`mpc.est_tau`; 0: no estimate).
     est_tau_elevator : float
-        Time constant along the elevator column [s] (``mpc.est_tau_elevator``; 0: none).
+        Time constant along the elevator column [s] (`mpc.est_tau_elevator`; 0: none).
 
     Returns
     -------
@@ -64,7 +64,7 @@ def elevator_share(v, b, scale) -> np.ndarray:
     Returns
     -------
     (...,) ndarray
-        c per vector (the projection is ``c[..., None] * b``).
+        c per vector (the projection is `c[..., None] * b`).
     """
     bs, vs = b / scale, v / scale
     return np.einsum("...i,...i->...", bs, vs) / np.einsum("...i,...i->...", bs, bs)
@@ -82,8 +82,8 @@ class DisturbanceEstimator:
     effectiveness (eq. 16), the mean of the modelling error. The nominal model then
     predicts with d, so the tube only has to hold what is left (docs/theory/certificate.md).
 
-    With a gain ``gamma_e`` along the elevator column b of the scheduled model's B, the
-    share of r - d along b (the projection in the metric of ``scale``,
+    With a gain `gamma_e` along the elevator column b of the scheduled model's B, the
+    share of r - d along b (the projection in the metric of `scale`,
     b (b' S r) / (b' S b), S = diag(scale)^-2) is filtered with gamma_e instead: a loss of
     effectiveness or an elevator bias acts along b (eq. 15-16), so with gamma_e = 1 the
     estimate knows it one step after the onset while the other directions keep the slow
@@ -100,12 +100,12 @@ class DisturbanceEstimator:
     gamma_e : float, optional
         Filter gain in (0, 1] along the elevator column (None: gamma in every direction).
     scale : (p,) array_like, optional
-        State scale of the projection's metric (needed with ``gamma_e``).
+        State scale of the projection's metric (needed with `gamma_e`).
 
     Raises
     ------
     ValueError
-        If a gain is not in (0, 1], or ``gamma_e`` comes without a positive ``scale`` of
+        If a gain is not in (0, 1], or `gamma_e` comes without a positive `scale` of
         length p.
     """
 
@@ -145,8 +145,8 @@ class DisturbanceEstimator:
     def update_residual(self, r: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
         """Estimates d (B, p) after one step whose residual r (B, p) is given.
 
-        ``b`` (B, p) is each run's elevator column of the scheduled model, the direction
-        filtered with ``gamma_e`` (ignored without it; required with it).
+        `b` (B, p) is each run's elevator column of the scheduled model, the direction
+        filtered with `gamma_e` (ignored without it; required with it).
 
         r is what the nominal model missed in the measured step (for the nonlinear
         nominal, x_k - f_0(x_{k-1}, u_{k-1}) with f_0 one period of the nominal CM).

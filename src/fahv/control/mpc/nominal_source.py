@@ -1,24 +1,24 @@
-"""The nominal source ``mpc``: the online tracking MPC with a disturbance estimate, B runs.
+"""The nominal source `mpc`: the online tracking MPC with a disturbance estimate, B runs.
 
-:class:`TrackingMPCNominal` is the nominal part of the law ``tube_mpc`` (registry entry
-``mpc``, case section ``mpc``): it runs the nominal of the tube-based MPC of Mayne,
+`TrackingMPCNominal` is the nominal part of the law `tube_mpc` (registry entry
+`mpc`, case section `mpc`): it runs the nominal of the tube-based MPC of Mayne,
 Seron and Rakovic (2005) in the tracking form with an artificial steady state of Limon
-et al. (2010), one :class:`~fahv.control.mpc.tracking.TrackingMPC` per run, with the
-state-disturbance estimate of :mod:`fahv.control.mpc.estimator`. Its output is the
+et al. (2010), one `fahv.control.mpc.tracking.TrackingMPC` per run, with the
+state-disturbance estimate of `fahv.control.mpc.estimator`. Its output is the
 reference (x_r, u_r) at the artificial set point and the nominal deviation (x_n, u_n)
 that the ancillary law u = u_r + u_n + tau F (x - x_r - x_n) of eq. (36) / (54) of
 Yang et al. (2022) acts on. The nominal state moves by the scheduled LPV model of
-eq. (12) or by the nonlinear CM of eq. (1)-(3) (``mpc.nominal_model``). Also here: its
-node parameters (the case section's keys under ``mpc.`` and the design's boxes) and
+eq. (12) or by the nonlinear CM of eq. (1)-(3) (`mpc.nominal_model`). Also here: its
+node parameters (the case section's keys under `mpc.` and the design's boxes) and
 its offline part (the terminal ingredients' re-check and the attitude bounds).
 
 Batch
-    :class:`TrackingMPCNominal` runs B runs at once: the fast step (estimator,
+    `TrackingMPCNominal` runs B runs at once: the fast step (estimator,
     plan interpolation, nominal model, output) is one numpy computation over the
     batch, whose per-run items are the BLAS calls of one run's computation, so a
     run's numbers do not depend on its batch; the re-plans (one QP per run every M
     steps) are a loop over the runs, each with its own
-    :class:`~fahv.control.mpc.tracking.TrackingMPC`.
+    `fahv.control.mpc.tracking.TrackingMPC`.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ from fahv.msg import NominalTrajectory
 from fahv.plant.rk4 import params_records, rk4_cm
 from fahv.verdict import RunEnded
 
-#: Node parameter ``mpc.att_max``: the bounds the design chose (alpha, theta).
+#: Node parameter `mpc.att_max`: the bounds the design chose (alpha, theta).
 ATT_MAX_PARAMETER = Field(
     "mpc.att_max", "floats", "bounds on the nominal |alpha - alpha_r| and |theta - theta_r| "
     "(from the nominal trim) of the QP's attitude rows, from the design (the default only "
@@ -52,7 +52,7 @@ ATT_MAX_PARAMETER = Field(
     lo_open=True, hi=10.0, length=2, default=(0.35, 0.35),
 )  # fmt: skip
 
-#: Node parameter ``mpc.u_box``: the nominal box's input ranges the design assumed.
+#: Node parameter `mpc.u_box`: the nominal box's input ranges the design assumed.
 U_BOX_PARAMETER = Field(
     "mpc.u_box", "floats", "rows on the manoeuvre part of the nominal input (the input minus "
     "the set point's steady input, trim plus estimate shift): Phi lo, Phi hi, delta_e lo, "
@@ -61,7 +61,7 @@ U_BOX_PARAMETER = Field(
     default=(0.0, 0.0, 0.0, 0.0),
 )  # fmt: skip
 
-#: Node parameter ``mpc.hv_box``: the nominal box's h and V ranges the design assumed.
+#: Node parameter `mpc.hv_box`: the nominal box's h and V ranges the design assumed.
 HV_BOX_PARAMETER = Field(
     "mpc.hv_box", "floats", "the nominal's altitude and speed range: h lo, h hi [ft], V lo, "
     "V hi [ft/s], from the design's nominal box (tube.form eight_state: the envelope less "
@@ -69,7 +69,7 @@ HV_BOX_PARAMETER = Field(
     "nominal in it; all 0: none", lo=0.0, hi=1e6, length=4, default=(0.0, 0.0, 0.0, 0.0),
 )  # fmt: skip
 
-#: Node parameter ``mpc.x_box``: the range of the nominal's other states the certificate covers.
+#: Node parameter `mpc.x_box`: the range of the nominal's other states the certificate covers.
 X_BOX_PARAMETER = Field(
     "mpc.x_box", "floats", "the range the tube's certificate covers for the nominal's alpha, "
     "theta [deg], q [deg/s], eta_1, eta_1_dot, eta_2, eta_2_dot (from the nominal vehicle's "
@@ -78,8 +78,8 @@ X_BOX_PARAMETER = Field(
     "all 0: none", lo=-1e3, hi=1e3, length=14, default=(0.0,) * 14,
 )  # fmt: skip
 
-#: Node parameters of the nominal MPC: its case section's keys under ``mpc.`` (``att_max``
-#: as the design's bounds) and the design's ``mpc.u_box``, ``mpc.hv_box`` and ``mpc.x_box``.
+#: Node parameters of the nominal MPC: its case section's keys under `mpc.` (`att_max`
+#: as the design's bounds) and the design's `mpc.u_box`, `mpc.hv_box` and `mpc.x_box`.
 MPC_NODE_PARAMETERS = (
     *(
         ATT_MAX_PARAMETER if f.name == "att_max" else dataclasses.replace(f, name=f"mpc.{f.name}")
@@ -112,7 +112,7 @@ class TrackingMPCNominal(NominalSource):
     u_dev = Gu delta + K (z - Gx delta - x_d) + c_j (the nominal input is
     u_r,s + u_d + u_dev, (x_d, u_d) the estimate's steady-state shift); every M steps
     (the first at step 1, once the estimate has started) each run's QP
-    (:class:`TrackingMPC`) chooses the moves and the set-point step delta, with its
+    (`TrackingMPC`) chooses the moves and the set-point step delta, with its
     input limits at every fast step of the first two moves. Between re-plans u_d
     follows the estimate, which the QP does not bound: the nominal input stays within
     the tightened limits by the plan only as far as d stays near its re-plan value
@@ -121,7 +121,7 @@ class TrackingMPCNominal(NominalSource):
     artificial set point theta, x_n = X_n - x_r, u_n = u_nominal - u_r, so that the
     ancillary law u = u_r + u_n + tau F (x - x_r - x_n) (eq. 36/54) is unchanged.
 
-    With ``mpc.nominal_model`` 'cm' (9-state CM designs) the nominal state moves by the
+    With `mpc.nominal_model` 'cm' (9-state CM designs) the nominal state moves by the
     nonlinear CM of the nominal vehicle instead, z+ = f_0(z, u_nominal) + d (one period
     of the plant's RK4, inputs clipped to the actuator limits as the plant does), and
     the estimate filters the residual of that model, r = x_k - f_0(x_k-1, u_k-1). The
@@ -136,7 +136,7 @@ class TrackingMPCNominal(NominalSource):
     must hold no longer grows with the nominal's distance from the trim
     (docs/theory/nominal_mpc.md, "The error along the nominal").
 
-    With ``mpc.h_reset`` the nominal's altitude is set to the measured one at every
+    With `mpc.h_reset` the nominal's altitude is set to the measured one at every
     re-plan, before the QP: the altitude error e_h returns to 0 every M steps, so that
     |e_h| is bounded by M steps of its increment and the tube can be designed on the
     eight states after h (docs/theory/nominal_mpc.md, "The altitude reset"). The QP plans
@@ -152,7 +152,7 @@ class TrackingMPCNominal(NominalSource):
     Parameters
     ----------
     p, runs, lanes
-        As :class:`~fahv.control.base.NominalSource`.
+        As `fahv.control.base.NominalSource`.
 
     Raises
     ------
@@ -254,7 +254,7 @@ class TrackingMPCNominal(NominalSource):
         self.status = ["not started"] * B
 
     def _init_nominal_cm(self, p: dict, B: int) -> None:
-        """The nominal vehicle's CM for ``mpc.nominal_model`` 'cm'.
+        """The nominal vehicle's CM for `mpc.nominal_model` 'cm'.
 
         Raises
         ------
@@ -274,7 +274,7 @@ class TrackingMPCNominal(NominalSource):
     def _qp_counts(self) -> tuple[np.ndarray, ...]:
         """Per-run QP counters (solves, fallback, terminal, recovered), each (B,) int64.
 
-        Only a re-plan changes them: :meth:`step` builds them after each re-plan and
+        Only a re-plan changes them: `step` builds them after each re-plan and
         its messages share them until the next (no message array is written in place).
         """
         st = [m.stats for m in self.mpcs]
@@ -294,12 +294,12 @@ class TrackingMPCNominal(NominalSource):
         """Schedule run b's QP at the nominal's operating point theta = (h, V) during a run.
 
         The trim map is the QP's domain: it is clipped to its grid, so at a point more
-        than one difference step (:data:`~fahv.control.mpc.tracking.TRIM_STEP`) beyond
+        than one difference step (`fahv.control.mpc.tracking.TRIM_STEP`) beyond
         the grid its Jacobian has a zero column and the own-trim rows' Gx[0:2] is
         singular. A nominal that left that domain (it follows the disturbance estimate,
         which follows a vehicle that diverges, e.g. under a stuck elevator) ends the run
-        with the verdict ``nominal_out_of_domain``; singular scheduling equations inside
-        it with ``nominal_singular`` (:mod:`fahv.verdict`).
+        with the verdict `nominal_out_of_domain`; singular scheduling equations inside
+        it with `nominal_singular` (`fahv.verdict`).
 
         Raises
         ------
@@ -345,8 +345,8 @@ class TrackingMPCNominal(NominalSource):
     def _plan(self, b: int, cmd: np.ndarray) -> bool:
         """Re-plan run b: reschedule if needed, solve its QP, or fall back (counted).
 
-        Returns True when the plan moved the set point ``TH[b]``: its trim ``TRX[b]``,
-        ``TRU[b]`` is then due (evaluated for all such runs at once by :meth:`step`).
+        Returns True when the plan moved the set point `TH[b]`: its trim `TRX[b]`,
+        `TRU[b]` is then due (evaluated for all such runs at once by `step`).
         """
         mpc, ly = self.mpcs[b], self.mpcs[b].layout
         # schedule at the nominal operating point (h, V of X_n), not at the set point:
@@ -394,7 +394,7 @@ class TrackingMPCNominal(NominalSource):
         """The QP, then the recovery QPs: (y or None, why, whether a recovery planned).
 
         The recovery frees the set point on the trim map (no trust region), then also
-        drops the steady-input rows (:meth:`TrackingMPC.solve`, ``relax_steady``).
+        drops the steady-input rows (`TrackingMPC.solve`, `relax_steady`).
         """
         y, why = mpc.solve(*args, u_prev=u_prev)
         recovered = False
@@ -454,7 +454,7 @@ class TrackingMPCNominal(NominalSource):
         self._counts = self._qp_counts()
 
     def output(self, k, t, x, u_prev) -> NominalTrajectory:
-        """Output of step k for the B runs (class docstring); :meth:`advance` follows.
+        """Output of step k for the B runs (class docstring); `advance` follows.
 
         QP counters and the input-equivalent estimate d_hat = -u_d (for a loss of
         elevator effectiveness alone, (0, (rho_f - 1) delta_e,r)) are in the message.
@@ -518,9 +518,9 @@ class TrackingMPCNominal(NominalSource):
     def design(cls, ctx) -> dict[str, np.ndarray]:
         """Re-check the terminal ingredients; the attitude bounds of the QP.
 
-        Returns ``att_max`` (2,) [rad], the bounds of the QP's attitude rows, and
-        ``att_support`` (2,) [rad], the support of Z in alpha and theta
-        (:func:`attitude_bounds`).
+        Returns `att_max` (2,) [rad], the bounds of the QP's attitude rows, and
+        `att_support` (2,) [rad], the support of Z in alpha and theta
+        (`attitude_bounds`).
 
         Raises
         ------
@@ -551,9 +551,9 @@ class TrackingMPCNominal(NominalSource):
 
     @classmethod
     def node_values(cls, arrays: dict, case: dict) -> dict:
-        """``mpc.*`` node parameters from the case's ``mpc`` section (defaults if absent).
+        """`mpc.*` node parameters from the case's `mpc` section (defaults if absent).
 
-        ``mpc.att_max`` is the design's attitude bounds (:func:`attitude_bounds`).
+        `mpc.att_max` is the design's attitude bounds (`attitude_bounds`).
         """
         mpc = case.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
         out = {

@@ -3,20 +3,20 @@
 The tracking MPC with an artificial steady state of Limon et al. (2010, "Robust
 tube-based MPC for tracking") on the nominal LPV model of eq. (12) of Yang et al.
 (2022), scheduled at one operating point. Its decision vector y = [c_0 .. c_{N_p-1},
-delta, alpha] (:class:`QPLayout`) holds the moves c_j (each held for M fast steps), the
+delta, alpha] (`QPLayout`) holds the moves c_j (each held for M fast steps), the
 step delta of the artificial set point theta = (h_s, V_s) along the trim map
 (x_s = G_x delta, u_s = G_u delta) and the scaling alpha of the terminal set.
 
 Predictions are pre-stabilised by the terminal gain K of LMIs (33)-(35):
 u = u_s + K (z - x_s) + c_j, so that zeta = z - x_s obeys
 zeta+ = (A + B K) zeta + B c_j + E delta with E = (A - I) G_x + B G_u
-(:func:`move_predictions`, :func:`horizon_predictions`). The functions below stack
-these predictions into the QP's cost (:func:`tracking_cost`) and the state-independent
+(`move_predictions`, `horizon_predictions`). The functions below stack
+these predictions into the QP's cost (`tracking_cost`) and the state-independent
 parts of its rows: inputs at the move starts and at the fast steps of the first moves
 (the tightened set of eq. 30), attitude, the nominal's h, V and other states, and the
 jumps of the input between moves. Every row is linear in (y, z0), given as a y part
 (rows, ny) and a z0 part (rows, n); the bounds that depend on z0 are set at each solve
-(:meth:`fahv.control.mpc.tracking.TrackingMPC.solve`).
+(`fahv.control.mpc.tracking.TrackingMPC.solve`).
 """
 
 from __future__ import annotations
@@ -116,15 +116,15 @@ def move_predictions(A, B, K, Gx, Gu, Du, M: int):
 def horizon_predictions(Phi_w, Gam_w, Psi_w, Gx, layout: QPLayout):
     """Predictions at the move starts: zeta_j = S[j] zeta_0 + C[j] y, zeta_0 = z0 - Gx delta.
 
-    ``S[j] = Phi^j``; the move columns are block Toeplitz, ``C[j][:, c_i] = Phi^(j-1-i) Gam``
+    `S[j] = Phi^j`; the move columns are block Toeplitz, `C[j][:, c_i] = Phi^(j-1-i) Gam`
     (i < j); the delta columns -Phi^j Gx + sum_(k<j) Phi^k Psi (Phi, Gam, Psi of a whole
-    move, the last entries of :func:`move_predictions`). The horizon's products are
+    move, the last entries of `move_predictions`). The horizon's products are
     stacked (one matrix product per block, not one per move).
 
     Parameters
     ----------
     Phi_w, Gam_w, Psi_w : ndarray
-        One move's predictions (:func:`move_predictions`).
+        One move's predictions (`move_predictions`).
     Gx : (n, 2) ndarray
         Trim map's state Jacobian per scaled set-point step.
     layout : QPLayout
@@ -164,7 +164,7 @@ def tracking_cost(C, S, Phi, Dx, settings, layout: QPLayout):
     ----------
     C : (N_p + 1, n, ny) ndarray
     S : (N_p + 1, n, n) ndarray
-        Move-start predictions (:func:`horizon_predictions`).
+        Move-start predictions (`horizon_predictions`).
     Phi : (n, n) ndarray
         One move's state transition (Phi_M).
     Dx : (n,) ndarray
@@ -209,7 +209,7 @@ def move_input_rows(K, C, S, Gu, Du, layout: QPLayout):
     ----------
     K : (m, n) ndarray
     C, S : ndarray
-        Move-start predictions (:func:`horizon_predictions`).
+        Move-start predictions (`horizon_predictions`).
     Gu : (m, 2) ndarray
         Trim map's input Jacobian per scaled set-point step.
     Du : (m,) ndarray
@@ -233,7 +233,7 @@ def move_input_rows(K, C, S, Gu, Du, layout: QPLayout):
 
 
 def fine_step_predictions(Phi_w, Gam_w, Psi_w, C, S, fine_moves: int, layout: QPLayout):
-    """Predictions at the fast steps i = 1..M-1 inside the first ``fine_moves`` moves.
+    """Predictions at the fast steps i = 1..M-1 inside the first `fine_moves` moves.
 
     In closed form zeta = Phi_i zeta_j + Gam_i c_j + Psi_i delta, shared by the attitude,
     range and input rows of those steps.
@@ -241,9 +241,9 @@ def fine_step_predictions(Phi_w, Gam_w, Psi_w, C, S, fine_moves: int, layout: QP
     Parameters
     ----------
     Phi_w, Gam_w, Psi_w : ndarray
-        One move's predictions (:func:`move_predictions`).
+        One move's predictions (`move_predictions`).
     C, S : ndarray
-        Move-start predictions (:func:`horizon_predictions`).
+        Move-start predictions (`horizon_predictions`).
     fine_moves : int
         Moves bounded at every fast step.
     layout : QPLayout
@@ -264,7 +264,7 @@ def fine_step_predictions(Phi_w, Gam_w, Psi_w, C, S, fine_moves: int, layout: QP
 
 
 def fine_input_rows(K, fine, Gu, Du, layout: QPLayout, n: int):
-    """Absolute input at the fast steps of :func:`fine_step_predictions`, less u_base.
+    """Absolute input at the fast steps of `fine_step_predictions`, less u_base.
 
     Between move starts the input of the pre-stabilised model moves with K zeta, and
     the tube's tightening (eq. 30) holds only if it stays in the tightened set at every
@@ -274,7 +274,7 @@ def fine_input_rows(K, fine, Gu, Du, layout: QPLayout, n: int):
     ----------
     K : (m, n) ndarray
     fine : list of (Zy, Zz)
-        :func:`fine_step_predictions`.
+        `fine_step_predictions`.
     Gu : (m, 2) ndarray
     Du : (m,) ndarray
     layout : QPLayout
@@ -305,9 +305,9 @@ def attitude_rows(fine, C, S):
     Parameters
     ----------
     fine : list of (Zy, Zz)
-        :func:`fine_step_predictions`.
+        `fine_step_predictions`.
     C, S : ndarray
-        Move-start predictions (:func:`horizon_predictions`).
+        Move-start predictions (`horizon_predictions`).
 
     Returns
     -------
@@ -325,9 +325,9 @@ def row_steps(fine, C, S) -> tuple[np.ndarray, np.ndarray]:
     Parameters
     ----------
     fine : list of (Zy, Zz)
-        :func:`fine_step_predictions`.
+        `fine_step_predictions`.
     C, S : ndarray
-        Move-start predictions (:func:`horizon_predictions`); their first (the current
+        Move-start predictions (`horizon_predictions`); their first (the current
         step) is left out.
 
     Returns
@@ -344,14 +344,14 @@ def row_steps(fine, C, S) -> tuple[np.ndarray, np.ndarray]:
 def range_rows(fine, C, S, Gx, layout: QPLayout):
     """Absolute h and V of the nominal less x_r_s, at the attitude rows' steps.
 
-    x_r_s + Gx delta + zeta: the rows of ``mpc.hv_box`` (the nominal box's range).
+    x_r_s + Gx delta + zeta: the rows of `mpc.hv_box` (the nominal box's range).
 
     Parameters
     ----------
     fine : list of (Zy, Zz)
-        :func:`fine_step_predictions`.
+        `fine_step_predictions`.
     C, S : ndarray
-        Move-start predictions (:func:`horizon_predictions`).
+        Move-start predictions (`horizon_predictions`).
     Gx : (n, 2) ndarray
     layout : QPLayout
 
@@ -359,7 +359,7 @@ def range_rows(fine, C, S, Gx, layout: QPLayout):
     -------
     Hv_y : (rows, ny) ndarray
     Hv_z : (rows, n) ndarray
-        Rows in pairs (h, V), step by step (the steps of :func:`attitude_rows`).
+        Rows in pairs (h, V), step by step (the steps of `attitude_rows`).
     """
     Y, Z = row_steps(fine, C, S)
     hv_y = Y[:, 0:2].copy()  # (steps, 2, ny)
@@ -373,14 +373,14 @@ def own_trim_rows(fine, C, S, Gx):
     The trim at the nominal's own (h, V), linearised at the scheduling point:
     zeta[2:9] - T zeta[0:2] with T = Gx[2:9] Gx[0:2]^-1 (the set point's delta cancels,
     Gx[2:9] = T Gx[0:2]); the estimate's shift x_d is added at each solve. The rows of
-    ``mpc.x_box``.
+    `mpc.x_box`.
 
     Parameters
     ----------
     fine : list of (Zy, Zz)
-        :func:`fine_step_predictions`.
+        `fine_step_predictions`.
     C, S : ndarray
-        Move-start predictions (:func:`horizon_predictions`).
+        Move-start predictions (`horizon_predictions`).
     Gx : (n, 2) ndarray
 
     Returns
@@ -389,7 +389,7 @@ def own_trim_rows(fine, C, S, Gx):
         Trim slope per ft, ft/s.
     Xb_y : (rows, ny) ndarray
     Xb_z : (rows, n) ndarray
-        Rows in sevens, step by step (the steps of :func:`attitude_rows`).
+        Rows in sevens, step by step (the steps of `attitude_rows`).
     """
     Y, Z = row_steps(fine, C, S)
     T_own = Gx[2:9] @ np.linalg.inv(Gx[0:2])  # (7, 2) trim slope per ft, ft/s
@@ -399,7 +399,7 @@ def own_trim_rows(fine, C, S, Gx):
 
 
 def rate_rows(Phi_w, Gam_w, Psi_w, C, S, K, Du, layout: QPLayout):
-    """Jumps of the nominal input at the move starts j = 1..N_p-1, per Du (``mpc.du_max``).
+    """Jumps of the nominal input at the move starts j = 1..N_p-1, per Du (`mpc.du_max`).
 
     At the start of move j the nominal input changes from the last fast step of move
     j-1 to the first of move j by K (zeta_j - zeta_j-1,M-1) + Du (c_j - c_j-1) (zeta is
@@ -410,9 +410,9 @@ def rate_rows(Phi_w, Gam_w, Psi_w, C, S, K, Du, layout: QPLayout):
     Parameters
     ----------
     Phi_w, Gam_w, Psi_w : ndarray
-        One move's predictions (:func:`move_predictions`).
+        One move's predictions (`move_predictions`).
     C, S : ndarray
-        Move-start predictions (:func:`horizon_predictions`).
+        Move-start predictions (`horizon_predictions`).
     K : (m, n) ndarray
     Du : (m,) ndarray
     layout : QPLayout

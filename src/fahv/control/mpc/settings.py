@@ -1,11 +1,11 @@
-"""Settings of the nominal tracking MPC: the case file's ``mpc`` section and its typed form.
+"""Settings of the nominal tracking MPC: the case file's `mpc` section and its typed form.
 
-:data:`MPC_SECTION_FIELDS` are the keys of the case file's ``mpc`` section (horizon,
+`MPC_SECTION_FIELDS` are the keys of the case file's `mpc` section (horizon,
 rates, weights, the disturbance estimate's time constants, the nominal model);
-:class:`MPCSettings` is what one :class:`~fahv.control.mpc.tracking.TrackingMPC` is
-built with, read from the nominal_trajectory node's ``mpc.*`` parameters; the functions
-below turn the box and rate parameters (``mpc.u_box``, ``mpc.hv_box``, ``mpc.x_box``,
-``mpc.du_max``) into the QP's bounds, checking them at the boundary.
+`MPCSettings` is what one `fahv.control.mpc.tracking.TrackingMPC` is
+built with, read from the nominal_trajectory node's `mpc.*` parameters; the functions
+below turn the box and rate parameters (`mpc.u_box`, `mpc.hv_box`, `mpc.x_box`,
+`mpc.du_max`) into the QP's bounds, checking them at the boundary.
 
 The horizon is that of the tracking MPC with an artificial steady state of Limon et al.
 (2010, "Robust tube-based MPC for tracking"): N_p moves of M fast steps each, an offset
@@ -93,43 +93,43 @@ class MPCSettings:
     att_max : (2,) ndarray
         Bounds on the nominal |alpha - alpha_s| and |theta - theta_s| [rad] (the
         attitude requirement minus the support of the tube in alpha, theta), at every
-        fast step of the first ``fine_moves`` moves and at the start of every later one.
+        fast step of the first `fine_moves` moves and at the start of every later one.
     fine_moves : int
         Moves whose attitude and inputs are bounded at every fast step (the move the
         plan applies before the next re-plan, and the one a shifted plan applies).
     nominal_model : str
         'lpv' or 'cm': what the nominal state moves by
-        (:class:`~fahv.control.mpc.nominal_source.TrackingMPCNominal`).
+        (`fahv.control.mpc.nominal_source.TrackingMPCNominal`).
     du_max : (2,) ndarray
         Largest change of the nominal input at a move start [Phi, delta_e rad]: rows on
         the jump between consecutive moves of the plan and, at a re-plan, on the jump from
         the nominal input applied at the previous fast step
-        (:meth:`~fahv.control.mpc.tracking.TrackingMPC.solve`); inf (the default,
-        ``mpc.du_max`` 0): no rate rows.
+        (`fahv.control.mpc.tracking.TrackingMPC.solve`); inf (the default,
+        `mpc.du_max` 0): no rate rows.
     h_reset : bool
         Reset the nominal's altitude to the measured one at every re-plan
-        (:class:`~fahv.control.mpc.nominal_source.TrackingMPCNominal`).
+        (`fahv.control.mpc.nominal_source.TrackingMPCNominal`).
     u_box : (2, 2) ndarray or None
         Rows [lo, hi] on the manoeuvre part of the nominal input [Phi, delta_e rad], the
         input minus the steady input of the set point (its trim plus the estimate's
         shift u_d), K zeta + c, at every move start and every fast step of the first
-        ``fine_moves`` moves: the eight-state tube's nominal box less the box corners'
+        `fine_moves` moves: the eight-state tube's nominal box less the box corners'
         trim offsets (the plant applies its own trim at steady state, whatever its loss
-        or bias; :mod:`fahv.tube.rows`); None (``mpc.u_box`` all 0): no rows.
+        or bias; `fahv.tube.rows`); None (`mpc.u_box` all 0): no rows.
     hv_box : (2, 2) ndarray or None
-        ``[[h lo, V lo], [h hi, V hi]]`` in ft, ft/s: the nominal's altitude and speed range
+        `[[h lo, V lo], [h hi, V hi]]` in ft, ft/s: the nominal's altitude and speed range
         the design assumed (the eight-state tube's nominal box, the envelope less
-        ``eight_state.h_margin`` / ``V_margin``): the artificial set point stays in it
+        `eight_state.h_margin` / `V_margin`): the artificial set point stays in it
         (the recovery's too) and rows keep the predicted nominal in it at the attitude
-        rows' steps; None (``mpc.hv_box`` all 0): the set point anywhere on the trim map.
+        rows' steps; None (`mpc.hv_box` all 0): the set point anywhere on the trim map.
     x_box : (2, 7) ndarray or None
         [lo, hi] of the nominal's alpha, theta [rad], q [rad/s], eta_1, eta_1_dot [1/s],
         eta_2, eta_2_dot [1/s] as deviations from the nominal vehicle's trim at the
         nominal's own (h, V): the range the tube's certificate covers
-        (:func:`fahv.bounds.domain.certified_range`). Rows keep the predicted nominal
+        (`fahv.bounds.domain.certified_range`). Rows keep the predicted nominal
         in it at the attitude rows' steps, with the trim at its own (h, V) linearised at
-        the scheduling point (``T = Gx[2:9] Gx[0:2]^-1``), widened only to hold the start;
-        None (``mpc.x_box`` all 0): no rows.
+        the scheduling point (`T = Gx[2:9] Gx[0:2]^-1`), widened only to hold the start;
+        None (`mpc.x_box` all 0): no rows.
     """
 
     M: int
@@ -150,19 +150,19 @@ class MPCSettings:
 
     @property
     def has_rate_rows(self) -> bool:
-        """True if the QP carries the rate rows of ``du_max``."""
+        """True if the QP carries the rate rows of `du_max`."""
         return bool(np.all(np.isfinite(self.du_max)))
 
     @classmethod
     def of_parameters(cls, p: dict, n: int) -> MPCSettings:
-        """Settings of a nominal_trajectory node's ``mpc.*`` parameters.
+        """Settings of a nominal_trajectory node's `mpc.*` parameters.
 
         Parameters
         ----------
         p : dict
-            Validated node parameters; the keys under ``mpc.`` are read (``att_max`` in
-            deg, the boxes and rates as :func:`input_box`, :func:`range_box`,
-            :func:`state_box`, :func:`rate_limits`).
+            Validated node parameters; the keys under `mpc.` are read (`att_max` in
+            deg, the boxes and rates as `input_box`, `range_box`,
+            `state_box`, `rate_limits`).
         n : int
             Design states (the state weights after the ninth are 0).
 
@@ -192,7 +192,7 @@ class MPCSettings:
 
 
 def _box_values(value, n: int, name: str) -> np.ndarray | None:
-    """A box node parameter ``name`` as (n,) finite floats; None if all are 0 (no rows).
+    """A box node parameter `name` as (n,) finite floats; None if all are 0 (no rows).
 
     Raises
     ------
@@ -206,7 +206,7 @@ def _box_values(value, n: int, name: str) -> np.ndarray | None:
 
 
 def input_box(u_box) -> np.ndarray | None:
-    """``mpc.u_box`` (Phi lo, Phi hi, delta_e lo, delta_e hi [deg]; all 0: none) as rows.
+    """`mpc.u_box` (Phi lo, Phi hi, delta_e lo, delta_e hi [deg]; all 0: none) as rows.
 
     Parameters
     ----------
@@ -216,7 +216,7 @@ def input_box(u_box) -> np.ndarray | None:
     Returns
     -------
     (2, 2) ndarray or None
-        ``[[Phi lo, delta_e lo], [Phi hi, delta_e hi]]`` in -, rad; None for all zeros.
+        `[[Phi lo, delta_e lo], [Phi hi, delta_e hi]]` in -, rad; None for all zeros.
 
     Raises
     ------
@@ -233,7 +233,7 @@ def input_box(u_box) -> np.ndarray | None:
 
 
 def range_box(hv_box) -> np.ndarray | None:
-    """``mpc.hv_box`` (h lo, h hi [ft], V lo, V hi [ft/s]; all 0: none) as bounds.
+    """`mpc.hv_box` (h lo, h hi [ft], V lo, V hi [ft/s]; all 0: none) as bounds.
 
     Parameters
     ----------
@@ -258,18 +258,18 @@ def range_box(hv_box) -> np.ndarray | None:
     return np.array([[v[0], v[2]], [v[1], v[3]]])
 
 
-#: States of ``mpc.x_box`` (design order 2..8) and their node-parameter units.
+#: States of `mpc.x_box` (design order 2..8) and their node-parameter units.
 X_BOX_STATES = ("alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot")
 #: Factor from the node parameter's units (deg, deg, deg/s, -, 1/s, -, 1/s) to the state's.
 X_BOX_TO_STATE = np.array([math.radians(1.0)] * 3 + [1.0] * 4)
 
 
 def state_box(x_box) -> np.ndarray | None:
-    """``mpc.x_box`` (7 lows then 7 highs; all 0: none) as the QP's state range rows.
+    """`mpc.x_box` (7 lows then 7 highs; all 0: none) as the QP's state range rows.
 
     The values are the nominal's alpha, theta [deg], q [deg/s], eta_1, eta_1_dot [1/s],
     eta_2, eta_2_dot [1/s] as deviations from the nominal vehicle's trim at its own
-    (h, V) (:data:`X_BOX_STATES`).
+    (h, V) (`X_BOX_STATES`).
 
     Parameters
     ----------
@@ -299,7 +299,7 @@ def state_box(x_box) -> np.ndarray | None:
 
 
 def rate_limits(du_max) -> np.ndarray:
-    """``mpc.du_max`` (Phi, delta_e deg; 0: none) as the QP's rate bounds (2,) [-, rad].
+    """`mpc.du_max` (Phi, delta_e deg; 0: none) as the QP's rate bounds (2,) [-, rad].
 
     Parameters
     ----------

@@ -3,7 +3,7 @@
 The nominal part of the tube-based MPC of Mayne, Seron and Rakovic (2005), in the
 tracking form of Limon et al. (2010, "Robust tube-based MPC for tracking"), on the
 nominal LPV model of eq. (12) of Yang et al. (2022) scheduled at the current operating
-point (the condensed QP's layout and rows: :mod:`fahv.control.mpc.qp_layout`):
+point (the condensed QP's layout and rows: `fahv.control.mpc.qp_layout`):
 
 * **Artificial steady state.** The QP chooses, besides the nominal moves, a step
   delta = (dh_s, dV_s) of the artificial set point theta = (h_s, V_s) along the trim
@@ -30,12 +30,12 @@ point (the condensed QP's layout and rows: :mod:`fahv.control.mpc.qp_layout`):
   rows without the trust region on the set-point step, so the artificial set point may
   move in one re-plan to wherever on the trim map its steady input fits the tightened
   limits (the trust region only keeps the map's linearisation local), and then without
-  the steady-input rows (:meth:`TrackingMPC.solve`). What follows when both fail (the
+  the steady-input rows (`TrackingMPC.solve`). What follows when both fail (the
   shifted previous plan, then the terminal law) is the nominal source's
-  (:class:`fahv.control.mpc.nominal_source.TrackingMPCNominal`).
+  (`fahv.control.mpc.nominal_source.TrackingMPCNominal`).
 
 The steady state of the set point moves by the disturbance estimate's shift
-(x_d, u_d) = (H_x d, H_u d) (:func:`fahv.control.mpc.estimator.steady_state_shift`),
+(x_d, u_d) = (H_x d, H_u d) (`fahv.control.mpc.estimator.steady_state_shift`),
 computed at each scheduling.
 """
 
@@ -77,12 +77,12 @@ assert NO_BOUND < QP_NO_BOUND  # the QP's "no bound" must read as none in check_
 
 
 def daqp_module():
-    """The DAQP solver module (``daqp``), imported on the first solve.
+    """The DAQP solver module (`daqp`), imported on the first solve.
 
     Returns
     -------
     module
-        What :meth:`TrackingMPC.solve` builds its workspace from (``daqp.Model``).
+        What `TrackingMPC.solve` builds its workspace from (`daqp.Model`).
     """
     import daqp
 
@@ -104,7 +104,7 @@ class QPStats:
     recovered : int
         Re-plans whose QP was infeasible and that the recovery QP (set point free on
         the trim map, then also without the steady-input rows,
-        :meth:`TrackingMPC.solve`) planned.
+        `TrackingMPC.solve`) planned.
     reschedules : int
         Rebuilds of the QP matrices (scheduling changes).
     """
@@ -210,12 +210,12 @@ class TrackingMPC:
     def schedule(self, h: float, V: float) -> None:
         """Build the condensed QP at the scheduling point (h, V) [ft, ft/s].
 
-        Decision y of :class:`~fahv.control.mpc.qp_layout.QPLayout`. Also the
+        Decision y of `fahv.control.mpc.qp_layout.QPLayout`. Also the
         steady-state shift of a constant disturbance, Hx (n, n) and Hu (m, n)
-        (:func:`~fahv.control.mpc.estimator.steady_state_shift`), and the constraint
-        matrix of :meth:`solve` (it does not depend on the state). Scheduling is a large
+        (`fahv.control.mpc.estimator.steady_state_shift`), and the constraint
+        matrix of `solve` (it does not depend on the state). Scheduling is a large
         part of a campaign's time (docs/guide/campaigns.md): the horizon's products are stacked
-        (:mod:`fahv.control.mpc.qp_layout`).
+        (`fahv.control.mpc.qp_layout`).
 
         Parameters
         ----------
@@ -248,11 +248,11 @@ class TrackingMPC:
     def _prediction_rows(self, A, B, Gx, Gu) -> None:
         """Predictions, cost and the state-independent parts of the rows at (A, B, Gx, Gu).
 
-        Sets ``S``, ``C``, ``H``, ``Fz``, the input rows ``U_y``, ``U_z``, ``Uf_y``,
-        ``Uf_z``, the attitude rows ``Att_y``, ``Att_z``, the terminal box ``Tb_y``,
-        ``Tb_z``, and as the settings ask the range rows ``Hv_y``, ``Hv_z``, the
-        own-trim rows ``T_own``, ``Xb_y``, ``Xb_z`` and the rate rows ``Rate_y``,
-        ``Rate_z`` (:mod:`fahv.control.mpc.qp_layout`).
+        Sets `S`, `C`, `H`, `Fz`, the input rows `U_y`, `U_z`, `Uf_y`,
+        `Uf_z`, the attitude rows `Att_y`, `Att_z`, the terminal box `Tb_y`,
+        `Tb_z`, and as the settings ask the range rows `Hv_y`, `Hv_z`, the
+        own-trim rows `T_own`, `Xb_y`, `Xb_z` and the rate rows `Rate_y`,
+        `Rate_z` (`fahv.control.mpc.qp_layout`).
         """
         s, ly, K, Du = self.s, self.layout, self.K, self.Du
         Phi_w, Gam_w, Psi_w = move_predictions(A, B, K, Gx, Gu, Du, s.M)
@@ -280,11 +280,11 @@ class TrackingMPC:
 
         Input limits (N_p m), terminal box |L^-1 zeta_N| <= alpha / sqrt(n) (two one-sided
         sets of n rows), steady input u_base + Gu delta +/- alpha k_max within the
-        tightened limits (2 m), attitude rows, the rate rows (``du_max``), the input
-        limits at every fast step inside the first ``fine_moves`` moves
-        (fine_moves (M - 1) m rows), and with ``u_box`` the rows on the manoeuvre part of
+        tightened limits (2 m), attitude rows, the rate rows (`du_max`), the input
+        limits at every fast step inside the first `fine_moves` moves
+        (fine_moves (M - 1) m rows), and with `u_box` the rows on the manoeuvre part of
         the input (minus the set point's steady input) at the same move starts and fast
-        steps. Then the simple bounds on y (:meth:`_set_point_bounds`).
+        steps. Then the simple bounds on y (`_set_point_bounds`).
         """
         ly, n, m, N_p = self.layout, self.n, self.m, self.s.N_p
         nb = ly.ny
@@ -319,8 +319,8 @@ class TrackingMPC:
     def _set_point_bounds(self) -> None:
         """Simple bounds on y: the set point's trust region and map bounds, alpha in [0, 1].
 
-        The recovery's bounds (``solve(recover=True)``) leave out the trust region: the
-        set point anywhere on the trim map (inside ``hv_box``, if given).
+        The recovery's bounds (`solve(recover=True)`) leave out the trust region: the
+        set point anywhere on the trim map (inside `hv_box`, if given).
         """
         s, ly, nb = self.s, self.layout, self.layout.ny
         lo_b = np.full(nb, -QP_NO_BOUND)
@@ -379,7 +379,7 @@ class TrackingMPC:
             attitude, terminal set, steady input) stays.
         u_prev : (2,) ndarray, optional
             Nominal input applied at the previous fast step (absolute). With rate rows
-            (``mpc.du_max``) the first move's input may differ from it by at most du_max;
+            (`mpc.du_max`) the first move's input may differ from it by at most du_max;
             None: no such row (the first plan of a run).
         relax_steady : bool
             Drop the steady-input rows (the terminal ingredients' admissibility beyond
@@ -394,7 +394,7 @@ class TrackingMPC:
             Solution (None if rejected).
         info : str
             "ok" or why it was rejected (solver flag, or the failed check of
-            :func:`fahv.synthesis.qp.check_kkt`); a rejected QP raises nothing, the
+            `fahv.synthesis.qp.check_kkt`); a rejected QP raises nothing, the
             caller falls back.
         """
         e_theta = (self.theta_s - cmd) / self.theta_scale
@@ -404,9 +404,9 @@ class TrackingMPC:
         return self._solve_qp(f, bl, bu)
 
     def _row_bounds(self, z0, u_base, x_off, recover, u_prev, relax_steady):
-        """Lower and upper bounds (bl, bu) of y's simple bounds and of the rows of ``A_c``.
+        """Lower and upper bounds (bl, bu) of y's simple bounds and of the rows of `A_c`.
 
-        In the order of :meth:`_constraint_matrix`; arguments as :meth:`solve`.
+        In the order of `_constraint_matrix`; arguments as `solve`.
         """
         s, m = self.s, self.m
         u_off = (self.U_z @ z0).reshape(s.N_p, m) + u_base
@@ -437,8 +437,8 @@ class TrackingMPC:
     def _move_start_bounds(self, z0, u_base, u_off, x_off, recover, u_prev, relax_steady):
         """Bounds (bl, bu) of y and of the move-start, terminal, steady and attitude rows.
 
-        ``u_off`` (N_p, m) is the move-start inputs at y = 0; the other arguments as
-        :meth:`solve`.
+        `u_off` (N_p, m) is the move-start inputs at y = 0; the other arguments as
+        `solve`.
         Per-move rows come as (N_p, m) and (n_att, 2) blocks broadcast against their
         (m,) / (2,) bounds (the same element-wise operations as tiling the bounds).
         """
@@ -471,7 +471,7 @@ class TrackingMPC:
     def _solve_qp(self, f, bl, bu):
         """Solve with DAQP (warm start) and check the solution: (y or None, "ok" or why).
 
-        A new workspace per scheduling (H and ``A_c`` fixed until then); between re-plans
+        A new workspace per scheduling (H and `A_c` fixed until then); between re-plans
         only f and the bounds move. A failed solve drops the workspace.
         """
         if self._qp is None:
