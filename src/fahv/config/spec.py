@@ -159,6 +159,10 @@ class Field:
                 raise error(f"{where} must be in {self.range_text()}{unit}, got {v!r}")
         allowed = self.allowed()
         if allowed and v not in allowed:
+            if callable(self.choices):  # a registry's names: plugins may add to them
+                raise error(f"{where}: unknown {self.description} {v!r}; must be one of "
+                            f"{allowed} (a plugin's are registered by the modules the "
+                            "environment variable FAHV_PLUGINS names)")  # fmt: skip
             raise error(f"{where} must be one of {allowed}, got {v!r}")
         return v
 
@@ -290,6 +294,9 @@ def _section(spec, data, source, prefix, error, defaults, pending) -> dict:
     if not isinstance(data, Mapping):
         raise error(f"{source}: '{where}' must be a mapping, got {type(data).__name__}")
     names = {e.name for e in spec.entries}
+    for e in spec.entries:  # a choice first (a fault kind), then the keys it brings
+        if isinstance(e, Field) and e.choices is not None and e.when is None and e.name in data:
+            e.check(data[e.name], f"{source}: key '{prefix}{e.name}'", error)
     unknown = sorted(set(data) - names, key=str)
     if unknown:
         raise error(f"{source}: unknown key '{prefix}{unknown[0]}' (known: {sorted(names)})")

@@ -185,7 +185,8 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     eh, eV = x[:, H] - run.h_c, x[:, V] - run.V_c
     ts_h, ts_V = settling_times(run)
     t_settle = max(ts_h, ts_V) if not (math.isnan(ts_h) or math.isnan(ts_V)) else math.nan
-    after = t >= (t_settle if not math.isnan(t_settle) else t[-1])
+    settled = not math.isnan(t_settle)
+    after = t >= (t_settle if settled else t[-1])
     in_run = t_fault is not None and t_fault < t[-1]
     tf = t_fault if in_run else t[0]
     post = t >= tf
@@ -215,10 +216,13 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     return {
         "settling_time_h_s": ts_h,
         "settling_time_V_s": ts_V,
-        "h_err_max_after_settle_ft": float(np.abs(eh[after]).max()),
-        "V_err_max_after_settle_fps": float(np.abs(eV[after]).max()),
-        "h_err_rms_after_settle_ft": float(np.sqrt(np.mean(eh[after] ** 2))),
-        "V_err_rms_after_settle_fps": float(np.sqrt(np.mean(eV[after] ** 2))),
+        # after settling: only for a run that settled (NaN otherwise)
+        "h_err_max_after_settle_ft": float(np.abs(eh[after]).max()) if settled else math.nan,
+        "V_err_max_after_settle_fps": float(np.abs(eV[after]).max()) if settled else math.nan,
+        "h_err_rms_after_settle_ft": float(np.sqrt(np.mean(eh[after] ** 2)))
+        if settled else math.nan,
+        "V_err_rms_after_settle_fps": float(np.sqrt(np.mean(eV[after] ** 2)))
+        if settled else math.nan,
         "h_err_final_ft": float(eh[-1]),
         "V_err_final_fps": float(eV[-1]),
         "alpha_err_max_deg": float(np.abs(ea).max()),

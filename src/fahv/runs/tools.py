@@ -117,6 +117,19 @@ def _no_fault(m: dict) -> bool:
     return isinstance(v, float) and math.isnan(v)
 
 
+#: What a NaN of a row means, in the words of the README's results table.
+NAN_WORDS = {
+    "t_fault_s": "none in the run",
+    "settling_time_h_s": "never",
+    "settling_time_V_s": "never",
+    "h_err_rms_after_settle_ft": "never settled",
+    "V_err_rms_after_settle_fps": "never settled",
+    "tube_fraction_inside": "no tube",
+    "tube_level_max": "no tube",
+    "tube_error_h_max_ft": "no tube",
+}
+
+
 def format_metrics(table: dict[str, dict]) -> str:
     """Metrics of several runs as a text table, one column per run.
 
@@ -130,7 +143,8 @@ def format_metrics(table: dict[str, dict]) -> str:
     -----
     The "after fault" rows of a run without a fault within it are over the whole run:
     their label says so when no column has a fault, a `*` marks such a cell
-    otherwise. A fault onset NaN prints as `none in the run`.
+    otherwise. A NaN prints as what it means (`NAN_WORDS`: a settling time as
+    `never`, a tube row as `no tube`, a fault onset as `none in the run`).
     """
     names = list(table)
     none = [n for n in names if _no_fault(table[n])]
@@ -143,8 +157,8 @@ def format_metrics(table: dict[str, dict]) -> str:
         cells = []
         for n in names:
             v = table[n].get(key)
-            if key == "t_fault_s" and isinstance(v, float) and math.isnan(v):
-                cells.append("none in the run")
+            if isinstance(v, float) and math.isnan(v) and key in NAN_WORDS:
+                cells.append(NAN_WORDS[key])
             elif v is None:
                 cells.append("-")
             else:
