@@ -203,6 +203,10 @@ def test_rerun_metadata_and_topics_agree_on_the_run_s_own_fault(reference, tmp_p
     assert md["campaign_seed"] == str(c["seed"])
     for col in ("fault.t_onset", "s.m", "command.h_c", "initial.V0"):
         assert md[f"dispersed.{col}"] == str(row[col]), col
+    # the run's coverage verdict, with its own fault and command, in the row and the file
+    assert md["coverage"] == row["coverage"] and row["coverage"].startswith(
+        ("certified", "not certified: ")
+    )
 
 
 def test_report_numbers(reference):
@@ -219,6 +223,15 @@ def test_report_numbers(reference):
             "worst_trajectories.png"} <= names  # fmt: skip
     assert all(p.stat().st_size > 5000 for p in rep.figures)
     assert "| attitude error within +/- 0.5 deg |" in rep.text
+    # the certified and the not certified draws apart: every run in one group
+    groups = rep.by_coverage
+    assert set(groups) == {"certified", "not certified"}
+    assert sum(groups[g]["tube_mpc"]["completes"][1] for g in groups) == 12
+    outside = [r for r in rows if r["fault.kind"] == "dropout" and r["fault.t_onset"] < 6.0]
+    assert outside and all("fault kind dropout outside" in r["coverage"] for r in outside)
+    n_not = sum(r["coverage"] != "certified" for r in rows)
+    assert groups["not certified"]["tube_mpc"]["completes"][1] == n_not
+    assert f"### not certified: {n_not} of 12 draws" in rep.text
 
 
 def test_report_command_prints_a_summary_and_the_path(reference, capsys):
@@ -229,7 +242,9 @@ def test_report_command_prints_a_summary_and_the_path(reference, capsys):
     assert main(["campaign", "report", str(out), "--no-figures"]) == 0
     text = capsys.readouterr().out
     assert f"report: {out / 'report' / 'report.md'}" in text
-    assert "## Worst" not in text and len(text.splitlines()) <= 12
+    assert "## Worst" not in text and len(text.splitlines()) <= 13
+    # the paper's design (W not closed over its domain) certifies none of the draws
+    assert "\n  all, certified | not certified draws: tube_mpc 0/0 | " in text
     rep = (out / "report" / "report.md").read_text()
     assert "## Worst 3 runs per metric" in rep
     att = sum(verdicts(r, c["requirements"])["attitude"] for r in store.read_rows(out))

@@ -2,6 +2,8 @@
 
 import math
 
+import pytest
+
 from fahv.campaign.report import REQUIREMENTS, verdicts
 
 REQ = {"attitude_deg": 0.5, "settling_s": 60.0, "h_final_ft": 10.0, "V_final_fps": 2.0}
@@ -59,3 +61,46 @@ def test_nominal_range_is_checked_against_the_certified_range_and_not_in_all():
         v = verdicts({**row, key: value}, REQ, cert)
         assert v["nominal_range"] is False, key
         assert v["all"] is True  # the requirements alone
+
+
+def test_the_certified_and_the_not_certified_draws_are_counted_apart():
+    """Synthetic rows of two variants over five draws: draws 0 and 1 certified, 2 to 4
+    not (an onset beyond the certified one, a fault kind outside the design's, an open
+    certificate); each group gets its own pass rates and Clopper-Pearson bounds, and the
+    reasons are counted with their numbers (not those in names) as #."""
+    from fahv.campaign.report import Report, coverage_lines, failure_bound
+
+    onset = "onset loss {} % above the certified 8.07 %"
+    stuck = "fault kind stuck outside the design's fault kinds (none, loss_of_effectiveness, bias)"
+    paper = "design case1_paper: W is not shown to bound the disturbance over its domain"
+    covs = ["certified", "certified", "not certified: " + onset.format(12.5),
+            f"not certified: {stuck}; " + onset.format(20), f"not certified: {paper}"]  # fmt: skip
+    slow = {"settling_after_command_s": 75.0}
+    rows = {
+        "a": [{**ROW, "index": i, "variant": "a", "coverage": c} for i, c in enumerate(covs)],
+        "b": [{**ROW, **(slow if i >= 1 else {}), "index": i, "variant": "b", "coverage": c}
+              for i, c in enumerate(covs)],
+    }  # fmt: skip
+    data = {"variants": ["a", "b"], "requirements": {**REQ, "confidence": 0.95}}
+    table, lines = coverage_lines(data, rows)
+    assert set(table) == {"certified", "not certified"}
+    assert table["certified"]["a"]["all"] == (2, 2, failure_bound(0, 2, 0.95))
+    assert table["certified"]["b"]["all"] == (1, 2, failure_bound(1, 2, 0.95))
+    assert table["not certified"]["a"]["all"] == (3, 3, failure_bound(0, 3, 0.95))
+    assert table["not certified"]["b"]["settling"] == (0, 3, 1.0)
+    assert table["certified"]["b"]["all"][2] == pytest.approx(0.9747, abs=1e-4)
+    assert table["not certified"]["a"]["all"][2] == pytest.approx(1 - 0.05 ** (1 / 3))
+    text = "\n".join(lines)
+    assert "### certified: 2 of 5 draws" in text and "### not certified: 3 of 5 draws" in text
+    assert (
+        "| settled within 60 s of the command | 2/2 (100.0 %), p_fail < 0.776 | "
+        "1/2 (50.0 %), p_fail < 0.975 |" in text
+    )
+    assert "- 2 x onset loss # % above the certified # %" in text
+    assert f"- 1 x {stuck}" in text and f"- 1 x {paper}" in text
+    rep = Report("", {v: {k: (0, 0, 0.0) for k, _ in REQUIREMENTS} for v in "ab"}, [], 10, table)
+    assert "  all, certified | not certified draws: a 2/2 | 3/3; b 1/2 | 0/3" in rep.summary()
+    # a dataset without coverage verdicts (earlier versions) has no such section
+    old = {v: [{k: x for k, x in r.items() if k != "coverage"} for r in rs]
+           for v, rs in rows.items()}  # fmt: skip
+    assert coverage_lines(data, old) == ({}, [])

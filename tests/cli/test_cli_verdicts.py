@@ -1,6 +1,7 @@
 """Every fault kind on Case 1 through `fahv simulate`: the run completes (exit 0) or ends
 with a named verdict (exit 3) at a named step, time and node, in the run file and in
-`fahv inspect`; never a traceback. A fault kind of a plugin is held to the same."""
+`fahv inspect`; never a traceback. A fault kind of a plugin is held to the same. Each
+run's coverage verdict is printed once and stored."""
 
 import importlib
 import os
@@ -34,10 +35,20 @@ EXPECTED = {
     "elevator_travel": ("nominal_out_of_domain", 1150, "nominal_trajectory"),
 }
 
+#: The coverage verdict of each run (design cm_certified, the fault at 20 s).
+OUTSIDE = "not certified: fault kind {} outside the design's fault kinds (none, " \
+          "loss_of_effectiveness, bias)"  # fmt: skip
+COVERAGE = {
+    "none": "certified",
+    "loss_of_effectiveness": "not certified: onset loss 10 % above the certified 8.07 %",
+    "bias": "not certified: onset of a 2 deg bias (the onset lines certify losses only)",
+    **{k: OUTSIDE.format(k) for k in ("stuck", "dropout", "elevator_travel")},
+}
+
 
 @pytest.fixture
 def plugin_faults(monkeypatch):
-    """The plugin fault kind ``elevator_travel`` (tests/cli/plugin_faults.py), registered."""
+    """The plugin fault kind `elevator_travel` (tests/cli/plugin_faults.py), registered."""
     monkeypatch.syspath_prepend(str(HERE))
     monkeypatch.setenv("FAHV_PLUGINS", "plugin_faults")
     sys.modules.pop("plugin_faults", None)
@@ -47,7 +58,7 @@ def plugin_faults(monkeypatch):
 
 
 def case1_with(tmp_path: Path, kind: str) -> Path:
-    """A copy of Case 1 with the fault ``kind`` at :data:`ONSET`."""
+    """A copy of Case 1 with the fault `kind` at `ONSET`."""
     spec = yaml.safe_load(CASE1.read_text())
     spec["fault"] = {"kind": kind, "t_onset": ONSET, **PARAMS.get(kind, {})}
     path = tmp_path / f"case1_{kind}.yaml"
@@ -56,14 +67,20 @@ def case1_with(tmp_path: Path, kind: str) -> Path:
 
 
 def simulate_kind(kind: str, tmp_path: Path, capsys) -> tuple[int, str, object]:
-    """`fahv simulate` of Case 1 with fault ``kind``: (exit status, stderr, the run file)."""
+    """`fahv simulate` of Case 1 with fault `kind`: (exit status, stderr, the run file)."""
     out = tmp_path / "bags"
     rc = main(["simulate", str(case1_with(tmp_path, kind)), "--duration", str(DURATION),
                "--out", str(out)])  # fmt: skip
-    err = capsys.readouterr().err
+    printed = capsys.readouterr()
+    err = printed.err
     assert "Traceback" not in err
+    # the coverage verdict, once, before the metrics; the same in the run file
+    assert printed.out.count("coverage: ") == 1
+    assert f"coverage: {COVERAGE[kind]}\ncase case1, design " in printed.out
     (bag,) = out.iterdir()
-    return rc, err, read_run(bag)
+    rec = read_run(bag)
+    assert rec.metadata["coverage"] == COVERAGE[kind]
+    return rc, err, rec
 
 
 def check_verdict(kind: str, rc: int, err: str, rec, capsys) -> None:
@@ -77,6 +94,7 @@ def check_verdict(kind: str, rc: int, err: str, rec, capsys) -> None:
         assert md["verdict_node"] == node
     assert main(["inspect", str(rec.path)]) == 0
     shown = capsys.readouterr().out
+    assert f"\ncoverage      {COVERAGE[kind]}\n" in shown
     if name == "completed":
         assert rc == 0 and md["status"] == "complete"
         assert f"verdict       completed at t = {step * 0.02:.2f} s ({step} steps)" in shown

@@ -1,8 +1,10 @@
-"""The code hash of a design's provenance covers every package the design code imports."""
+"""The code hash of a design's provenance covers every package the design code imports;
+the design hash is the design's content (inputs and arrays), not the code that made it."""
 
 from pathlib import Path
 
 import grimp
+import numpy as np
 
 import fahv
 from fahv.spec.artefacts import DESIGN_PACKAGES
@@ -24,3 +26,92 @@ def test_the_code_hash_covers_every_package_the_design_and_its_verification_impo
     packages = {p for p in packages if (ROOT / p / "__init__.py").is_file()}
     assert sorted(packages - set(DESIGN_PACKAGES) - NOT_HASHED) == []
     assert all((ROOT / p / "__init__.py").is_file() for p in DESIGN_PACKAGES)
+
+
+def _small_design(code_hash="aaaa", time_s=1.0, F=(1.0, 2.0)):
+    """A design of two arrays, made by code `code_hash` in `time_s` seconds."""
+    from fahv.spec.artefacts import Design
+
+    prov = {"design_file": "d.yaml", "design_file_hash": "1234", "vehicle_file": "",
+            "vehicle_hash": "5678", "code_version": "0.1.0", "code_hash": code_hash,
+            "blas_threads": "1"}  # fmt: skip
+    d = Design(
+        {"name": "d", "Ts": 0.02},
+        {"F": np.array([F]), "N": np.eye(2)},
+        {"code_version": "0.1.0", "provenance": prov, "design_time_s": time_s,
+         "stage_times_s": {"model": time_s}},
+    )  # fmt: skip
+    d.summary["design_hash"] = d.content_hash()
+    return d
+
+
+def test_the_design_hash_is_the_content_not_the_code():
+    """The arrays and the inputs' hashes make the design hash; the code version and hash,
+    the paths and the times do not."""
+    a = _small_design()
+    assert _small_design(code_hash="bbbb", time_s=9.0).content_hash() == a.content_hash()
+    other = _small_design()
+    other.summary["provenance"].update(code_version="0.2.0", design_file="/elsewhere/d.yaml")
+    assert other.content_hash() == a.content_hash()
+    assert _small_design(F=(1.0, 2.0000000001)).content_hash() != a.content_hash()
+    for key in ("design_file_hash", "vehicle_hash"):  # another design file or vehicle
+        changed = _small_design()
+        changed.summary["provenance"][key] = "9999"
+        assert changed.content_hash() != a.content_hash(), key
+    assert a.content_hash() == "2130a97a495b9b6b"
+
+
+def test_resaving_the_same_content_leaves_the_files_byte_identical(tmp_path):
+    """A design re-made by other code into the same arrays: design.npz, design.json and
+    the certificate lines stay byte for byte, with the stored code hash and stage times
+    (the next design's estimate); another array rewrites them."""
+    from fahv.spec.artefacts import load_design, save_design
+
+    out = tmp_path / "d"
+    save_design(_small_design(), out, {"certificate.txt": "lines\n"})
+    files = {p.name: p.read_bytes() for p in out.iterdir()}
+    again = _small_design(code_hash="bbbb", time_s=9.0)
+    save_design(again, out, {"certificate.txt": "lines\n"})
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == files
+    assert again.summary["provenance"]["code_hash"] == "aaaa"  # the stored one, kept
+    assert load_design(out).summary["stage_times_s"] == {"model": 1.0}
+    save_design(_small_design(code_hash="bbbb", time_s=9.0, F=(3.0, 2.0)), out)
+    stored = load_design(out)
+    assert stored.summary["provenance"]["code_hash"] == "bbbb"
+    assert stored.summary["stage_times_s"] == {"model": 9.0}
+    assert (out / "design.npz").read_bytes() != files["design.npz"]
+
+
+def test_a_design_stored_with_the_earlier_hash_still_loads(tmp_path):
+    """Designs and campaign folders stored before the hash left the code out load as
+    they are (their hash over the whole provenance is accepted)."""
+    from fahv.spec.artefacts import load_design, save_design
+
+    d = _small_design()
+    d.summary["design_hash"] = d.legacy_hash()
+    assert d.legacy_hash() != d.content_hash()
+    save_design(d, tmp_path / "old")
+    assert load_design(tmp_path / "old").summary["design_hash"] == d.legacy_hash()
+
+
+def test_remaking_a_design_into_the_same_arrays_keeps_its_files(tmp_path, monkeypatch):
+    """`fahv design` (design_and_store) on a folder that holds the same design: the
+    stage clock gets the stored stage times, and no file changes."""
+    import fahv.cli.design as cli_design
+
+    out = tmp_path / "d"
+    seen = []
+
+    def fake_design(spec, vehicle, progress=None, log=print, clock=None, previous=None):
+        seen.append(dict(clock.previous))
+        clock.stage("model")
+        return _small_design(code_hash=f"code{len(seen)}")
+
+    monkeypatch.setattr(cli_design, "run_design", fake_design)
+    lines = []
+    cli_design.design_and_store(None, None, out, log=lines.append)
+    files = {p.name: p.read_bytes() for p in out.iterdir()}
+    cli_design.design_and_store(None, None, out, log=lines.append)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == files
+    assert seen[0] == {} and list(seen[1]) == ["model"]  # the stored stage times
+    assert lines[-1].startswith("design hash 2130a97a495b9b6b: the stored design's arrays")

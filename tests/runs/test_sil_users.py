@@ -1,6 +1,7 @@
 """The SIL graph as users run it: several graphs at once with the same exported
 ROS_DOMAIN_ID, a foreign graph in the domain, Ctrl-C on `fahv sil`, and the graph started
-node by node with `ros2 run` after `source ros_ws/install/setup.bash`."""
+node by node with `ros2 run` after `source ros_ws/install/setup.bash` (once, twice with one
+parameter file)."""
 
 import os
 import re
@@ -217,7 +218,7 @@ def test_ros2_standin_bag_info_is_fahv_inspect(design, tmp_path):
 
 
 def _by_hand(hand_graph, quick_case, tmp_path, duration, watchdog, without=()):
-    """The README's commands, each node's output in ``tmp_path/logs/<node>.log``."""
+    """The README's commands, each node's output in `tmp_path/logs/<node>.log`."""
     return hand_graph(quick_case, tmp_path, duration, watchdog, without, tmp_path / "logs")
 
 
@@ -305,6 +306,33 @@ def test_graph_started_by_hand_names_a_node_killed_mid_run(
     assert not rec.truncated and rec.metadata["status"] == "interrupted (exit status 3)"
     assert "tube_mpc (lost" in rec.metadata["reason"]
     assert 500 <= rec.topics["/hsv/state"]["count"] < 15000
+
+
+def test_the_graph_started_twice_by_hand_with_one_parameter_file_records_two_runs(
+    quick_case, tmp_path, hand_graph, exit_statuses
+):
+    """The README's commands twice with the same parameter file: the second recorder finds
+    the run folder taken, says so and records to `<run>-2`; every node of both graphs
+    exits 0 and both runs are complete, with the same states."""
+    lines, started, env, _ = _by_hand(hand_graph, quick_case, tmp_path, T, None)
+    with domain_coordinator.domain_id() as domain:
+        env["ROS_DOMAIN_ID"] = str(domain)
+        for _ in range(2):
+            done = subprocess.run(
+                ["bash", "-c", "\n".join(lines)], cwd=ROOT, env=env, capture_output=True,
+                text=True, timeout=180,
+            )  # fmt: skip
+            assert exit_statuses(done.stdout) == dict.fromkeys(started, 0), done.stdout
+    first, second = sorted((tmp_path / "bags").iterdir())
+    assert second.name == f"{first.name}-2"
+    log = _read(tmp_path / "logs" / "recorder.log")  # the second start's
+    assert f"run folder {first} exists already: recording to {second}" in log, log[-2000:]
+    runs = [read_run(b) for b in (first, second)]
+    for rec in runs:
+        assert not rec.truncated and rec.metadata["status"] == "complete"
+        assert rec.topics["/hsv/state"]["count"] == N
+    a, b = (run_result_of(rec) for rec in runs)
+    assert np.array_equal(a.x, b.x) and a.x.shape == (N, 9)
 
 
 def _read(path):

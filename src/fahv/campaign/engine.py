@@ -46,6 +46,7 @@ from fahv.loop.batch import simulate_batch
 from fahv.loop.simulate import RunResult
 from fahv.model.vehicle import ALPHA, THETA, H, V, load_vehicle
 from fahv.runs.metrics import metrics
+from fahv.runs.sil import run_coverage
 from fahv.spec.artefacts import load_design, save_design
 from fahv.version import __version__
 
@@ -119,7 +120,8 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
     Returns
     -------
     dict
-        `rows` (one dict per run: index, variant, seeds, dispersed values, status,
+        `rows` (one dict per run: index, variant, seeds, dispersed values,
+        `coverage` (its coverage verdict, `fahv.runs.sil.run_coverage`), status,
         reason, every metric of `fahv.runs.metrics.metrics`, `t_command_end_s`,
         `settling_after_command_s`, `wall_s`), `trajectories` (per completed
         run), `wall_s` of the batch, `host`.
@@ -128,20 +130,22 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
     case, seed = design.case, data["seed"]
     values = [draw(data, case, i) for i in indices]
     results: list = [None] * len(indices)
-    ovs, where = [], []
+    ovs, where, covered = [], [], [""] * len(indices)
     for j, v in enumerate(values):
         try:
             ovs.append(overrides(v, design, variant))
             where.append(j)
         except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
             results[j] = exc
+        else:
+            covered[j] = run_coverage(design, duration, ovs[-1]).text()
     for j, res in zip(where, simulate_batch(design, variant, ovs, duration), strict=True):
         results[j] = res
     veh = _vehicle(design.summary.get("provenance", {}).get("vehicle_file", ""))
     rows, trajs = [], []
-    for i, vals, res in zip(indices, values, results, strict=True):
+    for i, vals, res, cov in zip(indices, values, results, covered, strict=True):
         row = {"index": int(i), "variant": variant, "campaign_seed": seed,
-               "run_seed": run_seed(seed, i), **vals}  # fmt: skip
+               "run_seed": run_seed(seed, i), **vals, "coverage": cov}  # fmt: skip
         failure = f"{type(res).__name__}: {res}" if isinstance(res, BaseException) else None
         run = getattr(res, "partial", None) if failure else res
         if run is None:

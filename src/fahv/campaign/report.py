@@ -27,8 +27,10 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections import Counter
 from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +39,7 @@ from scipy.stats import beta
 from fahv.campaign import store
 from fahv.campaign.draws import scatter_columns
 from fahv.campaign.paired import paired_figures, paired_stats, paired_text
+from fahv.spec.coverage import NOT_CERTIFIED, is_certified
 
 #: Requirements in report order: (key, description).
 REQUIREMENTS = (
@@ -178,12 +181,16 @@ class Report:
     figures : list of Path
     n_runs : int
         Rows in the dataset.
+    by_coverage : dict
+        `{group: {variant: {requirement: (passed, applicable, bound)}}}` of the
+        certified and the not certified draws (`coverage_lines`).
     """
 
     text: str
     table: dict
     figures: list
     n_runs: int
+    by_coverage: dict = dataclass_field(default_factory=dict)
 
     def summary(self) -> str:
         """A few lines for the terminal: runs, then each requirement's pass count per variant.
@@ -200,6 +207,11 @@ class Report:
                 ok, n, _bound = self.table[v][key]
                 cells.append(f"{'n/a' if n == 0 else f'{ok}/{n} ({100.0 * ok / n:.1f} %)':>18}")
             lines.append(f"  {key:<{width}}  " + "  ".join(cells))
+        if self.by_coverage:  # "every requirement at once" of each group of draws
+            c, u = (self.by_coverage[g] for g in COVERAGE_GROUPS)
+            lines.append("  all, certified | not certified draws: " + "; ".join(
+                f"{v} {c[v]['all'][0]}/{c[v]['all'][1]} | {u[v]['all'][0]}/{u[v]['all'][1]}"
+                for v in variants))  # fmt: skip
         return "\n".join(lines)
 
 
@@ -254,6 +266,8 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
     lines = header_lines(man, rows)
     table, rate_lines = pass_rate_lines(data, per_variant, _certified_range(out))
     lines += rate_lines
+    by_coverage, cov_lines = coverage_lines(data, per_variant, _certified_range(out))
+    lines += cov_lines
     reasons = Counter(r["reason"].split(" at t =")[0] for r in rows if r["status"] != "ok")
     if reasons:
         lines += ["", "Failed runs by reason:", ""]
@@ -283,7 +297,7 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
     rep = out / "report"
     rep.mkdir(exist_ok=True)
     (rep / "report.md").write_text(text)
-    return Report(text, table, figs, len(rows))
+    return Report(text, table, figs, len(rows), by_coverage)
 
 
 def header_lines(man: dict, rows: list[dict]) -> list[str]:
@@ -323,22 +337,8 @@ def pass_rate_lines(data: dict, per_variant: dict, certified) -> tuple[dict, lis
     lines : list of str
     """
     req = data["requirements"]
-    conf = req["confidence"]
-    table: dict = {}
-    lines = ["| requirement | " + " | ".join(data["variants"]) + " |",
-             "|---|" + "---|" * len(data["variants"])]  # fmt: skip
     verd = {v: [verdicts(r, req, certified) for r in rs] for v, rs in per_variant.items()}
-    for key, desc in REQUIREMENTS:
-        cells = []
-        for v in data["variants"]:
-            vals = [x[key] for x in verd[v] if x[key] is not None]
-            n, ok = len(vals), sum(vals)
-            bound = failure_bound(n - ok, n, conf)
-            table.setdefault(v, {})[key] = (ok, n, bound)
-            cells.append(
-                "n/a" if n == 0 else f"{ok}/{n} ({100.0 * ok / n:.1f} %), p_fail < {bound:.3g}"
-            )
-        lines.append(f"| {desc.format(**req)} | " + " | ".join(cells) + " |")
+    table, lines = rate_table(data, verd)
     for v in data["variants"]:  # a nominal part stuck on its terminal law off the command
         stuck = [
             r["index"] for r, x in zip(per_variant[v], verd[v], strict=True)
@@ -352,6 +352,103 @@ def pass_rate_lines(data: dict, per_variant: dict, certified) -> tuple[dict, lis
                 + (f": runs {', '.join(map(str, stuck[:20]))}" if stuck else "")
                 + ".",
             ]
+    return table, lines
+
+
+def rate_table(data: dict, verd: dict) -> tuple[dict, list[str]]:
+    """The pass-rate table of runs' verdicts, per requirement and variant.
+
+    Parameters
+    ----------
+    data : dict
+        The validated campaign (`variants`, `requirements`).
+    verd : dict
+        `{variant: [verdicts of a run, ...]}` (`verdicts`).
+
+    Returns
+    -------
+    table : dict
+        `{variant: {requirement: (passed, runs, failure-probability bound)}}`
+        (`failure_bound` at the campaign's confidence).
+    lines : list of str
+        The Markdown table.
+    """
+    req = data["requirements"]
+    table: dict = {}
+    lines = ["| requirement | " + " | ".join(data["variants"]) + " |",
+             "|---|" + "---|" * len(data["variants"])]  # fmt: skip
+    for key, desc in REQUIREMENTS:
+        cells = []
+        for v in data["variants"]:
+            vals = [x[key] for x in verd[v] if x[key] is not None]
+            n, ok = len(vals), sum(vals)
+            bound = failure_bound(n - ok, n, req["confidence"])
+            table.setdefault(v, {})[key] = (ok, n, bound)
+            cells.append(
+                "n/a" if n == 0 else f"{ok}/{n} ({100.0 * ok / n:.1f} %), p_fail < {bound:.3g}"
+            )
+        lines.append(f"| {desc.format(**req)} | " + " | ".join(cells) + " |")
+    return table, lines
+
+
+#: The two groups of draws `coverage_lines` reports apart, by their coverage verdict.
+COVERAGE_GROUPS = ("certified", "not certified")
+
+
+def coverage_group(row: dict) -> str | None:
+    """`certified` or `not certified` by a row's `coverage`; None without a verdict."""
+    ok = is_certified(row.get("coverage"))
+    return None if ok is None else COVERAGE_GROUPS[0 if ok else 1]
+
+
+def coverage_lines(data: dict, per_variant: dict, certified=None) -> tuple[dict, list[str]]:
+    """Pass rates of the draws the design certifies and of the others, apart.
+
+    A draw's group is its runs' coverage verdict (column `coverage`,
+    `fahv.runs.sil.run_coverage`); a dataset of an earlier version, without the
+    column, has no such section.
+
+    Parameters
+    ----------
+    data : dict
+        The validated campaign.
+    per_variant : dict
+        `{variant: [row, ...]}`.
+    certified : dict, optional
+        The design's certified nominal range (`verdicts`).
+
+    Returns
+    -------
+    table : dict
+        `{group: {variant: {requirement: (passed, runs, bound)}}}` for the groups of
+        `COVERAGE_GROUPS`; empty without coverage verdicts.
+    lines : list of str
+        The section: per group its draws and its table; the reasons of the draws not
+        certified, counted with their numbers as `#`.
+    """
+    rows = [r for rs in per_variant.values() for r in rs]
+    if not any(coverage_group(r) for r in rows):
+        return {}, []
+    req = data["requirements"]
+    draws = {r["index"]: r["coverage"] for r in rows if coverage_group(r)}
+    lines = ["", "## Pass rate of the certified and the not certified draws", "",
+             "A draw is certified when the design's certificate covers everything it asks "
+             "(its coverage verdict); the bounds hold for each group on its own."]  # fmt: skip
+    table: dict = {}
+    for group in COVERAGE_GROUPS:
+        sub = {v: [r for r in rs if coverage_group(r) == group] for v, rs in per_variant.items()}
+        n = sum(coverage_group({"coverage": c}) == group for c in draws.values())
+        verd = {v: [verdicts(r, req, certified) for r in rs] for v, rs in sub.items()}
+        table[group], rate = rate_table(data, verd)
+        lines += ["", f"### {group}: {n} of {len(draws)} draws", ""] + rate
+    why = Counter(
+        re.sub(r"(?<![A-Za-z_])-?\d+(\.\d+)?", "#", reason)  # not in names: case1_paper
+        for c in draws.values() if c.startswith(NOT_CERTIFIED)
+        for reason in c.removeprefix(NOT_CERTIFIED).split("; ")
+    )  # fmt: skip
+    if why:
+        lines += ["", "Why draws are not certified (draws per reason):", ""]
+        lines += [f"- {n} x {reason}" for reason, n in why.most_common()]
     return table, lines
 
 

@@ -27,7 +27,10 @@ def design_and_store(spec, vehicle, out_dir: Path, log=print, cold: bool = False
     least every 10 s, with the time left estimated from the stage times of the design
     `out_dir` held before (`fahv.design.stage_clock.StageClock`). The LMIs'
     constraint generation starts from the active sets that design stored, unless
-    `cold` (`previous` of `fahv.design.pipeline.run_design`).
+    `cold` (`previous` of `fahv.design.pipeline.run_design`). A design whose
+    arrays and inputs are those of the stored one leaves its files as they are (its
+    design hash is its content, `fahv.spec.artefacts.save_design`): the stored
+    code version and stage times stay, and the latter still estimate the next design.
 
     Returns
     -------
@@ -56,6 +59,9 @@ def design_and_store(spec, vehicle, out_dir: Path, log=print, cold: bool = False
         design = run_design(spec, vehicle, progress=bar, log=both, clock=clock, previous=start)
     design.summary["design_time_s"] = round(time.monotonic() - t0, 1)  # not in the hash
     design.summary["stage_times_s"] = clock.times  # not in the hash: the next estimate
+    if previous is not None and previous.content_hash() == design.content_hash():
+        log(f"design hash {design.summary['design_hash']}: the stored design's arrays from the "
+            "same inputs; its files are kept, with the code and the times that made them")
     save_design(design, out_dir, {"certificate.txt": "\n".join(lines) + "\n"})
     return design
 

@@ -20,6 +20,7 @@ from fahv.runs.plots import paper_figures
 from fahv.runs.replay import run_replay
 from fahv.runs.sil import (
     recorder_metadata,
+    run_coverage,
     run_name,
     run_parameter_file,
     run_sil,
@@ -216,6 +217,7 @@ def cmd_simulate(args) -> int:
     finally:
         if live is not None:
             live.close()
+    print_coverage(run_coverage(design, args.duration).text(), args.json)
     if args.json:
         print(to_json(table))
     elif table:
@@ -224,6 +226,14 @@ def cmd_simulate(args) -> int:
     for line in ended:
         print(line, file=sys.stderr)
     return EXIT_VERDICT if ended else 0
+
+
+def print_coverage(text: str, json_out: bool = False) -> None:
+    """Print a run's coverage verdict, `coverage: certified` or `coverage: not certified: ...`.
+
+    On stdout before the metrics, on stderr when stdout holds JSON (`json_out`).
+    """
+    print(f"coverage: {text}", file=sys.stderr if json_out else sys.stdout)
 
 
 def _live_view(port: int | None, Ts: float):
@@ -281,6 +291,8 @@ def cmd_sil(args) -> int:
     if rec.metadata.get("reason"):
         status(f"reason: {rec.metadata['reason']}")
     verdict = Verdict.from_metadata(rec.metadata)
+    print_coverage(rec.metadata.get("coverage") or run_coverage(design, args.duration).text(),
+                   args.json)  # fmt: skip
     if run.t.size:
         table = {variant: metrics(run, vehicle.limits)}
         if args.json:
@@ -394,7 +406,8 @@ def _add_design_options(p) -> None:
     p.add_argument(
         "--allow-uncertified",
         action="store_true",
-        help="run a scenario beyond the design's certified range, with a warning",
+        help="run a scenario beyond the design's certified ranges (command, trim, loss, "
+        "vehicle draw), with a warning",
     )
 
 

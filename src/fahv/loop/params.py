@@ -337,3 +337,37 @@ def controller_node(params: dict) -> str:
 def parameter_file(nodes: dict) -> dict:
     """`{node: {"ros__parameters": params}}`: the layout of a ROS 2 parameter file."""
     return {k: {"ros__parameters": v} for k, v in nodes.items()}
+
+
+def case_with(case: dict, nodes: dict | None) -> dict:
+    """A run spec's data with the fault and command a run's node parameters give.
+
+    The inverse of `node_parameters` for what a campaign run disperses: the
+    `fault_injector`'s fault (`kind`, `t_onset` and the kind's parameters) and the
+    `nominal_trajectory`'s `command.*`. Other parameters are left out (the vehicle
+    draw stays the run spec's).
+
+    Parameters
+    ----------
+    case : dict
+        The run spec's data (`command`, `fault`, ...).
+    nodes : dict or None
+        `{node: {name: value}}`, a run's node parameters or only its overrides.
+
+    Returns
+    -------
+    dict
+        A shallow copy of `case` with `fault` and `command` replaced where
+        `nodes` gives them.
+    """
+    nodes = nodes or {}
+    out = dict(case)
+    fault = nodes.get("fault_injector")
+    if fault and "kind" in fault:
+        names = ("kind", "t_onset", *(f.name for f in FAULTS[fault["kind"]].parameters))
+        out["fault"] = {k: fault[k] for k in names if k in fault}
+    cmd = {k.split(".", 1)[1]: v for k, v in (nodes.get("nominal_trajectory") or {}).items()
+           if k.startswith("command.")}  # fmt: skip
+    if cmd:
+        out["command"] = {**case["command"], **cmd}
+    return out

@@ -16,7 +16,8 @@ _METADATA = Field("metadata_json", "str", "run metadata as a JSON object", defau
 
 #: Parameters of the `recorder` node.
 RECORDER = (
-    Field("bag", "str", "run folder to create (bags/<run>)"),
+    Field("bag", "str", "run folder to create (bags/<run>; if it exists, the first free "
+          "<run>-2, <run>-3 ...)"),
     TS,
     DURATION,
     _WATCHDOG,

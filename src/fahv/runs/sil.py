@@ -28,9 +28,10 @@ import yaml
 
 from fahv.errors import RunError
 from fahv.loop.graph import graph_nodes
-from fahv.loop.params import controller_node, node_parameters, parameter_file
+from fahv.loop.params import case_with, controller_node, node_parameters, parameter_file
 from fahv.plant.faults import FAULTS
 from fahv.runs.workspace import ROOT, WS, ensure_built, ros_env
+from fahv.spec.coverage import Coverage, coverage
 from fahv.version import code_version
 
 #: `use_sim_time` of the graph's nodes. The loop runs on the step index k and t_k that
@@ -72,6 +73,26 @@ def fault_metadata(fault_params: dict) -> dict:
     return {f"fault_{k}": fault_params[k] for k in keys if k in fault_params}
 
 
+def run_coverage(design, duration: float | None = None, nodes: dict | None = None) -> Coverage:
+    """The coverage verdict of a run (`fahv.spec.coverage.coverage`).
+
+    Parameters
+    ----------
+    design : fahv.spec.artefacts.Design
+        The run's design (a stored design with its scenario's arrays and run spec).
+    duration : float, optional
+        Simulated time [s] (the run spec's by default): a fault from then on never acts.
+    nodes : dict, optional
+        The run's node parameters or overrides: the fault and command a campaign run
+        draws (`fahv.loop.params.case_with`).
+
+    Returns
+    -------
+    fahv.spec.coverage.Coverage
+    """
+    return coverage(design, case_with(design.case, nodes), duration=duration)
+
+
 #: The design provenance a run's metadata carries.
 PROVENANCE_KEYS = ("design_file", "design_file_hash", "vehicle_file", "vehicle_hash", "code_hash")
 
@@ -83,7 +104,8 @@ def run_metadata(
 
     The provenance (case hash, vehicle file and hash, design code hash) lets
     `fahv inspect` say exactly what a run was made from, and the metrics use the
-    recorded vehicle's limits.
+    recorded vehicle's limits. `coverage` is the run's coverage verdict
+    (`run_coverage`, with the fault and command of `nodes`).
 
     Parameters
     ----------
@@ -119,6 +141,7 @@ def run_metadata(
         "source": source,
         "Ts": c["Ts"],
         "duration": duration,
+        "coverage": run_coverage(design, duration, nodes).text(),
         **{k: prov[k] for k in PROVENANCE_KEYS if k in prov},
         **fault,
         **{f"plant_params.{k}": float(v) for k, v in params.items()},

@@ -400,7 +400,8 @@ def summarize(rec: Recording, limits) -> dict:
 
 
 #: Metadata keys `fahv inspect` prints on their own line.
-SUMMARY_KEYS = ("case", "variant", "source", "status", "design_hash", "code_version", "fault")
+SUMMARY_KEYS = ("case", "variant", "source", "status", "coverage", "design_hash", "code_version",
+                "fault")  # fmt: skip
 
 
 def _fmt(v, spec: str = "{:g}") -> str:

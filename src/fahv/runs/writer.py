@@ -103,6 +103,26 @@ def _media_type(name: str) -> str:
     return MEDIA_TYPES.get(Path(name).suffix, "application/octet-stream")
 
 
+def free_run_folder(path: str | Path) -> Path:
+    """`path`, or the first of `<path>-2`, `<path>-3` ... that does not exist.
+
+    The name a run started again with the same parameter file records to (the recorder
+    started by hand), as `fahv.runs.sil.reserve_run` names two runs started in the
+    same second.
+
+    Raises
+    ------
+    RunError
+        If none of `<path>-2` ... `<path>-9999` is free.
+    """
+    path = Path(path)
+    for i in range(1, 10_000):
+        cand = path if i == 1 else path.with_name(f"{path.name}-{i}")
+        if not cand.exists():
+            return cand
+    raise RunError(f"no free run folder {path}-N")
+
+
 class RunWriter:
     """Writer of one run: a rosbag2 bag with one MCAP file that holds everything of the run.
 

@@ -2,10 +2,14 @@
 
 A design records where it came from (`provenance`): the design file and its
 content hash, the vehicle data file and its hash, and the version and hash of the library
-code that made it. `stale_reason` compares a stored design with its design file and
-vehicle, so a design whose inputs changed is refused (with the command that re-makes it),
-never used. Whether the current code still certifies a stored design is what
-`fahv verify` re-checks (`fahv.certificate.verify`).
+code that made it. Its identity, the design hash (`Design.content_hash`), is its
+content: the design file's data, the inputs' hashes and the arrays. The code that made it
+is provenance, not identity, so a design re-made with other code into the same arrays is
+the same design, and `save_design` leaves its stored files as they are.
+`stale_reason` compares a stored design with its design file and vehicle, so a
+design whose inputs changed is refused (with the command that re-makes it), never used.
+Whether the current code still certifies a stored design is what `fahv verify`
+re-checks (`fahv.certificate.verify`).
 """
 
 from __future__ import annotations
@@ -59,9 +63,27 @@ class Design:
         return self.arrays["A"].shape[1]
 
     def content_hash(self) -> str:
-        """sha256 over the design data, the provenance and every array (16 hex characters)."""
+        """The design hash: sha256 over its content (16 hex characters).
+
+        The design data (`case`), the hashes of its inputs (the provenance's
+        `HASHED_PROVENANCE`: design file, vehicle data) and every array (name,
+        shape, bytes). The code version and hash, the paths and the design's times are
+        not hashed: they say how it was made.
+        """
+        prov = self.summary.get("provenance", {})
+        return self._hash({k: prov.get(k) for k in HASHED_PROVENANCE})
+
+    def legacy_hash(self) -> str:
+        """The design hash as designs stored before it left the code out computed it.
+
+        Over the whole provenance (code version and hash, paths, BLAS threads) instead of
+        the inputs' hashes: `load_design` accepts a design stored with it.
+        """
+        return self._hash(self.summary.get("provenance", {}))
+
+    def _hash(self, provenance: dict) -> str:
         h = hashlib.sha256(json.dumps(self.case, sort_keys=True, default=str).encode())
-        h.update(json.dumps(self.summary.get("provenance", {}), sort_keys=True).encode())
+        h.update(json.dumps(provenance, sort_keys=True).encode())
         for k in sorted(self.arrays):
             a = np.ascontiguousarray(self.arrays[k])
             h.update(k.encode())
@@ -74,23 +96,67 @@ class Design:
         return dataclasses.replace(vehicle.params, **self.summary["plant_params"])
 
 
+#: Provenance entries the design hash covers: the contents of the design's inputs.
+HASHED_PROVENANCE = ("design_file_hash", "vehicle_hash")
+#: Summary entries that say how a design was made (the code, the paths, the times), not
+#: what it is: a design saved over a stored one of the same content keeps the stored ones.
+MAKING_KEYS = ("code_version", "provenance", "design_time_s", "stage_times_s")
+
+
+def _json_text(design: Design) -> str:
+    return json.dumps({"case": design.case, "summary": design.summary}, indent=2, default=list)
+
+
+def _stored_same(out: Path, design: Design) -> Design | None:
+    """The design stored in `out` if its content hash is `design`'s, else None."""
+    try:
+        stored = load_design(out)
+    except DesignError:
+        return None
+    return stored if stored.content_hash() == design.content_hash() else None
+
+
+def _write_if_changed(path: Path, text: str) -> None:
+    """Write `text` to `path` (a temporary file renamed) unless it holds it already."""
+    try:
+        if path.read_text() == text:
+            return
+    except OSError:
+        pass
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
 def save_design(design: Design, out_dir: str | Path, extra: dict | None = None) -> Path:
     """Write `design.npz`, `design.json` and `extra` files into out_dir atomically.
 
-    `extra` maps file names to text (the CLI adds the ROS 2 parameter file).
+    `extra` maps file names to text (the design adds its certificate lines).
 
     The files are written to a temporary sibling folder that replaces `out_dir` only
     when all of them are complete, so a failure never leaves half an artefact set.
+
+    When `out_dir` already holds a design of the same content (its design hash,
+    `Design.content_hash`), the stored files stay: `design.npz` is not written,
+    `design.summary` takes the stored `MAKING_KEYS` (the code, paths and times
+    that made the stored design), and `design.json` and the `extra` files are
+    rewritten only where their text changed. A design re-made into the same arrays from
+    the same inputs so leaves its files byte for byte as they were.
     Returns out_dir.
     """
     out = Path(out_dir)
+    stored = _stored_same(out, design)
+    if stored is not None:
+        design.summary.update({k: stored.summary[k] for k in MAKING_KEYS if k in stored.summary})
+        _write_if_changed(out / "design.json", _json_text(design))
+        for name, text in (extra or {}).items():
+            _write_if_changed(out / name, text)
+        return out
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
         np.savez(tmp / "design.npz", **design.arrays)
-        (tmp / "design.json").write_text(
-            json.dumps({"case": design.case, "summary": design.summary}, indent=2, default=list)
-        )
+        (tmp / "design.json").write_text(_json_text(design))
         for name, text in (extra or {}).items():
             (tmp / name).write_text(text)
         if out.exists():
@@ -104,6 +170,9 @@ def save_design(design: Design, out_dir: str | Path, extra: dict | None = None) 
 
 def load_design(out_dir: str | Path) -> Design:
     """Read the artefacts written by `save_design`.
+
+    The stored hash is checked against the content (`Design.content_hash`, or
+    `Design.legacy_hash` for a design stored before the hash left the code out).
 
     Raises
     ------
@@ -121,7 +190,7 @@ def load_design(out_dir: str | Path) -> Design:
     # a run's design (a stored design with a scenario's arrays) keeps the stored design's
     # hash as its identity and records its own content's beside it
     expected = meta["summary"].get("content_hash", meta["summary"].get("design_hash"))
-    if design.content_hash() != expected:
+    if expected not in (design.content_hash(), design.legacy_hash()):
         raise DesignError(f"design artefacts in {out} do not match their hash: re-run fahv design")
     return design
 

@@ -13,7 +13,9 @@ depends on the scenario, in seconds and without re-designing:
   the design step (Wan & Kothare 2003 re-solved, then cached by content hash).
 
 `certified_range` states what the design certifies (nominal h, V range, fault
-range, parameter box) and `uncertified` lists what a scenario asks beyond it.
+range, parameter box) and `uncertified` lists what a scenario asks beyond it (the
+reasons a scenario is refused for; the run's whole verdict is
+`fahv.spec.coverage.coverage`).
 """
 
 from __future__ import annotations
@@ -261,9 +263,9 @@ def uncertified(design: Design, spec: dict, vehicle) -> list[str]:
     eff = make_fault(f["kind"], f["t_onset"], f).design_effectiveness()
     if eff < rng["rho_min"] - 1e-12:
         out.append(
-            f"the fault's elevator effectiveness {eff:g} lies below the design's fault range "
-            f"rho_f in [{rng['rho_min']:g}, 1] (a loss of at most "
-            f"{100 * (1 - rng['rho_min']):.0f} %)"
+            f"loss {round(100 * (1 - eff), 2):g} % above the certified "
+            f"{round(100 * (1 - rng['rho_min']), 2):g} % (elevator effectiveness {eff:g} below "
+            f"the design's fault range rho_f in [{rng['rho_min']:g}, 1])"
         )
     if spec["uncertainty"]["scale"] > rng["uncertainty_scale"] + 1e-12:
         out.append(

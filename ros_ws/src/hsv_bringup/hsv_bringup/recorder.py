@@ -21,7 +21,9 @@ on a Foxglove WebSocket server (`fahv.runs.live.LiveView`): the live view costs
 the loop no extra DDS reader. Messages of a step already recorded on a topic (another
 graph's, later in the same domain) are counted as anomalies and not recorded.
 
-Parameters: `bag` (folder to create), `Ts`, `duration`, `watchdog_s`,
+Parameters: `bag` (folder to create; if it exists, a recorder started again with the
+same parameter file records to the first free `<bag>-2`, `<bag>-3` ...,
+`fahv.runs.writer.free_run_folder`), `Ts`, `duration`, `watchdog_s`,
 `metadata_json` (JSON object of run metadata: case, design_hash, variant, ...),
 `params_file` (the run's parameter file, attached to the run); `live_port`;
 `graph_nodes` and `run_id` like every node of the graph.
@@ -47,7 +49,7 @@ from fahv.loop.wire import step_of
 from fahv.runs.latency import TIMESTAMPS_FILE, timestamps_npz
 from fahv.runs.live import LiveView, live_hint
 from fahv.runs.nodes import RECORDER
-from fahv.runs.writer import RunWriter
+from fahv.runs.writer import RunWriter, free_run_folder
 
 #: Pause of the recorder after a spin that recorded messages [s wall time]: the
 #: messages that arrive meanwhile are taken together at the next wake-up. Its lag stays
@@ -78,15 +80,18 @@ class Recorder(Node):
         self.watchdog_s = get["watchdog_s"]
         self.status = GraphStatus(self, graph_nodes, run_id, self.watchdog_s)
         self.live = None
+        bag = free_run_folder(get["bag"])  # started again: <bag>-2, -3 ...
+        if bag != Path(get["bag"]):
+            self.get_logger().info(f"run folder {get['bag']} exists already: recording to {bag}")
         if get["live_port"] >= 0:  # served from here: no extra DDS reader on the loop
             try:
-                name = f"fahv {Path(get['bag']).name}"
+                name = f"fahv {bag.name}"
                 self.live = LiveView(get["live_port"], get["Ts"], name=name)
             except RunError as exc:
                 raise ParameterError(f"recorder: parameter 'live_port': {exc}") from None
             print(f"live view on {self.live.url} ({live_hint()})", flush=True)
         try:
-            self.writer = RunWriter(get["bag"], meta, get["Ts"], params=get["params_file"] or None)
+            self.writer = RunWriter(bag, meta, get["Ts"], params=get["params_file"] or None)
         except RunError as exc:
             raise ParameterError(f"recorder: parameter 'bag' or 'params_file': {exc}") from None
         self.next_k = dict.fromkeys(TOPICS, 0)
