@@ -22,7 +22,7 @@ place of actuator, sensor and estimator states).
 Usage:
 
     .venv/bin/python benchmarks/bench_design.py [--design offline_design/designs/cm_certified.yaml]
-        [--before c5dd379 --before-file offline_design/designs/cm_certified.yaml]
+        [--before c5ab016 --before-file offline_design/designs/cm_certified.yaml]
         [--scaling] [--only-scaling] [--keep DIR] [--smoke]
 
 `--smoke` runs the scaling code at a tiny size and no design: three of the ten
@@ -235,7 +235,9 @@ def main() -> int:
     """Time the designs (unless --only-scaling), then the scaling tables if asked."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--design", default="offline_design/designs/cm_certified.yaml")
-    ap.add_argument("--before", default="c5dd379", help="earlier commit ('' : skip it)")
+    ap.add_argument("--before", default="c5ab016",
+                    help="earlier commit (default: the release before the faster synthesis; "
+                         "'': skip it)")  # fmt: skip
     ap.add_argument("--before-file", default="offline_design/designs/cm_certified.yaml",
                     help="the design's file as the earlier commit named it")  # fmt: skip
     ap.add_argument("--keep", type=Path, default=None,
