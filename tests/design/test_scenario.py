@@ -113,6 +113,7 @@ def test_a_command_outside_the_envelope_is_named():
     c["command"]["h_c"] = vehicle.envelope.h_max + 100.0
     msgs = uncertified(design, c, vehicle)
     assert len(msgs) == 1 and "command" in msgs[0] and "flight envelope" in msgs[0]
+    assert msgs[0].endswith("h 85000..86500 ft, V 7700..8300 ft/s")  # the range checked
     assert uncertified(design, run_spec_data(PAPER), vehicle) == []
 
 

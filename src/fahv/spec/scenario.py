@@ -242,7 +242,9 @@ def uncertified(design: Design, spec: dict, vehicle) -> list[str]:
     for what, h, V in (("initial point", cmd["h0"], cmd["V0"]),
                        ("command", cmd["h_c"], cmd["V_c"])):  # fmt: skip
         if not vehicle.envelope.contains(h, V):
-            out.append(f"the {what} ({h:g} ft, {V:g} ft/s) lies outside the flight envelope")
+            env = vehicle.envelope
+            out.append(f"the {what} ({h:g} ft, {V:g} ft/s) lies outside the flight envelope, "
+                       f"h {env.h_min:g}..{env.h_max:g} ft, V {env.V_min:g}..{env.V_max:g} ft/s")
             continue
         hv = rng["hv_box"]
         if hv is not None and not (hv[0, 0] <= h <= hv[1, 0] and hv[0, 1] <= V <= hv[1, 1]):
