@@ -96,7 +96,7 @@ def noise_bound(stddev: float, n_steps: int, p: float) -> float:
     Examples
     --------
     >>> round(noise_bound(1.0, 15000, 0.999), 3)
-    5.398
+    5.4
     """
     return stddev * -NormalDist().inv_cdf((1.0 - p) / (2.0 * n_steps))
 
