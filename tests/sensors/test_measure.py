@@ -2,6 +2,7 @@
 
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -64,7 +65,9 @@ def test_delay_hold_bias_lag_and_quantisation():
     data = replace_channel(data, "V", stddev=0.0, lag=10.0)
     s = Sensors(data, [1], 0.02, measured=("h", "V"))
     h = 100.0 + np.arange(8)  # true h ramps 1 ft per step
-    y = np.array([s.measure(k, np.r_[h[k], 7900.0 + 1.0 * (k > 0), np.zeros(9)][None])[0] for k in range(8)])
+    y = np.array(
+        [s.measure(k, np.r_[h[k], 7900.0 + 1.0 * (k > 0), np.zeros(9)][None])[0] for k in range(8)]
+    )
     # sample at 0, 3, 6 of h two steps earlier (h_0 before step 2), + 1 ft, held between
     np.testing.assert_array_equal(y[:, 0], [101, 101, 101, 102, 102, 102, 105, 105])
     # lag 10/(s + 10): after k steps of 0.02 s, 1 - exp(-0.2 k) of the 1 ft/s step
@@ -123,9 +126,15 @@ def test_vehicle_file_errors_name_the_key():
     assert sensors_from_mapping(good).channels["h"].stddev == 0.0
     bad = [
         ({"h": {"stddev": {"value": 1.0, "unit": "ft"}}}, "'sensors.h.stddev' has no 'source'"),
-        ({"q": {"stddev": {"value": 1.0, "unit": "ft", "source": "s"}}}, "'sensors.q.stddev' has unit"),
+        (
+            {"q": {"stddev": {"value": 1.0, "unit": "ft", "source": "s"}}},
+            "'sensors.q.stddev' has unit",
+        ),
         ({"V": {"noise": {"value": 1.0, "unit": "ft/s", "source": "s"}}}, "in 'sensors.V'"),
-        ({"h": {"stddev": {"value": -1.0, "unit": "ft", "source": "s"}}}, "'sensors.h.stddev' = -1.0"),
+        (
+            {"h": {"stddev": {"value": -1.0, "unit": "ft", "source": "s"}}},
+            "'sensors.h.stddev' = -1.0",
+        ),
         ({"h": {"period": {"value": 0, "unit": "steps", "source": "s"}}}, "'sensors.h.period'"),
     ]
     for change, text in bad:
@@ -143,3 +152,16 @@ def test_noise_bound_holds_with_its_probability():
     z = white_noise(np.arange(2000)[:, None], "h", np.arange(1000)[None], DATA.channels["h"])
     out = np.mean(np.abs(z).max(axis=1) > noise_bound(3.2, 1000, 0.99))
     assert out < 0.015
+
+
+def test_the_docs_bound_table_is_the_noise_bound_of_case_1():
+    page = Path(__file__).parents[2] / "docs" / "theory" / "sensors.md"
+    rows = re.findall(r"^\| `(\w+)` \| ([\d.]+) (ft/s|ft|deg/s|deg) \| ([\d.]+) \3 \|$",
+                      page.read_text(), re.MULTILINE)  # fmt: skip
+    assert [r[0] for r in rows] == ["h", "V", "theta", "q", "alpha"]
+    for name, sigma, unit, bound in rows:
+        value = DATA.channels[name].stddev
+        if unit.startswith("deg"):
+            value = math.degrees(value)
+        assert float(sigma) == pytest.approx(value, rel=1e-12)
+        assert float(bound) == pytest.approx(noise_bound(value, 15000, 0.999), rel=5e-4)

@@ -30,7 +30,13 @@ from fahv.model.vehicle import DEFAULT_VEHICLE_FILE
 #: Measurable channels, in output order.
 CHANNELS: tuple[str, ...] = ("h", "V", "theta", "q", "alpha")
 #: Unit of each channel's measurement.
-CHANNEL_UNITS: dict[str, str] = {"h": "ft", "V": "ft/s", "theta": "rad", "q": "rad/s", "alpha": "rad"}
+CHANNEL_UNITS: dict[str, str] = {
+    "h": "ft",
+    "V": "ft/s",
+    "theta": "rad",
+    "q": "rad/s",
+    "alpha": "rad",
+}
 #: Stable channel ids, the second word of the generator's key (never renumber).
 CHANNEL_IDS: dict[str, int] = {"h": 1, "V": 2, "theta": 3, "q": 4, "alpha": 5}
 #: Channels measured unless told otherwise (air-data alpha is optional).
@@ -127,7 +133,9 @@ class SensorData:
 def _value(entry: Any, key: str, path: str, unit: str) -> float:
     """The number of an entry `{value, unit, source}` in `unit` (converted from an alias)."""
     if not isinstance(entry, Mapping) or "value" not in entry:
-        raise VehicleDataError(f"{path}: 'sensors.{key}' must be a mapping with 'value', 'unit', 'source'")
+        raise VehicleDataError(
+            f"{path}: 'sensors.{key}' must be a mapping with 'value', 'unit', 'source'"
+        )
     if not entry.get("source"):
         raise VehicleDataError(f"{path}: 'sensors.{key}' has no 'source'")
     value = entry["value"]
@@ -153,17 +161,24 @@ def _channel(section: Any, name: str, path: str) -> tuple[ChannelNoise, list[str
     unknown = sorted(set(section) - set(PARAMETER_UNITS))
     if unknown:
         raise VehicleDataError(
-            f"{path}: unknown key(s) {unknown} in 'sensors.{name}'; expected {list(PARAMETER_UNITS)}"
+            f"{path}: unknown key(s) {unknown} in 'sensors.{name}'; "
+            f"expected {list(PARAMETER_UNITS)}"
         )
     u = CHANNEL_UNITS[name]
     values: dict[str, Any] = {}
     representative = []
     for key, entry in section.items():
-        unit = PARAMETER_UNITS[key].replace("u", u, 1) if PARAMETER_UNITS[key] in ("u", "u/s") else PARAMETER_UNITS[key]
+        unit = (
+            PARAMETER_UNITS[key].replace("u", u, 1)
+            if PARAMETER_UNITS[key] in ("u", "u/s")
+            else PARAMETER_UNITS[key]
+        )
         v = _value(entry, f"{name}.{key}", path, unit)
         if key in ("delay", "period"):
             if v != int(v) or v < (1 if key == "period" else 0):
-                raise VehicleDataError(f"{path}: 'sensors.{name}.{key}' must be a whole number of steps")
+                raise VehicleDataError(
+                    f"{path}: 'sensors.{name}.{key}' must be a whole number of steps"
+                )
             v = int(v)
         elif key in _NON_NEGATIVE and v < 0.0:
             raise VehicleDataError(f"{path}: 'sensors.{name}.{key}' = {v} must be >= 0")

@@ -55,7 +55,9 @@ class SensorFaultKind:
 
     def __init__(self, t_onset=math.inf, channel: str = "q", **params) -> None:
         if channel not in CHANNELS:
-            raise ConfigError(f"sensor fault channel must be one of {list(CHANNELS)}, got {channel!r}")
+            raise ConfigError(
+                f"sensor fault channel must be one of {list(CHANNELS)}, got {channel!r}"
+            )
         self.channel = channel
         self.t_onset = np.atleast_1d(np.asarray(t_onset, dtype=float))
         missing = [f.name for f in self.parameters if f.name not in params]
@@ -66,7 +68,9 @@ class SensorFaultKind:
         }
         bad = [k for k, v in self.params.items() if v.size != self.t_onset.size]
         if bad:
-            raise ConfigError(f"sensor fault kind '{self.name}': parameters {bad} have other lengths")
+            raise ConfigError(
+                f"sensor fault kind '{self.name}': parameters {bad} have other lengths"
+            )
         #: Value held by `stuck` (NaN until the onset).
         self.held = np.full(self.t_onset.size, np.nan)
 
@@ -145,7 +149,9 @@ class Drift(SensorFaultKind):
     """y = y_healthy + rate (t - t_onset): a ramp from the onset."""
 
     name = "drift"
-    parameters = (Field("rate", "float", "drift rate from the onset", unit="unit of the channel/s"),)
+    parameters = (
+        Field("rate", "float", "drift rate from the onset", unit="unit of the channel/s"),
+    )
 
     def apply(self, y, last, t, lanes):
         """Add the ramp."""
@@ -217,14 +223,20 @@ def sensor_fault_from_section(
             raise ConfigError(f"{key}.{k}: missing")
     kind = section["kind"]
     if kind not in SENSOR_FAULTS.names():
-        raise ConfigError(f"{key}.kind: unknown sensor fault kind {kind!r}; one of {SENSOR_FAULTS.names()}")
+        raise ConfigError(
+            f"{key}.kind: unknown sensor fault kind {kind!r}; one of {SENSOR_FAULTS.names()}"
+        )
     cls = SENSOR_FAULTS[kind]
     if section["channel"] not in measured:
-        raise ConfigError(f"{key}.channel: {section['channel']!r} is not a measured channel {list(measured)}")
+        raise ConfigError(
+            f"{key}.channel: {section['channel']!r} is not a measured channel {list(measured)}"
+        )
     allowed = {"channel", "kind", "t_onset"} | {f.name for f in cls.parameters}
     unknown = sorted(set(section) - allowed)
     if unknown:
-        raise ConfigError(f"{key}: unknown key(s) {unknown} for kind '{kind}'; expected {sorted(allowed)}")
+        raise ConfigError(
+            f"{key}: unknown key(s) {unknown} for kind '{kind}'; expected {sorted(allowed)}"
+        )
     values = {}
     for name in ["t_onset", *(f.name for f in cls.parameters)]:
         if name not in section:

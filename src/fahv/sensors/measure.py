@@ -16,7 +16,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from fahv.model.vehicle import ALPHA, ETA1_DOT, ETA2_DOT, H, IQ, THETA, V
+from fahv.model.vehicle import ALPHA, ETA1_DOT, ETA2_DOT, IQ, THETA, H, V
 from fahv.sensors.data import CHANNEL_IDS, CHANNEL_UNITS, DEFAULT_MEASURED, ChannelNoise, SensorData
 from fahv.sensors.faults import SensorFaultKind
 from fahv.sensors.philox import STREAM_DYNAMIC_BIAS, STREAM_NOISE, STREAM_TURN_ON_BIAS, normals
@@ -24,7 +24,9 @@ from fahv.sensors.philox import STREAM_DYNAMIC_BIAS, STREAM_NOISE, STREAM_TURN_O
 _STATE_INDEX = {"h": H, "V": V, "theta": THETA, "alpha": ALPHA}
 
 
-def true_outputs(x: np.ndarray, data: SensorData, measured: Sequence[str] = DEFAULT_MEASURED) -> np.ndarray:
+def true_outputs(
+    x: np.ndarray, data: SensorData, measured: Sequence[str] = DEFAULT_MEASURED
+) -> np.ndarray:
     """Noise-free outputs of the channels: the states, and the gyro's q with the modes.
 
     Parameters
@@ -155,10 +157,11 @@ class Sensors:
         self._sample = np.zeros((B, n_y))
         self._gm = np.zeros((B, n_y))
         self.y = np.zeros((B, n_y))
-        self._turn_on = np.stack(
-            [n.bias_mean + n.bias_stddev * normals(self.seeds, CHANNEL_IDS[c], 0, STREAM_TURN_ON_BIAS)[:, 0]
-             for c, n in zip(self.names, self.noise, strict=True)], axis=1,
-        )  # fmt: skip
+        #: Turn-on bias of each run and channel (B, n_y), drawn at step 0.
+        self.turn_on = np.zeros((B, n_y))
+        for j, (c, n) in enumerate(zip(self.names, self.noise, strict=True)):
+            z = normals(self.seeds, CHANNEL_IDS[c], 0, STREAM_TURN_ON_BIAS)[:, 0]
+            self.turn_on[:, j] = n.bias_mean + n.bias_stddev * z
 
     def _delayed(self, z: np.ndarray) -> np.ndarray:
         """True outputs of step k - delay per channel (the first ones before step delay)."""
@@ -179,7 +182,7 @@ class Sensors:
             else:
                 a = math.exp(-n.period * self.Ts / n.dynamic_bias_correlation_time)
                 self._gm[:, j] = a * self._gm[:, j] + gm * math.sqrt(1.0 - a * a) * w
-        bias = n.bias + self._turn_on[:, j] + n.drift_rate * k * self.Ts + self._gm[:, j]
+        bias = n.bias + self.turn_on[:, j] + n.drift_rate * k * self.Ts + self._gm[:, j]
         return z + bias + white_noise(self.seeds, c, k, n)
 
     def measure(self, k: int, x: np.ndarray) -> np.ndarray:

@@ -114,7 +114,12 @@ def normals(seed, channel, step, stream: int = STREAM_NOISE) -> np.ndarray:
         *(np.asarray(v, dtype=np.uint64) for v in (seed, channel, step))
     )
     with np.errstate(over="ignore"):
-        ctr = (step + np.uint64(1), np.full_like(step, stream), np.zeros_like(step), np.zeros_like(step))
+        ctr = (
+            step + np.uint64(1),
+            np.full_like(step, stream),
+            np.zeros_like(step),
+            np.zeros_like(step),
+        )
     w = philox4x64(ctr, (seed, channel))
     out = np.empty(step.shape + (4,))
     for i in (0, 2):
