@@ -11,7 +11,7 @@ from fahv.errors import ConfigError, VehicleDataError
 from fahv.model.vehicle import ETA1_DOT, ETA2_DOT, IQ
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors, replace_channel, sensors_from_mapping
 from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_from_section
-from fahv.sensors.measure import Sensors, noise_bound, true_outputs, white_noise
+from fahv.sensors.measure import Sensors, measure_history, noise_bound, true_outputs, white_noise
 
 DATA = load_sensors()
 X0 = np.array([85500.0, 7900.0, 0.03, 0.03, 0.0, 0.1, 0.0, 0.01, 0.0, 0.0, 0.0])
@@ -165,3 +165,26 @@ def test_the_docs_bound_table_is_the_noise_bound_of_case_1():
             value = math.degrees(value)
         assert float(sigma) == pytest.approx(value, rel=1e-12)
         assert float(bound) == pytest.approx(noise_bound(value, 15000, 0.999), rel=5e-4)
+
+
+def test_a_record_measured_afterwards_gives_the_online_numbers():
+    rng = np.random.default_rng(0)
+    x = X0 + 0.01 * rng.standard_normal((30, 2, 11))
+    fault = sensor_fault_from_section({"channel": "q", "kind": "stuck", "t_onset": 0.2})
+    online = Sensors(DATA, [5, 6], 0.02, faults=[None, fault])
+    y = np.stack([online.measure(k, x[k]) for k in range(30)])
+    again = sensor_fault_from_section({"channel": "q", "kind": "stuck", "t_onset": 0.2})
+    np.testing.assert_array_equal(measure_history(DATA, [5, 6], 0.02, x, faults=[None, again]), y)
+    np.testing.assert_array_equal(measure_history(DATA, [5], 0.02, x[:, 0]), y[:, 0])
+
+
+def test_a_dropout_with_a_duration_resumes_sampling():
+    fault = sensor_fault_from_section(
+        {"channel": "h", "kind": "dropout", "t_onset": 0.1, "duration": 0.06}
+    )
+    data = replace_channel(DATA, "h", stddev=0.0)
+    x = np.zeros((10, 11))
+    x[:, 0] = 1000.0 + 10.0 * np.arange(10)
+    y = measure_history(data, [1], 0.02, x, measured=("h",), faults=[fault])[:, 0]
+    # steps 5, 6, 7 (t = 0.10, 0.12, 0.14 < 0.16) hold step 4's 1040 ft; step 8 samples again
+    np.testing.assert_array_equal(y, [1000, 1010, 1020, 1030, 1040, 1040, 1040, 1040, 1080, 1090])

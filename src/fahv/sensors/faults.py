@@ -60,11 +60,16 @@ class SensorFaultKind:
             )
         self.channel = channel
         self.t_onset = np.atleast_1d(np.asarray(t_onset, dtype=float))
-        missing = [f.name for f in self.parameters if f.name not in params]
+        missing = [f.name for f in self.parameters if f.name not in params and f.required]
         if missing:
             raise ConfigError(f"sensor fault kind '{self.name}' needs parameter(s) {missing}")
         self.params = {
-            f.name: np.atleast_1d(np.asarray(params[f.name], dtype=float)) for f in self.parameters
+            f.name: np.atleast_1d(np.asarray(params.get(f.name, f.default), dtype=float))
+            for f in self.parameters
+        }
+        self.params = {
+            k: np.broadcast_to(v, self.t_onset.shape).copy() if v.size == 1 else v
+            for k, v in self.params.items()
         }
         bad = [k for k, v in self.params.items() if v.size != self.t_onset.size]
         if bad:
@@ -173,9 +178,17 @@ class StuckSensor(SensorFaultKind):
 
 @register_sensor_fault
 class DropoutSensor(SensorFaultKind):
-    """No new sample: the last output is held while the fault lasts."""
+    """No new sample: the last output is held while the fault lasts (`duration`)."""
 
     name = "dropout"
+    parameters = (
+        Field("duration", "float", "length of the dropout (inf: to the end of the run)",
+              unit="s", lo=0.0, lo_open=True, default=math.inf),
+    )  # fmt: skip
+
+    def active(self, t: float) -> np.ndarray:
+        """(n,) bool: t_onset <= t < t_onset + duration [s]."""
+        return super().active(t) & (t < self.t_onset + self.params["duration"] - 1e-12)
 
     def apply(self, y, last, t, lanes):
         """The previous output."""
@@ -238,15 +251,23 @@ def sensor_fault_from_section(
             f"{key}: unknown key(s) {unknown} for kind '{kind}'; expected {sorted(allowed)}"
         )
     values = {}
+    optional = {f.name for f in cls.parameters if not f.required}
     for name in ["t_onset", *(f.name for f in cls.parameters)]:
         if name not in section:
-            if name == "t_onset" and kind == "none":
+            if (name == "t_onset" and kind == "none") or name in optional:
                 continue
             raise ConfigError(f"{key}.{name}: missing (sensor fault kind '{kind}' needs it)")
         v = section[name]
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        infinite_ok = name == "duration" and v == math.inf
+        if (
+            isinstance(v, bool)
+            or not isinstance(v, int | float)
+            or not (math.isfinite(v) or infinite_ok)
+        ):
             raise ConfigError(f"{key}.{name}: must be a finite number, got {v!r}")
-        if name == "t_onset" and v < 0.0:
-            raise ConfigError(f"{key}.t_onset: must be >= 0, got {v}")
+        if (name == "t_onset" and v < 0.0) or (name == "duration" and v <= 0.0):
+            raise ConfigError(
+                f"{key}.{name}: must be {'>= 0' if name == 't_onset' else '> 0'}, got {v}"
+            )
         values[name] = float(v)
     return cls(values.pop("t_onset", math.inf), section["channel"], **values)

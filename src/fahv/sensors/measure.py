@@ -232,3 +232,37 @@ class Sensors:
                 y[:, j] = n.precision * np.round(y[:, j] / n.precision)
         self.y = y
         return y.copy()
+
+
+def measure_history(data: SensorData, seeds, Ts: float, x: np.ndarray, measured=DEFAULT_MEASURED,
+                    faults=None) -> np.ndarray:  # fmt: skip
+    """The measurements of whole runs from their state histories (a run's record).
+
+    The same numbers as `Sensors.measure` called step by step during the runs: y is a
+    function of the states and the seeds only.
+
+    Parameters
+    ----------
+    data : SensorData
+        Noise models and mode slopes.
+    seeds : (B,) array_like of int
+        Seed of each run.
+    Ts : float
+        Step [s].
+    x : (N, B, n) or (N, n) ndarray, n >= 9
+        True states of N steps (a single run may drop the B axis).
+    measured : sequence of str
+        Channels, in output order.
+    faults : sequence of SensorFaultKind or None, optional
+        One-run fault of each run (None: healthy).
+
+    Returns
+    -------
+    (N, B, n_y) ndarray, or (N, n_y) for an (N, n) history
+    """
+    x = np.asarray(x, dtype=float)
+    single = x.ndim == 2
+    xs = x[:, None, :] if single else x
+    sensors = Sensors(data, seeds, Ts, measured, faults)
+    y = np.stack([sensors.measure(k, xs[k]) for k in range(xs.shape[0])])
+    return y[:, 0, :] if single else y
