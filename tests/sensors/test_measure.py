@@ -58,6 +58,14 @@ def test_step_by_step_equals_batch_in_another_order():
     np.testing.assert_array_equal(
         y_1[:, 0], X0[0] + white_noise(np.array(seeds), "h", 49, DATA.channels["h"])
     )
+    # with every part of the model on (turn-on and Gauss-Markov biases, lag, delay, hold)
+    data = replace_channel(DATA, "q", bias_stddev=1e-3, dynamic_bias_stddev=1e-3,
+                           dynamic_bias_correlation_time=0.5, lag=30.0, delay=1, period=2,
+                           drift_rate=1e-4, precision=1e-5)  # fmt: skip
+    x = X0 + 0.01 * np.random.default_rng(1).standard_normal((40, 3, 11))
+    batch = measure_history(data, seeds[::-1], 0.02, x[:, ::-1])[:, ::-1]
+    for i, seed in enumerate(seeds):
+        np.testing.assert_array_equal(measure_history(data, [seed], 0.02, x[:, i]), batch[:, i])
 
 
 def test_delay_hold_bias_lag_and_quantisation():
