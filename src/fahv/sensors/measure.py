@@ -208,6 +208,9 @@ class Sensors:
         if k not in (0, self.k + 1):
             raise ValueError(f"measure: step {k} after step {self.k} (steps go 0, 1, 2, ...)")
         self.k = k
+        if k == 0:
+            for _, _, fault in self.groups:
+                fault.held[:] = np.nan
         z = self._delayed(true_outputs(np.reshape(x, (self.seeds.size, -1)), self.data, self.names))
         last = self.y.copy()
         for j, n in enumerate(self.noise):
