@@ -1,0 +1,273 @@
+"""Sensor faults: the registry of sensor fault kinds, in the style of the actuator faults.
+
+A sensor fault kind is a subclass of `SensorFaultKind` registered in
+`SENSOR_FAULTS`: its name, its parameters (config fields, amplitudes in the unit of
+the faulty channel) and `SensorFaultKind.apply`, the output of the channel while the
+fault is active. Built-in kinds: `none`, `bias_step`, `drift`, `stuck`, `dropout`.
+
+The intended scenario section (not yet read by the case validation, which a later
+step extends when the loop reads measurements):
+
+    sensor_fault:
+      channel: q          # one of the measured channels
+      kind: bias_step     # a name of SENSOR_FAULTS
+      t_onset: 20.0       # [s]
+      bias: 0.001         # the kind's parameters (here [rad/s])
+
+`sensor_fault_from_section` validates such a mapping.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+
+from fahv.config import Field, Registry
+from fahv.errors import ConfigError
+from fahv.sensors.data import CHANNELS
+
+
+class SensorFaultKind:
+    """A fault of one channel of n >= 1 runs (lanes), active from `t_onset` on.
+
+    Parameters
+    ----------
+    t_onset : float or (n,) array_like
+        Onset time [s].
+    channel : str
+        The faulty channel (one of `CHANNELS`).
+    **params
+        Values of `parameters` (float or (n,) array_like), in the channel's unit.
+
+    Raises
+    ------
+    ConfigError
+        If a parameter is missing, the channel unknown, or the lengths differ.
+    """
+
+    #: Registry name (`sensor_fault.kind`).
+    name: ClassVar[str] = ""
+    #: Parameters the kind takes, beyond `channel`, `kind` and `t_onset`.
+    parameters: ClassVar[tuple[Field, ...]] = ()
+
+    def __init__(self, t_onset=math.inf, channel: str = "q", **params) -> None:
+        if channel not in CHANNELS:
+            raise ConfigError(
+                f"sensor fault channel must be one of {list(CHANNELS)}, got {channel!r}"
+            )
+        self.channel = channel
+        self.t_onset = np.atleast_1d(np.asarray(t_onset, dtype=float))
+        missing = [f.name for f in self.parameters if f.name not in params and f.required]
+        if missing:
+            raise ConfigError(f"sensor fault kind '{self.name}' needs parameter(s) {missing}")
+        self.params = {
+            f.name: np.atleast_1d(np.asarray(params.get(f.name, f.default), dtype=float))
+            for f in self.parameters
+        }
+        self.params = {
+            k: np.broadcast_to(v, self.t_onset.shape).copy() if v.size == 1 else v
+            for k, v in self.params.items()
+        }
+        bad = [k for k, v in self.params.items() if v.size != self.t_onset.size]
+        if bad:
+            raise ConfigError(
+                f"sensor fault kind '{self.name}': parameters {bad} have other lengths"
+            )
+        #: Value held by `stuck` (NaN until the onset).
+        self.held = np.full(self.t_onset.size, np.nan)
+
+    @property
+    def lanes(self) -> int:
+        """Number of runs n the instance describes."""
+        return self.t_onset.size
+
+    @classmethod
+    def stack(cls, faults: Sequence[SensorFaultKind]) -> SensorFaultKind:
+        """One instance of the runs of `faults` (all of this kind and channel), in order."""
+        t_onset = np.concatenate([f.t_onset for f in faults])
+        params = {
+            p.name: np.concatenate([f.params[p.name] for f in faults]) for p in cls.parameters
+        }
+        return cls(t_onset, faults[0].channel, **params)
+
+    def active(self, t: float) -> np.ndarray:
+        """(n,) bool: True once t >= t_onset [s] (never for `none`)."""
+        if self.name == "none":
+            return np.zeros(self.lanes, dtype=bool)
+        return t >= self.t_onset - 1e-12
+
+    def apply(self, y: np.ndarray, last: np.ndarray, t: float, lanes: np.ndarray) -> np.ndarray:
+        """Output of the channel for the active runs `lanes`.
+
+        Parameters
+        ----------
+        y : (m,) ndarray
+            The healthy sample of those runs at time t [unit of the channel].
+        last : (m,) ndarray
+            The output of the previous step (the healthy sample at step 0).
+        t : float
+            Time [s].
+        lanes : (m,) int ndarray
+            Which of this instance's runs the entries are.
+
+        Returns
+        -------
+        (m,) ndarray
+        """
+        return y
+
+
+#: Sensor fault kinds by name.
+SENSOR_FAULTS: Registry[type[SensorFaultKind]] = Registry("sensor fault kind")
+
+
+def register_sensor_fault(cls: type[SensorFaultKind]) -> type[SensorFaultKind]:
+    """Class decorator: register a `SensorFaultKind` under its `name`."""
+    SENSOR_FAULTS.register(cls.name, cls)
+    return cls
+
+
+@register_sensor_fault
+class NoSensorFault(SensorFaultKind):
+    """No fault."""
+
+    name = "none"
+
+
+@register_sensor_fault
+class BiasStep(SensorFaultKind):
+    """y = y_healthy + bias from the onset on."""
+
+    name = "bias_step"
+    parameters = (Field("bias", "float", "bias added from the onset", unit="unit of the channel"),)
+
+    def apply(self, y, last, t, lanes):
+        """Add the bias."""
+        return y + self.params["bias"][lanes]
+
+
+@register_sensor_fault
+class Drift(SensorFaultKind):
+    """y = y_healthy + rate (t - t_onset): a ramp from the onset."""
+
+    name = "drift"
+    parameters = (
+        Field("rate", "float", "drift rate from the onset", unit="unit of the channel/s"),
+    )
+
+    def apply(self, y, last, t, lanes):
+        """Add the ramp."""
+        return y + self.params["rate"][lanes] * (t - self.t_onset[lanes])
+
+
+@register_sensor_fault
+class StuckSensor(SensorFaultKind):
+    """The output frozen at its value at the onset (the last output before it)."""
+
+    name = "stuck"
+
+    def apply(self, y, last, t, lanes):
+        """Hold the output of the step before the onset."""
+        new = np.isnan(self.held[lanes])
+        self.held[lanes[new]] = last[new]
+        return self.held[lanes].copy()
+
+
+@register_sensor_fault
+class DropoutSensor(SensorFaultKind):
+    """No new sample: the last output is held while the fault lasts (`duration`)."""
+
+    name = "dropout"
+    parameters = (
+        Field("duration", "float", "length of the dropout (inf: to the end of the run)",
+              unit="s", lo=0.0, lo_open=True, default=math.inf),
+    )  # fmt: skip
+
+    def active(self, t: float) -> np.ndarray:
+        """(n,) bool: t_onset <= t < t_onset + duration [s]."""
+        return super().active(t) & (t < self.t_onset + self.params["duration"] - 1e-12)
+
+    def apply(self, y, last, t, lanes):
+        """The previous output."""
+        return last.copy()
+
+
+def sensor_fault_from_section(
+    section: Mapping[str, Any], measured: Sequence[str] = CHANNELS, key: str = "sensor_fault"
+) -> SensorFaultKind:
+    """The one-run sensor fault of a scenario's `sensor_fault` section.
+
+    Parameters
+    ----------
+    section : mapping
+        `channel`, `kind`, `t_onset` [s] and the kind's parameters.
+    measured : sequence of str
+        Channels the run measures (the fault's channel must be one).
+    key : str
+        Name of the section in messages.
+
+    Returns
+    -------
+    SensorFaultKind
+
+    Raises
+    ------
+    ConfigError
+        On a missing or unknown key, an unknown kind or channel, or a value that is
+        not a number; the message names the key.
+
+    Examples
+    --------
+    >>> f = sensor_fault_from_section({"channel": "q", "kind": "stuck", "t_onset": 5.0})
+    >>> f.name, f.channel, float(f.t_onset[0])
+    ('stuck', 'q', 5.0)
+    >>> sensor_fault_from_section({"channel": "q", "kind": "drift", "t_onset": 5.0})
+    Traceback (most recent call last):
+        ...
+    fahv.errors.ConfigError: sensor_fault.rate: missing (sensor fault kind 'drift' needs it)
+    """
+    if not isinstance(section, Mapping):
+        raise ConfigError(f"{key}: must be a mapping with channel, kind, t_onset")
+    for k in ("channel", "kind"):
+        if k not in section:
+            raise ConfigError(f"{key}.{k}: missing")
+    kind = section["kind"]
+    if kind not in SENSOR_FAULTS.names():
+        raise ConfigError(
+            f"{key}.kind: unknown sensor fault kind {kind!r}; one of {SENSOR_FAULTS.names()}"
+        )
+    cls = SENSOR_FAULTS[kind]
+    if section["channel"] not in measured:
+        raise ConfigError(
+            f"{key}.channel: {section['channel']!r} is not a measured channel {list(measured)}"
+        )
+    allowed = {"channel", "kind", "t_onset"} | {f.name for f in cls.parameters}
+    unknown = sorted(set(section) - allowed)
+    if unknown:
+        raise ConfigError(
+            f"{key}: unknown key(s) {unknown} for kind '{kind}'; expected {sorted(allowed)}"
+        )
+    values = {}
+    optional = {f.name for f in cls.parameters if not f.required}
+    for name in ["t_onset", *(f.name for f in cls.parameters)]:
+        if name not in section:
+            if (name == "t_onset" and kind == "none") or name in optional:
+                continue
+            raise ConfigError(f"{key}.{name}: missing (sensor fault kind '{kind}' needs it)")
+        v = section[name]
+        infinite_ok = name == "duration" and v == math.inf
+        if (
+            isinstance(v, bool)
+            or not isinstance(v, int | float)
+            or not (math.isfinite(v) or infinite_ok)
+        ):
+            raise ConfigError(f"{key}.{name}: must be a finite number, got {v!r}")
+        if (name == "t_onset" and v < 0.0) or (name == "duration" and v <= 0.0):
+            raise ConfigError(
+                f"{key}.{name}: must be {'>= 0' if name == 't_onset' else '> 0'}, got {v}"
+            )
+        values[name] = float(v)
+    return cls(values.pop("t_onset", math.inf), section["channel"], **values)

@@ -1,0 +1,271 @@
+"""The measurement y of B runs from their true states: y_k = sensors(x_k), noise included.
+
+`Sensors` holds the sensor memory of B runs (delay line, lag, sample-and-hold, the
+Gauss-Markov bias, faults) and returns y (B, n_y) step after step. Every random
+number is a pure function of (seed of the run, channel, step) (`fahv.sensors.philox`),
+so the in-process simulator, a campaign batch, a node, a rerun and a replay that
+measure the same states get the same y. `noise_bound` gives the bound the white noise
+of a channel stays within over a whole run with a given probability.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from statistics import NormalDist
+
+import numpy as np
+
+from fahv.model.vehicle import ALPHA, ETA1_DOT, ETA2_DOT, IQ, THETA, H, V
+from fahv.sensors.data import CHANNEL_IDS, CHANNEL_UNITS, DEFAULT_MEASURED, ChannelNoise, SensorData
+from fahv.sensors.faults import SensorFaultKind
+from fahv.sensors.philox import STREAM_DYNAMIC_BIAS, STREAM_NOISE, STREAM_TURN_ON_BIAS, normals
+
+_STATE_INDEX = {"h": H, "V": V, "theta": THETA, "alpha": ALPHA}
+
+
+def true_outputs(
+    x: np.ndarray, data: SensorData, measured: Sequence[str] = DEFAULT_MEASURED
+) -> np.ndarray:
+    """Noise-free outputs of the channels: the states, and the gyro's q with the modes.
+
+    Parameters
+    ----------
+    x : (B, n) ndarray, n >= 9
+        True states (CM order; an ECM state's extra notch states are ignored)
+        [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s, ...].
+    data : SensorData
+        Mode slopes phi_1, phi_2 at the gyro.
+    measured : sequence of str
+        Channels, in output order.
+
+    Returns
+    -------
+    (B, n_y) ndarray
+        q_gyro = q + phi_1 eta_1_dot + phi_2 eta_2_dot [rad/s] for `q`, the state for
+        the others, in the units of `CHANNEL_UNITS`.
+    """
+    x = np.atleast_2d(np.asarray(x, dtype=float))
+    cols = []
+    for name in measured:
+        if name == "q":
+            cols.append(x[:, IQ] + data.phi_1 * x[:, ETA1_DOT] + data.phi_2 * x[:, ETA2_DOT])
+        else:
+            cols.append(x[:, _STATE_INDEX[name]])
+    return np.stack(cols, axis=1)
+
+
+def white_noise(seeds, channel: str, steps, noise: ChannelNoise) -> np.ndarray:
+    """White noise mean + stddev z of a channel for runs `seeds` at steps `steps`.
+
+    Parameters
+    ----------
+    seeds, steps : int or array_like of int
+        Run seeds and step indexes, broadcast together.
+    channel : str
+        Channel name (its id keys the generator).
+    noise : ChannelNoise
+        Mean and standard deviation [unit of the channel].
+
+    Returns
+    -------
+    ndarray
+        Of the broadcast shape, in the channel's unit.
+    """
+    z = normals(seeds, CHANNEL_IDS[channel], steps, STREAM_NOISE)[..., 0]
+    return noise.mean + noise.stddev * z
+
+
+def noise_bound(stddev: float, n_steps: int, p: float) -> float:
+    """Bound b with P(|n_k| <= b for all N steps) >= p, for white Gaussian n_k.
+
+    Union over the steps: b = stddev Phi^-1(1 - (1 - p) / (2 N)).
+
+    Parameters
+    ----------
+    stddev : float
+        Standard deviation of the noise [any unit].
+    n_steps : int
+        Number N of independent samples in the run.
+    p : float
+        Probability, 0 < p < 1.
+
+    Returns
+    -------
+    float
+        The bound, in the unit of `stddev`.
+
+    Examples
+    --------
+    >>> round(noise_bound(1.0, 15000, 0.999), 3)
+    5.4
+    """
+    return stddev * -NormalDist().inv_cdf((1.0 - p) / (2.0 * n_steps))
+
+
+class Sensors:
+    """The sensors of B runs: y_k (B, n_y) from the true state x_k, step by step.
+
+    Per channel and step k: the true output of step k - delay, the lag C_1/(s + C_1),
+    a new sample every `period` steps (held between), plus constant, turn-on, drift
+    and Gauss-Markov biases and white noise, the channel's fault, then quantisation
+    to `precision`.
+
+    Parameters
+    ----------
+    data : SensorData
+        Noise models and mode slopes (`fahv.sensors.data.load_sensors`).
+    seeds : (B,) array_like of int
+        Seed of each run (keys its numbers).
+    Ts : float
+        Step [s].
+    measured : sequence of str
+        Channels, in output order (default h, V, theta, q).
+    faults : sequence of SensorFaultKind or None, optional
+        One-run fault of each run (None: healthy), length B.
+
+    Raises
+    ------
+    ValueError
+        If `faults` does not have B entries or a fault's channel is not measured.
+    """
+
+    def __init__(self, data, seeds, Ts: float, measured=DEFAULT_MEASURED, faults=None) -> None:
+        self.data, self.Ts = data, float(Ts)
+        self.seeds = np.atleast_1d(np.asarray(seeds, dtype=np.uint64))
+        self.names = tuple(measured)
+        #: Unit of each output.
+        self.units = tuple(CHANNEL_UNITS[c] for c in self.names)
+        self.noise = [data.channels[c] for c in self.names]
+        B, n_y = self.seeds.size, len(self.names)
+        faults = [None] * B if faults is None else list(faults)
+        if len(faults) != B:
+            raise ValueError(f"faults: {len(faults)} entries for {B} runs")
+        self.groups: list[tuple[int, np.ndarray, SensorFaultKind]] = []
+        by_kind: dict[tuple, list] = {}
+        for run, f in enumerate(faults):
+            if f is not None:
+                if f.channel not in self.names:
+                    raise ValueError(f"sensor fault on {f.channel!r}, not measured {self.names}")
+                by_kind.setdefault((type(f), f.channel), []).append((run, f))
+        for (cls, channel), fl in by_kind.items():
+            runs = np.array([r for r, _ in fl])
+            self.groups.append((self.names.index(channel), runs, cls.stack([f for _, f in fl])))
+        self.k = -1
+        self._line = np.zeros((max(n.delay for n in self.noise) + 1, B, n_y))
+        self._lagged = np.zeros((B, n_y))
+        self._sample = np.zeros((B, n_y))
+        self._gm = np.zeros((B, n_y))
+        self.y = np.zeros((B, n_y))
+        #: Turn-on bias of each run and channel (B, n_y), drawn at step 0.
+        self.turn_on = np.zeros((B, n_y))
+        for j, (c, n) in enumerate(zip(self.names, self.noise, strict=True)):
+            z = normals(self.seeds, CHANNEL_IDS[c], 0, STREAM_TURN_ON_BIAS)[:, 0]
+            self.turn_on[:, j] = n.bias_mean + n.bias_stddev * z
+
+    def _delayed(self, z: np.ndarray) -> np.ndarray:
+        """True outputs of step k - delay per channel (the first ones before step delay)."""
+        if self.k == 0:
+            self._line[:] = z
+        self._line = np.roll(self._line, 1, axis=0)
+        self._line[0] = z
+        return np.stack([self._line[n.delay, :, j] for j, n in enumerate(self.noise)], axis=1)
+
+    def _new_sample(self, j: int, z: np.ndarray) -> np.ndarray:
+        """The sample of channel j at step k: value, biases and noise (B,)."""
+        n, c, k = self.noise[j], self.names[j], self.k
+        gm = n.dynamic_bias_stddev
+        if gm > 0.0:
+            w = normals(self.seeds, CHANNEL_IDS[c], k, STREAM_DYNAMIC_BIAS)[:, 0]
+            if k == 0:
+                self._gm[:, j] = gm * w
+            else:
+                a = math.exp(-n.period * self.Ts / n.dynamic_bias_correlation_time)
+                self._gm[:, j] = a * self._gm[:, j] + gm * math.sqrt(1.0 - a * a) * w
+        bias = n.bias + self.turn_on[:, j] + n.drift_rate * k * self.Ts + self._gm[:, j]
+        return z + bias + white_noise(self.seeds, c, k, n)
+
+    def measure(self, k: int, x: np.ndarray) -> np.ndarray:
+        """The measurement of step k from the true states x_k of the B runs.
+
+        Parameters
+        ----------
+        k : int
+            Step; 0 restarts the sensors, otherwise the step after the previous call.
+        x : (B, n) ndarray, n >= 9
+            True states at step k (CM or ECM order).
+
+        Returns
+        -------
+        (B, n_y) ndarray
+            y_k in the units `units`, channels `names`.
+
+        Raises
+        ------
+        ValueError
+            If k is neither 0 nor the step after the previous call.
+        """
+        if k not in (0, self.k + 1):
+            raise ValueError(f"measure: step {k} after step {self.k} (steps go 0, 1, 2, ...)")
+        self.k = k
+        if k == 0:
+            for _, _, fault in self.groups:
+                fault.held[:] = np.nan
+        z = self._delayed(true_outputs(np.reshape(x, (self.seeds.size, -1)), self.data, self.names))
+        last = self.y.copy()
+        for j, n in enumerate(self.noise):
+            if k == 0 or n.lag == 0.0:
+                self._lagged[:, j] = z[:, j]
+            else:
+                self._lagged[:, j] += -math.expm1(-n.lag * self.Ts) * (z[:, j] - self._lagged[:, j])
+            if k % n.period == 0:
+                self._sample[:, j] = self._new_sample(j, self._lagged[:, j])
+        y = self._sample.copy()
+        if k == 0:
+            last = y.copy()
+        t = k * self.Ts
+        for j, runs, fault in self.groups:
+            act = fault.active(t)
+            if act.any():
+                lanes = np.flatnonzero(act)
+                rows = runs[lanes]
+                y[rows, j] = fault.apply(y[rows, j], last[rows, j], t, lanes)
+        for j, n in enumerate(self.noise):
+            if n.precision > 0.0:
+                y[:, j] = n.precision * np.round(y[:, j] / n.precision)
+        self.y = y
+        return y.copy()
+
+
+def measure_history(data: SensorData, seeds, Ts: float, x: np.ndarray, measured=DEFAULT_MEASURED,
+                    faults=None) -> np.ndarray:  # fmt: skip
+    """The measurements of whole runs from their state histories (a run's record).
+
+    The same numbers as `Sensors.measure` called step by step during the runs: y is a
+    function of the states and the seeds only.
+
+    Parameters
+    ----------
+    data : SensorData
+        Noise models and mode slopes.
+    seeds : (B,) array_like of int
+        Seed of each run.
+    Ts : float
+        Step [s].
+    x : (N, B, n) or (N, n) ndarray, n >= 9
+        True states of N steps (a single run may drop the B axis).
+    measured : sequence of str
+        Channels, in output order.
+    faults : sequence of SensorFaultKind or None, optional
+        One-run fault of each run (None: healthy).
+
+    Returns
+    -------
+    (N, B, n_y) ndarray, or (N, n_y) for an (N, n) history
+    """
+    x = np.asarray(x, dtype=float)
+    single = x.ndim == 2
+    xs = x[:, None, :] if single else x
+    sensors = Sensors(data, seeds, Ts, measured, faults)
+    y = np.stack([sensors.measure(k, xs[k]) for k in range(xs.shape[0])])
+    return y[:, 0, :] if single else y
