@@ -30,7 +30,7 @@ def test_every_node_validates(params):
         ("tube_mpc", "F_shape", [2, 8], "parameter 'F' has 18 values, but 'F_shape' = \\[2, 8\\]"),
         ("tube_mpc", "N_shape", [3, 3], "parameter 'N'"),
         ("tube_mpc", "tau", 1.5, r"parameter 'tau' must be in \(0, 1\], got 1.5"),
-        ("tube_mpc", "law", "pid", "parameter 'law' must be one of"),
+        ("tube_mpc", "law", "pid", "parameter 'law': unknown control law 'pid'; must be one of"),
         ("notch_filter", "omega_z", "fast", "parameter 'omega_z' must be float"),
         ("fault_injector", "rho_f", None, "parameter 'rho_f' is missing"),
         ("plant", "x0_shape", [8], "parameter 'x0' has 9 values"),
