@@ -190,7 +190,7 @@ def _check_true_errors(d, veh, tm, box, scale, nv, chunks: int = 10):
 def test_the_adjustable_tube_set_reproduces_its_bound_and_holds_W_8(tube_set_tau):
     """The adjustable law's tube set (tau = 0.8): its vertex data rebuilt here (8192
     vertices, the gains tau' F_8 at 0.8 and 1) reproduce the design's altitude bound H and
-    row bound (to 1e-6), inside W_8 with the V row's slack of 3.0 %; and 100 000 true
+    row bound (to 1e-6), inside W_8 with the V row's slack of 3.0 %; and 20 000 true
     one-step errors of the perturbed nonlinear CM, every box corner at both rho_f ends,
     e on the boundary of Z_8 and inside, gains tau' anywhere in [0.8, 1], lie inside W_8
     (the check of test_the_disturbance_along_the_nominal_lies_inside_W_8)."""
@@ -203,7 +203,7 @@ def test_the_adjustable_tube_set_reproduces_its_bound_and_holds_W_8(tube_set_tau
     assert ab.H == pytest.approx(float(d["H"]), rel=1e-6)
     np.testing.assert_allclose(ab.bound, d["bound"], rtol=1e-6)
     assert 0.025 < (1.0 - ab.bound / d["W"]).min() < 0.035
-    _check_true_errors(*tube_set_tau)
+    _check_true_errors(*tube_set_tau, chunks=2)  # a test record, not a shipped design
 
 
 def test_the_altitude_bound_reproduces_the_stored_tube_set(tube_set):
