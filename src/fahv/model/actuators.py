@@ -111,7 +111,9 @@ def _servo(data: Any, key: str, path: str) -> Servo:
         raise VehicleDataError(f"{path}: '{key}' must be a mapping of servo entries")
     unknown = sorted(set(data) - set(_UNITS))
     if unknown:
-        raise VehicleDataError(f"{path}: '{key}': unknown entries {unknown}; expected {list(_UNITS)}")
+        raise VehicleDataError(
+            f"{path}: '{key}': unknown entries {unknown}; expected {list(_UNITS)}"
+        )
     out = {}
     for name, units in _UNITS.items():
         if name not in data:
@@ -120,7 +122,9 @@ def _servo(data: Any, key: str, path: str) -> Servo:
             raise VehicleDataError(f"{path}: missing key '{key}.{name}'")
         v, unit = _value(data[name], f"{key}.{name}", path)
         if unit not in units:
-            raise VehicleDataError(f"{path}: '{key}.{name}' unit must be one of {units}, got {unit!r}")
+            raise VehicleDataError(
+                f"{path}: '{key}.{name}' unit must be one of {units}, got {unit!r}"
+            )
         out[name] = math.radians(v) if unit == "deg/s" else v
     return Servo(**out)
 
@@ -168,6 +172,8 @@ def actuators_from_mapping(data: Any, path: str = "<mapping>") -> dict[str, dict
                 f"{[m for m in ACTUATOR_MODELS if m != IDEAL]} (ideal needs no data)"
             )
         if not isinstance(channels, Mapping) or set(channels) != set(CHANNELS):
-            raise VehicleDataError(f"{path}: 'actuators.{model}' must give exactly {list(CHANNELS)}")
+            raise VehicleDataError(
+                f"{path}: 'actuators.{model}' must give exactly {list(CHANNELS)}"
+            )
         out[model] = {c: _servo(channels[c], f"actuators.{model}.{c}", path) for c in CHANNELS}
     return out
