@@ -273,8 +273,8 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         x0_meas = np.concatenate([x0_meas, np.zeros(2)])
     tau = float(c["tube"]["tau"]) if law.has_tube else 1.0
     vehicle_file = design.summary.get("provenance", {}).get("vehicle_file", "")
-    fault = {"kind": f["kind"], "t_onset": float(f["t_onset"]), "vehicle_file": vehicle_file}
-    fault.update({p.name: f[p.name] for p in FAULTS[f["kind"]].parameters})
+    fault = {"kind": f["kind"], "t_onset": float(f["t_onset"]), "vehicle_file": vehicle_file,
+             **{p.name: f[p.name] for p in FAULTS[f["kind"]].parameters}}  # fmt: skip
     notch_values = {f"notch.{k}": val for k, val in {"enabled": enabled, **notch}.items()}
     controller = {
         **common,
@@ -295,15 +295,14 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
             "vehicle_file": vehicle_file,
             **mat("x0", x0),
             **{f"params.{k}": float(val) for k, val in design.summary["plant_params"].items()},
-            "actuators": actuator_model(c),
-            **stuck_parameters(f["kind"], f["t_onset"]),
+            "actuators": actuator_model(c), **stuck_parameters(f["kind"], f["t_onset"]),
         },
         "fault_injector": {**common, **fault},
         "notch_filter": {**common, "enabled": enabled, **notch},
         "nominal_trajectory": {
             **common,
             "plant_substeps": int(c["plant_substeps"]),
-            "vehicle_file": design.summary.get("provenance", {}).get("vehicle_file", ""),
+            "vehicle_file": vehicle_file,
             **{f"command.{k}": (val if k == "kind" else float(val)) for k, val in cmd.items()},
             "nominal": law.nominal.name,
             "level_max": float(c["nominal"]["level_max"]),

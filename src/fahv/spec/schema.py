@@ -177,7 +177,8 @@ def plant_section() -> Section:
     is what it was before the section existed); :func:`actuator_model` reads it.
     """
     return Section("plant", PLANT, "the simulated plant: actuator model",
-                   when=lambda r: False, when_text="given (absent: actuators ideal)")
+                   when=lambda r: False, when_text="a scenario sets another actuator model "
+                   "(optional: absent, the actuators are ideal)")
 
 
 def actuator_model(spec) -> str:
