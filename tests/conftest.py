@@ -130,7 +130,7 @@ def store_quick(design, folder):
     stored = Design(load_design_file(dfile).data, dict(design.arrays), summary)
     stored.summary["design_hash"] = stored.content_hash()
     save_design(stored, folder / "designs" / "quick")
-    scen = {k: c[k] for k in SCENARIO_KEYS}
+    scen = {k: c[k] for k in SCENARIO_KEYS if k in c}  # plant: optional
     scen["design"] = "quick"
     sfile = folder / "scenarios" / "quick.yaml"
     sfile.write_text(yaml.safe_dump(plain(scen), sort_keys=False))
