@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from fahv.config.yamlio import load_yaml
-from fahv.errors import ParameterError, SpecError, VehicleDataError
+from fahv.errors import ConfigError, ParameterError, SpecError, VehicleDataError
 from fahv.loop.cores import servos_of
 from fahv.model.actuators import kernel_parameters
 from fahv.model.trim import trim
 from fahv.model.vehicle import vehicle_from_mapping
+from fahv.plant.faults import FaultInjector, make_fault
 from fahv.plant.integrator import Plant
 from fahv.plant.rk4 import params_records, rk4_cm, rk4_cm_act
 
@@ -141,3 +142,18 @@ def test_actuator_data_and_the_key_are_checked(vehicle, raw):
     with pytest.raises(SpecError, match="key 'fault.side' must be -1"):
         spec_file({**raw, "fault": {"kind": "hardover", "t_onset": 1.0, "side": 0.5}})
     assert "plant" not in spec_file(raw).data  # absent: the run spec (and hash) as before
+
+
+def test_hardover_commands_the_limit_of_its_side(vehicle):
+    """With ideal actuators the elevator jumps to the limit at the onset; the kind needs
+    the limits and a side of -1 or 1."""
+    lim = vehicle.limits
+    faults = [make_fault("hardover", 1.0, {"side": s}) for s in (1.0, -1.0)]
+    inj = FaultInjector(faults, lim)
+    u = np.array([[0.3, 0.2], [0.3, 0.2]])
+    np.testing.assert_array_equal(inj.apply(0.98, u), u)
+    np.testing.assert_array_equal(inj.apply(1.0, u)[:, 1], [lim.delta_e_max, lim.delta_e_min])
+    with pytest.raises(ConfigError, match="needs the actuators' position limits"):
+        FaultInjector(make_fault("hardover", 1.0, {"side": 1.0}))
+    with pytest.raises(ConfigError, match="parameter 'side' must be -1 or 1"):
+        make_fault("hardover", 1.0, {"side": 0.5})
