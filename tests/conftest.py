@@ -53,8 +53,8 @@ def quick(raw, **changes):
 
 @pytest.fixture(scope="session")
 def make_case(raw):
-    """Factory of quick cases: ``make_case(**changes)`` (Case 1, small W sample; without
-    the RMPC baseline, whose off-line design costs about a minute, unless ``variants``
+    """Factory of quick cases: `make_case(**changes)` (Case 1, small W sample; without
+    the RMPC baseline, whose off-line design costs about a minute, unless `variants`
     is given)."""
     no_rmpc = [v for v in raw["variants"] if v != "rmpc"]
     return lambda **changes: quick(raw, **{"variants": no_rmpc, **changes})
@@ -91,7 +91,7 @@ def design(raw, tmp_path_factory, worker_id):
 @pytest.fixture(scope="session")
 def quick_case(design, raw, tmp_path_factory):
     """The test design as a case file plus its saved artefacts, for the `fahv` command:
-    (case file, artefact folder) to pass as ``fahv simulate|sil CASE --design DIR``."""
+    (case file, artefact folder) to pass as `fahv simulate|sil CASE --design DIR`."""
 
     folder = tmp_path_factory.mktemp("case")
     return store_quick(design, folder)
@@ -99,17 +99,17 @@ def quick_case(design, raw, tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def store_as_files():
-    """:func:`store_quick`, for the test folders that need their own copy."""
+    """`store_quick`, for the test folders that need their own copy."""
     return store_quick
 
 
 def store_quick(design, folder):
-    """Store a test design as ``fahv`` finds it: design file, stored design, scenario file.
+    """Store a test design as `fahv` finds it: design file, stored design, scenario file.
 
-    ``design`` is a design made from a whole case (:func:`quick`); its design part is
-    written to ``folder/designs/quick.yaml``, its arrays stored beside it as that design
-    file's design, and the case's scenario to ``folder/scenarios/quick.yaml``. Returns
-    (scenario file, artefact folder) to pass as ``fahv simulate|sil SCENARIO --design DIR``.
+    `design` is a design made from a whole case (`quick`); its design part is
+    written to `folder/designs/quick.yaml`, its arrays stored beside it as that design
+    file's design, and the case's scenario to `folder/scenarios/quick.yaml`. Returns
+    (scenario file, artefact folder) to pass as `fahv simulate|sil SCENARIO --design DIR`.
     """
     from fahv.spec.artefacts import Design, save_design
     from fahv.spec.files import load_design_file, spec_file
@@ -135,7 +135,7 @@ def store_quick(design, folder):
     stored = Design(load_design_file(dfile).data, dict(design.arrays), summary)
     stored.summary["design_hash"] = stored.content_hash()
     save_design(stored, folder / "designs" / "quick")
-    scen = {k: c[k] for k in SCENARIO_KEYS}
+    scen = {k: c[k] for k in SCENARIO_KEYS if k in c}  # plant: optional
     scen["design"] = "quick"
     sfile = folder / "scenarios" / "quick.yaml"
     sfile.write_text(yaml.safe_dump(plain(scen), sort_keys=False))
@@ -146,9 +146,9 @@ def store_quick(design, folder):
 def interrupt_fahv():
     """Run a `fahv` command, signal it once its run folder exists, check the interruption.
 
-    ``interrupt_fahv(args, out, signals, wait_s, timeout_s)``: starts ``.venv/bin/fahv
-    *args`` in a new process group (as a terminal's foreground job), waits until
-    ``out/*/run.json`` exists, sleeps ``wait_s``, sends ``signals`` to the group 0.2 s
+    `interrupt_fahv(args, out, signals, wait_s, timeout_s)`: starts `.venv/bin/fahv
+    *args` in a new process group (as a terminal's foreground job), waits until
+    `out/*/run.json` exists, sleeps `wait_s`, sends `signals` to the group 0.2 s
     apart, and asserts exit 130, no traceback, the "interrupted at step K of 15000; run
     written to RUN" message, and a run whose status is interrupted, not truncated, with
     K steps recorded. Returns (K, the Recording, the output).
@@ -196,21 +196,21 @@ def _hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None)
     Parameters
     ----------
     quick_case : (Path, Path)
-        Case file and design folder (fixture ``quick_case``).
+        Case file and design folder (fixture `quick_case`).
     out : Path
-        Folder of the parameter file ``run.yaml`` and of the run (``out/bags``).
+        Folder of the parameter file `run.yaml` and of the run (`out/bags`).
     duration, watchdog : float
         Run length and node watchdog [s] (None: the default watchdog).
     without : sequence of str
         Nodes not started (a graph with a node missing).
     logs : Path, optional
-        Each node's output in ``logs/<node>.log`` (else the shell's output).
+        Each node's output in `logs/<node>.log` (else the shell's output).
 
     Returns
     -------
     (list of str, list of str, dict, Path)
         The shell lines (the shell ends once every node has exited and prints a line
-        ``exit NODE STATUS`` per node: :func:`_exit_statuses`), the nodes started in
+        `exit NODE STATUS` per node: `_exit_statuses`), the nodes started in
         order, the environment (without ROS_DOMAIN_ID: the caller takes a free one) and
         the parameter file.
     """
@@ -252,7 +252,7 @@ def _hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None)
 
 
 def _exit_statuses(stdout):
-    """{node: exit status} from the ``exit NODE STATUS`` lines of :func:`_hand_graph`."""
+    """{node: exit status} from the `exit NODE STATUS` lines of `_hand_graph`."""
     import re
 
     return {m[1]: int(m[2]) for m in re.finditer(r"^exit (\w+) (\d+)$", stdout, re.M)}
@@ -260,11 +260,11 @@ def _exit_statuses(stdout):
 
 @pytest.fixture(scope="session")
 def hand_graph():
-    """The README's graph by hand as a function (:func:`_hand_graph`)."""
+    """The README's graph by hand as a function (`_hand_graph`)."""
     return _hand_graph
 
 
 @pytest.fixture(scope="session")
 def exit_statuses():
-    """Per-node exit statuses of a hand-started graph's output (:func:`_exit_statuses`)."""
+    """Per-node exit statuses of a hand-started graph's output (`_exit_statuses`)."""
     return _exit_statuses

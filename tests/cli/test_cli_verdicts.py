@@ -24,7 +24,7 @@ CASE1 = ROOT / "offline_design" / "scenarios" / "case1.yaml"
 ONSET, DURATION = 20.0, 60.0
 #: Parameters of each kind (what the kind takes).
 PARAMS = {"loss_of_effectiveness": {"rho_f": 0.9}, "bias": {"bias_deg": 2.0},
-          "elevator_travel": {"travel_deg": 12.1}}  # fmt: skip
+          "elevator_travel": {"travel_deg": 12.1}, "hardover": {"side": 1.0}}  # fmt: skip
 #: Measured on Case 1 (cm_certified) with the fault at 20 s: verdict, step, node.
 EXPECTED = {
     "none": ("completed", 3000, "-"),
@@ -32,6 +32,7 @@ EXPECTED = {
     "bias": ("completed", 3000, "-"),
     "stuck": ("nominal_out_of_domain", 1325, "nominal_trajectory"),
     "dropout": ("nominal_out_of_domain", 1350, "nominal_trajectory"),
+    "hardover": ("nominal_out_of_domain", 1200, "nominal_trajectory"),
     "elevator_travel": ("nominal_out_of_domain", 1150, "nominal_trajectory"),
 }
 
@@ -42,7 +43,7 @@ COVERAGE = {
     "none": "certified",
     "loss_of_effectiveness": "not certified: onset loss 10 % above the certified 8.07 %",
     "bias": "not certified: onset of a 2 deg bias (the onset lines certify losses only)",
-    **{k: OUTSIDE.format(k) for k in ("stuck", "dropout", "elevator_travel")},
+    **{k: OUTSIDE.format(k) for k in ("stuck", "dropout", "hardover", "elevator_travel")},
 }
 
 
@@ -57,20 +58,27 @@ def plugin_faults(monkeypatch):
     FAULTS.unregister("elevator_travel")
 
 
-def case1_with(tmp_path: Path, kind: str) -> Path:
-    """A copy of Case 1 with the fault `kind` at `ONSET`."""
+def case1_with(tmp_path: Path, kind: str, actuators: str | None = None) -> Path:
+    """A copy of Case 1 with the fault `kind` at `ONSET` (and an actuator model)."""
     spec = yaml.safe_load(CASE1.read_text())
     spec["fault"] = {"kind": kind, "t_onset": ONSET, **PARAMS.get(kind, {})}
+    if actuators is not None:
+        spec["plant"] = {"actuators": actuators}
     path = tmp_path / f"case1_{kind}.yaml"
     path.write_text(yaml.safe_dump(spec, sort_keys=False))
     return path
 
 
-def simulate_kind(kind: str, tmp_path: Path, capsys) -> tuple[int, str, object]:
-    """`fahv simulate` of Case 1 with fault `kind`: (exit status, stderr, the run file)."""
+def simulate_kind(kind: str, tmp_path: Path, capsys, actuators: str | None = None):
+    """`fahv simulate` of Case 1 with fault `kind`: (exit status, stderr, the run file).
+
+    With servo `actuators` the scenario is beyond the design (ideal actuators): it runs
+    with `--allow-uncertified`.
+    """
     out = tmp_path / "bags"
-    rc = main(["simulate", str(case1_with(tmp_path, kind)), "--duration", str(DURATION),
-               "--out", str(out)])  # fmt: skip
+    extra = [] if actuators is None else ["--allow-uncertified"]
+    rc = main(["simulate", str(case1_with(tmp_path, kind, actuators)), "--duration",
+               str(DURATION), "--out", str(out), *extra])  # fmt: skip
     printed = capsys.readouterr()
     err = printed.err
     assert "Traceback" not in err
@@ -110,10 +118,34 @@ def check_verdict(kind: str, rc: int, err: str, rec, capsys) -> None:
 def test_every_fault_kind_completes_or_ends_with_its_verdict(kind, tmp_path, capsys):
     rc, err, rec = simulate_kind(kind, tmp_path, capsys)
     check_verdict(kind, rc, err, rec, capsys)
-    if kind in ("stuck", "dropout"):  # the vehicle fell through the envelope's floor
+    if kind in ("stuck", "dropout", "hardover"):  # fell through the envelope's floor
         why = rec.metadata["verdict_reason"]
         assert "left the trim map the QP is scheduled on (h in [85000, 86500] ft" in why
         assert "vehicle at h = 84" in why
+
+
+#: With second-order actuators (the vehicle file's servos): verdict, step, node.
+SERVO_EXPECTED = {
+    "stuck": ("nominal_out_of_domain", 1325, "nominal_trajectory"),
+    "hardover": ("nominal_out_of_domain", 1200, "nominal_trajectory"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(SERVO_EXPECTED))
+def test_actuator_faults_with_servo_dynamics_end_with_their_verdict(
+    kind, tmp_path, capsys, monkeypatch
+):
+    """The stuck servo (held at its position) and the hardover (driven at its rate limit)
+    end as named verdicts, the warning names the actuator model beyond the design."""
+    monkeypatch.setitem(EXPECTED, kind, SERVO_EXPECTED[kind])
+    # the coverage verdict names both: the actuator model first, then the fault kind
+    servos = ("the actuator model 'second_order' (plant.actuators) is not in the design "
+              "model: the tube and the nominal ellipsoid are certified for ideal actuators")
+    both = COVERAGE[kind].replace("not certified: ", f"not certified: {servos}; ")
+    monkeypatch.setitem(COVERAGE, kind, both)
+    rc, err, rec = simulate_kind(kind, tmp_path, capsys, "second_order")
+    assert "the actuator model 'second_order' (plant.actuators) is not in the design" in err
+    check_verdict(kind, rc, err, rec, capsys)
 
 
 def test_a_plugin_fault_kind_ends_with_its_verdict(plugin_faults, tmp_path, capsys):

@@ -31,7 +31,7 @@ import functools
 import numpy as np
 from scipy.stats import qmc
 
-from fahv.loop.params import node_parameters
+from fahv.loop.params import node_parameters, stuck_parameters
 from fahv.model.trim import TrimMap
 from fahv.model.vehicle import load_vehicle
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturb
@@ -194,7 +194,11 @@ def overrides(values: dict, design, variant: str) -> dict:
             "t_onset": values["fault.t_onset"],
             "rho_f": values["fault.rho_f"],
             "bias_deg": values["fault.bias_deg"],
+            # a drawn hardover goes to the scenario's side (the upper limit if it has none)
+            "side": float(design.case["fault"].get("side", 1.0)),
         }
+        ov["plant"] = {**ov.get("plant", {}),
+                       **stuck_parameters(values["fault.kind"], values["fault.t_onset"])}
     cmd = design.case["command"]
     h0, V0 = values.get("initial.h0", cmd["h0"]), values.get("initial.V0", cmd["V0"])
     if "initial.h0" in values or "command.h_c" in values:

@@ -35,7 +35,7 @@ from fahv.loop.simulate import History, Loop, RunResult, run_info, run_parameter
 
 #: Node parameters a run may have of its own inside a batch (prefixes end with '.').
 PER_RUN = {
-    "plant": ("x0", "params."),
+    "plant": ("x0", "params.", "stuck", "stuck_onset"),
     "nominal_trajectory": ("x0", "command."),
     "fault_injector": None,  # everything
 }

@@ -24,10 +24,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from fahv.control import LAWS, NOMINAL_SOURCES
-from fahv.errors import RunError
+from fahv.errors import ParameterError, RunError
 from fahv.lanes import Lanes
 from fahv.loop.graph import CONTROLLER_NODES, n_steps_of
 from fahv.loop.params import validate
+from fahv.model.actuators import IDEAL
 from fahv.model.notch import DiscreteNotch, NotchFilter
 from fahv.model.vehicle import DELTA_E, IQ, H, V, load_vehicle
 from fahv.msg import (
@@ -39,9 +40,28 @@ from fahv.msg import (
     TubeStatus,
     VehicleState,
 )
-from fahv.plant.faults import FaultInjector, make_fault
+from fahv.plant.faults import FAULTS, FaultInjector, make_fault
 from fahv.plant.integrator import Plant
 from fahv.verdict import RunEnded
+
+
+def servos_of(vehicle, model: str):
+    """The servos of actuator model `model` of a vehicle; None for `ideal`.
+
+    Raises
+    ------
+    ParameterError
+        If the vehicle file gives no data for the model (names parameter `actuators`).
+    """
+    if model == IDEAL:
+        return None
+    if model not in vehicle.actuators:
+        raise ParameterError(
+            f"plant: parameter 'actuators' = {model!r}: the vehicle file "
+            f"{vehicle.source_file} has no 'actuators.{model}' section "
+            f"(it gives {sorted(vehicle.actuators) or 'none'})"
+        )
+    return vehicle.actuators[model]
 
 
 def check_step(node: str, topic: str, msg: LoopMessage, k: int) -> None:
@@ -52,6 +72,11 @@ def check_step(node: str, topic: str, msg: LoopMessage, k: int) -> None:
 
 class PlantCore:
     """Plant node: the nonlinear CM of each run with its perturbed parameters (`Plant`).
+
+    The actuator model (parameter `actuators`, shared by the runs of a batch) is
+    `ideal` or one of the vehicle file's servo models (`fahv.model.actuators`);
+    with servo dynamics, a run's elevator actuator is held at its position from its
+    `stuck_onset` on (fault kind `stuck`).
 
     Parameters
     ----------
@@ -86,7 +111,11 @@ class PlantCore:
         # first exit from the flight envelope of each run (reason of a later divergence)
         self.exit_reason: list[str | None] = [None] * len(runs)
         self.x0 = np.stack([np.asarray(r["x0"], float) for r in runs])
-        self.plant = Plant(params, veh.limits, self.x0, p["Ts"], p["plant_substeps"])
+        self.stuck_onset = np.array(
+            [r["stuck_onset"] if r["stuck"] else np.inf for r in runs], float
+        )  # fmt: skip
+        self.plant = Plant(params, veh.limits, self.x0, p["Ts"], p["plant_substeps"],
+                           servos_of(veh, p["actuators"]))  # fmt: skip
         self.lanes = lanes
         self.k = 0
 
@@ -127,7 +156,7 @@ class PlantCore:
             self.lanes.fail_mask(bad, ended)
         if not self.lanes.alive.all():
             self._reset(~self.lanes.alive)
-        return VehicleState.of(self.k, t, self.plant.x)
+        return VehicleState.of(self.k, t, self.plant.x, self.plant.positions)
 
     def advance(self, actuator: ControlCommand) -> None:
         """Integrate [t_k, t_k+1] with the step-k actuator commands (ZOH, saturated).
@@ -149,7 +178,8 @@ class PlantCore:
                 "non_finite_input", "plant", self.k, t, f"plant input not finite: u = {u[b]!r}"
             ))  # fmt: skip
             u[bad] = self.limits.u_min
-        self.plant.step(u)
+        held = actuator.t >= self.stuck_onset - 1e-12
+        self.plant.step(u, held if held.any() else None)
         self.k += 1
 
 
@@ -276,7 +306,11 @@ class FaultCore:
     """Fault-injector node (`fahv.plant.faults.FaultInjector`), each run its fault."""
 
     def __init__(self, runs: Sequence[dict], lanes: Lanes) -> None:
-        self.injector = inj = FaultInjector([make_fault(r["kind"], r["t_onset"], r) for r in runs])
+        faults = [make_fault(r["kind"], r["t_onset"], r) for r in runs]
+        limits = None
+        if any(FAULTS[r["kind"]].needs_limits for r in runs):  # e.g. a hardover
+            limits = load_vehicle(runs[0]["vehicle_file"] or None).limits
+        self.injector = inj = FaultInjector(faults, limits)
         self.k = 0
         # the FaultStatus fields that do not depend on t (read-only: shared by messages)
         self._kind = tuple(inj.kind)

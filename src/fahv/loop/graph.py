@@ -131,7 +131,8 @@ NODES: dict[str, NodeSpec] = {
                  ("/hsv/actuator_command", "/hsv/fault_status"), "loop",
                  "actuator faults between controller and plant (eq. 15 ...)"),
         NodeSpec("plant", "hsv_plant", ("/hsv/actuator_command",), ("/clock", "/hsv/state"),
-                 "loop", "nonlinear CM (eq. 1-3), RK4, lockstep master, /clock"),
+                 "loop", "nonlinear CM (eq. 1-3) with its actuators (ideal or servos), RK4, "
+                 "lockstep master, /clock"),
         NodeSpec("replay", "hsv_bringup", tuple(TOPICS), tuple(TOPICS), "replay",
                  "republishes a recorded run (raw CDR), captures outputs"),
     )

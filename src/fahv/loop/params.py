@@ -29,7 +29,7 @@ from fahv.loop.graph import CONTROLLER_NODES
 from fahv.plant.faults import FAULT_KIND, FAULTS, T_ONSET, fault_fields
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.spec.artefacts import variant_gain_key
-from fahv.spec.schema import COMMAND, DURATION, NOTCH, PLANT_SUBSTEPS, TS
+from fahv.spec.schema import COMMAND, DURATION, NOTCH, PLANT, PLANT_SUBSTEPS, TS, actuator_model
 
 COMMON = (
     Field("case", "str", "name of the run spec the run flies (its scenario's name; the run "
@@ -81,9 +81,18 @@ def specs() -> dict[str, tuple[Field, ...]]:
             _matrix("x0", "initial plant state (9,) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]"),
             *(Field(f"params.{k}", "float", f"true (perturbed) value of vehicle parameter {k}")
               for k in PAPER_UNCERTAINTY),
+            *PLANT,
+            Field("stuck", "bool", "the run's fault is a stuck elevator (fault kind stuck): "
+                  "from stuck_onset the elevator actuator is held at its position (with servo "
+                  "dynamics; an ideal actuator's position is the held command)",
+                  default=False),
+            Field("stuck_onset", "float", "onset of the stuck elevator (fault t_onset)",
+                  unit="s", lo=0.0, default=0.0),
         ),
         "fault_injector": (
             *COMMON,
+            Field("vehicle_file", "str", "vehicle data file (YAML) whose input limits a "
+                  "hardover drives to; empty: the packaged one", default=""),
             FAULT_KIND,
             T_ONSET,
             *fault_fields(),
@@ -263,8 +272,9 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     if n == 11:
         x0_meas = np.concatenate([x0_meas, np.zeros(2)])
     tau = float(c["tube"]["tau"]) if law.has_tube else 1.0
-    fault = {"kind": f["kind"], "t_onset": float(f["t_onset"])}
-    fault.update({p.name: f[p.name] for p in FAULTS[f["kind"]].parameters})
+    vehicle_file = design.summary.get("provenance", {}).get("vehicle_file", "")
+    fault = {"kind": f["kind"], "t_onset": float(f["t_onset"]), "vehicle_file": vehicle_file,
+             **{p.name: f[p.name] for p in FAULTS[f["kind"]].parameters}}  # fmt: skip
     notch_values = {f"notch.{k}": val for k, val in {"enabled": enabled, **notch}.items()}
     controller = {
         **common,
@@ -282,16 +292,17 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         "plant": {
             **common,
             "plant_substeps": int(c["plant_substeps"]),
-            "vehicle_file": design.summary.get("provenance", {}).get("vehicle_file", ""),
+            "vehicle_file": vehicle_file,
             **mat("x0", x0),
             **{f"params.{k}": float(val) for k, val in design.summary["plant_params"].items()},
+            "actuators": actuator_model(c), **stuck_parameters(f["kind"], f["t_onset"]),
         },
         "fault_injector": {**common, **fault},
         "notch_filter": {**common, "enabled": enabled, **notch},
         "nominal_trajectory": {
             **common,
             "plant_substeps": int(c["plant_substeps"]),
-            "vehicle_file": design.summary.get("provenance", {}).get("vehicle_file", ""),
+            "vehicle_file": vehicle_file,
             **{f"command.{k}": (val if k == "kind" else float(val)) for k, val in cmd.items()},
             "nominal": law.nominal.name,
             "level_max": float(c["nominal"]["level_max"]),
@@ -311,6 +322,18 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         },
         law.node: controller,
     }
+
+
+def stuck_parameters(kind: str, t_onset: float) -> dict:
+    """The plant's parameters `stuck`, `stuck_onset` of a run's fault (kind, onset [s]).
+
+    Examples
+    --------
+    >>> stuck_parameters("stuck", 100.0), stuck_parameters("bias", 100.0)
+    ({'stuck': True, 'stuck_onset': 100.0}, {'stuck': False, 'stuck_onset': 0.0})
+    """
+    stuck = kind == "stuck"
+    return {"stuck": stuck, "stuck_onset": float(t_onset) if stuck else 0.0}
 
 
 def _plain(v):

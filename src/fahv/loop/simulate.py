@@ -83,6 +83,9 @@ class RunResult:
         Nominal MPC QPs accepted, nominal steps on the shifted plan and on the
         terminal law, re-plans by the recovery QP over the run (zeros without the
         online MPC; `QP_COUNTS`).
+    u_actuator : (N, 2) ndarray or None
+        Actuator positions [Phi, delta_e rad] at t_k (/hsv/state; NaN at step 0;
+        ideal actuators: the applied input of step k - 1); None if not given.
     """
 
     t: np.ndarray
@@ -101,6 +104,7 @@ class RunResult:
     lmi_counts: np.ndarray
     info: dict = field(default_factory=dict)
     qp_counts: np.ndarray = field(default_factory=lambda: np.zeros(4, dtype=int))
+    u_actuator: np.ndarray | None = None
 
 
 class History:
@@ -133,6 +137,7 @@ class History:
             "V_g": np.empty((N, B)),
             "tube_level": np.empty((N, B)),
             "fault_active": np.empty((N, B), dtype=bool),
+            "u_actuator": np.empty((N, B, 2)),
         }
         self._counters = None  # the last step's (TubeStatus, NominalTrajectory)
 
@@ -168,6 +173,7 @@ class History:
         a["h_g"][k], a["V_g"][k] = nom.h_g, nom.v_g
         a["tube_level"][k] = tube.level
         a["fault_active"][k] = fs.active
+        a["u_actuator"][k] = state.u_a()
         self._counters = (tube, nom)  # running totals: the last step's are the run's
         self.count += 1
 

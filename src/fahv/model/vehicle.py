@@ -35,6 +35,7 @@ import yaml
 
 from fahv.config.yamlio import load_yaml
 from fahv.errors import VehicleDataError
+from fahv.model.actuators import Servo, actuators_from_mapping
 from fahv.model.envelope import Envelope
 
 # Named indices: CM / DM state (eq. 7).
@@ -257,6 +258,10 @@ class Vehicle:
     data_hash : str
         sha256 of the vehicle's numbers (`physics_hash`; "" when built from a
         mapping).
+    actuators : dict
+        Actuator models of the file's `actuators` section, `{model: {channel:
+        Servo}}` (`fahv.model.actuators`; `ideal` needs no data). They do not
+        enter `data_hash`: the design does not model the actuators.
     """
 
     params: VehicleParams
@@ -268,6 +273,7 @@ class Vehicle:
     source_file: str
     name: str = ""
     data_hash: str = ""
+    actuators: Mapping[str, Mapping[str, Servo]] = dataclasses.field(default_factory=dict)
 
     @property
     def packaged(self) -> bool:
@@ -301,7 +307,8 @@ def vehicle_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Ve
     ----------
     data : mapping
         Parsed file with sections `parameters`, `envelope`, `input_limits`,
-        `scales` (see `src/fahv/data/vehicle_parker2007.yaml`).
+        `scales` and optionally `actuators` (see
+        `src/fahv/data/vehicle_parker2007.yaml`).
     path : str
         Name used in error messages.
 
@@ -395,6 +402,7 @@ def vehicle_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Ve
         representative=tuple(representative),
         source_file=path,
         name=str(data.get("name", "")),
+        actuators=actuators_from_mapping(data.get("actuators"), path),
     )
 
 

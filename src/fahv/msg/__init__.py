@@ -147,7 +147,9 @@ class VehicleState(LoopMessage):
 
     HEADER: ClassVar[tuple[str, ...]] = (
         "Plant state x_k of the coupling model CM (Yang et al. 2022, eq. 1-3) at step k.",
-        "Published by the plant at t_k = k * Ts, before it integrates [t_k, t_k+1].",
+        "Published by the plant at t_k = k * Ts, before it integrates [t_k, t_k+1],",
+        "with the actuator positions at t_k (ideal actuators: the command held over",
+        "[t_k-1, t_k]).",
     )
     k: int = _f("int64", _STEP_K)
     t: float = _f("float64", _STEP_T)
@@ -160,6 +162,12 @@ class VehicleState(LoopMessage):
     eta_1_dot: np.ndarray = _f("float64", "its rate [1/s]")
     eta_2: np.ndarray = _f("float64", "second generalised flexible coordinate")
     eta_2_dot: np.ndarray = _f("float64", "its rate [1/s]")
+    phi_a: np.ndarray = _f(
+        "float64", "actuator position: Phi at the engine [-] (NaN before the first command)"
+    )
+    delta_e_a: np.ndarray = _f(
+        "float64", "actuator position: elevator deflection [rad] (NaN before the first command)"
+    )
 
     #: State fields in plant state order (eq. 7).
     STATE: ClassVar[tuple[str, ...]] = (
@@ -167,10 +175,18 @@ class VehicleState(LoopMessage):
     )  # fmt: skip
 
     @classmethod
-    def of(cls, k: int, t: float, x: np.ndarray) -> VehicleState:
-        """Message of step k from the plant states x (B, 9) (columns are copied)."""
+    def of(cls, k: int, t: float, x: np.ndarray, u_a: np.ndarray | None = None) -> VehicleState:
+        """Message of step k from the plant states x (B, 9) and actuator positions u_a (B, 2).
+
+        The columns are copied; `u_a` None (before the first command) gives NaN.
+        """
         x = np.array(x, dtype=float)
-        return cls(k, t, *(x[:, i] for i in range(9)))
+        u_a = np.full((len(x), 2), np.nan) if u_a is None else np.array(u_a, dtype=float)
+        return cls(k, t, *(x[:, i] for i in range(9)), u_a[:, 0], u_a[:, 1])
+
+    def u_a(self) -> np.ndarray:
+        """Actuator positions (B, 2) [Phi, delta_e rad] (NaN before the first command)."""
+        return np.stack([np.asarray(self.phi_a, float), np.asarray(self.delta_e_a, float)], axis=1)
 
     def x(self) -> np.ndarray:
         """Plant states (B, 9) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]."""
@@ -302,7 +318,7 @@ class FaultStatus(LoopMessage):
     HEADER: ClassVar[tuple[str, ...]] = ("Fault applied at step k by the fault injector.",)
     k: int = _f("int64", _STEP_K)
     t: float = _f("float64", _STEP_T)
-    kind: tuple = _f("string", "none, loss_of_effectiveness, stuck, bias, dropout")
+    kind: tuple = _f("string", "none, loss_of_effectiveness, stuck, bias, dropout, hardover")
     active: np.ndarray = _f("bool", "true once t >= t_onset")
     t_onset: np.ndarray = _f("float64", "onset time [s]")
     rho_f: np.ndarray = _f("float64", "elevator effectiveness (eq. 15), 1 = healthy")

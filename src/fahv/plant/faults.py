@@ -5,7 +5,13 @@ A fault kind is one class (subclass of `FaultKind`) registered in
 case file, the fault-injector node and the docs read them from here), and
 `FaultKind.apply`, the input that reaches the actuators while it is active.
 Built-in kinds: `none`, `loss_of_effectiveness` (eq. 15), `bias`, `stuck`,
-`dropout`.
+`dropout`, `hardover`.
+
+The faults act on the elevator command before the actuator: with ideal actuators the
+command is the position; with servo dynamics (`fahv.model.actuators`) a
+`hardover` command at a position limit drives the servo there at its rate limit, and
+`stuck` is also applied by the plant, which holds the servo at its position at the
+onset (plant parameter `stuck_onset`).
 """
 
 from __future__ import annotations
@@ -20,7 +26,7 @@ import numpy as np
 from fahv.config import Field, Registry
 from fahv.config.spec import lookup
 from fahv.errors import ConfigError
-from fahv.model.vehicle import DELTA_E
+from fahv.model.vehicle import DELTA_E, InputLimits
 
 
 class FaultKind:
@@ -50,6 +56,10 @@ class FaultKind:
     name: ClassVar[str] = ""
     #: Parameters the kind takes, beyond `kind` and `t_onset`.
     parameters: ClassVar[tuple[Field, ...]] = ()
+    #: The kind needs the actuators' position limits (`bind_limits`).
+    needs_limits: ClassVar[bool] = False
+    #: Position limits of the actuators, once bound.
+    limits: InputLimits | None = None
 
     def __init__(self, t_onset=math.inf, **params) -> None:
         self.t_onset = np.atleast_1d(np.asarray(t_onset, dtype=float))
@@ -68,6 +78,18 @@ class FaultKind:
     def lanes(self) -> int:
         """Number of runs n the instance describes."""
         return self.t_onset.size
+
+    def bind_limits(self, limits: InputLimits | None) -> None:
+        """Give the fault the actuators' position limits (those of the simulated vehicle).
+
+        Raises
+        ------
+        ConfigError
+            If the kind needs them (`needs_limits`) and `limits` is None.
+        """
+        if self.needs_limits and limits is None:
+            raise ConfigError(f"fault kind '{self.name}' needs the actuators' position limits")
+        self.limits = limits
 
     @classmethod
     def stack(cls, faults: Sequence[FaultKind]) -> FaultKind:
@@ -192,7 +214,11 @@ class Bias(FaultKind):
 
 @register_fault
 class Stuck(FaultKind):
-    """delta_e frozen at the value applied just before the onset."""
+    """delta_e frozen at the value applied just before the onset; a servo held where it is.
+
+    With servo dynamics the plant also holds the elevator actuator at its position at
+    the onset (plant parameters `stuck`, `stuck_onset`).
+    """
 
     name = "stuck"
 
@@ -221,6 +247,46 @@ class Dropout(FaultKind):
     def apply(self, u, held, lanes):
         """The previous applied input (the command itself at step 0)."""
         return u if held is None else held.copy()
+
+
+SIDE = Field(
+    "side", "float", "the position limit a hardover drives the elevator to: +1 the upper "
+    "(delta_e max), -1 the lower (delta_e min)", lo=-1.0, hi=1.0,
+)  # fmt: skip
+
+
+@register_fault
+class Hardover(FaultKind):
+    """delta_e commanded to a position limit (side +1: max, -1: min) from the onset.
+
+    With ideal actuators the elevator jumps to the limit; a servo
+    (`fahv.model.actuators`) drives it there at its rate limit.
+
+    Raises
+    ------
+    ConfigError
+        If a `side` is not -1 or +1.
+    """
+
+    name = "hardover"
+    parameters = (SIDE,)
+    needs_limits = True
+
+    def __init__(self, t_onset=math.inf, **params) -> None:
+        super().__init__(t_onset, **params)
+        if not np.all(np.isin(self.params["side"], (-1.0, 1.0))):
+            raise ConfigError(
+                f"fault kind 'hardover': parameter 'side' must be -1 or 1, got "
+                f"{self.params['side'].tolist()}"
+            )
+
+    def apply(self, u, held, lanes):
+        """The elevator command at the limit of each run's side."""
+        if self.limits is None:
+            raise ConfigError("fault kind 'hardover' needs the actuators' position limits")
+        side = self.params["side"][lanes]
+        u[:, DELTA_E] = np.where(side > 0.0, self.limits.delta_e_max, self.limits.delta_e_min)
+        return u
 
 
 def fault_kind_of(root) -> str | None:
@@ -269,9 +335,17 @@ class FaultInjector:
     ----------
     faults : FaultKind or sequence of FaultKind
         The fault of each run (one-lane instances, any kinds), in run order.
+    limits : InputLimits, optional
+        Position limits of the actuators (needed by a kind that drives to them,
+        `hardover`).
+
+    Raises
+    ------
+    ConfigError
+        If a kind needs the limits and none are given.
     """
 
-    def __init__(self, faults) -> None:
+    def __init__(self, faults, limits: InputLimits | None = None) -> None:
         faults = [faults] if isinstance(faults, FaultKind) else list(faults)
         self.n = sum(f.lanes for f in faults)
         kinds: dict[type, list] = {}
@@ -285,6 +359,8 @@ class FaultInjector:
             for cls, fl in kinds.items()
         ]
         self.kind = [""] * self.n
+        for _, f in self.groups:
+            f.bind_limits(limits)
         for ix, f in self.groups:
             for i in ix:
                 self.kind[i] = f.kind

@@ -1,9 +1,11 @@
-"""Plant: the nonlinear CM (eq. 1-3) of B vehicles, ZOH input, saturation, fixed-step RK4.
+"""Plant: the nonlinear CM (eq. 1-3) of B vehicles, ZOH input, saturation, actuators, RK4.
 
 One class serves every path: the plant node (B = 1), `fahv simulate` (B = 1) and a
 campaign batch (B runs with their own parameters); the integration is the compiled
-kernel `fahv.plant.rk4.rk4_cm` (imported when the first plant is built, so that
-the other nodes of the graph start without numba).
+kernel `fahv.plant.rk4.rk4_cm` with ideal actuators (the paper's plant: the
+saturated command is the position) and `fahv.plant.rk4.rk4_cm_act` with servo
+dynamics (`fahv.model.actuators`), both imported when the first plant is built,
+so that the other nodes of the graph start without numba.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from fahv.model.actuators import kernel_parameters
 from fahv.model.vehicle import InputLimits, VehicleParams
 
 
@@ -53,7 +56,7 @@ def saturate(u: np.ndarray, limits: InputLimits) -> np.ndarray:
 
 
 class Plant:
-    """B vehicles of the nonlinear CM (eq. 1-3) with ZOH input, saturation and RK4.
+    """B vehicles of the nonlinear CM (eq. 1-3) with ZOH input, saturation, actuators and RK4.
 
     Parameters
     ----------
@@ -67,7 +70,11 @@ class Plant:
         Control period [s].
     n_sub : int
         RK4 steps per period; dt = Ts / n_sub must resolve the flexible modes
-        (omega_2 dt well below 1).
+        (omega_2 dt well below 1) and the servos (omega_n dt well below 1).
+    actuators : dict, optional
+        Servo of each input, `{"Phi": Servo, "delta_e": Servo}`
+        (`fahv.model.actuators`); None: ideal actuators (no dynamics). The servos
+        start at rest at the first command.
 
     Raises
     ------
@@ -75,7 +82,9 @@ class Plant:
         If x0 does not have 9 finite values per vehicle, or the counts differ.
     """
 
-    def __init__(self, params, limits: InputLimits, x0, Ts: float, n_sub: int) -> None:
+    def __init__(
+        self, params, limits: InputLimits, x0, Ts: float, n_sub: int, actuators=None
+    ) -> None:
         from fahv.plant import rk4
 
         plist = [params] if isinstance(params, VehicleParams) else list(params)
@@ -90,9 +99,36 @@ class Plant:
         self.params: Sequence[VehicleParams] = plist
         self.limits, self.Ts, self.n_sub = limits, float(Ts), int(n_sub)
         self.x = x
+        #: Servo data (2, 6) of the kernel; None for ideal actuators.
+        self.servos = None
+        if actuators is not None:
+            self._kernel_act = rk4.rk4_cm_act
+            self.servos = kernel_parameters(actuators, limits.u_min, limits.u_max)
+        #: Actuator states (B, 4) [Phi, Phi_dot 1/s, delta_e rad, delta_e_dot rad/s]
+        #: (None before the first step; rates zero for ideal actuators).
+        self.a: np.ndarray | None = None
 
-    def step(self, u_applied: np.ndarray) -> np.ndarray:
-        """Advance one period with the saturated inputs u_applied (B, 2); returns x (B, 9).
+    @property
+    def positions(self) -> np.ndarray | None:
+        """Actuator positions (B, 2) [Phi, delta_e rad] now (None before the first step)."""
+        return None if self.a is None else self.a[:, ::2].copy()
+
+    def step(self, u_applied: np.ndarray, held: np.ndarray | None = None) -> np.ndarray:
+        """Advance one period with the inputs u_applied (B, 2), saturated; returns x (B, 9).
+
+        Parameters
+        ----------
+        u_applied : (B, 2) array_like
+            Commands [Phi, delta_e rad] at the actuators, held over the period.
+        held : (B,) bool array_like, optional
+            Runs whose elevator actuator is held at its position (fault `stuck`;
+            used only with servo dynamics: for ideal actuators the held command is
+            the position).
+
+        Returns
+        -------
+        (B, 9) ndarray
+            The airframe states at the end of the period.
 
         Raises
         ------
@@ -102,5 +138,18 @@ class Plant:
         u = saturate(np.asarray(u_applied, float).reshape(-1, 2), self.limits)
         if not np.all(np.isfinite(u)):
             raise ValueError(f"plant input must be finite, got {np.asarray(u_applied)!r}")
-        self.x = self._kernel(self.x, np.ascontiguousarray(u), self.records, self.Ts, self.n_sub)
+        u = np.ascontiguousarray(u)
+        if self.servos is None:
+            self.x = self._kernel(self.x, u, self.records, self.Ts, self.n_sub)
+            self.a = np.zeros((len(u), 4))
+            self.a[:, ::2] = u
+            return self.x
+        if self.a is None:  # the servos start at rest at the first command
+            self.a = np.zeros((len(u), 4))
+            self.a[:, ::2] = u
+        hold = np.zeros(len(u), bool) if held is None else np.asarray(held, bool).reshape(-1)
+        self.x, self.a = self._kernel_act(
+            self.x, self.a, u, self.records, self.servos, np.ascontiguousarray(hold),
+            self.Ts, self.n_sub,
+        )  # fmt: skip
         return self.x

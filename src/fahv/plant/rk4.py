@@ -150,3 +150,112 @@ def rk4_cm(X, U, P, Ts, n_sub):  # pragma: no cover - compiled
             x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         out[b] = x
     return out
+
+
+@numba.njit(cache=True)
+def _servo_rhs(a, uc, AP, held):  # pragma: no cover - compiled
+    """Rates of the actuator states a (4,) [Phi, Phi_dot, delta_e, delta_e_dot]."""
+    ad = np.empty(4)
+    for j in range(2):
+        zeta, wn = AP[j, 0], AP[j, 1]
+        ad[2 * j] = a[2 * j + 1]
+        ad[2 * j + 1] = wn * wn * (uc[j] - a[2 * j]) - 2.0 * zeta * wn * a[2 * j + 1]
+    if held:
+        ad[2] = 0.0
+        ad[3] = 0.0
+    return ad
+
+
+@numba.njit(cache=True)
+def _position(a, AP):  # pragma: no cover - compiled
+    """Positions (2,) [Phi, delta_e rad] the airframe sees: a's, clipped to the limits."""
+    u = np.empty(2)
+    for j in range(2):
+        u[j] = min(max(a[2 * j], AP[j, 4]), AP[j, 5])
+    return u
+
+
+@numba.njit(cache=True)
+def _limit(a, a_prev, AP, dt):  # pragma: no cover - compiled
+    """The limits after one RK4 step, in place (JSBSim's rate limit and clipto, no wind-up)."""
+    for j in range(2):
+        incr, decr, lo, hi = AP[j, 2], AP[j, 3], AP[j, 4], AP[j, 5]
+        r = min(max(a[2 * j + 1], -decr), incr)
+        p = min(max(a[2 * j], a_prev[2 * j] - decr * dt), a_prev[2 * j] + incr * dt)
+        p = min(max(p, lo), hi)
+        if (p >= hi and r > 0.0) or (p <= lo and r < 0.0):
+            r = 0.0
+        a[2 * j], a[2 * j + 1] = p, r
+
+
+@numba.njit(cache=True)
+def rk4_cm_act(X, A, U, P, AP, held, Ts, n_sub):  # pragma: no cover - compiled
+    """Integrate the CM with second-order actuators over Ts for B vehicles (ZOH commands).
+
+    The 9 airframe states and the 4 actuator states are one RK4 state; the airframe
+    sees the actuator positions clipped to their limits. After each RK4 step of
+    dt = Ts / n_sub, per actuator (JSBSim `FGActuator`: rate limit, then clipto):
+
+    1. rate state r <- clip(r, -rate_limit_decr, rate_limit_incr);
+    2. position p <- clip(p, p_prev - rate_limit_decr dt, p_prev + rate_limit_incr dt),
+       p_prev the position before the step (the rate limit on the position itself);
+    3. p <- clip(p, min, max) (clipto);
+    4. no wind-up: r <- 0 if p is at a limit and r points beyond it.
+
+    Parameters
+    ----------
+    X : (B, 9) float64 ndarray
+        Airframe states [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s].
+    A : (B, 4) float64 ndarray
+        Actuator states [Phi, Phi_dot 1/s, delta_e rad, delta_e_dot rad/s].
+    U : (B, 2) float64 ndarray
+        Commands [Phi, delta_e rad] (already saturated).
+    P : (B,) ndarray of PARAMS_DTYPE
+        Parameters of each vehicle.
+    AP : (2, 6) float64 ndarray
+        Servo of Phi and of delta_e: [zeta, omega_n rad/s, rate_limit_incr,
+        rate_limit_decr (input unit/s, inf: none), min, max]
+        (`fahv.model.actuators.kernel_parameters`).
+    held : (B,) bool ndarray
+        The elevator actuator is held (fault `stuck`): its position and rate frozen.
+    Ts : float
+        Interval [s].
+    n_sub : int
+        RK4 steps per interval (dt = Ts / n_sub).
+
+    Returns
+    -------
+    tuple of ndarray
+        Airframe states (B, 9) and actuator states (B, 4) at the end of the interval.
+    """
+    B = X.shape[0]
+    out = np.empty_like(X)
+    out_a = np.empty_like(A)
+    dt = Ts / n_sub
+    for b in range(B):
+        vp = P[b]
+        uc = U[b]
+        h = held[b]
+        x = X[b].copy()
+        a = A[b].copy()
+        if h:
+            a[3] = 0.0
+        for _ in range(n_sub):
+            k1 = dynamics.cm_rhs(x, _position(a, AP), vp)
+            j1 = _servo_rhs(a, uc, AP, h)
+            a2 = a + 0.5 * dt * j1
+            k2 = dynamics.cm_rhs(x + 0.5 * dt * k1, _position(a2, AP), vp)
+            j2 = _servo_rhs(a2, uc, AP, h)
+            a3 = a + 0.5 * dt * j2
+            k3 = dynamics.cm_rhs(x + 0.5 * dt * k2, _position(a3, AP), vp)
+            j3 = _servo_rhs(a3, uc, AP, h)
+            a4 = a + dt * j3
+            k4 = dynamics.cm_rhs(x + dt * k3, _position(a4, AP), vp)
+            j4 = _servo_rhs(a4, uc, AP, h)
+            x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            a_prev = a
+            a = a + dt / 6.0 * (j1 + 2.0 * j2 + 2.0 * j3 + j4)
+            _limit(a, a_prev, AP, dt)
+        out[b] = x
+        out_a[b] = a
+    return out, out_a

@@ -35,7 +35,7 @@ from fahv.plant.uncertainty import perturbed_params
 from fahv.spec.artefacts import Design, load_arrays, save_arrays
 from fahv.spec.context import DesignContext
 from fahv.spec.files import SpecFile, load_design_file, read_yaml_file, spec_file
-from fahv.spec.schema import SCENARIO_KEYS, design_spec, scenario_spec
+from fahv.spec.schema import SCENARIO_KEYS, actuator_model, design_spec, scenario_spec
 
 #: Top-level entries of a design file that the run spec does not carry (the scenario's own
 #: command and vehicle draw replace them).
@@ -129,6 +129,8 @@ def form_run_spec(design: SpecFile, scenario: dict, path: str | Path) -> SpecFil
     data = {k: v for k, v in design.data.items() if k not in DESIGN_ONLY_KEYS}
     data.update({k: scenario[k] for k in ("name", "description", "command", "fault",
                                           "uncertainty", "duration")})  # fmt: skip
+    if "plant" in scenario:  # optional: absent, the run spec is what it was without it
+        data["plant"] = scenario["plant"]
     data["variants"] = variants
     return spec_file(data, str(path))
 
@@ -220,8 +222,9 @@ def uncertified(design: Design, spec: dict, vehicle) -> list[str]:
 
     Checks the initial point and the command against the envelope and the design's
     nominal range (`hv_box`), their trim inputs against the tightened input set
-    (eq. 30), the fault's effectiveness against the fault range (`tube.rho_min`) and
-    the simulated vehicle's draw against the parameter box.
+    (eq. 30), the fault's effectiveness against the fault range (`tube.rho_min`),
+    the simulated vehicle's draw against the parameter box and the actuator model
+    (the design assumes ideal actuators).
 
     Parameters
     ----------
@@ -273,6 +276,11 @@ def uncertified(design: Design, spec: dict, vehicle) -> list[str]:
         out.append(
             f"the vehicle draw's uncertainty scale {spec['uncertainty']['scale']:g} exceeds the "
             f"design's parameter box ({rng['uncertainty_scale']:g} of the sec. 5.1 box)"
+        )
+    if actuator_model(spec) != "ideal":
+        out.append(
+            f"the actuator model {actuator_model(spec)!r} (plant.actuators) is not in the "
+            "design model: the tube and the nominal ellipsoid are certified for ideal actuators"
         )
     return out
 

@@ -26,6 +26,7 @@ from fahv.config import Check, Field, Section
 from fahv.config.spec import lookup
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
 from fahv.control.base import ATTITUDE_BOUND_DEG
+from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
 from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
 
 TS = Field("Ts", "float", "control period Ts", unit="s", lo=0.0, hi=0.1, lo_open=True)
@@ -161,6 +162,36 @@ def _eight_state_needs(r) -> bool:
     )  # fmt: skip
 
 
+#: The simulated plant's own choices (scenario key `plant`): the actuator model.
+PLANT = (
+    Field("actuators", "str", "actuator model of the simulated plant: ideal (no dynamics, "
+          "the paper's plant) or second_order (servos of the vehicle file's actuators "
+          "section, rate and position limited)", choices=ACTUATOR_MODELS, default=IDEAL),
+)  # fmt: skip
+
+
+def plant_section() -> Section:
+    """The `plant` section of a scenario and a run spec: optional, left out when absent.
+
+    Absent, it is not filled in (so the run spec, and its hash, of a scenario without it
+    is what it was before the section existed); `actuator_model` reads it.
+    """
+    return Section("plant", PLANT, "the simulated plant: actuator model",
+                   when=lambda r: False, when_text="a scenario sets another actuator model "
+                   "(optional: absent, the actuators are ideal)")
+
+
+def actuator_model(spec) -> str:
+    """The actuator model of a run spec or scenario (`plant.actuators`; `ideal` if absent).
+
+    Examples
+    --------
+    >>> actuator_model({}), actuator_model({"plant": {"actuators": "second_order"}})
+    ('ideal', 'second_order')
+    """
+    return (spec.get("plant") or {}).get("actuators", IDEAL)
+
+
 UNCERTAINTY = (
     Field("seed", "int", "seed of the parameter draw s_p ~ U(-1, 1)", lo=0),
     Field("scale", "float", "fraction of the sec. 5.1 parameter box", lo=0.0, hi=1.0),
@@ -169,7 +200,10 @@ UNCERTAINTY = (
 
 def fault_section() -> Section:
     """The `fault` section: kind (from the fault registry), onset, the kind's parameters."""
-    return Section("fault", (FAULT_KIND, T_ONSET, *fault_fields()), "actuator fault (eq. 15 ...)")
+    return Section("fault", (FAULT_KIND, T_ONSET, *fault_fields()), "actuator fault (eq. 15 ...)",
+                   checks=(Check("side", lambda r: r["fault"]["kind"] != "hardover"
+                                 or r["fault"]["side"] in (-1.0, 1.0),
+                                 "must be -1 (lower limit) or 1 (upper limit)"),))  # fmt: skip
 
 
 #: The design step: the design point where the flexible modes are linearised (h0, V0) and
@@ -186,7 +220,9 @@ DESIGN_STEP = (
 )  # fmt: skip
 
 #: Top-level keys a scenario sets; everything else of a run spec comes from its design.
-SCENARIO_KEYS = ("name", "description", "command", "fault", "uncertainty", "duration", "variants")
+SCENARIO_KEYS = (
+    "name", "description", "command", "fault", "uncertainty", "plant", "duration", "variants",
+)
 
 
 def _law_sections() -> tuple:
@@ -307,6 +343,7 @@ def run_spec() -> Section:
             _command_section(),
             fault_section(),
             Section("uncertainty", UNCERTAINTY, "plant parameters p (1 + s_p scale rel_p)"),
+            plant_section(),
             _variants("variants to run (law + notch setting)"),
         ),
         "run spec",
@@ -364,6 +401,7 @@ def scenario_spec() -> Section:
                 UNCERTAINTY,
                 "the simulated vehicle: plant parameters p (1 + s_p scale rel_p), s_p ~ U(-1, 1)",
             ),
+            plant_section(),
             _variants("variants to run (a subset of the design's; empty: the design's)"),
         ),
         "scenario file",

@@ -1,8 +1,9 @@
 """`fault_injector` node: actuator faults between the controller and the plant.
 
-Loss of elevator effectiveness (rho_f, onset, eq. 15), stuck elevator, elevator bias
-and dropped commands (`kind` parameter), applied by `fahv.loop.FaultCore`; the
-fault applied at every step is announced on /hsv/fault_status.
+Loss of elevator effectiveness (rho_f, onset, eq. 15), stuck elevator, elevator bias,
+dropped commands and an elevator hardover to a position limit (`kind` parameter),
+applied by `fahv.loop.FaultCore`; the fault applied at every step is announced on
+/hsv/fault_status.
 """
 
 from __future__ import annotations

@@ -1,8 +1,9 @@
 """`plant` node: nonlinear CM of the vehicle, lockstep master, publisher of /clock.
 
-Publishes /clock and /hsv/state for step k, integrates [t_k, t_k+1] when
-/hsv/actuator_command of step k arrives (`fahv.loop.PlantCore`), and starts step 0
-only when every node of the graph has announced itself on /hsv/ready.
+Publishes /clock and /hsv/state for step k (with the actuator positions), integrates
+[t_k, t_k+1] when /hsv/actuator_command of step k arrives (`fahv.loop.PlantCore`:
+ideal actuators or the vehicle file's servos, parameter `actuators`), and starts step
+0 only when every node of the graph has announced itself on /hsv/ready.
 """
 
 from __future__ import annotations
