@@ -210,27 +210,40 @@ def _ellipsoid_tasks(nv, tube_set: TubeSet, case: dict, box, vehicle, trim_map, 
     them. Returns the tasks by name, the steady sets' factors and the ellipsoid count.
     """
     parts, lams, n_ellipsoids = {}, (), len(notches or {})
+    nv_s = _shared(nv)  # the vertex data once per worker, not in every task
     if gamma is not None:
         bound = steady_disturbance(nv, tube_set, _jump_h(case, box, vehicle, trim_map, unc,
                                                          rho_min), gamma)  # fmt: skip
         A, B = nv.vertices()
         Acl_8 = A[:, 1:, 1:] + B[:, 1:, :] @ tube_set.F_8
         lams = tuple(dict.fromkeys((tube_set.lam, *STEADY_LAMS)))
+        Acl_s = _shared(Acl_8)
         with dask.annotate(priority=2):
-            steady = [delayed(steady_set)(Acl_8, tube_set.N_8, tube_set.F_8, bound, lam,
+            steady = [delayed(steady_set)(Acl_s, tube_set.N_8, tube_set.F_8, bound, lam,
                                           (starts or {}).get(steady_key(lam)))
                       for lam in lams]  # fmt: skip
         parts["steady"] = steady
         n_ellipsoids += len(steady)
         with dask.annotate(priority=1):
             parts["onset"] = delayed(onset_bound)(
-                nv, tube_set, vehicle, trim_map, unc, gamma, case["Ts"], case["plant_substeps"],
+                nv_s, tube_set, vehicle, trim_map, unc, gamma, case["Ts"], case["plant_substeps"],
                 steady_shaped=delayed(_smallest_steady)(steady), **estimate,
             )  # fmt: skip
     for v, nf in (notches or {}).items():
-        parts[f"loop {v}"] = delayed(_notch_loops_logged)(nv, tube_set, case, {v: nf}, None,
+        parts[f"loop {v}"] = delayed(_notch_loops_logged)(nv_s, tube_set, case, {v: nf}, None,
                                                           starts)  # fmt: skip
     return parts, lams, n_ellipsoids
+
+
+def _shared(obj):
+    """`obj` scattered once to every worker of the active Dask client, or `obj` itself.
+
+    The tasks take the future in its place, so that large arrays (the vertex data, tens
+    of MB) travel once per worker instead of once per task in the graph. Without a
+    distributed client (a library call) the object itself is used.
+    """
+    client = active_client()
+    return obj if client is None else client.scatter(obj, broadcast=True, hash=False)
 
 
 def _with_ellipsoids(nv, tube_set: TubeSet, case: dict, got: dict, lams, notches, stable_only,
