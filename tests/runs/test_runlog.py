@@ -15,6 +15,8 @@ from fahv.runs.metrics import metrics
 from fahv.runs.sil import run_metadata
 from fahv.runs.writer import RunWriter
 
+#: The fields of a VehicleState message: the state and the actuator positions.
+STATE_MSG = (*STATE_FIELDS, "phi_a", "delta_e_a")
 N = 150  # 3 s at Ts = 0.02
 
 
@@ -70,7 +72,7 @@ def test_truncated_file_is_read_up_to_the_last_chunk(tmp_path):
     n_msgs = 20000  # about 2.4 MB of VehicleState: several chunks
     with RunWriter(tmp_path / "long", {"case": "synthetic"}, 0.02) as w:
         for k in range(n_msgs):
-            w.write("/hsv/state", k, {"k": k, "t": 0.02 * k, **dict.fromkeys(STATE_FIELDS, 1.0)})
+            w.write("/hsv/state", k, {"k": k, "t": 0.02 * k, **dict.fromkeys(STATE_MSG, 1.0)})
     _, mcap = bag_paths(tmp_path / "long")
     data = mcap.read_bytes()
     cut = tmp_path / "cut" / "cut.mcap"
@@ -173,7 +175,7 @@ def test_a_stop_inside_a_chunk_write_ends_the_run_whole(tmp_path):
     written = 0
     with pytest.raises(KeyboardInterrupt), w:
         for k in range(20000):
-            w.write("/hsv/state", k, {"k": k, "t": 0.02 * k, **dict.fromkeys(STATE_FIELDS, 1.0)})
+            w.write("/hsv/state", k, {"k": k, "t": 0.02 * k, **dict.fromkeys(STATE_MSG, 1.0)})
             written += 1
     interrupt.clear()
     assert storage._file.stopped and 5000 < written < 20000
