@@ -85,13 +85,14 @@ def _s_procedure_block(top, AX, E, mu, P):
     return 0.5 * (blk + blk.T)
 
 
-def _analysis_problem(As, E, Ss, Ks, tmax, lam):
+def _analysis_problem(As, E, Ss, Ks, tmax, lam, s_max=None):
     """The LMI of `invariant_ellipsoid` on the vertices As (scaled): its parts.
 
     Each vertex's S-procedure block with its middle diag(mu_i) eliminated by a Schur
     complement, mu_i,j = b / r_i,j (b the budget (1 - lam)(1 - BUDGET_MARGIN)):
     [[lam P, (A_i P)'], [A_i P, P - E diag(r_i) E' / b]] >= 0 with sum_j 1 / r_i,j <= 1
     (sum_j mu_i,j <= b): the same condition on blocks of 2n rows instead of 2n + p.
+    With `s_max`, a feasibility problem with s^2 <= s_max^2 in place of min s^2.
 
     Returns (prob, P, r, s2, vertex_constraints).
     """
@@ -110,12 +111,14 @@ def _analysis_problem(As, E, Ss, Ks, tmax, lam):
         inner = P - E @ cp.diag(r[i]) @ E.T / b
         blk = cp.bmat([[lam * P, AP.T], [AP, inner]])
         blocks.append(0.5 * (blk + blk.T) >> 0)
+    if s_max is not None:
+        return cp.Problem(cp.Minimize(0), [*cons, s2 <= s_max**2, *blocks]), P, r, s2, blocks
     return cp.Problem(cp.Minimize(s2), cons + blocks), P, r, s2, blocks
 
 
 def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float,
-                        active: int = 24, add: int = 12,
-                        start=None) -> InvariantEllipsoid | None:  # fmt: skip
+                        active: int = 24, add: int = 12, start=None,
+                        s_max: float | None = None) -> InvariantEllipsoid | None:  # fmt: skip
     """Smallest ellipsoid RPI for a fixed closed loop whose projection lies in a given one.
 
     The analysis form of the tube LMI (24) for a closed loop xi+ = A_cl,i xi + E w with
@@ -129,6 +132,11 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
 
     minimising s^2: E is RPI for W at every vertex, its projection on the first p states
     lies in s {e' S^-1 e <= 1}, and the input deviation K xi stays within support_max.
+    With `s_max`, any such E with s <= s_max is sought instead of the smallest (a
+    feasibility problem): a certificate with the margin 1 - s_max where the smallest s
+    is not needed, found in fewer passes and blocks (the smallest makes the ellipsoid touch
+    the invariance condition at many vertices: on cm_certified's notch loop on mode 1,
+    64 blocks and 14 s for s <= 0.98 against 154 blocks and 81 s for the smallest, 0.776).
     Linear in (P, mu_i, s^2) for the fixed lam and loop. Solved in the coordinates xi / D
     on a growing subset of the vertices (constraint generation: the `active` vertices
     of largest spectral radius first, then per pass at most `add` of those whose
@@ -169,6 +177,8 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
         Vertices of the first solve in place of the `active` of largest spectral
         radius (an earlier result's `active`). It changes how fast the generation
         ends, not what is accepted.
+    s_max : float, optional
+        Seek an ellipsoid with s <= s_max, not the smallest s.
 
     Returns
     -------
@@ -224,7 +234,7 @@ def invariant_ellipsoid(Acl, w_max, D, shape, K, support_max, levels, lam: float
     chosen = _first_vertices(As, active, start)
     released = np.zeros(0, int)
     while True:
-        prob, P, r, s2, blocks = _analysis_problem(As[chosen], E, Ss, Ks, tmax, lam)
+        prob, P, r, s2, blocks = _analysis_problem(As[chosen], E, Ss, Ks, tmax, lam, s_max)
         if not solve_lmi(prob):
             return InvariantEllipsoid(None, float("inf"), None, chosen)
         Pv = 0.5 * (P.value + P.value.T)
