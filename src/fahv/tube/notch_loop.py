@@ -268,8 +268,9 @@ def notch_tube(A, B, F, N, w_max, notch, Ts: float, iq: int, lam: float = 0.995,
     S-procedure (`fahv.synthesis.invariant_ellipsoid.invariant_ellipsoid`), its
     projection on e bounded by s Z and its input deviation K xi by F Z's support (the
     tightening of eq. 30) per input: first one with s <= `NOTCH_S_MAX` (a margin, not
-    the smallest s), and only if there is none the smallest s. The solver's answer is then re-checked exactly: the
-    worst one-step level of E over every vertex and every corner of W
+    the smallest s), and only if there is none the smallest s. The solver's answer is
+    then re-checked exactly: the worst one-step level of E over every vertex and every
+    corner of W
     (`fahv.synthesis.rpi_level.vertex_levels`).
     If the level is at most 1, s at most 1 and the supports within the tightening, every
     assumption W was bounded under (e in Z, the applied input within the tightening)
