@@ -125,8 +125,12 @@ def test_actuator_data_and_the_key_are_checked(vehicle, raw):
         vehicle_from_mapping(bad)
     bad = copy.deepcopy(data)
     bad["actuators"]["second_order"]["delta_e"]["rate_limit_incr"]["unit"] = "rad/s"
-    with pytest.raises(VehicleDataError, match="rate_limit_incr' unit must be"):
+    with pytest.raises(VehicleDataError) as err:
         vehicle_from_mapping(bad)
+    assert str(err.value) == (
+        "<mapping>: 'actuators.second_order.delta_e.rate_limit_incr' has unit 'rad/s'; "
+        "expected one of ['1/s', 'deg/s']"
+    )
     bad = copy.deepcopy(data)
     bad["actuators"]["third_order"] = bad["actuators"]["second_order"]
     with pytest.raises(VehicleDataError, match="'actuators.third_order': unknown actuator model"):

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from fahv.errors import VehicleDataError
+from fahv.model.entries import read_entry
 
 #: The actuator model without dynamics (the paper's plant, the default of every scenario).
 IDEAL = "ideal"
@@ -38,10 +39,12 @@ IDEAL = "ideal"
 ACTUATOR_MODELS: tuple[str, ...] = (IDEAL, "second_order")
 #: Actuators of a model, in input order (u = [Phi, delta_e]).
 CHANNELS: tuple[str, ...] = ("Phi", "delta_e")
-#: Units of the entries of one actuator (rates in the input's unit per second; delta_e
-#: rate limits in deg/s in the file, rad/s in `Servo`).
-_UNITS = {"zeta": ("-",), "omega_n": ("rad/s",),
-          "rate_limit_incr": ("1/s", "deg/s"), "rate_limit_decr": ("1/s", "deg/s")}  # fmt: skip
+#: Units accepted for the entries of one actuator, with the factor to the unit of `Servo`
+#: (rates in the input's unit per second; delta_e rate limits in deg/s in the file,
+#: rad/s in `Servo`).
+_RATE_UNITS = {"1/s": 1.0, "deg/s": math.pi / 180.0}
+_UNITS = {"zeta": {"-": 1.0}, "omega_n": {"rad/s": 1.0},
+          "rate_limit_incr": _RATE_UNITS, "rate_limit_decr": _RATE_UNITS}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -93,19 +96,6 @@ def kernel_parameters(servos: Mapping[str, Servo], u_min, u_max) -> np.ndarray:
     )  # fmt: skip
 
 
-def _value(entry: Any, key: str, path: str) -> tuple[float, str]:
-    if not isinstance(entry, Mapping) or "value" not in entry:
-        raise VehicleDataError(f"{path}: missing key '{key}.value'")
-    if not entry.get("source"):
-        raise VehicleDataError(f"{path}: '{key}' has no 'source'")
-    v = entry["value"]
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise VehicleDataError(f"{path}: '{key}' must be a finite number, got {v!r}")
-    if not float(v) > 0.0:
-        raise VehicleDataError(f"{path}: '{key}' = {v} is not physical (must be > 0)")
-    return float(v), str(entry.get("unit", ""))
-
-
 def _servo(data: Any, key: str, path: str) -> Servo:
     if not isinstance(data, Mapping):
         raise VehicleDataError(f"{path}: '{key}' must be a mapping of servo entries")
@@ -116,16 +106,14 @@ def _servo(data: Any, key: str, path: str) -> Servo:
         )
     out = {}
     for name, units in _UNITS.items():
-        if name not in data:
-            if name.startswith("rate_limit"):
-                continue
-            raise VehicleDataError(f"{path}: missing key '{key}.{name}'")
-        v, unit = _value(data[name], f"{key}.{name}", path)
-        if unit not in units:
+        if name.startswith("rate_limit") and name not in data:
+            continue  # none
+        out[name] = read_entry(data, name, path, key, units).value
+        if not out[name] > 0.0:
+            written = data[name]["value"]  # named as the file gives it, in the file's unit
             raise VehicleDataError(
-                f"{path}: '{key}.{name}' unit must be one of {units}, got {unit!r}"
+                f"{path}: '{key}.{name}' = {written} is not physical (must be > 0)"
             )
-        out[name] = math.radians(v) if unit == "deg/s" else v
     return Servo(**out)
 
 

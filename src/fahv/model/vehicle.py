@@ -36,6 +36,7 @@ import yaml
 from fahv.config.yamlio import load_yaml
 from fahv.errors import VehicleDataError
 from fahv.model.actuators import Servo, actuators_from_mapping
+from fahv.model.entries import finite_number, read_entry
 from fahv.model.envelope import Envelope
 
 # Named indices: CM / DM state (eq. 7).
@@ -281,23 +282,22 @@ class Vehicle:
         return self.source_file.startswith("<packaged>")
 
 
-def _number(value: Any, key: str, path: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise VehicleDataError(f"{path}: '{key}' must be a number, got {value!r}")
-    out = float(value)
-    if not math.isfinite(out):
-        raise VehicleDataError(f"{path}: '{key}' must be finite, got {value!r}")
-    return out
-
-
-def _entry(section: Mapping[str, Any], key: str, path: str, prefix: str) -> Mapping[str, Any]:
+def _bounds(section: Mapping[str, Any], key: str, path: str, prefix: str) -> tuple[float, float]:
+    """The range `{min, max, unit, source}` of `prefix.key`, checked min < max."""
     full = f"{prefix}.{key}"
     if key not in section:
         raise VehicleDataError(f"{path}: missing key '{full}'")
     entry = section[key]
     if not isinstance(entry, Mapping):
-        raise VehicleDataError(f"{path}: '{full}' must be a mapping with 'value', 'unit', 'source'")
-    return entry
+        raise VehicleDataError(f"{path}: '{full}' must be a mapping with 'min', 'max', 'unit'")
+    for b in ("min", "max"):
+        if b not in entry:
+            raise VehicleDataError(f"{path}: missing key '{full}.{b}'")
+    lo = finite_number(entry["min"], f"{full}.min", path)
+    hi = finite_number(entry["max"], f"{full}.max", path)
+    if not lo < hi:
+        raise VehicleDataError(f"{path}: '{full}' needs min < max, got [{lo}, {hi}]")
+    return lo, hi
 
 
 def vehicle_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Vehicle:
@@ -345,13 +345,9 @@ def vehicle_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Ve
     values: dict[str, float] = {}
     representative: list[str] = []
     for key in fields:
-        entry = _entry(params_in, key, path, "parameters")
-        if "value" not in entry:
-            raise VehicleDataError(f"{path}: missing key 'parameters.{key}.value'")
-        if not entry.get("source"):
-            raise VehicleDataError(f"{path}: 'parameters.{key}' has no 'source'")
-        values[key] = _number(entry["value"], f"parameters.{key}", path)
-        if entry.get("representative", False):
+        entry = read_entry(params_in, key, path, "parameters")
+        values[key] = entry.value
+        if entry.representative:
             representative.append(key)
     for key in _POSITIVE:
         if values[key] <= 0.0:
@@ -364,29 +360,15 @@ def vehicle_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Ve
                 f"{path}: 'parameters.{key}' = {values[key]} is not physical (must be >= 0)"
             )
 
-    def bounds(section: str, key: str) -> tuple[float, float]:
-        entry = _entry(data[section], key, path, section)
-        for b in ("min", "max"):
-            if b not in entry:
-                raise VehicleDataError(f"{path}: missing key '{section}.{key}.{b}'")
-        lo = _number(entry["min"], f"{section}.{key}.min", path)
-        hi = _number(entry["max"], f"{section}.{key}.max", path)
-        if not lo < hi:
-            raise VehicleDataError(f"{path}: '{section}.{key}' needs min < max, got [{lo}, {hi}]")
-        return lo, hi
-
-    h_lo, h_hi = bounds("envelope", "h")
-    v_lo, v_hi = bounds("envelope", "V")
+    h_lo, h_hi = _bounds(data["envelope"], "h", path, "envelope")
+    v_lo, v_hi = _bounds(data["envelope"], "V", path, "envelope")
     if v_lo <= 0.0:
         raise VehicleDataError(f"{path}: 'envelope.V.min' = {v_lo} is not physical (must be > 0)")
-    phi_lo, phi_hi = bounds("input_limits", "Phi")
-    de_lo, de_hi = bounds("input_limits", "delta_e")
+    phi_lo, phi_hi = _bounds(data["input_limits"], "Phi", path, "input_limits")
+    de_lo, de_hi = _bounds(data["input_limits"], "delta_e", path, "input_limits")
 
     def scale(key: str) -> float:
-        entry = _entry(data["scales"], key, path, "scales")
-        if "value" not in entry:
-            raise VehicleDataError(f"{path}: missing key 'scales.{key}.value'")
-        s = _number(entry["value"], f"scales.{key}", path)
+        s = read_entry(data["scales"], key, path, "scales", sourced=False).value
         if s <= 0.0:
             raise VehicleDataError(f"{path}: 'scales.{key}' = {s} must be > 0")
         return s

@@ -16,7 +16,6 @@ Angles may be given in deg (deg/s for rates): they are converted to rad.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib import resources
@@ -25,6 +24,7 @@ from typing import Any
 
 from fahv.config.yamlio import load_yaml
 from fahv.errors import VehicleDataError
+from fahv.model.entries import read_entry, unit_factors
 from fahv.model.vehicle import DEFAULT_VEHICLE_FILE
 
 #: Measurable channels, in output order.
@@ -41,14 +41,6 @@ CHANNEL_UNITS: dict[str, str] = {
 CHANNEL_IDS: dict[str, int] = {"h": 1, "V": 2, "theta": 3, "q": 4, "alpha": 5}
 #: Channels measured unless told otherwise (air-data alpha is optional).
 DEFAULT_MEASURED: tuple[str, ...] = ("h", "V", "theta", "q")
-
-#: Other units accepted for a channel unit, with the factor to it.
-_ALIASES: dict[str, dict[str, float]] = {
-    "rad": {"rad": 1.0, "deg": math.pi / 180.0},
-    "rad/s": {"rad/s": 1.0, "deg/s": math.pi / 180.0},
-    "ft": {"ft": 1.0},
-    "ft/s": {"ft/s": 1.0},
-}
 
 
 @dataclass(frozen=True)
@@ -130,30 +122,6 @@ class SensorData:
     source_file: str = ""
 
 
-def _value(entry: Any, key: str, path: str, unit: str) -> float:
-    """The number of an entry `{value, unit, source}` in `unit` (converted from an alias)."""
-    if not isinstance(entry, Mapping) or "value" not in entry:
-        raise VehicleDataError(
-            f"{path}: 'sensors.{key}' must be a mapping with 'value', 'unit', 'source'"
-        )
-    if not entry.get("source"):
-        raise VehicleDataError(f"{path}: 'sensors.{key}' has no 'source'")
-    value = entry["value"]
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise VehicleDataError(f"{path}: 'sensors.{key}' must be a finite number, got {value!r}")
-    got = entry.get("unit")
-    if unit.endswith("/s") and unit[:-2] in _ALIASES:
-        base, per_s = unit[:-2], "/s"
-    else:
-        base, per_s = unit, ""
-    aliases = {a + per_s: f for a, f in _ALIASES.get(base, {unit: 1.0}).items()}
-    if got not in aliases:
-        raise VehicleDataError(
-            f"{path}: 'sensors.{key}' has unit {got!r}; expected one of {sorted(aliases)}"
-        )
-    return float(value) * aliases[got]
-
-
 def _channel(section: Any, name: str, path: str) -> tuple[ChannelNoise, list[str]]:
     """The noise model of one channel and its representative entries."""
     if not isinstance(section, Mapping):
@@ -167,13 +135,14 @@ def _channel(section: Any, name: str, path: str) -> tuple[ChannelNoise, list[str
     u = CHANNEL_UNITS[name]
     values: dict[str, Any] = {}
     representative = []
-    for key, entry in section.items():
+    for key in section:
         unit = (
             PARAMETER_UNITS[key].replace("u", u, 1)
             if PARAMETER_UNITS[key] in ("u", "u/s")
             else PARAMETER_UNITS[key]
         )
-        v = _value(entry, f"{name}.{key}", path, unit)
+        entry = read_entry(section, key, path, f"sensors.{name}", unit_factors(unit))
+        v = entry.value
         if key in ("delay", "period"):
             if v != int(v) or v < (1 if key == "period" else 0):
                 raise VehicleDataError(
@@ -183,7 +152,7 @@ def _channel(section: Any, name: str, path: str) -> tuple[ChannelNoise, list[str
         elif key in _NON_NEGATIVE and v < 0.0:
             raise VehicleDataError(f"{path}: 'sensors.{name}.{key}' = {v} must be >= 0")
         values[key] = v
-        if entry.get("representative", False):
+        if entry.representative:
             representative.append(f"{name}.{key}")
     noise = ChannelNoise(**values)
     if noise.dynamic_bias_stddev > 0.0 and noise.dynamic_bias_correlation_time <= 0.0:
@@ -234,11 +203,12 @@ def sensors_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Se
     slopes = section["gyro_mode_slopes"]
     representative: list[str] = []
     phi = []
+    if not isinstance(slopes, Mapping):
+        raise VehicleDataError(f"{path}: 'sensors.gyro_mode_slopes' must be a mapping of entries")
     for key in ("phi_1", "phi_2"):
-        if not isinstance(slopes, Mapping) or key not in slopes:
-            raise VehicleDataError(f"{path}: missing key 'sensors.gyro_mode_slopes.{key}'")
-        phi.append(_value(slopes[key], f"gyro_mode_slopes.{key}", path, "rad"))
-        if slopes[key].get("representative", False):
+        entry = read_entry(slopes, key, path, "sensors.gyro_mode_slopes", unit_factors("rad"))
+        phi.append(entry.value)
+        if entry.representative:
             representative.append(f"gyro_mode_slopes.{key}")
     channels = {}
     for name in CHANNELS:
@@ -266,6 +236,7 @@ def load_sensors(path: str | Path | None = None) -> SensorData:
 
     Examples
     --------
+    >>> import math
     >>> s = load_sensors()
     >>> s.channels["V"].stddev, round(math.degrees(s.channels["q"].stddev), 6)
     (1.0, 0.18)
