@@ -1,5 +1,8 @@
 """Configuration: the one declaration language (fields, sections), YAML, registries.
 
+`fahv.config.faults` is the base of the fault kinds (actuator and sensor): their
+per-lane onset and parameters and their registry.
+
 The bottom layer of fahv with `fahv.synthesis`: no vehicle, no control law.
 """
 

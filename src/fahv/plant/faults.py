@@ -16,28 +16,28 @@ onset (plant parameter `stuck_onset`).
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from collections.abc import Sequence
 from typing import ClassVar
 
 import numpy as np
 
-from fahv.config import Field, Registry
+from fahv.config import Field
+from fahv.config.faults import FaultRegistry, LaneFault
 from fahv.config.spec import lookup
 from fahv.errors import ConfigError
 from fahv.model.vehicle import DELTA_E, InputLimits
 
 
-class FaultKind:
+class FaultKind(LaneFault):
     """An actuator fault of one or more runs (lanes), active from `t_onset` on.
 
     A fault kind is a subclass that sets `name` and `parameters` and
     implements `apply` over lanes. An instance describes the fault of n >= 1
     runs of that kind: `t_onset` and every parameter are (n,) arrays (a scalar
-    makes n = 1); `stack` joins the faults of several runs into one instance.
-    The fault injector of a single run (B = 1) and of a campaign batch call the same
-    `apply`, so the two paths agree by construction.
+    makes n = 1); `stack` joins the faults of several runs into one instance. The
+    lanes, the parameter checks, `stack` and `active` are those of
+    `fahv.config.faults.LaneFault`. The fault injector of a single run (B = 1) and of
+    a campaign batch call the same `apply`, so the two paths agree by construction.
 
     Parameters
     ----------
@@ -49,38 +49,23 @@ class FaultKind:
     Raises
     ------
     ConfigError
-        If a parameter of the kind is missing, or the parameters have different lengths.
+        If a parameter of the kind is missing or not a number, or the parameters have
+        different lengths.
     """
 
-    #: Registry name (`fault.kind` of a case file).
-    name: ClassVar[str] = ""
-    #: Parameters the kind takes, beyond `kind` and `t_onset`.
-    parameters: ClassVar[tuple[Field, ...]] = ()
+    what: ClassVar[str] = "fault kind"
     #: The kind needs the actuators' position limits (`bind_limits`).
     needs_limits: ClassVar[bool] = False
     #: Position limits of the actuators, once bound.
     limits: InputLimits | None = None
 
-    def __init__(self, t_onset=math.inf, **params) -> None:
-        self.t_onset = np.atleast_1d(np.asarray(t_onset, dtype=float))
-        missing = [f.name for f in self.parameters if f.name not in params]
-        if missing:
-            raise ConfigError(f"fault kind '{self.name}' needs parameter(s) {missing}")
-        self.params = {
-            f.name: np.atleast_1d(np.asarray(params[f.name], dtype=float)) for f in self.parameters
-        }
-        n = self.t_onset.size
-        bad = [k for k, v in self.params.items() if v.size != n]
-        if bad:
-            raise ConfigError(f"fault kind '{self.name}': parameters {bad} do not have {n} lanes")
-
-    @property
-    def lanes(self) -> int:
-        """Number of runs n the instance describes."""
-        return self.t_onset.size
-
     def bind_limits(self, limits: InputLimits | None) -> None:
         """Give the fault the actuators' position limits (those of the simulated vehicle).
+
+        Parameters
+        ----------
+        limits : InputLimits or None
+            Position limits of the actuators.
 
         Raises
         ------
@@ -90,26 +75,6 @@ class FaultKind:
         if self.needs_limits and limits is None:
             raise ConfigError(f"fault kind '{self.name}' needs the actuators' position limits")
         self.limits = limits
-
-    @classmethod
-    def stack(cls, faults: Sequence[FaultKind]) -> FaultKind:
-        """One instance of the runs of `faults` (all of this kind), in order."""
-        t_onset = np.concatenate([f.t_onset for f in faults])
-        params = {
-            p.name: np.concatenate([f.params[p.name] for f in faults]) for p in cls.parameters
-        }
-        return cls(t_onset, **params)
-
-    @property
-    def kind(self) -> str:
-        """Registry name of the fault."""
-        return self.name
-
-    def active(self, t: float) -> np.ndarray:
-        """(n,) bool: True once t >= t_onset [s] (never for `none`)."""
-        if self.name == "none":
-            return np.zeros(self.lanes, dtype=bool)
-        return t >= self.t_onset - 1e-12
 
     def design_effectiveness(self) -> float:
         """Elevator effectiveness rho_f the tube design covers (eq. 15-16); 1 if none."""
@@ -145,13 +110,28 @@ class FaultKind:
 
 
 #: Fault kinds by name.
-FAULTS: Registry[type[FaultKind]] = Registry("fault kind")
+FAULTS: FaultRegistry[FaultKind] = FaultRegistry("fault kind")
 
 
 def register_fault(cls: type[FaultKind]) -> type[FaultKind]:
-    """Class decorator: register a `FaultKind` under its `name`."""
-    FAULTS.register(cls.name, cls)
-    return cls
+    """Class decorator: register a `FaultKind` under its `name`.
+
+    Parameters
+    ----------
+    cls : type
+        A subclass of `FaultKind`.
+
+    Returns
+    -------
+    type
+        `cls`.
+
+    Raises
+    ------
+    ConfigError
+        If the name is taken or not an identifier.
+    """
+    return FAULTS.add(cls)
 
 
 @register_fault
@@ -274,11 +254,7 @@ class Hardover(FaultKind):
 
     def __init__(self, t_onset=math.inf, **params) -> None:
         super().__init__(t_onset, **params)
-        if not np.all(np.isin(self.params["side"], (-1.0, 1.0))):
-            raise ConfigError(
-                f"fault kind 'hardover': parameter 'side' must be -1 or 1, got "
-                f"{self.params['side'].tolist()}"
-            )
+        self.check("side", np.isin(self.params["side"], (-1.0, 1.0)), "-1 or 1")
 
     def apply(self, u, held, lanes):
         """The elevator command at the limit of each run's side."""
@@ -304,28 +280,38 @@ T_ONSET = Field(
 
 
 def fault_fields() -> list[Field]:
-    """Parameters of every registered kind, each used only with its kind (for configs)."""
-    return [
-        dataclasses.replace(
-            f, when=lambda root, name=name: fault_kind_of(root) == name, when_text=f"kind is {name}"
-        )
-        for name, cls in FAULTS.items()
-        for f in cls.parameters
-    ]
+    """Parameters of every registered kind, each used only with its kind (for configs).
+
+    Returns
+    -------
+    list of Field
+        With `when` true when the fault section's `kind` is the field's kind.
+    """
+    return FAULTS.fields(fault_kind_of)
 
 
 def make_fault(kind: str, t_onset: float, params: dict) -> FaultKind:
     """The fault of one run, of a registered kind, with the parameters it takes.
 
-    Other entries of `params` are ignored.
+    Parameters
+    ----------
+    kind : str
+        Registered name (`FAULTS`).
+    t_onset : float
+        Onset time [s].
+    params : dict
+        Parameter values; other entries are ignored.
+
+    Returns
+    -------
+    FaultKind
 
     Raises
     ------
     ConfigError
         On an unknown kind or a missing parameter.
     """
-    cls = FAULTS[kind]
-    return cls(t_onset, **{f.name: params[f.name] for f in cls.parameters if f.name in params})
+    return FAULTS.make(kind, t_onset, params)
 
 
 class FaultInjector:

@@ -1,9 +1,11 @@
-"""Sensor faults: the registry of sensor fault kinds, in the style of the actuator faults.
+"""Sensor faults: the registry of sensor fault kinds, on the base of the actuator faults.
 
 A sensor fault kind is a subclass of `SensorFaultKind` registered in
 `SENSOR_FAULTS`: its name, its parameters (config fields, amplitudes in the unit of
 the faulty channel) and `SensorFaultKind.apply`, the output of the channel while the
 fault is active. Built-in kinds: `none`, `bias_step`, `drift`, `stuck`, `dropout`.
+The onset and parameters per lane and the registry are those of `fahv.config.faults`,
+shared with the actuator faults (`fahv.plant.faults`).
 
 The intended scenario section (not yet read by the case validation, which a later
 step extends when the loop reads measurements):
@@ -25,13 +27,18 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from fahv.config import Field, Registry
+from fahv.config import Field
+from fahv.config.faults import FaultRegistry, LaneFault
 from fahv.errors import ConfigError
 from fahv.sensors.data import CHANNELS
 
 
-class SensorFaultKind:
+class SensorFaultKind(LaneFault):
     """A fault of one channel of n >= 1 runs (lanes), active from `t_onset` on.
+
+    The lanes, the parameter checks, `stack` and `active` are those of
+    `fahv.config.faults.LaneFault`; a parameter with a default may be left out and a
+    scalar is used for every lane.
 
     Parameters
     ----------
@@ -45,13 +52,11 @@ class SensorFaultKind:
     Raises
     ------
     ConfigError
-        If a parameter is missing, the channel unknown, or the lengths differ.
+        If a parameter is missing or not a number, the channel unknown, or the lengths
+        differ.
     """
 
-    #: Registry name (`sensor_fault.kind`).
-    name: ClassVar[str] = ""
-    #: Parameters the kind takes, beyond `channel`, `kind` and `t_onset`.
-    parameters: ClassVar[tuple[Field, ...]] = ()
+    what: ClassVar[str] = "sensor fault kind"
 
     def __init__(self, t_onset=math.inf, channel: str = "q", **params) -> None:
         if channel not in CHANNELS:
@@ -59,45 +64,19 @@ class SensorFaultKind:
                 f"sensor fault channel must be one of {list(CHANNELS)}, got {channel!r}"
             )
         self.channel = channel
-        self.t_onset = np.atleast_1d(np.asarray(t_onset, dtype=float))
-        missing = [f.name for f in self.parameters if f.name not in params and f.required]
-        if missing:
-            raise ConfigError(f"sensor fault kind '{self.name}' needs parameter(s) {missing}")
-        self.params = {
-            f.name: np.atleast_1d(np.asarray(params.get(f.name, f.default), dtype=float))
-            for f in self.parameters
-        }
-        self.params = {
-            k: np.broadcast_to(v, self.t_onset.shape).copy() if v.size == 1 else v
-            for k, v in self.params.items()
-        }
-        bad = [k for k, v in self.params.items() if v.size != self.t_onset.size]
-        if bad:
-            raise ConfigError(
-                f"sensor fault kind '{self.name}': parameters {bad} have other lengths"
-            )
+        super().__init__(t_onset, **params)
         #: Value held by `stuck` (NaN until the onset).
         self.held = np.full(self.t_onset.size, np.nan)
 
-    @property
-    def lanes(self) -> int:
-        """Number of runs n the instance describes."""
-        return self.t_onset.size
+    def shared(self) -> dict[str, Any]:
+        """The channel, common to the runs `stack` joins.
 
-    @classmethod
-    def stack(cls, faults: Sequence[SensorFaultKind]) -> SensorFaultKind:
-        """One instance of the runs of `faults` (all of this kind and channel), in order."""
-        t_onset = np.concatenate([f.t_onset for f in faults])
-        params = {
-            p.name: np.concatenate([f.params[p.name] for f in faults]) for p in cls.parameters
-        }
-        return cls(t_onset, faults[0].channel, **params)
-
-    def active(self, t: float) -> np.ndarray:
-        """(n,) bool: True once t >= t_onset [s] (never for `none`)."""
-        if self.name == "none":
-            return np.zeros(self.lanes, dtype=bool)
-        return t >= self.t_onset - 1e-12
+        Returns
+        -------
+        dict
+            `{"channel": channel}`.
+        """
+        return {"channel": self.channel}
 
     def apply(self, y: np.ndarray, last: np.ndarray, t: float, lanes: np.ndarray) -> np.ndarray:
         """Output of the channel for the active runs `lanes`.
@@ -121,13 +100,28 @@ class SensorFaultKind:
 
 
 #: Sensor fault kinds by name.
-SENSOR_FAULTS: Registry[type[SensorFaultKind]] = Registry("sensor fault kind")
+SENSOR_FAULTS: FaultRegistry[SensorFaultKind] = FaultRegistry("sensor fault kind")
 
 
 def register_sensor_fault(cls: type[SensorFaultKind]) -> type[SensorFaultKind]:
-    """Class decorator: register a `SensorFaultKind` under its `name`."""
-    SENSOR_FAULTS.register(cls.name, cls)
-    return cls
+    """Class decorator: register a `SensorFaultKind` under its `name`.
+
+    Parameters
+    ----------
+    cls : type
+        A subclass of `SensorFaultKind`.
+
+    Returns
+    -------
+    type
+        `cls`.
+
+    Raises
+    ------
+    ConfigError
+        If the name is taken or not an identifier.
+    """
+    return SENSOR_FAULTS.add(cls)
 
 
 @register_sensor_fault
@@ -270,4 +264,5 @@ def sensor_fault_from_section(
                 f"{key}.{name}: must be {'>= 0' if name == 't_onset' else '> 0'}, got {v}"
             )
         values[name] = float(v)
-    return cls(values.pop("t_onset", math.inf), section["channel"], **values)
+    t_onset = values.pop("t_onset", math.inf)
+    return SENSOR_FAULTS.make(kind, t_onset, values, channel=section["channel"])
