@@ -113,25 +113,8 @@ class FaultKind(LaneFault):
 FAULTS: FaultRegistry[FaultKind] = FaultRegistry("fault kind")
 
 
-def register_fault(cls: type[FaultKind]) -> type[FaultKind]:
-    """Class decorator: register a `FaultKind` under its `name`.
-
-    Parameters
-    ----------
-    cls : type
-        A subclass of `FaultKind`.
-
-    Returns
-    -------
-    type
-        `cls`.
-
-    Raises
-    ------
-    ConfigError
-        If the name is taken or not an identifier.
-    """
-    return FAULTS.add(cls)
+#: Class decorator: register a `FaultKind` under its `name` (`FaultRegistry.add`).
+register_fault = FAULTS.add
 
 
 @register_fault

@@ -103,25 +103,8 @@ class SensorFaultKind(LaneFault):
 SENSOR_FAULTS: FaultRegistry[SensorFaultKind] = FaultRegistry("sensor fault kind")
 
 
-def register_sensor_fault(cls: type[SensorFaultKind]) -> type[SensorFaultKind]:
-    """Class decorator: register a `SensorFaultKind` under its `name`.
-
-    Parameters
-    ----------
-    cls : type
-        A subclass of `SensorFaultKind`.
-
-    Returns
-    -------
-    type
-        `cls`.
-
-    Raises
-    ------
-    ConfigError
-        If the name is taken or not an identifier.
-    """
-    return SENSOR_FAULTS.add(cls)
+#: Class decorator: register a `SensorFaultKind` under its `name` (`FaultRegistry.add`).
+register_sensor_fault = SENSOR_FAULTS.add
 
 
 @register_sensor_fault
