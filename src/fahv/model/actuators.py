@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from fahv.errors import VehicleDataError
-from fahv.model.entries import read_entry
+from fahv.model.entries import check_section, read_entry
 
 #: The actuator model without dynamics (the paper's plant, the default of every scenario).
 IDEAL = "ideal"
@@ -97,13 +97,7 @@ def kernel_parameters(servos: Mapping[str, Servo], u_min, u_max) -> np.ndarray:
 
 
 def _servo(data: Any, key: str, path: str) -> Servo:
-    if not isinstance(data, Mapping):
-        raise VehicleDataError(f"{path}: '{key}' must be a mapping of servo entries")
-    unknown = sorted(set(data) - set(_UNITS))
-    if unknown:
-        raise VehicleDataError(
-            f"{path}: '{key}': unknown entries {unknown}; expected {list(_UNITS)}"
-        )
+    check_section(data, key, path, _UNITS)
     out = {}
     for name, units in _UNITS.items():
         if name.startswith("rate_limit") and name not in data:

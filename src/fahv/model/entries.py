@@ -125,6 +125,51 @@ def finite_number(value: Any, key: str, path: str) -> float:
     return out
 
 
+def check_section(section: Any, key: str, path: str, allowed=None) -> Mapping[str, Any]:
+    """A section of the vehicle file, checked to be a mapping holding only `allowed` keys.
+
+    Parameters
+    ----------
+    section : Any
+        The parsed section.
+    key : str
+        Its full key (e.g. `sensors.q`), named in errors.
+    path : str
+        The file, named in errors.
+    allowed : collection of str, optional
+        The keys the section may hold (None: any).
+
+    Returns
+    -------
+    mapping
+        `section`.
+
+    Raises
+    ------
+    VehicleDataError
+        If `section` is not a mapping or holds a key outside `allowed`; the message
+        names the file, the section and the keys expected.
+
+    Examples
+    --------
+    >>> check_section({"mean": 0, "rate": 1}, "sensors.q", "v.yaml", ["mean"])
+    Traceback (most recent call last):
+        ...
+    fahv.errors.VehicleDataError: v.yaml: unknown key(s) ['rate'] in 'sensors.q'; expected ['mean']
+    """
+    if not isinstance(section, Mapping):
+        raise VehicleDataError(
+            f"{path}: '{key}' must be a mapping, got {type(section).__name__}"
+        )
+    if allowed is not None:
+        unknown = sorted(set(section) - set(allowed))
+        if unknown:
+            raise VehicleDataError(
+                f"{path}: unknown key(s) {unknown} in '{key}'; expected {list(allowed)}"
+            )
+    return section
+
+
 def read_entry(
     section: Mapping[str, Any],
     key: str,

@@ -421,6 +421,31 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
         ...
     fahv.errors.VehicleDataError: vehicle file not found: no/such/vehicle.yaml
     """
+    data, name = read_vehicle_file(path)
+    vehicle = vehicle_from_mapping(data, name)
+    return dataclasses.replace(vehicle, data_hash=physics_hash(vehicle))
+
+
+def read_vehicle_file(path: str | Path | None = None) -> tuple[Any, str]:
+    """The parsed YAML of a vehicle file and the name its errors give it.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        Vehicle file; `None` reads the packaged one (`DEFAULT_VEHICLE_FILE`).
+
+    Returns
+    -------
+    data : Any
+        The parsed document (its sections are checked by their readers).
+    name : str
+        The file's path, or `<packaged>/vehicle_parker2007.yaml`.
+
+    Raises
+    ------
+    VehicleDataError
+        If the file does not exist, cannot be read or is not valid YAML.
+    """
     if path is None:
         ref = resources.files("fahv.data").joinpath(DEFAULT_VEHICLE_FILE)
         text, name = ref.read_text(), f"<packaged>/{DEFAULT_VEHICLE_FILE}"
@@ -434,11 +459,9 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
         except OSError as exc:
             raise VehicleDataError(f"cannot read vehicle file {name}: {exc}") from None
     try:
-        data = load_yaml(text)
+        return load_yaml(text), name
     except yaml.YAMLError as exc:
         raise VehicleDataError(f"{name}: not valid YAML: {exc}") from None
-    vehicle = vehicle_from_mapping(data, name)
-    return dataclasses.replace(vehicle, data_hash=physics_hash(vehicle))
 
 
 def physics_hash(vehicle: Vehicle) -> str:

@@ -18,14 +18,12 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from fahv.config.yamlio import load_yaml
 from fahv.errors import VehicleDataError
-from fahv.model.entries import read_entry, unit_factors
-from fahv.model.vehicle import DEFAULT_VEHICLE_FILE
+from fahv.model.entries import check_section, read_entry, unit_factors
+from fahv.model.vehicle import read_vehicle_file
 
 #: Measurable channels, in output order.
 CHANNELS: tuple[str, ...] = ("h", "V", "theta", "q", "alpha")
@@ -124,14 +122,7 @@ class SensorData:
 
 def _channel(section: Any, name: str, path: str) -> tuple[ChannelNoise, list[str]]:
     """The noise model of one channel and its representative entries."""
-    if not isinstance(section, Mapping):
-        raise VehicleDataError(f"{path}: 'sensors.{name}' must be a mapping of noise parameters")
-    unknown = sorted(set(section) - set(PARAMETER_UNITS))
-    if unknown:
-        raise VehicleDataError(
-            f"{path}: unknown key(s) {unknown} in 'sensors.{name}'; "
-            f"expected {list(PARAMETER_UNITS)}"
-        )
+    check_section(section, f"sensors.{name}", path, PARAMETER_UNITS)
     u = CHANNEL_UNITS[name]
     values: dict[str, Any] = {}
     representative = []
@@ -192,19 +183,15 @@ def sensors_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Se
     fahv.errors.VehicleDataError: <mapping>: missing key 'sensors.gyro_mode_slopes'
     """
     section = data.get("sensors") if isinstance(data, Mapping) else None
-    if not isinstance(section, Mapping):
+    if section is None:
         raise VehicleDataError(f"{path}: missing key 'sensors' (a mapping)")
-    unknown = sorted(set(section) - set(CHANNELS) - {"gyro_mode_slopes"})
-    if unknown:
-        raise VehicleDataError(f"{path}: unknown key(s) {unknown} in 'sensors'")
+    check_section(section, "sensors", path, ("gyro_mode_slopes", *CHANNELS))
     for key in ("gyro_mode_slopes", *CHANNELS):
         if key not in section:
             raise VehicleDataError(f"{path}: missing key 'sensors.{key}'")
-    slopes = section["gyro_mode_slopes"]
+    slopes = check_section(section["gyro_mode_slopes"], "sensors.gyro_mode_slopes", path)
     representative: list[str] = []
     phi = []
-    if not isinstance(slopes, Mapping):
-        raise VehicleDataError(f"{path}: 'sensors.gyro_mode_slopes' must be a mapping of entries")
     for key in ("phi_1", "phi_2"):
         entry = read_entry(slopes, key, path, "sensors.gyro_mode_slopes", unit_factors("rad"))
         phi.append(entry.value)
@@ -241,16 +228,8 @@ def load_sensors(path: str | Path | None = None) -> SensorData:
     >>> s.channels["V"].stddev, round(math.degrees(s.channels["q"].stddev), 6)
     (1.0, 0.18)
     """
-    if path is None:
-        ref = resources.files("fahv.data").joinpath(DEFAULT_VEHICLE_FILE)
-        text, name = ref.read_text(), f"<packaged>/{DEFAULT_VEHICLE_FILE}"
-    else:
-        name = str(path)
-        try:
-            text = Path(path).read_text()
-        except OSError as exc:
-            raise VehicleDataError(f"cannot read vehicle file {name}: {exc}") from None
-    return sensors_from_mapping(load_yaml(text), name)
+    data, name = read_vehicle_file(path)
+    return sensors_from_mapping(data, name)
 
 
 def replace_channel(data: SensorData, name: str, **changes: Any) -> SensorData:

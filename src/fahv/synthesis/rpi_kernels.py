@@ -111,10 +111,8 @@ def worst_bound(s, b, cc, steps):  # pragma: no cover - compiled
         if v > top:
             top = v
             first = r
-    best, lam = row_bound(s, b, cc, first, steps)
+    best, lam = row_bound(s, b, cc, first, steps)  # inf: so is the maximum, all rows pass
     where = first
-    if not np.isfinite(best):  # no lam above s[-1] (b along the top eigenvector): every row
-        lam = ref
     for r in range(n_rows):
         if r == first or dual_at(s, b, cc, r, lam) <= best:
             continue
