@@ -251,11 +251,24 @@ def _hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None)
     return lines, started, env, params
 
 
-def _exit_statuses(stdout):
-    """{node: exit status} from the `exit NODE STATUS` lines of `_hand_graph`."""
+def _exit_statuses(stdout, logs=None):
+    """{node: exit status} from the `exit NODE STATUS` lines of `_hand_graph`.
+
+    With the nodes' `logs` folder, a node whose log shows a hung DDS teardown after it
+    closed (`fahv.loop.graph.teardown_hung`: exit status 1 from the teardown's C-level
+    timer) counts with the status it closed with, as the SIL runner counts it.
+    """
     import re
 
-    return {m[1]: int(m[2]) for m in re.finditer(r"^exit (\w+) (\d+)$", stdout, re.M)}
+    from fahv.loop.graph import teardown_hung
+
+    out = {m[1]: int(m[2]) for m in re.finditer(r"^exit (\w+) (\d+)$", stdout, re.M)}
+    for name, status in out.items():
+        log = logs / f"{name}.log" if logs is not None else None
+        if status == 1 and log is not None and log.is_file():
+            own = teardown_hung(log.read_text(errors="replace"))
+            out[name] = status if own is None else own
+    return out
 
 
 @pytest.fixture(scope="session")

@@ -27,14 +27,14 @@ T, N = 2.0, 100
 def hand_run(quick_case, tmp_path_factory, hand_graph, exit_statuses):
     """The README's graph by hand: `fahv sil --write-params`, then one `ros2 run` per node."""
     tmp = tmp_path_factory.mktemp("hand")
-    lines, started, env, params = hand_graph(quick_case, tmp, T)
+    lines, started, env, params = hand_graph(quick_case, tmp, T, logs=tmp / "logs")
     with domain_coordinator.domain_id() as domain:
         env["ROS_DOMAIN_ID"] = str(domain)
         done = subprocess.run(
             ["bash", "-c", "\n".join(lines)], cwd=ROOT, env=env, capture_output=True,
             text=True, timeout=180,
         )  # fmt: skip
-    assert exit_statuses(done.stdout) == dict.fromkeys(started, 0), done.stderr[-3000:]
+    assert exit_statuses(done.stdout, tmp / "logs") == dict.fromkeys(started, 0), done.stdout
     bag = next((tmp / "bags").iterdir())
     return bag, params
 

@@ -322,7 +322,8 @@ def test_the_graph_started_twice_by_hand_with_one_parameter_file_records_two_run
                 ["bash", "-c", "\n".join(lines)], cwd=ROOT, env=env, capture_output=True,
                 text=True, timeout=180,
             )  # fmt: skip
-            assert exit_statuses(done.stdout) == dict.fromkeys(started, 0), done.stdout
+            statuses = exit_statuses(done.stdout, tmp_path / "logs")
+            assert statuses == dict.fromkeys(started, 0), done.stdout
     first, second = sorted((tmp_path / "bags").iterdir())
     assert second.name == f"{first.name}-2"
     log = _read(tmp_path / "logs" / "recorder.log")  # the second start's

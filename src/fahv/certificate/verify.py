@@ -46,6 +46,7 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
+from filelock import FileLock
 
 from fahv.errors import DesignError
 from fahv.spec.artefacts import Design, code_hash
@@ -397,7 +398,9 @@ def verified_design(design: Design, vehicle, folder: Path, log=print) -> list[Ch
     """Verify a stored design unless a pass for the same content is recorded in `folder`.
 
     A pass is recorded as `folder/.verified-<key>` (`verdict_key`): it holds
-    for these arrays, this library code and this vehicle file only.
+    for these arrays, this library code and this vehicle file only. Processes that
+    load the same design at once wait for one verification (a file lock,
+    `folder/.verified.lock`; without it in a read-only folder).
 
     Returns
     -------
@@ -412,10 +415,23 @@ def verified_design(design: Design, vehicle, folder: Path, log=print) -> list[Ch
     mark = Path(folder) / f".verified-{verdict_key(design, vehicle)}"
     if mark.is_file():
         return None
-    results = verify(design, vehicle, log)
-    require_verified(results, design.summary.get("design_name", str(folder)))
+    # processes loading the same design at once (test workers, nodes, a campaign's
+    # workers) wait for one verification; a read-only checkout verifies without the lock
+    lock = FileLock(str(Path(folder) / ".verified.lock"))
     try:
-        mark.write_text("\n".join(r.text() for r in results) + "\n")
+        lock.acquire()
     except OSError:
-        pass  # a read-only checkout verifies again next time
-    return results
+        lock = None
+    try:
+        if mark.is_file():
+            return None
+        results = verify(design, vehicle, log)
+        require_verified(results, design.summary.get("design_name", str(folder)))
+        try:
+            mark.write_text("\n".join(r.text() for r in results) + "\n")
+        except OSError:
+            pass  # a read-only checkout verifies again next time
+        return results
+    finally:
+        if lock is not None:
+            lock.release()
