@@ -11,8 +11,9 @@ set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 PY="${PYTHON:-python3}"
-# The installer: uv resolves and downloads in parallel (the same pins in 18 s from an empty
-# cache, against pip's 77 s from a full one, measured on the 2-core machine).
+# The installer: uv resolves and downloads in parallel (the same pins, bytecode compiled,
+# in 33 s from an empty cache, against pip's 77 s from a full one, measured on the 2-core
+# machine).
 UV_VERSION=0.13.9
 if [ ! -x .venv/bin/python ]; then
   echo "[setup] creating .venv with $($PY --version)"
@@ -22,8 +23,11 @@ stamp=.venv/.fahv-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ constraints.txt -nt "$stamp" ]; then
   echo "[setup] installing fahv and its dependencies into .venv (uv $UV_VERSION)"
   .venv/bin/python -m pip install --quiet "uv==$UV_VERSION" 2>&1 | grep -v "^WARNING: Location" || true
-  if ! .venv/bin/uv pip install --python .venv/bin/python --quiet -c constraints.txt \
-      -e '.[dev,ros]' > .venv/pip-install.log 2>&1; then
+  # --compile-bytecode: the .pyc files now, as pip writes them (an environment with
+  # PYTHONDONTWRITEBYTECODE=1 would otherwise compile every module in every process:
+  # 4.1 s instead of 1.35 s to import the library, measured)
+  if ! .venv/bin/uv pip install --python .venv/bin/python --quiet --compile-bytecode \
+      -c constraints.txt -e '.[dev,ros]' > .venv/pip-install.log 2>&1; then
     cat .venv/pip-install.log >&2
     echo "[setup] error: uv could not install the versions constraints.txt pins (above);" \
       "scripts/lock.sh re-resolves them" >&2
@@ -48,4 +52,7 @@ if [ ! -f "$live/node_modules/.fahv-installed" ] || [ "$live/package-lock.json" 
   fi
 fi
 bash scripts/build_ros.sh
+# the library's and the nodes' own .pyc (read even where PYTHONDONTWRITEBYTECODE is set;
+# every node process imports them)
+.venv/bin/python -m compileall -q src ros_ws/install > /dev/null
 echo "[setup] .venv and ros_ws ready ($(.venv/bin/python --version))"
