@@ -12,10 +12,26 @@ trap 'rm -f "$docs_log"' EXIT
 # tests (the venv is all it needs)
 bash scripts/docs.sh > "$docs_log" 2>&1 &
 docs=$!
+# every shipped design verified (`fahv verify` records the pass its runs reuse) and one
+# second of Case 1 simulated, beside the workspace build: the test workers then find the
+# verdicts and the compiled kernels (numba's disk cache) instead of each making them
+warm_log="$(mktemp)"
+trap 'rm -f "$docs_log" "$warm_log"' EXIT
+{
+  for design in offline_design/designs/*.yaml; do .venv/bin/fahv verify "$design"; done
+  .venv/bin/fahv simulate offline_design/scenarios/case1.yaml --duration 1 --no-record
+} > "$warm_log" 2>&1 &
+warm=$!
 bash scripts/setup.sh
 .venv/bin/ruff check src tests benchmarks ros_ws/src
 # layer contracts of pyproject.toml; the ROS packages are analysed from their sources
 PYTHONPATH="$(printf '%s:' "$here"/ros_ws/src/hsv_*)" .venv/bin/lint-imports
+if ! wait "$warm"; then
+  cat "$warm_log" >&2
+  echo "[verify] error: a shipped design does not verify, or Case 1 does not run (above)" >&2
+  exit 1
+fi
+grep -E "^(design|verified)" "$warm_log" | sed 's/^/[verify] /'
 # on every core, one test file per worker at a time (module fixtures computed once);
 # "-n 0" after the command runs the suite in one process
 tests=0

@@ -1,7 +1,8 @@
 """Every public function and class of the model and synthesis layers documents its interface.
 
 numpydoc's own validation (``numpydoc.validate.validate``) over the public functions,
-classes and methods of every module of ``fahv.model`` and ``fahv.synthesis``, with the
+classes and methods of every module of ``fahv.model``, ``fahv.synthesis`` and
+``fahv.estimation``, with the
 rules that matter here:
 
 - PR01: a parameter is not documented;
@@ -22,10 +23,11 @@ import pkgutil
 import numpydoc.validate
 from numpydoc.docscrape import NumpyDocString
 
+import fahv.estimation
 import fahv.model
 import fahv.synthesis
 
-PACKAGES = (fahv.model, fahv.synthesis)
+PACKAGES = (fahv.model, fahv.synthesis, fahv.estimation)
 RULES = ("PR01", "PR02", "RT01")
 
 

@@ -46,6 +46,9 @@ def test_sil_equals_in_process_simulation(sil_run, design):
     assert rel.max() <= 1e-9
     np.testing.assert_allclose(run.u, ref.u, rtol=1e-9, atol=0)
     np.testing.assert_allclose(run.tube_level, ref.tube_level, rtol=1e-9, atol=0)
+    # the plant node's sensors drew the in-process numbers (h, V, theta and the gyro's q)
+    assert run.y.shape == ref.y.shape == (N, 4)
+    np.testing.assert_allclose(run.y, ref.y, rtol=1e-9, atol=0)
     lim = load_vehicle().limits
     m, m_ref = metrics(run, lim), metrics(ref, lim)
     assert m["alpha_err_max_deg"] == pytest.approx(m_ref["alpha_err_max_deg"], rel=1e-9)

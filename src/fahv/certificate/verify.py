@@ -394,6 +394,29 @@ def verdict_key(design: Design, vehicle) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def record_pass(design: Design, vehicle, folder: Path, results: list[CheckResult]) -> None:
+    """Record a passing verification in `folder` (`folder/.verified-<key>`, `verdict_key`).
+
+    Runs of the same arrays, library code and vehicle file then reuse it
+    (`verified_design`). Nothing is recorded in a read-only folder (the next run
+    verifies again).
+
+    Parameters
+    ----------
+    design : Design
+    vehicle : Vehicle
+    folder : Path
+        The design's folder.
+    results : list of CheckResult
+        The verification's lines, all passing (written to the record).
+    """
+    mark = Path(folder) / f".verified-{verdict_key(design, vehicle)}"
+    try:
+        mark.write_text("\n".join(r.text() for r in results) + "\n")
+    except OSError:
+        pass  # a read-only checkout verifies again next time
+
+
 def verified_design(design: Design, vehicle, folder: Path, log=print) -> list[CheckResult] | None:
     """Verify a stored design unless a pass for the same content is recorded in `folder`.
 
@@ -427,10 +450,7 @@ def verified_design(design: Design, vehicle, folder: Path, log=print) -> list[Ch
             return None
         results = verify(design, vehicle, log)
         require_verified(results, design.summary.get("design_name", str(folder)))
-        try:
-            mark.write_text("\n".join(r.text() for r in results) + "\n")
-        except OSError:
-            pass  # a read-only checkout verifies again next time
+        record_pass(design, vehicle, folder, results)
         return results
     finally:
         if lock is not None:

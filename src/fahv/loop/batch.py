@@ -123,10 +123,11 @@ def _run_group(runs: list[dict], design, variant: str) -> list[RunResult | Excep
             exc.partial = None
             return [exc]
         return [res for r in runs for res in _run_group([r], design, variant)]
-    hist = History(loop.n_steps, len(runs), loop.n)
+    hist = History(loop.n_steps, len(runs), loop.n, loop.n_y)
     with np.errstate(all="ignore"):
         for k in range(loop.n_steps):
-            hist.add(*loop.step(k)[1:])
+            _, state, meas, *rest = loop.step(k)
+            hist.add(state, *rest, meas=meas)
     out: list[RunResult | Exception] = []
     for b in range(len(runs)):
         info = run_info(design, variant, loop.Ts, runs[b]["plant"])

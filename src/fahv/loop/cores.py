@@ -36,12 +36,15 @@ from fahv.msg import (
     FaultStatus,
     FilteredPitchRate,
     LoopMessage,
+    Measurement,
     NominalTrajectory,
     TubeStatus,
     VehicleState,
 )
 from fahv.plant.faults import FAULTS, FaultInjector, make_fault
 from fahv.plant.integrator import Plant
+from fahv.sensors.data import CHANNELS, load_sensors
+from fahv.sensors.measure import Sensors
 from fahv.verdict import RunEnded
 
 
@@ -62,6 +65,37 @@ def servos_of(vehicle, model: str):
             f"(it gives {sorted(vehicle.actuators) or 'none'})"
         )
     return vehicle.actuators[model]
+
+
+def sensors_of(p: dict, seeds, vehicles: dict):
+    """The sensors of a batch's plant (parameters `measured`, `vehicle_file`); None: none.
+
+    Parameters
+    ----------
+    p : dict
+        Validated parameters of node `plant` (the batch's shared values).
+    seeds : sequence of int
+        `sensor_seed` of each run.
+    vehicles : dict
+        Cache of loaded files by name (the sensor data under `("sensors", name)`).
+
+    Raises
+    ------
+    ParameterError
+        On an unknown or repeated channel in `measured` (names the parameter).
+    """
+    measured = [c.strip() for c in p["measured"].split(",") if c.strip()]
+    if not measured:
+        return None
+    unknown = [c for c in measured if c not in CHANNELS]
+    if unknown or len(set(measured)) < len(measured):
+        why = f"unknown channel(s) {unknown}" if unknown else "a channel named twice"
+        raise ParameterError(f"plant: parameter 'measured' = {p['measured']!r}: {why} "
+                             f"(channels: {', '.join(CHANNELS)})")  # fmt: skip
+    key = ("sensors", p["vehicle_file"] or "")
+    if key not in vehicles:
+        vehicles[key] = load_sensors(p["vehicle_file"] or None)
+    return Sensors(vehicles[key], seeds, p["Ts"], measured)
 
 
 def check_step(node: str, topic: str, msg: LoopMessage, k: int) -> None:
@@ -116,6 +150,8 @@ class PlantCore:
         )  # fmt: skip
         self.plant = Plant(params, veh.limits, self.x0, p["Ts"], p["plant_substeps"],
                            servos_of(veh, p["actuators"]))  # fmt: skip
+        self.sensors = sensors_of(p, [r["sensor_seed"] for r in runs], vehicles)
+        self._channels = (p["measured"].replace(" ", ""),) * len(runs)
         self.lanes = lanes
         self.k = 0
 
@@ -157,6 +193,17 @@ class PlantCore:
         if not self.lanes.alive.all():
             self._reset(~self.lanes.alive)
         return VehicleState.of(self.k, t, self.plant.x, self.plant.positions)
+
+    def measurement(self) -> Measurement:
+        """Measurement of the current step k from the true states (after `state`).
+
+        The plant's sensors (`fahv.sensors.measure.Sensors`, parameters `measured` and
+        `sensor_seed`); y has no columns when nothing is measured.
+        """
+        k = self.k
+        y = (np.zeros((len(self.x0), 0)) if self.sensors is None
+             else self.sensors.measure(k, self.plant.x))  # fmt: skip
+        return Measurement(k, k * self.Ts, self._channels, y)
 
     def advance(self, actuator: ControlCommand) -> None:
         """Integrate [t_k, t_k+1] with the step-k actuator commands (ZOH, saturated).

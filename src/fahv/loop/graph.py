@@ -22,6 +22,7 @@ from fahv.msg import PKG, VehicleState
 TOPICS = {
     "/clock": "rosgraph_msgs/msg/Clock",
     "/hsv/state": f"{PKG}/msg/VehicleState",
+    "/hsv/measurement": f"{PKG}/msg/Measurement",
     "/hsv/q_filtered": f"{PKG}/msg/FilteredPitchRate",
     "/hsv/nominal": f"{PKG}/msg/NominalTrajectory",
     "/hsv/control_command": f"{PKG}/msg/ControlCommand",
@@ -130,9 +131,10 @@ NODES: dict[str, NodeSpec] = {
         NodeSpec("fault_injector", "hsv_plant", ("/hsv/control_command",),
                  ("/hsv/actuator_command", "/hsv/fault_status"), "loop",
                  "actuator faults between controller and plant (eq. 15 ...)"),
-        NodeSpec("plant", "hsv_plant", ("/hsv/actuator_command",), ("/clock", "/hsv/state"),
-                 "loop", "nonlinear CM (eq. 1-3) with its actuators (ideal or servos), RK4, "
-                 "lockstep master, /clock"),
+        NodeSpec("plant", "hsv_plant", ("/hsv/actuator_command",),
+                 ("/clock", "/hsv/state", "/hsv/measurement"), "loop",
+                 "nonlinear CM (eq. 1-3) with its actuators (ideal or servos) and sensors, "
+                 "RK4, lockstep master, /clock"),
         NodeSpec("replay", "hsv_bringup", tuple(TOPICS), tuple(TOPICS), "replay",
                  "republishes a recorded run (raw CDR), captures outputs"),
     )

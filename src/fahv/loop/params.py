@@ -29,7 +29,16 @@ from fahv.loop.graph import CONTROLLER_NODES
 from fahv.plant.faults import FAULT_KIND, FAULTS, T_ONSET, fault_fields
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.spec.artefacts import variant_gain_key
-from fahv.spec.schema import COMMAND, DURATION, NOTCH, PLANT, PLANT_SUBSTEPS, TS, actuator_model
+from fahv.spec.schema import (
+    COMMAND,
+    DURATION,
+    NOTCH,
+    PLANT,
+    PLANT_SUBSTEPS,
+    TS,
+    actuator_model,
+    sensor_values,
+)
 
 COMMON = (
     Field("case", "str", "name of the run spec the run flies (its scenario's name; the run "
@@ -295,7 +304,8 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
             "vehicle_file": vehicle_file,
             **mat("x0", x0),
             **{f"params.{k}": float(val) for k, val in design.summary["plant_params"].items()},
-            "actuators": actuator_model(c), **stuck_parameters(f["kind"], f["t_onset"]),
+            "actuators": actuator_model(c), **sensor_values(c),
+            **stuck_parameters(f["kind"], f["t_onset"]),
         },
         "fault_injector": {**common, **fault},
         "notch_filter": {**common, "enabled": enabled, **notch},

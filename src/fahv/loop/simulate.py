@@ -4,7 +4,7 @@ One step k (t_k = k Ts), the order of the node graph (docs/reference/architectur
 `*Core` of `fahv.loop.cores` built from that node's parameters
 (`fahv.loop.params.node_parameters`), for B runs at once:
 
-    state_k   = plant.state()                               (plant, + /clock)
+    state_k   = plant.state(), y_k = plant.measurement()    (plant, + /clock)
     q'_k      = notch.on_state(state_k)                     (notch_filter)
     ref_k     = nominal.on_state(state_k, u_k-1)            (nominal_trajectory)
     u_k, Z_k  = controller.on_inputs(state_k, q'_k, ref_k)  (tube_mpc / rmpc)
@@ -33,6 +33,7 @@ from fahv.msg import (
     ControlCommand,
     FaultStatus,
     FilteredPitchRate,
+    Measurement,
     NominalTrajectory,
     TubeStatus,
     VehicleState,
@@ -86,6 +87,9 @@ class RunResult:
     u_actuator : (N, 2) ndarray or None
         Actuator positions [Phi, delta_e rad] at t_k (/hsv/state; NaN at step 0;
         ideal actuators: the applied input of step k - 1); None if not given.
+    y : (N, n_y) ndarray or None
+        Sensor measurement of each step (/hsv/measurement, channels in
+        `info["measured"]`); None if not given.
     """
 
     t: np.ndarray
@@ -105,6 +109,7 @@ class RunResult:
     info: dict = field(default_factory=dict)
     qp_counts: np.ndarray = field(default_factory=lambda: np.zeros(4, dtype=int))
     u_actuator: np.ndarray | None = None
+    y: np.ndarray | None = None
 
 
 class History:
@@ -118,9 +123,11 @@ class History:
         Runs B.
     n : int
         Design-model state dimension (length of x_n).
+    n_y : int, optional
+        Measured channels (0: no measurement is stored).
     """
 
-    def __init__(self, n_steps: int, n_runs: int, n: int) -> None:
+    def __init__(self, n_steps: int, n_runs: int, n: int, n_y: int = 0) -> None:
         N, B = n_steps, n_runs
         self.N, self.B, self.count = N, B, 0
         self.t = np.empty(N)
@@ -139,6 +146,8 @@ class History:
             "fault_active": np.empty((N, B), dtype=bool),
             "u_actuator": np.empty((N, B, 2)),
         }
+        if n_y:
+            self.a["y"] = np.empty((N, B, n_y))
         self._counters = None  # the last step's (TubeStatus, NominalTrajectory)
 
     def add(
@@ -150,8 +159,9 @@ class History:
         tube: TubeStatus,
         act: ControlCommand,
         fs: FaultStatus,
+        meas: Measurement | None = None,
     ) -> None:
-        """Store the messages of the next step (in step order).
+        """Store the messages of the next step (in step order; `meas` if n_y > 0).
 
         Raises
         ------
@@ -174,6 +184,8 @@ class History:
         a["tube_level"][k] = tube.level
         a["fault_active"][k] = fs.active
         a["u_actuator"][k] = state.u_a()
+        if "y" in a:
+            a["y"][k] = meas.y
         self._counters = (tube, nom)  # running totals: the last step's are the run's
         self.count += 1
 
@@ -215,15 +227,17 @@ def run_result(records: dict, info: dict | None = None) -> RunResult:
                ControlCommand, FaultStatus)  # fmt: skip
     topics = ("/hsv/state", "/hsv/q_filtered", "/hsv/nominal", "/hsv/control_command",
               "/hsv/tube_status", "/hsv/actuator_command", "/hsv/fault_status")  # fmt: skip
-    lens = {len(records[t]) for t in topics}
+    meas = records.get("/hsv/measurement")  # absent from runs recorded before it existed
+    lens = {len(records[t]) for t in topics} | ({len(meas)} if meas is not None else set())
     if len(lens) != 1:
         raise RunError(f"run topics hold different numbers of steps: {sorted(lens)}")
     N = lens.pop()
     nom = records["/hsv/nominal"]
     n = len(nom[0]["x_n"]) if N else 9
-    hist = History(N, 1, n)
+    hist = History(N, 1, n, len(meas[0]["y"]) if meas and N else 0)
     for k in range(N):
-        hist.add(*(cls.from_lanes([records[t][k]]) for cls, t in zip(classes, topics, strict=True)))
+        msgs = (cls.from_lanes([records[t][k]]) for cls, t in zip(classes, topics, strict=True))
+        hist.add(*msgs, meas=Measurement.from_lanes([meas[k]]) if meas else None)
     return hist.result(0, info or {})
 
 
@@ -293,19 +307,22 @@ class Loop:
         self.Ts = runs[0]["plant"]["Ts"]
         self.n_steps = self.plant.n_steps
         self.n = self.controller.n
+        #: Measured channels of the plant's sensors.
+        self.n_y = 0 if self.plant.sensors is None else len(self.plant.sensors.names)
         self.cmd: ControlCommand | None = None
 
     def step(self, k: int) -> tuple:
         """Messages of step k in topic order (`fahv.loop.graph.TOPICS`)."""
         self.lanes.step = k
         state = self.plant.state()
+        meas = self.plant.measurement()
         qf = self.notch.on_state(state)
         nom = self.nominal.on_state(state, self.cmd)
         cmd, tube = self.controller.on_inputs(state, qf, nom)
         act, fs = self.fault.on_command(cmd)
         self.plant.advance(act)
         self.cmd = cmd
-        return clock_msg(k, self.Ts), state, qf, nom, cmd, tube, act, fs
+        return clock_msg(k, self.Ts), state, meas, qf, nom, cmd, tube, act, fs
 
 
 def run_info(design, variant: str, Ts: float, plant: dict | None = None) -> dict:
@@ -322,6 +339,7 @@ def run_info(design, variant: str, Ts: float, plant: dict | None = None) -> dict
             k.split(".", 1)[1]: float(v) for k, v in plant.items() if k.startswith("params.")
         }
         info["vehicle_file"] = plant.get("vehicle_file", "") or ""
+        info["measured"] = plant.get("measured", "")
     return info
 
 
@@ -402,12 +420,13 @@ def simulate_parameters(params: dict, progress=None, writer=None, info: dict | N
         On an invalid node parameter (names the node and the key).
     """
     loop = Loop([params], Lanes(1, strict=True))
-    hist = History(loop.n_steps, 1, loop.n)
+    hist = History(loop.n_steps, 1, loop.n, loop.n_y)
     steps = range(loop.n_steps) if progress is None else progress(range(loop.n_steps))
     try:
         for k in steps:
             msgs = loop.step(k)
-            hist.add(*msgs[1:])
+            _, state, meas, *rest = msgs
+            hist.add(state, *rest, meas=meas)
             if writer is not None:
                 for topic, msg in zip(TOPICS, msgs, strict=True):
                     writer.write(topic, k, msg)

@@ -70,20 +70,35 @@ class PolytopicLPV:
         point's sum is one (1, R) @ (R, n n) product, so a point's matrices do not
         depend on the other points.
         """
-        h = np.atleast_1d(np.asarray(h, dtype=float))
-        V = np.atleast_1d(np.asarray(V, dtype=float))
         R, n, _ = self.A.shape
         m = self.B.shape[2]
+        w = self.weights(h, V)
+        A = np.matmul(w[:, None, :], self.A.reshape(R, -1))[:, 0, :].reshape(len(w), n, n)
+        B = np.matmul(w[:, None, :], self.B.reshape(R, -1))[:, 0, :].reshape(len(w), n, m)
+        return A, B
+
+    def weights(self, h, V) -> np.ndarray:
+        """TP weights tau_i(p) (B, R) of B points p = (h, V), eq. (11); each row sums to one.
+
+        Parameters
+        ----------
+        h, V : (B,) array_like
+            Scheduling variables [ft, ft/s], clipped to the weight grids.
+
+        Returns
+        -------
+        (B, R) ndarray
+            The weights of the R vertices, in the order of `A` and `B`.
+        """
+        h = np.atleast_1d(np.asarray(h, dtype=float))
+        V = np.atleast_1d(np.asarray(V, dtype=float))
         wh = np.stack(
             [np.interp(h, self.h_grid, self.W_h[:, a]) for a in range(self.W_h.shape[1])], 1
         )
         wv = np.stack(
             [np.interp(V, self.V_grid, self.W_V[:, b]) for b in range(self.W_V.shape[1])], 1
         )
-        w = (wh[:, :, None] * wv[:, None, :]).reshape(h.size, R)
-        A = np.matmul(w[:, None, :], self.A.reshape(R, -1))[:, 0, :].reshape(h.size, n, n)
-        B = np.matmul(w[:, None, :], self.B.reshape(R, -1))[:, 0, :].reshape(h.size, n, m)
-        return A, B
+        return (wh[:, :, None] * wv[:, None, :]).reshape(h.size, self.A.shape[0])
 
     def system(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
         """(A(p) (n, n), B(p) (n, m)) at one point p = (h, V): `systems` of one point.

@@ -197,6 +197,25 @@ class VehicleState(LoopMessage):
 
 
 @dataclass(frozen=True)
+class Measurement(LoopMessage):
+    """Sensor measurement y_k of step k: the measured channels of the true state."""
+
+    HEADER: ClassVar[tuple[str, ...]] = (
+        "Sensor measurement y_k at step k: the measured channels of the true state x_k with",
+        "each sensor's delay, lag, sample-and-hold, biases, noise, fault and quantisation",
+        "(fahv.sensors). Published by the plant with /hsv/state: the sensors are part of the",
+        "simulated vehicle. The flexible states are never measured; the gyro's q sees them",
+        "through the mode slopes.",
+    )
+    k: int = _f("int64", _STEP_K)
+    t: float = _f("float64", _STEP_T)
+    channels: tuple = _f("string", "measured channels, comma-separated (e.g. h,V,theta,q)")
+    y: np.ndarray = _f(
+        "float64[]", "measured values in channel order [ft, ft/s, rad, rad/s, rad]; empty: none"
+    )
+
+
+@dataclass(frozen=True)
 class FilteredPitchRate(LoopMessage):
     """Pitch rate through the notch filter (eq. 38-39) of step k."""
 
@@ -330,8 +349,8 @@ class FaultStatus(LoopMessage):
 #: Every loop message class, by ROS 2 type name (`hsv_interfaces/msg/...`).
 MESSAGES: dict[str, type[LoopMessage]] = {
     c.ros_type(): c
-    for c in (VehicleState, FilteredPitchRate, NominalTrajectory, ControlCommand, TubeStatus,
-              FaultStatus)
+    for c in (VehicleState, Measurement, FilteredPitchRate, NominalTrajectory, ControlCommand,
+              TubeStatus, FaultStatus)
 }  # fmt: skip
 
 

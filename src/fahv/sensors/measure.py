@@ -22,6 +22,8 @@ from fahv.sensors.faults import SensorFaultKind
 from fahv.sensors.philox import STREAM_DYNAMIC_BIAS, STREAM_NOISE, STREAM_TURN_ON_BIAS, normals
 
 _STATE_INDEX = {"h": H, "V": V, "theta": THETA, "alpha": ALPHA}
+#: Rows of `Sensors._const`.
+_BIAS, _DRIFT, _MEAN, _STD, _DYN, _GM_A = range(6)
 
 
 def true_outputs(
@@ -157,6 +159,20 @@ class Sensors:
         self._sample = np.zeros((B, n_y))
         self._gm = np.zeros((B, n_y))
         self.y = np.zeros((B, n_y))
+        self._ids = np.array([CHANNEL_IDS[c] for c in self.names], dtype=np.uint64)
+        self._period = np.array([n.period for n in self.noise])
+        #: Per channel (columns), the rows _BIAS, _DRIFT, _MEAN, _STD, _DYN, _GM_A: bias,
+        #: drift rate, white noise mean and stddev, Gauss-Markov stddev and its factor
+        #: exp(-period Ts / correlation time) per sample (0 without that bias).
+        self._const = np.array([
+            (n.bias, n.drift_rate, n.mean, n.stddev, n.dynamic_bias_stddev,
+             math.exp(-n.period * self.Ts / n.dynamic_bias_correlation_time)
+             if n.dynamic_bias_stddev > 0.0 else 0.0)
+            for n in self.noise
+        ]).T.reshape(6, n_y)  # fmt: skip
+        #: Per channel, the discrete lag's gain 1 - exp(-C_1 Ts); channels without a lag.
+        self._lag_gain = np.array([-math.expm1(-n.lag * self.Ts) for n in self.noise])
+        self._lagged_off = np.array([n.lag == 0.0 for n in self.noise])
         #: Turn-on bias of each run and channel (B, n_y), drawn at step 0.
         self.turn_on = np.zeros((B, n_y))
         for j, (c, n) in enumerate(zip(self.names, self.noise, strict=True)):
@@ -171,19 +187,23 @@ class Sensors:
         self._line[0] = z
         return np.stack([self._line[n.delay, :, j] for j, n in enumerate(self.noise)], axis=1)
 
-    def _new_sample(self, j: int, z: np.ndarray) -> np.ndarray:
-        """The sample of channel j at step k: value, biases and noise (B,)."""
-        n, c, k = self.noise[j], self.names[j], self.k
-        gm = n.dynamic_bias_stddev
-        if gm > 0.0:
-            w = normals(self.seeds, CHANNEL_IDS[c], k, STREAM_DYNAMIC_BIAS)[:, 0]
+    def _new_samples(self, due: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """The samples of channels `due` (m,) at step k: values z (B, m), biases, noise.
+
+        One draw per stream for all of them (the numbers of `white_noise`, channel by
+        channel: a draw depends on seed, channel and step only).
+        """
+        k, ids, c = self.k, self._ids[due][None, :], self._const[:, due]
+        dyn = c[_DYN]
+        if (dyn > 0.0).any():
+            w = normals(self.seeds[:, None], ids, k, STREAM_DYNAMIC_BIAS)[..., 0]
             if k == 0:
-                self._gm[:, j] = gm * w
+                self._gm[:, due] = dyn * w
             else:
-                a = math.exp(-n.period * self.Ts / n.dynamic_bias_correlation_time)
-                self._gm[:, j] = a * self._gm[:, j] + gm * math.sqrt(1.0 - a * a) * w
-        bias = n.bias + self.turn_on[:, j] + n.drift_rate * k * self.Ts + self._gm[:, j]
-        return z + bias + white_noise(self.seeds, c, k, n)
+                a = c[_GM_A]
+                self._gm[:, due] = a * self._gm[:, due] + dyn * np.sqrt(1.0 - a * a) * w
+        bias = c[_BIAS] + self.turn_on[:, due] + c[_DRIFT] * k * self.Ts + self._gm[:, due]
+        return z + bias + (c[_MEAN] + c[_STD] * normals(self.seeds[:, None], ids, k)[..., 0])
 
     def measure(self, k: int, x: np.ndarray) -> np.ndarray:
         """The measurement of step k from the true states x_k of the B runs.
@@ -213,13 +233,14 @@ class Sensors:
                 fault.held[:] = np.nan
         z = self._delayed(true_outputs(np.reshape(x, (self.seeds.size, -1)), self.data, self.names))
         last = self.y.copy()
-        for j, n in enumerate(self.noise):
-            if k == 0 or n.lag == 0.0:
-                self._lagged[:, j] = z[:, j]
-            else:
-                self._lagged[:, j] += -math.expm1(-n.lag * self.Ts) * (z[:, j] - self._lagged[:, j])
-            if k % n.period == 0:
-                self._sample[:, j] = self._new_sample(j, self._lagged[:, j])
+        if k == 0:
+            self._lagged[:] = z
+        else:
+            lagged = self._lagged + self._lag_gain * (z - self._lagged)
+            self._lagged = np.where(self._lagged_off, z, lagged)
+        due = np.flatnonzero(k % self._period == 0)
+        if due.size:
+            self._sample[:, due] = self._new_samples(due, self._lagged[:, due])
         y = self._sample.copy()
         if k == 0:
             last = y.copy()

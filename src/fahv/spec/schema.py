@@ -28,6 +28,7 @@ from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
 from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
+from fahv.sensors.data import CHANNELS, DEFAULT_MEASURED
 
 TS = Field("Ts", "float", "control period Ts", unit="s", lo=0.0, hi=0.1, lo_open=True)
 DURATION = Field("duration", "float", "simulated duration of a run", unit="s", lo=0.0, lo_open=True)
@@ -162,23 +163,46 @@ def _eight_state_needs(r) -> bool:
     )  # fmt: skip
 
 
-#: The simulated plant's own choices (scenario key `plant`): the actuator model.
+#: The simulated plant's own choices (scenario key `plant`): the actuator model and the
+#: sensors (the noise models are the vehicle file's `sensors` section).
 PLANT = (
     Field("actuators", "str", "actuator model of the simulated plant: ideal (no dynamics, "
           "the paper's plant) or second_order (servos of the vehicle file's actuators "
           "section, rate and position limited)", choices=ACTUATOR_MODELS, default=IDEAL),
+    Field("measured", "str", "sensor channels of /hsv/measurement, comma-separated, from "
+          f"{', '.join(CHANNELS)} (q: the gyro, which sees the flexible modes); empty: none",
+          default=",".join(DEFAULT_MEASURED)),
+    Field("sensor_seed", "int", "seed of the run's sensor noise (with the channel and the "
+          "step, it keys every draw)", lo=0, default=0),
 )  # fmt: skip
+
+
+def sensor_values(spec) -> dict:
+    """The plant's sensor parameters of a run spec or scenario (`plant` section).
+
+    `measured` and `sensor_seed`; absent, the defaults: h, V, theta and the gyro's q,
+    seed 0.
+
+    Examples
+    --------
+    >>> sensor_values({})
+    {'measured': 'h,V,theta,q', 'sensor_seed': 0}
+    """
+    plant = spec.get("plant") or {}
+    return {f.name: plant.get(f.name, f.default) for f in PLANT if f.name != "actuators"}
 
 
 def plant_section() -> Section:
     """The `plant` section of a scenario and a run spec: optional, left out when absent.
 
     Absent, it is not filled in (so the run spec, and its hash, of a scenario without it
-    is what it was before the section existed); `actuator_model` reads it.
+    is what it was before the section existed); `actuator_model` and `sensor_values`
+    read it.
     """
-    return Section("plant", PLANT, "the simulated plant: actuator model",
+    return Section("plant", PLANT, "the simulated plant: actuator model, sensors",
                    when=lambda r: False, when_text="a scenario sets another actuator model "
-                   "(optional: absent, the actuators are ideal)")
+                   "or other sensors (optional: absent, the actuators are ideal and the "
+                   "sensors measure h, V, theta and q)")
 
 
 def actuator_model(spec) -> str:

@@ -1,6 +1,7 @@
 """`plant` node: nonlinear CM of the vehicle, lockstep master, publisher of /clock.
 
-Publishes /clock and /hsv/state for step k (with the actuator positions), integrates
+Publishes /clock, /hsv/state (with the actuator positions) and /hsv/measurement (its
+sensors) for step k, integrates
 [t_k, t_k+1] when /hsv/actuator_command of step k arrives (`fahv.loop.PlantCore`:
 ideal actuators or the vehicle file's servos, parameter `actuators`), and starts step
 0 only when every node of the graph has announced itself on /hsv/ready.
@@ -45,15 +46,25 @@ class PlantNode(LockstepNode):
         k = self.core.k
         return [("/clock", clock_msg(k, self.Ts)), ("/hsv/state", self.core.state())]
 
+    def _publish_measurement(self) -> None:
+        """The sensors' y of the state just published: no node of the loop waits for it."""
+        self.publish([("/hsv/measurement", self.core.measurement())])
+
     def on_ready(self) -> None:
-        """Every peer is ready: publish the state of step 0."""
+        """Every peer is ready: publish the state and the measurement of step 0."""
         self.get_logger().info(f"graph ready ({len(self.graph_nodes) - 1} peers): step 0")
         self.publish(self._publish_state())
+        self._publish_measurement()
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""
         self.core.advance(inputs["/hsv/actuator_command"])
         return self._publish_state() if self.core.k < self.n_steps else []
+
+    def after_publish(self, k: int) -> None:
+        """The measurement of the state published at step k, off the critical path."""
+        if self.core.k < self.n_steps:
+            self._publish_measurement()
 
 
 def run(args=None) -> None:

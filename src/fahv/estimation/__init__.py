@@ -1,0 +1,1 @@
+"""State estimation from the sensors' measurement: a gain-scheduled Kalman filter of the CM."""

@@ -1,0 +1,287 @@
+"""A gain-scheduled Kalman filter of the CM state from the sensors' measurement.
+
+The flight computer measures y_k = C x_k + v_k (`fahv.sensors`: h, V, theta and the
+gyro's q by default; the gyro sees the flexible modes through the mode slopes, row
+`output_matrix`), and must estimate the whole state x_k of the CM, eq. (1)-(3),
+flexible states included, to run the tube law on it. The filter here:
+
+- predicts with the nominal nonlinear CM (`fahv.plant.rk4.rk4_cm`, the plant's own
+  kernel with the vehicle file's nominal parameters) under the command the controller
+  sent (the flight computer does not know the actuator fault);
+- corrects with the a-posteriori (current-estimate) Kalman gain
+  L(p) = sum_i tau_i(p) L_i, scheduled on the estimate's (h, V) by the TP weights of the
+  design's LPV model, eq. (11)-(12);
+- L_i is the steady-state gain of vertex i (`kalman_gains`: the discrete algebraic
+  Riccati equation of (A_i, C) with the process covariance Q_w and the sensors'
+  covariance R_v, scaled by the design's state scales first).
+
+It models no sensor delay, lag or sample-and-hold (the vehicle file's defaults have
+none). Its error is not certified here: the invariant set of the estimation error is
+the next part of the output-feedback tube.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import scipy.linalg
+
+from fahv.model.lpv import PolytopicLPV
+from fahv.model.vehicle import ALPHA, ETA1_DOT, ETA2_DOT, IQ, THETA, H, V
+from fahv.plant.rk4 import params_records, rk4_cm
+from fahv.sensors.data import SensorData
+
+_ROW = {"h": H, "V": V, "theta": THETA, "alpha": ALPHA}
+
+
+def output_matrix(measured: Sequence[str], data: SensorData) -> np.ndarray:
+    """C (n_y, 9) of the noise-free outputs y = C x of the measured channels.
+
+    Parameters
+    ----------
+    measured : sequence of str
+        Channels in output order (`fahv.sensors.data.CHANNELS`).
+    data : SensorData
+        The mode slopes phi_1, phi_2 at the gyro.
+
+    Returns
+    -------
+    (n_y, 9) ndarray
+        Row of a state channel: its unit vector; row of `q`: the gyro,
+        q + phi_1 eta_1_dot + phi_2 eta_2_dot.
+
+    Raises
+    ------
+    KeyError
+        On an unknown channel.
+
+    Examples
+    --------
+    >>> from fahv.sensors.data import load_sensors
+    >>> output_matrix(["h", "theta"], load_sensors())[:, :4]
+    array([[1., 0., 0., 0.],
+           [0., 0., 0., 1.]])
+    """
+    C = np.zeros((len(measured), 9))
+    for r, name in enumerate(measured):
+        if name == "q":
+            C[r, IQ], C[r, ETA1_DOT], C[r, ETA2_DOT] = 1.0, data.phi_1, data.phi_2
+        else:
+            C[r, _ROW[name]] = 1.0
+    return C
+
+
+def measurement_covariance(measured: Sequence[str], data: SensorData) -> np.ndarray:
+    """R_v: the white noise variance of each channel on the diagonal.
+
+    Parameters
+    ----------
+    measured : sequence of str
+        Channels in output order.
+    data : SensorData
+        Their noise models (`stddev`).
+
+    Returns
+    -------
+    (n_y, n_y) ndarray
+        diag(stddev^2) [unit^2 of each channel].
+    """
+    return np.diag([data.channels[c].stddev ** 2 for c in measured])
+
+
+def kalman_gains(A: np.ndarray, C: np.ndarray, Q_w: np.ndarray, R_v: np.ndarray,
+                 scale: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """Steady-state a-posteriori Kalman gains L_i of every vertex (A_i, C).
+
+    P_i solves the filter's discrete algebraic Riccati equation
+    P = A P A' - A P C' (C P C' + R)^-1 C P A' + Q (`scipy.linalg.solve_discrete_are`
+    on the dual pair (A', C')), and L_i = P_i C' (C P_i C' + R)^-1, the gain of the
+    correction x_k|k = x_k|k-1 + L (y_k - C x_k|k-1).
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+        Discrete vertex matrices A_i (deviation coordinates, unscaled).
+    C : (n_y, n) ndarray
+        Output matrix.
+    Q_w : (n, n) ndarray
+        Process noise covariance (unscaled units^2).
+    R_v : (n_y, n_y) ndarray
+        Measurement noise covariance.
+    scale : (n,) ndarray, optional
+        State scales D (the design's Dx): the equation is solved for D^-1 x, where its
+        entries are of one size.
+
+    Returns
+    -------
+    (R, n, n_y) ndarray
+        L_i in unscaled units.
+
+    Raises
+    ------
+    ValueError
+        If a vertex is not detectable from C (no stabilising solution; names it), or a
+        gain is not finite.
+    """
+    R_, n, _ = A.shape
+    D = np.ones(n) if scale is None else np.asarray(scale, float)
+    Cs, Qs = C * D[None, :], Q_w / np.outer(D, D)
+    out = np.empty((R_, n, C.shape[0]))
+    for i in range(R_):
+        As = A[i] / D[:, None] * D[None, :]
+        try:
+            P = scipy.linalg.solve_discrete_are(As.T, Cs.T, Qs, R_v)
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            raise ValueError(f"Kalman gain of vertex {i}: no stabilising solution ({exc})") from exc
+        Ls = P @ Cs.T @ np.linalg.inv(Cs @ P @ Cs.T + R_v)
+        out[i] = D[:, None] * Ls
+    if not np.all(np.isfinite(out)):
+        raise ValueError("Kalman gains: a gain is not finite")
+    return out
+
+
+class GainScheduledKalman:
+    """The filter of B runs: `correct` with y_k, then `predict` with the command u_k.
+
+    Parameters
+    ----------
+    lpv : PolytopicLPV
+        The design's LPV model (its weights schedule the gains).
+    L : (R, 9, n_y) ndarray
+        Vertex gains (`kalman_gains`).
+    C : (n_y, 9) ndarray
+        Output matrix (`output_matrix`).
+    params : VehicleParams
+        The nominal vehicle of the predictor.
+    limits : InputLimits
+        The plant's input limits (the predictor saturates the command as the plant does).
+    Ts : float
+        Step [s].
+    n_sub : int
+        RK4 steps per step.
+    x0 : (B, 9) ndarray
+        Initial estimate x_0|-1 (e.g. the trim the run starts from).
+    """
+
+    def __init__(self, lpv: PolytopicLPV, L, C, params, limits, Ts: float, n_sub: int, x0) -> None:
+        self.lpv, self.L, self.C = lpv, np.asarray(L, float), np.asarray(C, float)
+        self.x = np.array(np.atleast_2d(x0), dtype=float)
+        self.rec = params_records([params] * len(self.x))
+        self.limits, self.Ts, self.n_sub = limits, float(Ts), int(n_sub)
+
+    def gains(self) -> np.ndarray:
+        """The scheduled gains at the current estimates' (h, V).
+
+        Returns
+        -------
+        (B, 9, n_y) ndarray
+            L(p) = sum_i tau_i(p) L_i of each run.
+        """
+        w = self.lpv.weights(self.x[:, H], self.x[:, V])  # (B, R)
+        return np.einsum("br,rij->bij", w, self.L)
+
+    def correct(self, y: np.ndarray) -> np.ndarray:
+        """The corrected estimate x_k|k from the measurement y_k.
+
+        Parameters
+        ----------
+        y : (B, n_y) ndarray
+            Measurement of step k, in the order of the rows of C.
+
+        Returns
+        -------
+        (B, 9) ndarray
+            x_k|k [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s] (a copy).
+
+        Raises
+        ------
+        ValueError
+            If y does not have one column per row of C.
+        """
+        y = np.atleast_2d(np.asarray(y, float))
+        if y.shape != (len(self.x), self.C.shape[0]):
+            raise ValueError(f"estimator: y has shape {y.shape}, expected "
+                             f"{(len(self.x), self.C.shape[0])}")  # fmt: skip
+        innovation = y - self.x @ self.C.T
+        self.x = self.x + np.einsum("bij,bj->bi", self.gains(), innovation)
+        return self.x.copy()
+
+    def predict(self, u: np.ndarray) -> None:
+        """Predict x_k+1|k from x_k|k under the command of step k.
+
+        Parameters
+        ----------
+        u : (B, 2) ndarray
+            Command u_k [Phi, delta_e rad], saturated to the plant's limits here.
+        """
+        u = np.clip(np.atleast_2d(np.asarray(u, float)), self.limits.u_min, self.limits.u_max)
+        self.x = rk4_cm(self.x, np.ascontiguousarray(u), self.rec, self.Ts, self.n_sub)
+
+
+def estimate_history(estimator: GainScheduledKalman, y: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """The filter over one recorded run, step by step: correct with y_k, predict with u_k.
+
+    Parameters
+    ----------
+    estimator : GainScheduledKalman
+        A filter of one run (B = 1), at its initial estimate.
+    y : (N, n_y) ndarray
+        Measurements of the run.
+    u : (N, 2) ndarray
+        Commands of the run [Phi, delta_e rad].
+
+    Returns
+    -------
+    (N, 9) ndarray
+        x_k|k of every step.
+    """
+    out = np.empty((len(y), 9))
+    for k in range(len(y)):
+        out[k] = estimator.correct(y[k][None])[0]
+        estimator.predict(u[k][None])
+    return out
+
+
+def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts: float,
+                  n_sub: int, x0) -> GainScheduledKalman:  # fmt: skip
+    """The filter of a design: its LPV model, gains with Q_w from its bound w_max.
+
+    Q_w = diag((w_max / 3)^2): the design's one-step disturbance bound (eq. 13-19) read
+    as three standard deviations of a white process noise; R_v the sensors' white noise.
+
+    Parameters
+    ----------
+    arrays : mapping
+        The design's arrays: `A`, `B`, `h_grid`, `V_grid`, `W_h`, `W_V`, `w_max`, `Dx`
+        (a CM design, n = 9).
+    vehicle : Vehicle
+        Nominal parameters and input limits of the predictor.
+    data : SensorData
+        The sensors' noise and mode slopes.
+    measured : sequence of str
+        Channels of y, in order.
+    Ts, n_sub : float, int
+        Step [s] and RK4 steps per step.
+    x0 : (B, 9) ndarray
+        Initial estimates.
+
+    Returns
+    -------
+    GainScheduledKalman
+        The filter of B runs at x0.
+
+    Raises
+    ------
+    ValueError
+        If the design is not of the nine CM states, or a vertex gain does not exist.
+    """
+    A = np.asarray(arrays["A"], float)
+    if A.shape[1:] != (9, 9):
+        raise ValueError(f"estimator: the design's A_i are {A.shape[1:]}, not the CM's (9, 9)")
+    lpv = PolytopicLPV(A, np.asarray(arrays["B"], float), *(np.asarray(arrays[k], float)
+                       for k in ("h_grid", "V_grid", "W_h", "W_V")))  # fmt: skip
+    C = output_matrix(measured, data)
+    Q_w = np.diag((np.asarray(arrays["w_max"], float) / 3.0) ** 2)
+    L = kalman_gains(A, C, Q_w, measurement_covariance(measured, data), arrays["Dx"])
+    return GainScheduledKalman(lpv, L, C, vehicle.params, vehicle.limits, Ts, n_sub, x0)
