@@ -36,8 +36,7 @@ from fahv.spec.schema import (
     PLANT,
     PLANT_SUBSTEPS,
     TS,
-    actuator_model,
-    sensor_values,
+    plant_choices,
 )
 
 COMMON = (
@@ -304,8 +303,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
             "vehicle_file": vehicle_file,
             **mat("x0", x0),
             **{f"params.{k}": float(val) for k, val in design.summary["plant_params"].items()},
-            "actuators": actuator_model(c), **sensor_values(c),
-            **stuck_parameters(f["kind"], f["t_onset"]),
+            **plant_choices(c), **stuck_parameters(f["kind"], f["t_onset"]),
         },
         "fault_injector": {**common, **fault},
         "notch_filter": {**common, "enabled": enabled, **notch},

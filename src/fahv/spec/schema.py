@@ -177,26 +177,26 @@ PLANT = (
 )  # fmt: skip
 
 
-def sensor_values(spec) -> dict:
-    """The plant's sensor parameters of a run spec or scenario (`plant` section).
+def plant_choices(spec) -> dict:
+    """The simulated plant's choices of a run spec or scenario (its `plant` section).
 
-    `measured` and `sensor_seed`; absent, the defaults: h, V, theta and the gyro's q,
-    seed 0.
+    `actuators`, `measured` and `sensor_seed`, each at its default where the section (or
+    the key) is absent: ideal actuators; h, V, theta and the gyro's q; seed 0.
 
     Examples
     --------
-    >>> sensor_values({})
-    {'measured': 'h,V,theta,q', 'sensor_seed': 0}
+    >>> plant_choices({})
+    {'actuators': 'ideal', 'measured': 'h,V,theta,q', 'sensor_seed': 0}
     """
     plant = spec.get("plant") or {}
-    return {f.name: plant.get(f.name, f.default) for f in PLANT if f.name != "actuators"}
+    return {f.name: plant.get(f.name, f.default) for f in PLANT}
 
 
 def plant_section() -> Section:
     """The `plant` section of a scenario and a run spec: optional, left out when absent.
 
     Absent, it is not filled in (so the run spec, and its hash, of a scenario without it
-    is what it was before the section existed); `actuator_model` and `sensor_values`
+    is what it was before the section existed); `actuator_model` and `plant_choices`
     read it.
     """
     return Section("plant", PLANT, "the simulated plant: actuator model, sensors",
