@@ -32,11 +32,10 @@ if ! wait "$warm"; then
   exit 1
 fi
 grep -E "^(design|verified)" "$warm_log" | sed 's/^/[verify] /'
-# on every core, one test file per worker at a time (module fixtures computed once) and
-# the tests that start ROS graphs one after the other on one worker (tests/conftest.py:
-# xdist groups); "-n 0" after the command runs the suite in one process
+# on every core, one test file per worker at a time (module fixtures computed once);
+# "-n 0" after the command runs the suite in one process
 tests=0
-.venv/bin/python -m pytest -n auto --dist loadgroup "$@" || tests=$?
+.venv/bin/python -m pytest -n auto --dist loadfile "$@" || tests=$?
 site=0
 wait "$docs" || site=$?
 echo "[docs] $(tail -n 1 "$docs_log")"

@@ -14,25 +14,22 @@ from fahv.model.vehicle import load_vehicle
 from fahv.spec.files import spec_file
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
 def pytest_collection_modifyitems(session, config, items):
-    """One xdist group per test file, and one for every test that starts a ROS graph.
+    """Run the files that need the shared quick design (fixture `design`) last but one.
 
-    `scripts/test.sh` runs the suite with `-n auto --dist loadgroup`: a worker takes a
-    whole file (its module fixtures are made once), and the tests marked `ros` run one
-    after the other on one worker, first. Two graphs at once on two cores starve each
-    other's lockstep: the suite took 3.4 min more CPU when the order of the files put
-    the graph tests of both workers side by side (measured). Collection order stays
-    within each group.
+    The workers of `-n auto --dist loadfile` share that design through a file lock
+    (fixture `design`): a worker that needs it while the other makes it waits idle. The
+    first file that needs it goes first, so that one worker starts making it at once,
+    then every file that does not need it, then the rest; within a file, and within each
+    group, the collection order stays.
     """
-    graph = [item for item in items if item.get_closest_marker("ros") is not None]
-    rest = [item for item in items if item.get_closest_marker("ros") is None]
-    for item in graph:
-        item.add_marker(pytest.mark.xdist_group("ros_graph"))
-    for item in rest:
-        item.add_marker(pytest.mark.xdist_group(item.path.relative_to(ROOT).as_posix()))
-    items[:] = graph + rest
+    files: dict = {}
+    for item in items:
+        files.setdefault(item.path, []).append(item)
+    needs = {f for f, its in files.items() if any("design" in it.fixturenames for it in its)}
+    first = next((f for f in files if f in needs), None)
+    order = sorted(files, key=lambda f: 0 if f == first else (1 if f not in needs else 2))
+    items[:] = [item for f in order for item in files[f]]
 
 
 #: The paper's Case 1 design with its scenario: the quick design of the tests.
