@@ -14,24 +14,6 @@ from fahv.model.vehicle import load_vehicle
 from fahv.spec.files import spec_file
 
 ROOT = Path(__file__).resolve().parents[1]
-def pytest_collection_modifyitems(session, config, items):
-    """Run the files that need the shared quick design (fixture `design`) last but one.
-
-    The workers of `-n auto --dist loadfile` share that design through a file lock
-    (fixture `design`): a worker that needs it while the other makes it waits idle. The
-    first file that needs it goes first, so that one worker starts making it at once,
-    then every file that does not need it, then the rest; within a file, and within each
-    group, the collection order stays.
-    """
-    files: dict = {}
-    for item in items:
-        files.setdefault(item.path, []).append(item)
-    needs = {f for f, its in files.items() if any("design" in it.fixturenames for it in its)}
-    first = next((f for f in files if f in needs), None)
-    order = sorted(files, key=lambda f: 0 if f == first else (1 if f not in needs else 2))
-    items[:] = [item for f in order for item in files[f]]
-
-
 #: The paper's Case 1 design with its scenario: the quick design of the tests.
 SCENARIO = "offline_design/scenarios/case1_paper.yaml"
 
