@@ -3,9 +3,11 @@ numbers a record measured afterwards gives, the same in simulate() and the batch
 and the measurement leaves the control loop bit for bit (no controller reads it yet)."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from fahv.errors import ParameterError
 from fahv.loop.batch import simulate_batch
@@ -15,6 +17,7 @@ from fahv.sensors.data import load_sensors
 from fahv.sensors.measure import measure_history
 
 DURATION = 2.0
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_the_plant_measures_what_the_record_gives_afterwards(design):
@@ -75,3 +78,60 @@ def test_a_bad_channel_list_is_refused_naming_the_parameter(design, measured, me
     with pytest.raises(ParameterError, match=r"plant: parameter 'measured'") as err:
         simulate(design, "tube_mpc", DURATION, overrides={"plant": {"measured": measured}})
     assert message in str(err.value)
+
+
+def test_sensor_faults_act_on_the_measurement_and_not_the_loop(design):
+    """A stuck gyro from 1 s holds the sample of the step before; a 100 ft bias step on h
+    adds exactly 100 ft from step 50; the states equal the healthy run's; the batch gives
+    simulate()'s bits for both faults side by side."""
+    stuck = {"sensor_fault.kind": "stuck", "sensor_fault.channel": "q",
+             "sensor_fault.t_onset": 1.0}  # fmt: skip
+    bias = {"sensor_fault.kind": "bias_step", "sensor_fault.channel": "h",
+            "sensor_fault.t_onset": 1.0, "sensor_fault.bias": 100.0}  # fmt: skip
+    base = simulate(design, "tube_mpc", DURATION)
+    runs = [simulate(design, "tube_mpc", DURATION, overrides={"plant": f}) for f in (stuck, bias)]
+    assert np.all(runs[0].y[50:, 3] == runs[0].y[49, 3]) and runs[0].y[48, 3] != runs[0].y[49, 3]
+    np.testing.assert_array_equal(runs[0].y[:50], base.y[:50])
+    shift = runs[1].y[:, 0] - base.y[:, 0]
+    assert np.all(shift[:50] == 0.0) and np.allclose(shift[50:], 100.0, rtol=0, atol=1e-9)
+    assert all(np.array_equal(r.x, base.x) for r in runs)
+    batch = simulate_batch(design, "tube_mpc", [{"plant": stuck}, {"plant": bias}], DURATION)
+    assert all(np.array_equal(b.y, r.y) for b, r in zip(batch, runs, strict=True))
+
+
+@pytest.mark.parametrize(
+    ("fault", "message"),
+    [
+        ({"sensor_fault.kind": "stuck", "sensor_fault.channel": "alpha",
+          "sensor_fault.t_onset": 1.0},  # fmt: skip
+         "sensor_fault.channel: 'alpha' is not a measured channel"),
+        ({"sensor_fault.kind": "drift", "sensor_fault.channel": "h", "sensor_fault.t_onset": 1.0},
+         "'sensor_fault.rate' is missing"),
+    ],
+)
+def test_a_bad_sensor_fault_is_refused_naming_the_parameter(design, fault, message):
+    with pytest.raises(ParameterError, match="plant: parameter") as err:
+        simulate(design, "tube_mpc", DURATION, overrides={"plant": fault})
+    assert message in str(err.value)
+
+
+def test_a_scenario_sets_the_sensor_fault(tmp_path):
+    """The scenario section `sensor_fault` reaches the plant's parameters; an unknown kind
+    is refused naming the key."""
+    from fahv.errors import ConfigError
+    from fahv.spec.scenario import load_scenario
+    from fahv.spec.schema import sensor_fault_values
+
+    spec = yaml.safe_load((ROOT / "offline_design/scenarios/case1.yaml").read_text())
+    spec["sensor_fault"] = {"kind": "drift", "channel": "theta", "t_onset": 30.0, "rate": 1e-4}
+    path = tmp_path / "drift.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    section = load_scenario(path).data["sensor_fault"]
+    assert sensor_fault_values({"sensor_fault": section}) == {
+        "sensor_fault.kind": "drift", "sensor_fault.channel": "theta",
+        "sensor_fault.t_onset": 30.0, "sensor_fault.rate": 1e-4,
+    }  # fmt: skip
+    spec["sensor_fault"]["kind"] = "frozen"
+    path.write_text(yaml.safe_dump(spec))
+    with pytest.raises(ConfigError, match="sensor_fault.kind"):
+        load_scenario(path)

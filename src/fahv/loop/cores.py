@@ -24,7 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fahv.control import LAWS, NOMINAL_SOURCES
-from fahv.errors import ParameterError, RunError
+from fahv.errors import ConfigError, ParameterError, RunError
 from fahv.lanes import Lanes
 from fahv.loop.graph import CONTROLLER_NODES, n_steps_of
 from fahv.loop.params import validate
@@ -44,6 +44,7 @@ from fahv.msg import (
 from fahv.plant.faults import FAULTS, FaultInjector, make_fault
 from fahv.plant.integrator import Plant
 from fahv.sensors.data import CHANNELS, load_sensors
+from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_from_section
 from fahv.sensors.measure import Sensors
 from fahv.verdict import RunEnded
 
@@ -67,24 +68,28 @@ def servos_of(vehicle, model: str):
     return vehicle.actuators[model]
 
 
-def sensors_of(p: dict, seeds, vehicles: dict):
+def sensors_of(p: dict, runs: Sequence[dict], vehicles: dict):
     """The sensors of a batch's plant (parameters `measured`, `vehicle_file`); None: none.
+
+    Each run's seed is its `sensor_seed`, its sensor fault its `sensor_fault.*`.
 
     Parameters
     ----------
     p : dict
         Validated parameters of node `plant` (the batch's shared values).
-    seeds : sequence of int
-        `sensor_seed` of each run.
+    runs : sequence of dict
+        Validated parameters of node `plant` of each run.
     vehicles : dict
         Cache of loaded files by name (the sensor data under `("sensors", name)`).
 
     Raises
     ------
     ParameterError
-        On an unknown or repeated channel in `measured` (names the parameter).
+        On an unknown or repeated channel in `measured`, or a sensor fault on a channel
+        that is not measured (names the parameter).
     """
     measured = [c.strip() for c in p["measured"].split(",") if c.strip()]
+    faults = [sensor_fault_of(r, measured) for r in runs]  # a fault names a measured channel
     if not measured:
         return None
     unknown = [c for c in measured if c not in CHANNELS]
@@ -95,7 +100,29 @@ def sensors_of(p: dict, seeds, vehicles: dict):
     key = ("sensors", p["vehicle_file"] or "")
     if key not in vehicles:
         vehicles[key] = load_sensors(p["vehicle_file"] or None)
-    return Sensors(vehicles[key], seeds, p["Ts"], measured)
+    seeds = [r["sensor_seed"] for r in runs]
+    return Sensors(vehicles[key], seeds, p["Ts"], measured, faults)
+
+
+def sensor_fault_of(run: dict, measured: Sequence[str]):
+    """The sensor fault of one run's plant parameters `sensor_fault.*`; None for `none`.
+
+    Raises
+    ------
+    ParameterError
+        On a fault whose channel is not measured or a missing parameter of its kind
+        (names the parameter).
+    """
+    values = {k.split(".", 1)[1]: v for k, v in run.items() if k.startswith("sensor_fault.")}
+    kind = values.get("kind", "none")
+    if kind == "none":
+        return None
+    used = {"kind", "channel", "t_onset", *(f.name for f in SENSOR_FAULTS[kind].parameters)}
+    values = {k: v for k, v in values.items() if k in used}  # the other kinds' defaults out
+    try:
+        return sensor_fault_from_section(values, measured, key="plant: parameter sensor_fault")
+    except ConfigError as exc:
+        raise ParameterError(str(exc)) from exc
 
 
 def check_step(node: str, topic: str, msg: LoopMessage, k: int) -> None:
@@ -150,7 +177,7 @@ class PlantCore:
         )  # fmt: skip
         self.plant = Plant(params, veh.limits, self.x0, p["Ts"], p["plant_substeps"],
                            servos_of(veh, p["actuators"]))  # fmt: skip
-        self.sensors = sensors_of(p, [r["sensor_seed"] for r in runs], vehicles)
+        self.sensors = sensors_of(p, runs, vehicles)
         self._channels = (p["measured"].replace(" ", ""),) * len(runs)
         self.lanes = lanes
         self.k = 0

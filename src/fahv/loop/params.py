@@ -28,6 +28,7 @@ from fahv.errors import ParameterError
 from fahv.loop.graph import CONTROLLER_NODES
 from fahv.plant.faults import FAULT_KIND, FAULTS, T_ONSET, fault_fields
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.sensors.faults import sensor_fault_fields
 from fahv.spec.artefacts import variant_gain_key
 from fahv.spec.schema import (
     COMMAND,
@@ -37,6 +38,7 @@ from fahv.spec.schema import (
     PLANT_SUBSTEPS,
     TS,
     plant_choices,
+    sensor_fault_values,
 )
 
 COMMON = (
@@ -96,6 +98,7 @@ def specs() -> dict[str, tuple[Field, ...]]:
                   default=False),
             Field("stuck_onset", "float", "onset of the stuck elevator (fault t_onset)",
                   unit="s", lo=0.0, default=0.0),
+            *_prefixed(sensor_fault_fields(), "sensor_fault."),
         ),
         "fault_injector": (
             *COMMON,
@@ -304,6 +307,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
             **mat("x0", x0),
             **{f"params.{k}": float(val) for k, val in design.summary["plant_params"].items()},
             **plant_choices(c), **stuck_parameters(f["kind"], f["t_onset"]),
+            **sensor_fault_values(c),
         },
         "fault_injector": {**common, **fault},
         "notch_filter": {**common, "enabled": enabled, **notch},
@@ -316,10 +320,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
             "level_max": float(c["nominal"]["level_max"]),
             **{k: _plain(v) for k, v in law.nominal.node_values(a, c).items()},
             **notch_values,
-            **mat("u_lo"),
-            **mat("u_hi"),
-            **mat("Dx"),
-            **mat("Du"),
+            **{k: val for name in ("u_lo", "u_hi", "Dx", "Du") for k, val in mat(name).items()},
             **mat("x0", x0_meas),
             **{
                 k: val

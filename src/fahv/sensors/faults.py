@@ -7,8 +7,8 @@ fault is active. Built-in kinds: `none`, `bias_step`, `drift`, `stuck`, `dropout
 The onset and parameters per lane and the registry are those of `fahv.config.faults`,
 shared with the actuator faults (`fahv.plant.faults`).
 
-The intended scenario section (not yet read by the case validation, which a later
-step extends when the loop reads measurements):
+A scenario's optional section (`sensor_fault_fields`; the plant node's parameters
+`sensor_fault.*`):
 
     sensor_fault:
       channel: q          # one of the measured channels
@@ -16,7 +16,7 @@ step extends when the loop reads measurements):
       t_onset: 20.0       # [s]
       bias: 0.001         # the kind's parameters (here [rad/s])
 
-`sensor_fault_from_section` validates such a mapping.
+`sensor_fault_from_section` validates such a mapping and builds the fault.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ import numpy as np
 
 from fahv.config import Field
 from fahv.config.faults import FaultRegistry, LaneFault
+from fahv.config.spec import lookup
 from fahv.errors import ConfigError
 from fahv.sensors.data import CHANNELS
 
@@ -170,6 +171,31 @@ class DropoutSensor(SensorFaultKind):
     def apply(self, y, last, t, lanes):
         """The previous output."""
         return last.copy()
+
+
+def sensor_fault_kind_of(root) -> str | None:
+    """`kind` of a scenario's `sensor_fault` section, or of the flat node parameters."""
+    return lookup(root, "sensor_fault.kind") or lookup(root, "kind")
+
+
+def sensor_fault_fields() -> tuple[Field, ...]:
+    """The keys of a `sensor_fault` section: kind, channel, onset, the kind's parameters.
+
+    Returns
+    -------
+    tuple of Field
+        `kind` (default `none`), `channel` (default `q`), `t_onset` [s] (used by every
+        kind but `none`), then every kind's parameters, each used only with its kind.
+    """
+    return (
+        Field("kind", "str", "sensor fault kind", choices=SENSOR_FAULTS.names, default="none"),
+        Field("channel", "str", "the faulty channel (a measured one)", choices=CHANNELS,
+              default="q"),
+        Field("t_onset", "float", "sensor fault onset time", unit="s", lo=0.0,
+              default=math.inf, when=lambda r: sensor_fault_kind_of(r) not in (None, "none"),
+              when_text="kind is not none"),
+        *SENSOR_FAULTS.fields(sensor_fault_kind_of),
+    )  # fmt: skip
 
 
 def sensor_fault_from_section(

@@ -29,6 +29,7 @@ from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
 from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
 from fahv.sensors.data import CHANNELS, DEFAULT_MEASURED
+from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_fields
 
 TS = Field("Ts", "float", "control period Ts", unit="s", lo=0.0, hi=0.1, lo_open=True)
 DURATION = Field("duration", "float", "simulated duration of a run", unit="s", lo=0.0, lo_open=True)
@@ -205,6 +206,38 @@ def plant_section() -> Section:
                    "sensors measure h, V, theta and q)")
 
 
+def sensor_fault_section() -> Section:
+    """The `sensor_fault` section of a scenario and a run spec: optional, left out when absent.
+
+    Absent, no sensor fault (and the run spec, and its hash, of a scenario without it is
+    what it was before the section existed). `fahv.sensors.faults.sensor_fault_fields`
+    gives its keys.
+    """
+    return Section("sensor_fault", sensor_fault_fields(), "a fault of one sensor channel "
+                   "(fahv.sensors.faults)", when=lambda r: False,
+                   when_text="a scenario fails a sensor (optional: absent, none)")  # fmt: skip
+
+
+def sensor_fault_values(spec) -> dict:
+    """The plant's `sensor_fault.*` node parameters of a run spec or scenario.
+
+    The section's keys that its kind uses, prefixed; `{"sensor_fault.kind": "none"}`
+    when the section is absent.
+
+    Examples
+    --------
+    >>> sensor_fault_values({})
+    {'sensor_fault.kind': 'none'}
+    >>> sensor_fault_values({"sensor_fault": {"kind": "stuck", "channel": "q", "t_onset": 5.0}})
+    {'sensor_fault.kind': 'stuck', 'sensor_fault.channel': 'q', 'sensor_fault.t_onset': 5.0}
+    """
+    section = spec.get("sensor_fault") or {"kind": "none"}
+    kind = section["kind"]
+    used = ("kind", "channel", "t_onset", *(f.name for f in SENSOR_FAULTS[kind].parameters))
+    return {f"sensor_fault.{k}": section[k] for k in used if k in section and
+            (kind != "none" or k == "kind")}  # fmt: skip
+
+
 def actuator_model(spec) -> str:
     """The actuator model of a run spec or scenario (`plant.actuators`; `ideal` if absent).
 
@@ -368,6 +401,7 @@ def run_spec() -> Section:
             fault_section(),
             Section("uncertainty", UNCERTAINTY, "plant parameters p (1 + s_p scale rel_p)"),
             plant_section(),
+            sensor_fault_section(),
             _variants("variants to run (law + notch setting)"),
         ),
         "run spec",
@@ -426,6 +460,7 @@ def scenario_spec() -> Section:
                 "the simulated vehicle: plant parameters p (1 + s_p scale rel_p), s_p ~ U(-1, 1)",
             ),
             plant_section(),
+            sensor_fault_section(),
             _variants("variants to run (a subset of the design's; empty: the design's)"),
         ),
         "scenario file",
