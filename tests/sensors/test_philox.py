@@ -40,3 +40,14 @@ def test_moments_and_independence_over_100000_draws():
     }
     for what, w in others.items():
         assert abs(np.corrcoef(z, w)[0, 1]) < 0.01, what
+
+
+def test_the_grid_form_draws_the_same_numbers():
+    """`normals_grid` (the sensors' one call per step) gives `normals`' bits."""
+    from fahv.sensors.philox import normals_grid
+
+    seeds = np.array([0, 7, 2**63 + 5], dtype=np.uint64)
+    channels = np.array([1, 4, 5], dtype=np.uint64)
+    for stream in (STREAM_NOISE, STREAM_DYNAMIC_BIAS):
+        grid = normals_grid(seeds, channels, 123, stream)
+        assert np.array_equal(grid, normals(seeds[:, None], channels[None, :], 123, stream))

@@ -19,7 +19,13 @@ import numpy as np
 from fahv.model.vehicle import ALPHA, ETA1_DOT, ETA2_DOT, IQ, THETA, H, V
 from fahv.sensors.data import CHANNEL_IDS, CHANNEL_UNITS, DEFAULT_MEASURED, ChannelNoise, SensorData
 from fahv.sensors.faults import SensorFaultKind
-from fahv.sensors.philox import STREAM_DYNAMIC_BIAS, STREAM_NOISE, STREAM_TURN_ON_BIAS, normals
+from fahv.sensors.philox import (
+    STREAM_DYNAMIC_BIAS,
+    STREAM_NOISE,
+    STREAM_TURN_ON_BIAS,
+    normals,
+    normals_grid,
+)
 
 _STATE_INDEX = {"h": H, "V": V, "theta": THETA, "alpha": ALPHA}
 #: Rows of `Sensors._const`.
@@ -181,6 +187,8 @@ class Sensors:
 
     def _delayed(self, z: np.ndarray) -> np.ndarray:
         """True outputs of step k - delay per channel (the first ones before step delay)."""
+        if self._line.shape[0] == 1:  # no channel delays
+            return z
         if self.k == 0:
             self._line[:] = z
         self._line = np.roll(self._line, 1, axis=0)
@@ -193,17 +201,17 @@ class Sensors:
         One draw per stream for all of them (the numbers of `white_noise`, channel by
         channel: a draw depends on seed, channel and step only).
         """
-        k, ids, c = self.k, self._ids[due][None, :], self._const[:, due]
+        k, ids, c = self.k, self._ids[due], self._const[:, due]
         dyn = c[_DYN]
         if (dyn > 0.0).any():
-            w = normals(self.seeds[:, None], ids, k, STREAM_DYNAMIC_BIAS)[..., 0]
+            w = normals_grid(self.seeds, ids, k, STREAM_DYNAMIC_BIAS)[..., 0]
             if k == 0:
                 self._gm[:, due] = dyn * w
             else:
                 a = c[_GM_A]
                 self._gm[:, due] = a * self._gm[:, due] + dyn * np.sqrt(1.0 - a * a) * w
         bias = c[_BIAS] + self.turn_on[:, due] + c[_DRIFT] * k * self.Ts + self._gm[:, due]
-        return z + bias + (c[_MEAN] + c[_STD] * normals(self.seeds[:, None], ids, k)[..., 0])
+        return z + bias + (c[_MEAN] + c[_STD] * normals_grid(self.seeds, ids, k)[..., 0])
 
     def measure(self, k: int, x: np.ndarray) -> np.ndarray:
         """The measurement of step k from the true states x_k of the B runs.
