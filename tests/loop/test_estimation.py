@@ -12,11 +12,11 @@ from fahv.estimation.kalman import (
     estimate_history,
     kalman_gains,
     measurement_covariance,
-    output_matrix,
 )
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import ALPHA, THETA, H, V, load_vehicle
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors
+from fahv.sensors.measure import output_matrix, true_outputs
 
 DURATION = 60.0
 #: Steps left out before the error is measured (the filter's transient) [steps].
@@ -64,3 +64,12 @@ def test_a_measurement_of_the_wrong_width_is_refused(certified):
                         np.zeros((1, 9)))  # fmt: skip
     with pytest.raises(ValueError, match=r"estimator: y has shape \(1, 3\), expected \(1, 4\)"):
         est.correct(np.zeros((1, 3)))
+
+
+def test_the_output_matrix_is_the_sensors_true_outputs():
+    """C x equals the sensors' noise-free outputs (gyro with the mode slopes) on random
+    states of every channel, to 1e-12 relative (a product against a sum: rounding only)."""
+    data, channels = load_sensors(), ("h", "V", "theta", "q", "alpha")
+    x = np.random.default_rng(3).normal(size=(200, 9)) * [1e4, 1e3, 0.1, 0.1, 0.1, 1, 1, 1, 1]
+    np.testing.assert_allclose(x @ output_matrix(channels, data).T,
+                               true_outputs(x, data, channels), rtol=1e-12, atol=1e-15)  # fmt: skip

@@ -2,7 +2,7 @@
 
 The flight computer measures y_k = C x_k + v_k (`fahv.sensors`: h, V, theta and the
 gyro's q by default; the gyro sees the flexible modes through the mode slopes, row
-`output_matrix`), and must estimate the whole state x_k of the CM, eq. (1)-(3),
+`fahv.sensors.measure.output_matrix`), and must estimate the whole state x_k of the CM, eq. (1)-(3),
 flexible states included, to run the tube law on it. The filter here:
 
 - predicts with the nominal nonlinear CM (`fahv.plant.rk4.rk4_cm`, the plant's own
@@ -28,48 +28,10 @@ import numpy as np
 import scipy.linalg
 
 from fahv.model.lpv import PolytopicLPV
-from fahv.model.vehicle import ALPHA, ETA1_DOT, ETA2_DOT, IQ, THETA, H, V
+from fahv.model.vehicle import H, V
 from fahv.plant.rk4 import params_records, rk4_cm
 from fahv.sensors.data import SensorData
-
-_ROW = {"h": H, "V": V, "theta": THETA, "alpha": ALPHA}
-
-
-def output_matrix(measured: Sequence[str], data: SensorData) -> np.ndarray:
-    """C (n_y, 9) of the noise-free outputs y = C x of the measured channels.
-
-    Parameters
-    ----------
-    measured : sequence of str
-        Channels in output order (`fahv.sensors.data.CHANNELS`).
-    data : SensorData
-        The mode slopes phi_1, phi_2 at the gyro.
-
-    Returns
-    -------
-    (n_y, 9) ndarray
-        Row of a state channel: its unit vector; row of `q`: the gyro,
-        q + phi_1 eta_1_dot + phi_2 eta_2_dot.
-
-    Raises
-    ------
-    KeyError
-        On an unknown channel.
-
-    Examples
-    --------
-    >>> from fahv.sensors.data import load_sensors
-    >>> output_matrix(["h", "theta"], load_sensors())[:, :4]
-    array([[1., 0., 0., 0.],
-           [0., 0., 0., 1.]])
-    """
-    C = np.zeros((len(measured), 9))
-    for r, name in enumerate(measured):
-        if name == "q":
-            C[r, IQ], C[r, ETA1_DOT], C[r, ETA2_DOT] = 1.0, data.phi_1, data.phi_2
-        else:
-            C[r, _ROW[name]] = 1.0
-    return C
+from fahv.sensors.measure import output_matrix
 
 
 def measurement_covariance(measured: Sequence[str], data: SensorData) -> np.ndarray:

@@ -178,7 +178,8 @@ class PlantCore:
         self.plant = Plant(params, veh.limits, self.x0, p["Ts"], p["plant_substeps"],
                            servos_of(veh, p["actuators"]))  # fmt: skip
         self.sensors = sensors_of(p, runs, vehicles)
-        self._channels = (p["measured"].replace(" ", ""),) * len(runs)
+        names = () if self.sensors is None else self.sensors.names
+        self._channels = (",".join(names),) * len(runs)
         self.lanes = lanes
         self.k = 0
 

@@ -63,6 +63,46 @@ def true_outputs(
     return np.stack(cols, axis=1)
 
 
+def output_matrix(measured: Sequence[str], data: SensorData) -> np.ndarray:
+    """C (n_y, 9) of the noise-free outputs y = C x of the measured channels.
+
+    The linear form of `true_outputs` (the same channels, the same mode slopes), for
+    an estimator's output equation.
+
+    Parameters
+    ----------
+    measured : sequence of str
+        Channels in output order (`fahv.sensors.data.CHANNELS`).
+    data : SensorData
+        The mode slopes phi_1, phi_2 at the gyro.
+
+    Returns
+    -------
+    (n_y, 9) ndarray
+        Row of a state channel: its unit vector; row of `q`: the gyro,
+        q + phi_1 eta_1_dot + phi_2 eta_2_dot.
+
+    Raises
+    ------
+    KeyError
+        On an unknown channel.
+
+    Examples
+    --------
+    >>> from fahv.sensors.data import load_sensors
+    >>> output_matrix(["h", "theta"], load_sensors())[:, :4]
+    array([[1., 0., 0., 0.],
+           [0., 0., 0., 1.]])
+    """
+    C = np.zeros((len(measured), 9))
+    for r, name in enumerate(measured):
+        if name == "q":
+            C[r, IQ], C[r, ETA1_DOT], C[r, ETA2_DOT] = 1.0, data.phi_1, data.phi_2
+        else:
+            C[r, _STATE_INDEX[name]] = 1.0
+    return C
+
+
 def white_noise(seeds, channel: str, steps, noise: ChannelNoise) -> np.ndarray:
     """White noise mean + stddev z of a channel for runs `seeds` at steps `steps`.
 
