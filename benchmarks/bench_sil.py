@@ -1,10 +1,11 @@
 """Real-time factor of the SIL node graph: the working tree against an earlier commit.
 
-Both trees run the same ROS 2 parameter file (made once by the working tree's
-`fahv sil SCENARIO --duration D --write-params`), each with its own nodes, runner
-and library: the commit is exported with `git archive` (the repository is not
-touched), its workspace built with its own `scripts/build_ros.sh` and its `src`
-put first on `PYTHONPATH`. The runs alternate (new, old, then old, new, ...) so that
+Both trees run the same scenario, each from the ROS 2 parameter file its own library
+makes of it (`fahv sil SCENARIO --duration D --write-params`, so that a tree whose
+nodes take other parameters still runs), each with its own nodes, runner and library:
+the commit is exported with `git archive` (the repository is not touched), its
+workspace built with its own `scripts/build_ros.sh` and its `src` put first on
+`PYTHONPATH`. The runs alternate (new, old, then old, new, ...) so that
 the load of other processes on the machine falls on both alike. The wall time is that
 of the `sil` runner process, as `fahv sil` measures it (start-up, the steps, the
 teardown); the real-time factor is the simulated time over it. Prints every run, the
@@ -12,8 +13,8 @@ median of each tree and their ratio.
 
 Run: .venv/bin/python benchmarks/bench_sil.py [--commit HEAD] [-n 3] [--duration 60]
      [--scenario offline_design/scenarios/case1.yaml] [--smoke]
-The two trees must read the same node parameters; a commit whose nodes refuse the
-file shows as failed runs (exit status 1, the node's reason printed).
+A commit whose nodes refuse its own file shows as failed runs (exit status 1, the
+node's reason printed).
 
 `--smoke` skips the earlier commit (nothing exported or built) and runs the working
 tree's graph once for 2 s simulated: CI's check that the benchmark still runs (its
@@ -84,15 +85,19 @@ def tree_env(ws: Path, src: Path | None) -> dict:
     return dict(item.split("=", 1) for item in out.decode().split("\0") if "=" in item)
 
 
-def write_params(scenario: str, duration: float, path: Path) -> dict:
-    """The run's parameter file, made by the working tree's `fahv sil --write-params`."""
-    fahv = ROOT / ".venv" / "bin" / "fahv"
-    cmd = [str(fahv) if fahv.is_file() else "fahv", "sil", scenario, "--duration", str(duration)]
-    r = subprocess.run(
-        [*cmd, "--write-params", str(path)], cwd=ROOT, capture_output=True, text=True
-    )
+def write_params(root: Path, env: dict, scenario: str, duration: float, path: Path) -> dict:
+    """The run's parameter file, made by the tree at `root` (`fahv sil --write-params`).
+
+    Raises
+    ------
+    SystemExit
+        If the tree's `fahv sil` fails (its output printed).
+    """
+    cmd = [sys.executable, "-c", "import sys; from fahv.cli import main; sys.exit(main())",
+           "sil", scenario, "--duration", str(duration), "--write-params", str(path)]  # fmt: skip
+    r = subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True)
     if r.returncode != 0:
-        sys.exit(f"bench_sil: {' '.join(cmd)} --write-params failed:\n{r.stdout}{r.stderr}")
+        sys.exit(f"bench_sil: fahv sil --write-params in {root} failed:\n{r.stdout}{r.stderr}")
     return yaml.safe_load(path.read_text())
 
 
@@ -128,6 +133,7 @@ def main() -> None:
 
     ensure_built()
     trees = {"working tree": (WS, ros_env())}
+    roots = {"working tree": ROOT}
     sha = None
     if args.smoke:
         args.n, args.duration = SMOKE_RUNS, SMOKE_DURATION
@@ -136,8 +142,13 @@ def main() -> None:
     else:
         base, sha = export_commit(args.commit, args.cache)
         trees[sha] = (base / "ros_ws", tree_env(base / "ros_ws", base / "src"))
+        roots[sha] = base
     work = Path(tempfile.mkdtemp(prefix="bench_sil_"))
-    content = write_params(args.scenario, args.duration, work / "params.yaml")
+    content = {
+        name: write_params(roots[name], env, args.scenario, args.duration,
+                           work / f"params_{i}.yaml")
+        for i, (name, (_, env)) in enumerate(trees.items())
+    }  # fmt: skip
     for _, env in trees.values():
         for k in NODE_SWITCHES:
             env.pop(k, None)
@@ -148,7 +159,8 @@ def main() -> None:
         order = list(trees) if i % 2 == 0 else list(trees)[::-1]
         for name in order:
             ws, env = trees[name]
-            rc, wall, err = run_once(content, ws, env, work / f"{i}_{name.replace(' ', '_')}")
+            rc, wall, err = run_once(content[name], ws, env,
+                                     work / f"{i}_{name.replace(' ', '_')}")  # fmt: skip
             rtf[name].append(args.duration / wall if rc == 0 else float("nan"))
             print(f"  run {i + 1} {name:>12s}: wall {wall:6.2f} s, real-time factor "
                   f"{rtf[name][-1]:5.2f}" + ("" if rc == 0 else f"  FAILED (exit {rc})"),

@@ -24,6 +24,11 @@ VERDICTS = {
     COMPLETED: ("-", "the run flew its whole duration"),
     "non_finite_state": ("plant", "the vehicle's state is no longer finite"),
     "non_finite_input": ("plant", "an actuator command reaching the plant is not finite"),
+    "non_finite_estimate": (
+        "state_estimator",
+        "the state estimate is no longer finite (a measurement that is not finite, or the "
+        "filter diverged)",
+    ),
     "nominal_out_of_domain": (
         "nominal_trajectory",
         "the nominal MPC's operating point (the nominal's altitude and speed) left the "

@@ -128,7 +128,11 @@ def test_ros_parameter_file(design):
     tm = p["tube_mpc"]
     assert tm["F_shape"] == [2, 9]
     np.testing.assert_allclose(np.reshape(tm["F"], tm["F_shape"]), design.arrays["F"])
-    assert set(p) == {"plant", "fault_injector", "notch_filter", "nominal_trajectory", "tube_mpc"}
+    assert set(p) == {"plant", "state_estimator", "fault_injector", "notch_filter",
+                      "nominal_trajectory", "tube_mpc"}  # fmt: skip
+    # the paper's loop: the estimator passes the exact state of a full-state sensor through
+    assert p["plant"]["measured"] == p["state_estimator"]["measured"] == "state"
+    assert p["state_estimator"]["estimator"] == "none"
     # the controller can replicate the notch on the nominal's q: the notch_filter node's filter
     for k in ("enabled", "omega_z", "eps_z", "omega_p", "eps_p"):
         assert tm[f"notch.{k}"] == p["notch_filter"][k] == p["nominal_trajectory"][f"notch.{k}"]

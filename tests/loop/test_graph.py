@@ -23,10 +23,11 @@ def test_docs_show_the_node_table():
 
 def test_graph_nodes_follow_the_table():
     assert DEFAULT_GRAPH == [
-        "recorder", "notch_filter", "nominal_trajectory", "tube_mpc", "fault_injector", "plant"
+        "recorder", "state_estimator", "notch_filter", "nominal_trajectory", "tube_mpc",
+        "fault_injector", "plant",
     ]  # fmt: skip
     assert graph_nodes("rmpc", record=False) == [
-        "notch_filter", "nominal_trajectory", "rmpc", "fault_injector", "plant"
+        "state_estimator", "notch_filter", "nominal_trajectory", "rmpc", "fault_injector", "plant"
     ]  # fmt: skip
     assert NODES["recorder"].inputs == tuple(TOPICS)
     # every loop topic has exactly one producer among the loop nodes of a run
@@ -34,7 +35,7 @@ def test_graph_nodes_follow_the_table():
         producers = [n for n in graph_nodes() if topic in GRAPH[n][1]]
         assert len(producers) == 1, topic
     assert replay_topics(["tube_mpc"]) == (
-        ["/hsv/state", "/hsv/q_filtered", "/hsv/nominal"],
+        ["/hsv/state_estimate", "/hsv/q_filtered", "/hsv/nominal"],
         ["/hsv/control_command", "/hsv/tube_status"],
     )
 

@@ -30,7 +30,8 @@ def test_a_status_round_trips_and_other_texts_are_not_statuses():
 def test_missing_peers_are_named_never_started_exited_or_lost():
     p = table()
     now = T0 + 6
-    for i, n in enumerate(["recorder", "nominal_trajectory", "tube_mpc", "plant"]):
+    for i, n in enumerate(["recorder", "state_estimator", "nominal_trajectory", "tube_mpc",
+                           "plant"]):  # fmt: skip
         p.update(st(n, 10 + i))
     assert p.missing(now) == ["fault_injector (never started)"]
     assert p.ready("plant") and not p.ready("fault_injector")
@@ -51,15 +52,15 @@ def test_a_peer_that_stopped_for_the_same_missing_node_is_not_named_as_the_cause
     that failed for its own reason is described."""
     p = table("recorder")
     now = T0 + 6
-    for i, n in enumerate(["notch_filter", "nominal_trajectory", "tube_mpc"]):
+    for i, n in enumerate(["state_estimator", "notch_filter", "nominal_trajectory", "tube_mpc"]):
         p.update(st(n, 10 + i, state="starting"))
     assert p.failed_verdict(now) is None
     why = "plant: graph not ready: missing fault_injector (never started); waiting for x"
-    p.update(st("plant", 13, state="exited", exit_status=3, reason=why))
+    p.update(st("plant", 14, state="exited", exit_status=3, reason=why))
     assert p.failed_verdict(now) == (
         "missing fault_injector (never started); stopped with plant, which exited for it too"
     )
-    p.update(st("tube_mpc", 12, state="exited", exit_status=2, reason="tube_mpc: bad F"))
+    p.update(st("tube_mpc", 13, state="exited", exit_status=2, reason="tube_mpc: bad F"))
     verdict = p.failed_verdict(now)
     assert verdict == (
         "missing fault_injector (never started); "

@@ -16,19 +16,24 @@ MS = 1_000_000  # ns
 
 
 def synthetic_stamps(n=10, recorder_delay_ns=100_000):
-    """A lockstep graph with known costs per hop [ms]: notch 0.5, nominal 0.8, controller
-    0.3 after the later of its inputs, fault injector 0.2, plant 1.0; step = 2.3 ms."""
+    """A lockstep graph with known costs per hop [ms]: estimator 0.1, notch 0.5, nominal
+    0.8, controller 0.3 after the later of its inputs, fault injector 0.2, plant 1.0 to the
+    state and 0.05 more to the measurement; step = 2.45 ms."""
     src = {t: [] for t in TOPICS}
     t0 = 0
     for k in range(n):
         state = t0
-        q = state + 0.5 * MS
-        nom = state + 0.8 * MS
+        meas = state + 0.05 * MS
+        est = meas + 0.1 * MS
+        q = est + 0.5 * MS
+        nom = est + 0.8 * MS
         cmd = max(state, q, nom) + 0.3 * MS
         act = cmd + 0.2 * MS
         for topic, ts in (
             ("/clock", state),
             ("/hsv/state", state),
+            ("/hsv/measurement", meas),
+            ("/hsv/state_estimate", est),
             ("/hsv/q_filtered", q),
             ("/hsv/nominal", nom),
             ("/hsv/tube_status", cmd - 10_000),
@@ -45,11 +50,12 @@ def test_hop_latencies_add_up_to_the_step():
     lat = hop_latencies(synthetic_stamps())
     hops = {h["node"]: h for h in lat["hops"]}
     expected = {
+        "state_estimator": 0.1,
         "notch_filter": 0.5,
         "nominal_trajectory": 0.8,
         "tube_mpc": 0.3,
         "fault_injector": 0.2,
-        "plant": 1.0,
+        "plant": 1.05,
     }
     assert list(hops) == list(expected)  # graph order
     for node, ms in expected.items():
@@ -57,14 +63,15 @@ def test_hop_latencies_add_up_to_the_step():
         assert hops[node]["max_ms"] == pytest.approx(ms, abs=1e-9)
     assert hops["tube_mpc"]["output"] == "/hsv/control_command"  # what the next node waits for
     assert hops["plant"]["n"] == 9  # state k + 1 answers command k
+    assert hops["plant"]["output"] == "/hsv/measurement"  # what the estimator waits for
     assert hops["notch_filter"]["n"] == 10
-    assert lat["step"]["median_ms"] == pytest.approx(2.3, abs=1e-9)
-    # critical path: the later of notch / nominal, then controller, fault injector, plant
-    assert 0.8 + 0.3 + 0.2 + 1.0 == pytest.approx(lat["step"]["median_ms"])
+    assert lat["step"]["median_ms"] == pytest.approx(2.45, abs=1e-9)
+    # critical path: plant, estimator, the later of notch / nominal, controller, injector
+    assert 1.05 + 0.1 + 0.8 + 0.3 + 0.2 == pytest.approx(lat["step"]["median_ms"])
     assert lat["dds_hop"]["median_ms"] == pytest.approx(0.1, abs=1e-9)
     text = format_latencies(lat)
     assert "step period: /hsv/state k -> k + 1" in text
-    assert "   2.300" in text and "35 %" in text  # nominal_trajectory: 0.8 of 2.3 ms
+    assert "   2.450" in text and "33 %" in text  # nominal_trajectory: 0.8 of 2.45 ms
 
 
 def test_timestamps_round_trip_and_missing_file(tmp_path):
@@ -79,4 +86,4 @@ def test_timestamps_round_trip_and_missing_file(tmp_path):
     assert run_controller(tmp_path) == "tube_mpc"
     (tmp_path / "params.yaml").write_text("rmpc:\n  ros__parameters: {}\n")
     assert run_controller(tmp_path) == "rmpc"
-    assert hop_latencies(back, "rmpc")["hops"][2]["node"] == "rmpc"
+    assert hop_latencies(back, "rmpc")["hops"][3]["node"] == "rmpc"

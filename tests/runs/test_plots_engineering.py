@@ -29,6 +29,7 @@ from fahv.runs.plots_context import (
 from fahv.runs.plots_frequency import SPECTRUM_PANELS, psd, spectra_figure
 from fahv.runs.plots_time import (
     error_figure,
+    estimate_figure,
     input_figure,
     input_rate_figure,
     mark_onsets,
@@ -128,6 +129,21 @@ def test_input_rates_are_finite_differences_of_the_applied_input():
     np.testing.assert_allclose(fig.axes[1].get_lines()[0].get_ydata(), 0.0, atol=1e-9)
 
 
+def test_the_estimate_figure_draws_x_hat_less_x_in_the_panels_units():
+    """An estimate 2 ft high in h and 0.01 deg in theta is drawn as 2 and 0.01; a run
+    without an estimate (the exact state) as zero."""
+    run = _run()
+    x_hat = run.x.copy()
+    x_hat[:, H] += 2.0
+    x_hat[:, 3] += math.radians(0.01)
+    estimated = dataclasses.replace(_plotted(), run=dataclasses.replace(run, x_hat=x_hat))
+    fig = estimate_figure([estimated, _plotted("exact")])
+    h, exact = fig.axes[0].get_lines()[:2]
+    np.testing.assert_allclose(h.get_ydata(), 2.0, atol=1e-9)
+    np.testing.assert_allclose(exact.get_ydata(), 0.0, atol=0)
+    np.testing.assert_allclose(fig.axes[3].get_lines()[0].get_ydata(), 0.01, atol=1e-9)
+
+
 def test_the_fault_onset_is_drawn_at_t_onset_on_every_panel():
     runs = [_plotted()]
     for fig in (error_figure(runs), input_figure(runs), tube_figure(runs)):
@@ -220,7 +236,7 @@ def test_fahv_plot_of_recorded_runs_with_and_without_the_notch(tmp_path, capsys,
     rc = main(["plot", *map(str, paths), "--out", str(tmp_path), "--t0", "0.04", "--t1", "0.14"])
     assert rc == 0
     assert set(drawn) == {"trajectory", "attitude", "flexible", "errors", "inputs",
-                          "input_rates", "tube", "spectra"}  # fmt: skip
+                          "input_rates", "tube", "estimate", "spectra"}  # fmt: skip
     legend = [t.get_text() for t in drawn["errors"].axes[0].get_legend().texts]
     assert legend == ["case1 / tube_mpc", "case1 / tube_mpc_no_notch"]  # from the metadata
     t = drawn["errors"].axes[0].get_lines()[-1].get_xdata()

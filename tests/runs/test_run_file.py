@@ -111,7 +111,7 @@ def test_renamed_copied_and_bare_runs_read_like_the_original(run, moved, kind):
     assert rec.params() == content and run_params(path) == content
     assert stored_metadata(path)["design_hash"] == rec.metadata["design_hash"]
     lat = run_latencies(rec.attachment(TIMESTAMPS_FILE), rec.params())
-    assert lat is not None and [h["node"] for h in lat["hops"]][2] == "tube_mpc"
+    assert lat is not None and [h["node"] for h in lat["hops"]][3] == "tube_mpc"
 
 
 def test_inspect_plot_compare_and_rerun_take_renamed_and_bare_runs(run, moved, tmp_path, capsys):

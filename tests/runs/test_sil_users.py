@@ -165,7 +165,8 @@ def test_graph_started_node_by_node_with_ros2_run(design, quick_case, tmp_path):
     )  # fmt: skip
     commands = [ln.strip() for ln in r.stdout.splitlines() if ln.strip().startswith("ros2 run")]
     assert [c.split()[3] for c in commands] == [
-        "recorder", "notch_filter", "nominal_trajectory", "tube_mpc", "fault_injector", "plant"
+        "recorder", "state_estimator", "notch_filter", "nominal_trajectory", "tube_mpc",
+        "fault_injector", "plant",
     ]  # fmt: skip
     assert all(NODES[c.split()[3]].package == c.split()[2] for c in commands)
     export = re.search(
@@ -192,7 +193,8 @@ def test_graph_started_node_by_node_with_ros2_run(design, quick_case, tmp_path):
     assert rec.metadata["ros_domain_id"] == str(domain)
     lat = run_latencies(bag)
     assert [h["node"] for h in lat["hops"]] == [
-        "notch_filter", "nominal_trajectory", "tube_mpc", "fault_injector", "plant"
+        "state_estimator", "notch_filter", "nominal_trajectory", "tube_mpc", "fault_injector",
+        "plant",
     ]  # fmt: skip
     assert all(h["n"] >= N - 1 for h in lat["hops"])
     assert 0.05 < lat["step"]["median_ms"] < 200.0
@@ -247,7 +249,8 @@ def test_graph_started_by_hand_without_a_node_names_it_and_every_process_ends(
             text=True, timeout=120,
         )  # fmt: skip
         elapsed = time.monotonic() - t0
-    assert started == ["recorder", "notch_filter", "nominal_trajectory", "tube_mpc", "plant"]
+    assert started == ["recorder", "state_estimator", "notch_filter", "nominal_trajectory",
+                       "tube_mpc", "plant"]  # fmt: skip
     # every node process has ended, each with the watchdog's exit status
     assert exit_statuses(done.stdout) == dict.fromkeys(started, 3), done.stdout
     verdicts, text = _watchdog_lines(tmp_path / "logs", started)

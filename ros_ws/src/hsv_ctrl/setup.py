@@ -14,10 +14,11 @@ setup(
     zip_safe=True,
     maintainer="fahv maintainers",
     maintainer_email="maintainers@fahv.example.org",
-    description="Notch filter, nominal trajectory, Tube-MPC (and RMPC baseline) nodes of Yang et al. 2022.",
+    description="State estimator, notch filter, nominal trajectory, Tube-MPC (and RMPC baseline) nodes of Yang et al. 2022.",
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
+            "state_estimator = hsv_ctrl.state_estimator:run",
             "notch_filter = hsv_ctrl.notch_filter:run",
             "nominal_trajectory = hsv_ctrl.nominal_trajectory:run",
             "tube_mpc = hsv_ctrl.tube_mpc:run",

@@ -11,6 +11,7 @@ from fahv.runs.plots_context import clip_runs, plotted_run, run_labels
 from fahv.runs.plots_frequency import spectra_figure
 from fahv.runs.plots_time import (
     error_figure,
+    estimate_figure,
     input_figure,
     input_rate_figure,
     mark_onsets,
@@ -76,6 +77,7 @@ PLOT_FIGURES = {
     "inputs": input_figure,
     "input_rates": input_rate_figure,
     "tube": tube_figure,
+    "estimate": estimate_figure,
 }
 
 

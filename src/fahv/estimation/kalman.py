@@ -5,15 +5,19 @@ gyro's q by default; the gyro sees the flexible modes through the mode slopes, r
 `fahv.sensors.measure.output_matrix`), and must estimate the whole state x_k of the CM, eq. (1)-(3),
 flexible states included, to run the tube law on it. The filter here:
 
+- estimates with the state an input disturbance d (2,), a random walk added to the
+  command (the offset-free disturbance model of Pannocchia and Rawlings 2003): an
+  actuator fault or a model error then moves d, not a bias of x;
 - predicts with the nominal nonlinear CM (`fahv.plant.rk4.rk4_cm`, the plant's own
   kernel with the vehicle file's nominal parameters) under the command the controller
-  sent (the flight computer does not know the actuator fault);
+  sent plus d (the flight computer does not know the actuator fault);
 - corrects with the a-posteriori (current-estimate) Kalman gain
   L(p) = sum_i tau_i(p) L_i, scheduled on the estimate's (h, V) by the TP weights of the
   design's LPV model, eq. (11)-(12);
 - L_i is the steady-state gain of vertex i (`kalman_gains`: the discrete algebraic
-  Riccati equation of (A_i, C) with the process covariance Q_w and the sensors'
-  covariance R_v, scaled by the design's state scales first).
+  Riccati equation of the augmented ([A_i B_i; 0 I], [C 0]) with the process covariance
+  diag(Q_w, Q_d) and the sensors' covariance R_v, scaled by the design's state and
+  input scales first).
 
 It models no sensor delay, lag or sample-and-hold (the vehicle file's defaults have
 none). Its error is not certified here: the invariant set of the estimation error is
@@ -53,8 +57,8 @@ def measurement_covariance(measured: Sequence[str], data: SensorData) -> np.ndar
 
 
 def kalman_gains(A: np.ndarray, C: np.ndarray, Q_w: np.ndarray, R_v: np.ndarray,
-                 scale: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
-    """Steady-state a-posteriori Kalman gains L_i of every vertex (A_i, C).
+                 scale: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Steady-state a-posteriori Kalman gains L_i of every vertex (A_i, C), and covariances.
 
     P_i solves the filter's discrete algebraic Riccati equation
     P = A P A' - A P C' (C P C' + R)^-1 C P A' + Q (`scipy.linalg.solve_discrete_are`
@@ -77,8 +81,10 @@ def kalman_gains(A: np.ndarray, C: np.ndarray, Q_w: np.ndarray, R_v: np.ndarray,
 
     Returns
     -------
-    (R, n, n_y) ndarray
+    L : (R, n, n_y) ndarray
         L_i in unscaled units.
+    P : (R, n, n) ndarray
+        The a-posteriori error covariance (I - L_i C) P_i of each vertex, unscaled.
 
     Raises
     ------
@@ -90,6 +96,7 @@ def kalman_gains(A: np.ndarray, C: np.ndarray, Q_w: np.ndarray, R_v: np.ndarray,
     D = np.ones(n) if scale is None else np.asarray(scale, float)
     Cs, Qs = C * D[None, :], Q_w / np.outer(D, D)
     out = np.empty((R_, n, C.shape[0]))
+    cov = np.empty((R_, n, n))
     for i in range(R_):
         As = A[i] / D[:, None] * D[None, :]
         try:
@@ -98,22 +105,54 @@ def kalman_gains(A: np.ndarray, C: np.ndarray, Q_w: np.ndarray, R_v: np.ndarray,
             raise ValueError(f"Kalman gain of vertex {i}: no stabilising solution ({exc})") from exc
         Ls = P @ Cs.T @ np.linalg.inv(Cs @ P @ Cs.T + R_v)
         out[i] = D[:, None] * Ls
+        cov[i] = np.outer(D, D) * ((np.eye(n) - Ls @ Cs) @ P)
     if not np.all(np.isfinite(out)):
         raise ValueError("Kalman gains: a gain is not finite")
+    return out, cov
+
+
+#: The design's one-step bound w_max read as this many standard deviations of the
+#: process noise (Q_w = diag((w_max / W_SIGMAS)^2)).
+W_SIGMAS = 3.0
+#: Random-walk intensity of the input disturbance d per sqrt(s) [Phi, delta_e rad]:
+#: 0.02 and 0.5 deg/sqrt(s) (a 10 % loss of a 13 deg elevator, 1.3 deg, is followed in
+#: seconds; the noise it lets into d stays small against the inputs' ranges).
+D_INTENSITY = np.array([0.02, np.radians(0.5)])
+
+
+def augmented(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """The vertices of the state with the input disturbance: [[A_i, B_i], [0, I]].
+
+    Parameters
+    ----------
+    A : (R, n, n) ndarray
+    B : (R, n, m) ndarray
+
+    Returns
+    -------
+    (R, n + m, n + m) ndarray
+        The model of z = [x; d] with x+ = A x + B (u + d), d+ = d.
+    """
+    R_, n, m = B.shape
+    out = np.zeros((R_, n + m, n + m))
+    out[:, :n, :n], out[:, :n, n:] = A, B
+    out[:, n:, n:] = np.eye(m)
     return out
 
 
 class GainScheduledKalman:
     """The filter of B runs: `correct` with y_k, then `predict` with the command u_k.
 
+    Its state z = [x; d] is the CM state (9,) and the input disturbance (2,).
+
     Parameters
     ----------
     lpv : PolytopicLPV
         The design's LPV model (its weights schedule the gains).
-    L : (R, 9, n_y) ndarray
-        Vertex gains (`kalman_gains`).
+    L : (R, 11, n_y) ndarray
+        Vertex gains of z (`kalman_gains` on `augmented`).
     C : (n_y, 9) ndarray
-        Output matrix (`output_matrix`).
+        Output matrix of x (`output_matrix`).
     params : VehicleParams
         The nominal vehicle of the predictor.
     limits : InputLimits
@@ -124,20 +163,61 @@ class GainScheduledKalman:
         RK4 steps per step.
     x0 : (B, 9) ndarray
         Initial estimate x_0|-1 (e.g. the trim the run starts from).
+    P : (R, 11, 11) ndarray, optional
+        Steady-state a-posteriori covariances of the vertices (`kalman_gains`), for
+        `sigma`.
+
+    Raises
+    ------
+    ValueError
+        If L is not of z's 11 rows and C's outputs.
     """
 
-    def __init__(self, lpv: PolytopicLPV, L, C, params, limits, Ts: float, n_sub: int, x0) -> None:
+    def __init__(self, lpv: PolytopicLPV, L, C, params, limits, Ts: float, n_sub: int, x0,
+                 P=None) -> None:  # fmt: skip
         self.lpv, self.L, self.C = lpv, np.asarray(L, float), np.asarray(C, float)
-        self.x = np.array(np.atleast_2d(x0), dtype=float)
-        self.rec = params_records([params] * len(self.x))
+        if self.L.shape[1:] != (11, self.C.shape[0]):
+            raise ValueError(f"estimator: gains of shape {self.L.shape[1:]}, expected "
+                             f"{(11, self.C.shape[0])}")  # fmt: skip
+        self.P = None if P is None else np.asarray(P, float)
+        x0 = np.atleast_2d(np.asarray(x0, float))
+        self.z = np.concatenate([x0, np.zeros((len(x0), 2))], axis=1)
+        self.rec = params_records([params] * len(x0))
         self.limits, self.Ts, self.n_sub = limits, float(Ts), int(n_sub)
+
+    @property
+    def x(self) -> np.ndarray:
+        """The state estimates (B, 9) (a view of z)."""
+        return self.z[:, :9]
+
+    @property
+    def d(self) -> np.ndarray:
+        """The input disturbance estimates (B, 2) [Phi, delta_e rad] (a view of z)."""
+        return self.z[:, 9:]
+
+    def sigma(self) -> np.ndarray:
+        """Standard deviation of each state's error at the current estimates' (h, V).
+
+        The square roots of the diagonal of sum_i tau_i(p) P_i, the vertices'
+        steady-state a-posteriori covariances weighted as the gains are: the filter's
+        own statement of its accuracy, not a propagated covariance nor a bound.
+
+        Returns
+        -------
+        (B, 9) ndarray
+            [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]; (B, 0) without P.
+        """
+        if self.P is None:
+            return np.zeros((len(self.x), 0))
+        w = self.lpv.weights(self.x[:, H], self.x[:, V])
+        return np.sqrt(np.einsum("br,rii->bi", w, self.P[:, :9, :9]))
 
     def gains(self) -> np.ndarray:
         """The scheduled gains at the current estimates' (h, V).
 
         Returns
         -------
-        (B, 9, n_y) ndarray
+        (B, 11, n_y) ndarray
             L(p) = sum_i tau_i(p) L_i of each run.
         """
         w = self.lpv.weights(self.x[:, H], self.x[:, V])  # (B, R)
@@ -166,19 +246,22 @@ class GainScheduledKalman:
             raise ValueError(f"estimator: y has shape {y.shape}, expected "
                              f"{(len(self.x), self.C.shape[0])}")  # fmt: skip
         innovation = y - self.x @ self.C.T
-        self.x = self.x + np.einsum("bij,bj->bi", self.gains(), innovation)
+        self.z = self.z + np.einsum("bij,bj->bi", self.gains(), innovation)
         return self.x.copy()
 
     def predict(self, u: np.ndarray) -> None:
-        """Predict x_k+1|k from x_k|k under the command of step k.
+        """Predict z_k+1|k from z_k|k under the command of step k (d held).
 
         Parameters
         ----------
         u : (B, 2) ndarray
-            Command u_k [Phi, delta_e rad], saturated to the plant's limits here.
+            Command u_k [Phi, delta_e rad]; u + d is saturated to the plant's limits.
         """
-        u = np.clip(np.atleast_2d(np.asarray(u, float)), self.limits.u_min, self.limits.u_max)
-        self.x = rk4_cm(self.x, np.ascontiguousarray(u), self.rec, self.Ts, self.n_sub)
+        u = np.atleast_2d(np.asarray(u, float)) + self.d
+        u = np.clip(u, self.limits.u_min, self.limits.u_max)
+        x = rk4_cm(np.ascontiguousarray(self.x), np.ascontiguousarray(u), self.rec, self.Ts,
+                   self.n_sub)  # fmt: skip
+        self.z = np.concatenate([x, self.d], axis=1)
 
 
 def estimate_history(estimator: GainScheduledKalman, y: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -210,13 +293,14 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
     """The filter of a design: its LPV model, gains with Q_w from its bound w_max.
 
     Q_w = diag((w_max / 3)^2): the design's one-step disturbance bound (eq. 13-19) read
-    as three standard deviations of a white process noise; R_v the sensors' white noise.
+    as three standard deviations of a white process noise; Q_d = diag(D_INTENSITY^2 Ts)
+    the input disturbance's random walk; R_v the sensors' white noise.
 
     Parameters
     ----------
     arrays : mapping
-        The design's arrays: `A`, `B`, `h_grid`, `V_grid`, `W_h`, `W_V`, `w_max`, `Dx`
-        (a CM design, n = 9).
+        The design's arrays: `A`, `B`, `h_grid`, `V_grid`, `W_h`, `W_V`, `w_max`, `Dx`,
+        `Du` (a CM design, n = 9).
     vehicle : Vehicle
         Nominal parameters and input limits of the predictor.
     data : SensorData
@@ -243,7 +327,11 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
         raise ValueError(f"estimator: the design's A_i are {A.shape[1:]}, not the CM's (9, 9)")
     lpv = PolytopicLPV(A, np.asarray(arrays["B"], float), *(np.asarray(arrays[k], float)
                        for k in ("h_grid", "V_grid", "W_h", "W_V")))  # fmt: skip
+    B = np.asarray(arrays["B"], float)
     C = output_matrix(measured, data)
-    Q_w = np.diag((np.asarray(arrays["w_max"], float) / 3.0) ** 2)
-    L = kalman_gains(A, C, Q_w, measurement_covariance(measured, data), arrays["Dx"])
-    return GainScheduledKalman(lpv, L, C, vehicle.params, vehicle.limits, Ts, n_sub, x0)
+    Q = np.diag(np.concatenate([(np.asarray(arrays["w_max"], float) / W_SIGMAS) ** 2,
+                                D_INTENSITY**2 * Ts]))  # fmt: skip
+    scale = np.concatenate([np.asarray(arrays["Dx"], float), np.asarray(arrays["Du"], float)])
+    L, P = kalman_gains(augmented(A, B), np.hstack([C, np.zeros((len(C), 2))]), Q,
+                        measurement_covariance(measured, data), scale)  # fmt: skip
+    return GainScheduledKalman(lpv, L, C, vehicle.params, vehicle.limits, Ts, n_sub, x0, P)

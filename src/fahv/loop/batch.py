@@ -126,8 +126,8 @@ def _run_group(runs: list[dict], design, variant: str) -> list[RunResult | Excep
     hist = History(loop.n_steps, len(runs), loop.n, loop.n_y)
     with np.errstate(all="ignore"):
         for k in range(loop.n_steps):
-            _, state, meas, *rest = loop.step(k)
-            hist.add(state, *rest, meas=meas)
+            _, state, meas, est, *rest = loop.step(k)
+            hist.add(state, *rest, meas=meas, est=est)
     out: list[RunResult | Exception] = []
     for b in range(len(runs)):
         info = run_info(design, variant, loop.Ts, runs[b]["plant"])

@@ -8,8 +8,9 @@ step-k output messages. The ROS nodes in `ros_ws/` call exactly these methods wi
 B = 1; the in-process simulator (`fahv.loop.simulate`) calls them in the graph's
 order with B = 1 (`fahv simulate`) or B runs (a campaign batch). One implementation:
 
-    plant.state(k) -> notch.on_state -> nominal.on_state -> controller.on_inputs
-                   -> fault.on_command -> plant.advance(k, actuator)
+    plant.state(k), plant.measurement() -> estimator.on_measurement -> notch.on_state
+        -> nominal.on_state -> controller.on_inputs -> fault.on_command
+        -> plant.advance(k, actuator)
 
 A run that fails (non-finite state, an infeasible first solve, ...) is reported to the
 `fahv.lanes.Lanes` of the batch: raised at once for a single run, recorded for a
@@ -25,9 +26,10 @@ import numpy as np
 
 from fahv.control import LAWS, NOMINAL_SOURCES
 from fahv.errors import ConfigError, ParameterError, RunError
+from fahv.estimation.kalman import design_filter
 from fahv.lanes import Lanes
 from fahv.loop.graph import CONTROLLER_NODES, n_steps_of
-from fahv.loop.params import validate
+from fahv.loop.params import ESTIMATOR_ARRAYS, validate
 from fahv.model.actuators import IDEAL
 from fahv.model.notch import DiscreteNotch, NotchFilter
 from fahv.model.vehicle import DELTA_E, IQ, H, V, load_vehicle
@@ -38,14 +40,16 @@ from fahv.msg import (
     LoopMessage,
     Measurement,
     NominalTrajectory,
+    StateEstimate,
     TubeStatus,
     VehicleState,
 )
 from fahv.plant.faults import FAULTS, FaultInjector, make_fault
 from fahv.plant.integrator import Plant
-from fahv.sensors.data import CHANNELS, load_sensors
+from fahv.sensors.data import CHANNELS, EXACT_STATE, STATE_CHANNELS, load_sensors
 from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_from_section
-from fahv.sensors.measure import Sensors
+from fahv.sensors.measure import ExactState, Sensors
+from fahv.spec.schema import NO_ESTIMATOR
 from fahv.verdict import RunEnded
 
 
@@ -71,7 +75,8 @@ def servos_of(vehicle, model: str):
 def sensors_of(p: dict, runs: Sequence[dict], vehicles: dict):
     """The sensors of a batch's plant (parameters `measured`, `vehicle_file`); None: none.
 
-    Each run's seed is its `sensor_seed`, its sensor fault its `sensor_fault.*`.
+    Each run's seed is its `sensor_seed`, its sensor fault its `sensor_fault.*`;
+    `measured` = `state` is the exact full-state sensor (`ExactState`).
 
     Parameters
     ----------
@@ -88,6 +93,11 @@ def sensors_of(p: dict, runs: Sequence[dict], vehicles: dict):
         On an unknown or repeated channel in `measured`, or a sensor fault on a channel
         that is not measured (names the parameter).
     """
+    if p["measured"].strip() == EXACT_STATE:
+        if any(r["sensor_fault.kind"] != "none" for r in runs):
+            raise ParameterError(f"plant: parameter 'sensor_fault.kind': the exact state "
+                                 f"(measured = {EXACT_STATE!r}) has no sensor to fail")  # fmt: skip
+        return ExactState(len(runs))
     measured = [c.strip() for c in p["measured"].split(",") if c.strip()]
     faults = [sensor_fault_of(r, measured) for r in runs]  # a fault names a measured channel
     if not measured:
@@ -258,6 +268,98 @@ class PlantCore:
         self.k += 1
 
 
+class EstimatorCore:
+    """State-estimator node: the estimate x_k|k of each run from its measurement y_k.
+
+    Parameter `estimator`: `none` passes the exact state of the full-state sensor
+    (the plant's `measured` = `state`) through, the paper's loop; `kalman` runs the
+    gain-scheduled Kalman filter of `fahv.estimation.kalman` on the measured channels,
+    its vertex gains made at start from the design's LPV model and disturbance bound
+    (`design_filter`). Inputs of step k: the Measurement of step k (the trigger) and
+    the controller's command of step k - 1 (`None` at k = 0), which the filter's
+    prediction takes.
+
+    Raises
+    ------
+    ParameterError
+        If `estimator` and `measured` do not fit (none needs the exact state, kalman
+        sensor channels), or no filter exists for the design (names the parameter).
+    """
+
+    def __init__(self, runs: Sequence[dict], lanes: Lanes) -> None:
+        p = runs[0]
+        self.kind, self.lanes, self.k = p["estimator"], lanes, 0
+        self.n_runs = len(runs)
+        self._names = (self.kind,) * self.n_runs
+        exact = p["measured"].strip() == EXACT_STATE
+        channels = STATE_CHANNELS if exact else [c.strip() for c in p["measured"].split(",")]
+        self._channels = ",".join(c for c in channels if c)  # what the plant must send
+        self.filter = None
+        if self.kind == NO_ESTIMATOR:
+            if not exact:
+                raise ParameterError(f"state_estimator: parameter 'estimator' = 'none' reads "
+                                     f"the exact state, but the plant measures "
+                                     f"{p['measured']!r} (measured = '{EXACT_STATE}')")  # fmt: skip
+            return
+        measured = [c.strip() for c in p["measured"].split(",") if c.strip()]
+        if exact or not measured:
+            raise ParameterError(f"state_estimator: parameter 'estimator' = {self.kind!r} needs "
+                                 f"sensor channels, not measured = {p['measured']!r}")  # fmt: skip
+        arrays = {name: p[name] for name in ESTIMATOR_ARRAYS}
+        self.x0 = x0 = np.stack([np.asarray(r["x0"], float) for r in runs])
+        try:
+            self.filter = design_filter(arrays, load_vehicle(p["vehicle_file"] or None),
+                                        load_sensors(p["vehicle_file"] or None), measured,
+                                        p["Ts"], p["plant_substeps"], x0)  # fmt: skip
+        except (ValueError, KeyError) as exc:
+            raise ParameterError(f"state_estimator: parameter 'estimator' = {self.kind!r}: "
+                                 f"{exc}") from exc  # fmt: skip
+
+    def on_measurement(self, meas: Measurement, previous: ControlCommand | None = None):
+        """StateEstimate of step k from Measurement k and ControlCommand k - 1.
+
+        A run whose estimate is not finite ends with the verdict `non_finite_estimate`
+        (its estimate is put back on finite values, so a batch stays finite).
+
+        Raises
+        ------
+        RunError
+            If a message is not of its step, or y is not of the measured channels.
+        RunEnded
+            For a single run whose estimate is not finite (a batch records it).
+        """
+        check_step("state_estimator", "measurement", meas, self.k)
+        if self.k == 0 and any(c != self._channels for c in meas.channels):
+            raise RunError(f"state_estimator: the measurement's channels {meas.channels[0]!r} "
+                           f"are not the estimator's (parameter 'measured': "
+                           f"{self._channels!r}): give both the same channels")  # fmt: skip
+        if previous is not None:
+            check_step("state_estimator", "control_command", previous, self.k - 1)
+        y = np.asarray(meas.y, float)
+        if self.filter is None:
+            x, sigma = y, np.zeros((self.n_runs, 0))
+        else:
+            if previous is not None:
+                self.filter.predict(previous.u())
+            try:
+                x = self.filter.correct(y)
+            except ValueError as exc:
+                raise RunError(str(exc)) from exc
+            sigma = self.filter.sigma()
+        bad = ~np.all(np.isfinite(x), axis=1)
+        if bad.any():
+            t = meas.t
+            self.lanes.fail_mask(bad, lambda b: RunEnded(
+                "non_finite_estimate", "state_estimator", self.k, t,
+                f"state estimate not finite (measurement {y[b]!r})"))  # fmt: skip
+            x = np.where(bad[:, None], 0.0, x)  # the ended runs' lanes kept finite
+            if self.filter is not None:
+                x[bad] = self.x0[bad]
+                self.filter.z[bad] = np.concatenate([self.x0[bad], np.zeros((bad.sum(), 2))], 1)
+        self.k += 1
+        return StateEstimate.of(meas.k, meas.t, x, self._names, sigma)
+
+
 class NotchCore:
     """Notch filter node on q (eq. 38-39, `fahv.model.notch.DiscreteNotch`)."""
 
@@ -273,8 +375,8 @@ class NotchCore:
         self._enabled = np.full(self.n_runs, self.enabled)  # read-only: shared by messages
         self._enabled.setflags(write=False)
 
-    def on_state(self, state: VehicleState) -> FilteredPitchRate:
-        """FilteredPitchRate of step k from VehicleState k."""
+    def on_state(self, state: StateEstimate) -> FilteredPitchRate:
+        """FilteredPitchRate of step k from the StateEstimate of step k (its q)."""
         check_step("notch_filter", "state", state, self.k)
         q = np.array(state.q, dtype=float)
         if self.filter is None:
@@ -288,7 +390,7 @@ class NotchCore:
 class NominalCore:
     """Nominal-trajectory node: the law's nominal part (a registered NominalSource).
 
-    Inputs of step k: the VehicleState of step k (the trigger) and the controller's
+    Inputs of step k: the StateEstimate of step k (the trigger) and the controller's
     command of step k - 1 (`None` at k = 0).
     """
 
@@ -297,8 +399,8 @@ class NominalCore:
         self.source = NOMINAL_SOURCES[p["nominal"]](p, runs, lanes)
         self.k = 0
 
-    def on_state(self, state: VehicleState, previous: ControlCommand | None = None):
-        """NominalTrajectory of step k from VehicleState k and ControlCommand k - 1.
+    def on_state(self, state: StateEstimate, previous: ControlCommand | None = None):
+        """NominalTrajectory of step k from StateEstimate k and ControlCommand k - 1.
 
         `output` then `advance` (the node publishes between the two).
         """
@@ -306,7 +408,7 @@ class NominalCore:
         self.advance()
         return out
 
-    def output(self, state: VehicleState, previous: ControlCommand | None = None):
+    def output(self, state: StateEstimate, previous: ControlCommand | None = None):
         """NominalTrajectory of step k; `advance` must follow before step k + 1."""
         check_step("nominal_trajectory", "state", state, self.k)
         u_prev = None
@@ -343,7 +445,7 @@ class ControllerCore:
         self._tau = np.full(self.n_runs, float(self.tau))
         self._tau.setflags(write=False)
 
-    def measured_state(self, state: VehicleState, qf: FilteredPitchRate) -> np.ndarray:
+    def measured_state(self, state: StateEstimate, qf: FilteredPitchRate) -> np.ndarray:
         """Controller states (B, n): x with q' for q (notch on), plus x_q for the ECM (eq. 43).
 
         Raises
@@ -360,11 +462,11 @@ class ControllerCore:
         return x
 
     def on_inputs(
-        self, state: VehicleState, qf: FilteredPitchRate, nominal: NominalTrajectory
+        self, state: StateEstimate, qf: FilteredPitchRate, nominal: NominalTrajectory
     ) -> tuple[ControlCommand, TubeStatus]:
         """ControlCommand and TubeStatus of step k from its three inputs."""
         k = self.k
-        for topic, msg in (("state", state), ("q_filtered", qf), ("nominal", nominal)):
+        for topic, msg in (("state_estimate", state), ("q_filtered", qf), ("nominal", nominal)):
             check_step("tube_mpc", topic, msg, k)
         ls = self.law.step(k, self.measured_state(state, qf), nominal, self.lanes)
         self.k += 1
@@ -410,6 +512,7 @@ class FaultCore:
 #: Core class of each loop node.
 CORES = {
     "plant": PlantCore,
+    "state_estimator": EstimatorCore,
     "notch_filter": NotchCore,
     "nominal_trajectory": NominalCore,
     "fault_injector": FaultCore,

@@ -2,8 +2,13 @@ r"""The SIL graph, written once: loop topics, their message types, and the node 
 
 One control step k (t_k = k Ts) flows through the nodes in this order:
 
-    plant --state_k--> notch_filter --q'_k--> tube_mpc --u_k--> fault_injector --u_f,k--> plant
-      \--state_k--> nominal_trajectory --(x_r, u_r, x_n, u_n)_k--/
+    plant --y_k--> state_estimator --x_k|k--> notch_filter --q'_k--> tube_mpc --u_k-->
+        fault_injector --u_f,k--> plant;  x_k|k --> nominal_trajectory --(x_r, u_r, x_n, u_n)_k
+        --> tube_mpc;  u_k-1 --> state_estimator, nominal_trajectory
+
+The plant also publishes its true state x_k (/hsv/state), which the recorder keeps for
+analysis and no controller node reads: the flight computer's nodes see the vehicle only
+through the measurement y_k and the estimate x_k|k.
 
 `NODES` is the only description of the graph: the ROS nodes take their topics
 from it, the SIL runner its executables and start order, the recorder its topics,
@@ -23,6 +28,7 @@ TOPICS = {
     "/clock": "rosgraph_msgs/msg/Clock",
     "/hsv/state": f"{PKG}/msg/VehicleState",
     "/hsv/measurement": f"{PKG}/msg/Measurement",
+    "/hsv/state_estimate": f"{PKG}/msg/StateEstimate",
     "/hsv/q_filtered": f"{PKG}/msg/FilteredPitchRate",
     "/hsv/nominal": f"{PKG}/msg/NominalTrajectory",
     "/hsv/control_command": f"{PKG}/msg/ControlCommand",
@@ -109,7 +115,7 @@ class NodeSpec:
     previous: tuple[str, ...] = ()
 
 
-_CONTROLLER_IN = ("/hsv/state", "/hsv/q_filtered", "/hsv/nominal")
+_CONTROLLER_IN = ("/hsv/state_estimate", "/hsv/q_filtered", "/hsv/nominal")
 _CONTROLLER_OUT = ("/hsv/control_command", "/hsv/tube_status")
 
 #: The node table, in start order (the plant starts last: it is the lockstep master).
@@ -118,9 +124,14 @@ NODES: dict[str, NodeSpec] = {
     for n in (
         NodeSpec("recorder", "hsv_bringup", tuple(TOPICS), (), "recorder",
                  "every loop topic, raw CDR, into one rosbag2/MCAP run"),
-        NodeSpec("notch_filter", "hsv_ctrl", ("/hsv/state",), ("/hsv/q_filtered",), "loop",
-                 "notch filter on q (eq. 37-39): q -> q'"),
-        NodeSpec("nominal_trajectory", "hsv_ctrl", ("/hsv/state",), ("/hsv/nominal",), "loop",
+        NodeSpec("state_estimator", "hsv_ctrl", ("/hsv/measurement",), ("/hsv/state_estimate",),
+                 "loop", "state estimate from the measurement: gain-scheduled Kalman filter "
+                 "on the LPV model (eq. 11-12), or the exact state of a full-state sensor",
+                 previous=("/hsv/control_command",)),
+        NodeSpec("notch_filter", "hsv_ctrl", ("/hsv/state_estimate",), ("/hsv/q_filtered",),
+                 "loop", "notch filter on the estimate's q (eq. 37-39): q -> q'"),
+        NodeSpec("nominal_trajectory", "hsv_ctrl", ("/hsv/state_estimate",), ("/hsv/nominal",),
+                 "loop",
                  "the law's nominal part: nominal MPC (QP) with disturbance estimate, reference "
                  "governor (eq. 20/46) or the command's trim",
                  previous=("/hsv/control_command",)),

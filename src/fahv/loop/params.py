@@ -28,18 +28,26 @@ from fahv.errors import ParameterError
 from fahv.loop.graph import CONTROLLER_NODES
 from fahv.plant.faults import FAULT_KIND, FAULTS, T_ONSET, fault_fields
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.sensors.data import EXACT_STATE
 from fahv.sensors.faults import sensor_fault_fields
 from fahv.spec.artefacts import variant_gain_key
 from fahv.spec.schema import (
     COMMAND,
     DURATION,
+    ESTIMATORS,
+    NO_ESTIMATOR,
     NOTCH,
     PLANT,
     PLANT_SUBSTEPS,
     TS,
+    estimator_kind,
     plant_choices,
     sensor_fault_values,
 )
+
+#: The design arrays the state estimator's Kalman gains are made from
+#: (`fahv.estimation.kalman.design_filter`).
+ESTIMATOR_ARRAYS = ("A", "B", "h_grid", "V_grid", "W_h", "W_V", "w_max", "Dx", "Du")
 
 COMMON = (
     Field("case", "str", "name of the run spec the run flies (its scenario's name; the run "
@@ -58,6 +66,23 @@ def _matrix(name: str, description: str) -> Field:
 
 def _prefixed(fields, prefix: str) -> list[Field]:
     return [dataclasses.replace(f, name=prefix + f.name) for f in fields]
+
+
+def _estimator_fields() -> tuple[Field, ...]:
+    """Parameters of the state estimator node."""
+    return (
+        *COMMON,
+        PLANT_SUBSTEPS,
+        Field("vehicle_file", "str", "vehicle data file (YAML) of the predictor's nominal "
+              "vehicle and the sensors' noise; empty: the packaged one", default=""),
+        Field("estimator", "str", "state estimator: none (the exact state, measured "
+              f"'{EXACT_STATE}') or kalman", choices=ESTIMATORS, default=NO_ESTIMATOR),
+        Field("measured", "str", "the plant's measured channels (its parameter measured)",
+              default=EXACT_STATE),
+        _matrix("x0", "initial estimate x_0|-1 (9,) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]"),
+        *(_matrix(name, f"the design's {name} (kalman: a CM design)")
+          for name in ESTIMATOR_ARRAYS),
+    )  # fmt: skip
 
 
 def specs() -> dict[str, tuple[Field, ...]]:
@@ -108,6 +133,7 @@ def specs() -> dict[str, tuple[Field, ...]]:
             T_ONSET,
             *fault_fields(),
         ),
+        "state_estimator": _estimator_fields(),
         "notch_filter": (*COMMON, *NOTCH),
         "nominal_trajectory": (
             *COMMON,
@@ -153,7 +179,7 @@ def _expect(node: str, name: str, arr: np.ndarray, shape: tuple) -> None:
 
 def _check_shapes(node: str, v: dict) -> None:
     """Cross-parameter shape checks of the matrices of one node."""
-    if node == "plant":
+    if node in ("plant", "state_estimator"):
         _expect(node, "x0", v["x0"], (9,))
     elif node == "nominal_trajectory":
         A = v["A"]
@@ -300,15 +326,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     for name, value in law.node_values(a, c).items():
         controller.update(flat_parameter(name, value))
     return {
-        "plant": {
-            **common,
-            "plant_substeps": int(c["plant_substeps"]),
-            "vehicle_file": vehicle_file,
-            **mat("x0", x0),
-            **{f"params.{k}": float(val) for k, val in design.summary["plant_params"].items()},
-            **plant_choices(c), **stuck_parameters(f["kind"], f["t_onset"]),
-            **sensor_fault_values(c),
-        },
+        **vehicle_parameters(design, common),
         "fault_injector": {**common, **fault},
         "notch_filter": {**common, "enabled": enabled, **notch},
         "nominal_trajectory": {
@@ -331,6 +349,42 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         },
         law.node: controller,
     }
+
+
+def vehicle_parameters(design, common: dict) -> dict:
+    """The parameters of the plant (its sensors) and the state estimator that reads them.
+
+    Parameters
+    ----------
+    design : fahv.spec.artefacts.Design
+    common : dict
+        The parameters every node shares (`COMMON`).
+
+    Returns
+    -------
+    dict
+        `{"plant": {...}, "state_estimator": {...}}`, matrices flattened.
+    """
+    a, c = design.arrays, design.case
+    f = c["fault"]
+    vehicle_file = design.summary.get("provenance", {}).get("vehicle_file", "")
+    def x0() -> dict:  # a list of its own per node: a parameter file holds no YAML alias
+        return flat_parameter("x0", np.asarray(a["x0"], float)[:9])
+
+    choices = plant_choices(c)
+    shared = {**common, "plant_substeps": int(c["plant_substeps"]), "vehicle_file": vehicle_file}
+    return {
+        "plant": {
+            **shared, **x0(),
+            **{f"params.{k}": float(val) for k, val in design.summary["plant_params"].items()},
+            **choices, **stuck_parameters(f["kind"], f["t_onset"]), **sensor_fault_values(c),
+        },
+        "state_estimator": {
+            **shared, **x0(), "estimator": estimator_kind(c), "measured": choices["measured"],
+            **{k: val for name in ESTIMATOR_ARRAYS
+               for k, val in flat_parameter(name, np.asarray(a[name], float)).items()},
+        },
+    }  # fmt: skip
 
 
 def stuck_parameters(kind: str, t_onset: float) -> dict:

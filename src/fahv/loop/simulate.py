@@ -5,9 +5,10 @@ One step k (t_k = k Ts), the order of the node graph (docs/reference/architectur
 (`fahv.loop.params.node_parameters`), for B runs at once:
 
     state_k   = plant.state(), y_k = plant.measurement()    (plant, + /clock)
-    q'_k      = notch.on_state(state_k)                     (notch_filter)
-    ref_k     = nominal.on_state(state_k, u_k-1)            (nominal_trajectory)
-    u_k, Z_k  = controller.on_inputs(state_k, q'_k, ref_k)  (tube_mpc / rmpc)
+    x_k|k     = estimator.on_measurement(y_k, u_k-1)        (state_estimator)
+    q'_k      = notch.on_state(x_k|k)                       (notch_filter)
+    ref_k     = nominal.on_state(x_k|k, u_k-1)              (nominal_trajectory)
+    u_k, Z_k  = controller.on_inputs(x_k|k, q'_k, ref_k)    (tube_mpc / rmpc)
     u_f,k, f_k = fault.on_command(u_k)                      (fault_injector)
     plant.advance(u_f,k): integrate [t_k, t_k+1], saturated u_f,k held (ZOH).
 
@@ -35,6 +36,7 @@ from fahv.msg import (
     FilteredPitchRate,
     Measurement,
     NominalTrajectory,
+    StateEstimate,
     TubeStatus,
     VehicleState,
 )
@@ -46,7 +48,7 @@ LMI_COUNTS = ("failed",)
 #: Counters of the nominal MPC's QP in /hsv/nominal (`qp_<name>`).
 QP_COUNTS = ("solves", "fallback", "terminal", "recovered")
 #: Loop nodes in the order of one step (the controller node is added per run).
-LOOP_NODES = ("plant", "notch_filter", "nominal_trajectory", "fault_injector")
+LOOP_NODES = ("plant", "state_estimator", "notch_filter", "nominal_trajectory", "fault_injector")
 
 
 @dataclass
@@ -90,6 +92,9 @@ class RunResult:
     y : (N, n_y) ndarray or None
         Sensor measurement of each step (/hsv/measurement, channels in
         `info["measured"]`); None if not given.
+    x_hat : (N, 9) ndarray or None
+        State estimate x_k|k the controller read (/hsv/state_estimate; the exact state
+        for the estimator `none`); None if not given.
     """
 
     t: np.ndarray
@@ -110,6 +115,7 @@ class RunResult:
     qp_counts: np.ndarray = field(default_factory=lambda: np.zeros(4, dtype=int))
     u_actuator: np.ndarray | None = None
     y: np.ndarray | None = None
+    x_hat: np.ndarray | None = None
 
 
 class History:
@@ -145,6 +151,7 @@ class History:
             "tube_level": np.empty((N, B)),
             "fault_active": np.empty((N, B), dtype=bool),
             "u_actuator": np.empty((N, B, 2)),
+            "x_hat": np.empty((N, B, 9)),
         }
         if n_y:
             self.a["y"] = np.empty((N, B, n_y))
@@ -160,8 +167,12 @@ class History:
         act: ControlCommand,
         fs: FaultStatus,
         meas: Measurement | None = None,
+        est: StateEstimate | None = None,
     ) -> None:
         """Store the messages of the next step (in step order; `meas` if n_y > 0).
+
+        Without `est` (a run recorded before the estimator existed), the estimate is
+        the state the controller then read, the exact state.
 
         Raises
         ------
@@ -184,6 +195,7 @@ class History:
         a["tube_level"][k] = tube.level
         a["fault_active"][k] = fs.active
         a["u_actuator"][k] = state.u_a()
+        a["x_hat"][k] = a["x"][k] if est is None else est.x()
         if "y" in a:
             a["y"][k] = meas.y
         self._counters = (tube, nom)  # running totals: the last step's are the run's
@@ -228,7 +240,8 @@ def run_result(records: dict, info: dict | None = None) -> RunResult:
     topics = ("/hsv/state", "/hsv/q_filtered", "/hsv/nominal", "/hsv/control_command",
               "/hsv/tube_status", "/hsv/actuator_command", "/hsv/fault_status")  # fmt: skip
     meas = records.get("/hsv/measurement")  # absent from runs recorded before it existed
-    lens = {len(records[t]) for t in topics} | ({len(meas)} if meas is not None else set())
+    est = records.get("/hsv/state_estimate")  # ditto
+    lens = {len(records[t]) for t in topics} | {len(m) for m in (meas, est) if m is not None}
     if len(lens) != 1:
         raise RunError(f"run topics hold different numbers of steps: {sorted(lens)}")
     N = lens.pop()
@@ -237,7 +250,8 @@ def run_result(records: dict, info: dict | None = None) -> RunResult:
     hist = History(N, 1, n, len(meas[0]["y"]) if meas and N else 0)
     for k in range(N):
         msgs = (cls.from_lanes([records[t][k]]) for cls, t in zip(classes, topics, strict=True))
-        hist.add(*msgs, meas=Measurement.from_lanes([meas[k]]) if meas else None)
+        hist.add(*msgs, meas=Measurement.from_lanes([meas[k]]) if meas else None,
+                 est=StateEstimate.from_lanes([est[k]]) if est else None)
     return hist.result(0, info or {})
 
 
@@ -281,7 +295,7 @@ def run_parameters(design, variant: str | None, duration, overrides: dict | None
 
 
 class Loop:
-    """The closed loop of B runs: the five node cores called in the graph's order.
+    """The closed loop of B runs: the six node cores called in the graph's order.
 
     Parameters
     ----------
@@ -300,7 +314,7 @@ class Loop:
     def __init__(self, runs, lanes: Lanes) -> None:
         ctrl = controller_node(runs[0])
         self.lanes = lanes
-        self.plant, self.notch, self.nominal, self.fault, self.controller = (
+        self.plant, self.estimator, self.notch, self.nominal, self.fault, self.controller = (
             build_core(node, [r[node] for r in runs], lanes)
             for node in (*LOOP_NODES, ctrl)
         )  # fmt: skip
@@ -316,13 +330,14 @@ class Loop:
         self.lanes.step = k
         state = self.plant.state()
         meas = self.plant.measurement()
-        qf = self.notch.on_state(state)
-        nom = self.nominal.on_state(state, self.cmd)
-        cmd, tube = self.controller.on_inputs(state, qf, nom)
+        est = self.estimator.on_measurement(meas, self.cmd)
+        qf = self.notch.on_state(est)
+        nom = self.nominal.on_state(est, self.cmd)
+        cmd, tube = self.controller.on_inputs(est, qf, nom)
         act, fs = self.fault.on_command(cmd)
         self.plant.advance(act)
         self.cmd = cmd
-        return clock_msg(k, self.Ts), state, meas, qf, nom, cmd, tube, act, fs
+        return clock_msg(k, self.Ts), state, meas, est, qf, nom, cmd, tube, act, fs
 
 
 def run_info(design, variant: str, Ts: float, plant: dict | None = None) -> dict:
@@ -425,8 +440,8 @@ def simulate_parameters(params: dict, progress=None, writer=None, info: dict | N
     try:
         for k in steps:
             msgs = loop.step(k)
-            _, state, meas, *rest = msgs
-            hist.add(state, *rest, meas=meas)
+            _, state, meas, est, *rest = msgs
+            hist.add(state, *rest, meas=meas, est=est)
             if writer is not None:
                 for topic, msg in zip(TOPICS, msgs, strict=True):
                     writer.write(topic, k, msg)

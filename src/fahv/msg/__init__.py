@@ -141,8 +141,24 @@ class LoopMessage:
         return cls(**values)
 
 
+class StateColumns:
+    """The nine CM state fields of a message (plant state or estimate) as one array."""
+
+    #: State fields in plant state order (eq. 7).
+    STATE: ClassVar[tuple[str, ...]] = (
+        "h", "v", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot"
+    )  # fmt: skip
+
+    def x(self) -> np.ndarray:
+        """States (B, 9) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]."""
+        out = np.empty(np.shape(self.h) + (9,))  # filled column by column: cheaper than np.stack
+        for i, f in enumerate(self.STATE):
+            out[..., i] = getattr(self, f)
+        return out
+
+
 @dataclass(frozen=True)
-class VehicleState(LoopMessage):
+class VehicleState(StateColumns, LoopMessage):
     """Plant state x_k (9 fields of (B,)) of the CM, eq. (1)-(3)."""
 
     HEADER: ClassVar[tuple[str, ...]] = (
@@ -169,11 +185,6 @@ class VehicleState(LoopMessage):
         "float64", "actuator position: elevator deflection [rad] (NaN before the first command)"
     )
 
-    #: State fields in plant state order (eq. 7).
-    STATE: ClassVar[tuple[str, ...]] = (
-        "h", "v", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot"
-    )  # fmt: skip
-
     @classmethod
     def of(cls, k: int, t: float, x: np.ndarray, u_a: np.ndarray | None = None) -> VehicleState:
         """Message of step k from the plant states x (B, 9) and actuator positions u_a (B, 2).
@@ -188,12 +199,39 @@ class VehicleState(LoopMessage):
         """Actuator positions (B, 2) [Phi, delta_e rad] (NaN before the first command)."""
         return np.stack([np.asarray(self.phi_a, float), np.asarray(self.delta_e_a, float)], axis=1)
 
-    def x(self) -> np.ndarray:
-        """Plant states (B, 9) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]."""
-        out = np.empty(np.shape(self.h) + (9,))  # filled column by column: cheaper than np.stack
-        for i, f in enumerate(self.STATE):
-            out[..., i] = getattr(self, f)
-        return out
+
+@dataclass(frozen=True)
+class StateEstimate(StateColumns, LoopMessage):
+    """Estimate x_k|k of the CM state (9 fields of (B,)) from the measurement of step k."""
+
+    HEADER: ClassVar[tuple[str, ...]] = (
+        "Estimate x_k|k of the coupling model's state (Yang et al. 2022, eq. 1-3) at step k,",
+        "from the measurement y_k and the commands before it (fahv.estimation). The notch,",
+        "the nominal trajectory and the controller read it; no controller node reads",
+        "/hsv/state. Estimator none: the exact state of a full-state sensor (the paper's",
+        "loop).",
+    )
+    k: int = _f("int64", _STEP_K)
+    t: float = _f("float64", _STEP_T)
+    h: np.ndarray = _f("float64", "altitude [ft]")
+    v: np.ndarray = _f("float64", "velocity V [ft/s]")
+    alpha: np.ndarray = _f("float64", "angle of attack [rad]")
+    theta: np.ndarray = _f("float64", "pitch angle [rad]")
+    q: np.ndarray = _f("float64", "pitch rate [rad/s] (rigid body: the gyro's modes removed)")
+    eta_1: np.ndarray = _f("float64", "first generalised flexible coordinate")
+    eta_1_dot: np.ndarray = _f("float64", "its rate [1/s]")
+    eta_2: np.ndarray = _f("float64", "second generalised flexible coordinate")
+    eta_2_dot: np.ndarray = _f("float64", "its rate [1/s]")
+    estimator: tuple = _f("string", "estimator of the run: none (exact state) or kalman")
+    sigma: np.ndarray = _f(
+        "float64[]", "standard deviation of each state's error, state order (empty: none)"
+    )
+
+    @classmethod
+    def of(cls, k: int, t: float, x: np.ndarray, estimator: tuple, sigma: np.ndarray):
+        """Message of step k from estimates x (B, 9), names (B,) and sigma (B, 9 or 0)."""
+        x = np.array(x, dtype=float)
+        return cls(k, t, *(x[:, i] for i in range(9)), estimator, np.array(sigma, dtype=float))
 
 
 @dataclass(frozen=True)
@@ -349,8 +387,8 @@ class FaultStatus(LoopMessage):
 #: Every loop message class, by ROS 2 type name (`hsv_interfaces/msg/...`).
 MESSAGES: dict[str, type[LoopMessage]] = {
     c.ros_type(): c
-    for c in (VehicleState, Measurement, FilteredPitchRate, NominalTrajectory, ControlCommand,
-              TubeStatus, FaultStatus)
+    for c in (VehicleState, Measurement, StateEstimate, FilteredPitchRate, NominalTrajectory,
+              ControlCommand, TubeStatus, FaultStatus)
 }  # fmt: skip
 
 

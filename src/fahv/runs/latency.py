@@ -13,8 +13,9 @@ them, `hop_latencies` gives for every loop node of the step
 i.e. the DDS transport of its last input, the executor's wake-up, the node's own
 computation and the publication, as seen on the wall clock (the plant's output of
 step k + 1 follows its input of step k). The nodes of one step run one after the
-other along the critical path (plant -> notch_filter | nominal_trajectory -> controller
--> fault_injector -> plant), so these latencies add up to the step period. The
+other along the critical path (plant -> state_estimator -> notch_filter |
+nominal_trajectory -> controller -> fault_injector -> plant), so these latencies add up
+to the step period. The
 recorder's own receive delay (receive - source) estimates one DDS hop without any
 computation.
 

@@ -32,6 +32,39 @@ def _settling_time(t, err, tol, t_from):
     return float(t[bad[-1] + 1])
 
 
+#: Time after the start before the estimate's error is measured (the filter's
+#: transient) [s].
+ESTIMATE_SETTLE_S = 10.0
+
+
+def estimate_errors(run: RunResult) -> dict:
+    """Errors of the state estimate the controller read, against the true state.
+
+    Parameters
+    ----------
+    run : RunResult
+        With `x_hat` (N, 9) [plant units].
+
+    Returns
+    -------
+    dict
+        Empty when the run read the exact state (no `x_hat`, or x_hat equal to x);
+        else `estimate_err_h_rms_ft`, `estimate_err_V_rms_fps` (rms) and
+        `estimate_err_alpha_max_deg`, `estimate_err_theta_max_deg` (largest |error|),
+        over t >= `ESTIMATE_SETTLE_S` (the whole run if shorter).
+    """
+    if run.x_hat is None or np.array_equal(run.x_hat, run.x):
+        return {}
+    keep = run.t >= ESTIMATE_SETTLE_S
+    e = (run.x_hat - run.x)[keep if keep.any() else slice(None)]
+    return {
+        "estimate_err_h_rms_ft": float(np.sqrt(np.mean(e[:, H] ** 2))),
+        "estimate_err_V_rms_fps": float(np.sqrt(np.mean(e[:, V] ** 2))),
+        "estimate_err_alpha_max_deg": float(np.degrees(np.abs(e[:, ALPHA]).max())),
+        "estimate_err_theta_max_deg": float(np.degrees(np.abs(e[:, THETA]).max())),
+    }
+
+
 def settling_times(run: RunResult) -> tuple[float, float]:
     """Settling times of the altitude and the velocity [s] (NaN: never settled).
 
@@ -231,6 +264,7 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
             max(np.abs(ea).max(), np.abs(et).max()) <= ATTITUDE_BOUND_DEG
         ),
         **own_m,
+        **estimate_errors(run),
         "eta_1_dev_peak": float(np.abs(x[:, ETA1] - run.x_r[:, ETA1]).max()),
         "eta_2_dev_peak": float(np.abs(x[:, ETA2] - run.x_r[:, ETA2]).max()),
         "t_fault_s": float(tf) if in_run else math.nan,

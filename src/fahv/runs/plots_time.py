@@ -14,7 +14,9 @@ matplotlib figure the caller saves and closes. What they draw:
 - the rates of the applied input (after the fault injector), finite differences over
   the step Ts;
 - the tube level e' N^-1 e (<= 1: the tube error e inside Z = {e' N^-1 e <= 1}) on a
-  logarithmic axis with the boundary at 1.
+  logarithmic axis with the boundary at 1;
+- the error of the state estimate the controller read, x_hat - x, of h, V, alpha, theta
+  and q (zero for the exact-state loop).
 
 `mark_onsets` draws the fault onset on every panel of any of them.
 """
@@ -23,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fahv.model.vehicle import ALPHA, THETA, H, V
+from fahv.model.vehicle import ALPHA, IQ, THETA, H, V
 from fahv.runs.metrics import ATTITUDE_BOUND_DEG, SETTLE_TOL
 from fahv.runs.plots import LINESTYLES, plt
 
@@ -36,6 +38,12 @@ ERROR_PANELS = (
      ATTITUDE_BOUND_DEG),
     ("theta - theta_r", "deg", lambda r: np.degrees(r.x[:, THETA] - r.x_r[:, THETA]),
      ATTITUDE_BOUND_DEG),
+)  # fmt: skip
+
+#: Estimate-error panels: (quantity, unit, state index, factor to the drawn unit).
+ESTIMATE_PANELS = (
+    ("h", "ft", H, 1.0), ("V", "ft/s", V, 1.0), ("alpha", "deg", ALPHA, float(np.degrees(1.0))),
+    ("theta", "deg", THETA, float(np.degrees(1.0))), ("q", "deg/s", IQ, float(np.degrees(1.0))),
 )  # fmt: skip
 
 #: Input panels: (label, column of u, factor from the stored unit to the drawn one).
@@ -279,4 +287,39 @@ def tube_figure(runs: list):
                 fontsize=7, va="bottom")  # fmt: skip
     ax.legend(loc="lower right", fontsize=7)
     _finish(fig, np.array([[ax]]), "Tube level e' N^-1 e (the tube error e is inside Z at <= 1)")
+    return fig
+
+
+def estimate_figure(runs: list):
+    """Errors of the state estimate the controller read against the true state.
+
+    Parameters
+    ----------
+    runs : list of PlottedRun
+        Runs in drawing order (at least one); a run without an estimate (recorded before
+        the estimator existed) read the exact state: its error is drawn as zero.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        5 panels: x_hat - x of h [ft], V [ft/s], alpha, theta [deg] and q [deg/s].
+
+    Raises
+    ------
+    ValueError
+        If there is no run.
+    """
+    if not runs:
+        raise ValueError("no run to plot")
+    fig, axes = plt.subplots(len(ESTIMATE_PANELS), 1, figsize=(9, 9), sharex=True)
+    for ax, (name, unit, j, scale) in zip(axes, ESTIMATE_PANELS, strict=True):
+        for i, r in enumerate(runs):
+            x_hat = r.run.x if r.run.x_hat is None else r.run.x_hat
+            ax.plot(r.run.t, scale * (x_hat[:, j] - r.run.x[:, j]), label=r.label,
+                    **line_style(i))  # fmt: skip
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_ylabel(f"{name}_hat - {name} [{unit}]")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="best", fontsize=7)
+    _finish(fig, axes[:, None], "State estimate error (what the controller read, less the truth)")
     return fig

@@ -49,6 +49,10 @@ METRIC_ROWS = (
         "max |theta - own trim theta_r,p| [deg]",
         "{:.3f}",
     ),
+    ("estimate_err_h_rms_ft", "state estimate: RMS error of h [ft]", "{:.2f}"),
+    ("estimate_err_V_rms_fps", "state estimate: RMS error of V [ft/s]", "{:.3f}"),
+    ("estimate_err_alpha_max_deg", "state estimate: max |alpha error| [deg]", "{:.4f}"),
+    ("estimate_err_theta_max_deg", "state estimate: max |theta error| [deg]", "{:.4f}"),
     ("eta_1_dev_peak", "peak |eta_1 - eta_1,r|", "{:.4f}"),
     ("eta_2_dev_peak", "peak |eta_2 - eta_2,r|", "{:.4f}"),
     ("t_fault_s", "fault onset [s]", "{:.2f}"),
@@ -101,6 +105,7 @@ ARRAY_COMPONENTS = {
     "u_r": INPUT_COMPONENTS,
     "u_n": INPUT_COMPONENTS,
     "x_q": (("x_q1", "-"), ("x_q2", "-")),
+    "sigma": STATE_COMPONENTS[:9],
 }
 
 _FIELD = re.compile(r"^\s*([\w/]+(?:\[\])?)\s+(\w+)\s*(?:#\s*(.*))?$")

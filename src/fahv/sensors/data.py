@@ -39,6 +39,13 @@ CHANNEL_UNITS: dict[str, str] = {
 CHANNEL_IDS: dict[str, int] = {"h": 1, "V": 2, "theta": 3, "q": 4, "alpha": 5}
 #: Channels measured unless told otherwise (air-data alpha is optional).
 DEFAULT_MEASURED: tuple[str, ...] = ("h", "V", "theta", "q")
+#: The value of `measured` that reads the whole state exactly: the paper's full-state
+#: loop (a sensor of every state, flexible ones included, without error).
+EXACT_STATE = "state"
+#: The channels of `EXACT_STATE`, the nine CM states in plant order (eq. 7).
+STATE_CHANNELS: tuple[str, ...] = (
+    "h", "V", "alpha", "theta", "q", "eta_1", "eta_1_dot", "eta_2", "eta_2_dot"
+)  # fmt: skip
 
 
 @dataclass(frozen=True)

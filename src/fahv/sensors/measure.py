@@ -17,7 +17,14 @@ from statistics import NormalDist
 import numpy as np
 
 from fahv.model.vehicle import ALPHA, ETA1_DOT, ETA2_DOT, IQ, THETA, H, V
-from fahv.sensors.data import CHANNEL_IDS, CHANNEL_UNITS, DEFAULT_MEASURED, ChannelNoise, SensorData
+from fahv.sensors.data import (
+    CHANNEL_IDS,
+    CHANNEL_UNITS,
+    DEFAULT_MEASURED,
+    STATE_CHANNELS,
+    ChannelNoise,
+    SensorData,
+)
 from fahv.sensors.faults import SensorFaultKind
 from fahv.sensors.philox import (
     STREAM_DYNAMIC_BIAS,
@@ -304,6 +311,29 @@ class Sensors:
                 y[:, j] = n.precision * np.round(y[:, j] / n.precision)
         self.y = y
         return y.copy()
+
+
+class ExactState:
+    """The full-state sensor of the paper's loop: y_k = x_k, every state, no error.
+
+    The measurement of `measured` = `state` (`fahv.sensors.data.EXACT_STATE`): with
+    the estimator `none` the controller then reads the exact state, flexible states
+    included, as eq. (36) assumes.
+
+    Parameters
+    ----------
+    n_runs : int
+        Runs B.
+    """
+
+    names: tuple[str, ...] = STATE_CHANNELS
+
+    def __init__(self, n_runs: int) -> None:
+        self.n_runs = int(n_runs)
+
+    def measure(self, k: int, x: np.ndarray) -> np.ndarray:
+        """y_k (B, 9): a copy of the first nine columns of x (B, >= 9) [plant units]."""
+        return np.array(x[:, :9], dtype=float)
 
 
 def measure_history(data: SensorData, seeds, Ts: float, x: np.ndarray, measured=DEFAULT_MEASURED,

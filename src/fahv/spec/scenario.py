@@ -35,7 +35,16 @@ from fahv.plant.uncertainty import perturbed_params
 from fahv.spec.artefacts import Design, load_arrays, save_arrays
 from fahv.spec.context import DesignContext
 from fahv.spec.files import SpecFile, load_design_file, read_yaml_file, spec_file
-from fahv.spec.schema import SCENARIO_KEYS, actuator_model, design_spec, scenario_spec
+from fahv.spec.schema import (
+    NO_ESTIMATOR,
+    OPTIONAL_SECTIONS,
+    SCENARIO_KEYS,
+    actuator_model,
+    design_spec,
+    estimator_kind,
+    scenario_spec,
+    sensor_fault_used,
+)
 
 #: Top-level entries of a design file that the run spec does not carry (the scenario's own
 #: command and vehicle draw replace them).
@@ -129,8 +138,11 @@ def form_run_spec(design: SpecFile, scenario: dict, path: str | Path) -> SpecFil
     data = {k: v for k, v in design.data.items() if k not in DESIGN_ONLY_KEYS}
     data.update({k: scenario[k] for k in ("name", "description", "command", "fault",
                                           "uncertainty", "duration")})  # fmt: skip
-    if "plant" in scenario:  # optional: absent, the run spec is what it was without it
-        data["plant"] = scenario["plant"]
+    for key in OPTIONAL_SECTIONS:  # absent, the run spec is what it was without them
+        if key in scenario:
+            data[key] = scenario[key]
+    if "sensor_fault" in data:  # the keys of its kind (the others' filled defaults out)
+        data["sensor_fault"] = sensor_fault_used(data["sensor_fault"])
     data["variants"] = variants
     return spec_file(data, str(path))
 
@@ -281,6 +293,11 @@ def uncertified(design: Design, spec: dict, vehicle) -> list[str]:
         out.append(
             f"the actuator model {actuator_model(spec)!r} (plant.actuators) is not in the "
             "design model: the tube and the nominal ellipsoid are certified for ideal actuators"
+        )
+    if estimator_kind(spec) != NO_ESTIMATOR:
+        out.append(
+            f"the estimator {estimator_kind(spec)!r} (estimator.kind): the tube is certified "
+            "for a controller that reads the exact state; the estimation error is not in it"
         )
     return out
 

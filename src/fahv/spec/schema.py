@@ -28,7 +28,7 @@ from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
 from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
-from fahv.sensors.data import CHANNELS, DEFAULT_MEASURED
+from fahv.sensors.data import CHANNELS, DEFAULT_MEASURED, EXACT_STATE
 from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_fields
 
 TS = Field("Ts", "float", "control period Ts", unit="s", lo=0.0, hi=0.1, lo_open=True)
@@ -171,8 +171,10 @@ PLANT = (
           "the paper's plant) or second_order (servos of the vehicle file's actuators "
           "section, rate and position limited)", choices=ACTUATOR_MODELS, default=IDEAL),
     Field("measured", "str", "sensor channels of /hsv/measurement, comma-separated, from "
-          f"{', '.join(CHANNELS)} (q: the gyro, which sees the flexible modes); empty: none",
-          default=",".join(DEFAULT_MEASURED)),
+          f"{', '.join(CHANNELS)} (q: the gyro, which sees the flexible modes), or "
+          f"{EXACT_STATE!r}: every state exactly (the paper's full-state loop); default: "
+          f"{EXACT_STATE!r} with estimator none, {','.join(DEFAULT_MEASURED)!r} with kalman",
+          default=EXACT_STATE),
     Field("sensor_seed", "int", "seed of the run's sensor noise (with the channel and the "
           "step, it keys every draw)", lo=0, default=0),
 )  # fmt: skip
@@ -182,15 +184,55 @@ def plant_choices(spec) -> dict:
     """The simulated plant's choices of a run spec or scenario (its `plant` section).
 
     `actuators`, `measured` and `sensor_seed`, each at its default where the section (or
-    the key) is absent: ideal actuators; h, V, theta and the gyro's q; seed 0.
+    the key) is absent: ideal actuators; seed 0; the exact state for the estimator
+    `none`, h, V, theta and the gyro's q for the Kalman filter.
 
     Examples
     --------
     >>> plant_choices({})
-    {'actuators': 'ideal', 'measured': 'h,V,theta,q', 'sensor_seed': 0}
+    {'actuators': 'ideal', 'measured': 'state', 'sensor_seed': 0}
+    >>> plant_choices({"estimator": {"kind": "kalman"}})["measured"]
+    'h,V,theta,q'
     """
     plant = spec.get("plant") or {}
-    return {f.name: plant.get(f.name, f.default) for f in PLANT}
+    out = {f.name: plant.get(f.name, f.default) for f in PLANT}
+    if "measured" not in plant and estimator_kind(spec) != NO_ESTIMATOR:
+        out["measured"] = ",".join(DEFAULT_MEASURED)
+    return out
+
+
+#: The flight computer's estimators: `none` passes the exact state of a full-state
+#: sensor through; `kalman` is the gain-scheduled Kalman filter (`fahv.estimation`).
+NO_ESTIMATOR = "none"
+ESTIMATORS = (NO_ESTIMATOR, "kalman")
+#: The estimator's keys (scenario section `estimator`).
+ESTIMATOR = (
+    Field("kind", "str", "state estimator of the flight computer: none (the exact state of "
+          "a full-state sensor, the paper's loop) or kalman (a gain-scheduled Kalman filter "
+          "on the measured channels)", choices=ESTIMATORS, default=NO_ESTIMATOR),
+)  # fmt: skip
+
+
+def estimator_section() -> Section:
+    """The `estimator` section of a scenario and a run spec: optional, left out when absent.
+
+    Absent, the estimator is `none` (and the run spec, and its hash, of a scenario
+    without it is what it was before the section existed).
+    """
+    return Section("estimator", ESTIMATOR, "the flight computer's state estimator",
+                   when=lambda r: False, when_text="a scenario estimates the state "
+                   "(optional: absent, none: the controller reads the exact state)")  # fmt: skip
+
+
+def estimator_kind(spec) -> str:
+    """The estimator of a run spec or scenario (`estimator.kind`; `none` if absent).
+
+    Examples
+    --------
+    >>> estimator_kind({}), estimator_kind({"estimator": {"kind": "kalman"}})
+    ('none', 'kalman')
+    """
+    return (spec.get("estimator") or {}).get("kind", NO_ESTIMATOR)
 
 
 def plant_section() -> Section:
@@ -218,6 +260,19 @@ def sensor_fault_section() -> Section:
                    when_text="a scenario fails a sensor (optional: absent, none)")  # fmt: skip
 
 
+def sensor_fault_used(section: dict) -> dict:
+    """The keys of a `sensor_fault` section that its kind uses (the others' defaults out).
+
+    Examples
+    --------
+    >>> sensor_fault_used({"kind": "none", "channel": "h", "t_onset": 1.0})
+    {'kind': 'none'}
+    """
+    kind = section["kind"]
+    used = ("kind", "channel", "t_onset", *(f.name for f in SENSOR_FAULTS[kind].parameters))
+    return {k: section[k] for k in used if k in section and (kind != "none" or k == "kind")}
+
+
 def sensor_fault_values(spec) -> dict:
     """The plant's `sensor_fault.*` node parameters of a run spec or scenario.
 
@@ -232,10 +287,7 @@ def sensor_fault_values(spec) -> dict:
     {'sensor_fault.kind': 'stuck', 'sensor_fault.channel': 'q', 'sensor_fault.t_onset': 5.0}
     """
     section = spec.get("sensor_fault") or {"kind": "none"}
-    kind = section["kind"]
-    used = ("kind", "channel", "t_onset", *(f.name for f in SENSOR_FAULTS[kind].parameters))
-    return {f"sensor_fault.{k}": section[k] for k in used if k in section and
-            (kind != "none" or k == "kind")}  # fmt: skip
+    return {f"sensor_fault.{k}": v for k, v in sensor_fault_used(section).items()}
 
 
 def actuator_model(spec) -> str:
@@ -278,8 +330,11 @@ DESIGN_STEP = (
 
 #: Top-level keys a scenario sets; everything else of a run spec comes from its design.
 SCENARIO_KEYS = (
-    "name", "description", "command", "fault", "uncertainty", "plant", "duration", "variants",
+    "name", "description", "command", "fault", "uncertainty", "plant", "sensor_fault",
+    "estimator", "duration", "variants",
 )
+#: Optional scenario sections a run spec holds only when the scenario sets them.
+OPTIONAL_SECTIONS = ("plant", "sensor_fault", "estimator")
 
 
 def _law_sections() -> tuple:
@@ -402,6 +457,7 @@ def run_spec() -> Section:
             Section("uncertainty", UNCERTAINTY, "plant parameters p (1 + s_p scale rel_p)"),
             plant_section(),
             sensor_fault_section(),
+            estimator_section(),
             _variants("variants to run (law + notch setting)"),
         ),
         "run spec",
@@ -461,6 +517,7 @@ def scenario_spec() -> Section:
             ),
             plant_section(),
             sensor_fault_section(),
+            estimator_section(),
             _variants("variants to run (a subset of the design's; empty: the design's)"),
         ),
         "scenario file",

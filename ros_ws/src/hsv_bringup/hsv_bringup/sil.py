@@ -1,17 +1,17 @@
 """`sil` runner: start the node graph of one run, supervise it, stop every node.
 
-There is no `launch` among the ROS 2 wheels this project installs, so this runner starts the
-installed executables itself, each with the run's parameter file, in the order of the
-node table (`fahv.loop.graph.NODES`: recorder, notch_filter, nominal_trajectory,
-controller, fault_injector, plant; the plant waits until every other node has announced
-itself, so the order only saves time). It watches the processes: the run succeeds when
-every node exits 0 after the last step; the first node that exits non-zero or is killed
-(a node whose status is not 3 first: the cause rather than the peers that stopped
-because of it) fails the run, the others get SIGINT (the recorder closes its file),
-then SIGKILL after a grace period, and the runner exits 1 naming that node and showing
-the end of its log. A run that ends with a verdict (fahv.verdict: the node that finds it
-and then every peer exit with status 6, the recorder finishes the file with it) is no
-failure: the runner waits for every node and exits 3.
+There is no `launch` among the ROS 2 wheels this project installs, so this runner starts
+the installed executables itself, each with the run's parameter file, in the order of the
+node table (`fahv.loop.graph.NODES`: recorder, state_estimator, notch_filter,
+nominal_trajectory, controller, fault_injector, plant; the plant waits until every other
+node has announced itself, so the order only saves time). It watches the processes: the
+run succeeds when every node exits 0 after the last step; the first node that exits non-
+zero or is killed (a node whose status is not 3 first: the cause rather than the peers
+that stopped because of it) fails the run, the others get SIGINT (the recorder closes its
+file), then SIGKILL after a grace period, and the runner exits 1 naming that node and
+showing the end of its log. A run that ends with a verdict (fahv.verdict: the node that
+finds it and then every peer exit with status 6, the recorder finishes the file with it)
+is no failure: the runner waits for every node and exits 3.
 
 Isolation: every graph runs in a DDS domain of its own. Unless `--domain-id` is
 given, the runner takes a free `ROS_DOMAIN_ID` from ROS 2's `domain_coordinator`

@@ -29,7 +29,7 @@ class NominalTrajectoryNode(LockstepNode):
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""
-        nominal = self.core.output(inputs["/hsv/state"], inputs["/hsv/control_command"])
+        nominal = self.core.output(inputs["/hsv/state_estimate"], inputs["/hsv/control_command"])
         return [("/hsv/nominal", nominal)]
 
     def after_publish(self, k: int) -> None:

@@ -22,7 +22,7 @@ class NotchFilterNode(LockstepNode):
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""
-        return [("/hsv/q_filtered", self.core.on_state(inputs["/hsv/state"]))]
+        return [("/hsv/q_filtered", self.core.on_state(inputs["/hsv/state_estimate"]))]
 
 
 def run(args=None) -> None:

@@ -29,7 +29,7 @@ class TubeMPCNode(LockstepNode):
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""
         cmd, tube = self.core.on_inputs(
-            inputs["/hsv/state"], inputs["/hsv/q_filtered"], inputs["/hsv/nominal"]
+            inputs["/hsv/state_estimate"], inputs["/hsv/q_filtered"], inputs["/hsv/nominal"]
         )
         return [("/hsv/tube_status", tube), ("/hsv/control_command", cmd)]
 

@@ -1,7 +1,8 @@
 """`plant` node: nonlinear CM of the vehicle, lockstep master, publisher of /clock.
 
-Publishes /clock, /hsv/state (with the actuator positions) and /hsv/measurement (its
-sensors) for step k, integrates
+Publishes /clock, /hsv/state (with the actuator positions; for the record, no controller
+node reads it) and /hsv/measurement (its sensors; the state estimator reads it) for step
+k, integrates
 [t_k, t_k+1] when /hsv/actuator_command of step k arrives (`fahv.loop.PlantCore`:
 ideal actuators or the vehicle file's servos, parameter `actuators`), and starts step
 0 only when every node of the graph has announced itself on /hsv/ready.
@@ -43,28 +44,21 @@ class PlantNode(LockstepNode):
         warm_up.advance(ControlCommand.of(0, 0.0, warm_up.limits.u_min[None, :]))
 
     def _publish_state(self) -> list:
+        """/clock, the true state (for the record) and the measurement the estimator reads."""
         k = self.core.k
-        return [("/clock", clock_msg(k, self.Ts)), ("/hsv/state", self.core.state())]
-
-    def _publish_measurement(self) -> None:
-        """The sensors' y of the state just published: no node of the loop waits for it."""
-        self.publish([("/hsv/measurement", self.core.measurement())])
+        state = self.core.state()
+        return [("/clock", clock_msg(k, self.Ts)), ("/hsv/state", state),
+                ("/hsv/measurement", self.core.measurement())]  # fmt: skip
 
     def on_ready(self) -> None:
         """Every peer is ready: publish the state and the measurement of step 0."""
         self.get_logger().info(f"graph ready ({len(self.graph_nodes) - 1} peers): step 0")
         self.publish(self._publish_state())
-        self._publish_measurement()
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""
         self.core.advance(inputs["/hsv/actuator_command"])
         return self._publish_state() if self.core.k < self.n_steps else []
-
-    def after_publish(self, k: int) -> None:
-        """The measurement of the state published at step k, off the critical path."""
-        if self.core.k < self.n_steps:
-            self._publish_measurement()
 
 
 def run(args=None) -> None:
