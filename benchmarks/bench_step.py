@@ -5,12 +5,13 @@ graph adds the DDS hops on top (its per-step time is printed by the plant node a
 `fahv sil` as the real-time factor).
 
 Usage: .venv/bin/python benchmarks/bench_step.py [--scenario SCENARIO] [--design DIR]
-       [--steps 2000] [--smoke]
+       [--steps 2000] [--kalman] [--smoke]
 
 The scenario (default offline_design/scenarios/case1_paper.yaml, Case 1 on the paper's
 design) runs on its stored design, or on the artefact folder `--design DIR` (as
-`fahv simulate --design`). `--smoke` runs 20 steps in seconds: CI's check that the
-benchmark still runs (its figures mean nothing).
+`fahv simulate --design`). `--kalman` runs the state estimator's Kalman filter on the
+sensors h, V, theta, q (default: the scenario's estimator). `--smoke` runs 20 steps in
+seconds: CI's check that the benchmark still runs (its figures mean nothing).
 """
 
 import argparse
@@ -21,7 +22,10 @@ from fahv.certificate.verified import load_or_design
 from fahv.loop.cores import build_core
 from fahv.loop.params import node_parameters
 
-NAMES = ("plant", "notch_filter", "nominal_trajectory", "tube_mpc", "fault_injector")
+NAMES = ("plant", "state_estimator", "notch_filter", "nominal_trajectory", "tube_mpc",
+         "fault_injector")  # fmt: skip
+#: --kalman: the sensors the filter reads.
+KALMAN_CHANNELS = "h,V,theta,q"
 #: --smoke: the steps timed.
 SMOKE_STEPS = 20
 
@@ -34,6 +38,8 @@ def main() -> None:
                     help="artefact folder of the stored design (default: beside its "
                     "design file)")  # fmt: skip
     ap.add_argument("--steps", type=int, default=2000, help="steps timed after step 0")
+    ap.add_argument("--kalman", action="store_true",
+                    help=f"the Kalman filter on the sensors {KALMAN_CHANNELS}")  # fmt: skip
     ap.add_argument("--smoke", action="store_true",
                     help=f"{SMOKE_STEPS} steps (CI: the benchmark still runs)")  # fmt: skip
     args = ap.parse_args()
@@ -44,30 +50,37 @@ def main() -> None:
         args.scenario, args.design, log=io.StringIO().write, variants=["tube_mpc"]
     )
     p = node_parameters(design, "tube_mpc")
-    plant, notch, nom, ctrl, fault = (build_core(name, p[name]) for name in NAMES)
+    if args.kalman:
+        p["plant"]["measured"] = p["state_estimator"]["measured"] = KALMAN_CHANNELS
+        p["state_estimator"]["estimator"] = "kalman"
+    plant, est, notch, nom, ctrl, fault = (build_core(name, p[name]) for name in NAMES)
     t = dict.fromkeys(NAMES, 0.0)
     clock = time.perf_counter
     # step 0 apart: it loads the plant's compiled RK4 (numba cache) once per process
     t_first = clock()
-    s = plant.state()
+    s = est.on_measurement((plant.state(), plant.measurement())[1])
     u, _z = ctrl.on_inputs(s, notch.on_state(s), nom.on_state(s))
     plant.advance(fault.on_command(u)[0])
     t_first = clock() - t_first
     for _ in range(n):
         a = clock()
-        s = plant.state()
+        plant.state()
+        y = plant.measurement()
         b = clock()
-        q = notch.on_state(s)
+        s = est.on_measurement(y, u)
         c = clock()
-        r = nom.on_state(s, u)
+        q = notch.on_state(s)
         d = clock()
-        u, _z = ctrl.on_inputs(s, q, r)
+        r = nom.on_state(s, u)
         e = clock()
-        act, _f = fault.on_command(u)
+        u, _z = ctrl.on_inputs(s, q, r)
         f = clock()
-        plant.advance(act)
+        act, _f = fault.on_command(u)
         g = clock()
-        for key, dt in zip(t, (b - a + g - f, c - b, d - c, e - d, f - e), strict=True):
+        plant.advance(act)
+        h = clock()
+        steps = (b - a + h - g, c - b, d - c, e - d, f - e, g - f)
+        for key, dt in zip(t, steps, strict=True):
             t[key] += dt
     total = sum(t.values())
     Ts = p["plant"]["Ts"]
