@@ -46,8 +46,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The smoke run's vertex data: three uncertain parameters, eight interior vehicles.
-SMOKE = {"params": 3, "interior": 8}
+#: The smoke run's vertex data: two uncertain parameters, four interior vehicles.
+SMOKE = {"params": 2, "interior": 4}
 #: The arrays a design certifies (compared between the runs).
 CERTIFIED = ("A", "B", "w_max", "F", "N", "K", "Q", "u_lo", "u_hi", "trim_x", "trim_u")
 
