@@ -76,4 +76,17 @@ def test_overrides_carry_the_values_to_the_nodes(campaign, design):
     np.testing.assert_array_equal(ov["plant"]["x0"], x0[:9])
     assert ov["plant"]["x0"][0] == pytest.approx(v["initial.h0"], abs=1e-6)
     assert ov["nominal_trajectory"]["command.h_c"] == v["command.h_c"]
+    assert ov["state_estimator"]["x0"] == ov["plant"]["x0"]  # the filter starts there too
     assert scatter_columns(campaign.data)[-2:] == ["initial.h0", "initial.V0"]
+
+
+def test_a_campaign_on_the_sensors_gives_every_run_its_own_noise(campaign, design):
+    """On a case whose estimator reads noisy sensors, each run draws its own sensor seed
+    (the plant's `sensor_seed`), a function of (seed, index); on the exact state none."""
+    assert "sensor_seed" not in draw(campaign.data, campaign.run_spec.data, 0)
+    case = dict(campaign.run_spec.data, estimator={"kind": "kalman"})
+    seeds = [draw(campaign.data, case, i)["sensor_seed"] for i in range(campaign["runs"])]
+    assert len(set(seeds)) == campaign["runs"]
+    assert seeds[3] == draw(campaign.data, case, 3)["sensor_seed"]
+    ov = overrides({"sensor_seed": seeds[3]}, design, "tube_mpc")
+    assert ov == {"plant": {"sensor_seed": seeds[3]}}

@@ -35,6 +35,8 @@ from fahv.loop.params import node_parameters, stuck_parameters
 from fahv.model.trim import TrimMap
 from fahv.model.vehicle import load_vehicle
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturb
+from fahv.sensors.data import EXACT_STATE
+from fahv.spec.schema import plant_choices
 
 #: Random stream of each group of dispersed values.
 STREAMS = {"uncertainty": 0, "fault": 1, "command": 2, "initial": 3}
@@ -103,7 +105,9 @@ def draw(data: dict, case: dict, index: int) -> dict:
         parameters; `fault.kind`, `fault.t_onset` [s], `fault.loss`,
         `fault.rho_f`, `fault.bias_deg` [deg]; `command.dh` [ft], `command.dV`
         [ft/s], `command.h_c`, `command.V_c`; `initial.h0` [ft], `initial.V0`
-        [ft/s].
+        [ft/s]; `sensor_seed` (the run's seed of the sensors' noise, `run_seed`)
+        when the case's plant measures through noisy sensors (an estimator reads
+        them), so that every run draws its own noise.
 
     Raises
     ------
@@ -151,6 +155,8 @@ def draw(data: dict, case: dict, index: int) -> dict:
         V_c = V0 + dV if d["command"]["dV"] else cmd["V_c"]
         out.update({"command.dh": h_c - h0, "command.dV": V_c - V0, "command.h_c": h_c,
                     "command.V_c": V_c})  # fmt: skip
+    if plant_choices(case)["measured"] != EXACT_STATE:
+        out["sensor_seed"] = run_seed(seed, index)
     return out
 
 
@@ -180,14 +186,18 @@ def overrides(values: dict, design, variant: str) -> dict:
         `fault_injector`: kind, onset and size; `nominal_trajectory`: the command
         and its initial state. Groups that are not dispersed are left out, so the
         run keeps the scenario's values (its seeded parameter draw, fault, command,
-        start).
+        start); `plant.sensor_seed` when drawn, and the initial trim also as the
+        `state_estimator`'s initial estimate.
     """
     ov: dict = {}
+    if "sensor_seed" in values:
+        ov["plant"] = {"sensor_seed": int(values["sensor_seed"])}
     s = {k.split(".", 1)[1]: v for k, v in values.items() if k.startswith("s.")}
     if s:
         veh = _vehicle(design.summary.get("provenance", {}).get("vehicle_file", ""))
         vp = perturb(veh.params, PAPER_UNCERTAINTY, s)
-        ov["plant"] = {f"params.{k}": float(getattr(vp, k)) for k in PAPER_UNCERTAINTY}
+        ov.setdefault("plant", {}).update(
+            {f"params.{k}": float(getattr(vp, k)) for k in PAPER_UNCERTAINTY})
     if "fault.kind" in values:
         ov["fault_injector"] = {
             "kind": values["fault.kind"],
@@ -220,6 +230,7 @@ def overrides(values: dict, design, variant: str) -> dict:
         if n == 11:
             x0_meas = np.concatenate([x0_meas, np.zeros(2)])
         ov.setdefault("plant", {}).update({"x0": x0.tolist(), "x0_shape": [9]})
+        ov["state_estimator"] = {"x0": x0.tolist(), "x0_shape": [9]}
         ov["nominal_trajectory"].update({"x0": x0_meas.tolist(), "x0_shape": [n]})
     return ov
 

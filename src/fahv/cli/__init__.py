@@ -32,29 +32,49 @@ command prints `interrupted at step k of n; run written to DIR` and exits with 1
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 
-from fahv.cli import campaign, design, index, inspect, margins, modelling, run
 from fahv.cli.common import stop_signals
 from fahv.errors import FahvError, RunInterrupted
 
 #: Exit status after SIGINT / SIGTERM (128 + SIGINT, as a shell reports it).
 EXIT_INTERRUPTED = 130
+#: The module of `fahv.cli` that defines each subcommand, in the order of `--help`. A
+#: command imports only its own module: `fahv inspect` does not load the design
+#: pipeline, Dask or the campaign statistics (a test checks the table is complete).
+COMMANDS = {
+    "trim": "modelling", "tp": "modelling", "figures": "modelling", "tube": "modelling",
+    "design": "design", "verify": "design", "margins": "margins",
+    "simulate": "run", "sil": "run", "replay": "run", "paper-figures": "run",
+    "results": "run", "inspect": "inspect", "export": "inspect", "compare": "inspect",
+    "plot": "inspect", "campaign": "campaign", "index": "index",
+}  # fmt: skip
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Argument parser of the `fahv` command."""
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """Argument parser of the `fahv` command.
+
+    Parameters
+    ----------
+    command : str, optional
+        A subcommand (a key of `COMMANDS`): only its module is imported and its
+        parsers added. None or an unknown word: every subcommand (for `--help` and the
+        error that lists them).
+    """
     ap = argparse.ArgumentParser(prog="fahv", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="command", required=True)
-
-    for group in (modelling, design, margins, run, inspect, campaign, index):
-        group.add_parsers(sub)
+    modules = [COMMANDS[command]] if command in COMMANDS else dict.fromkeys(COMMANDS.values())
+    for name in modules:
+        importlib.import_module(f"fahv.cli.{name}").add_parsers(sub)
     return ap
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `fahv`; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    command = next((a for a in argv if not a.startswith("-")), None)
+    args = build_parser(command).parse_args(argv)
     with stop_signals():
         try:
             return args.func(args)

@@ -16,7 +16,6 @@ from fahv.loop.simulate import simulate
 from fahv.loop.wire import encode
 from fahv.runs.bag import read_run, run_result_of, stored_metadata
 from fahv.runs.metrics import metrics
-from fahv.runs.plots import paper_figures
 from fahv.runs.replay import run_replay
 from fahv.runs.sil import (
     recorder_metadata,
@@ -376,6 +375,8 @@ def cmd_replay(args) -> int:
 
 def cmd_paper_figures(args) -> int:
     """Simulate every variant of Cases 1 and 2 (recorded) and write Fig. 9-17."""
+    from fahv.runs.plots import paper_figures  # matplotlib: this command's only
+
     runs = {}
     for path in args.runs or []:  # recorded runs (simulated or SIL) instead of new ones
         rec = read_run_warned(path)

@@ -26,7 +26,6 @@ import numpy as np
 
 from fahv.control import LAWS, NOMINAL_SOURCES
 from fahv.errors import ConfigError, ParameterError, RunError
-from fahv.estimation.kalman import design_filter
 from fahv.lanes import Lanes
 from fahv.loop.graph import CONTROLLER_NODES, n_steps_of
 from fahv.loop.params import ESTIMATOR_ARRAYS, validate
@@ -48,7 +47,6 @@ from fahv.plant.faults import FAULTS, FaultInjector, make_fault
 from fahv.plant.integrator import Plant
 from fahv.sensors.data import CHANNELS, EXACT_STATE, STATE_CHANNELS, load_sensors
 from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_from_section
-from fahv.sensors.measure import ExactState, Sensors
 from fahv.spec.schema import NO_ESTIMATOR
 from fahv.verdict import RunEnded
 
@@ -93,6 +91,8 @@ def sensors_of(p: dict, runs: Sequence[dict], vehicles: dict):
         On an unknown or repeated channel in `measured`, or a sensor fault on a channel
         that is not measured (names the parameter).
     """
+    from fahv.sensors.measure import ExactState, Sensors  # numba: the plant's only
+
     if p["measured"].strip() == EXACT_STATE:
         if any(r["sensor_fault.kind"] != "none" for r in runs):
             raise ParameterError(f"plant: parameter 'sensor_fault.kind': the exact state "
@@ -305,6 +305,8 @@ class EstimatorCore:
         if exact or not measured:
             raise ParameterError(f"state_estimator: parameter 'estimator' = {self.kind!r} needs "
                                  f"sensor channels, not measured = {p['measured']!r}")  # fmt: skip
+        from fahv.estimation.kalman import design_filter  # scipy and numba: the filter's only
+
         arrays = {name: p[name] for name in ESTIMATOR_ARRAYS}
         self.x0 = x0 = np.stack([np.asarray(r["x0"], float) for r in runs])
         try:

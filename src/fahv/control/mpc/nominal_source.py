@@ -41,7 +41,6 @@ from fahv.lanes import Lanes
 from fahv.model.notch import DiscreteNotch, NotchFilter
 from fahv.model.vehicle import load_vehicle
 from fahv.msg import NominalTrajectory
-from fahv.plant.rk4 import params_records, rk4_cm
 from fahv.verdict import RunEnded
 
 #: Node parameter `mpc.att_max`: the bounds the design chose (alpha, theta).
@@ -266,8 +265,11 @@ class TrackingMPCNominal(NominalSource):
                 f"nominal_trajectory: mpc.nominal_model 'cm' needs the 9-state CM design, "
                 f"got {self.n} states"
             )
+        from fahv.plant.rk4 import params_records, rk4_cm  # numba: only for this model
+
         veh = load_vehicle(p["vehicle_file"] or None)
         self.nominal_vehicle = params_records([veh.params] * B)
+        self._rk4_cm = rk4_cm
         self.limits_lo, self.limits_hi = veh.limits.u_min, veh.limits.u_max
         self.n_sub = int(p["plant_substeps"])
 
@@ -419,8 +421,8 @@ class TrackingMPCNominal(NominalSource):
     def _nominal_step(self, X: np.ndarray, U) -> np.ndarray:
         """One period of the nominal vehicle's CM (eq. 1-3) from X (B, 9) under U (B, 2)."""
         U = np.clip(np.asarray(U, float), self.limits_lo, self.limits_hi)
-        return rk4_cm(np.ascontiguousarray(X, float), np.ascontiguousarray(U), self.nominal_vehicle,
-                      self.Ts, self.n_sub)  # fmt: skip
+        return self._rk4_cm(np.ascontiguousarray(X, float), np.ascontiguousarray(U),
+                            self.nominal_vehicle, self.Ts, self.n_sub)  # fmt: skip
 
     def _estimate(self, x: np.ndarray, u_prev) -> None:
         """Update the estimates from the measured states x (B, 9) and the inputs u_prev."""

@@ -24,7 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 
 @dataclass(frozen=True)
@@ -180,6 +179,8 @@ def tracking_cost(C, S, Phi, Dx, settings, layout: QPLayout):
     Fz : (ny, n) ndarray
         Linear term per z0 (f = 2 Fz z0 + the offset cost's part).
     """
+    import scipy.linalg  # here: a node that never builds a QP does not load scipy.linalg
+
     s, n, N_p, ny = settings, S.shape[1], layout.N_p, layout.ny
     wq = s.q_w / Dx**2 * s.M  # diagonal of the stage weight
     Phi_s = Phi * Dx[None, :] / Dx[:, None]  # scaled coordinates

@@ -1,0 +1,27 @@
+"""`fahv` imports only the module of the command it runs: the command table is complete,
+and `fahv simulate` starts without matplotlib, Dask or the design pipeline."""
+
+import subprocess
+import sys
+
+from fahv.cli import COMMANDS, build_parser
+
+
+def _commands(parser) -> set[str]:
+    sub = next(a for a in parser._actions if a.dest == "command")
+    return set(sub.choices)
+
+
+def test_the_command_table_names_every_subcommand_once():
+    assert _commands(build_parser()) == set(COMMANDS)
+    for command, module in COMMANDS.items():  # a command's own parser holds it
+        assert command in _commands(build_parser(command)), (command, module)
+    assert _commands(build_parser("no-such-command")) == set(COMMANDS)
+
+
+def test_simulate_leaves_the_heavy_modules_of_other_commands_unloaded():
+    code = ("import sys; from fahv.cli import build_parser; build_parser('simulate'); "
+            "print(sorted(m for m in ('matplotlib', 'dask', 'fahv.design.pipeline', "
+            "'fahv.campaign.engine', 'scipy.stats') if m in sys.modules))")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout
