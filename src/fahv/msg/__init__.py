@@ -141,8 +141,24 @@ class LoopMessage:
         return cls(**values)
 
 
-class StateColumns:
-    """The nine CM state fields of a message (plant state or estimate) as one array."""
+@dataclass(frozen=True)
+class StateColumns(LoopMessage):
+    """The step and the nine CM state fields (B,) a plant state and an estimate share.
+
+    Not a message of its own: `VehicleState` and `StateEstimate` add their fields.
+    """
+
+    k: int = _f("int64", _STEP_K)
+    t: float = _f("float64", _STEP_T)
+    h: np.ndarray = _f("float64", "altitude [ft]")
+    v: np.ndarray = _f("float64", "velocity V [ft/s]")
+    alpha: np.ndarray = _f("float64", "angle of attack [rad]")
+    theta: np.ndarray = _f("float64", "pitch angle [rad]")
+    q: np.ndarray = _f("float64", "pitch rate [rad/s]")
+    eta_1: np.ndarray = _f("float64", "first generalised flexible coordinate")
+    eta_1_dot: np.ndarray = _f("float64", "its rate [1/s]")
+    eta_2: np.ndarray = _f("float64", "second generalised flexible coordinate")
+    eta_2_dot: np.ndarray = _f("float64", "its rate [1/s]")
 
     #: State fields in plant state order (eq. 7).
     STATE: ClassVar[tuple[str, ...]] = (
@@ -158,7 +174,7 @@ class StateColumns:
 
 
 @dataclass(frozen=True)
-class VehicleState(StateColumns, LoopMessage):
+class VehicleState(StateColumns):
     """Plant state x_k (9 fields of (B,)) of the CM, eq. (1)-(3)."""
 
     HEADER: ClassVar[tuple[str, ...]] = (
@@ -167,17 +183,6 @@ class VehicleState(StateColumns, LoopMessage):
         "with the actuator positions at t_k (ideal actuators: the command held over",
         "[t_k-1, t_k]).",
     )
-    k: int = _f("int64", _STEP_K)
-    t: float = _f("float64", _STEP_T)
-    h: np.ndarray = _f("float64", "altitude [ft]")
-    v: np.ndarray = _f("float64", "velocity V [ft/s]")
-    alpha: np.ndarray = _f("float64", "angle of attack [rad]")
-    theta: np.ndarray = _f("float64", "pitch angle [rad]")
-    q: np.ndarray = _f("float64", "pitch rate [rad/s] (unfiltered)")
-    eta_1: np.ndarray = _f("float64", "first generalised flexible coordinate")
-    eta_1_dot: np.ndarray = _f("float64", "its rate [1/s]")
-    eta_2: np.ndarray = _f("float64", "second generalised flexible coordinate")
-    eta_2_dot: np.ndarray = _f("float64", "its rate [1/s]")
     phi_a: np.ndarray = _f(
         "float64", "actuator position: Phi at the engine [-] (NaN before the first command)"
     )
@@ -201,7 +206,7 @@ class VehicleState(StateColumns, LoopMessage):
 
 
 @dataclass(frozen=True)
-class StateEstimate(StateColumns, LoopMessage):
+class StateEstimate(StateColumns):
     """Estimate x_k|k of the CM state (9 fields of (B,)) from the measurement of step k."""
 
     HEADER: ClassVar[tuple[str, ...]] = (
@@ -211,17 +216,6 @@ class StateEstimate(StateColumns, LoopMessage):
         "/hsv/state. Estimator none: the exact state of a full-state sensor (the paper's",
         "loop).",
     )
-    k: int = _f("int64", _STEP_K)
-    t: float = _f("float64", _STEP_T)
-    h: np.ndarray = _f("float64", "altitude [ft]")
-    v: np.ndarray = _f("float64", "velocity V [ft/s]")
-    alpha: np.ndarray = _f("float64", "angle of attack [rad]")
-    theta: np.ndarray = _f("float64", "pitch angle [rad]")
-    q: np.ndarray = _f("float64", "pitch rate [rad/s] (rigid body: the gyro's modes removed)")
-    eta_1: np.ndarray = _f("float64", "first generalised flexible coordinate")
-    eta_1_dot: np.ndarray = _f("float64", "its rate [1/s]")
-    eta_2: np.ndarray = _f("float64", "second generalised flexible coordinate")
-    eta_2_dot: np.ndarray = _f("float64", "its rate [1/s]")
     estimator: tuple = _f("string", "estimator of the run: none (exact state) or kalman")
     sigma: np.ndarray = _f(
         "float64[]", "standard deviation of each state's error, state order (empty: none)"

@@ -96,6 +96,19 @@ def mark_onsets(fig, runs: list) -> list[float]:
     return onsets
 
 
+def _panels(runs: list, rows: int, cols: int, figsize: tuple):
+    """(figure, axes) of rows x cols panels over a shared time axis, for `runs`.
+
+    Raises
+    ------
+    ValueError
+        If there is no run.
+    """
+    if not runs:
+        raise ValueError("no run to plot")
+    return plt.subplots(rows, cols, figsize=figsize, sharex=True)
+
+
 def _finish(fig, axes, title: str) -> None:
     """Label t [s] under the bottom row, set the title, lay the figure out tightly."""
     for ax in np.atleast_2d(axes)[-1]:
@@ -123,9 +136,7 @@ def error_figure(runs: list):
     ValueError
         If there is no run.
     """
-    if not runs:
-        raise ValueError("no run to plot")
-    fig, axes = plt.subplots(len(ERROR_PANELS), 2, figsize=(11, 9), sharex=True)
+    fig, axes = _panels(runs, len(ERROR_PANELS), 2, (11, 9))
     for row, (label, unit, fn, bound) in zip(axes, ERROR_PANELS, strict=True):
         for col, ax in enumerate(row):
             _band(ax, bound, f"requirement +/- {bound:g} {unit}" if col == 1 else None)
@@ -183,9 +194,7 @@ def input_figure(runs: list):
     ValueError
         If there is no run.
     """
-    if not runs:
-        raise ValueError("no run to plot")
-    fig, axes = plt.subplots(len(INPUT_PANELS), 2, figsize=(11, 6), sharex=True)
+    fig, axes = _panels(runs, len(INPUT_PANELS), 2, (11, 6))
     for row, (label, j, scale) in zip(axes, INPUT_PANELS, strict=True):
         for ax in row:
             for i, r in enumerate(runs):
@@ -228,9 +237,7 @@ def input_rate_figure(runs: list):
     ValueError
         If there is no run.
     """
-    if not runs:
-        raise ValueError("no run to plot")
-    fig, axes = plt.subplots(len(INPUT_PANELS), 1, figsize=(8, 5.4), sharex=True)
+    fig, axes = _panels(runs, len(INPUT_PANELS), 1, (8, 5.4))
     units = ("dPhi/dt [1/s]", "d delta_e/dt [deg/s]")
     for ax, (_, j, scale), unit in zip(axes, INPUT_PANELS, units, strict=True):
         for i, r in enumerate(runs):
@@ -309,9 +316,7 @@ def estimate_figure(runs: list):
     ValueError
         If there is no run.
     """
-    if not runs:
-        raise ValueError("no run to plot")
-    fig, axes = plt.subplots(len(ESTIMATE_PANELS), 1, figsize=(9, 9), sharex=True)
+    fig, axes = _panels(runs, len(ESTIMATE_PANELS), 1, (9, 9))
     for ax, (name, unit, j, scale) in zip(axes, ESTIMATE_PANELS, strict=True):
         for i, r in enumerate(runs):
             x_hat = r.run.x if r.run.x_hat is None else r.run.x_hat
