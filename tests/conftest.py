@@ -148,10 +148,12 @@ def interrupt_fahv():
 
     `interrupt_fahv(args, out, signals, wait_s, timeout_s)`: starts `.venv/bin/fahv
     *args` in a new process group (as a terminal's foreground job), waits until
-    `out/*/run.json` exists, sleeps `wait_s`, sends `signals` to the group 0.2 s
-    apart, and asserts exit 130, no traceback, the "interrupted at step K of 15000; run
-    written to RUN" message, and a run whose status is interrupted, not truncated, with
-    K steps recorded. Returns (K, the Recording, the output).
+    `out/*/run.json` exists (for `fahv sil`, also until the plant's log says the graph
+    is ready and stepping: its start-up takes longer on a loaded machine), sleeps
+    `wait_s`, sends `signals` to the group 0.2 s apart, and asserts exit 130, no
+    traceback, the "interrupted at step K of 15000; run written to RUN" message, and a
+    run whose status is interrupted, not truncated, with K steps recorded. Returns (K,
+    the Recording, the output).
     """
     import os
     import re
@@ -159,7 +161,7 @@ def interrupt_fahv():
     import time
 
     from fahv.runs.bag import read_run
-    from fahv.runs.workspace import ROOT
+    from fahv.runs.workspace import ROOT, WS
 
     def run(args, out, signals, wait_s, timeout_s):
         p = subprocess.Popen(
@@ -170,6 +172,13 @@ def interrupt_fahv():
         t0 = time.monotonic()
         while not list(out.glob("*/run.json")) and time.monotonic() - t0 < timeout_s:
             time.sleep(0.1)
+        if args[0] == "sil" and list(out.glob("*/run.json")):
+            plant_log = WS / "log" / "sil" / next(out.glob("*/run.json")).parent.name / "logs"
+            plant_log = plant_log / "plant.log"
+            while time.monotonic() - t0 < timeout_s and not (
+                plant_log.is_file() and "graph ready" in plant_log.read_text(errors="replace")
+            ):
+                time.sleep(0.1)
         time.sleep(wait_s)
         for i, sig in enumerate(signals):
             if i:
