@@ -93,3 +93,27 @@ def test_the_output_matrix_is_the_sensors_true_outputs():
     x = np.random.default_rng(3).normal(size=(200, 9)) * [1e4, 1e3, 0.1, 0.1, 0.1, 1, 1, 1, 1]
     np.testing.assert_allclose(x @ output_matrix(channels, data).T,
                                true_outputs(x, data, channels), rtol=1e-12, atol=1e-15)  # fmt: skip
+
+
+def test_a_measurement_that_is_not_finite_ends_its_run_alone(certified):
+    """Two runs of a batch on the Kalman filter; run 1's measurement of step 0 is NaN:
+    run 1 ends with the verdict non_finite_estimate and its estimate is put back at its
+    start, run 0 goes on with a finite estimate of its own measurement."""
+    from fahv.lanes import Lanes
+    from fahv.loop.cores import build_core
+    from fahv.loop.simulate import run_parameters
+    from fahv.msg import Measurement
+    from fahv.verdict import RunEnded
+
+    p = run_parameters(certified, "tube_mpc", 1.0, kalman_loop())["state_estimator"]
+    lanes = Lanes(2, strict=False)
+    core = build_core("state_estimator", [p, p], lanes)
+    x0 = np.asarray(p["x0"], float)
+    y = np.stack([output_matrix(DEFAULT_MEASURED, load_sensors()) @ x0] * 2)
+    y[1, 0] = np.nan
+    est = core.on_measurement(Measurement(0, 0.0, (",".join(DEFAULT_MEASURED),) * 2, y))
+    assert list(lanes.alive) == [True, False]
+    assert isinstance(lanes.errors[1], RunEnded)
+    assert lanes.errors[1].verdict.name == "non_finite_estimate"
+    np.testing.assert_array_equal(est.x()[1], x0)  # back at its start, finite
+    assert np.all(np.isfinite(est.x()[0])) and np.all(np.isfinite(core.filter.z))

@@ -181,9 +181,23 @@ class GainScheduledKalman:
                              f"{(11, self.C.shape[0])}")  # fmt: skip
         self.P = None if P is None else np.asarray(P, float)
         x0 = np.atleast_2d(np.asarray(x0, float))
-        self.z = np.concatenate([x0, np.zeros((len(x0), 2))], axis=1)
+        self.z = np.empty((len(x0), 11))
+        self.restart(np.ones(len(x0), dtype=bool), x0)
         self.rec = params_records([params] * len(x0))
         self.limits, self.Ts, self.n_sub = limits, float(Ts), int(n_sub)
+
+    def restart(self, runs: np.ndarray, x0: np.ndarray) -> None:
+        """Put the filters of `runs` back at their start: x = x0, d = 0.
+
+        Parameters
+        ----------
+        runs : (B,) bool ndarray
+            The runs to restart.
+        x0 : (B, 9) ndarray
+            Initial estimates of every run (those of `runs` are taken).
+        """
+        self.z[runs, :9] = np.asarray(x0, float)[runs]
+        self.z[runs, 9:] = 0.0
 
     @property
     def x(self) -> np.ndarray:

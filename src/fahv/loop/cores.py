@@ -45,7 +45,13 @@ from fahv.msg import (
 )
 from fahv.plant.faults import FAULTS, FaultInjector, make_fault
 from fahv.plant.integrator import Plant
-from fahv.sensors.data import CHANNELS, EXACT_STATE, STATE_CHANNELS, load_sensors
+from fahv.sensors.data import (
+    CHANNELS,
+    EXACT_STATE,
+    STATE_CHANNELS,
+    load_sensors,
+    measured_channels,
+)
 from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_from_section
 from fahv.spec.schema import NO_ESTIMATOR
 from fahv.verdict import RunEnded
@@ -98,7 +104,7 @@ def sensors_of(p: dict, runs: Sequence[dict], vehicles: dict):
             raise ParameterError(f"plant: parameter 'sensor_fault.kind': the exact state "
                                  f"(measured = {EXACT_STATE!r}) has no sensor to fail")  # fmt: skip
         return ExactState(len(runs))
-    measured = [c.strip() for c in p["measured"].split(",") if c.strip()]
+    measured = measured_channels(p["measured"])
     faults = [sensor_fault_of(r, measured) for r in runs]  # a fault names a measured channel
     if not measured:
         return None
@@ -292,8 +298,10 @@ class EstimatorCore:
         self.n_runs = len(runs)
         self._names = (self.kind,) * self.n_runs
         exact = p["measured"].strip() == EXACT_STATE
-        channels = STATE_CHANNELS if exact else [c.strip() for c in p["measured"].split(",")]
-        self._channels = ",".join(c for c in channels if c)  # what the plant must send
+        measured = measured_channels(p["measured"])
+        self._channels = ",".join(STATE_CHANNELS if exact else measured)  # what the plant sends
+        self._no_sigma = np.zeros((self.n_runs, 0))  # read-only: shared by messages
+        self._no_sigma.setflags(write=False)
         self.filter = None
         if self.kind == NO_ESTIMATOR:
             if not exact:
@@ -301,7 +309,6 @@ class EstimatorCore:
                                      f"the exact state, but the plant measures "
                                      f"{p['measured']!r} (measured = '{EXACT_STATE}')")  # fmt: skip
             return
-        measured = [c.strip() for c in p["measured"].split(",") if c.strip()]
         if exact or not measured:
             raise ParameterError(f"state_estimator: parameter 'estimator' = {self.kind!r} needs "
                                  f"sensor channels, not measured = {p['measured']!r}")  # fmt: skip
@@ -339,7 +346,7 @@ class EstimatorCore:
             check_step("state_estimator", "control_command", previous, self.k - 1)
         y = np.asarray(meas.y, float)
         if self.filter is None:
-            x, sigma = y, np.zeros((self.n_runs, 0))
+            x, sigma = y, self._no_sigma
         else:
             if previous is not None:
                 self.filter.predict(previous.u())
@@ -354,10 +361,11 @@ class EstimatorCore:
             self.lanes.fail_mask(bad, lambda b: RunEnded(
                 "non_finite_estimate", "state_estimator", self.k, t,
                 f"state estimate not finite (measurement {y[b]!r})"))  # fmt: skip
-            x = np.where(bad[:, None], 0.0, x)  # the ended runs' lanes kept finite
-            if self.filter is not None:
-                x[bad] = self.x0[bad]
-                self.filter.z[bad] = np.concatenate([self.x0[bad], np.zeros((bad.sum(), 2))], 1)
+            if self.filter is None:
+                x = np.where(bad[:, None], 0.0, x)  # the ended runs' lanes kept finite
+            else:  # the ended runs' filters back at their start (the batch stays finite)
+                self.filter.restart(bad, self.x0)
+                x = np.where(bad[:, None], self.x0, x)
         self.k += 1
         return StateEstimate.of(meas.k, meas.t, x, self._names, sigma)
 

@@ -48,6 +48,19 @@ STATE_CHANNELS: tuple[str, ...] = (
 )  # fmt: skip
 
 
+def measured_channels(measured: str) -> list[str]:
+    """The channel names of a `measured` parameter (comma-separated, blanks dropped).
+
+    Unchecked: `fahv.loop.cores.sensors_of` names unknown or repeated channels.
+
+    Examples
+    --------
+    >>> measured_channels(" h, V,theta,q ,"), measured_channels("")
+    (['h', 'V', 'theta', 'q'], [])
+    """
+    return [c.strip() for c in measured.split(",") if c.strip()]
+
+
 @dataclass(frozen=True)
 class ChannelNoise:
     """Noise model of one channel (Gazebo's noise model, JSBSim's sensor component).
