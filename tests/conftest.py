@@ -62,7 +62,9 @@ def make_case(raw):
 
 @pytest.fixture(scope="session")
 def design(raw, tmp_path_factory, worker_id):
-    """Case 1 designed with a small W sample (shared by the design, SIL and log tests).
+    """Case 1 designed with a small W sample (shared by the design, SIL and log tests),
+    without the RMPC baseline (its ellipsoids are half a minute of LMIs; the tests that
+    run the baseline take the shipped design, `paper_scenario_design`).
 
     Under pytest-xdist the first worker designs it and saves the artefacts next to the
     workers' temporary folders; the others wait on the lock and load them (the content
@@ -76,16 +78,26 @@ def design(raw, tmp_path_factory, worker_id):
     # the shipped design of the file is where its LMIs start (the RMPC's ellipsoids in
     # one solve each): the arrays are the same, the certificates re-checked all the same
     previous = load_design(ROOT / "offline_design" / "designs" / "cm_paper").arrays
+    spec = quick(raw, variants=[v for v in raw["variants"] if v != "rmpc"])
     if worker_id == "master":  # not distributed
-        return run_design(quick(raw), log=lambda *_: None, previous=previous)
+        return run_design(spec, log=lambda *_: None, previous=previous)
     shared = tmp_path_factory.getbasetemp().parent
     with FileLock(str(shared / "quick_design.lock")):
         folder = shared / "quick_design"
         if (folder / "design.json").exists():
             return load_design(folder)
-        d = run_design(quick(raw), log=lambda *_: None, previous=previous)
+        d = run_design(spec, log=lambda *_: None, previous=previous)
         save_design(d, folder)
         return d
+
+
+@pytest.fixture(scope="session")
+def paper_scenario_design():
+    """The shipped cm_paper design with scenario case1_paper's arrays, as `fahv simulate`
+    runs it (every variant of the scenario, the RMPC baseline's included)."""
+    from fahv.certificate.verified import load_or_design
+
+    return load_or_design(ROOT / SCENARIO, log=lambda *_: None)[1]
 
 
 @pytest.fixture(scope="session")
@@ -149,7 +161,8 @@ def interrupt_fahv():
     `interrupt_fahv(args, out, signals, wait_s, timeout_s)`: starts `.venv/bin/fahv
     *args` in a new process group (as a terminal's foreground job), waits until
     `out/*/run.json` exists (for `fahv sil`, also until the plant's log says the graph
-    is ready and stepping: its start-up takes longer on a loaded machine), sleeps
+    is ready and the recording holds its first chunk: its start-up takes longer on a
+    loaded machine), sleeps
     `wait_s`, sends `signals` to the group 0.2 s apart, and asserts exit 130, no
     traceback, the "interrupted at step K of 15000; run written to RUN" message, and a
     run whose status is interrupted, not truncated, with K steps recorded. Returns (K,
@@ -177,6 +190,12 @@ def interrupt_fahv():
             plant_log = plant_log / "plant.log"
             while time.monotonic() - t0 < timeout_s and not (
                 plant_log.is_file() and "graph ready" in plant_log.read_text(errors="replace")
+            ):
+                time.sleep(0.1)
+            # stepping: the recorder has written its first 1 MiB chunk (some 500 steps)
+            folder = next(out.glob("*/run.json")).parent
+            while time.monotonic() - t0 < timeout_s and not any(
+                f.stat().st_size > 1 << 20 for f in folder.glob("*.mcap")
             ):
                 time.sleep(0.1)
         time.sleep(wait_s)

@@ -23,6 +23,12 @@ def _seq(a) -> EllipsoidSequence:
 
 
 @pytest.fixture(scope="module")
+def design(paper_scenario_design):
+    """The shipped design of Case 1 with the RMPC baseline (cm_paper)."""
+    return paper_scenario_design
+
+
+@pytest.fixture(scope="module")
 def seq(design):
     return _seq(design.arrays)
 

@@ -200,6 +200,7 @@ def test_design_runs_the_law_on_the_eight_state_tube_set(raw8, vehicle, monkeypa
     # the tube laws (the RMPC baseline's off-line design, a minute, does not use the tube
     # set; the shipped eight-state design's RMPC is re-checked by tests/design/test_verify.py)
     r["variants"] = [v for v in r["variants"] if v != "rmpc"]
+    r["tube"]["lam"] = r["tube"]["lam"][1:2]  # one of the vertex tube's three LMIs
     lines = []
     design = pmod.run_design(spec_file(r, "quick8.yaml"), log=lines.append)
     # the estimate's gains: Ts / est_tau, and 1 along the 20 LPV vertices' elevator columns
@@ -291,6 +292,7 @@ def test_the_adjustable_law_runs_tau_F_8_and_tightens_by_tau_F_8_Z_8(raw8, vehic
     r["disturbance"]["samples"] = 40
     r["certificate"] = {"schedules": 0}
     r["tube"]["tau"] = 0.8
+    r["tube"]["lam"] = r["tube"]["lam"][1:2]  # one of the vertex tube's three LMIs
     r["variants"] = ["tube_mpc"]  # the law that runs tau (the RMPC baseline's minute: not here)
     design = pmod.run_design(spec_file(r, "quick8_tau.yaml"), log=lambda *_: None)
     assert taus == [0.8]
@@ -317,6 +319,7 @@ def test_a_nominal_box_without_room_for_the_faulty_trim_is_refused(raw8, monkeyp
     r["disturbance"]["samples"] = 40
     r["certificate"] = {"schedules": 0}
     r["eight_state"]["delta_e"] = [-0.9, 7.0]
+    r["tube"]["lam"] = r["tube"]["lam"][1:2]  # one of the vertex tube's three LMIs
     with pytest.raises(DesignError, match="eight_state.Phi / delta_e") as err:
         pmod.run_design(spec_file(r, "narrow.yaml"), log=lambda *_: None)
     print(err.value)

@@ -95,7 +95,8 @@ def test_failing_runs_are_reported_and_the_others_complete(design):
     _assert_same(res[0], res[3])
 
 
-def test_rmpc_runs_batched_and_equal(design):
+def test_rmpc_runs_batched_and_equal(paper_scenario_design):
+    design = paper_scenario_design
     ovs = [{"fault_injector": {"kind": "bias", "t_onset": 0.0, "bias_deg": 1.0}}, None]
     ovs.append({"plant": {"params.m": 1.05 * design.summary["plant_params"]["m"]}})
     res = simulate_batch(design, "rmpc", ovs, 20.0)

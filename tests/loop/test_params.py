@@ -58,14 +58,19 @@ def test_variants(design):
     assert build_core("notch_filter", no_notch["notch_filter"]).on_state(state).q_f[0] == 0.25
     notch2 = node_parameters(design, "tube_mpc_notch2")["notch_filter"]
     assert notch2["omega_z"] == pytest.approx(design.arrays["omega_flex"][1], rel=1e-12)
+    with pytest.raises(ParameterError, match="variant 'pid'"):
+        node_parameters(design, "pid")
+
+
+def test_rmpc_variant_parameters(paper_scenario_design):
+    design = paper_scenario_design
     rmpc = node_parameters(design, "rmpc")
     assert "rmpc" in rmpc and "tube_mpc" not in rmpc
     assert rmpc["nominal_trajectory"]["nominal"] == "command"
     N = design.case["rmpc"]["ellipsoids"]  # the off-line RMPC: ellipsoids and gains
+    assert N == 9
     assert np.asarray(rmpc["rmpc"]["rmpc_P"]).size == N * 81
     assert np.asarray(rmpc["rmpc"]["rmpc_K"]).size == N * 18
-    with pytest.raises(ParameterError, match="variant 'pid'"):
-        node_parameters(design, "pid")
 
 
 def test_a_variant_runs_the_gain_designed_for_its_notch_loop(design):

@@ -146,7 +146,7 @@ def test_ctrl_c_on_fahv_sil_finalises_the_run_and_exits_130(quick_case, tmp_path
     out = tmp_path / "bags"
     steps, rec, _ = interrupt_fahv(
         ["sil", case_file, "--design", art, "--duration", "300", "--out", out], out,
-        [signal.SIGINT, signal.SIGINT], 2.0, 90,  # 2 s after the graph is ready: stepping
+        [signal.SIGINT, signal.SIGINT], 0.5, 90,  # the graph is stepping
     )  # fmt: skip
     assert 10 < steps < 15000
     assert rec.topics["/hsv/state"]["count"] >= steps

@@ -30,8 +30,10 @@ def heavy(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def heavy_design(make_case, heavy):
-    return run_design(make_case(), load_vehicle(heavy), log=lambda *_: None)
+def heavy_design(make_case, heavy, raw):
+    """Case 1 designed for the heavy vehicle (one of the tube LMI's contraction factors)."""
+    tube = {**raw["tube"], "lam": raw["tube"]["lam"][1:2]}
+    return run_design(make_case(tube=tube), load_vehicle(heavy), log=lambda *_: None)
 
 
 def test_vehicle_changes_design_hash_and_provenance(design, heavy_design, heavy, tmp_path):
