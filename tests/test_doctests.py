@@ -1,9 +1,11 @@
-"""The ``Examples`` of the model, synthesis and sensors layers' docstrings run, and hold.
+"""The ``Examples`` of the model, synthesis, sensors and estimation layers' docstrings run,
+and hold.
 
-Every module of ``fahv.model``, ``fahv.synthesis`` and ``fahv.sensors`` is imported
-(``pkgutil``) and its docstrings' examples are run by the standard library's
-``doctest``. The examples are small, with numbers checked against a closed form or
-the design point's trim, and print nothing that depends on NumPy's print options.
+Every module of ``fahv.model``, ``fahv.synthesis``, ``fahv.sensors`` and
+``fahv.estimation`` is imported (``pkgutil``) and its docstrings' examples are run by
+the standard library's ``doctest``. The examples are small, with numbers checked
+against a closed form or the design point's trim, and print nothing that depends on
+NumPy's print options.
 """
 
 import doctest
@@ -11,11 +13,12 @@ import importlib
 import io
 import pkgutil
 
+import fahv.estimation
 import fahv.model
 import fahv.sensors
 import fahv.synthesis
 
-PACKAGES = (fahv.model, fahv.synthesis, fahv.sensors)
+PACKAGES = (fahv.model, fahv.synthesis, fahv.sensors, fahv.estimation)
 #: Examples (``>>>`` statements) the two layers hold: a module that stops being found,
 #: or examples that stop being collected, fail the test rather than pass it unnoticed.
 MIN_EXAMPLES = 215

@@ -45,7 +45,7 @@ EXIT_INTERRUPTED = 130
 #: pipeline, Dask or the campaign statistics (a test checks the table is complete).
 COMMANDS = {
     "trim": "modelling", "tp": "modelling", "figures": "modelling", "tube": "modelling",
-    "design": "design", "verify": "design", "margins": "margins",
+    "design": "design", "verify": "design", "margins": "margins", "estimation": "estimation",
     "simulate": "run", "sil": "run", "replay": "run", "paper-figures": "run",
     "results": "run", "inspect": "inspect", "export": "inspect", "compare": "inspect",
     "plot": "inspect", "campaign": "campaign", "index": "index",

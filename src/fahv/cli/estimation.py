@@ -1,0 +1,132 @@
+"""`fahv estimation`: what can be certified about a scenario's state estimate, and what cannot."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from fahv.certificate.verified import load_or_design
+from fahv.control.base import ATTITUDE_BOUND_DEG
+from fahv.errors import SpecError
+from fahv.estimation.kalman import W_SIGMAS, design_filter
+from fahv.sensors.data import CHANNEL_UNITS, load_sensors, measured_channels
+from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, plant_choices
+
+#: Error states as printed: name, unit, factor from the state's unit.
+STATES = (("h", "ft", 1.0), ("V", "ft/s", 1.0), ("alpha", "deg", np.degrees(1.0)),
+          ("theta", "deg", np.degrees(1.0)), ("q", "deg/s", np.degrees(1.0)),
+          ("eta_1", "", 1.0), ("eta_1_dot", "1/s", 1.0), ("eta_2", "", 1.0),
+          ("eta_2_dot", "1/s", 1.0), ("d_Phi", "", 1.0),
+          ("d_delta_e", "deg", np.degrees(1.0)))  # fmt: skip
+
+
+def state_values(v, states=range(11)) -> str:
+    """`h 0.39 ft, V 0.20 ft/s, ...` of an (11,) error vector in its states' units.
+
+    Examples
+    --------
+    >>> state_values(np.r_[1.0, 2.0, np.radians(0.5), np.zeros(8)], range(3))
+    'h 1 ft, V 2 ft/s, alpha 0.5 deg'
+    """
+    return ", ".join(f"{STATES[i][0]} {v[i] * STATES[i][2]:.4g} {STATES[i][1]}".rstrip()
+                     for i in states)  # fmt: skip
+
+
+def channel_values(measured, v) -> str:
+    """`h 16.75 ft, theta 0.298 deg` of values per measured channel (angles in deg).
+
+    Examples
+    --------
+    >>> channel_values(["h", "q"], [16.75, np.radians(1.0)])
+    'h 16.75 ft, q 1 deg/s'
+    """
+    out = []
+    for c, x in zip(measured, v, strict=True):
+        unit = CHANNEL_UNITS[c]
+        if unit.startswith("rad"):
+            x, unit = np.degrees(x), unit.replace("rad", "deg")
+        out.append(f"{c} {x:.4g} {unit}")
+    return ", ".join(out)
+
+
+def study_lines(study, measured, design_name: str) -> list[str]:
+    """The lines `fahv estimation` prints of an `fahv.estimation.study.EstimateStudy`."""
+    cov, R = study.covariance, study.system.n_vertices
+    att = np.degrees(study.noise_worst[2:4]).max()
+    verdict = (f"above the attitude requirement ({ATTITUDE_BOUND_DEG} deg) from the estimate "
+               "alone: no worst-case (set) certificate of the attitude exists with these "
+               "sensors and this filter" if att > ATTITUDE_BOUND_DEG else
+               f"within the attitude requirement ({ATTITUDE_BOUND_DEG} deg)")  # fmt: skip
+    share = "certified" if study.tube_certified else "NOT certified"
+    return [
+        f"estimator: gain-scheduled Kalman filter on {', '.join(measured)} of design "
+        f"{design_name} ({R} LPV vertices: {R * R} pairs of model and gain vertex), "
+        f"run of {study.steps} steps, probability p = {study.p}",
+        f"noise as a random sequence (white, the sensors' stddev): common covariance bound "
+        f"over the {R * R} pairs, re-checked exactly (smallest eigenvalue {cov.min_eig:.3g} "
+        f">= 0; the LMI held {cov.pairs_held} pairs)",
+        f"  1 sigma: {state_values(cov.std)}",
+        f"  whole run with p >= {study.p} ({study.r_state:.2f} sigma, union bound over the "
+        f"steps and the 11 states): {state_values(study.run_bound)}",
+        f"noise as a bounded sequence (|v| <= {channel_values(measured, study.v_max)}: "
+        f"the bound a whole run stays within with p >= {study.p}): worst case at a frozen "
+        f"vertex (exact, reached): {state_values(study.noise_worst, range(5))}: {verdict}",
+        f"model error as a bounded sequence (the design's W and {W_SIGMAS:g} sigma of the "
+        f"input disturbance's step): worst case at a frozen vertex (exact): "
+        f"{state_values(study.model_worst, range(5))}",
+        f"tube on the estimate (u = v + F (x_hat - x_bar)): the noise-driven error (p >= "
+        f"{study.p}, radius {study.r_joint:.2f}) moves the tube error by up to "
+        f"{study.tube_share:.3g} of Z per step, against the room {study.tube_room:.3g} of its "
+        f"certified level: {share}" + ("" if study.tube_certified else
+                                        f" ({study.tube_share / study.tube_room:.0f}x the room)"),
+    ]  # fmt: skip
+
+
+def cmd_estimation(args) -> int:
+    """Print the bounds of a scenario's Kalman filter and the tube's room for them."""
+    from fahv.estimation.study import estimate_study  # cvxpy and scipy.stats: here only
+
+    t0 = time.monotonic()
+    spec, design, vehicle = load_or_design(args.scenario, args.design_dir, args.vehicle,
+                                           allow_uncertified=True)  # fmt: skip
+    c = spec.data
+    if estimator_kind(c) == NO_ESTIMATOR:
+        raise SpecError(f"{args.scenario}: estimator.kind is {NO_ESTIMATOR!r} (the controller "
+                        "reads the exact state): there is no estimate to bound")  # fmt: skip
+    measured = measured_channels(plant_choices(c)["measured"])
+    data = load_sensors(args.vehicle)
+    a = design.arrays
+    flt = design_filter(a, vehicle, data, measured, c["Ts"], c["plant_substeps"], a["x0"][None])
+    cert = design.summary["certificate"]
+    level = cert["level"] if "level" in cert else cert["rpi_level"]
+    study = estimate_study(flt, a, data, measured, c["Ts"], round(c["duration"] / c["Ts"]),
+                           level, args.probability)  # fmt: skip
+    name = design.summary.get("design_name", c.get("design", ""))
+    for line in study_lines(study, measured, name):
+        print(line)
+    print(f"estimation: {time.monotonic() - t0:.1f} s")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    """Add the parser of this command."""
+    p = sub.add_parser(
+        "estimation",
+        help="bounds of a scenario's state estimate and the tube's room for them",
+        description="What can be certified about the estimation error of a scenario's Kalman "
+        "filter (estimator.kind kalman): a covariance bound of the noise-driven error over "
+        "every pair of model and gain vertex (LMI, re-checked exactly) with the radius a "
+        "whole run stays within with probability p; the exact worst cases at the frozen "
+        "vertices of the noise and the model error taken as bounded sequences (a lower "
+        "bound on any set-based certificate); and what the estimate's error adds to the "
+        "tube's one-step level when the tube law feeds it back.",
+    )
+    p.add_argument("scenario", help="scenario file with estimator.kind kalman, e.g. "
+                   "offline_design/scenarios/case1_kalman.yaml")  # fmt: skip
+    p.add_argument("--design-dir", default=None, help="artefact folder of the stored design")
+    p.add_argument("--probability", type=float, default=0.99,
+                   help="probability of the run-long statements (default 0.99)")  # fmt: skip
+    p.add_argument("--vehicle", metavar="FILE", default=None,
+                   help="vehicle data file (YAML); default: the packaged one")  # fmt: skip
+    p.set_defaults(func=cmd_estimation)

@@ -1,0 +1,27 @@
+"""`fahv estimation`: the bounds of a scenario's Kalman filter as a user reads them."""
+
+import re
+
+from fahv.cli import main
+
+
+def test_estimation_prints_each_bound_and_the_tubes_verdict(capsys):
+    assert main(["estimation", "offline_design/scenarios/case1_kalman.yaml"]) == 0
+    out = capsys.readouterr().out
+    assert "gain-scheduled Kalman filter on h, V, theta, q of design cm_certified (20 LPV " \
+           "vertices: 400 pairs" in out  # fmt: skip
+    m = re.search(r"re-checked exactly \(smallest eigenvalue (\S+) >= 0", out)
+    assert m and float(m.group(1)) >= 0.0
+    assert re.search(r"  1 sigma: h 0\.39\d* ft, V 0\.19\d* ft/s, alpha 0\.01[34]\d* deg", out)
+    assert re.search(r"whole run with p >= 0\.99 \(5\.4\d sigma", out)
+    assert re.search(r"\|v\| <= h 16\.7\d ft, V 5\.23\d ft/s, theta 0\.298\d* deg", out)
+    assert re.search(r"worst case at a frozen vertex \(exact, reached\): h 36\.\d+ ft, V 8\.9\d* "
+                     r"ft/s, alpha 0\.678\d* deg.*: above the attitude requirement", out)
+    assert re.search(r"of its certified level: NOT certified \(\d+x the room\)", out)
+
+
+def test_estimation_of_a_scenario_without_an_estimator_is_refused(capsys):
+    assert main(["estimation", "offline_design/scenarios/case1.yaml"]) == 2
+    err = capsys.readouterr().err
+    assert "estimator.kind is 'none' (the controller reads the exact state): there is no " \
+           "estimate to bound" in err  # fmt: skip
