@@ -27,8 +27,10 @@ from fahv.runs.writer import RunWriter
 pytestmark = pytest.mark.ros  # runs the built node graph
 
 CLIENT = ROOT / "tests" / "live" / "client.cjs"
-N = 6000  # 120 s of simulated time (12 s of wall time or more): the graph still runs while
-# `ros2 topic list` looks (30 s ended before it did once the graph ran at 10 x real time)
+N = 1500  # 30 s of simulated time at twice real time (--rate 2): 15 s of wall time, in
+# which `ros2 topic list` looks while the graph runs (30 s unpaced ended before it did once
+# the graph ran at 10 x real time)
+RATE = 2.0
 
 
 def _read_until(stream, pattern, sink):
@@ -51,7 +53,7 @@ def test_live_view_serves_every_loop_topic_to_a_foxglove_client(quick_case, tmp_
     fahv = str(ROOT / ".venv" / "bin" / "fahv")
     proc = subprocess.Popen(
         [fahv, "sil", str(case_file), "--design", str(art), "--duration", str(N * 0.02),
-         "--out", str(tmp_path), "--quiet", "--live", "0"],
+         "--out", str(tmp_path), "--quiet", "--live", "0", "--rate", str(RATE)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     err: list[str] = []
@@ -120,6 +122,12 @@ def test_live_view_serves_every_loop_topic_to_a_foxglove_client(quick_case, tmp_
     assert max(counts.values()) == N  # subscribed before step 0: every step arrived
     times = [int(e["timestamp"]) for e in events if e["op"] == "time"]
     assert times and times == sorted(times) and times[-1] == (N - 1) * 20_000_000
+    # paced: the plant's N steps took at least (N - 1) Ts / rate of wall time
+    from fahv.runs.workspace import WS
+
+    plant_log = (WS / "log" / "sil" / Path(bag).name / "logs" / "plant.log").read_text()
+    wall = float(re.search(r"done: \d+ steps in ([\d.]+) s wall", plant_log).group(1))
+    assert (N - 1) * 0.02 / RATE <= wall < (N - 1) * 0.02 / RATE + 10.0, plant_log
 
 
 def test_simulate_live_serves_the_in_process_run(design, tmp_path):

@@ -105,6 +105,10 @@ def cmd_estimation(args) -> int:
     name = design.summary.get("design_name", c.get("design", ""))
     for line in study_lines(study, measured, name):
         print(line)
+    fault = (c.get("sensor_fault") or {}).get("kind", "none")
+    if fault != "none":
+        print(f"note: the scenario's sensor fault ({fault}) is not in these bounds: they are "
+              "the healthy sensors'")  # fmt: skip
     print(f"estimation: {time.monotonic() - t0:.1f} s")
     return 0
 

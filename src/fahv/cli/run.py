@@ -267,6 +267,7 @@ def cmd_sil(args) -> int:
         domain_id=args.domain_id,
         live_port=args.live,
         log=status,
+        overrides=_plant_rate(args),
     )
     n_steps = int(round(res.simulated_s / case["Ts"]))
     if not res.bag.is_dir():
@@ -307,6 +308,19 @@ def cmd_sil(args) -> int:
     return 0 if res.returncode == 0 else 1
 
 
+def _plant_rate(args) -> dict | None:
+    """The plant's `rate` override of `fahv sil --rate` (None at 0, the default).
+
+    Raises
+    ------
+    ValueError
+        If the rate is negative or not finite.
+    """
+    if not 0.0 <= args.rate < float("inf"):
+        raise ValueError(f"--rate {args.rate}: must be a finite number >= 0")
+    return {"plant": {"rate": args.rate}} if args.rate else None
+
+
 def _write_params_only(args, design, variant: str) -> int:
     """`fahv sil --write-params FILE`: the run's parameter file and how to start the nodes."""
     from fahv.runs.workspace import ensure_built
@@ -315,7 +329,8 @@ def _write_params_only(args, design, variant: str) -> int:
     out = Path(args.out or ROOT / "bags").resolve()
     bag = out / run_name(design.case["name"], variant, "sil")
     path = Path(args.write_params)
-    content = write_run_params(design, variant, bag, path, args.duration, args.watchdog)
+    content = write_run_params(design, variant, bag, path, args.duration, args.watchdog,
+                               _plant_rate(args))  # fmt: skip
     print(f"parameter file {path} written; the recorder will write {bag}")
     print("start the graph node by node (any order; the plant starts step 0 once all are up):")
     print("  source ros_ws/install/setup.bash")
@@ -521,6 +536,9 @@ def add_parsers(sub) -> None:
         "and print the `ros2 run` commands that start the graph by hand",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--rate", type=float, default=0.0,
+                   help="0: as fast as the graph steps (default); r: at most r x real time "
+                   "(1: a live view at the vehicle's own pace)")  # fmt: skip
     _add_live_option(p)
     p.add_argument("--json", action="store_true", help="metrics as JSON")
     add_vehicle_option(p)

@@ -123,6 +123,9 @@ def specs() -> dict[str, tuple[Field, ...]]:
                   default=False),
             Field("stuck_onset", "float", "onset of the stuck elevator (fault t_onset)",
                   unit="s", lo=0.0, default=0.0),
+            Field("rate", "float", "pace of the steps: 0 as fast as the graph steps, r > 0 at "
+                  "most r times real time (a graph watched live; fahv sil --rate)", lo=0.0,
+                  default=0.0),
             *_prefixed(sensor_fault_fields(), "sensor_fault."),
         ),
         "fault_injector": (

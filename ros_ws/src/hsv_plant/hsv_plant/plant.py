@@ -5,12 +5,15 @@ node reads it) and /hsv/measurement (its sensors; the state estimator reads it) 
 k, integrates
 [t_k, t_k+1] when /hsv/actuator_command of step k arrives (`fahv.loop.PlantCore`:
 ideal actuators or the vehicle file's servos, parameter `actuators`), and starts step
-0 only when every node of the graph has announced itself on /hsv/ready.
+0 only when every node of the graph has announced itself on /hsv/ready. With
+parameter `rate` r > 0 it publishes step k no earlier than k Ts / r after step 0 (a
+graph watched live at real time: r = 1).
 """
 
 from __future__ import annotations
 
 import sys
+import time
 
 from hsv_common.lockstep import LockstepNode
 from hsv_common.runtime import main
@@ -40,6 +43,8 @@ class PlantNode(LockstepNode):
         at step 0 left every peer waiting for step 1 past its watchdog.
         """
         self.core = PlantCore([p], Lanes(1))
+        self.rate = float(p["rate"])  # 0: as fast as the graph steps
+        self.t_ready = 0.0
         warm_up = PlantCore([p], Lanes(1))
         warm_up.advance(ControlCommand.of(0, 0.0, warm_up.limits.u_min[None, :]))
 
@@ -53,11 +58,16 @@ class PlantNode(LockstepNode):
     def on_ready(self) -> None:
         """Every peer is ready: publish the state and the measurement of step 0."""
         self.get_logger().info(f"graph ready ({len(self.graph_nodes) - 1} peers): step 0")
+        self.t_ready = time.monotonic()
         self.publish(self._publish_state())
 
     def on_step(self, k: int, inputs: dict) -> list:
         """Outputs of step k (see LockstepNode.on_step)."""
         self.core.advance(inputs["/hsv/actuator_command"])
+        if self.rate > 0.0:  # paced: step k + 1 no earlier than its time / rate after step 0
+            wait = self.t_ready + self.core.k * self.Ts / self.rate - time.monotonic()
+            if wait > 0.0:
+                time.sleep(wait)
         return self._publish_state() if self.core.k < self.n_steps else []
 
 
