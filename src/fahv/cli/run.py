@@ -14,9 +14,8 @@ from fahv.loop.graph import NODES, TOPICS, graph_nodes
 from fahv.loop.params import controller_node
 from fahv.loop.simulate import simulate
 from fahv.loop.wire import encode
-from fahv.runs.bag import read_run, run_result_of, stored_metadata
+from fahv.runs.bag import read_run, run_result_of
 from fahv.runs.metrics import metrics
-from fahv.runs.replay import run_replay
 from fahv.runs.sil import (
     recorder_metadata,
     run_coverage,
@@ -360,34 +359,6 @@ def export_line(domain: int) -> str:
     return f"export ROS_DOMAIN_ID={domain} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 
 
-def cmd_replay(args) -> int:
-    """Republish a recorded run (raw CDR), optionally into nodes under test."""
-    res = run_replay(
-        args.run,
-        nodes=args.node or (),
-        topics=args.topics,
-        capture=args.capture,
-        out=args.out,
-        rate=0.0 if args.fast else args.rate,
-        steps=args.steps,
-        watchdog_s=args.watchdog,
-        quiet=args.quiet,
-        params=args.params,
-    )
-    if res.interrupted:
-        done = stored_metadata(res.out) if res.out is not None else {}
-        src = stored_metadata(args.run)
-        n = args.steps or int(round(float(src.get("duration", 0)) / float(src.get("Ts", 1))))
-        raise RunInterrupted(int(done.get("steps_recorded", 0)), n, res.out)
-    if res.returncode != 0:
-        print(f"fahv replay: failed (logs in {res.log_dir})", file=sys.stderr)
-        return 1
-    if res.outputs is not None:  # the runner said where the replayed run was written
-        print(res.outputs.summary())
-        return 0 if res.outputs.identical else 1
-    return 0
-
-
 def cmd_paper_figures(args) -> int:
     """Simulate every variant of Cases 1 and 2 (recorded) and write Fig. 9-17."""
     from fahv.runs.plots import paper_figures  # matplotlib: this command's only
@@ -543,35 +514,6 @@ def add_parsers(sub) -> None:
     p.add_argument("--json", action="store_true", help="metrics as JSON")
     add_vehicle_option(p)
     p.set_defaults(func=cmd_sil)
-    p = sub.add_parser(
-        "replay",
-        help="republish a run's loop topics (raw CDR) over DDS, optionally into nodes under test",
-    )
-    p.add_argument("run", help="run folder or .mcap file")
-    p.add_argument("--topics", nargs="+", default=None, help="topics to republish")
-    p.add_argument(
-        "--node",
-        nargs="+",
-        default=None,
-        help="nodes to test against the replay with the run's parameters (e.g. tube_mpc)",
-    )
-    p.add_argument(
-        "--capture", nargs="+", default=None, help="topics to capture (default: the nodes' outputs)"
-    )
-    p.add_argument("--out", default=None, help="run folder for the replayed + captured messages")
-    p.add_argument("--rate", type=float, default=1.0, help="1: recorded timing, r: r x faster")
-    p.add_argument("--fast", action="store_true", help="as fast as possible (lockstep on captures)")
-    p.add_argument("--steps", type=int, default=0, help="steps to replay (0: all)")
-    p.add_argument("--watchdog", type=float, default=10.0, help="node watchdog [s wall time]")
-    p.add_argument(
-        "--params",
-        metavar="FILE",
-        default=None,
-        help="parameter file of the nodes under test (default: the one in the run file; "
-        "needed only for runs of earlier versions started by hand)",
-    )
-    p.add_argument("--quiet", action="store_true", help="no progress lines")
-    p.set_defaults(func=cmd_replay)
     p = sub.add_parser(
         "paper-figures",
         help="simulate Cases 1 and 2 (all variants, recorded; the paper's law on "
