@@ -94,7 +94,8 @@ SOLVED_RTOL = 1e-3
 
 
 def test_the_shipped_paper_design_is_what_its_design_file_makes(tmp_path):
-    """Re-designs cm_paper from its design file with the current code (about 20 s) and
+    """Re-designs cm_paper from its design file with the current code (about 20 s; without
+    the certificate's domain check, which makes no compared array) and
     compares with the shipped arrays: a change of the code or the design file that moves
     the design is caught here (the slower cm_certified is covered by its verification).
     The RMPC baseline's ellipsoids, which none of the compared arrays depend on, are not
@@ -110,6 +111,9 @@ def test_the_shipped_paper_design_is_what_its_design_file_makes(tmp_path):
     assert "rmpc" in spec.data["variants"]
     data = {**spec.data, "variants": [v for v in spec.data["variants"] if v != "rmpc"]}
     data.pop("rmpc")
+    # the certificate's domain check (15 s of plant steps) makes no compared array; the
+    # shipped design's is re-checked by `fahv verify` above
+    data["certificate"] = {"schedules": 0}
     new = run_design(spec_file(data, str(dfile), design_spec()), vehicle, log=lambda *_: None)
     for k in MODEL_ARRAYS:
         np.testing.assert_allclose(new.arrays[k], shipped.arrays[k], rtol=1e-9, atol=0, err_msg=k)
