@@ -7,6 +7,7 @@ import time
 import numpy as np
 
 from fahv.certificate.verified import load_or_design
+from fahv.cli.common import add_vehicle_option
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.errors import SpecError
 from fahv.estimation.kalman import W_SIGMAS, design_filter
@@ -131,6 +132,5 @@ def add_parsers(sub) -> None:
     p.add_argument("--design-dir", default=None, help="artefact folder of the stored design")
     p.add_argument("--probability", type=float, default=0.99,
                    help="probability of the run-long statements (default 0.99)")  # fmt: skip
-    p.add_argument("--vehicle", metavar="FILE", default=None,
-                   help="vehicle data file (YAML); default: the packaged one")  # fmt: skip
+    add_vehicle_option(p)
     p.set_defaults(func=cmd_estimation)
