@@ -25,3 +25,21 @@ def test_estimation_of_a_scenario_without_an_estimator_is_refused(capsys):
     err = capsys.readouterr().err
     assert "estimator.kind is 'none' (the controller reads the exact state): there is no " \
            "estimate to bound" in err  # fmt: skip
+
+
+def test_estimation_names_what_its_bounds_leave_out(tmp_path, capsys):
+    """A scenario on servos with a sensor fault: the bounds are printed, and two notes
+    say that neither the fault nor the servos are in them."""
+    import yaml
+
+    d = yaml.safe_load(open("offline_design/scenarios/case1_kalman.yaml"))
+    d["name"] = "kalman_servo"
+    d.setdefault("plant", {})["actuators"] = "second_order"
+    d["sensor_fault"] = {"kind": "stuck", "channel": "h", "t_onset": 50.0}
+    path = tmp_path / "kalman_servo.yaml"
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    assert main(["estimation", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "NOT certified" in out
+    assert "note: the scenario's sensor fault (stuck) is not in these bounds" in out
+    assert "note: the scenario's actuators (second_order) are not in the filter's model" in out

@@ -110,6 +110,10 @@ def cmd_estimation(args) -> int:
     if fault != "none":
         print(f"note: the scenario's sensor fault ({fault}) is not in these bounds: they are "
               "the healthy sensors'")  # fmt: skip
+    actuators = plant_choices(c)["actuators"]
+    if actuators != "ideal":
+        print(f"note: the scenario's actuators ({actuators}) are not in the filter's model "
+              "nor in these bounds: both take the applied input as the command")  # fmt: skip
     print(f"estimation: {time.monotonic() - t0:.1f} s")
     return 0
 
