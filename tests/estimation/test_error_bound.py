@@ -9,7 +9,7 @@ import pytest
 import scipy.linalg
 
 from fahv.certificate.verified import load_or_design
-from fahv.estimation.error_bound import worst_sequence
+from fahv.estimation.error_bound import peak_to_peak, worst_sequence
 from fahv.estimation.kalman import design_filter, measurement_covariance
 from fahv.estimation.study import estimate_study, white_noise_only
 from fahv.loop.simulate import simulate
@@ -83,8 +83,6 @@ def test_the_frozen_worst_case_is_reached_by_its_sequence(study):
     within 1e-9 of it after 6000 steps."""
     es = study.system
     xi = np.concatenate([np.zeros(11), study.v_max])
-    from fahv.estimation.error_bound import peak_to_peak
-
     pk = peak_to_peak(es, xi)
     i = int(np.argmax(pk[:, ALPHA]))
     e = np.zeros(11)

@@ -11,44 +11,40 @@ from fahv.cli.common import add_vehicle_option
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.errors import SpecError
 from fahv.estimation.kalman import W_SIGMAS, design_filter
+from fahv.model.vehicle import STATE_NAMES, STATE_UNITS
 from fahv.sensors.data import CHANNEL_UNITS, load_sensors, measured_channels
 from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, plant_choices
 
-#: Error states as printed: name, unit, factor from the state's unit.
-STATES = (("h", "ft", 1.0), ("V", "ft/s", 1.0), ("alpha", "deg", np.degrees(1.0)),
-          ("theta", "deg", np.degrees(1.0)), ("q", "deg/s", np.degrees(1.0)),
-          ("eta_1", "", 1.0), ("eta_1_dot", "1/s", 1.0), ("eta_2", "", 1.0),
-          ("eta_2_dot", "1/s", 1.0), ("d_Phi", "", 1.0),
-          ("d_delta_e", "deg", np.degrees(1.0)))  # fmt: skip
+#: Names and units of the filter's state z = [x; d] (`fahv.estimation.kalman`).
+Z_NAMES = (*STATE_NAMES, "d_Phi", "d_delta_e")
+Z_UNITS = (*STATE_UNITS, "-", "rad")
+
+
+def named_values(names, units, v) -> str:
+    """`h 16.75 ft, theta 0.298 deg`: values with their names, angles in deg, no unit for "-".
+
+    Examples
+    --------
+    >>> named_values(["h", "q", "eta_1"], ["ft", "rad/s", "-"], [16.75, np.radians(1.0), 0.5])
+    'h 16.75 ft, q 1 deg/s, eta_1 0.5'
+    """
+    out = []
+    for name, unit, x in zip(names, units, v, strict=True):
+        if unit.startswith("rad"):
+            x, unit = np.degrees(x), unit.replace("rad", "deg")
+        out.append(f"{name} {x:.4g} {'' if unit == '-' else unit}".rstrip())
+    return ", ".join(out)
 
 
 def state_values(v, states=range(11)) -> str:
-    """`h 0.39 ft, V 0.20 ft/s, ...` of an (11,) error vector in its states' units.
-
-    Examples
-    --------
-    >>> state_values(np.r_[1.0, 2.0, np.radians(0.5), np.zeros(8)], range(3))
-    'h 1 ft, V 2 ft/s, alpha 0.5 deg'
-    """
-    return ", ".join(f"{STATES[i][0]} {v[i] * STATES[i][2]:.4g} {STATES[i][1]}".rstrip()
-                     for i in states)  # fmt: skip
+    """`h 0.39 ft, V 0.20 ft/s, ...` of states of an (11,) vector of z (`named_values`)."""
+    return named_values([Z_NAMES[i] for i in states], [Z_UNITS[i] for i in states],
+                        [v[i] for i in states])  # fmt: skip
 
 
 def channel_values(measured, v) -> str:
-    """`h 16.75 ft, theta 0.298 deg` of values per measured channel (angles in deg).
-
-    Examples
-    --------
-    >>> channel_values(["h", "q"], [16.75, np.radians(1.0)])
-    'h 16.75 ft, q 1 deg/s'
-    """
-    out = []
-    for c, x in zip(measured, v, strict=True):
-        unit = CHANNEL_UNITS[c]
-        if unit.startswith("rad"):
-            x, unit = np.degrees(x), unit.replace("rad", "deg")
-        out.append(f"{c} {x:.4g} {unit}")
-    return ", ".join(out)
+    """`h 16.75 ft, theta 0.298 deg` of values per measured channel (`named_values`)."""
+    return named_values(measured, [CHANNEL_UNITS[c] for c in measured], v)
 
 
 def study_lines(study, measured, design_name: str) -> list[str]:

@@ -129,7 +129,7 @@ class CovarianceBound:
         return np.sqrt(np.diag(self.S))
 
 
-def _pair_margins(es: ErrorSystem, Ss: np.ndarray, Qs: np.ndarray, Ms: np.ndarray) -> np.ndarray:
+def _pair_margins(Ss: np.ndarray, Qs: np.ndarray, Ms: np.ndarray) -> np.ndarray:
     """Smallest eigenvalue of S - M_ij S M_ij' - Q_j (R, R), scaled coordinates."""
     lhs = Ss[None, None] - np.einsum("ijab,bc,ijdc->ijad", Ms, Ss, Ms) - Qs[None]
     return np.linalg.eigvalsh(0.5 * (lhs + np.swapaxes(lhs, -1, -2)))[..., 0]
@@ -187,7 +187,7 @@ def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 20) -> Covaria
             raise DesignError(f"covariance bound: the LMI on {len(held)} vertex pairs is "
                               "infeasible (the filter's error is not stable at every pair)")
         Sv = 0.5 * (S.value + S.value.T)
-        margins = _pair_margins(es, Sv, Qs, Ms)
+        margins = _pair_margins(Sv, Qs, Ms)
         bad = [(int(i), int(j)) for i, j in np.argwhere(margins < 0.0) if (i, j) not in held]
         if not bad:
             break

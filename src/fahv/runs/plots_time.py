@@ -272,9 +272,7 @@ def tube_figure(runs: list):
     ValueError
         If there is no run.
     """
-    if not runs:
-        raise ValueError("no run to plot")
-    fig, ax = plt.subplots(figsize=(8, 3.6))
+    fig, ax = _panels(runs, 1, 1, (8, 3.6))
     ax.axhline(1.0, color="k", ls="--", lw=0.9, label="boundary of Z (level 1)")
     no_tube, peak = [], 1e-3
     for i, r in enumerate(runs):
