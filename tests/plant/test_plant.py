@@ -46,6 +46,22 @@ def test_trim_is_equilibrium_of_plant(vehicle):
     assert np.max(np.abs(p.x - tp.x_r) / vehicle.state_scale) < 1e-8
 
 
+def test_the_plant_compiles_its_kernels_when_built_and_only_once(vehicle):
+    """The plant node's step 1 is timed by its peers' watchdogs: the kernels (ideal and
+    servo actuators) are compiled by the constructor, the steps add no specialisation,
+    and the zero-length warm-up step leaves the state as given."""
+    from fahv.plant import rk4
+
+    tp = trim(vehicle, 85500.0, 7900.0)
+    p = Plant(vehicle.params, vehicle.limits, tp.x_r, 0.02, 10, vehicle.actuators["second_order"])
+    n_cm, n_act = len(rk4.rk4_cm.signatures), len(rk4.rk4_cm_act.signatures)
+    assert n_cm >= 1 and n_act >= 1
+    assert np.array_equal(p.x[0], tp.x_r) and p.a is None
+    p.step(tp.u_r)
+    p.step(tp.u_r, held=[True])
+    assert (len(rk4.rk4_cm.signatures), len(rk4.rk4_cm_act.signatures)) == (n_cm, n_act)
+
+
 def test_plant_saturates_and_rejects_bad_input(vehicle):
     tp = trim(vehicle, 85500.0, 7900.0)
     p = Plant(vehicle.params, vehicle.limits, tp.x_r, 0.02, 10)

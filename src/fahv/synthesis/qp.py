@@ -72,6 +72,18 @@ def check_kkt(H, f, A_c, bl, bu, y, lam, primal_tol=PRIMAL_TOL, kkt_tol=KKT_TOL)
     return ""
 
 
+def compile_kernel() -> None:
+    """Compile the KKT check now (or load it from numba's disk cache), not at the first QP.
+
+    Every QP check passes C-contiguous float64 arrays, so one call on a 1-variable
+    problem builds the only specialisation. A loop node builds its MPC before it
+    reports ready: a cold compile (about 6 s of CPU) then falls in its start-up,
+    not in a step its peers' watchdogs time. Raises nothing.
+    """
+    check_kkt(np.eye(1), np.zeros(1), np.zeros((0, 1)), -np.ones(1), np.ones(1),
+              np.zeros(1), np.zeros(1))  # fmt: skip
+
+
 @functools.cache
 def _kkt_kernel():
     """`_kkt_measures` compiled by numba (cached on disk), built at its first use.

@@ -30,6 +30,19 @@ def test_qp_solution_meets_tightened_limits_and_kkt(design, make_mpc):
     assert u[:, 0].max() > u_base[0] + 0.1
 
 
+def test_the_kkt_check_is_compiled_when_the_mpc_is_built(design, make_mpc):
+    """A node builds its MPC before it reports ready: the numba compile of the KKT check
+    happens there, and the QPs of the run need no other specialisation."""
+    from fahv.synthesis.qp import _kkt_kernel
+
+    mpc = make_mpc()
+    assert len(_kkt_kernel().signatures) == 1
+    c = design.case["command"]
+    mpc.schedule(c["h0"], c["V0"])
+    assert mpc.solve(np.zeros(mpc.n), mpc.u_r_s, np.array([c["h_c"], c["V_c"]]))[1] == "ok"
+    assert len(_kkt_kernel().signatures) == 1
+
+
 def test_kkt_check_rejects_a_perturbed_solution():
     H, f = np.eye(2), np.array([-2.0, 0.0])
     A = np.array([[1.0, 1.0]])

@@ -272,6 +272,8 @@ class TrackingMPCNominal(NominalSource):
         self._rk4_cm = rk4_cm
         self.limits_lo, self.limits_hi = veh.limits.u_min, veh.limits.u_max
         self.n_sub = int(p["plant_substeps"])
+        # compiled now (a node's start-up, not its first timed step), on a zero-length step
+        rk4_cm(np.ones((B, 9)), np.zeros((B, 2)), self.nominal_vehicle, 0.0, 1)
 
     def _qp_counts(self) -> tuple[np.ndarray, ...]:
         """Per-run QP counters (solves, fallback, terminal, recovered), each (B,) int64.

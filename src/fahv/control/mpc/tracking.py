@@ -62,7 +62,7 @@ from fahv.control.mpc.qp_layout import (
 )
 from fahv.control.mpc.settings import MPCSettings
 from fahv.errors import DesignError
-from fahv.synthesis.qp import NO_BOUND, check_kkt
+from fahv.synthesis.qp import NO_BOUND, check_kkt, compile_kernel
 
 #: Steps (dh [ft], dV [ft/s]) of the trim map's central differences at a scheduling point.
 #: The map clips to its grid: a point farther than one step beyond the grid in h or V
@@ -171,6 +171,7 @@ class TrackingMPC:
         # bounds of the rows that have none on one side (terminal rows, steady input)
         self._no_lo_t = np.full(2 * n, -QP_NO_BOUND)
         self._no_hi_u, self._no_lo_u = np.full(self.m, QP_NO_BOUND), np.full(self.m, -QP_NO_BOUND)
+        compile_kernel()  # at construction: a node's start-up, not its first timed step
 
     @property
     def u_lo(self) -> np.ndarray:
