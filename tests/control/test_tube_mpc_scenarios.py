@@ -1,8 +1,8 @@
 """Issue-level requirements of the new Tube-MPC (law ``tube_mpc``) beyond Case 1.
 
-Each scenario is designed (small W sample, as every test design; scenarios whose design
-part is the same share its design, :func:`_design`) and simulated for 300 s in process;
-the node graph computes the same numbers (tests/runs/test_sil.py).
+The scenarios on Case 1's design take the suite's test design (small W sample) and
+change the run as a campaign disperses it; Case 2 is designed here. Each runs 300 s
+in process; the node graph computes the same numbers (tests/runs/test_sil.py).
 Requirements (sec. 5.1 and docs/theory/certificate.md): |h - h_c| <= 10 ft and
 |V - V_c| <= 2 ft/s within 60 s of the end of the command and held until the fault;
 back within the same bounds within 60 s of the fault and held to the end; attitude
@@ -11,17 +11,23 @@ error within 0.5 deg; no command beyond the input limits; the tube error inside 
 
 import copy
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from fahv.campaign.draws import overrides
 from fahv.design.pipeline import run_design
+from fahv.loop.batch import simulate_batch
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturbed_params
 from fahv.runs.metrics import metrics
+from fahv.spec.artefacts import load_design
 from fahv.spec.files import spec_file
 from fahv.spec.scenario import design_part, run_spec_data, scenario_design
 
+ROOT = Path(__file__).resolve().parents[2]
 H_TOL, V_TOL, ATT_DEG, WINDOW = 10.0, 2.0, 0.5, 60.0
 
 
@@ -35,17 +41,15 @@ def _entered(t, inside, t0, t1):
     return t[sel][0] if bad.size == 0 else t[sel][bad[-1] + 1]
 
 
-def requirements(run, case) -> dict:
+def requirements(run, t_cmd: float, t_f: float) -> dict:
     """Measured figures of one run against the requirements above.
 
-    The settling windows are specific to these requirements; attitude, input limits and
-    the tube level come from :func:`fahv.runs.metrics.metrics` (the level is already
+    ``t_cmd`` is the end of the command [s], ``t_f`` the fault onset [s]. The settling
+    windows are specific to these requirements; attitude, input limits and the tube
+    level come from :func:`fahv.runs.metrics.metrics` (the level is already
     e' N^-1 e, <= 1 inside Z, the set the design certifies also for tau < 1).
     """
-    c = case.data
     t = run.t
-    t_cmd = c["command"]["t_start"] + c["command"]["t_ramp"]
-    t_f = c["fault"]["t_onset"]
     inside = (np.abs(run.x[:, 0] - run.h_c) <= H_TOL) & (np.abs(run.x[:, 1] - run.V_c) <= V_TOL)
     m = metrics(run, load_vehicle().limits)
     return {
@@ -57,60 +61,7 @@ def requirements(run, case) -> dict:
     }
 
 
-def _case(path, **changes):
-    d = run_spec_data(path)
-    d = copy.deepcopy(d)
-    d["disturbance"]["samples"] = 40
-    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_one_step_bound.py
-    d["variants"] = ["tube_mpc"]  # the law under test (no baseline design: CI time)
-    for key, value in changes.items():
-        section, name = key.split(".")
-        d[section][name] = value
-    return spec_file(d, "scenario.yaml")
-
-
-#: Designs of the scenarios' design parts, by content hash (made once per test run).
-_DESIGNS = {}
-
-
-def _design(case):
-    """``run_design(case)``: the design of the run spec's design part with the scenario's
-    arrays (as :func:`fahv.design.pipeline.run_design` forms it), the design part designed
-    once per content: the scenarios below that change only the fault, the vehicle draw or
-    nothing share Case 1's design."""
-    part = design_part(case)
-    key = part.content_hash()
-    if key not in _DESIGNS:
-        _DESIGNS[key] = run_design(part, log=lambda *_: None)
-    return scenario_design(_DESIGNS[key], case, load_vehicle(), None, lambda *_: None)
-
-
-SCENARIOS = {
-    # descending step inside the envelope, Case 1 fault
-    "descending step": (
-        "offline_design/scenarios/case1_paper.yaml",
-        {"command.h_c": 85100.0, "command.V_c": 7750.0},
-    ),
-    # 30 % loss of elevator effectiveness at 150 s
-    "30 % loss at 150 s": (
-        "offline_design/scenarios/case1_paper.yaml",
-        {"fault.rho_f": 0.7, "fault.t_onset": 150.0},
-    ),
-    # another draw of the uncertain parameters
-    "parameter seed 7": ("offline_design/scenarios/case1_paper.yaml", {"uncertainty.seed": 7}),
-    # Case 2: ramps, adjustable law tau = 0.8 on the ECM design
-    "case 2": ("offline_design/scenarios/case2.yaml", {}),
-}
-
-
-@pytest.mark.parametrize("name", list(SCENARIOS))
-def test_tube_mpc_meets_the_requirements(name):
-    path, changes = SCENARIOS[name]
-    case = _case(path, **changes)
-    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    design = _design(case)
-    run = simulate(design, "tube_mpc")
-    r = requirements(run, case)
+def _assert_requirements(r: dict) -> None:
     assert r["settle_after_command_s"] <= WINDOW, r
     assert r["settle_after_fault_s"] <= WINDOW, r
     assert r["attitude_deg"] <= ATT_DEG, r
@@ -118,17 +69,66 @@ def test_tube_mpc_meets_the_requirements(name):
     assert r["tube_level"] <= 1.0, r
 
 
-def test_heavy_vehicle_with_a_large_loss_in_a_descent_ends_on_the_command():
+_LOSS = {"fault.kind": "loss_of_effectiveness", "fault.bias_deg": 0.0}
+_SEED_7 = np.random.default_rng(7)  # as `fahv.plant.uncertainty.perturbed_params` draws
+
+#: Case 1 (the test design: a 10 % loss at 100 s, parameter draw of seed 1) with one
+#: change each, as the campaign engine disperses a run: name -> its dispersed values.
+SCENARIOS = {
+    # descending step inside the envelope, Case 1 fault
+    "descending step": {"command.h_c": 85100.0, "command.V_c": 7750.0},
+    # 30 % loss of elevator effectiveness at 150 s
+    "30 % loss at 150 s": {**_LOSS, "fault.rho_f": 0.7, "fault.t_onset": 150.0},
+    # another draw of the uncertain parameters: seed 7's
+    "parameter seed 7": {f"s.{k}": _SEED_7.uniform(-1.0, 1.0) for k in PAPER_UNCERTAINTY},
+}
+
+
+def test_the_seed_7_scenario_is_the_scenario_files_draw(design):
+    """The dispersed signs of "parameter seed 7" give the vehicle a scenario file with
+    `uncertainty: {seed: 7, scale: 1}` simulates."""
+    plant = overrides(SCENARIOS["parameter seed 7"], design, "tube_mpc")["plant"]
+    drawn = perturbed_params(load_vehicle(), 7, 1.0)
+    assert design.case["uncertainty"]["scale"] == 1.0
+    assert {k: plant[f"params.{k}"] for k in drawn} == pytest.approx(drawn, rel=1e-15)
+
+
+def test_tube_mpc_meets_the_requirements_beyond_case_1(design):
+    """The scenarios of `SCENARIOS`, 300 s each, stepped together by the batch engine
+    (each run equals its own `simulate`, tests/loop/test_batch.py)."""
+    ov = [overrides(v, design, "tube_mpc") for v in SCENARIOS.values()]
+    c = design.case
+    t_cmd = c["command"]["t_start"] + c["command"]["t_ramp"]
+    for (name, values), run in zip(SCENARIOS.items(), simulate_batch(design, "tube_mpc", ov),
+                                   strict=True):  # fmt: skip
+        assert not isinstance(run, Exception), (name, run)
+        r = requirements(run, t_cmd, values.get("fault.t_onset", c["fault"]["t_onset"]))
+        _assert_requirements({"scenario": name, **r})
+
+
+def test_case_2_meets_the_requirements():
+    """Case 2: ramps, adjustable law tau = 0.8 on the ECM design (small W sample)."""
+    d = copy.deepcopy(run_spec_data("offline_design/scenarios/case2.yaml"))
+    d["disturbance"]["samples"] = 40
+    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_one_step_bound.py
+    case = spec_file(d, "scenario.yaml")
+    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+    # the shipped design is where the LMIs start (as the suite's test design does)
+    previous = load_design(ROOT / "offline_design" / "designs" / "ecm_paper").arrays
+    part = run_design(design_part(case), log=lambda *_: None, previous=previous)
+    design = scenario_design(part, case, load_vehicle(), None, lambda *_: None)
+    c = case.data
+    r = requirements(simulate(design, "tube_mpc"), c["command"]["t_start"] + c["command"][
+        "t_ramp"], c["fault"]["t_onset"])
+    _assert_requirements(r)
+
+
+def test_heavy_vehicle_with_a_large_loss_in_a_descent_ends_on_the_command(design):
     """A run that can sit on the terminal law (heavy vehicle with the weaker c_e, 29.8 %
     loss 4 s into a descent from 86000 ft, 8200 ft/s to 85200 ft, 8300 ft/s; a nominal
     that used the terminal law away from the command ended 29 ft/s short at 300 s). Its
     faulty trim at the command fits the tightened limits, so it must end on the command,
     and no nominal update may use the terminal law away from it."""
-    from fahv.campaign.draws import overrides
-
-    case = _case("offline_design/scenarios/case1_paper.yaml")
-    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    design = _design(case)
     signs = {k: 0.0 for k in ("I_yy", "S", "z_T", "c_bar", "beta_1", "beta_3", "beta_5",
                               "beta_7")}  # fmt: skip
     values = {
