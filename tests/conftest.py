@@ -60,35 +60,49 @@ def make_case(raw):
     return lambda **changes: quick(raw, **{"variants": no_rmpc, **changes})
 
 
-@pytest.fixture(scope="session")
-def design(raw, tmp_path_factory, worker_id):
-    """Case 1 designed with a small W sample (shared by the design, SIL and log tests),
-    without the RMPC baseline (its ellipsoids are half a minute of LMIs; the tests that
-    run the baseline take the shipped design, `paper_scenario_design`).
+def shared_design(spec, shipped: str, name: str, tmp_path_factory, worker_id):
+    """`run_design(spec)` made once per test session, its LMIs started from the shipped
+    design `shipped` (the arrays are the same, every certificate re-checked all the same).
 
     Under pytest-xdist the first worker designs it and saves the artefacts next to the
-    workers' temporary folders; the others wait on the lock and load them (the content
-    hash is checked by load_design), so the suite designs it once.
+    workers' temporary folders under `name`; the others wait on the lock and load them
+    (the content hash is checked by load_design), so the suite designs it once.
     """
     from filelock import FileLock
 
     from fahv.spec.artefacts import load_design, save_design
 
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    # the shipped design of the file is where its LMIs start (the RMPC's ellipsoids in
-    # one solve each): the arrays are the same, the certificates re-checked all the same
-    previous = load_design(ROOT / "offline_design" / "designs" / "cm_paper").arrays
-    spec = quick(raw, variants=[v for v in raw["variants"] if v != "rmpc"])
+    previous = load_design(ROOT / "offline_design" / "designs" / shipped).arrays
     if worker_id == "master":  # not distributed
         return run_design(spec, log=lambda *_: None, previous=previous)
     shared = tmp_path_factory.getbasetemp().parent
-    with FileLock(str(shared / "quick_design.lock")):
-        folder = shared / "quick_design"
+    with FileLock(str(shared / f"{name}.lock")):
+        folder = shared / name
         if (folder / "design.json").exists():
             return load_design(folder)
         d = run_design(spec, log=lambda *_: None, previous=previous)
         save_design(d, folder)
         return d
+
+
+@pytest.fixture(scope="session")
+def design(raw, tmp_path_factory, worker_id):
+    """Case 1 designed with a small W sample (shared by the design, SIL and log tests),
+    without the RMPC baseline (its ellipsoids are half a minute of LMIs; the tests that
+    run the baseline take the shipped design, `paper_scenario_design`)."""
+    spec = quick(raw, variants=[v for v in raw["variants"] if v != "rmpc"])
+    return shared_design(spec, "cm_paper", "quick_design", tmp_path_factory, worker_id)
+
+
+@pytest.fixture(scope="session")
+def case2_design(tmp_path_factory, worker_id):
+    """Case 2 (11-state ECM, adjustable law tau = 0.8) designed with a small W sample."""
+    from fahv.spec.scenario import load_scenario
+
+    raw2 = plain(load_scenario("offline_design/scenarios/case2.yaml").run_spec.data)
+    return shared_design(quick(raw2), "ecm_paper", "quick_design_case2", tmp_path_factory,
+                         worker_id)  # fmt: skip
 
 
 @pytest.fixture(scope="session")

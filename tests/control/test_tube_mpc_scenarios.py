@@ -1,7 +1,8 @@
 """Issue-level requirements of the new Tube-MPC (law ``tube_mpc``) beyond Case 1.
 
 The scenarios on Case 1's design take the suite's test design (small W sample) and
-change the run as a campaign disperses it; Case 2 is designed here. Each runs 300 s
+change the run as a campaign disperses it; Case 2 takes the suite's Case 2 design. Each
+runs 300 s
 in process; the node graph computes the same numbers (tests/runs/test_sil.py).
 Requirements (sec. 5.1 and docs/theory/certificate.md): |h - h_c| <= 10 ft and
 |V - V_c| <= 2 ft/s within 60 s of the end of the command and held until the fault;
@@ -9,25 +10,16 @@ back within the same bounds within 60 s of the fault and held to the end; attitu
 error within 0.5 deg; no command beyond the input limits; the tube error inside Z.
 """
 
-import copy
-import warnings
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from fahv.campaign.draws import overrides
-from fahv.design.pipeline import run_design
 from fahv.loop.batch import simulate_batch
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturbed_params
 from fahv.runs.metrics import metrics
-from fahv.spec.artefacts import load_design
-from fahv.spec.files import spec_file
-from fahv.spec.scenario import design_part, run_spec_data, scenario_design
 
-ROOT = Path(__file__).resolve().parents[2]
 H_TOL, V_TOL, ATT_DEG, WINDOW = 10.0, 2.0, 0.5, 60.0
 
 
@@ -106,21 +98,12 @@ def test_tube_mpc_meets_the_requirements_beyond_case_1(design):
         _assert_requirements({"scenario": name, **r})
 
 
-def test_case_2_meets_the_requirements():
+def test_case_2_meets_the_requirements(case2_design):
     """Case 2: ramps, adjustable law tau = 0.8 on the ECM design (small W sample)."""
-    d = copy.deepcopy(run_spec_data("offline_design/scenarios/case2.yaml"))
-    d["disturbance"]["samples"] = 40
-    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_one_step_bound.py
-    case = spec_file(d, "scenario.yaml")
-    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    # the shipped design is where the LMIs start (as the suite's test design does)
-    previous = load_design(ROOT / "offline_design" / "designs" / "ecm_paper").arrays
-    part = run_design(design_part(case), log=lambda *_: None, previous=previous)
-    design = scenario_design(part, case, load_vehicle(), None, lambda *_: None)
-    c = case.data
-    r = requirements(simulate(design, "tube_mpc"), c["command"]["t_start"] + c["command"][
-        "t_ramp"], c["fault"]["t_onset"])
-    _assert_requirements(r)
+    c = case2_design.case
+    t_cmd = c["command"]["t_start"] + c["command"]["t_ramp"]
+    _assert_requirements(requirements(simulate(case2_design, "tube_mpc"), t_cmd,
+                                      c["fault"]["t_onset"]))  # fmt: skip
 
 
 def test_heavy_vehicle_with_a_large_loss_in_a_descent_ends_on_the_command(design):

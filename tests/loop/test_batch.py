@@ -107,26 +107,8 @@ def test_rmpc_runs_batched_and_equal(paper_scenario_design):
     assert not np.array_equal(res[1].x, res[2].x)  # the runs differ, each equals simulate
 
 
-@pytest.fixture(scope="module")
-def design_case2():
-    """Case 2 (11-state ECM, tau = 0.8) designed with a small W sample."""
-    import copy
-    import warnings
-
-    from fahv.design.pipeline import run_design
-    from fahv.spec.files import spec_file
-    from fahv.spec.scenario import run_spec_data
-
-    raw = run_spec_data("offline_design/scenarios/case2.yaml")
-    d = copy.deepcopy(raw)
-    d["disturbance"]["samples"] = 40
-    d["certificate"] = {"schedules": 0}  # checked in tests/design/test_one_step_bound.py
-    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    return run_design(spec_file(d, "quick2.yaml"), log=lambda *_: None)
-
-
-def test_case2_eleven_state_law_batched_and_equal(design_case2):
-    d = design_case2
+def test_case2_eleven_state_law_batched_and_equal(case2_design):
+    d = case2_design
     assert d.n_x == 11
     ovs = [{"fault_injector": {"kind": k, "t_onset": 0.5, "rho_f": 0.8, "bias_deg": 1.0}}
            for k in ("loss_of_effectiveness", "bias")]  # fmt: skip
@@ -136,13 +118,13 @@ def test_case2_eleven_state_law_batched_and_equal(design_case2):
         assert res.x_n.shape == (75, 11)
 
 
-def test_nonlinear_nominal_refuses_the_eleven_state_design(design_case2):
+def test_nonlinear_nominal_refuses_the_eleven_state_design(case2_design):
     """mpc.nominal_model 'cm' moves the nominal by the 9-state CM: an ECM design (11
     states, q' and x_q) is refused with a RunError that names the key and the size."""
     from fahv.loop.cores import build_core
     from fahv.loop.params import node_parameters
 
-    p = node_parameters(design_case2, "tube_mpc")["nominal_trajectory"]
+    p = node_parameters(case2_design, "tube_mpc")["nominal_trajectory"]
     p["mpc.nominal_model"] = "cm"
     with pytest.raises(RunError, match=r"mpc\.nominal_model 'cm' needs the 9-state CM design, "
                        r"got 11 states"):  # fmt: skip
