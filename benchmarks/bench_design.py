@@ -25,10 +25,11 @@ Usage:
         [--before c5ab016 --before-file offline_design/designs/cm_certified.yaml]
         [--scaling] [--only-scaling] [--keep DIR] [--smoke]
 
-`--smoke` runs the scaling code at a tiny size and no design: three of the ten
-parameters varied (8 corners and 8 interior vehicles), one parameter direction (256
-vertices), one closure iteration, and the invariant-ellipsoid LMI on 8 and 10 states over
-16 of those vertices: seconds, its figures mean nothing.
+`--smoke` runs the scaling code at a tiny size and no design: two of the ten
+parameters varied (4 corners and 4 interior vehicles), no parameter direction (128
+vertices: the box's 64 corners at both ends of rho_f), one closure iteration, and the
+invariant-ellipsoid LMI on 8 and 10 states over 16 vertices of one direction: seconds,
+its figures mean nothing.
 """
 
 from __future__ import annotations
@@ -251,7 +252,7 @@ def main() -> int:
     design_file = ROOT / args.design
     if args.smoke:
         print("smoke: the scaling code at a tiny size, no design (the figures mean nothing)")
-        vertex_scaling(design_file, (1,), onset=False, smoke=True)
+        vertex_scaling(design_file, (0,), onset=False, smoke=True)
         state_scaling((8, 10), 16, smoke=True)
         return 0
     if not args.only_scaling:

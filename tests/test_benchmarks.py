@@ -62,8 +62,8 @@ FIGURES = {
     ],
     "bench_design": [
         r"^smoke: the scaling code at a tiny size",
-        # the closure on 256 vertices: the blocks it held, or why it does not close there
-        rf"^ +256 +{NUM} +(\d+|not closed: .+)$",
+        # the closure on 128 vertices: the blocks it held, or why it does not close there
+        rf"^ +128 +{NUM} +(\d+|not closed: .+)$",
         rf"^ +10 +{NUM} +\d+ +(\d\.\d+|none found)$",  # the ellipsoid LMI on 10 states
     ],
 }
