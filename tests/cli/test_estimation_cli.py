@@ -2,6 +2,8 @@
 
 import re
 
+import pytest
+
 from fahv.cli import main
 
 
@@ -18,6 +20,17 @@ def test_estimation_prints_each_bound_and_the_tubes_verdict(capsys):
     assert re.search(r"worst case at a frozen vertex \(exact, reached\): h 36\.\d+ ft, V 8\.9\d* "
                      r"ft/s, alpha 0\.678\d* deg.*: above the attitude requirement", out)
     assert re.search(r"of its certified level: NOT certified \(\d+x the room\)", out)
+    # the tube of the estimate: the sensor noise alone needs 13.7 and 9.95 times the room
+    # (measured), the state-feedback tube of the same vertices about half of it
+    assert re.search(r"from the sensor noise \(.*\): V 0\.327\d* ft/s, alpha 0\.034\d* deg", out)
+    m = re.search(r"state feedback for the design's W: tightening (\S+) and (\S+) of the room",
+                  out)  # fmt: skip
+    assert m and 0.4 < float(m.group(1)) < 0.6 and 0.4 < float(m.group(2)) < 0.6
+    m = re.search(r"the estimate's tube for the sensor noise alone: tightening (\S+) and (\S+) "
+                  r"of the room .*: no room is left for the nominal: no output-feedback tube of "
+                  r"this synthesis exists for these sensors", out)  # fmt: skip
+    assert m and float(m.group(1)) == pytest.approx(13.7, rel=0.05)
+    assert float(m.group(2)) == pytest.approx(9.95, rel=0.05)
 
 
 def test_estimation_of_a_scenario_without_an_estimator_is_refused(capsys):
@@ -38,8 +51,8 @@ def test_estimation_names_what_its_bounds_leave_out(tmp_path, capsys):
     d["sensor_fault"] = {"kind": "stuck", "channel": "h", "t_onset": 50.0}
     path = tmp_path / "kalman_servo.yaml"
     path.write_text(yaml.safe_dump(d, sort_keys=False))
-    assert main(["estimation", str(path)]) == 0
+    assert main(["estimation", str(path), "--no-tube"]) == 0
     out = capsys.readouterr().out
-    assert "NOT certified" in out
+    assert "NOT certified" in out and "output-feedback tube" not in out
     assert "note: the scenario's sensor fault (stuck) is not in these bounds" in out
     assert "note: the scenario's actuators (second_order) are not in the filter's model" in out

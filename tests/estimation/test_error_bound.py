@@ -125,3 +125,37 @@ def test_noise_beyond_white_is_refused():
     with pytest.raises(ValueError, match="channel 'q' has bias besides white noise"):
         white_noise_only(data, MEASURED)
     white_noise_only(load_sensors(), MEASURED)  # the packaged sensors: white only
+
+
+def test_the_filters_correction_bounds_are_reached(certified, study):
+    """The row bounds of the estimate's correction (fahv.estimation.output_feedback) are
+    exact: the sign vector of a gain row at its noise bounds reaches the sensor part, and
+    the ellipsoid's support point at the worst pair of vertices reaches the error part;
+    random points of the ellipsoid and of the noise box stay within them."""
+    from fahv.estimation.kalman import augmented
+    from fahv.estimation.output_feedback import error_part, sensor_part
+
+    _, design, vehicle = certified
+    a, data = design.arrays, load_sensors()
+    flt = design_filter(a, vehicle, data, MEASURED, 0.02, 5, a["x0"][None])
+    L, v_max, r, S = flt.L, study.v_max, study.r_joint, study.covariance.S
+    Az = augmented(np.asarray(flt.lpv.A), np.asarray(flt.lpv.B))
+    Cz = np.hstack([flt.C, np.zeros((len(flt.C), 2))])
+    sens, err = sensor_part(L, v_max), error_part(L, Cz, Az, S, r)
+    s = ALPHA
+    j = int(np.argmax(np.abs(L[:, s, :]) @ v_max))
+    assert L[j, s] @ (np.sign(L[j, s]) * v_max) == pytest.approx(sens[s], rel=1e-12)
+    rows = np.einsum("jy,iyk->ijk", L[:, s, :], Cz @ Az)  # (R, R, 11): the rows of state s
+    i, jj = np.unravel_index(np.argmax(np.einsum("ijk,kl,ijl->ij", rows, S, rows)), rows.shape[:2])
+    ell = rows[i, jj]
+    e = r * S @ ell / np.sqrt(ell @ S @ ell)  # on the ellipsoid's boundary
+    assert e @ np.linalg.solve(S, e) == pytest.approx(r**2, rel=1e-9)
+    assert ell @ e == pytest.approx(err[s], rel=1e-9)
+    rng = np.random.default_rng(0)
+    Sh = np.linalg.cholesky(S)
+    u = rng.normal(size=(2000, 11))
+    pts = r * (u / np.linalg.norm(u, axis=1)[:, None]) @ Sh.T
+    assert np.abs(np.einsum("ijk,pk->ijp", rows, pts)).max() <= err[s] * (1 + 1e-12)
+    v = rng.uniform(-1, 1, (2000, len(v_max))) * v_max
+    assert np.abs(np.einsum("jsy,py->jsp", L, v)).max(axis=(0, 2)).max() <= sens.max()
+    assert np.all(np.abs(np.einsum("jsy,py->jsp", L, v)).max(axis=(0, 2)) <= sens + 1e-15)

@@ -80,6 +80,33 @@ def study_lines(study, measured, design_name: str) -> list[str]:
     ]  # fmt: skip
 
 
+def tube_lines(of) -> list[str]:
+    """The lines `fahv estimation` prints of an `OutputFeedbackTube`.
+
+    `of` is a `fahv.estimation.output_feedback.OutputFeedbackTube`.
+    """
+
+    def fit(t) -> str:
+        return (f"tightening {t.share[0]:.3g} and {t.share[1]:.3g} of the room of Phi and "
+                f"delta_e, support of Z in alpha {np.degrees(t.attitude[0]):.3g} deg and theta "
+                f"{np.degrees(t.attitude[1]):.3g} deg (lam {t.lam:g})")  # fmt: skip
+
+    est = of.estimate
+    verdict = ("it fits" if est.fits else "no room is left for the nominal: no output-feedback "
+               "tube of this synthesis exists for these sensors")  # fmt: skip
+    return [
+        "output-feedback tube (the tube of the estimate, Mayne et al. 2006): the filter's "
+        "correction L(p) (C e + v) moves the estimate by up to",
+        f"  from the sensor noise (|v| within its run-long bound): "
+        f"{state_values(of.sensor, range(1, 9))}",
+        f"  from the estimation error (its run-long ellipsoid): "
+        f"{state_values(of.error, range(1, 9))}",
+        f"  tube LMI (24-28) on the design's LPV vertices (the eight states after h), state "
+        f"feedback for the design's W: {fit(of.state_feedback)}",
+        f"  the estimate's tube for the sensor noise alone: {fit(est)}: {verdict}",
+    ]
+
+
 def cmd_estimation(args) -> int:
     """Print the bounds of a scenario's Kalman filter and the tube's room for them."""
     from fahv.estimation.study import estimate_study  # cvxpy and scipy.stats: here only
@@ -102,6 +129,12 @@ def cmd_estimation(args) -> int:
     name = design.summary.get("design_name", c.get("design", ""))
     for line in study_lines(study, measured, name):
         print(line)
+    if not args.no_tube:
+        from fahv.estimation.output_feedback import output_feedback_tube
+
+        of = output_feedback_tube(flt, a, study.covariance.S, study.r_joint, study.v_max)
+        for line in tube_lines(of):
+            print(line)
     fault = (c.get("sensor_fault") or {}).get("kind", "none")
     if fault != "none":
         print(f"note: the scenario's sensor fault ({fault}) is not in these bounds: they are "
@@ -125,12 +158,15 @@ def add_parsers(sub) -> None:
         "whole run stays within with probability p; the exact worst cases at the frozen "
         "vertices of the noise and the model error taken as bounded sequences (a lower "
         "bound on any set-based certificate); and what the estimate's error adds to the "
-        "tube's one-step level when the tube law feeds it back.",
+        "tube's one-step level when the tube law feeds it back; and whether a tube of the "
+        "estimate (output-feedback tube MPC) fits the inputs' room.",
     )
     p.add_argument("scenario", help="scenario file with estimator.kind kalman, e.g. "
                    "offline_design/scenarios/case1_kalman.yaml")  # fmt: skip
     p.add_argument("--design-dir", default=None, help="artefact folder of the stored design")
     p.add_argument("--probability", type=float, default=0.99,
                    help="probability of the run-long statements (default 0.99)")  # fmt: skip
+    p.add_argument("--no-tube", action="store_true",
+                   help="leave out the output-feedback tube (its LMIs take about 10 s)")
     add_vehicle_option(p)
     p.set_defaults(func=cmd_estimation)
