@@ -40,9 +40,10 @@ def test_estimation_of_a_scenario_without_an_estimator_is_refused(capsys):
            "estimate to bound" in err  # fmt: skip
 
 
-def test_estimation_names_what_its_bounds_leave_out(tmp_path, capsys):
+def test_estimation_names_what_its_bounds_leave_out_and_scales_the_noise(tmp_path, capsys):
     """A scenario on servos with a sensor fault: the bounds are printed, and two notes
-    say that neither the fault nor the servos are in them."""
+    say that neither the fault nor the servos are in them. With sensors a hundred times
+    quieter the tube of the estimate fits (0.86 and 0.63 of the room, measured)."""
     import yaml
 
     d = yaml.safe_load(open("offline_design/scenarios/case1_kalman.yaml"))
@@ -51,8 +52,19 @@ def test_estimation_names_what_its_bounds_leave_out(tmp_path, capsys):
     d["sensor_fault"] = {"kind": "stuck", "channel": "h", "t_onset": 50.0}
     path = tmp_path / "kalman_servo.yaml"
     path.write_text(yaml.safe_dump(d, sort_keys=False))
-    assert main(["estimation", str(path), "--no-tube"]) == 0
+    assert main(["estimation", str(path), "--noise-scale", "0.01"]) == 0
     out = capsys.readouterr().out
-    assert "NOT certified" in out and "output-feedback tube" not in out
+    assert "sensors: every measured channel's noise stddev times 0.01" in out
+    m = re.search(r"the estimate's tube for the sensor noise alone: tightening (\S+) and (\S+) "
+                  r"of the room .*: it fits", out)  # fmt: skip
+    assert m and float(m.group(1)) == pytest.approx(0.855, rel=0.05)
+    assert float(m.group(2)) == pytest.approx(0.63, rel=0.05)
     assert "note: the scenario's sensor fault (stuck) is not in these bounds" in out
     assert "note: the scenario's actuators (second_order) are not in the filter's model" in out
+
+
+@pytest.mark.parametrize("scale", ["0", "nan", "-1"])
+def test_a_noise_scale_that_is_not_positive_is_refused(scale, capsys):
+    assert main(["estimation", "offline_design/scenarios/case1_kalman.yaml", "--noise-scale",
+                 scale]) == 2  # fmt: skip
+    assert "--noise-scale must be a positive number" in capsys.readouterr().err

@@ -12,7 +12,7 @@ from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.errors import SpecError
 from fahv.estimation.kalman import W_SIGMAS, design_filter
 from fahv.model.vehicle import STATE_NAMES, STATE_UNITS
-from fahv.sensors.data import CHANNEL_UNITS, load_sensors, measured_channels
+from fahv.sensors.data import CHANNEL_UNITS, load_sensors, measured_channels, replace_channel
 from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, plant_choices
 
 #: Names and units of the filter's state z = [x; d] (`fahv.estimation.kalman`).
@@ -80,6 +80,21 @@ def study_lines(study, measured, design_name: str) -> list[str]:
     ]  # fmt: skip
 
 
+def scaled_noise(data, measured, scale: float):
+    """The sensor data with the white-noise stddev of each measured channel times `scale`.
+
+    Raises
+    ------
+    SpecError
+        If `scale` is not a positive finite number.
+    """
+    if not (np.isfinite(scale) and scale > 0.0):
+        raise SpecError(f"--noise-scale must be a positive number, got {scale}")
+    for c in measured:
+        data = replace_channel(data, c, stddev=data.channels[c].stddev * scale)
+    return data
+
+
 def tube_lines(of) -> list[str]:
     """The lines `fahv estimation` prints of an `OutputFeedbackTube`.
 
@@ -119,7 +134,7 @@ def cmd_estimation(args) -> int:
         raise SpecError(f"{args.scenario}: estimator.kind is {NO_ESTIMATOR!r} (the controller "
                         "reads the exact state): there is no estimate to bound")  # fmt: skip
     measured = measured_channels(plant_choices(c)["measured"])
-    data = load_sensors(args.vehicle)
+    data = scaled_noise(load_sensors(args.vehicle), measured, args.noise_scale)
     a = design.arrays
     flt = design_filter(a, vehicle, data, measured, c["Ts"], c["plant_substeps"], a["x0"][None])
     cert = design.summary["certificate"]
@@ -127,14 +142,16 @@ def cmd_estimation(args) -> int:
     study = estimate_study(flt, a, data, measured, c["Ts"], round(c["duration"] / c["Ts"]),
                            level, args.probability)  # fmt: skip
     name = design.summary.get("design_name", c.get("design", ""))
+    if args.noise_scale != 1.0:
+        print(f"sensors: every measured channel's noise stddev times {args.noise_scale:g} "
+              "(the filter designed for it)")  # fmt: skip
     for line in study_lines(study, measured, name):
         print(line)
-    if not args.no_tube:
-        from fahv.estimation.output_feedback import output_feedback_tube
+    from fahv.estimation.output_feedback import output_feedback_tube
 
-        of = output_feedback_tube(flt, a, study.covariance.S, study.r_joint, study.v_max)
-        for line in tube_lines(of):
-            print(line)
+    of = output_feedback_tube(flt, a, study.covariance.S, study.r_joint, study.v_max)
+    for line in tube_lines(of):
+        print(line)
     fault = (c.get("sensor_fault") or {}).get("kind", "none")
     if fault != "none":
         print(f"note: the scenario's sensor fault ({fault}) is not in these bounds: they are "
@@ -166,7 +183,9 @@ def add_parsers(sub) -> None:
     p.add_argument("--design-dir", default=None, help="artefact folder of the stored design")
     p.add_argument("--probability", type=float, default=0.99,
                    help="probability of the run-long statements (default 0.99)")  # fmt: skip
-    p.add_argument("--no-tube", action="store_true",
-                   help="leave out the output-feedback tube (its LMIs take about 10 s)")
+    p.add_argument("--noise-scale", type=float, default=1.0,
+                   help="scale every measured channel's noise stddev by this factor (the "
+                        "filter re-designed for it): what sensor quality a certificate "
+                        "needs (default 1)")  # fmt: skip
     add_vehicle_option(p)
     p.set_defaults(func=cmd_estimation)
