@@ -328,6 +328,10 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     }
     for name, value in law.node_values(a, c).items():
         controller.update(flat_parameter(name, value))
+    nominal = {k: _plain(v) for k, v in law.nominal.node_values(a, c).items()}
+    est_tau = float((c.get("estimator") or {}).get("nominal_est_tau", 0.0))
+    if "mpc.est_tau" in nominal and est_tau > 0.0 and estimator_kind(c) != NO_ESTIMATOR:
+        nominal["mpc.est_tau"] = est_tau  # the scenario's, for a loop on the estimate
     return {
         **vehicle_parameters(design, common),
         "fault_injector": {**common, **fault},
@@ -339,7 +343,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
             **{f"command.{k}": (val if k == "kind" else float(val)) for k, val in cmd.items()},
             "nominal": law.nominal.name,
             "level_max": float(c["nominal"]["level_max"]),
-            **{k: _plain(v) for k, v in law.nominal.node_values(a, c).items()},
+            **nominal,
             **notch_values,
             **{k: val for name in ("u_lo", "u_hi", "Dx", "Du") for k, val in mat(name).items()},
             **mat("x0", x0_meas),

@@ -210,6 +210,11 @@ ESTIMATOR = (
     Field("kind", "str", "state estimator of the flight computer: none (the exact state of "
           "a full-state sensor, the paper's loop) or kalman (a gain-scheduled Kalman filter "
           "on the measured channels)", choices=ESTIMATORS, default=NO_ESTIMATOR),
+    Field("nominal_est_tau", "float", "time constant of the nominal MPC's state-disturbance "
+          "estimate when the flight computer estimates the state (replaces the design's "
+          "mpc.est_tau in the run: the estimate is noisier than the exact state it was "
+          "designed for, and the filter estimates an input disturbance itself); 0: the "
+          "design's", unit="s", lo=0.0, hi=1e3, default=0.0),
 )  # fmt: skip
 
 
