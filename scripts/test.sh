@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Install everything (scripts/setup.sh), then run the linters, the test suite and the
-# strict build of the documentation site; the site builds beside the workspace build and
-# the tests (its output follows theirs) and a failure of either fails the script.
+# strict build of the documentation site. The site and the ROS 2 workspace build beside
+# the linters and the tests (their output follows the tests'); a failure of any fails
+# the script.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
@@ -22,7 +23,18 @@ trap 'rm -f "$docs_log" "$warm_log"' EXIT
   .venv/bin/fahv simulate offline_design/scenarios/case1.yaml --duration 1 --no-record
 } > "$warm_log" 2>&1 &
 warm=$!
-bash scripts/setup.sh
+# the ROS 2 workspace and the live test's client (scripts/setup.sh) beside the linters and
+# the tests: a test marked `ros` waits until the build has ended (tests/conftest.py reads
+# its exit status from the file FAHV_ROS_BUILD names, written once it is known)
+build_log="$(mktemp)"
+build_status="$(mktemp -u)"
+trap 'rm -f "$docs_log" "$warm_log" "$build_log" "$build_status"' EXIT
+{
+  if bash scripts/setup.sh > "$build_log" 2>&1; then rc=0; else rc=$?; fi
+  echo "$rc" > "$build_status.part" && mv "$build_status.part" "$build_status"
+} &
+build=$!
+export FAHV_ROS_BUILD="$build_status" FAHV_ROS_BUILD_LOG="$build_log"
 .venv/bin/ruff check src tests benchmarks ros_ws/src
 # layer contracts of pyproject.toml; the ROS packages are analysed from their sources
 PYTHONPATH="$(printf '%s:' "$here"/ros_ws/src/hsv_*)" .venv/bin/lint-imports
@@ -36,6 +48,12 @@ grep -E "^(design|verified)" "$warm_log" | sed 's/^/[verify] /'
 # "-n 0" after the command runs the suite in one process
 tests=0
 .venv/bin/python -m pytest -n auto --dist loadfile "$@" || tests=$?
+wait "$build" || true
+sed 's/^/[build] /' "$build_log"
+if [ "$(cat "$build_status" 2>/dev/null)" != "0" ]; then
+  echo "[build] error: scripts/setup.sh failed (above)" >&2
+  tests=1
+fi
 site=0
 wait "$docs" || site=$?
 echo "[docs] $(tail -n 1 "$docs_log")"

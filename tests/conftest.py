@@ -1,7 +1,9 @@
 import copy
+import functools
 import json
 import os
 import subprocess
+import time
 import warnings
 from pathlib import Path
 
@@ -16,6 +18,43 @@ from fahv.spec.files import spec_file
 ROOT = Path(__file__).resolve().parents[1]
 #: The paper's Case 1 design with its scenario: the quick design of the tests.
 SCENARIO = "offline_design/scenarios/case1_paper.yaml"
+
+
+#: The longest a test marked `ros` waits for the workspace build beside the suite [s].
+BUILD_WAIT_S = 900.0
+
+
+@functools.cache
+def _workspace_build(status: str, log: str) -> str:
+    """'' once the build `scripts/test.sh` runs beside the suite has succeeded, else why not.
+
+    `status` is the file its exit status is written to when the build ends, `log` its
+    output.
+    """
+    path, deadline = Path(status), time.monotonic() + BUILD_WAIT_S
+    while not path.exists():
+        if time.monotonic() > deadline:
+            return f"the ROS 2 workspace build did not end within {BUILD_WAIT_S:.0f} s"
+        time.sleep(0.5)
+    rc = path.read_text().strip()
+    if rc == "0":
+        return ""
+    tail = Path(log).read_text(errors="replace")[-3000:] if Path(log).is_file() else ""
+    return f"the ROS 2 workspace build failed (exit status {rc}):\n{tail}"
+
+
+def pytest_runtest_setup(item):
+    """A test marked `ros` waits for the workspace build that runs beside the suite.
+
+    `scripts/test.sh` builds ros_ws while the tests start (environment variable
+    `FAHV_ROS_BUILD`: the file the build's exit status goes to); without it the
+    workspace is taken as built.
+    """
+    status = os.environ.get("FAHV_ROS_BUILD")
+    if status and item.get_closest_marker("ros") is not None:
+        why = _workspace_build(status, os.environ.get("FAHV_ROS_BUILD_LOG", ""))
+        if why:
+            pytest.fail(why, pytrace=False)
 
 
 @pytest.fixture(scope="session")
