@@ -141,3 +141,17 @@ def test_case1_kalman_meets_the_requirements_on_the_estimate():
     assert max(m["alpha_err_max_deg"], m["theta_err_max_deg"]) <= 0.5
     assert m["input_limit_violations"] == 0
     assert m["tube_level_max"] > 1.0  # the estimate's error is not in the tube
+
+
+def test_the_filter_compiles_its_predictor_when_built(certified):
+    """The estimator node's first prediction falls in a timed step: the filter compiles
+    the RK4 kernel when it is built, and its predictions add no specialisation."""
+    from fahv.plant import rk4
+
+    a = certified.arrays
+    est = design_filter(a, load_vehicle(), load_sensors(), DEFAULT_MEASURED, 0.02, 5,
+                        a["x0"][None])  # fmt: skip
+    n = len(rk4.rk4_cm.signatures)
+    assert n >= 1
+    est.predict(np.zeros((1, 2)))
+    assert len(rk4.rk4_cm.signatures) == n

@@ -124,7 +124,9 @@ def tube_lines(of) -> list[str]:
 
 def cmd_estimation(args) -> int:
     """Print the bounds of a scenario's Kalman filter and the tube's room for them."""
-    from fahv.estimation.study import estimate_study  # cvxpy and scipy.stats: here only
+    # cvxpy and scipy.stats: here only
+    from fahv.estimation.output_feedback import output_feedback_tube
+    from fahv.estimation.study import estimate_study
 
     t0 = time.monotonic()
     spec, design, vehicle = load_or_design(args.scenario, args.design_dir, args.vehicle,
@@ -147,8 +149,6 @@ def cmd_estimation(args) -> int:
               "(the filter designed for it)")  # fmt: skip
     for line in study_lines(study, measured, name):
         print(line)
-    from fahv.estimation.output_feedback import output_feedback_tube
-
     of = output_feedback_tube(flt, a, study.covariance.S, study.r_joint, study.v_max)
     for line in tube_lines(of):
         print(line)

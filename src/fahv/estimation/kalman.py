@@ -33,7 +33,7 @@ import scipy.linalg
 
 from fahv.model.lpv import PolytopicLPV
 from fahv.model.vehicle import H, V
-from fahv.plant.rk4 import params_records, rk4_cm
+from fahv.plant.rk4 import compile_kernels, params_records, rk4_cm
 from fahv.sensors.data import SensorData
 from fahv.sensors.measure import output_matrix
 
@@ -185,6 +185,7 @@ class GainScheduledKalman:
         self.restart(np.ones(len(x0), dtype=bool), x0)
         self.rec = params_records([params] * len(x0))
         self.limits, self.Ts, self.n_sub = limits, float(Ts), int(n_sub)
+        compile_kernels(self.rec)  # the predictor's kernel now, not in a timed step
 
     def restart(self, runs: np.ndarray, x0: np.ndarray) -> None:
         """Put the filters of `runs` back at their start: x = x0, d = 0.

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fahv.estimation.kalman import augmented
 from fahv.synthesis.feedback import design_tube
 
 #: Contraction factors tried by the tube LMI (the state-feedback tube of the LPV
@@ -86,7 +87,13 @@ def error_part(L: np.ndarray, Cz: np.ndarray, Az: np.ndarray, S: np.ndarray,
     Returns
     -------
     (n_z,) ndarray
-        max_ij r sqrt((L_j C_z A_z,i S A_z,i' C_z' L_j')_ss) per state s.
+        max_ij r sqrt((L_j C_z A_z,i S A_z,i' C_z' L_j')_ss) per state s [the state's
+        unit].
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If S is not positive definite.
     """
     Sh = np.linalg.cholesky(np.asarray(S, float))
     CA = np.einsum("yk,ikl,lm->iym", Cz, Az, Sh)  # (R, n_y, n_z): C_z A_z,i S^1/2
@@ -207,8 +214,6 @@ def output_feedback_tube(flt, arrays, S: np.ndarray, r: float,
     DesignError
         If a tube LMI fails (`tube_fit`).
     """
-    from fahv.estimation.kalman import augmented
-
     L = np.asarray(flt.L, float)
     Az = augmented(np.asarray(flt.lpv.A, float), np.asarray(flt.lpv.B, float))
     Cz = np.hstack([flt.C, np.zeros((len(flt.C), Az.shape[1] - flt.C.shape[1]))])

@@ -107,19 +107,7 @@ class Plant:
         #: Actuator states (B, 4) [Phi, Phi_dot 1/s, delta_e rad, delta_e_dot rad/s]
         #: (None before the first step; rates zero for ideal actuators).
         self.a: np.ndarray | None = None
-        self._compile()
-
-    def _compile(self) -> None:
-        """Compile the kernels now (or load them from disk), on a zero-length step.
-
-        A cold compile takes seconds: in the plant node it then falls in the start-up,
-        not in step 1, which every peer's watchdog times. Changes no state.
-        """
-        u = np.zeros((len(self.x), 2))
-        self._kernel(self.x, u, self.records, 0.0, 1)
-        if self.servos is not None:
-            a, hold = np.zeros((len(u), 4)), np.zeros(len(u), bool)
-            self._kernel_act(self.x, a, u, self.records, self.servos, hold, 0.0, 1)
+        rk4.compile_kernels(self.records, self.servos)  # now, not in a timed step
 
     @property
     def positions(self) -> np.ndarray | None:

@@ -259,3 +259,28 @@ def rk4_cm_act(X, A, U, P, AP, held, Ts, n_sub):  # pragma: no cover - compiled
         out[b] = x
         out_a[b] = a
     return out, out_a
+
+
+def compile_kernels(P: np.ndarray, servos: np.ndarray | None = None) -> None:
+    """Compile `rk4_cm` (and `rk4_cm_act` with `servos`) now, or load them from disk.
+
+    Numba compiles a kernel at its first call; in a loop node that call would fall in a
+    step its peers' watchdogs time (a cold compile takes seconds: on a fresh clone with
+    three graphs starting at once it outlasted the 10 s watchdog). Every object that
+    integrates with these kernels (the plant, the nominal CM, the Kalman filter's
+    predictor) calls this when it is built. One zero-length step of one vehicle, with
+    the argument types every later call passes (C-contiguous float64 states and inputs,
+    records of `PARAMS_DTYPE`, a float Ts and an int n_sub), so no step adds a
+    specialisation. Changes nothing.
+
+    Parameters
+    ----------
+    P : (B,) ndarray of PARAMS_DTYPE
+        Parameter records (the first one is used).
+    servos : (2, 6) ndarray, optional
+        Servo data of `rk4_cm_act` (`fahv.model.actuators.kernel_parameters`).
+    """
+    X, U, P1 = np.ones((1, 9)), np.zeros((1, 2)), np.ascontiguousarray(P[:1])
+    rk4_cm(X, U, P1, 0.0, 1)
+    if servos is not None:
+        rk4_cm_act(X, np.zeros((1, 4)), U, P1, servos, np.zeros(1, bool), 0.0, 1)

@@ -21,7 +21,6 @@ from hsv_common.runtime import main
 from fahv.lanes import Lanes
 from fahv.loop.cores import PlantCore
 from fahv.loop.graph import clock_msg
-from fahv.msg import ControlCommand
 
 
 class PlantNode(LockstepNode):
@@ -35,18 +34,15 @@ class PlantNode(LockstepNode):
     WAIT_FOR_PEERS = True
 
     def make_core(self, p: dict) -> None:
-        """Build the library object from the raw node parameters; compile its step.
+        """Build the library object from the raw node parameters.
 
-        The first step of a plant compiles its integrator (numba; cached on disk, so
-        again after every change of the model's source). A throwaway core takes that
-        step now, before the node is ready: in the loop, a compile of several seconds
-        at step 0 left every peer waiting for step 1 past its watchdog.
+        The core compiles its integrator and sensor kernels when it is built
+        (`fahv.plant.rk4.compile_kernels`), before the node is ready: a compile in a
+        step would leave every peer waiting past its watchdog.
         """
         self.core = PlantCore([p], Lanes(1))
         self.rate = float(p["rate"])  # 0: as fast as the graph steps
         self.t_ready = 0.0
-        warm_up = PlantCore([p], Lanes(1))
-        warm_up.advance(ControlCommand.of(0, 0.0, warm_up.limits.u_min[None, :]))
 
     def _publish_state(self) -> list:
         """/clock, the true state (for the record) and the measurement the estimator reads."""

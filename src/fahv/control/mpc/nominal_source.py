@@ -265,15 +265,14 @@ class TrackingMPCNominal(NominalSource):
                 f"nominal_trajectory: mpc.nominal_model 'cm' needs the 9-state CM design, "
                 f"got {self.n} states"
             )
-        from fahv.plant.rk4 import params_records, rk4_cm  # numba: only for this model
+        from fahv.plant.rk4 import compile_kernels, params_records, rk4_cm  # numba: this model only
 
         veh = load_vehicle(p["vehicle_file"] or None)
         self.nominal_vehicle = params_records([veh.params] * B)
         self._rk4_cm = rk4_cm
         self.limits_lo, self.limits_hi = veh.limits.u_min, veh.limits.u_max
         self.n_sub = int(p["plant_substeps"])
-        # compiled now (a node's start-up, not its first timed step), on a zero-length step
-        rk4_cm(np.ones((B, 9)), np.zeros((B, 2)), self.nominal_vehicle, 0.0, 1)
+        compile_kernels(self.nominal_vehicle)  # now, not in a timed step
 
     def _qp_counts(self) -> tuple[np.ndarray, ...]:
         """Per-run QP counters (solves, fallback, terminal, recovered), each (B,) int64.
