@@ -1,5 +1,6 @@
 """`fahv` imports only the module of the command it runs: the command table is complete,
-and `fahv simulate` starts without matplotlib, Dask or the design pipeline."""
+and `fahv simulate` starts without matplotlib, Dask or the design pipeline, `fahv verify`
+without cvxpy."""
 
 import subprocess
 import sys
@@ -23,5 +24,17 @@ def test_simulate_leaves_the_heavy_modules_of_other_commands_unloaded():
     code = ("import sys; from fahv.cli import build_parser; build_parser('simulate'); "
             "print(sorted(m for m in ('matplotlib', 'dask', 'fahv.design.pipeline', "
             "'fahv.campaign.engine', 'scipy.stats') if m in sys.modules))")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout
+
+
+def test_verify_loads_neither_the_lmi_solver_nor_dask():
+    """`fahv verify` re-checks stored arrays: its command and the checks it calls
+    (fahv.certificate.verify and the synthesis modules' exact checks) import no cvxpy
+    (1.5-2 s of every verify's start) and no Dask."""
+    code = ("import sys; from fahv.cli import build_parser; build_parser('verify'); "
+            "import fahv.certificate.verify, fahv.synthesis.nominal, fahv.synthesis.offline_rmpc, "
+            "fahv.synthesis.rpi_level; "
+            "print(sorted(m for m in ('cvxpy', 'dask', 'fahv.design.pipeline') if m in sys.modules))")  # fmt: skip
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout

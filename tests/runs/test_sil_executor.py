@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fahv.loop.graph import TOPICS
+from fahv.loop.graph import TEARDOWN_MARK, TOPICS, teardown_hung
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import read_run, run_result_of
 from fahv.runs.sil import run_sil
@@ -162,5 +162,18 @@ def test_the_graph_equals_the_simulation_on_either_executor(
     assert run.x.shape == ref.x.shape == (50, 9)
     np.testing.assert_allclose(run.x, ref.x, rtol=1e-9, atol=0)
     np.testing.assert_allclose(run.u, ref.u, rtol=1e-9, atol=0)
-    logs = "".join(p.read_text() for p in (res.bag / "logs").glob("*.log"))
-    assert "teardown hung" not in logs and "Timeout (0:" not in logs
+    for log in (res.bag / "logs").glob("*.log"):
+        _no_hang_but_in_dds_teardown(log.read_text())
+
+
+def _no_hang_but_in_dds_teardown(log: str) -> None:
+    """No node's main thread hung, except in the DDS teardown after it closed with status
+    0, inside rclpy's destruction of its entities: Fast DDS 2.14 can deadlock destroying
+    a participant while its peers leave (hsv_common.runtime.TEARDOWN_S; seen in this test
+    under a loaded suite), which the runner ends and names, the run complete."""
+    if "Timeout (0:" not in log:
+        return
+    assert teardown_hung(log) == 0, log[-3000:]
+    dump = log[log.rfind(TEARDOWN_MARK) :]
+    first = dump.split("(most recent call first):", 1)[1].strip().splitlines()[0]
+    assert "/rclpy/" in first and " in teardown" in dump, dump[-3000:]

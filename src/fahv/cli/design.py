@@ -9,9 +9,6 @@ from pathlib import Path
 
 from fahv.certificate.verify import record_pass, require_verified, verify
 from fahv.cli.common import add_vehicle_option, progress, vehicle_of
-from fahv.cluster import dask_client
-from fahv.design.pipeline import run_design
-from fahv.design.stage_clock import StageClock
 from fahv.errors import DesignError, SpecError
 from fahv.spec.artefacts import load_design, save_design
 from fahv.spec.files import load_design_file, read_yaml_file
@@ -52,6 +49,10 @@ def design_and_store(spec, vehicle, out_dir: Path, log=print, cold: bool = False
     def bar(it):
         return progress(it, desc="sample W", leave=False)
 
+    # here: `fahv verify` (this module's other command) loads neither cvxpy nor Dask
+    from fahv.design.pipeline import run_design
+    from fahv.design.stage_clock import StageClock
+
     previous = _previous_design(out_dir)
     times = None if previous is None else previous.summary.get("stage_times_s")
     start = None if cold or previous is None else previous.arrays
@@ -80,6 +81,8 @@ def cmd_design(args) -> int:
     vehicle = vehicle_of(args)
     out = design_dir(spec.path, spec.name, args.out, vehicle)
     # the workers start while the first stages run in this process
+    from fahv.cluster import dask_client
+
     client, cluster = dask_client(args.scheduler, args.workers)
     try:
         design = design_and_store(spec, vehicle, out, cold=args.cold)

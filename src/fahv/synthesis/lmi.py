@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
-import cvxpy as cp
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from fahv.errors import DesignError
+
+if TYPE_CHECKING:  # cvxpy only where a problem is built: the checks load none
+    import cvxpy as cp
 
 #: Solver used for every LMI (interior point, handles SDP cones); see docs/reference/environment.md.
 SDP_SOLVER = "CLARABEL"
@@ -35,11 +39,14 @@ def solve_lmi(prob: cp.Problem) -> bool:
 
     Examples
     --------
+    >>> import cvxpy as cp
     >>> x = cp.Variable()
     >>> prob = cp.Problem(cp.Minimize(x), [x >= 1.0, x >= -5.0])
     >>> solve_lmi(prob), round(float(prob.value), 6)
     (True, 1.0)
     """
+    import cvxpy as cp
+
     try:
         prob.solve(solver=SDP_SOLVER, **SDP_OPTIONS)
     except cp.error.SolverError:
@@ -73,6 +80,7 @@ def dual_support(constraints) -> np.ndarray:
 
     Examples
     --------
+    >>> import cvxpy as cp
     >>> x = cp.Variable()
     >>> constraints = [x >= 1.0, x >= -5.0]
     >>> solve_lmi(cp.Problem(cp.Minimize(x), constraints))

@@ -23,12 +23,15 @@ rest in gradually (docs/theory/certificate.md).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import cvxpy as cp
 import numpy as np
 
 from fahv.errors import DesignError
 from fahv.synthesis.lmi import SDP_OPTIONS, SDP_SOLVER, psd_tolerance, require_psd, scale_vertices
+
+if TYPE_CHECKING:  # cvxpy only where a problem is built: the checks load none
+    import cvxpy as cp
 
 #: Default decay factor of (34): per-step Lyapunov decrease V+ <= lam V.
 DEFAULT_LAM = 0.9995
@@ -225,6 +228,8 @@ def _check_bounds(u_max) -> np.ndarray:
 
 
 def _invariance_constraints(As, Bs, Q, Y, Xd, ums, lam):
+    import cvxpy as cp
+
     R, n, m = Bs.shape
     cons = [Xd <= ums**2 * (1.0 - _MARGIN)]
     for i in range(R):
@@ -237,6 +242,8 @@ def _invariance_constraints(As, Bs, Q, Y, Xd, ums, lam):
 
 
 def _solve(prob: cp.Problem, what: str) -> None:
+    import cvxpy as cp
+
     try:
         prob.solve(solver=SDP_SOLVER, **SDP_OPTIONS)
     except cp.error.SolverError:
@@ -303,6 +310,8 @@ def design_nominal(A, B, d, u_max, Dx, Du, lam: float = DEFAULT_LAM) -> NominalD
     >>> bool(abs(1.1 + nd.K[0, 0]) < 1.0), bool(input_ratio(nd.K, nd.Q, nd.u_max)[0] <= 1.0)
     (True, True)
     """
+    import cvxpy as cp
+
     if not 0.0 < lam < 1.0:
         raise DesignError(f"nominal decay factor lam must be in (0, 1), got {lam}")
     u_max = _check_bounds(u_max)

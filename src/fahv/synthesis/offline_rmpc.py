@@ -45,7 +45,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cvxpy as cp
 import numpy as np
 
 from fahv.errors import DesignError
@@ -122,6 +121,8 @@ def _min_gamma(As, Bs, z, C, S, Q_outer, eps):
     state and input cost (cost z' C'C z + v' S'S v). `Q_outer`: the previous
     ellipsoid (nesting Q <= (1 - NEST) Q_outer) or None. K = Y Q^-1.
     """
+    import cvxpy as cp
+
     R, n, m = Bs.shape
     Q = cp.Variable((n, n), symmetric=True)
     Y = cp.Variable((m, n))
