@@ -13,10 +13,11 @@ import sys
 
 import numpy as np
 import pytest
+from rosbags.typesys import Stores, get_typestore
 
 from fahv.loop.graph import TOPICS, clock_msg
-from fahv.loop.wire import decode_message, encode, step_of
-from fahv.msg import MESSAGES
+from fahv.loop.wire import STANDARD_TYPES, decode_message, encode, step_of, typestore
+from fahv.msg import MESSAGES, PKG
 from fahv.runs.workspace import ensure_built, ros_env
 
 
@@ -125,3 +126,15 @@ def test_the_codec_agrees_with_rclpy_both_ways():
     assert r.returncode == 0, r.stderr[-3000:]
     typed_topics = [t for t, ros_type in TOPICS.items() if ros_type in MESSAGES]
     assert r.stdout.strip() == f"checked {50 * len(typed_topics)}"  # 50 draws of each topic
+
+
+def test_the_loop_types_are_those_of_ros_2_jazzy():
+    """The codec's store (an empty store, the two standard types of `STANDARD_TYPES` and
+    the hsv_interfaces messages) gives every loop topic's type the definition (what a run
+    file stores as its schema) and the type hash (RIHS01) of rosbags' ROS 2 Jazzy store."""
+    jazzy = get_typestore(Stores.ROS2_JAZZY)
+    jazzy.register({t: typestore().fielddefs[t] for t in set(TOPICS.values()) if t.startswith(PKG)})
+    for msgtype in sorted(set(TOPICS.values())):
+        assert typestore().generate_msgdef(msgtype) == jazzy.generate_msgdef(msgtype), msgtype
+        assert typestore().hash_rihs01(msgtype) == jazzy.hash_rihs01(msgtype), msgtype
+    assert set(STANDARD_TYPES) <= set(jazzy.types)
