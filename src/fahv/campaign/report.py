@@ -499,7 +499,7 @@ def draw_figures(out: Path, data: dict, per_variant: dict, cols: list[str]) -> l
         ax.set_xlabel(label)
         ax.set_ylabel("runs")
         ax.legend(fontsize=7)
-        fig.tight_layout()
+        _margins(fig, top=0.15)
         p = rep / f"hist_{key}.png"
         fig.savefig(p, dpi=110)
         plt.close(fig)
@@ -523,7 +523,7 @@ def draw_figures(out: Path, data: dict, per_variant: dict, cols: list[str]) -> l
             ax.axis("off")
         axes[0, 0].set_ylabel(label, fontsize=8)
         fig.suptitle(f"{label} against the dispersed values", fontsize=9)
-        fig.tight_layout()
+        _margins(fig, hspace=0.45, wspace=0.3)
         p = rep / f"scatter_{key}.png"
         fig.savefig(p, dpi=100)
         plt.close(fig)
@@ -532,6 +532,18 @@ def draw_figures(out: Path, data: dict, per_variant: dict, cols: list[str]) -> l
     if p is not None:
         paths.append(p)
     return paths
+
+
+def _margins(fig, top: float = 0.45, hspace: float = 0.2, wspace: float = 0.2) -> None:
+    """Fixed margins around the axes: room for tick and axis labels and a title.
+
+    `top` [in]; `hspace`, `wspace` as matplotlib's (shares of an axes). matplotlib's
+    tight layout draws each figure once more to measure it: a 1000-run report's figures
+    took 15.5 s of CPU with it and 9 s without (measured).
+    """
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=0.75 / w, right=1.0 - 0.15 / w, bottom=0.55 / h, top=1.0 - top / h,
+                        hspace=hspace, wspace=wspace)  # fmt: skip
 
 
 def worst_indices(per_variant: dict, n: int = 5) -> list[tuple[int, str]]:
@@ -585,7 +597,7 @@ def _worst_trajectories(out: Path, data: dict, per_variant: dict, plt) -> Path |
         ax.set_xlabel("t [s]")
     axes[0, 0].legend(fontsize=7)
     fig.suptitle("worst runs (the worst of each metric in turn)", fontsize=10)
-    fig.tight_layout()
+    _margins(fig, hspace=0.15, wspace=0.25)
     p = out / "report" / "worst_trajectories.png"
     fig.savefig(p, dpi=100)
     plt.close(fig)
