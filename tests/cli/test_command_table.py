@@ -32,9 +32,10 @@ def test_verify_loads_neither_the_lmi_solver_nor_dask():
     """`fahv verify` re-checks stored arrays: its command and the checks it calls
     (fahv.certificate.verify and the synthesis modules' exact checks) import no cvxpy
     (1.5-2 s of every verify's start) and no Dask."""
+    heavy = "('cvxpy', 'dask', 'fahv.design.pipeline')"
     code = ("import sys; from fahv.cli import build_parser; build_parser('verify'); "
             "import fahv.certificate.verify, fahv.synthesis.nominal, fahv.synthesis.offline_rmpc, "
             "fahv.synthesis.rpi_level; "
-            "print(sorted(m for m in ('cvxpy', 'dask', 'fahv.design.pipeline') if m in sys.modules))")  # fmt: skip
+            f"print(sorted(m for m in {heavy} if m in sys.modules))")  # fmt: skip
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout
