@@ -98,6 +98,7 @@ def test_remaking_a_design_into_the_same_arrays_keeps_its_files(tmp_path, monkey
     """`fahv design` (design_and_store) on a folder that holds the same design: the
     stage clock gets the stored stage times, and no file changes."""
     import fahv.cli.design as cli_design
+    import fahv.design.pipeline as pipeline
 
     out = tmp_path / "d"
     seen = []
@@ -107,7 +108,7 @@ def test_remaking_a_design_into_the_same_arrays_keeps_its_files(tmp_path, monkey
         clock.stage("model")
         return _small_design(code_hash=f"code{len(seen)}")
 
-    monkeypatch.setattr(cli_design, "run_design", fake_design)
+    monkeypatch.setattr(pipeline, "run_design", fake_design)
     lines = []
     cli_design.design_and_store(None, None, out, log=lines.append)
     files = {p.name: p.read_bytes() for p in out.iterdir()}

@@ -7,7 +7,7 @@
 - `fahv.campaign.engine`: batches of runs as Dask tasks (batched simulator
   `fahv.loop.batch.simulate_batch`), results written incrementally, resume.
 - `fahv.campaign.store`: the Parquet dataset of a campaign folder.
-- `fahv.campaign.report`: pass rates, failure-probability bounds, worst runs,
-  figures.
+- `fahv.campaign.report`: pass rates, failure-probability bounds, worst runs;
+  `fahv.campaign.figures`: its figures; `fahv.campaign.paired`: the paired comparison.
 - `fahv.campaign.rerun`: one run again, recorded as a run folder (MCAP).
 """

@@ -38,6 +38,7 @@ from scipy.stats import beta
 
 from fahv.campaign import store
 from fahv.campaign.draws import scatter_columns
+from fahv.campaign.figures import WORST_METRICS, draw_figures, metric
 from fahv.campaign.paired import paired_figures, paired_stats, paired_text
 from fahv.spec.coverage import NOT_CERTIFIED, is_certified
 
@@ -71,20 +72,6 @@ _NOMINAL_DEV = (
     ("nominal_eta_2_dot_dev_max", "other_half", 4, False),
 )
 
-#: Metrics of the worst-run tables and histograms: (column, label, how it is made
-#: "worse = larger", requirement key of the histogram line).
-WORST_METRICS = (
-    ("alpha_err_max_deg", "max |alpha - alpha_r| [deg]", abs, "attitude_deg"),
-    ("theta_err_max_deg", "max |theta - theta_r| [deg]", abs, "attitude_deg"),
-    ("h_err_final_ft", "|h - h_c| at the end [ft]", abs, "h_final_ft"),
-    ("V_err_final_fps", "|V - V_c| at the end [ft/s]", abs, "V_final_fps"),
-    ("settling_after_command_s", "settling after the command [s]", abs, "settling_s"),
-    ("tube_level_max", "max tube level e' N^-1 e", abs, None),
-    ("tube_error_h_max_ft", "max |e_h| of the tube error [ft]", abs, None),
-    ("eta_1_dot_rms_after_fault", "RMS eta_1_dot after the fault [1/s]", abs, None),
-    ("delta_e_max_deg", "max delta_e [deg]", abs, None),
-)
-
 
 def failure_bound(k: int, n: int, confidence: float) -> float:
     """One-sided upper bound on the failure probability, k failures in n runs.
@@ -99,11 +86,6 @@ def failure_bound(k: int, n: int, confidence: float) -> float:
     if k >= n:
         return 1.0
     return float(beta.ppf(confidence, k + 1, n - k))
-
-
-def _num(row: dict, key: str) -> float:
-    v = row.get(key)
-    return math.nan if v is None else float(v)
 
 
 def verdicts(row: dict, req: dict, certified: dict | None = None) -> dict[str, bool | None]:
@@ -144,27 +126,27 @@ def nominal_in_range(row: dict, certified: dict | None) -> bool | None:
     if certified is None or row.get("nominal_h_min_ft") is None:
         return None
     lo, hi, oth = (np.asarray(certified[k], float) for k in ("lo", "hi", "other_half"))
-    ok = lo[0] <= _num(row, "nominal_h_min_ft") and _num(row, "nominal_h_max_ft") <= hi[0]
-    ok &= lo[1] <= _num(row, "nominal_V_min_fps") and _num(row, "nominal_V_max_fps") <= hi[1]
+    ok = lo[0] <= metric(row, "nominal_h_min_ft") and metric(row, "nominal_h_max_ft") <= hi[0]
+    ok &= lo[1] <= metric(row, "nominal_V_min_fps") and metric(row, "nominal_V_max_fps") <= hi[1]
     for key, field, i, degrees in _NOMINAL_DEV:
         bound = min(-lo[i], hi[i]) if field == "lohi" else oth[i]
-        ok &= bool(_num(row, key) <= (np.degrees(bound) if degrees else bound))
+        ok &= bool(metric(row, key) <= (np.degrees(bound) if degrees else bound))
     return bool(ok)
 
 
 def _each(row: dict, req: dict) -> dict[str, bool | None]:
     """The verdicts of `verdicts` but "all"."""
-    att = max(_num(row, "alpha_err_max_deg"), _num(row, "theta_err_max_deg"))
-    tube = _num(row, "tube_fraction_inside")
-    settle = _num(row, "settling_after_command_s")
+    att = max(metric(row, "alpha_err_max_deg"), metric(row, "theta_err_max_deg"))
+    tube = metric(row, "tube_fraction_inside")
+    settle = metric(row, "settling_after_command_s")
     return {
         "completes": row["status"] == "ok",
         "attitude": bool(att <= req["attitude_deg"]),
-        "input_limits": _num(row, "input_limit_violations") == 0,
+        "input_limits": metric(row, "input_limit_violations") == 0,
         "tube": None if math.isnan(tube) else bool(tube == 1.0),
         "settling": bool(settle <= req["settling_s"]),
-        "final_h": bool(abs(_num(row, "h_err_final_ft")) <= req["h_final_ft"]),
-        "final_V": bool(abs(_num(row, "V_err_final_fps")) <= req["V_final_fps"]),
+        "final_h": bool(abs(metric(row, "h_err_final_ft")) <= req["h_final_ft"]),
+        "final_V": bool(abs(metric(row, "V_err_final_fps")) <= req["V_final_fps"]),
     }
 
 
@@ -311,7 +293,7 @@ def header_lines(man: dict, rows: list[dict]) -> list[str]:
         f"({data['runs']} samples x variants {', '.join(data['variants'])}); seed "
         f"{data['seed']}, scenario {man['case']['name']}, {man['duration']:g} s per run, "
         f"design {man['design_hash']}. Wall time summed over the runs (worker time): "
-        f"{sum(_num(r, 'wall_s') for r in rows):.0f} s.",
+        f"{sum(metric(r, 'wall_s') for r in rows):.0f} s.",
         "",
         *[
             f"Part {x['session']} ({x['engine']}): {x['new']} runs ({x['failed']} failed) "
@@ -462,7 +444,7 @@ def worst_lines(data: dict, per_variant: dict, shown: list[str], worst: int) -> 
                 continue
 
             def score(r, key=key, worse=worse):
-                x = _num(r, key)
+                x = metric(r, key)
                 return math.inf if math.isnan(x) else worse(x)
 
             top = sorted(rs, key=score, reverse=True)[:worst]
@@ -471,134 +453,6 @@ def worst_lines(data: dict, per_variant: dict, shown: list[str], worst: int) -> 
             lines.append("|---|---|" + "---|" * len(shown))
             for r in top:
                 vals = " | ".join(_fmt(r.get(c)) for c in shown)
-                lines.append(f"| {r['index']} | {_fmt(worse(_num(r, key)))} | {vals} |")
+                lines.append(f"| {r['index']} | {_fmt(worse(metric(r, key)))} | {vals} |")
             lines.append("")
     return lines
-
-
-def draw_figures(out: Path, data: dict, per_variant: dict, cols: list[str]) -> list[Path]:
-    """PNG figures of a campaign: histograms, metric vs parameter, worst trajectories."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    req = data["requirements"]
-    rep = out / "report"
-    rep.mkdir(exist_ok=True)
-    paths = []
-    for key, label, worse, req_key in WORST_METRICS:
-        fig, ax = plt.subplots(figsize=(6, 3.6))
-        for v, rs in per_variant.items():
-            x = np.array([worse(_num(r, key)) for r in rs if r.get(key) is not None])
-            x = x[np.isfinite(x)]
-            if x.size:
-                ax.hist(x, bins=30, alpha=0.6, label=f"{v} (n = {x.size})")
-        if req_key is not None:
-            ax.axvline(req[req_key], color="r", ls="--", label=f"requirement {req[req_key]:g}")
-        ax.set_xlabel(label)
-        ax.set_ylabel("runs")
-        ax.legend(fontsize=7)
-        _margins(fig, top=0.15)
-        p = rep / f"hist_{key}.png"
-        fig.savefig(p, dpi=110)
-        plt.close(fig)
-        paths.append(p)
-        if not cols:
-            continue
-        nc = min(4, len(cols))
-        nr = math.ceil(len(cols) / nc)
-        fig, axes = plt.subplots(nr, nc, figsize=(3.2 * nc, 2.6 * nr), squeeze=False)
-        for ax, c in zip(axes.ravel(), cols, strict=False):
-            for v, rs in per_variant.items():
-                pts = [(_num(r, c), worse(_num(r, key))) for r in rs if r.get(key) is not None]
-                if pts:
-                    a = np.array(pts)
-                    ax.plot(a[:, 0], a[:, 1], ".", ms=3, label=v)
-            if req_key is not None:
-                ax.axhline(req[req_key], color="r", ls="--", lw=0.8)
-            ax.set_xlabel(c, fontsize=8)
-            ax.tick_params(labelsize=7)
-        for ax in axes.ravel()[len(cols) :]:
-            ax.axis("off")
-        axes[0, 0].set_ylabel(label, fontsize=8)
-        fig.suptitle(f"{label} against the dispersed values", fontsize=9)
-        _margins(fig, hspace=0.45, wspace=0.3)
-        p = rep / f"scatter_{key}.png"
-        fig.savefig(p, dpi=100)
-        plt.close(fig)
-        paths.append(p)
-    p = _worst_trajectories(out, data, per_variant, plt)
-    if p is not None:
-        paths.append(p)
-    return paths
-
-
-def _margins(fig, top: float = 0.45, hspace: float = 0.2, wspace: float = 0.2) -> None:
-    """Fixed margins around the axes: room for tick and axis labels and a title.
-
-    `top` [in]; `hspace`, `wspace` as matplotlib's (shares of an axes). matplotlib's
-    tight layout draws each figure once more to measure it: a 1000-run report's figures
-    took 15.5 s of CPU with it and 9 s without (measured).
-    """
-    w, h = fig.get_size_inches()
-    fig.subplots_adjust(left=0.75 / w, right=1.0 - 0.15 / w, bottom=0.55 / h, top=1.0 - top / h,
-                        hspace=hspace, wspace=wspace)  # fmt: skip
-
-
-def worst_indices(per_variant: dict, n: int = 5) -> list[tuple[int, str]]:
-    """(index, variant) of up to `n` worst runs: the worst of each metric in turn."""
-    ranked = []
-    for key, _, worse, _ in WORST_METRICS[:5]:
-        for v, rs in per_variant.items():
-            rs = [r for r in rs if r.get(key) is not None]
-
-            def score(r, key=key, worse=worse):
-                x = _num(r, key)
-                return math.inf if math.isnan(x) else worse(x)
-
-            ranked.append([(r["index"], v) for r in sorted(rs, key=score, reverse=True)])
-    out: list = []
-    for depth in range(max((len(r) for r in ranked), default=0)):
-        for r in ranked:
-            if depth < len(r) and r[depth] not in out:
-                out.append(r[depth])
-            if len(out) >= n:
-                return out
-    return out
-
-
-def _worst_trajectories(out: Path, data: dict, per_variant: dict, plt) -> Path | None:
-    """Overlay of the worst runs' decimated histories (from `trajectories/`)."""
-    keys = worst_indices(per_variant)
-    trajs = {(r["index"], r["variant"]): r for r in store.read_rows(out, store.TRAJECTORIES)}
-    keys = [k for k in keys if k in trajs]
-    if not keys:
-        return None
-    panels = (
-        ("h_err", "h - h_c [ft]"),
-        ("V_err", "V - V_c [ft/s]"),
-        ("alpha_err_deg", "alpha - alpha_r [deg]"),
-        ("theta_err_deg", "theta - theta_r [deg]"),
-        ("delta_e_deg", "delta_e [deg]"),
-        ("tube_level", "tube level"),
-    )
-    fig, axes = plt.subplots(3, 2, figsize=(10, 7.5), sharex=True)
-    for (col, label), ax in zip(panels, axes.ravel(), strict=True):
-        for idx, v in keys:
-            tr = trajs[(idx, v)]
-            ax.plot(tr["t"], tr[col], lw=0.8, label=f"run {idx} ({v})")
-        ax.set_ylabel(label, fontsize=8)
-        if col.endswith("_err_deg"):
-            att = data["requirements"]["attitude_deg"]
-            for s in (-att, att):
-                ax.axhline(s, color="r", ls="--", lw=0.7)
-    for ax in axes[-1]:
-        ax.set_xlabel("t [s]")
-    axes[0, 0].legend(fontsize=7)
-    fig.suptitle("worst runs (the worst of each metric in turn)", fontsize=10)
-    _margins(fig, hspace=0.15, wspace=0.25)
-    p = out / "report" / "worst_trajectories.png"
-    fig.savefig(p, dpi=100)
-    plt.close(fig)
-    return p
