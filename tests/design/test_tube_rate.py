@@ -1,0 +1,58 @@
+"""The tube's share of the elevator servo's rate limit (fahv.tube.rates), on the certified
+design's own tube set and vertices (16384, rebuilt in tests/design/conftest.py)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fahv.config.yamlio import load_yaml
+from fahv.tube.rates import tube_rate
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_tube_part_of_the_elevator_command_leaves_room_in_the_servo_rate(tube_set_case1):
+    """F e of cm_certified moves by at most 1.65 deg per step (0.02 s) over the 16384
+    vertices, Z_8 and W_8; with the nominal's rate rows (0.2 deg per move start) 1.85 deg,
+    inside the elevator servo's 100 deg/s (2 deg per step). Sampled: e on Z_8's boundary
+    and w at W_8's corners never exceed the bound, and the maximiser of the worst vertex
+    reaches it."""
+    d, veh, *_, nv = tube_set_case1
+    A, B = nv.vertices()
+    A8, B8 = A[:, 1:, 1:], B[:, 1:, :]
+    F, N, W = d["F"], d["N"], d["W"]
+    r = tube_rate(A8, B8, F, N, W)
+    de = np.degrees(r.per_step[1])
+    assert de == pytest.approx(1.649, abs=0.005)
+    design = load_yaml((ROOT / "offline_design/designs/cm_certified.yaml").read_text())
+    ts, du_max = float(design["Ts"]), float(design["mpc"]["du_max"][1])
+    servo = np.degrees(veh.actuators["second_order"]["delta_e"].rate_limit_incr) * ts
+    assert servo == pytest.approx(2.0, rel=1e-12) and du_max == 0.2
+    print(f"tube part {de:.3f} + nominal rows {du_max} = {de + du_max:.3f} <= {servo:.2f} deg "
+          f"per step, margin {1 - (de + du_max) / servo:.1%}")  # fmt: skip
+    assert de + du_max <= servo
+    # sampled: random vertices, e on the boundary of Z_8, w at the corners of W_8
+    rng = np.random.default_rng(5)
+    L = np.linalg.cholesky(N)
+    i = rng.integers(0, len(A8), 20000)
+    u = rng.normal(size=(20000, 8))
+    e = (u / np.linalg.norm(u, axis=1, keepdims=True)) @ L.T
+    w = rng.choice([-1.0, 1.0], (20000, 8)) * W
+    Acl = A8[i] + B8[i] @ F
+    step = np.einsum("jk,rk->rj", F, np.einsum("rkl,rl->rk", Acl, e) - e + w)
+    assert np.all(np.abs(step) <= r.per_step * (1 + 1e-12))
+    # the worst vertex's maximiser reaches the Z part exactly
+    v = r.vertex[1]
+    c = (F[1] @ (A8[v] + B8[v] @ F - np.eye(8)))
+    e_star = N @ c / np.sqrt(c @ N @ c)
+    assert float(c @ e_star) == pytest.approx(r.over_z[1], rel=1e-12)
+    assert np.abs(step[:, 1]).max() >= 0.5 * r.per_step[1]  # the samples reach into it
+
+
+def test_tube_rate_refuses_bad_shapes_and_a_negative_w():
+    with pytest.raises(ValueError, match="shapes"):
+        tube_rate(np.zeros((2, 3, 3)), np.zeros((2, 3, 1)), np.zeros((1, 2)), np.eye(3),
+                  np.ones(3))  # fmt: skip
+    with pytest.raises(ValueError, match="non-negative"):
+        tube_rate(np.zeros((1, 1, 1)), np.zeros((1, 1, 1)), [[1.0]], [[1.0]], [-1.0])
