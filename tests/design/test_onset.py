@@ -94,7 +94,8 @@ def test_onset_bound_of_a_stored_tube_set_holds_along_switching_vertices(tube_se
     ts = TubeSet(d["F"], d["N"], d["W"], ab.H, float(d["lam"]), ab.bound, 0.999505,
                  int(d["moves"]), ab.step, ab.w_h)  # fmt: skip
     ob = onset_bound(nv, ts, veh, tm, dict(PAPER_UNCERTAINTY), 0.2, TS, N_SUB, interior=256,
-                     iterations=4, witness_iterations=2)  # fmt: skip
+                     iterations=4, witness_iterations=2,
+                     steady_start=d.get("steady_active"))  # fmt: skip
     print(onset_lines(ob))
     # the lower bound: below the upper one, above 1 at 24 % (the first jump alone is 2.13),
     # and the loss it refutes lies between the certified one and the design's

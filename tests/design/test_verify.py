@@ -43,6 +43,8 @@ def test_every_shipped_design_verifies(name, threads):
                          capture_output=True, text=True, timeout=900)  # fmt: skip
     assert res.returncode == 0, res.stdout + res.stderr
     assert "verified:" in res.stdout and "FAILED" not in res.stdout
+    if name == "cm_certified":  # the servo's rate (tests/design/test_input_rate.py)
+        assert re.search(r"^input rate: .* 1\.849 <= 2\.000 deg per step", res.stdout, re.M)
     model = next(line for line in res.stdout.splitlines() if line.startswith("model:"))
     diff, tol = re.search(r"difference ([0-9.e+-]+) .* <= ([0-9.e+-]+)", model).groups()
     assert float(diff) <= float(tol), model

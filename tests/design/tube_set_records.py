@@ -7,7 +7,9 @@ rho_min, the directions' column scale, W_8's bound and, for a design's own tube 
 its exact level. The tests rebuild the vertex data with the library's code from it.
 
 - ``closed_tube_h_reset.npz``: a tube set of 4096 vertices (k = 5) on the box the
-  certified design of Case 1 reproduces within rounding;
+  certified design of Case 1 reproduces within rounding, with ``steady_active``, the
+  vertices its onset's steady set held (where the onset test's constraint generation
+  starts, `steady_start` of `fahv.onset.bound.onset_bound`);
 - ``closed_tube_h_reset_tau.npz``: a tube set of the adjustable law (tau = 0.8, 8192
   vertices);
 - ``cm_certified``: the shipped certified design's own tube set (k = 7, 16384

@@ -19,6 +19,10 @@ respect; negative when it fails):
     The one-step bound of the nonlinear, perturbed plant over the tube's own domain
     lies inside W_8, and the scheduling box holds the nominal box grown by the tube
     (`check_eight_state`); the exact level is then taken over those vertices.
+`input rate` (eight-state tube, a vehicle with a servo rate limit)
+    The tube's part of the elevator command over Z_8, W_8 and the vertices, plus the
+    nominal plan's rate rows, moves at most the servo's rate limit per step
+    (`check_input_rate`; the disturbance estimate's part is not bounded).
 `attitude`
     The attitude requirement (0.5 deg) follows from the QP's rows plus the support of Z
     in alpha and theta, where the design claimed it.
@@ -296,7 +300,8 @@ def check_eight_state(design: Design, vehicle) -> list[CheckResult]:
     stored F, N without their h row and column, W_8 the stored certificate's. Three
     lines: the one-step bound of the nonlinear plant over the domain inside W_8 (every
     row), the scheduling box holding the nominal box grown by the tube, and the exact
-    worst one-step level of Z_8 (LMI 24 re-checked exactly).
+    worst one-step level of Z_8 (LMI 24 re-checked exactly); a fourth with the elevator
+    servo's rate limit (`check_input_rate`).
     """
     from fahv.bounds.domain import box_shortfall, nominal_box
     from fahv.bounds.one_step_bound import altitude_bound
@@ -343,7 +348,35 @@ def check_eight_state(design: Design, vehicle) -> list[CheckResult]:
             f"Z_8 (LMI 24 along the nominal) re-checked exactly: worst one-step level over "
             f"{A.shape[0]} vertices and every corner of W_8 = {level:.6f} <= 1",
         ),
-    ]  # fmt: skip
+    ] + check_input_rate(A[:, 1:, 1:], B[:, 1:, :], F_8, N_8, W_8, c, vehicle)  # fmt: skip
+
+
+def check_input_rate(A_8, B_8, F_8, N_8, W_8, case: dict, vehicle) -> list[CheckResult]:
+    """The elevator command's rate against the servo's (`fahv.bounds.input_rate.tube_rate`).
+
+    The tube's part F e over Z_8, W_8 and the vertices, plus the nominal plan's rate rows
+    (`mpc.du_max`), against the elevator servo's rate limit times Ts (the vehicle file's
+    `actuators.second_order`). The nominal input's disturbance-estimate part is not
+    bounded (the line says so). No line when the vehicle file gives no finite rate limit.
+    """
+    from fahv.bounds.input_rate import tube_rate
+
+    servo = (vehicle.actuators.get("second_order") or {}).get("delta_e")
+    if servo is None or not np.isfinite(servo.rate_limit_incr):
+        return []
+    limit = np.degrees(min(servo.rate_limit_incr, servo.rate_limit_decr)) * float(case["Ts"])
+    r = tube_rate(A_8, B_8, F_8, N_8, W_8)
+    tube, plan = float(np.degrees(r.per_step[1])), float((case.get("mpc") or {}).get(
+        "du_max", (0.0, 0.0))[1])  # fmt: skip
+    total = tube + plan
+    return [CheckResult(
+        "input rate", bool(total <= limit), 1.0 - total / limit,
+        f"the tube's part of the delta_e command moves at most {tube:.3f} deg per step over "
+        f"{A_8.shape[0]} vertices (Z_8 {np.degrees(r.over_z[1]):.3f}, W_8 "
+        f"{np.degrees(r.over_w[1]):.3f}), with the nominal plan's rate rows {plan:.3f}: "
+        f"{total:.3f} <= {limit:.3f} deg per step of the servo; the disturbance estimate's "
+        "part of the nominal input is not bounded",
+    )]  # fmt: skip
 
 
 def verify(design: Design, vehicle, log: Callable[[str], None] = print) -> list[CheckResult]:

@@ -241,6 +241,10 @@ class OnsetBound:
         between `certified_loss` and the design's loss (an upper bound of what any
         analysis on the tube set's assumptions can certify); the design's loss when its
         own lower bound is at most 1; nan without `witness`.
+    steady_active : tuple of int
+        The vertices the steady set's last LMI held (`steady_set`; empty when
+        `steady_shaped` was given): `steady_start` of a later bound on the same tube set.
+        Not in `summary`.
     """
 
     loss: float
@@ -262,6 +266,7 @@ class OnsetBound:
     jump_rigid_q: float
     witness: OnsetWitness | None = None
     ceiling: float = float("nan")
+    steady_active: tuple[int, ...] = ()
 
     @property
     def level0(self) -> float:
@@ -270,8 +275,9 @@ class OnsetBound:
 
     def summary(self) -> dict:
         """JSON-ready record (the attributes; `jump_share` as a list)."""
+        skip = ("witness", "steady_active")
         out = {k: [float(x) for x in v] if isinstance(v, tuple) else float(v)
-               for k, v in self.__dict__.items() if k != "witness"}  # fmt: skip
+               for k, v in self.__dict__.items() if k not in skip}  # fmt: skip
         if self.witness is not None:
             out["witness"] = {k: float(v) if isinstance(v, float) else int(v)
                               for k, v in self.witness.__dict__.items()}  # fmt: skip
@@ -471,7 +477,7 @@ def onset_bound(nv: NominalVertices, tube_set: TubeSet, vehicle, trim_map,
                 gamma_e: float | None = None, directions=None, projection_scale=None,
                 interior: int = 1024, iterations: int = 6,
                 steady_shaped: float | None = None, steady_lams=None,
-                witness_iterations: int = 4) -> OnsetBound:  # fmt: skip
+                witness_iterations: int = 4, steady_start=None) -> OnsetBound:  # fmt: skip
     """Bound the onset of an elevator loss as a transient of the tube set.
 
     The jumps (module docstring) are taken over the scheduling box at every corner of the
@@ -535,6 +541,10 @@ def onset_bound(nv: NominalVertices, tube_set: TubeSet, vehicle, trim_map,
         Bisection steps for the smallest loss the lower bound refutes (the lower bound at
         the design's loss, then between the certified loss and it; half a minute each
         over 16384 vertices); 0: no lower bound.
+    steady_start : (a,) array_like of int, optional
+        Where the steady set's constraint generation starts at the first contraction
+        factor (an earlier bound's `steady_active` on the same tube set: the same set in
+        one solve); it changes how fast the generation ends, not what is accepted.
 
     Returns
     -------
@@ -562,9 +572,13 @@ def onset_bound(nv: NominalVertices, tube_set: TubeSet, vehicle, trim_map,
     rigid = float(m.z_norm(J_rigid).max())
     bound = steady_disturbance(nv, tube_set, jump_h, gamma)
     c = float((bound / tube_set.W_8).max())
+    active: tuple[int, ...] = ()
     if steady_shaped is None:
-        steady_shaped = min(steady_set(m.Acl_8, tube_set.N_8, tube_set.F_8, bound, lam)[0]
-                            for lam in (steady_lams or (tube_set.lam,)))  # fmt: skip
+        sets = [steady_set(m.Acl_8, tube_set.N_8, tube_set.F_8, bound, lam,
+                           steady_start if i == 0 else None)
+                for i, lam in enumerate(steady_lams or (tube_set.lam,))]  # fmt: skip
+        steady_shaped, _, held = min(sets, key=lambda r: r[0])
+        active = tuple(int(i) for i in held)
     c_s = float(steady_shaped)
     c0 = min(c, c_s)  # the steady level the bound starts from
     cert = _certified_loss(m, c0, loss, j, jb, jr, False, iterations)
@@ -580,5 +594,5 @@ def onset_bound(nv: NominalVertices, tube_set: TubeSet, vehicle, trim_map,
         loss, gamma, 0.0 if gamma_e is None else float(gamma_e), m.a, c, c_s, j, jb, jr,
         float(norm[n_c:].max() / norm[:n_c].max()) if len(norm) > n_c else 0.0,
         c0 + m.peak(j, jb, jr), cert, cert_one_step, jump_h, share, rigid, rigid_q, found,
-        ceiling,
+        ceiling, active,
     )  # fmt: skip

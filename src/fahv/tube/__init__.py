@@ -2,6 +2,5 @@
 
 The vertex tube checked over its domain, the eight-state tube set and its closure, the
 tube loop through the notch filter and a gain designed for it, the QP's rows that keep
-the nominal inside the tube set's range, the input room, the tube's share of the input rates
-and the tube's feasibility.
+the nominal inside the tube set's range, the input room and the tube's feasibility.
 """

@@ -1,13 +1,14 @@
-"""The tube's share of the elevator servo's rate limit (fahv.tube.rates), on the certified
-design's own tube set and vertices (16384, rebuilt in tests/design/conftest.py)."""
+"""The tube's share of the elevator servo's rate limit (fahv.bounds.input_rate), on the
+certified design's own tube set and vertices (16384, rebuilt in tests/design/conftest.py),
+and the `input rate` line of `fahv verify`."""
 
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from fahv.bounds.input_rate import tube_rate
 from fahv.config.yamlio import load_yaml
-from fahv.tube.rates import tube_rate
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -56,3 +57,26 @@ def test_tube_rate_refuses_bad_shapes_and_a_negative_w():
                   np.ones(3))  # fmt: skip
     with pytest.raises(ValueError, match="non-negative"):
         tube_rate(np.zeros((1, 1, 1)), np.zeros((1, 1, 1)), [[1.0]], [[1.0]], [-1.0])
+
+
+def test_the_verify_line_compares_with_the_vehicle_files_servo():
+    """`check_input_rate`: the one-state loop of `tube_rate`'s example (F e moves by 0.75
+    rad per step = 42.97 deg) with plan rows of 1 deg against servos of 2500 and 2000 deg/s
+    at Ts = 0.02 s (50 and 40 deg per step): holds, then fails, margin 1 - 43.97 / limit; no
+    line for a vehicle file without a finite rate limit."""
+    from types import SimpleNamespace
+
+    from fahv.certificate.verify import check_input_rate
+    from fahv.model.actuators import Servo
+
+    args = ([[[1.0]]], [[[0.0, 0.5]]], [[0.0], [-1.0]], [[1.0]], [0.25])
+    case = {"Ts": 0.02, "mpc": {"du_max": [0.0, 1.0]}}
+    for rate, ok in ((2500.0, True), (2000.0, False)):
+        servo = Servo(zeta=0.7, omega_n=150.0, rate_limit_incr=np.radians(rate),
+                      rate_limit_decr=np.radians(rate))  # fmt: skip
+        veh = SimpleNamespace(actuators={"second_order": {"delta_e": servo}})
+        (res,) = check_input_rate(*map(np.asarray, args), case, veh)
+        limit = rate * 0.02
+        assert res.ok is ok and res.margin == pytest.approx(1 - (np.degrees(0.75) + 1) / limit)
+        assert f"{np.degrees(0.75) + 1:.3f} <= {limit:.3f} deg per step" in res.line
+    assert check_input_rate(*map(np.asarray, args), case, SimpleNamespace(actuators={})) == []
