@@ -43,38 +43,6 @@ def _workspace_build(status: str, log: str) -> str:
     return f"the ROS 2 workspace build failed (exit status {rc}):\n{tail}"
 
 
-#: The test files that take longest on one worker (seconds of a CI run, measured per test;
-#: the CPU-heavy ones first, then those that start ROS 2 graphs and wait for the workspace
-#: build). pytest-xdist hands out whole files (--dist loadfile) in collection order, in which
-#: most of these came last (tests/runs, tests/test_benchmarks.py): one worker then ran the
-#: last long file while the other had nothing left. Longest first, the two finish together.
-LONGEST_FIRST = (
-    "tests/design/test_one_step_bound.py",  # 110 s
-    "tests/campaign/test_campaign_engine.py",  # 85 s
-    "tests/design/test_verify.py",  # 65 s
-    "tests/design/test_onset.py",  # 40 s
-    "tests/runs/test_results_reference.py",  # 35 s
-    "tests/runs/test_sil_users.py",  # 120 s
-    "tests/test_benchmarks.py",  # 70 s
-    "tests/runs/test_replay_report.py",  # 33 s
-    "tests/runs/test_sil.py",  # 33 s
-    "tests/runs/test_sil_executor.py",  # 28 s
-    "tests/runs/test_live.py",  # 24 s
-)
-
-
-def pytest_collection_modifyitems(config, items):
-    """The files of `LONGEST_FIRST` first, in its order; the others after them as
-    collected (a stable sort: the tests of a file keep their order)."""
-    root = Path(config.rootpath)
-    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
-
-    def key(item) -> int:
-        return rank.get(Path(item.path).relative_to(root).as_posix(), len(rank))
-
-    items.sort(key=key)
-
-
 def pytest_runtest_setup(item):
     """A test marked `ros` waits for the workspace build that runs beside the suite.
 
