@@ -357,14 +357,31 @@ def check_input_rate(A_8, B_8, F_8, N_8, W_8, case: dict, vehicle) -> list[Check
     The tube's part F e over Z_8, W_8 and the vertices, plus the nominal plan's rate rows
     (`mpc.du_max`), against the elevator servo's rate limit times Ts (the vehicle file's
     `actuators.second_order`). The nominal input's disturbance-estimate part is not
-    bounded (the line says so). No line when the vehicle file gives no finite rate limit.
+    bounded (the line says so).
+
+    Parameters
+    ----------
+    A_8, B_8 : (R, 8, 8), (R, 8, 2) ndarray
+        Vertex matrices of the eight states after h.
+    F_8, N_8, W_8 : (2, 8), (8, 8), (8,) ndarray
+        The tube gain, Z_8's shape and W_8 (state units, inputs [Phi, delta_e rad]).
+    case : dict
+        The design file's data (`Ts` [s], `mpc.du_max` [-, deg]).
+    vehicle : fahv.model.vehicle.Vehicle
+        Its `actuators` give the servo.
+
+    Returns
+    -------
+    list of CheckResult
+        One line; none when the vehicle file gives no finite elevator rate limit.
     """
     from fahv.bounds.input_rate import tube_rate
 
     servo = (vehicle.actuators.get("second_order") or {}).get("delta_e")
-    if servo is None or not np.isfinite(servo.rate_limit_incr):
+    rate = np.inf if servo is None else min(servo.rate_limit_incr, servo.rate_limit_decr)
+    if not np.isfinite(rate):
         return []
-    limit = np.degrees(min(servo.rate_limit_incr, servo.rate_limit_decr)) * float(case["Ts"])
+    limit = float(np.degrees(rate)) * float(case["Ts"])
     r = tube_rate(A_8, B_8, F_8, N_8, W_8)
     tube, plan = float(np.degrees(r.per_step[1])), float((case.get("mpc") or {}).get(
         "du_max", (0.0, 0.0))[1])  # fmt: skip
