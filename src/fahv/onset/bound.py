@@ -242,8 +242,9 @@ class OnsetBound:
         analysis on the tube set's assumptions can certify); the design's loss when its
         own lower bound is at most 1; nan without `witness`.
     steady_active : tuple of int
-        The vertices the steady set's last LMI held (`steady_set`; empty when
-        `steady_shaped` was given): `steady_start` of a later bound on the same tube set.
+        The vertices the steady set's last LMI held at the first contraction factor
+        (`steady_set`; empty when `steady_shaped` was given): `steady_start` of a later
+        bound on the same tube set.
         Not in `summary`.
     """
 
@@ -577,8 +578,8 @@ def onset_bound(nv: NominalVertices, tube_set: TubeSet, vehicle, trim_map,
         sets = [steady_set(m.Acl_8, tube_set.N_8, tube_set.F_8, bound, lam,
                            steady_start if i == 0 else None)
                 for i, lam in enumerate(steady_lams or (tube_set.lam,))]  # fmt: skip
-        steady_shaped, _, held = min(sets, key=lambda r: r[0])
-        active = tuple(int(i) for i in held)
+        steady_shaped = min(r[0] for r in sets)
+        active = tuple(int(i) for i in sets[0][2])  # where `steady_start` applies
     c_s = float(steady_shaped)
     c0 = min(c, c_s)  # the steady level the bound starts from
     cert = _certified_loss(m, c0, loss, j, jb, jr, False, iterations)
