@@ -31,6 +31,14 @@ def test_estimation_prints_each_bound_and_the_tubes_verdict(capsys):
                   r"this synthesis exists for these sensors", out)  # fmt: skip
     assert m and float(m.group(1)) == pytest.approx(13.7, rel=0.05)
     assert float(m.group(2)) == pytest.approx(9.95, rel=0.05)
+    # the probabilistic tube of the loop on the estimate: its re-check, 1 sigma of t, and
+    # the attitude it reaches with the design's rows (0.602 / 0.589 deg, measured)
+    m = re.search(r"covariance bound of \[t; e\] .* re-checked exactly \(smallest eigenvalue "
+                  r"(\S+) >= 0", out)  # fmt: skip
+    assert m and float(m.group(1)) >= 0.0
+    assert re.search(r"1 sigma of t: V 0\.107\d* ft/s, alpha 0\.0204\d* deg", out)
+    assert re.search(r"noise part reach 0\.60\d / 0\.589 deg \(requirement 0\.5 deg\): NOT "
+                     r"certified; nominal rows of 0\.29\d / 0\.31\d deg would be", out)  # fmt: skip
 
 
 def test_estimation_of_a_scenario_without_an_estimator_is_refused(capsys):

@@ -10,7 +10,7 @@ from fahv.certificate.verified import load_or_design
 from fahv.cli.common import add_vehicle_option
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.errors import SpecError
-from fahv.estimation.kalman import W_SIGMAS, design_filter
+from fahv.estimation.kalman import W_SIGMAS, design_filter, measurement_covariance
 from fahv.model.vehicle import STATE_NAMES, STATE_UNITS
 from fahv.sensors.data import CHANNEL_UNITS, load_sensors, measured_channels, replace_channel
 from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, plant_choices
@@ -122,9 +122,45 @@ def tube_lines(of) -> list[str]:
     ]
 
 
+def chance_lines(pt, arrays, p: float, steps: int, R: int) -> list[str]:
+    """The lines `fahv estimation` prints of a `fahv.estimation.closed_loop.ProbabilisticTube`."""
+    from fahv.estimation.closed_loop import attitude_chance, radii
+
+    r_step, r_run = radii(p, steps)
+    req = np.radians(ATTITUDE_BOUND_DEG)
+    reach, need = attitude_chance(pt, arrays["att_max"], arrays["att_support"], r_run, req)
+    ok = bool(np.all(reach <= req))
+    deg = np.degrees
+    verdict = ("certified with probability >= p" if ok else
+               f"NOT certified; nominal rows of {deg(need[0]):.3f} / {deg(need[1]):.3f} deg "
+               "would be")  # fmt: skip
+    return [
+        f"probabilistic tube of the loop on the estimate (u = v + F (x_hat - x_bar); t = x - "
+        f"x_bar, the eight states after h): covariance bound of [t; e] driven by the sensor "
+        f"noise over the {R * R} pairs, re-checked exactly (smallest eigenvalue "
+        f"{pt.min_eig:.3g} >= 0; the LMI held {pt.pairs_held} pairs)",
+        f"  1 sigma of t: {state_values(np.r_[0.0, pt.std_t], range(1, 5))}; of the tube's "
+        f"input u - v: Phi {pt.std_u[0]:.3g}, delta_e {deg(pt.std_u[1]):.3g} deg; of its step: "
+        f"Phi {pt.std_step[0]:.3g}, delta_e {deg(pt.std_step[1]):.3g} deg per step",
+        f"  p = {p} at one step ({r_step:.2f} sigma): alpha {deg(r_step * pt.std_t[1]):.4f}, "
+        f"theta {deg(r_step * pt.std_t[2]):.4f} deg, delta_e step "
+        f"{deg(r_step * pt.std_step[1]):.3f} deg; whole run ({r_run:.2f} sigma): alpha "
+        f"{deg(r_run * pt.std_t[1]):.4f}, theta {deg(r_run * pt.std_t[2]):.4f} deg, delta_e "
+        f"step {deg(r_run * pt.std_step[1]):.3f} deg",
+        f"  attitude (whole run, p >= {p}): nominal rows {deg(arrays['att_max'][0]):.3f} + "
+        f"support of Z {deg(arrays['att_support'][0]):.3f} / {deg(arrays['att_support'][1]):.3f}"
+        f" + noise part reach {deg(reach[0]):.3f} / {deg(reach[1]):.3f} deg (requirement "
+        f"{ATTITUDE_BOUND_DEG} deg): {verdict}",
+        f"  model error through the estimate (w within the design's W; exact worst case at a "
+        f"frozen vertex, a lower bound on any set that holds it, not in the above): "
+        f"{state_values(np.r_[0.0, pt.model_t], range(1, 5))}",
+    ]
+
+
 def cmd_estimation(args) -> int:
     """Print the bounds of a scenario's Kalman filter and the tube's room for them."""
     # cvxpy and scipy.stats: here only
+    from fahv.estimation.closed_loop import joint_system, probabilistic_tube
     from fahv.estimation.output_feedback import output_feedback_tube
     from fahv.estimation.study import estimate_study
 
@@ -152,6 +188,11 @@ def cmd_estimation(args) -> int:
     of = output_feedback_tube(flt, a, study.covariance.S, study.r_joint, study.v_max)
     for line in tube_lines(of):
         print(line)
+    js = joint_system(study.system, a["A"], a["B"], a["F"])
+    g_max = np.r_[np.asarray(a["w_max"], float), 0.0, 0.0]
+    pt = probabilistic_tube(js, measurement_covariance(measured, data), g_max)
+    for line in chance_lines(pt, a, study.p, study.steps, study.system.n_vertices):
+        print(line)
     fault = (c.get("sensor_fault") or {}).get("kind", "none")
     if fault != "none":
         print(f"note: the scenario's sensor fault ({fault}) is not in these bounds: they are "
@@ -175,8 +216,10 @@ def add_parsers(sub) -> None:
         "whole run stays within with probability p; the exact worst cases at the frozen "
         "vertices of the noise and the model error taken as bounded sequences (a lower "
         "bound on any set-based certificate); and what the estimate's error adds to the "
-        "tube's one-step level when the tube law feeds it back; and whether a tube of the "
-        "estimate (output-feedback tube MPC) fits the inputs' room.",
+        "tube's one-step level when the tube law feeds it back; whether a tube of the "
+        "estimate (output-feedback tube MPC) fits the inputs' room; and the probabilistic "
+        "tube of the loop on the estimate (a covariance bound of its deviation from the "
+        "nominal, LMI re-checked exactly) with the attitude it reaches with probability p.",
     )
     p.add_argument("scenario", help="scenario file with estimator.kind kalman, e.g. "
                    "offline_design/scenarios/case1_kalman.yaml")  # fmt: skip

@@ -40,7 +40,7 @@ import numpy as np
 
 from fahv.errors import DesignError
 from fahv.estimation.kalman import GainScheduledKalman, augmented
-from fahv.synthesis.lmi import solve_lmi
+from fahv.synthesis.lmi import dual_support, solve_lmi
 
 #: Strict margin of the covariance LMI (in the coordinates scaled by the filter's own
 #: standard deviations, where S is of order 1): the exact re-check then needs none.
@@ -135,14 +135,15 @@ def _pair_margins(Ss: np.ndarray, Qs: np.ndarray, Ms: np.ndarray) -> np.ndarray:
     return np.linalg.eigvalsh(0.5 * (lhs + np.swapaxes(lhs, -1, -2)))[..., 0]
 
 
-def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 20) -> CovarianceBound:
+def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10) -> CovarianceBound:
     """The smallest (in trace, scaled) common covariance bound of the noise-driven error.
 
     Solves min trace(S) s.t. S - M_ij S M_ij' - N_j R_v N_j' >= COVARIANCE_MARGIN I in the
     coordinates e / sigma, on the matched pairs (i, i) first, then adding per pass the
     `add` pairs of the R^2 whose exact smallest eigenvalue is most negative, until none
-    is (constraint generation): every pair is then re-checked exactly, without a
-    tolerance. If S bounds the covariance of e_k it bounds that of e_k+1 whatever pair
+    is (constraint generation; a pair off the solution's dual support is released, each
+    at most once, `fahv.synthesis.lmi.dual_support`): every pair is then re-checked
+    exactly, without a tolerance. If S bounds the covariance of e_k it bounds that of e_k+1 whatever pair
     the step takes, so the bound holds from a start inside it (the filter's start at
     the trim: its own steady covariance) for any sequence of vertices.
 
@@ -178,7 +179,7 @@ def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 20) -> Covaria
     Ns = es.N / D[None, :, None]
     Qs = np.einsum("jab,bc,jdc->jad", Ns, np.asarray(R_v, float), Ns)
     R, n = es.n_vertices, len(D)
-    held = [(i, i) for i in range(R)]
+    held, released = [(i, i) for i in range(R)], set()
     while True:
         S = cp.Variable((n, n), symmetric=True)
         cons = [S - Ms[i, j] @ S @ Ms[i, j].T - Qs[j] >> COVARIANCE_MARGIN * np.eye(n)
@@ -192,7 +193,11 @@ def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 20) -> Covaria
         if not bad:
             break
         bad.sort(key=lambda p: margins[p])
-        held += bad[:add]
+        # pairs off the dual support are released, each once (then the passes end)
+        support = {held[k] for k in dual_support(cons)}
+        drop = {p for p in held if p not in support and p not in released}
+        released |= drop
+        held = [p for p in held if p not in drop] + bad[:add]
     worst = float(margins.min())
     if worst < 0.0:
         i, j = np.unravel_index(np.argmin(margins), margins.shape)
