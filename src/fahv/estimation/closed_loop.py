@@ -72,7 +72,7 @@ class JointSystem:
         Returns
         -------
         (2, 19) ndarray
-            [F, -F E] [Phi, rad per unit of each state of xi].
+            [F, -F E], in Phi and rad per unit of each state of xi.
         """
         return np.hstack([self.F8, -self.F8 @ self.E])
 
@@ -186,7 +186,7 @@ def model_part(js: JointSystem, g_max: np.ndarray) -> np.ndarray:
     ----------
     js : JointSystem
     g_max : (11,) array_like
-        Bounds of g = [w (9); w_d (2)] [the states' units].
+        Bounds of g = [w (9); w_d (2)], in the states' units.
 
     Returns
     -------

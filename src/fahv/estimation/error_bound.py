@@ -143,9 +143,9 @@ def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10) -> Covaria
     `add` pairs of the R^2 whose exact smallest eigenvalue is most negative, until none
     is (constraint generation; a pair off the solution's dual support is released, each
     at most once, `fahv.synthesis.lmi.dual_support`): every pair is then re-checked
-    exactly, without a tolerance. If S bounds the covariance of e_k it bounds that of e_k+1 whatever pair
-    the step takes, so the bound holds from a start inside it (the filter's start at
-    the trim: its own steady covariance) for any sequence of vertices.
+    exactly, without a tolerance. If S bounds the covariance of e_k it bounds that of
+    e_k+1 whatever pair the step takes, so the bound holds from a start inside it (the
+    filter's start at the trim: its own steady covariance) for any sequence of vertices.
 
     Parameters
     ----------
