@@ -11,6 +11,7 @@ from fahv.loop.batch import simulate_batch
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.plant.rk4 import params_records, rk4_cm
+from fahv.runs.metrics import input_rates
 
 DURATION = 2.0
 SECOND_ORDER = {"actuators": "second_order"}
@@ -38,7 +39,8 @@ def test_ideal_actuators_leave_the_loop_bit_for_bit(design):
 def test_second_order_actuators_in_simulate_and_the_batch(design):
     """Three runs with servos (no fault, stuck elevator, hardover to +30 deg at 0.5 s): the
     batch gives simulate()'s bits; the servo lags the command; the stuck elevator stays
-    where it was at the onset; the hardover moves at 100 deg/s to the limit."""
+    where it was at the onset; the hardover moves at 100 deg/s to the limit, and the run's
+    metrics give that rate for the actuator and the command's jump for the command."""
     t_on = 0.5
     ovs = [
         {"plant": SECOND_ORDER, "fault_injector": {"kind": "none"}},
@@ -64,3 +66,7 @@ def test_second_order_actuators_in_simulate_and_the_batch(design):
     steps = np.diff(de)
     assert steps.max() <= 100.0 * 0.02 * (1 + 1e-9) and steps[1:5].min() > 1.99
     assert np.nanmax(hard.u_actuator[:, 1]) == load_vehicle().limits.delta_e_max  # reached, clipped
+    # the metrics' rates: the command jumps to +30 deg, the servo moves at its 100 deg/s
+    rates = input_rates(hard)
+    assert 99.9 <= rates["delta_e_actuator_rate_max_degps"] <= 100.0 * (1 + 1e-9)
+    assert rates["delta_e_rate_max_degps"] > 1000.0

@@ -175,6 +175,45 @@ def own_trim_attitude(run: RunResult) -> np.ndarray | None:
     return np.stack([alpha, alpha], axis=1)  # level flight: theta = alpha
 
 
+def input_rates(run: RunResult) -> dict[str, float]:
+    """The elevator's largest rate: of the command and of the actuator's position.
+
+    Parameters
+    ----------
+    run : RunResult
+        With `u` (N, 2) and, if recorded, `u_actuator` (N, 2) [Phi, rad].
+
+    Returns
+    -------
+    dict
+        `delta_e_rate_max_degps`: max |u_k+1 - u_k| / Ts of the commanded elevator
+        [deg/s], what the controller asks of the servo; `delta_e_actuator_rate_max_degps`:
+        the same of the actuator's position (what flies; ideal actuators: the applied
+        command), left out without `u_actuator`. NaN for a run of fewer than two steps.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> run = SimpleNamespace(t=np.array([0.0, 0.02, 0.04]), u_actuator=None,
+    ...                       u=np.array([[0.0, 0.0], [0.0, np.radians(1.0)], [0.0, 0.0]]))
+    >>> round(input_rates(run)["delta_e_rate_max_degps"], 6)
+    50.0
+    """
+    if run.t.size < 2:
+        return {"delta_e_rate_max_degps": math.nan}
+    Ts = float(run.t[1] - run.t[0])
+
+    def rate(u) -> float:
+        step = np.abs(np.diff(u[:, 1]))
+        step = step[np.isfinite(step)]
+        return float(np.degrees(step.max()) / Ts) if step.size else math.nan
+
+    out = {"delta_e_rate_max_degps": rate(run.u)}
+    if run.u_actuator is not None:
+        out["delta_e_actuator_rate_max_degps"] = rate(run.u_actuator)
+    return out
+
+
 def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, float]:
     """Metrics of a run (the issue's table): tracking, attitude, flexible, inputs, tube.
 
@@ -203,12 +242,12 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     trim at its own (h, V) (`nominal_deviation`) and `nominal_h_min_ft` ...
     `nominal_V_max_fps` its range: what the tube's certificate assumes of the nominal
     (the campaign report checks them against the design's certified range).
-    Tracking errors are against the case command. Flexible RMS values are over
-    t >= t_fault (the whole run without fault); `t_fault_s` is the onset within the
-    run (NaN: no fault within the run, so the "after fault" values are over the whole
-    run). `tube_error_h_max_ft` is the largest altitude part of the tube error,
-    |h - h_r - h_n| (with `mpc.h_reset` it returns to 0 at every re-plan; NaN
-    without a tube).
+    The elevator's largest rates are `input_rates`'. Tracking errors are against the
+    case command. Flexible RMS values are over t >= t_fault (the whole run without
+    fault); `t_fault_s` is the onset within the run (NaN: no fault within the run, so
+    the "after fault" values are over the whole run). `tube_error_h_max_ft` is the
+    largest altitude part of the tube error, |h - h_r - h_n| (with `mpc.h_reset` it
+    returns to 0 at every re-plan; NaN without a tube).
     """
     t, x = run.t, run.x
     if t.size == 0:
@@ -275,6 +314,7 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
         "delta_e_min_deg": float(np.degrees(u[:, 1].min())),
         "delta_e_max_deg": float(np.degrees(u[:, 1].max())),
         "input_limit_violations": int(np.count_nonzero(viol.max(axis=1) > 0.0)),
+        **input_rates(run),
         "tube_fraction_inside": float(np.mean(lvl <= 1.0))
         if np.all(np.isfinite(lvl))
         else math.nan,
