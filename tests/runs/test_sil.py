@@ -23,10 +23,12 @@ pytestmark = pytest.mark.ros  # every test here runs the built node graph
 
 T = 4.0
 N = 200
-#: The loop on the sensors and the Kalman filter (the nodes' other numbers than the
-#: exact-state loop's, which the main job and the other graph tests fly).
-KALMAN = {"plant": {"measured": "h,V,theta,q"},
-          "state_estimator": {"estimator": "kalman", "measured": "h,V,theta,q"}}  # fmt: skip
+#: The implementable loop: servos, the sensors and the Kalman filter whose predictor
+#: integrates the servos (the nodes' other numbers than the exact-state loop's, which the
+#: main job and the other graph tests fly).
+KALMAN = {"plant": {"measured": "h,V,theta,q", "actuators": "second_order"},
+          "state_estimator": {"estimator": "kalman", "measured": "h,V,theta,q",
+                              "actuators": "second_order"}}  # fmt: skip
 
 
 @pytest.fixture(scope="module")

@@ -199,8 +199,9 @@ def cmd_estimation(args) -> int:
               "the healthy sensors'")  # fmt: skip
     actuators = plant_choices(c)["actuators"]
     if actuators != "ideal":
-        print(f"note: the scenario's actuators ({actuators}) are not in the filter's model "
-              "nor in these bounds: both take the applied input as the command")  # fmt: skip
+        print(f"note: the scenario's actuators ({actuators}) are in the filter's predictor "
+              "but not in these bounds: their LPV model takes the applied input as the "
+              "command")  # fmt: skip
     print(f"estimation: {time.monotonic() - t0:.1f} s")
     return 0
 

@@ -19,9 +19,14 @@ flexible states included, to run the tube law on it. The filter here:
   diag(Q_w, Q_d) and the sensors' covariance R_v, scaled by the design's state and
   input scales first).
 
+With the plant's servos (`design_filter`'s `servos`) the predictor integrates the
+actuator states with the airframe by the plant's kernel (`fahv.plant.rk4.rk4_cm_act`),
+from rest at the first command as the plant's servos start; they are not measured, so
+the correction leaves them to the model (the gains are the airframe's).
+
 It models no sensor delay, lag or sample-and-hold (the vehicle file's defaults have
-none). Its error is not certified here: the invariant set of the estimation error is
-the next part of the output-feedback tube.
+none). What its error certifies is in `fahv.estimation.error_bound` and
+`fahv.estimation.closed_loop`.
 """
 
 from __future__ import annotations
@@ -31,9 +36,10 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.linalg
 
+from fahv.model.actuators import kernel_parameters
 from fahv.model.lpv import PolytopicLPV
 from fahv.model.vehicle import H, V
-from fahv.plant.rk4 import compile_kernels, params_records, rk4_cm
+from fahv.plant.rk4 import compile_kernels, params_records, rk4_cm, rk4_cm_act
 from fahv.sensors.data import SensorData
 from fahv.sensors.measure import output_matrix
 
@@ -166,26 +172,37 @@ class GainScheduledKalman:
     P : (R, 11, 11) ndarray, optional
         Steady-state a-posteriori covariances of the vertices (`kalman_gains`), for
         `sigma`.
+    servos : (2, 6) ndarray, optional
+        The plant's servos (`fahv.model.actuators.kernel_parameters`): the predictor
+        then integrates the actuator states with the airframe, by the plant's own kernel
+        (`fahv.plant.rk4.rk4_cm_act`), and `a` holds them. None: ideal actuators.
 
     Raises
     ------
     ValueError
-        If L is not of z's 11 rows and C's outputs.
+        If L is not of z's 11 rows and C's outputs, or servos is not (2, 6).
     """
 
     def __init__(self, lpv: PolytopicLPV, L, C, params, limits, Ts: float, n_sub: int, x0,
-                 P=None) -> None:  # fmt: skip
+                 P=None, servos=None) -> None:  # fmt: skip
         self.lpv, self.L, self.C = lpv, np.asarray(L, float), np.asarray(C, float)
         if self.L.shape[1:] != (11, self.C.shape[0]):
             raise ValueError(f"estimator: gains of shape {self.L.shape[1:]}, expected "
                              f"{(11, self.C.shape[0])}")  # fmt: skip
         self.P = None if P is None else np.asarray(P, float)
+        self.servos = None if servos is None else np.ascontiguousarray(servos, float)
+        if self.servos is not None and self.servos.shape != (2, 6):
+            raise ValueError(f"estimator: servo data of shape {self.servos.shape}, expected (2, 6)")
         x0 = np.atleast_2d(np.asarray(x0, float))
         self.z = np.empty((len(x0), 11))
+        #: Actuator states (B, 4) [Phi, Phi_dot 1/s, delta_e rad, delta_e_dot rad/s] of the
+        #: predictor with servos (NaN until a run's first prediction, which starts them at
+        #: rest at its input, as the plant's servos start).
+        self.a = np.full((len(x0), 4), np.nan)
         self.restart(np.ones(len(x0), dtype=bool), x0)
         self.rec = params_records([params] * len(x0))
         self.limits, self.Ts, self.n_sub = limits, float(Ts), int(n_sub)
-        compile_kernels(self.rec)  # the predictor's kernel now, not in a timed step
+        compile_kernels(self.rec, self.servos)  # the predictor's kernel now, not in a timed step
 
     def restart(self, runs: np.ndarray, x0: np.ndarray) -> None:
         """Put the filters of `runs` back at their start: x = x0, d = 0.
@@ -199,6 +216,7 @@ class GainScheduledKalman:
         """
         self.z[runs, :9] = np.asarray(x0, float)[runs]
         self.z[runs, 9:] = 0.0
+        self.a[runs] = np.nan
 
     @property
     def x(self) -> np.ndarray:
@@ -273,9 +291,16 @@ class GainScheduledKalman:
             Command u_k [Phi, delta_e rad]; u + d is saturated to the plant's limits.
         """
         u = np.atleast_2d(np.asarray(u, float)) + self.d
-        u = np.clip(u, self.limits.u_min, self.limits.u_max)
-        x = rk4_cm(np.ascontiguousarray(self.x), np.ascontiguousarray(u), self.rec, self.Ts,
-                   self.n_sub)  # fmt: skip
+        u = np.ascontiguousarray(np.clip(u, self.limits.u_min, self.limits.u_max))
+        x = np.ascontiguousarray(self.x)
+        if self.servos is None:
+            x = rk4_cm(x, u, self.rec, self.Ts, self.n_sub)
+        else:
+            new = np.isnan(self.a[:, 0])
+            self.a[new] = 0.0
+            self.a[new, ::2] = u[new]
+            x, self.a = rk4_cm_act(x, self.a, u, self.rec, self.servos,
+                                   np.zeros(len(u), bool), self.Ts, self.n_sub)  # fmt: skip
         self.z = np.concatenate([x, self.d], axis=1)
 
 
@@ -304,7 +329,7 @@ def estimate_history(estimator: GainScheduledKalman, y: np.ndarray, u: np.ndarra
 
 
 def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts: float,
-                  n_sub: int, x0) -> GainScheduledKalman:  # fmt: skip
+                  n_sub: int, x0, servos=None) -> GainScheduledKalman:  # fmt: skip
     """The filter of a design: its LPV model, gains with Q_w from its bound w_max.
 
     Q_w = diag((w_max / 3)^2): the design's one-step disturbance bound (eq. 13-19) read
@@ -326,6 +351,11 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
         Step [s] and RK4 steps per step.
     x0 : (B, 9) ndarray
         Initial estimates.
+    servos : mapping, optional
+        The plant's servo models by channel (`fahv.model.actuators.Servo`, the vehicle
+        file's `actuators.second_order`): the predictor integrates them (the gains stay
+        those of the airframe, whose ZOH model takes the servo's lag as process noise).
+        None: ideal actuators.
 
     Returns
     -------
@@ -349,4 +379,6 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
     scale = np.concatenate([np.asarray(arrays["Dx"], float), np.asarray(arrays["Du"], float)])
     L, P = kalman_gains(augmented(A, B), np.hstack([C, np.zeros((len(C), 2))]), Q,
                         measurement_covariance(measured, data), scale)  # fmt: skip
-    return GainScheduledKalman(lpv, L, C, vehicle.params, vehicle.limits, Ts, n_sub, x0, P)
+    AP = None if servos is None else kernel_parameters(servos, vehicle.limits.u_min,
+                                                       vehicle.limits.u_max)  # fmt: skip
+    return GainScheduledKalman(lpv, L, C, vehicle.params, vehicle.limits, Ts, n_sub, x0, P, AP)

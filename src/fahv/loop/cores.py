@@ -57,19 +57,20 @@ from fahv.spec.schema import NO_ESTIMATOR
 from fahv.verdict import RunEnded
 
 
-def servos_of(vehicle, model: str):
+def servos_of(vehicle, model: str, node: str = "plant"):
     """The servos of actuator model `model` of a vehicle; None for `ideal`.
 
     Raises
     ------
     ParameterError
-        If the vehicle file gives no data for the model (names parameter `actuators`).
+        If the vehicle file gives no data for the model (names `node`'s parameter
+        `actuators`).
     """
     if model == IDEAL:
         return None
     if model not in vehicle.actuators:
         raise ParameterError(
-            f"plant: parameter 'actuators' = {model!r}: the vehicle file "
+            f"{node}: parameter 'actuators' = {model!r}: the vehicle file "
             f"{vehicle.source_file} has no 'actuators.{model}' section "
             f"(it gives {sorted(vehicle.actuators) or 'none'})"
         )
@@ -281,9 +282,10 @@ class EstimatorCore:
     (the plant's `measured` = `state`) through, the paper's loop; `kalman` runs the
     gain-scheduled Kalman filter of `fahv.estimation.kalman` on the measured channels,
     its vertex gains made at start from the design's LPV model and disturbance bound
-    (`design_filter`). Inputs of step k: the Measurement of step k (the trigger) and
-    the controller's command of step k - 1 (`None` at k = 0), which the filter's
-    prediction takes.
+    (`design_filter`), its predictor with the plant's actuator model (parameter
+    `actuators`: the servos' states integrated with the airframe). Inputs of step k:
+    the Measurement of step k (the trigger) and the controller's command of step k - 1
+    (`None` at k = 0), which the filter's prediction takes.
 
     Raises
     ------
@@ -316,10 +318,11 @@ class EstimatorCore:
 
         arrays = {name: p[name] for name in ESTIMATOR_ARRAYS}
         self.x0 = x0 = np.stack([np.asarray(r["x0"], float) for r in runs])
+        veh = load_vehicle(p["vehicle_file"] or None)
+        servos = servos_of(veh, p["actuators"], "state_estimator")
         try:
-            self.filter = design_filter(arrays, load_vehicle(p["vehicle_file"] or None),
-                                        load_sensors(p["vehicle_file"] or None), measured,
-                                        p["Ts"], p["plant_substeps"], x0)  # fmt: skip
+            self.filter = design_filter(arrays, veh, load_sensors(p["vehicle_file"] or None),
+                                        measured, p["Ts"], p["plant_substeps"], x0, servos)
         except (ValueError, KeyError) as exc:
             raise ParameterError(f"state_estimator: parameter 'estimator' = {self.kind!r}: "
                                  f"{exc}") from exc  # fmt: skip

@@ -26,6 +26,7 @@ from fahv.config.spec import validate_flat
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS, variant_notch
 from fahv.errors import ParameterError
 from fahv.loop.graph import CONTROLLER_NODES
+from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
 from fahv.plant.faults import FAULT_KIND, FAULTS, T_ONSET, fault_fields
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.sensors.data import EXACT_STATE
@@ -79,6 +80,9 @@ def _estimator_fields() -> tuple[Field, ...]:
               f"'{EXACT_STATE}') or kalman", choices=ESTIMATORS, default=NO_ESTIMATOR),
         Field("measured", "str", "the plant's measured channels (its parameter measured)",
               default=EXACT_STATE),
+        Field("actuators", "str", "the plant's actuator model (its parameter actuators), "
+              "which the Kalman filter's predictor integrates", choices=ACTUATOR_MODELS,
+              default=IDEAL),
         _matrix("x0", "initial estimate x_0|-1 (9,) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]"),
         *(_matrix(name, f"the design's {name} (kalman: a CM design)")
           for name in ESTIMATOR_ARRAYS),
@@ -388,6 +392,7 @@ def vehicle_parameters(design, common: dict) -> dict:
         },
         "state_estimator": {
             **shared, **x0(), "estimator": estimator_kind(c), "measured": choices["measured"],
+            "actuators": choices["actuators"],
             **{k: val for name in ESTIMATOR_ARRAYS
                for k, val in flat_parameter(name, np.asarray(a[name], float)).items()},
         },
