@@ -158,9 +158,10 @@ def test_the_filter_compiles_its_predictor_when_built(certified):
 
 
 def test_the_filter_integrates_the_plants_servos():
-    """case1_implementable (servos, noisy sensors, the Kalman filter), 20 s before the
-    fault: the library's filter with the vehicle file's servos, on the run's y and
-    commands, gives the node's estimate bit for bit; its elevator position is the plant's
+    """case1_implementable (servos, noisy sensors, the Kalman filter) with the servos in
+    the predictor (estimator.actuators second_order), 20 s before the fault: the
+    library's filter with the vehicle file's servos, on the run's y and commands, gives
+    the node's estimate bit for bit; its elevator position is the plant's
     servo position plus the input disturbance estimate d (which it adds to the command),
     to a median of 0.01 deg and at most 0.15 deg (measured 0.002 and 0.086 deg, the servo's
     lag behind d's changes; |d| reaches 0.51 deg); the filter without the servos is another
@@ -168,7 +169,8 @@ def test_the_filter_integrates_the_plants_servos():
     _, design, vehicle = load_or_design("offline_design/scenarios/case1_implementable.yaml",
                                         log=lambda *_: None, variants=["tube_mpc"],
                                         allow_uncertified=True)  # fmt: skip
-    run = simulate(design, "tube_mpc", duration=20.0)
+    run = simulate(design, "tube_mpc", duration=20.0,
+                   overrides={"state_estimator": {"actuators": "second_order"}})
     case, data = design.case, load_sensors()
     servos = vehicle.actuators["second_order"]
     est = design_filter(design.arrays, vehicle, data, DEFAULT_MEASURED, case["Ts"],

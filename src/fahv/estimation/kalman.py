@@ -22,7 +22,8 @@ flexible states included, to run the tube law on it. The filter here:
 With the plant's servos (`design_filter`'s `servos`) the predictor integrates the
 actuator states with the airframe by the plant's kernel (`fahv.plant.rk4.rk4_cm_act`),
 from rest at the first command as the plant's servos start; they are not measured, so
-the correction leaves them to the model (the gains are the airframe's).
+the correction leaves them to the model (the gains are the airframe's: with them this
+predictor destabilises Case 1's bending mode, so the loop's default is the ideal one).
 
 It models no sensor delay, lag or sample-and-hold (the vehicle file's defaults have
 none). What its error certifies is in `fahv.estimation.error_bound` and

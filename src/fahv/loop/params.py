@@ -41,6 +41,7 @@ from fahv.spec.schema import (
     PLANT,
     PLANT_SUBSTEPS,
     TS,
+    estimator_actuators,
     estimator_kind,
     plant_choices,
     sensor_fault_values,
@@ -80,9 +81,9 @@ def _estimator_fields() -> tuple[Field, ...]:
               f"'{EXACT_STATE}') or kalman", choices=ESTIMATORS, default=NO_ESTIMATOR),
         Field("measured", "str", "the plant's measured channels (its parameter measured)",
               default=EXACT_STATE),
-        Field("actuators", "str", "the plant's actuator model (its parameter actuators), "
-              "which the Kalman filter's predictor integrates", choices=ACTUATOR_MODELS,
-              default=IDEAL),
+        Field("actuators", "str", "actuator model the Kalman filter's predictor integrates "
+              "(scenario estimator.actuators): ideal or the vehicle file's second_order "
+              "servos", choices=ACTUATOR_MODELS, default=IDEAL),
         _matrix("x0", "initial estimate x_0|-1 (9,) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]"),
         *(_matrix(name, f"the design's {name} (kalman: a CM design)")
           for name in ESTIMATOR_ARRAYS),
@@ -392,7 +393,7 @@ def vehicle_parameters(design, common: dict) -> dict:
         },
         "state_estimator": {
             **shared, **x0(), "estimator": estimator_kind(c), "measured": choices["measured"],
-            "actuators": choices["actuators"],
+            "actuators": estimator_actuators(c),
             **{k: val for name in ESTIMATOR_ARRAYS
                for k, val in flat_parameter(name, np.asarray(a[name], float)).items()},
         },

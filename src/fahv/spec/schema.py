@@ -215,6 +215,11 @@ ESTIMATOR = (
           "mpc.est_tau in the run: the estimate is noisier than the exact state it was "
           "designed for, and the filter estimates an input disturbance itself); 0: the "
           "design's", unit="s", lo=0.0, hi=1e3, default=0.0),
+    Field("actuators", "str", "actuator model the Kalman filter's predictor integrates: "
+          "ideal (the command acts at once, the default) or second_order (the vehicle "
+          "file's servos, as the plant's; with the filter's airframe gains it destabilises "
+          "the first bending mode of Case 1's loop, docs/theory/estimation.md)",
+          choices=ACTUATOR_MODELS, default=IDEAL),
 )  # fmt: skip
 
 
@@ -227,6 +232,17 @@ def estimator_section() -> Section:
     return Section("estimator", ESTIMATOR, "the flight computer's state estimator",
                    when=lambda r: False, when_text="a scenario estimates the state "
                    "(optional: absent, none: the controller reads the exact state)")  # fmt: skip
+
+
+def estimator_actuators(spec) -> str:
+    """The actuator model of the estimator's predictor (`estimator.actuators`; `ideal`).
+
+    Examples
+    --------
+    >>> estimator_actuators({}), estimator_actuators({"estimator": {"actuators": "second_order"}})
+    ('ideal', 'second_order')
+    """
+    return (spec.get("estimator") or {}).get("actuators", IDEAL)
 
 
 def estimator_kind(spec) -> str:
