@@ -199,10 +199,11 @@ def cmd_estimation(args) -> int:
               "the healthy sensors'")  # fmt: skip
     actuators = plant_choices(c)["actuators"]
     if actuators != "ideal":
-        where = ("in the filter's predictor but not" if estimator_actuators(c) != "ideal"
-                 else "neither in the filter's model nor")  # fmt: skip
+        where = ("in the scenario's filter (estimator.actuators) but not" if
+                 estimator_actuators(c) != "ideal" else "neither in the filter's model nor")
         print(f"note: the scenario's actuators ({actuators}) are {where} in these bounds: "
-              "their LPV model takes the applied input as the command")  # fmt: skip
+              "they are of the filter without servo states, whose LPV model takes the "
+              "applied input as the command")  # fmt: skip
     print(f"estimation: {time.monotonic() - t0:.1f} s")
     return 0
 

@@ -90,10 +90,13 @@ def error_system(flt: GainScheduledKalman) -> ErrorSystem:
     Raises
     ------
     ValueError
-        If the filter has no covariances (`P` None).
+        If the filter has no covariances (`P` None) or has servo states.
     """
     if flt.P is None:
         raise ValueError("error_system: the filter has no steady-state covariances (P)")
+    if flt.servos is not None:
+        raise ValueError("error_system: the bounds are of a filter without servo states "
+                         "(design_filter without servos)")
     A = np.asarray(flt.lpv.A, float)
     Az = augmented(A, np.asarray(flt.lpv.B, float))
     n = Az.shape[1]

@@ -37,6 +37,7 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.linalg
 
+from fahv.estimation.servo_model import N_SERVO, with_servos
 from fahv.model.actuators import kernel_parameters
 from fahv.model.lpv import PolytopicLPV
 from fahv.model.vehicle import H, V
@@ -125,6 +126,10 @@ W_SIGMAS = 3.0
 #: 0.02 and 0.5 deg/sqrt(s) (a 10 % loss of a 13 deg elevator, 1.3 deg, is followed in
 #: seconds; the noise it lets into d stays small against the inputs' ranges).
 D_INTENSITY = np.array([0.02, np.radians(0.5)])
+#: Process noise of the servo states per step, as a share of their scales (position: the
+#: input's scale, rate: it times omega_n): their model is exact, this keeps the Riccati
+#: equation regular.
+SERVO_NOISE = 1e-3
 
 
 def augmented(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -156,8 +161,9 @@ class GainScheduledKalman:
     ----------
     lpv : PolytopicLPV
         The design's LPV model (its weights schedule the gains).
-    L : (R, 11, n_y) ndarray
-        Vertex gains of z (`kalman_gains` on `augmented`).
+    L : (R, n_z, n_y) ndarray
+        Vertex gains of z (`kalman_gains` on `augmented`; n_z = 11, or 15 with servos:
+        `fahv.estimation.servo_model.with_servos`).
     C : (n_y, 9) ndarray
         Output matrix of x (`output_matrix`).
     params : VehicleParams
@@ -170,36 +176,35 @@ class GainScheduledKalman:
         RK4 steps per step.
     x0 : (B, 9) ndarray
         Initial estimate x_0|-1 (e.g. the trim the run starts from).
-    P : (R, 11, 11) ndarray, optional
+    P : (R, n_z, n_z) ndarray, optional
         Steady-state a-posteriori covariances of the vertices (`kalman_gains`), for
         `sigma`.
     servos : (2, 6) ndarray, optional
-        The plant's servos (`fahv.model.actuators.kernel_parameters`): the predictor
-        then integrates the actuator states with the airframe, by the plant's own kernel
-        (`fahv.plant.rk4.rk4_cm_act`), and `a` holds them. None: ideal actuators.
+        The plant's servos (`fahv.model.actuators.kernel_parameters`): z then ends with
+        the four actuator states `a`, which the predictor integrates with the airframe by
+        the plant's own kernel (`fahv.plant.rk4.rk4_cm_act`) and the correction moves
+        by their rows of L. None: ideal actuators.
 
     Raises
     ------
     ValueError
-        If L is not of z's 11 rows and C's outputs, or servos is not (2, 6).
+        If L is not of z's rows (11, or 15 with servos) and C's outputs, or servos is not
+        (2, 6).
     """
 
     def __init__(self, lpv: PolytopicLPV, L, C, params, limits, Ts: float, n_sub: int, x0,
                  P=None, servos=None) -> None:  # fmt: skip
         self.lpv, self.L, self.C = lpv, np.asarray(L, float), np.asarray(C, float)
-        if self.L.shape[1:] != (11, self.C.shape[0]):
-            raise ValueError(f"estimator: gains of shape {self.L.shape[1:]}, expected "
-                             f"{(11, self.C.shape[0])}")  # fmt: skip
-        self.P = None if P is None else np.asarray(P, float)
         self.servos = None if servos is None else np.ascontiguousarray(servos, float)
         if self.servos is not None and self.servos.shape != (2, 6):
             raise ValueError(f"estimator: servo data of shape {self.servos.shape}, expected (2, 6)")
+        n_z = 11 if self.servos is None else 11 + N_SERVO
+        if self.L.shape[1:] != (n_z, self.C.shape[0]):
+            raise ValueError(f"estimator: gains of shape {self.L.shape[1:]}, expected "
+                             f"{(n_z, self.C.shape[0])}")  # fmt: skip
+        self.P = None if P is None else np.asarray(P, float)
         x0 = np.atleast_2d(np.asarray(x0, float))
-        self.z = np.empty((len(x0), 11))
-        #: Actuator states (B, 4) [Phi, Phi_dot 1/s, delta_e rad, delta_e_dot rad/s] of the
-        #: predictor with servos (NaN until a run's first prediction, which starts them at
-        #: rest at its input, as the plant's servos start).
-        self.a = np.full((len(x0), 4), np.nan)
+        self.z = np.empty((len(x0), n_z))
         self.restart(np.ones(len(x0), dtype=bool), x0)
         self.rec = params_records([params] * len(x0))
         self.limits, self.Ts, self.n_sub = limits, float(Ts), int(n_sub)
@@ -216,8 +221,8 @@ class GainScheduledKalman:
             Initial estimates of every run (those of `runs` are taken).
         """
         self.z[runs, :9] = np.asarray(x0, float)[runs]
-        self.z[runs, 9:] = 0.0
-        self.a[runs] = np.nan
+        self.z[runs, 9:11] = 0.0
+        self.z[runs, 11:] = np.nan  # the servos: at rest at the first command (`predict`)
 
     @property
     def x(self) -> np.ndarray:
@@ -227,7 +232,16 @@ class GainScheduledKalman:
     @property
     def d(self) -> np.ndarray:
         """The input disturbance estimates (B, 2) [Phi, delta_e rad] (a view of z)."""
-        return self.z[:, 9:]
+        return self.z[:, 9:11]
+
+    @property
+    def a(self) -> np.ndarray:
+        """The actuator states (B, 4) of z (a view; (B, 0) without servos).
+
+        [Phi, Phi_dot 1/s, delta_e rad, delta_e_dot rad/s]; NaN before a run's first
+        prediction, which starts them at rest at its input.
+        """
+        return self.z[:, 11:]
 
     def sigma(self) -> np.ndarray:
         """Standard deviation of each state's error at the current estimates' (h, V).
@@ -251,7 +265,7 @@ class GainScheduledKalman:
 
         Returns
         -------
-        (B, 11, n_y) ndarray
+        (B, n_z, n_y) ndarray
             L(p) = sum_i tau_i(p) L_i of each run.
         """
         w = self.lpv.weights(self.x[:, H], self.x[:, V])  # (B, R)
@@ -297,11 +311,14 @@ class GainScheduledKalman:
         if self.servos is None:
             x = rk4_cm(x, u, self.rec, self.Ts, self.n_sub)
         else:
-            new = np.isnan(self.a[:, 0])
-            self.a[new] = 0.0
-            self.a[new, ::2] = u[new]
-            x, self.a = rk4_cm_act(x, self.a, u, self.rec, self.servos,
-                                   np.zeros(len(u), bool), self.Ts, self.n_sub)  # fmt: skip
+            a = self.a.copy()
+            new = np.isnan(a[:, 0])
+            a[new] = 0.0
+            a[new, ::2] = u[new]
+            x, a = rk4_cm_act(x, np.ascontiguousarray(a), u, self.rec, self.servos,
+                              np.zeros(len(u), bool), self.Ts, self.n_sub)  # fmt: skip
+            self.z = np.concatenate([x, self.d, a], axis=1)
+            return
         self.z = np.concatenate([x, self.d], axis=1)
 
 
@@ -375,11 +392,20 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
                        for k in ("h_grid", "V_grid", "W_h", "W_V")))  # fmt: skip
     B = np.asarray(arrays["B"], float)
     C = output_matrix(measured, data)
-    Q = np.diag(np.concatenate([(np.asarray(arrays["w_max"], float) / W_SIGMAS) ** 2,
-                                D_INTENSITY**2 * Ts]))  # fmt: skip
-    scale = np.concatenate([np.asarray(arrays["Dx"], float), np.asarray(arrays["Du"], float)])
-    L, P = kalman_gains(augmented(A, B), np.hstack([C, np.zeros((len(C), 2))]), Q,
-                        measurement_covariance(measured, data), scale)  # fmt: skip
+    Du = np.asarray(arrays["Du"], float)
+    q = [(np.asarray(arrays["w_max"], float) / W_SIGMAS) ** 2, D_INTENSITY**2 * Ts]
+    scale = [np.asarray(arrays["Dx"], float), Du]
     AP = None if servos is None else kernel_parameters(servos, vehicle.limits.u_min,
                                                        vehicle.limits.u_max)  # fmt: skip
+    if AP is None:
+        Az = augmented(A, B)
+    else:  # the servos' states: the model is exact, their process noise only regularises
+        Az = with_servos(A, B, AP, Ts)
+        s_scale = np.repeat(Du, 2) * np.tile([1.0, 0.0], 2) + np.repeat(Du * AP[:, 1], 2) * \
+            np.tile([0.0, 1.0], 2)  # fmt: skip
+        q.append((SERVO_NOISE * s_scale) ** 2)
+        scale.append(s_scale)
+    Cz = np.hstack([C, np.zeros((len(C), Az.shape[1] - 9))])
+    L, P = kalman_gains(Az, Cz, np.diag(np.concatenate(q)),
+                        measurement_covariance(measured, data), np.concatenate(scale))  # fmt: skip
     return GainScheduledKalman(lpv, L, C, vehicle.params, vehicle.limits, Ts, n_sub, x0, P, AP)

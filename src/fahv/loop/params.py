@@ -334,9 +334,11 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     for name, value in law.node_values(a, c).items():
         controller.update(flat_parameter(name, value))
     nominal = {k: _plain(v) for k, v in law.nominal.node_values(a, c).items()}
-    est_tau = float((c.get("estimator") or {}).get("nominal_est_tau", 0.0))
-    if "mpc.est_tau" in nominal and est_tau > 0.0 and estimator_kind(c) != NO_ESTIMATOR:
-        nominal["mpc.est_tau"] = est_tau  # the scenario's, for a loop on the estimate
+    est = c.get("estimator") or {}
+    for key in ("est_tau", "est_tau_elevator"):  # the scenario's, for a loop on the estimate
+        tau_s = float(est.get(f"nominal_{key}", 0.0))
+        if f"mpc.{key}" in nominal and tau_s > 0.0 and estimator_kind(c) != NO_ESTIMATOR:
+            nominal[f"mpc.{key}"] = tau_s
     return {
         **vehicle_parameters(design, common),
         "fault_injector": {**common, **fault},

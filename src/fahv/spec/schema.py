@@ -215,10 +215,13 @@ ESTIMATOR = (
           "mpc.est_tau in the run: the estimate is noisier than the exact state it was "
           "designed for, and the filter estimates an input disturbance itself); 0: the "
           "design's", unit="s", lo=0.0, hi=1e3, default=0.0),
-    Field("actuators", "str", "actuator model the Kalman filter's predictor integrates: "
-          "ideal (the command acts at once, the default) or second_order (the vehicle "
-          "file's servos, as the plant's; with the filter's airframe gains it destabilises "
-          "the first bending mode of Case 1's loop, docs/theory/estimation.md)",
+    Field("nominal_est_tau_elevator", "float", "the same for the nominal MPC's estimate "
+          "along the elevator column (the design's mpc.est_tau_elevator, Ts in "
+          "cm_certified: it takes the estimate's discrepancy wholesale every step); 0: the "
+          "design's", unit="s", lo=0.0, hi=1e3, default=0.0),
+    Field("actuators", "str", "actuator model the Kalman filter's predictor and gains "
+          "include: ideal (the command acts at once, the default) or second_order (the "
+          "vehicle file's servos, as the plant's: four more filter states)",
           choices=ACTUATOR_MODELS, default=IDEAL),
 )  # fmt: skip
 
