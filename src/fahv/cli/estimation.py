@@ -13,7 +13,7 @@ from fahv.errors import SpecError
 from fahv.estimation.kalman import W_SIGMAS, design_filter, measurement_covariance
 from fahv.model.vehicle import STATE_NAMES, STATE_UNITS
 from fahv.sensors.data import CHANNEL_UNITS, load_sensors, measured_channels, replace_channel
-from fahv.spec.schema import NO_ESTIMATOR, estimator_actuators, estimator_kind, plant_choices
+from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, estimator_value, plant_choices
 
 #: Names and units of the filter's state z = [x; d] (`fahv.estimation.kalman`).
 Z_NAMES = (*STATE_NAMES, "d_Phi", "d_delta_e")
@@ -199,8 +199,9 @@ def cmd_estimation(args) -> int:
               "the healthy sensors'")  # fmt: skip
     actuators = plant_choices(c)["actuators"]
     if actuators != "ideal":
-        where = ("in the scenario's filter (estimator.actuators) but not" if
-                 estimator_actuators(c) != "ideal" else "neither in the filter's model nor")
+        in_filter = estimator_value(c, "actuators") != "ideal"
+        where = ("in the scenario's filter (estimator.actuators) but not" if in_filter
+                 else "neither in the filter's model nor")  # fmt: skip
         print(f"note: the scenario's actuators ({actuators}) are {where} in these bounds: "
               "they are of the filter without servo states, whose LPV model takes the "
               "applied input as the command")  # fmt: skip

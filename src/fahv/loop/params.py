@@ -41,8 +41,8 @@ from fahv.spec.schema import (
     PLANT,
     PLANT_SUBSTEPS,
     TS,
-    estimator_actuators,
     estimator_kind,
+    estimator_value,
     plant_choices,
     sensor_fault_values,
 )
@@ -395,7 +395,7 @@ def vehicle_parameters(design, common: dict) -> dict:
         },
         "state_estimator": {
             **shared, **x0(), "estimator": estimator_kind(c), "measured": choices["measured"],
-            "actuators": estimator_actuators(c),
+            "actuators": estimator_value(c, "actuators"),
             **{k: val for name in ESTIMATOR_ARRAYS
                for k, val in flat_parameter(name, np.asarray(a[name], float)).items()},
         },

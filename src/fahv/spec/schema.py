@@ -237,15 +237,32 @@ def estimator_section() -> Section:
                    "(optional: absent, none: the controller reads the exact state)")  # fmt: skip
 
 
-def estimator_actuators(spec) -> str:
-    """The actuator model of the estimator's predictor (`estimator.actuators`; `ideal`).
+def estimator_value(spec, key: str):
+    """A key of a run spec's or scenario's `estimator` section; its default if absent.
+
+    Parameters
+    ----------
+    spec : mapping
+        The run spec or scenario data.
+    key : str
+        A key of `ESTIMATOR`.
+
+    Returns
+    -------
+    The value, or the `ESTIMATOR` field's default.
+
+    Raises
+    ------
+    StopIteration
+        If `key` is not a key of the section.
 
     Examples
     --------
-    >>> estimator_actuators({}), estimator_actuators({"estimator": {"actuators": "second_order"}})
-    ('ideal', 'second_order')
+    >>> estimator_value({}, "actuators"), estimator_value({"estimator": {"kind": "kalman"}}, "kind")
+    ('ideal', 'kalman')
     """
-    return (spec.get("estimator") or {}).get("actuators", IDEAL)
+    default = next(f.default for f in ESTIMATOR if f.name == key)
+    return (spec.get("estimator") or {}).get(key, default)
 
 
 def estimator_kind(spec) -> str:
@@ -256,7 +273,7 @@ def estimator_kind(spec) -> str:
     >>> estimator_kind({}), estimator_kind({"estimator": {"kind": "kalman"}})
     ('none', 'kalman')
     """
-    return (spec.get("estimator") or {}).get("kind", NO_ESTIMATOR)
+    return estimator_value(spec, "kind")
 
 
 def plant_section() -> Section:
