@@ -401,8 +401,7 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
         Az = augmented(A, B)
     else:  # the servos' states: the model is exact, their process noise only regularises
         Az = with_servos(A, B, AP, Ts)
-        s_scale = np.repeat(Du, 2) * np.tile([1.0, 0.0], 2) + np.repeat(Du * AP[:, 1], 2) * \
-            np.tile([0.0, 1.0], 2)  # fmt: skip
+        s_scale = np.column_stack([Du, Du * AP[:, 1]]).ravel()  # [Phi, Phi_dot, de, de_dot]
         q.append((SERVO_NOISE * s_scale) ** 2)
         scale.append(s_scale)
     Cz = np.hstack([C, np.zeros((len(C), Az.shape[1] - 9))])
