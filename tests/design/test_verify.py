@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fahv.certificate.verify import require_verified, verify
+from fahv.certificate.verify import MODEL_RTOL, rel_diff, require_verified, verify
 from fahv.errors import DesignError
 from fahv.model.vehicle import load_vehicle
 from fahv.spec.artefacts import Design
@@ -91,7 +91,16 @@ def test_a_model_change_fails_the_model_check(paper):
 #: LMI solve makes (they move with the floating point of the machine, within the
 #: solver's accuracy: the relative tolerance below, measured differences ~1e-6).
 MODEL_ARRAYS = ("A", "B", "W_h", "W_V", "Dx", "Du", "trim_x", "trim_u", "w_max", "x0")
-SOLVED_ARRAYS = ("F", "N", "K", "Q")
+#: Tolerance (relative to the largest entry) of the model arrays `fahv verify` does not
+#: compare: the scaled command x0 and the bound w_max (measured: 0 and 5e-13 between an
+#: AVX2 and an AVX-512 OpenBLAS kernel).
+MODEL_FLOOR = 1e-10
+#: The tube's LMI solutions, compared within SOLVED_RTOL of their largest entry (measured:
+#: 5.4e-4 between the two kernels). The nominal K and Q are not compared: the nominal LMI
+#: maximises s, which reaches its bound 1, and leaves Q free within a set (measured: 0.7 %
+#: of Q's largest entry between the two kernels); x0 = s d is compared, the certificate
+#: of K and Q re-checked by the verification.
+SOLVED_ARRAYS = ("F", "N")
 SOLVED_RTOL = 1e-3
 
 
@@ -117,8 +126,9 @@ def test_the_shipped_paper_design_is_what_its_design_file_makes(tmp_path):
     # shipped design's is re-checked by `fahv verify` above
     data["certificate"] = {"schedules": 0}
     new = run_design(spec_file(data, str(dfile), design_spec()), vehicle, log=lambda *_: None)
-    for k in MODEL_ARRAYS:
-        np.testing.assert_allclose(new.arrays[k], shipped.arrays[k], rtol=1e-9, atol=0, err_msg=k)
+    for k in MODEL_ARRAYS:  # within `fahv verify`'s model tolerances (the floor elsewhere)
+        diff = rel_diff(new.arrays[k], shipped.arrays[k])
+        assert diff <= MODEL_RTOL.get(k, MODEL_FLOOR), (k, diff)
     for k in SOLVED_ARRAYS:
         scale = np.max(np.abs(shipped.arrays[k]))
         np.testing.assert_allclose(new.arrays[k], shipped.arrays[k], rtol=0,

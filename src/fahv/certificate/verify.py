@@ -95,7 +95,24 @@ class CheckResult:
         return f"{self.name}: {self.line}  {'OK' if self.ok else 'FAILED'}"
 
 
-def _rel_diff(a, b) -> float:
+def rel_diff(a, b) -> float:
+    """Largest absolute difference of two arrays over the largest entry of `b`.
+
+    Parameters
+    ----------
+    a, b : array_like
+        The arrays compared (any shape; `b` is the reference).
+
+    Returns
+    -------
+    float
+        max |a - b| / max |b| (0 for empty arrays, inf when the shapes differ).
+
+    Examples
+    --------
+    >>> rel_diff([1.0, 2.0], [1.0, 2.0 + 1e-9]) < 1e-9, rel_diff([1.0], [1.0, 2.0])
+    (True, inf)
+    """
     a, b = np.asarray(a, float), np.asarray(b, float)
     if a.shape != b.shape:
         return np.inf
@@ -119,7 +136,7 @@ def check_model(design: Design, vehicle) -> CheckResult:
     tm = trim_map(vehicle, *c["trim_grid"], kind, notch)
     got = {"A": disc.A, "B": disc.B, "W_h": tp.W_h, "W_V": tp.W_V, "Dx": tp.state_scale,
            "Du": tp.input_scale, "trim_x": tm.x_r, "trim_u": tm.u_r}  # fmt: skip
-    diffs = {k: _rel_diff(v, a[k]) for k, v in got.items()}
+    diffs = {k: rel_diff(v, a[k]) for k, v in got.items()}
     worst = max(diffs, key=lambda k: diffs[k] / MODEL_RTOL[k])  # closest to its tolerance
     ok = all(diffs[k] <= MODEL_RTOL[k] for k in diffs)
     return CheckResult(
@@ -137,7 +154,7 @@ def check_tightening(design: Design, vehicle) -> CheckResult:
     support = tau * np.sqrt(np.einsum("jn,nm,jm->j", F, N, F))
     lo = vehicle.limits.u_min + support
     hi = vehicle.limits.u_max - support
-    diff = max(_rel_diff(lo, a["u_lo"]), _rel_diff(hi, a["u_hi"]))
+    diff = max(rel_diff(lo, a["u_lo"]), rel_diff(hi, a["u_hi"]))
     empty = bool(np.any(hi <= lo))
     ok = diff <= TIGHTENING_RTOL and not empty
     return CheckResult(

@@ -28,7 +28,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fahv.errors import DesignError
-from fahv.synthesis.lmi import SDP_OPTIONS, SDP_SOLVER, psd_tolerance, require_psd, scale_vertices
+from fahv.synthesis.lmi import (
+    LMI_MARGIN,
+    SDP_OPTIONS,
+    SDP_SOLVER,
+    psd_tolerance,
+    require_psd,
+    scale_vertices,
+)
 
 if TYPE_CHECKING:  # cvxpy only where a problem is built: the checks load none
     import cvxpy as cp
@@ -232,10 +239,12 @@ def _invariance_constraints(As, Bs, Q, Y, Xd, ums, lam):
 
     R, n, m = Bs.shape
     cons = [Xd <= ums**2 * (1.0 - _MARGIN)]
+    # (34') with the strict margin of every RPI block: the solver's own tolerance (1e-8)
+    # then cannot break the re-check, whatever BLAS kernels the machine runs
     for i in range(R):
         AQ = As[i] @ Q + Bs[i] @ Y
         blk = cp.bmat([[lam * Q, AQ.T], [AQ, Q]])
-        cons.append(0.5 * (blk + blk.T) >> 0)
+        cons.append(0.5 * (blk + blk.T) >> LMI_MARGIN * np.eye(2 * n))
     blk = cp.bmat([[cp.diag(Xd), Y], [Y.T, Q]])
     cons.append(0.5 * (blk + blk.T) >> 0)
     return cons
