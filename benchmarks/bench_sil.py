@@ -9,7 +9,9 @@ workspace built with its own `scripts/build_ros.sh` and its `src` put first on
 the load of other processes on the machine falls on both alike. The wall time is that
 of the `sil` runner process, as `fahv sil` measures it (start-up, the steps, the
 teardown); the real-time factor is the simulated time over it. Prints every run, the
-median of each tree and their ratio.
+median of each tree and their ratio. Unless `--no-compose`, the working tree also runs
+with its loop nodes composed in one process (`sil --compose`, named `composed`), in the
+same alternation.
 
 Run: .venv/bin/python benchmarks/bench_sil.py [--commit HEAD] [-n 3] [--duration 60]
      [--scenario offline_design/scenarios/case1.yaml] [--smoke]
@@ -40,6 +42,8 @@ from fahv.runs.workspace import ROOT, WS, ensure_built, ros_env
 #: Environment variables of the nodes that the benchmark does not pass on (each tree
 #: runs with its own defaults).
 NODE_SWITCHES = ("HSV_EXECUTOR", "HSV_PARAM_SERVICES")
+#: Name of the working tree's runs with the loop nodes composed in one process.
+COMPOSED_TREE = "composed"
 #: --smoke: runs of the working tree and simulated time [s].
 SMOKE_RUNS, SMOKE_DURATION = 1, 2.0
 
@@ -101,8 +105,13 @@ def write_params(root: Path, env: dict, scenario: str, duration: float, path: Pa
     return yaml.safe_load(path.read_text())
 
 
-def run_once(content: dict, ws: Path, env: dict, work: Path) -> tuple[int, float, str]:
-    """One run of a workspace's `sil` runner; (exit status, wall time [s], error tail)."""
+def run_once(
+    content: dict, ws: Path, env: dict, work: Path, extra: tuple = ()
+) -> tuple[int, float, str]:
+    """One run of a workspace's `sil` runner (`extra`: its further options).
+
+    Returns (exit status, wall time [s], error tail).
+    """
     work.mkdir(parents=True)
     c = yaml.safe_load(yaml.safe_dump(content))
     c["recorder"]["ros__parameters"].update(bag=str(work / "run"), params_file="")
@@ -110,7 +119,8 @@ def run_once(content: dict, ws: Path, env: dict, work: Path) -> tuple[int, float
     params = work / "params.yaml"
     params.write_text(yaml.safe_dump(c, sort_keys=False))
     exe = ws / "install" / "hsv_bringup" / "lib" / "hsv_bringup" / "sil"
-    cmd = [str(exe), "--params-file", str(params), "--log-dir", str(work / "logs"), "--quiet"]
+    cmd = [str(exe), "--params-file", str(params), "--log-dir", str(work / "logs"), "--quiet",
+           *extra]  # fmt: skip
     t0 = time.monotonic()
     r = subprocess.run(cmd, env=env, capture_output=True, text=True)
     wall = time.monotonic() - t0
@@ -126,6 +136,9 @@ def main() -> None:
     ap.add_argument("-n", type=int, default=3, help="runs of each tree")
     ap.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "fahv_bench_sil")
     ap.add_argument("--keep", action="store_true", help="keep the run folders")
+    ap.add_argument("--no-compose", action="store_true",
+                    help="leave out the working tree's graph with its loop nodes composed in "
+                    "one process (`sil --compose`)")  # fmt: skip
     ap.add_argument("--smoke", action="store_true",
                     help="no earlier commit, one short run of the working tree (CI: the "
                     "benchmark still runs)")  # fmt: skip
@@ -144,6 +157,8 @@ def main() -> None:
         trees[sha] = (base / "ros_ws", tree_env(base / "ros_ws", base / "src"))
         roots[sha] = base
     work = Path(tempfile.mkdtemp(prefix="bench_sil_"))
+    if not args.no_compose:  # the same tree and parameter file, the loop in one process
+        trees[COMPOSED_TREE], roots[COMPOSED_TREE] = trees["working tree"], ROOT
     content = {
         name: write_params(roots[name], env, args.scenario, args.duration,
                            work / f"params_{i}.yaml")
@@ -159,8 +174,9 @@ def main() -> None:
         order = list(trees) if i % 2 == 0 else list(trees)[::-1]
         for name in order:
             ws, env = trees[name]
+            extra = ("--compose",) if name == COMPOSED_TREE else ()
             rc, wall, err = run_once(content[name], ws, env,
-                                     work / f"{i}_{name.replace(' ', '_')}")  # fmt: skip
+                                     work / f"{i}_{name.replace(' ', '_')}", extra)  # fmt: skip
             rtf[name].append(args.duration / wall if rc == 0 else float("nan"))
             print(f"  run {i + 1} {name:>12s}: wall {wall:6.2f} s, real-time factor "
                   f"{rtf[name][-1]:5.2f}" + ("" if rc == 0 else f"  FAILED (exit {rc})"),
@@ -172,11 +188,11 @@ def main() -> None:
         runs = ", ".join(f"{x:.2f}" for x in v)
         print(f"{name:>12s}: median real-time factor {med[name]:.2f}  ({runs})")
     if sha is not None:
-        new, old = med["working tree"], med[sha]
-        print(f"ratio working tree / {sha}: {new / old:.2f}")
+        for name in [n for n in med if n != sha]:
+            print(f"ratio {name} / {sha}: {med[name] / med[sha]:.2f}")
     if not args.keep:
         shutil.rmtree(work, ignore_errors=True)
-    if any(x != x for x in rtf["working tree"]):
+    if any(x != x for x in rtf["working tree"] + rtf.get(COMPOSED_TREE, [])):
         sys.exit("bench_sil: a run of the working tree failed")
 
 

@@ -1,6 +1,7 @@
 """A run of the node graph that ends with a verdict: the node that finds it and its peers
 stop with it, the recorder finishes the file with it, `fahv sil` names it and exits 3;
-the verdict, step and time are the in-process simulator's."""
+the verdict, step and time are the in-process simulator's, with the loop nodes in a process
+each and composed in one."""
 
 import pytest
 import yaml
@@ -16,13 +17,15 @@ from fahv.verdict import RunEnded, Verdict
 pytestmark = pytest.mark.ros  # runs the built node graph
 
 
-def test_a_stuck_elevator_ends_the_graph_with_the_simulators_verdict(tmp_path, capsys):
+@pytest.mark.parametrize("compose", [False, True], ids=["process_per_node", "composed"])
+def test_a_stuck_elevator_ends_the_graph_with_the_simulators_verdict(tmp_path, capsys, compose):
     spec = yaml.safe_load((ROOT / "offline_design/scenarios/case1.yaml").read_text())
     spec["fault"] = {"kind": "stuck", "t_onset": 1.0}
     case = tmp_path / "case1_stuck.yaml"
     case.write_text(yaml.safe_dump(spec, sort_keys=False))
     out = tmp_path / "bags"
-    rc = main(["sil", str(case), "--duration", "8", "--out", str(out), "--quiet"])
+    rc = main(["sil", str(case), "--duration", "8", "--out", str(out), "--quiet"]
+              + (["--compose"] if compose else []))  # fmt: skip
     err = capsys.readouterr().err
     assert "Traceback" not in err
     assert rc == EXIT_VERDICT

@@ -29,6 +29,7 @@ setup(
             "recorder = hsv_bringup.recorder:run",
             "replay = hsv_bringup.replay:run",
             "sil = hsv_bringup.sil:run",
+            "loop = hsv_bringup.composed:run",
             "ros2 = hsv_bringup.ros2_standin:run",
         ],
     },

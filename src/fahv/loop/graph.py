@@ -278,6 +278,9 @@ def registry_tables() -> str:
 #: Line a node process prints (`[name] closed with exit status S; DDS teardown`) after
 #: its close, before the DDS teardown that a C-level timer bounds (hsv_common.runtime).
 TEARDOWN_MARK = "closed with exit status"
+#: Name of the process (and executable, package hsv_bringup) that runs loop nodes
+#: composed in one process (`sil --compose`; hsv_bringup.composed).
+COMPOSED = "loop"
 
 
 def teardown_hung(log: str) -> int | None:

@@ -348,6 +348,7 @@ def run_sil(
     name: str | None = None,
     metadata: dict | None = None,
     live_port: int | None = None,
+    compose: bool = False,
 ) -> SilRun:
     """Run one variant of a designed case through the node graph, recorded to MCAP.
 
@@ -378,6 +379,9 @@ def run_sil(
         Further run metadata (`run_parameter_file`).
     live_port : int, optional
         Serve the live view on this port (0: any free one); None: no live view.
+    compose : bool
+        Run the loop nodes in one process (the runner's `--compose`, ROS 2
+        composition) instead of one process each; the run is the same step for step.
 
     Returns
     -------
@@ -405,7 +409,7 @@ def run_sil(
     )
     base = name or f"{design.case['name']}_{variant}_sil"
     stem = f"{base}_{time.strftime('%Y%m%d-%H%M%S')}"
-    return run_graph(content, stem, out_dir, quiet, log, domain_id)
+    return run_graph(content, stem, out_dir, quiet, log, domain_id, compose)
 
 
 def run_graph(
@@ -415,6 +419,7 @@ def run_graph(
     quiet: bool = False,
     log=print,
     domain_id: int | None = None,
+    compose: bool = False,
 ) -> SilRun:
     """Run a parameter file's graph (every node in it, the recorder included).
 
@@ -425,7 +430,7 @@ def run_graph(
         run file); the recorder's `bag` and `params_file` are set here.
     name : str
         Run name (`-2` ... appended if it is taken).
-    out_dir, quiet, log, domain_id
+    out_dir, quiet, log, domain_id, compose
         As `run_sil`.
 
     Returns
@@ -448,7 +453,8 @@ def run_graph(
     path.write_text(yaml.safe_dump(content, sort_keys=False, width=120))
     sim_s = content["plant"]["ros__parameters"]["duration"]
     controller = controller_node(content)
-    cmd = _runner(work, ["--controller", controller], quiet, domain_id)
+    cmd = _runner(work, ["--controller", controller] + (["--compose"] if compose else []), quiet,
+                  domain_id)  # fmt: skip
     log(f"SIL run {name}: logs in {work}")
     t0 = time.monotonic()
     rc, interrupted = run_runner(cmd, env)

@@ -50,7 +50,7 @@ import domain_coordinator
 import yaml
 from tqdm import tqdm
 
-from fahv.loop.graph import CONTROLLER_NODES, NODES, graph_nodes, teardown_hung
+from fahv.loop.graph import COMPOSED, CONTROLLER_NODES, NODES, graph_nodes, teardown_hung
 
 #: Exit status of the runner (and of `fahv sil`) after SIGINT / SIGTERM (128 + SIGINT).
 EXIT_INTERRUPTED = 130
@@ -82,7 +82,7 @@ def executable(name: str) -> Path:
     FileNotFoundError
         If no prefix holds it (the workspace is not built or not sourced).
     """
-    pkg = NODES[name].package
+    pkg = "hsv_bringup" if name == COMPOSED else NODES[name].package
     for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
         exe = Path(prefix) / "lib" / pkg / name
         if prefix and exe.is_file():
@@ -104,9 +104,16 @@ def _tail(path: Path, n: int = 12) -> str:
 class Graph:
     """The processes of one run."""
 
-    def __init__(self, params_file: Path, log_dir: Path, names: list[str], env: dict) -> None:
+    def __init__(
+        self, params_file: Path, log_dir: Path, names: list[str], env: dict, compose: bool = False
+    ) -> None:
         self.params_file, self.log_dir, self.env = params_file, log_dir, env
-        self.names = list(names)
+        # with `compose`, the loop nodes are one process (COMPOSED) after the others
+        self.composed = [n for n in names if NODES[n].kind in ("loop", "controller")]
+        if not compose:
+            self.composed = []
+        self.names = [n for n in names if n not in self.composed]
+        self.names += [COMPOSED] if self.composed else []
         self.procs: dict[str, subprocess.Popen] = {}
         self.logs: dict[str, Path] = {}
         self.progress = (0, 0)
@@ -118,7 +125,9 @@ class Graph:
         self.log_dir.mkdir(parents=True, exist_ok=True)
         for name in self.names:
             self.logs[name] = self.log_dir / f"{name}.log"
-            cmd = [str(executable(name)), "--ros-args", "--params-file", str(self.params_file)]
+            nodes = self.composed if name == COMPOSED else []
+            cmd = [str(executable(name)), *nodes, "--ros-args", "--params-file",
+                   str(self.params_file)]  # fmt: skip
             pipe = name in ("recorder", "replay")  # they print progress lines
             with open(self.logs[name], "w") as log:
                 p = subprocess.Popen(
@@ -368,6 +377,12 @@ def main(argv: list[str] | None = None) -> int:
         help="ROS_DOMAIN_ID of the graph (default: a free one from domain_coordinator; "
         "an exported ROS_DOMAIN_ID is not used)",
     )
+    ap.add_argument(
+        "--compose",
+        action="store_true",
+        help=f"run the loop nodes in one process ('{COMPOSED}', ROS 2 composition) "
+        "instead of one process each",
+    )
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
     try:
@@ -384,7 +399,7 @@ def main(argv: list[str] | None = None) -> int:
     env = dict(os.environ)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env["PYTHONUNBUFFERED"] = "1"
-    graph = Graph(args.params_file, args.log_dir, names, env)
+    graph = Graph(args.params_file, args.log_dir, names, env, args.compose)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, graph.on_signal)
     with ExitStack() as held:

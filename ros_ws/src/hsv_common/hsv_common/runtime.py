@@ -34,7 +34,7 @@ from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
 from fahv.errors import ParameterError
 from fahv.loop import graph
-from fahv.loop.graph import TEARDOWN_MARK
+from fahv.loop.graph import COMPOSED, TEARDOWN_MARK
 from fahv.verdict import RunEnded
 
 EXIT_OK, EXIT_ERROR, EXIT_PARAM, EXIT_WATCHDOG, EXIT_SIGNAL, EXIT_FOREIGN = 0, 1, 2, 3, 4, 5
@@ -355,4 +355,126 @@ def main(node_cls, args=None, linger_s: float = 10.0) -> int:
             if rclpy.ok():
                 rclpy.shutdown()
             guard.cancel()
+    return status
+
+
+
+class _Composition:
+    """The nodes of one process (`main_composed`) and how each one ended."""
+
+    def __init__(self) -> None:
+        self.nodes: list = []
+        self.ended: dict = {}  # node (None: the process) -> (status, reason), in order
+        self.closing: dict = {}  # node that ended with a verdict -> its linger deadline
+        self.closed: set = set()
+
+    def running(self) -> bool:
+        """True while a node is neither done nor ended, or a verdict is still going out."""
+        return bool(self.closing) or not all(n.done or n in self.ended for n in self.nodes)
+
+    def close(self, node, status: int, reason: str) -> None:
+        """Close `node` once (its last status goes out to its peers)."""
+        if node not in self.closed:
+            self.closed.add(node)
+            node.close(status, reason)
+
+    def poll(self, linger_s: float) -> None:
+        """`poll` every running node; close those that stopped (`main_composed`)."""
+        for node in self.nodes:
+            if node.done or node in self.ended:
+                continue
+            try:
+                node.poll()
+            except Exception as exc:  # this node's end: its peers learn it from its status
+                self.ended[node] = failure(node.get_name(), exc)
+                if isinstance(exc, RunEnded):  # its messages go out first, as in `main`
+                    self.closing[node] = time.monotonic() + linger_s
+                else:
+                    self.close(node, *self.ended[node])
+        for node, t_end in list(self.closing.items()):
+            if delivered(node) or time.monotonic() > t_end:
+                del self.closing[node]
+                self.close(node, *self.ended[node])
+
+    def finish(self, stop: _Stop) -> int:
+        """Close every node not closed yet; the process's exit status (`main_composed`)."""
+        first = next(iter(self.ended.values()), None)
+        for node in self.nodes:
+            if node in self.ended:
+                status, reason = self.ended[node]
+            elif node.done:
+                status, reason = EXIT_OK, ""
+            elif stop.signal is not None:
+                status = EXIT_SIGNAL
+                reason = f"stopped by signal {signal.Signals(stop.signal).name} at step {node.k}"
+            else:  # the process's own failure
+                status, reason = first
+            self.close(node, status, reason)
+        if first is not None:
+            status = first[0]
+        else:
+            status = EXIT_SIGNAL if stop.signal is not None else EXIT_OK
+        print(f"[{COMPOSED}] {TEARDOWN_MARK} {status}; DDS teardown", file=sys.stderr, flush=True)
+        return status
+
+
+def main_composed(node_classes: list, args=None, linger_s: float = 10.0) -> int:
+    """Run several nodes in one process on one executor; returns the exit status.
+
+    ROS 2's composition: each node keeps its name, parameters, topics and status, and
+    the middleware delivers between nodes of one process without the network stack
+    (Fast DDS's intra-process delivery), which shortens each hop of a lockstep step.
+    The nodes behave as in `main`, each on its own: a node that fails closes
+    with its exit status (one that ended the run with a verdict once its messages are
+    delivered), and its peers in and out of the process see it in its last status and
+    stop by their own checks. The process exits with the status of the first node that
+    stopped (the cause; its peers follow with 3 or 6), 4 after a signal, 0 when every
+    node finished and its messages were delivered.
+
+    Parameters
+    ----------
+    node_classes : list of type
+        `LockstepNode` subclasses, built in this order.
+    args : list of str, optional
+        Command line with the ROS arguments (`--ros-args --params-file FILE`), as for
+        `rclpy.init`.
+    linger_s : float
+        Longest wait for the last messages' delivery [s wall time].
+    """
+    stop = _Stop()
+    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    c = _Composition()
+    ex = make_executor()
+    guard = HangGuard()
+    try:
+        for cls in node_classes:
+            c.nodes.append(cls())
+            ex.add_node(c.nodes[-1])
+        gc.collect()
+        gc.freeze()
+        guard.arm(max(max(n.watchdog_s for n in c.nodes), HANG_S) + HANG_S)
+        while stop.signal is None and c.running():
+            guard.beat()
+            ex.spin_once(timeout_sec=SPIN_S)
+            if stop.signal is None:
+                c.poll(linger_s)
+        guard.arm(linger_s + 2 * HANG_S)  # the last messages of the finished nodes
+        t_end = time.monotonic() + linger_s
+        done = [n for n in c.nodes if n.done]
+        while stop.signal is None and time.monotonic() < t_end and not all(map(delivered, done)):
+            ex.spin_once(timeout_sec=LINGER_SPIN_S)
+    except Exception as exc:  # a node not built, or a callback's error: the process's
+        built = len(c.nodes) == len(node_classes)
+        c.ended[None] = failure(COMPOSED if built else node_classes[len(c.nodes)].ROLE, exc)
+    finally:
+        status = c.finish(stop)
+        guard.arm(TEARDOWN_S)
+        ex.shutdown(timeout_sec=TEARDOWN_S)
+        for node in c.nodes:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+        guard.cancel()
     return status
