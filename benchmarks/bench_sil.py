@@ -14,7 +14,8 @@ with its loop nodes composed in one process (`sil --compose`, named `composed`),
 same alternation.
 
 Run: .venv/bin/python benchmarks/bench_sil.py [--commit HEAD] [-n 3] [--duration 60]
-     [--scenario offline_design/scenarios/case1.yaml] [--smoke]
+     [--scenario offline_design/scenarios/case1.yaml] [--allow-uncertified] [--no-compose]
+     [--smoke]
 A commit whose nodes refuse its own file shows as failed runs (exit status 1, the
 node's reason printed).
 
@@ -89,8 +90,12 @@ def tree_env(ws: Path, src: Path | None) -> dict:
     return dict(item.split("=", 1) for item in out.decode().split("\0") if "=" in item)
 
 
-def write_params(root: Path, env: dict, scenario: str, duration: float, path: Path) -> dict:
+def write_params(
+    root: Path, env: dict, scenario: str, duration: float, path: Path, extra: tuple = ()
+) -> dict:
     """The run's parameter file, made by the tree at `root` (`fahv sil --write-params`).
+
+    `extra`: further options of `fahv sil` (`--allow-uncertified`).
 
     Raises
     ------
@@ -98,7 +103,8 @@ def write_params(root: Path, env: dict, scenario: str, duration: float, path: Pa
         If the tree's `fahv sil` fails (its output printed).
     """
     cmd = [sys.executable, "-c", "import sys; from fahv.cli import main; sys.exit(main())",
-           "sil", scenario, "--duration", str(duration), "--write-params", str(path)]  # fmt: skip
+           "sil", scenario, "--duration", str(duration), "--write-params", str(path),
+           *extra]  # fmt: skip
     r = subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True)
     if r.returncode != 0:
         sys.exit(f"bench_sil: fahv sil --write-params in {root} failed:\n{r.stdout}{r.stderr}")
@@ -136,6 +142,8 @@ def main() -> None:
     ap.add_argument("-n", type=int, default=3, help="runs of each tree")
     ap.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "fahv_bench_sil")
     ap.add_argument("--keep", action="store_true", help="keep the run folders")
+    ap.add_argument("--allow-uncertified", action="store_true",
+                    help="run a scenario beyond what its design certifies (fahv sil's option)")
     ap.add_argument("--no-compose", action="store_true",
                     help="leave out the working tree's graph with its loop nodes composed in "
                     "one process (`sil --compose`)")  # fmt: skip
@@ -159,9 +167,10 @@ def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="bench_sil_"))
     if not args.no_compose:  # the same tree and parameter file, the loop in one process
         trees[COMPOSED_TREE], roots[COMPOSED_TREE] = trees["working tree"], ROOT
+    allow = ("--allow-uncertified",) if args.allow_uncertified else ()
     content = {
         name: write_params(roots[name], env, args.scenario, args.duration,
-                           work / f"params_{i}.yaml")
+                           work / f"params_{i}.yaml", allow)
         for i, (name, (_, env)) in enumerate(trees.items())
     }  # fmt: skip
     for _, env in trees.values():

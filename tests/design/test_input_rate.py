@@ -82,6 +82,39 @@ def test_the_verify_line_compares_with_the_vehicle_files_servo():
     assert check_input_rate(*map(np.asarray, args), case, SimpleNamespace(actuators={})) == []
 
 
+def test_the_design_prints_the_line_and_refuses_a_tube_set_that_fails_it():
+    """The design that closes a tube set prints the same `input rate` line (the
+    one-state loop above, plan rows of 1 deg) and stops with a DesignError naming it when
+    the servo is too slow; nothing is printed for a vehicle file without a rate limit."""
+    from types import SimpleNamespace
+
+    from fahv.design.tube_set_design import log_input_rate
+    from fahv.errors import DesignError
+    from fahv.model.actuators import Servo
+
+    A, B = np.array([[[1.0, 0.0], [0.0, 1.0]]]), np.array([[[0.0, 0.0], [0.0, 0.5]]])
+    nv = SimpleNamespace(vertices=lambda: (A, B))  # h first, then the one tube state
+    ts = SimpleNamespace(F_8=np.array([[0.0], [-1.0]]), N_8=np.eye(1), W_8=np.array([0.25]))
+    case = {"Ts": 0.02, "mpc": {"du_max": [0.0, 1.0]}}
+    for rate, ok in ((2500.0, True), (2000.0, False)):
+        servo = Servo(zeta=0.7, omega_n=150.0, rate_limit_incr=np.radians(rate),
+                      rate_limit_decr=np.radians(rate))  # fmt: skip
+        veh = SimpleNamespace(actuators={"second_order": {"delta_e": servo}})
+        lines = []
+        if ok:
+            log_input_rate(nv, ts, case, veh, lines.append)
+        else:
+            with pytest.raises(DesignError, match="43.972 <= 40.000 deg per step"):
+                log_input_rate(nv, ts, case, veh, lines.append)
+        (line,) = lines
+        assert line.startswith("input rate: the tube's part of the delta_e command moves at most "
+                               "42.972 deg per step over 1 vertices")  # fmt: skip
+        assert line.endswith("  OK" if ok else "  FAILED")
+    lines = []
+    log_input_rate(nv, ts, case, SimpleNamespace(actuators={}), lines.append)
+    assert lines == []
+
+
 def test_the_tube_part_of_a_case1_run_stays_within_the_bound():
     """Case 1 on the exact state (tube_mpc_no_notch, the step and 30 s past the 10 % loss
     at 100 s): the tube's part F e of the elevator command, e = x - x_r - x_n from the

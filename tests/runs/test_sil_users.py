@@ -153,9 +153,11 @@ def test_ctrl_c_on_fahv_sil_finalises_the_run_and_exits_130(quick_case, tmp_path
     assert rec.topics["/hsv/state"]["count"] >= steps
 
 
-def test_graph_started_node_by_node_with_ros2_run(design, quick_case, tmp_path):
+@pytest.mark.parametrize("composed", [False, True], ids=["node_by_node", "composed"])
+def test_graph_started_node_by_node_with_ros2_run(design, quick_case, tmp_path, composed):
     """The README's commands: `fahv sil --write-params`, then `source
-    ros_ws/install/setup.bash` and one `ros2 run` per node (the stand-in on this machine)."""
+    ros_ws/install/setup.bash` and one `ros2 run` per node (the stand-in on this machine),
+    or the recorder's and the one that composes the loop nodes in one process."""
     case_file, art = quick_case
     params = tmp_path / "run.yaml"
     fahv = str(ROOT / ".venv" / "bin" / "fahv")
@@ -165,11 +167,15 @@ def test_graph_started_node_by_node_with_ros2_run(design, quick_case, tmp_path):
         cwd=ROOT, capture_output=True, text=True, check=True,
     )  # fmt: skip
     commands = [ln.strip() for ln in r.stdout.splitlines() if ln.strip().startswith("ros2 run")]
-    assert [c.split()[3] for c in commands] == [
-        "recorder", "state_estimator", "notch_filter", "nominal_trajectory", "tube_mpc",
-        "fault_injector", "plant",
-    ]  # fmt: skip
-    assert all(NODES[c.split()[3]].package == c.split()[2] for c in commands)
+    loop = ["state_estimator", "notch_filter", "nominal_trajectory", "tube_mpc",
+            "fault_injector", "plant"]  # fmt: skip
+    assert [c.split()[3] for c in commands] == ["recorder", *loop, "loop"]
+    assert commands[-1].split()[2:4 + len(loop)] == ["hsv_bringup", "loop", *loop]
+    assert all(NODES[c.split()[3]].package == c.split()[2] for c in commands[:-1])
+    if composed:  # the recorder in the background, the composed loop in the foreground
+        commands = [commands[0], commands[-1]]
+    else:
+        commands = commands[:-1]
     export = re.search(
         r"^  export ROS_DOMAIN_ID=(\d+) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST   # a domain",
         r.stdout, re.M,

@@ -27,6 +27,7 @@ from fahv.bounds.one_step_bound import altitude_bound
 from fahv.bounds.vertices import NominalVertices, nominal_vertices
 from fahv.cluster import active_client
 from fahv.control.base import ATTITUDE_BOUND_DEG
+from fahv.errors import DesignError
 from fahv.onset.bound import (
     STEADY_LAMS,
     onset_bound,
@@ -52,6 +53,38 @@ def _state_max(case: dict, log) -> np.ndarray | None:
         f"{ATTITUDE_BOUND_DEG - case['mpc']['att_max']:.3f} deg (requirement "
         f"{ATTITUDE_BOUND_DEG} deg less the QP's rows mpc.att_max)")  # fmt: skip
     return state_max
+
+
+def log_input_rate(nv, tube_set: TubeSet, case: dict, vehicle, log) -> None:
+    """The `input rate` line of `fahv verify`, logged by the design that makes the tube set.
+
+    Parameters
+    ----------
+    nv : NominalVertices
+        The vertices along the nominal (`vertices()` gives A (R, 9, 9), B (R, 9, 2)).
+    tube_set : TubeSet
+        Its F_8 (2, 8), N_8 (8, 8) and W_8 (8,).
+    case : dict
+        The design file's data (`Ts` [s], `mpc.du_max`).
+    vehicle : Vehicle
+        Its elevator servo's rate limit (none: no line).
+    log : callable
+        Receives the line.
+
+    Raises
+    ------
+    DesignError
+        If the tube's part of the elevator command and the plan's rate rows move faster
+        than the vehicle's servo (`fahv.certificate.verify.check_input_rate`).
+    """
+    from fahv.certificate.verify import check_input_rate
+
+    A, B = nv.vertices()
+    for check in check_input_rate(A[:, 1:, 1:], B[:, 1:, :], tube_set.F_8, tube_set.N_8,
+                                  tube_set.W_8, case, vehicle):  # fmt: skip
+        log(check.text())
+        if not check.ok:
+            raise DesignError(f"certificate failed: {check.line}")
 
 
 def _contain(case: dict, box, vehicle, trim_map, unc, rho_min: float, log) -> np.ndarray | None:
@@ -193,6 +226,7 @@ def design_tube_set(
                               s["lam"], case["mpc"]["M"], grow=s["grow"],
                               iterations=s["iterations"], w_ref=w_max, state_max=state_max,
                               contain=contain, warm=warm, log=log)  # fmt: skip
+    log_input_rate(nv, tube_set, case, vehicle, log)
     stage("tube set: onset bound, notch loops")
     parts, lams, n_ellipsoids = _ellipsoid_tasks(
         nv, tube_set, case, box, vehicle, trim_map, unc, rho_min, gamma, notches, starts, estimate
