@@ -64,24 +64,6 @@ def test_sil_equals_in_process_simulation(sil_run, design):
     assert sil_run.simulated_s == T  # the run's duration parameter, exact
 
 
-def test_the_composed_loop_runs_the_same_steps(sil_run, design, tmp_path):
-    """The loop nodes in one process (ROS 2 composition): every recorded array of the
-    run equals the one of the graph with a process per node, and each node logs its end."""
-    res = run_sil(design, "tube_mpc", duration=T, out_dir=tmp_path, quiet=True,
-                  overrides=KALMAN, compose=True)  # fmt: skip
-    assert res.returncode == 0
-    run, ref = run_result_of(read_run(res.bag)), run_result_of(read_run(sil_run.bag))
-    for name in ("x", "u", "y", "x_hat", "tube_level"):
-        assert np.array_equal(getattr(run, name), getattr(ref, name)), name
-    logs = sorted(p.name for p in (res.bag / "logs").iterdir())
-    assert logs == ["loop.log", "recorder.log"]
-    text = (res.bag / "logs" / "loop.log").read_text()
-    for node in ("plant", "fault_injector", "state_estimator", "notch_filter",
-                 "nominal_trajectory", "tube_mpc"):  # fmt: skip
-        assert f"[{node}]: done: {N} steps" in text, node
-    assert "[loop] closed with exit status 0" in text
-
-
 def test_sil_recording_opens_in_rosbags(sil_run):
     with AnyReader([sil_run.bag]) as reader:
         conns = {c.topic: c for c in reader.connections}

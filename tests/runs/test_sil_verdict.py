@@ -43,5 +43,10 @@ def test_a_stuck_elevator_ends_the_graph_with_the_simulators_verdict(tmp_path, c
     assert f"run {bag.name} ended: nominal_out_of_domain at t = 5.50 s (step 275, " in err
     run = run_result_of(rec)
     assert (run.x == ended.value.partial.x).all()
+    if compose:  # one process ran the loop nodes: one log with each one's end
+        assert sorted(p.name for p in (bag / "logs").iterdir()) == ["loop.log", "recorder.log"]
+        text = (bag / "logs" / "loop.log").read_text()
+        assert "[loop] closed with exit status 6" in text
+        assert "[nominal_trajectory] run ended: nominal_out_of_domain" in text
     assert main(["inspect", str(bag)]) == 0
     assert "verdict       nominal_out_of_domain at t = 5.50 s" in capsys.readouterr().out
