@@ -43,6 +43,7 @@ def test_a_stuck_elevator_ends_the_graph_with_the_simulators_verdict(tmp_path, c
     assert f"run {bag.name} ended: nominal_out_of_domain at t = 5.50 s (step 275, " in err
     run = run_result_of(rec)
     assert (run.x == ended.value.partial.x).all()
+    assert rec.metadata["graph_processes"] == ("composed" if compose else "per_node")
     if compose:  # one process ran the loop nodes: one log with each one's end
         assert sorted(p.name for p in (bag / "logs").iterdir()) == ["loop.log", "recorder.log"]
         text = (bag / "logs" / "loop.log").read_text()

@@ -448,7 +448,9 @@ def run_graph(
     bag = Path(out_dir).resolve() / name
     path = work / "params.yaml"
     rec = content["recorder"]["ros__parameters"]
-    rec.update(bag=str(bag), params_file=str(path.resolve()))
+    meta = recorder_metadata(content)  # how the loop ran: one process, or one per node
+    meta["graph_processes"] = "composed" if compose else "per_node"
+    rec.update(bag=str(bag), params_file=str(path.resolve()), metadata_json=json.dumps(meta))
     content.setdefault("/**", {"ros__parameters": {}})["ros__parameters"]["run_id"] = name
     path.write_text(yaml.safe_dump(content, sort_keys=False, width=120))
     sim_s = content["plant"]["ros__parameters"]["duration"]
