@@ -316,6 +316,7 @@ def _hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None)
         argv += ["--watchdog", str(watchdog)]
     r = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, check=True)
     commands = [ln.strip() for ln in r.stdout.splitlines() if ln.strip().startswith("ros2 run")]
+    commands = [c for c in commands if c.split()[3] != "loop"]  # one process per node
     if logs is not None:
         logs.mkdir(parents=True, exist_ok=True)
     lines, started = ["source ros_ws/install/setup.bash"], []
