@@ -1,4 +1,5 @@
-"""``fahv margins``: the table of cm_certified and its figures."""
+"""``fahv margins``: the table of cm_certified and its figures; of a scenario with an
+estimator, the elevator loop on the estimate too."""
 
 from __future__ import annotations
 
@@ -12,10 +13,19 @@ from fahv.runs.workspace import ROOT
 
 def test_margins_prints_the_table_and_writes_the_figures(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(ROOT)
-    assert main(["margins", "cm_certified", "--out", str(tmp_path), "--format", "pdf"]) == 0
+    # case1_kalman: its design cm_certified, and its filter on h, V, theta and q
+    assert main(["margins", "case1_kalman", "--out", str(tmp_path), "--format", "pdf"]) == 0
     out = capsys.readouterr().out
     assert "GM+ [dB]" in out and "DM phase [deg]" in out
     rows = [line.split() for line in out.splitlines() if line.startswith(("delta_e ", "q "))]
+    on_estimate = [r for r in rows if r[:3] == ["delta_e", "on", "x_hat"]]
+    rows = [r for r in rows if r not in on_estimate]
+    assert "the law on the Kalman estimate of h, V, theta, q (scenario case1_kalman" in out
+    # 4 settings at the design point and worst over the vertices
+    assert len(on_estimate) == 4 * 2
+    dp = next(r for r in on_estimate if r[3:6] == ["omega_1", "design", "point"])
+    assert float(dp[6]) == pytest.approx(5.0, abs=0.1) and float(dp[8]) == pytest.approx(30.1,
+                                                                                      abs=0.3)
     # 2 breaks x (4 settings at the design point and the corner, 2 over the vertices)
     assert len(rows) == 2 * (4 * 2 + 2)
     q_on = next(r for r in rows if r[:4] == ["q", "omega_1", "design", "point"])

@@ -63,8 +63,10 @@ class Plants:
     B: np.ndarray
 
 
-def _notch_parts(notch: NotchFilter | None, Ts: float):
+def notch_parts(notch: NotchFilter | None, Ts: float):
     """(A_d (k, k), b (k,), C_q (k,), d) of the filter q -> q' in chi coordinates; k = 0 if off.
+
+    Raises ValueError if the notch cannot be sampled at Ts.
 
     As `fahv.tube.notch_loop.notch_closed_loop`: chi+ = A_d chi + b q,
     q' = C_q chi + d q, with b = A_d B_d + B_d and d = C_q B_d + D_q.
@@ -75,9 +77,14 @@ def _notch_parts(notch: NotchFilter | None, Ts: float):
     return dn.A_d, dn.A_d @ dn.B_d + dn.B_d, dn.C_q, float(dn.C_q @ dn.B_d + dn.D_q)
 
 
-def _law(F, notch, Ts, n, iq):
-    """The law's gain K (m, n + k) on xi = [x; chi] and the filter's rows (k, n + k)."""
-    A_d, b, C_q, d = _notch_parts(notch, Ts)
+def law_gain(F, notch, Ts, n, iq):
+    """The law's gain K (m, n + k) on xi = [x; chi] and the filter's rows (k, n + k).
+
+    F (m, n) is the ancillary gain, `notch` the filter on q (None: none, k = 0), Ts
+    the period [s], iq the index of q among the n states: u = F x with x's q replaced by
+    the filter's output q' = C_q chi + d q (eq. 38).
+    """
+    A_d, b, C_q, d = notch_parts(notch, Ts)
     k = len(b)
     S = np.eye(n)
     S[iq, iq] = d
@@ -117,7 +124,7 @@ def closed_loop(A, B, F, notch: NotchFilter | None, Ts: float, iq: int = IQ) -> 
     """
     A, B, F = (np.asarray(v, float) for v in (A, B, F))
     P, n, _ = A.shape
-    K, rows = _law(F, notch, Ts, n, iq)
+    K, rows = law_gain(F, notch, Ts, n, iq)
     k = rows.shape[0]
     top = np.concatenate([A, np.zeros((P, n, k))], axis=2) + B @ K
     return np.concatenate([top, np.broadcast_to(rows, (P, k, n + k))], axis=1)
@@ -149,7 +156,7 @@ def open_loop(A, B, F, notch: NotchFilter | None, Ts: float, break_at: str,
     """
     A, B, F = (np.asarray(v, float) for v in (A, B, F))
     P, n, _ = A.shape
-    K, rows = _law(F, notch, Ts, n, iq)
+    K, rows = law_gain(F, notch, Ts, n, iq)
     k = rows.shape[0]
     plant = np.concatenate([np.concatenate([A, np.zeros((P, n, k))], axis=2),
                             np.broadcast_to(rows, (P, k, n + k))], axis=1)  # fmt: skip
@@ -161,7 +168,7 @@ def open_loop(A, B, F, notch: NotchFilter | None, Ts: float, break_at: str,
     elif break_at == "q":
         K_q = K.copy()
         K_q[:, iq] = 0.0  # the law's q column: the injected signal instead of x_q
-        _, b, _, d = _notch_parts(notch, Ts)
+        _, b, _, d = notch_parts(notch, Ts)
         A_L = plant + Bxi @ K_q
         A_L[:, n:, iq] = 0.0
         B_L = np.concatenate([B @ (F[:, iq] * d), np.broadcast_to(b, (P, k))], axis=1)[..., None]

@@ -72,10 +72,56 @@ def _markdown(study) -> str:
         f"- {line}" for line in notch_summary(rows))  # fmt: skip
 
 
+def estimate_rows(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple[list, str]:
+    """The margins of the law on the Kalman estimate when `arg` is a scenario with one.
+
+    Parameters
+    ----------
+    arg : str
+        The command's argument (a design or a scenario, `resolve_design_file`).
+    study : fahv.analysis.margin_study.MarginStudy
+        The study of its design (the notch settings).
+    stored : fahv.spec.artefacts.Design
+    vehicle : fahv.model.vehicle.Vehicle
+    vehicle_file : str, optional
+        Its file, which holds the sensors' data (the packaged one by default).
+
+    Returns
+    -------
+    (list of LoopMargins, str)
+        The rows (`fahv.analysis.estimated_loop.estimated_margins`) and the line that
+        names the filter; ([], "") for a design or a scenario without an estimator.
+    """
+    from fahv.spec.scenario import load_scenario
+    from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, plant_choices
+
+    path = Path(arg)
+    if not path.suffix:
+        path = Path("offline_design") / "scenarios" / f"{arg}.yaml"
+    if path.resolve() == resolve_design_file(arg).resolve() or not path.is_file():
+        return [], ""
+    c = load_scenario(path).run_spec.data
+    if estimator_kind(c) == NO_ESTIMATOR:
+        return [], ""
+    from fahv.analysis.estimated_loop import estimated_margins
+    from fahv.estimation.kalman import design_filter
+    from fahv.sensors.data import load_sensors, measured_channels
+
+    measured = measured_channels(plant_choices(c)["measured"])
+    a = stored.arrays
+    flt = design_filter(a, vehicle, load_sensors(vehicle_file), measured, c["Ts"],
+                        c["plant_substeps"], a["x0"][None])  # fmt: skip
+    line = (f"the law on the Kalman estimate of {', '.join(measured)} (scenario {path.stem}; "
+            "the filter without servo states, ideal actuators): u = v + F x_hat, broken at the "
+            "elevator input, the filter fed the commanded input")  # fmt: skip
+    return estimated_margins(stored, flt, study.settings), line
+
+
 def cmd_margins(args) -> int:
     """Print the margin table of a design and write its Bode and Nichols figures."""
     t0 = time.monotonic()
-    study, stored, folder = study_of(args.design, args.design_dir, vehicle_of(args),
+    vehicle = vehicle_of(args)
+    study, stored, folder = study_of(args.design, args.design_dir, vehicle,
                                      args.every_notch)  # fmt: skip
     print(
         f"design {study.design_name} ({folder}), hash {stored.summary['design_hash']}: "
@@ -88,6 +134,10 @@ def cmd_margins(args) -> int:
         print(margin_table(study.table_rows()))
         for line in notch_summary(study.table_rows()):
             print(line)
+    rows, line = estimate_rows(args.design, study, stored, vehicle, args.vehicle)
+    if rows:
+        print(line)
+        print(margin_table(rows, markdown=args.markdown))
     for label, rho in study.corner_rho.items():
         print(
             f"notch {label}: closed loop stable at {int((rho < 1).sum())} of {len(rho)} "
