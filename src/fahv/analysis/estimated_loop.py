@@ -17,7 +17,9 @@ estimate's q (eq. 38, chi); the law u_c = K [x_hat_post; chi] (`fahv.analysis.ma
 gain on [x; chi]). The loop's state is xi = [x; z; chi]. Broken at the elevator input
 (the throttle's loop closed), L(z) = -(delta_e the law commands) / (delta_e injected).
 
-Leaves out: the servos (the filter and the plant with ideal actuators), the
+A filter with the servos' states (`estimator.actuators: second_order`) flies the
+airframe with the same servos, linear (`servo_plants`: their rate limits are not in a
+linear loop), and the loop is broken at the elevator servo's command. Leaves out: the
 disturbance estimate's path through the nominal MPC, and the scheduling of L on the
 estimate (the gains of the point's own vertex, or of the design point's weights).
 """
@@ -28,6 +30,8 @@ import numpy as np
 
 import control
 from fahv.analysis.margins import law_gain, notch_parts
+from fahv.estimation.kalman import augmented
+from fahv.estimation.servo_model import N_SERVO, servo_step, with_servos
 from fahv.model.notch import NotchFilter
 from fahv.model.vehicle import DELTA_E, IQ, PHI
 
@@ -38,23 +42,24 @@ def estimated_loop(A, B, F, notch: NotchFilter | None, Ts: float, A_z, B_z, L, C
 
     Parameters
     ----------
-    A : (P, n, n) ndarray
-    B : (P, n, m) ndarray
-        Plant points (deviation coordinates, one control period).
+    A : (P, n_p, n_p) ndarray
+    B : (P, n_p, m) ndarray
+        Plant points (deviation coordinates, one control period): the airframe's n = 9
+        states first, then any actuator states (`servo_plants`).
     F : (m, n) ndarray
-        Ancillary gain (tau F for the adjustable law).
+        Ancillary gain (tau F for the adjustable law) on the airframe's states.
     notch : fahv.model.notch.NotchFilter or None
         Filter on the estimate's q (None: q_hat fed back as estimated).
     Ts : float
         Control period [s].
     A_z : (P, n_z, n_z) ndarray
     B_z : (P, n_z, m) ndarray
-        The filter's model at each point (`fahv.estimation.kalman.augmented`: z =
-        [x; d], n_z = n + m).
+        The filter's model at each point, z = [x; d; ...] (`filter_models`).
     L : (P, n_z, n_y) ndarray
         The filter's gain at each point.
     C : (n_y, n) ndarray
-        The sensors' output matrix (`fahv.estimation.kalman.output_matrix`).
+        The sensors' output matrix on the airframe's states
+        (`fahv.estimation.kalman.output_matrix`).
     iq : int
         Index of q in x.
 
@@ -63,7 +68,7 @@ def estimated_loop(A, B, F, notch: NotchFilter | None, Ts: float, A_z, B_z, L, C
     A_L : (P, N, N) ndarray
     B_L : (P, N, 1) ndarray
     C_L : (P, 1, N) ndarray
-        N = n + n_z + k (k = 2 with the notch); negative-feedback convention: w = -y
+        N = n_p + n_z + k (k = 2 with the notch); negative-feedback convention: w = -y
         closes the loop (`estimated_closed_loop`).
 
     Raises
@@ -73,35 +78,97 @@ def estimated_loop(A, B, F, notch: NotchFilter | None, Ts: float, A_z, B_z, L, C
     """
     A, B, A_z, B_z, L = (np.asarray(v, float) for v in (A, B, A_z, B_z, L))
     C, F = np.asarray(C, float), np.asarray(F, float)
-    P, n, m = B.shape
-    n_z = A_z.shape[1]
-    if A.shape != (P, n, n) or A_z.shape != (P, n_z, n_z) or B_z.shape != (P, n_z, m) \
-            or L.shape != (P, n_z, C.shape[0]) or C.shape[1] != n or F.shape != (m, n):
+    P, n_p, m = B.shape
+    n, n_z = F.shape[1], A_z.shape[1]
+    if A.shape != (P, n_p, n_p) or A_z.shape != (P, n_z, n_z) or B_z.shape != (P, n_z, m) \
+            or L.shape != (P, n_z, C.shape[0]) or C.shape[1] != n or F.shape[0] != m \
+            or n_p < n or n_z < n:
         raise ValueError(f"estimated_loop: shapes A {A.shape}, B {B.shape}, A_z {A_z.shape}, "
                          f"B_z {B_z.shape}, L {L.shape}, C {C.shape}, F {F.shape} disagree")
     K, _ = law_gain(F, notch, Ts, n, iq)
     A_d, b, _, _ = notch_parts(notch, Ts)
     k = len(b)
-    C_z = np.hstack([C, np.zeros((len(C), n_z - n))])
-    G = np.eye(n_z)[None] - L @ C_z  # z_post = G z + L C x
-    # the estimate x_hat_post = [I 0] z_post, and u_c = K_all xi on xi = [x; z; chi]
-    Gx, Gz = (L @ C)[:, :n], G[:, :n]
+    C_p = np.hstack([C, np.zeros((len(C), n_p - n))])  # y of the plant's state
+    C_z = np.hstack([C, np.zeros((len(C), n_z - n))])  # ... of the filter's
+    G = np.eye(n_z)[None] - L @ C_z  # z_post = G z + L C_p x
+    LC = L @ C_p
+    # the estimate x_hat_post = z_post[:n], and u_c = K_all xi on xi = [x; z; chi]
+    Gx, Gz = LC[:, :n], G[:, :n]
     K_all = np.concatenate([K[None, :, :n] @ Gx, K[None, :, :n] @ Gz,
                             np.broadcast_to(K[:, n:], (P, m, k))], axis=2)  # fmt: skip
-    N = n + n_z + k
+    N = n_p + n_z + k
     A_L = np.zeros((P, N, N))
-    A_L[:, :n, :n] = A
-    A_L[:, :n] += B[:, :, PHI : PHI + 1] @ K_all[:, PHI : PHI + 1]  # the throttle's loop
-    A_L[:, n : n + n_z, :n] = A_z @ (L @ C)
-    A_L[:, n : n + n_z, n : n + n_z] = A_z @ G
-    A_L[:, n : n + n_z] += B_z @ K_all  # the filter predicts with the commanded input
-    A_L[:, n + n_z :, :n] = b[None, :, None] * Gx[:, None, iq, :]  # chi+ = A_d chi + b q_hat
-    A_L[:, n + n_z :, n : n + n_z] = b[None, :, None] * Gz[:, None, iq, :]
-    A_L[:, n + n_z :, n + n_z :] = A_d
+    A_L[:, :n_p, :n_p] = A
+    A_L[:, :n_p] += B[:, :, PHI : PHI + 1] @ K_all[:, PHI : PHI + 1]  # the throttle's loop
+    A_L[:, n_p : n_p + n_z, :n_p] = A_z @ LC
+    A_L[:, n_p : n_p + n_z, n_p : n_p + n_z] = A_z @ G
+    A_L[:, n_p : n_p + n_z] += B_z @ K_all  # the filter predicts with the commanded input
+    A_L[:, n_p + n_z :, :n_p] = b[None, :, None] * Gx[:, None, iq, :]  # chi+ = A_d chi + b q_hat
+    A_L[:, n_p + n_z :, n_p : n_p + n_z] = b[None, :, None] * Gz[:, None, iq, :]
+    A_L[:, n_p + n_z :, n_p + n_z :] = A_d
     B_L = np.zeros((P, N, 1))
-    B_L[:, :n, 0] = B[:, :, DELTA_E]
+    B_L[:, :n_p, 0] = B[:, :, DELTA_E]
     C_L = -K_all[:, DELTA_E : DELTA_E + 1]
     return A_L, B_L, np.ascontiguousarray(C_L)
+
+
+def filter_models(A, B, servos=None, Ts: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The filter's linear model at plant points: (A_z, B_z), z = [x; d] or [x; d; s].
+
+    Parameters
+    ----------
+    A : (P, n, n) ndarray
+    B : (P, n, m) ndarray
+        The airframe at each point.
+    servos : (2, 6) ndarray, optional
+        The filter's servos (`GainScheduledKalman.servos`); None: ideal actuators.
+    Ts : float
+        Control period [s] (with servos).
+
+    Returns
+    -------
+    A_z : (P, n_z, n_z) ndarray
+    B_z : (P, n_z, m) ndarray
+        `fahv.estimation.kalman.augmented` with B_z = [B; 0], or
+        `fahv.estimation.servo_model.with_servos` with the command through the servos.
+    """
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    P, n, m = B.shape
+    if servos is None:
+        return augmented(A, B), np.concatenate([B, np.zeros((P, m, m))], axis=1)
+    _, Gam, _, Pu = servo_step(servos, Ts)
+    B_z = np.concatenate([B @ Pu, np.zeros((P, m, m)), np.broadcast_to(Gam, (P,) + Gam.shape)],
+                         axis=1)  # fmt: skip
+    return with_servos(A, B, servos, Ts), B_z
+
+
+def servo_plants(A, B, servos, Ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """The airframe with its servos at plant points: the state [x; s], the command u.
+
+    x+ = A x + B (P_s s + P_u u), s+ = Phi s + Gamma u
+    (`fahv.estimation.servo_model.servo_step`: the servos' exact discretisation over
+    the held step, without their rate limits).
+
+    Parameters
+    ----------
+    A : (P, n, n) ndarray
+    B : (P, n, m) ndarray
+    servos : (2, 6) ndarray
+        `fahv.model.actuators.kernel_parameters` of the plant's servos.
+    Ts : float
+        Control period [s].
+
+    Returns
+    -------
+    A_p : (P, n + 4, n + 4) ndarray
+    B_p : (P, n + 4, m) ndarray
+    """
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    Phi, Gam, Ps, Pu = servo_step(servos, Ts)
+    P, n, m = B.shape
+    A_p = np.zeros((P, n + N_SERVO, n + N_SERVO))
+    A_p[:, :n, :n], A_p[:, :n, n:], A_p[:, n:, n:] = A, B @ Ps, Phi
+    return A_p, np.concatenate([B @ Pu, np.broadcast_to(Gam, (P,) + Gam.shape)], axis=1)
 
 
 def estimated_closed_loop(A_L, B_L, C_L) -> np.ndarray:
@@ -123,14 +190,15 @@ def estimated_margins(design, flt, settings) -> list:
 
     At the design point (the LPV model and the filter's gain blended with the weights of
     the design step's (h0, V0)) and worst over the LPV vertices (each vertex with its own
-    gain L_i), for each setting of `settings`.
+    gain L_i), for each setting of `settings`. A filter with servo states flies the plant
+    with the same servos (`servo_plants`), and the loop is broken at the servo's command.
 
     Parameters
     ----------
     design : fahv.spec.artefacts.Design
         A nine-state design: `A`, `B`, the TP grids and weights, `omega_flex`.
     flt : fahv.estimation.kalman.GainScheduledKalman
-        The scenario's filter, without servo states (`design_filter`).
+        The scenario's filter (`design_filter`).
     settings : list of fahv.analysis.margin_study.NotchSetting
         The notch settings and gains.
 
@@ -142,28 +210,26 @@ def estimated_margins(design, flt, settings) -> list:
     Raises
     ------
     ValueError
-        If the filter has servo states, or the shapes disagree (`estimated_loop`).
+        If the shapes disagree (`estimated_loop`).
     """
     from fahv.analysis.margins import frequency_grid, loop_margins, spectral_radius, worst_case
-    from fahv.estimation.kalman import augmented
 
-    if flt.servos is not None:
-        raise ValueError("estimated_margins: the loop is of a filter without servo states")
     a, Ts = design.arrays, float(design.case["Ts"])
-    A, B = np.asarray(a["A"], float), np.asarray(a["B"], float)
     step = design.case["design_step"]
     w = flt.lpv.weights([step["h0"]], [step["V0"]])[0]
     A_p, B_p = flt.lpv.systems([step["h0"]], [step["V0"]])
     points = {
         "design point": (A_p, B_p, np.einsum("r,rab->ab", w, flt.L)[None]),
-        "vertex": (A, B, np.asarray(flt.L, float)),
-    }
+        "vertex": (np.asarray(a["A"], float), np.asarray(a["B"], float),
+                   np.asarray(flt.L, float)),
+    }  # fmt: skip
     omega = frequency_grid(Ts, a["omega_flex"])
     rows = []
     for s in settings:
         for name, (A_, B_, L_) in points.items():
-            B_z = np.concatenate([B_, np.zeros((len(B_), B_.shape[2], B_.shape[2]))], axis=1)
-            loops = estimated_loop(A_, B_, s.F, s.notch, Ts, augmented(A_, B_), B_z, L_, flt.C)
+            plant = (A_, B_) if flt.servos is None else servo_plants(A_, B_, flt.servos, Ts)
+            loops = estimated_loop(*plant, s.F, s.notch, Ts,
+                                   *filter_models(A_, B_, flt.servos, Ts), L_, flt.C)
             rho = spectral_radius(estimated_closed_loop(*loops))
             systems = estimated_loop_systems(*loops, Ts)
             got = [loop_margins(sys, r, omega, a["omega_flex"][0],

@@ -93,7 +93,7 @@ def estimate_rows(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple[
         names the filter; ([], "") for a design or a scenario without an estimator.
     """
     from fahv.spec.scenario import load_scenario
-    from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, plant_choices
+    from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, estimator_value, plant_choices
 
     path = Path(arg)
     if not path.suffix:
@@ -105,15 +105,20 @@ def estimate_rows(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple[
         return [], ""
     from fahv.analysis.estimated_loop import estimated_margins
     from fahv.estimation.kalman import design_filter
+    from fahv.loop.cores import servos_of
     from fahv.sensors.data import load_sensors, measured_channels
 
     measured = measured_channels(plant_choices(c)["measured"])
     a = stored.arrays
+    model = estimator_value(c, "actuators")
+    servos = servos_of(vehicle, model, "state_estimator")
     flt = design_filter(a, vehicle, load_sensors(vehicle_file), measured, c["Ts"],
-                        c["plant_substeps"], a["x0"][None])  # fmt: skip
+                        c["plant_substeps"], a["x0"][None], servos)  # fmt: skip
+    actuators = ("ideal actuators" if servos is None else
+                 f"the {model} servos in the plant and the filter, linear")  # fmt: skip
     line = (f"the law on the Kalman estimate of {', '.join(measured)} (scenario {path.stem}; "
-            "the filter without servo states, ideal actuators): u = v + F x_hat, broken at the "
-            "elevator input, the filter fed the commanded input")  # fmt: skip
+            f"{actuators}): u = v + F x_hat, broken at the elevator command, the filter fed "
+            "the commanded input")  # fmt: skip
     return estimated_margins(stored, flt, study.settings), line
 
 
