@@ -30,8 +30,12 @@ while the graph stops only prints a note.
 Usually started by `fahv sil CASE` (or `fahv replay`), which writes the parameter
 file; by hand:
 
-    sil --params-file RUN_PARAMS.yaml --log-dir DIR [--controller tube_mpc|rmpc]
+    sil --params-file RUN_PARAMS.yaml --log-dir DIR [--controller tube_mpc|rmpc] [--compose]
     sil --params-file REPLAY_PARAMS.yaml --log-dir DIR --nodes replay tube_mpc
+
+With `--compose` the loop nodes run in one process, `loop` (hsv_bringup.composed,
+ROS 2 composition); the runner then supervises that process under that name, and the
+recorder (or replay) as before.
 """
 
 from __future__ import annotations
