@@ -11,6 +11,7 @@ import pytest
 import yaml
 
 from fahv.design.pipeline import run_design
+from fahv.loop.graph import COMPOSED
 from fahv.model.tp_model import build_tp_model
 from fahv.model.vehicle import load_vehicle
 from fahv.spec.files import spec_file
@@ -316,7 +317,7 @@ def _hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None)
         argv += ["--watchdog", str(watchdog)]
     r = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, check=True)
     commands = [ln.strip() for ln in r.stdout.splitlines() if ln.strip().startswith("ros2 run")]
-    commands = [c for c in commands if c.split()[3] != "loop"]  # one process per node
+    commands = [c for c in commands if c.split()[3] != COMPOSED]  # one process per node
     if logs is not None:
         logs.mkdir(parents=True, exist_ok=True)
     lines, started = ["source ros_ws/install/setup.bash"], []

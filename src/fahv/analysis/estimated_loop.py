@@ -29,7 +29,14 @@ from __future__ import annotations
 import numpy as np
 
 import control
-from fahv.analysis.margins import law_gain, notch_parts
+from fahv.analysis.margins import (
+    frequency_grid,
+    law_gain,
+    loop_margins,
+    notch_parts,
+    spectral_radius,
+    worst_case,
+)
 from fahv.estimation.kalman import augmented
 from fahv.estimation.servo_model import N_SERVO, servo_step, with_servos
 from fahv.model.notch import NotchFilter
@@ -174,14 +181,37 @@ def servo_plants(A, B, servos, Ts: float) -> tuple[np.ndarray, np.ndarray]:
 def estimated_closed_loop(A_L, B_L, C_L) -> np.ndarray:
     """The closed loop of `estimated_loop`: A_L - B_L C_L (P, N, N).
 
-    Its eigenvalues are those of the state-feedback loop and of the filter's error at a
-    matched point (the separation principle), which the tests check.
+    Parameters
+    ----------
+    A_L : (P, N, N) array_like
+    B_L : (P, N, 1) array_like
+    C_L : (P, 1, N) array_like
+        `estimated_loop`'s output (negative-feedback convention).
+
+    Returns
+    -------
+    (P, N, N) ndarray
+        Its eigenvalues are those of the state-feedback loop and of the filter's error at
+        a matched point (the separation principle), which the tests check.
     """
     return np.asarray(A_L, float) - np.asarray(B_L, float) @ np.asarray(C_L, float)
 
 
 def estimated_loop_systems(A_L, B_L, C_L, Ts: float) -> list:
-    """python-control state-space loops (dt = Ts) of `estimated_loop`'s points."""
+    """python-control state-space loops of `estimated_loop`'s points.
+
+    Parameters
+    ----------
+    A_L, B_L, C_L : ndarray
+        `estimated_loop`'s output, (P, N, N), (P, N, 1), (P, 1, N).
+    Ts : float
+        Control period [s] (the systems' dt).
+
+    Returns
+    -------
+    list of control.StateSpace
+        P SISO loops, for `fahv.analysis.margins.loop_margins`.
+    """
     return [control.ss(a, b, c, 0.0, dt=Ts) for a, b, c in zip(A_L, B_L, C_L, strict=True)]
 
 
@@ -212,8 +242,6 @@ def estimated_margins(design, flt, settings) -> list:
     ValueError
         If the shapes disagree (`estimated_loop`).
     """
-    from fahv.analysis.margins import frequency_grid, loop_margins, spectral_radius, worst_case
-
     a, Ts = design.arrays, float(design.case["Ts"])
     step = design.case["design_step"]
     w = flt.lpv.weights([step["h0"]], [step["V0"]])[0]

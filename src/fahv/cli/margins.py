@@ -92,13 +92,12 @@ def estimate_rows(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple[
         The rows (`fahv.analysis.estimated_loop.estimated_margins`) and the line that
         names the filter; ([], "") for a design or a scenario without an estimator.
     """
+    from fahv.campaign.spec import scenario_path
     from fahv.spec.scenario import load_scenario
     from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, estimator_value, plant_choices
 
-    path = Path(arg)
-    if not path.suffix:
-        path = Path("offline_design") / "scenarios" / f"{arg}.yaml"
-    if path.resolve() == resolve_design_file(arg).resolve() or not path.is_file():
+    path = scenario_path(arg)
+    if not path.is_file() or path.resolve() == resolve_design_file(arg).resolve():
         return [], ""
     c = load_scenario(path).run_spec.data
     if estimator_kind(c) == NO_ESTIMATOR:

@@ -10,7 +10,7 @@ from pathlib import Path
 from fahv.certificate.verified import load_or_design
 from fahv.cli.common import add_vehicle_option, progress, read_run_warned, to_json
 from fahv.errors import FahvError, RunInterrupted
-from fahv.loop.graph import COMPOSED, NODES, TOPICS, graph_nodes
+from fahv.loop.graph import COMPOSED, NODES, TOPICS, graph_nodes, loop_nodes
 from fahv.loop.params import controller_node
 from fahv.loop.simulate import simulate
 from fahv.loop.wire import encode
@@ -339,7 +339,7 @@ def _write_params_only(args, design, variant: str) -> int:
     for name in names:
         amp = "" if name == "plant" else " &"
         print(f"  ros2 run {NODES[name].package} {name} --ros-args --params-file {path}{amp}")
-    loop = [n for n in names if NODES[n].kind in ("loop", "controller")]
+    loop = loop_nodes(names)
     print("or the loop nodes composed in one process (after the recorder's line):")
     print(f"  ros2 run hsv_bringup {COMPOSED} {' '.join(loop)} --ros-args --params-file {path}")
     return 0

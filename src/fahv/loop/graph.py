@@ -185,6 +185,21 @@ def producer_of(topic: str, nodes=None) -> str:
     return "?"
 
 
+def loop_nodes(names=None) -> list[str]:
+    """The loop and controller nodes among `names` (default: the table's), in their order.
+
+    These are the nodes that exchange the loop topics step by step: the ones a replay
+    can test and the `loop` process can compose (not the recorder or replay).
+
+    Examples
+    --------
+    >>> loop_nodes(["recorder", "state_estimator", "tube_mpc", "plant"])
+    ['state_estimator', 'tube_mpc', 'plant']
+    """
+    names = list(NODES) if names is None else names
+    return [n for n in names if NODES[n].kind in ("loop", "controller")]
+
+
 def replay_topics(nodes) -> tuple[list[str], list[str]]:
     """(inputs to replay, outputs to capture) for testing `nodes` against a run.
 
@@ -196,7 +211,7 @@ def replay_topics(nodes) -> tuple[list[str], list[str]]:
     RunError
         On a node that is not a loop node of `NODES`.
     """
-    testable = sorted(n.name for n in NODES.values() if n.kind in ("loop", "controller"))
+    testable = sorted(loop_nodes())
     unknown = [n for n in nodes if n not in testable]
     if unknown:
         raise RunError(f"cannot replay into {unknown}: nodes are {testable}")

@@ -54,7 +54,14 @@ import domain_coordinator
 import yaml
 from tqdm import tqdm
 
-from fahv.loop.graph import COMPOSED, CONTROLLER_NODES, NODES, graph_nodes, teardown_hung
+from fahv.loop.graph import (
+    COMPOSED,
+    CONTROLLER_NODES,
+    NODES,
+    graph_nodes,
+    loop_nodes,
+    teardown_hung,
+)
 
 #: Exit status of the runner (and of `fahv sil`) after SIGINT / SIGTERM (128 + SIGINT).
 EXIT_INTERRUPTED = 130
@@ -113,9 +120,7 @@ class Graph:
     ) -> None:
         self.params_file, self.log_dir, self.env = params_file, log_dir, env
         # with `compose`, the loop nodes are one process (COMPOSED) after the others
-        self.composed = [n for n in names if NODES[n].kind in ("loop", "controller")]
-        if not compose:
-            self.composed = []
+        self.composed = loop_nodes(names) if compose else []
         self.names = [n for n in names if n not in self.composed]
         self.names += [COMPOSED] if self.composed else []
         self.procs: dict[str, subprocess.Popen] = {}

@@ -30,7 +30,7 @@ import time
 
 from rclpy.node import Node
 
-from fahv.loop.graph import GRAPH, NODES, PREVIOUS, n_steps_of, producer_of
+from fahv.loop.graph import GRAPH, PREVIOUS, loop_nodes, n_steps_of, producer_of
 from fahv.loop.params import specs, validate
 from fahv.loop.wire import decode_message, encode, step_of
 from fahv.verdict import RunEnded
@@ -94,9 +94,9 @@ class LockstepNode(Node):
         }
         self.status.attach(self.subs, self.pubs)
         self.status.waiting = []
-        loop_nodes = {n.name for n in NODES.values() if n.kind in ("loop", "controller")}
+        loop = set(loop_nodes())
         self.publish_order = sorted(  # stable: the table's order within each group
-            self.outputs, key=lambda t: not loop_nodes & set(self.status.consumers(t))
+            self.outputs, key=lambda t: not loop & set(self.status.consumers(t))
         )
         self.done = False
         self.ended: RunEnded | None = None  # the verdict of the node's core, raised by poll

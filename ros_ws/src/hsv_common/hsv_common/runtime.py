@@ -358,7 +358,6 @@ def main(node_cls, args=None, linger_s: float = 10.0) -> int:
     return status
 
 
-
 class _Composition:
     """The nodes of one process (`main_composed`) and how each one ended."""
 
@@ -471,7 +470,7 @@ def main_composed(node_classes: list, args=None, linger_s: float = 10.0) -> int:
     finally:
         status = c.finish(stop)
         guard.arm(TEARDOWN_S)
-        ex.shutdown(timeout_sec=TEARDOWN_S)
+        teardown(ex, None)  # the executor first, then every node (`make_executor`)
         for node in c.nodes:
             node.destroy_node()
         if rclpy.ok():
