@@ -48,6 +48,13 @@ def test_estimation_of_a_scenario_without_an_estimator_is_refused(capsys):
            "estimate to bound" in err  # fmt: skip
 
 
+def test_estimation_of_an_ecm_design_is_refused(capsys):
+    """Case 2 flies on the estimate, but these bounds are of a CM design's tube law."""
+    assert main(["estimation", "offline_design/scenarios/case2_implementable.yaml"]) == 2
+    assert "design 'ecm_paper' is of the ECM: the bounds are those of the tube law of a CM " \
+           "design" in capsys.readouterr().err  # fmt: skip
+
+
 def test_estimation_names_what_its_bounds_leave_out_and_scales_the_noise(tmp_path, capsys):
     """A scenario on servos with a sensor fault: the bounds are printed, and two notes
     say that neither the fault nor the servos are in them. With sensors a hundred times

@@ -127,18 +127,6 @@ def test_a_variant_the_design_did_not_prepare_is_refused(tmp_path):
         load_scenario(path)
 
 
-def test_an_estimator_on_a_design_that_is_not_of_the_cm_is_refused_at_load(tmp_path):
-    """Case 2's ECM design has no nine-state model for the Kalman filter: the scenario
-    is refused when it is loaded, naming the key, not by the node once the run started."""
-    root = _copy_tree(tmp_path)
-    path = _scenario(root, "case2_kalman", design="ecm_paper", variants=["tube_mpc"],
-                     plant={"measured": "h,V,theta,q"}, estimator={"kind": "kalman"})  # fmt: skip
-    match = (r"case2_kalman.yaml: key 'estimator.kind': 'kalman' needs a design of the CM "
-             r".* design 'ecm_paper' is of the ECM")
-    with pytest.raises(SpecError, match=match):
-        load_scenario(path)
-
-
 def test_a_stale_design_is_refused_with_the_command_that_fixes_it(tmp_path):
     root = _copy_tree(tmp_path)
     dfile = root / "designs" / "cm_paper.yaml"

@@ -171,6 +171,11 @@ def cmd_estimation(args) -> int:
     if estimator_kind(c) == NO_ESTIMATOR:
         raise SpecError(f"{args.scenario}: estimator.kind is {NO_ESTIMATOR!r} (the controller "
                         "reads the exact state): there is no estimate to bound")  # fmt: skip
+    if c["design_model"] != "cm":
+        raise SpecError(f"{args.scenario}: design {design.summary.get('design_name', '')!r} is "
+                        f"of the "
+                        f"{c['design_model'].upper()}: the bounds are those of the tube law "
+                        "of a CM design (its eight-state tube) on the estimate")  # fmt: skip
     measured = measured_channels(plant_choices(c)["measured"])
     data = scaled_noise(load_sensors(args.vehicle), measured, args.noise_scale)
     a = design.arrays

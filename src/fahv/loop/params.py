@@ -27,6 +27,7 @@ from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS, variant_notch
 from fahv.errors import ParameterError
 from fahv.loop.graph import CONTROLLER_NODES
 from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
+from fahv.model.cascade import AIRFRAME_ARRAYS, airframe_arrays
 from fahv.plant.faults import FAULT_KIND, FAULTS, T_ONSET, fault_fields
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.sensors.data import EXACT_STATE
@@ -47,9 +48,10 @@ from fahv.spec.schema import (
     sensor_fault_values,
 )
 
-#: The design arrays the state estimator's Kalman gains are made from
-#: (`fahv.estimation.kalman.design_filter`).
-ESTIMATOR_ARRAYS = ("A", "B", "h_grid", "V_grid", "W_h", "W_V", "w_max", "Dx", "Du")
+#: The arrays of the CM LPV model the state estimator's Kalman gains are made from
+#: (`fahv.estimation.kalman.design_filter`): a CM design's, an ECM design's CM part
+#: (`fahv.model.cascade.airframe_arrays`).
+ESTIMATOR_ARRAYS = AIRFRAME_ARRAYS
 
 COMMON = (
     Field("case", "str", "name of the run spec the run flies (its scenario's name; the run "
@@ -85,7 +87,8 @@ def _estimator_fields() -> tuple[Field, ...]:
               "(scenario estimator.actuators): ideal or the vehicle file's second_order "
               "servos", choices=ACTUATOR_MODELS, default=IDEAL),
         _matrix("x0", "initial estimate x_0|-1 (9,) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]"),
-        *(_matrix(name, f"the design's {name} (kalman: a CM design)")
+        *(_matrix(name, f"the filter's CM LPV model: {name} of a CM design, of an ECM "
+                  "design's CM part (fahv.model.cascade)")
           for name in ESTIMATOR_ARRAYS),
     )  # fmt: skip
 
@@ -335,10 +338,13 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         controller.update(flat_parameter(name, value))
     nominal = {k: _plain(v) for k, v in law.nominal.node_values(a, c).items()}
     est = c.get("estimator") or {}
+    on_estimate = "mpc.est_tau" in nominal and estimator_kind(c) != NO_ESTIMATOR
     for key in ("est_tau", "est_tau_elevator"):  # the scenario's, for a loop on the estimate
         tau_s = float(est.get(f"nominal_{key}", 0.0))
-        if f"mpc.{key}" in nominal and tau_s > 0.0 and estimator_kind(c) != NO_ESTIMATOR:
+        if on_estimate and tau_s > 0.0:
             nominal[f"mpc.{key}"] = tau_s
+    if on_estimate:
+        nominal["mpc.est_start"] = estimator_value(c, "nominal_est_start")
     return {
         **vehicle_parameters(design, common),
         "fault_injector": {**common, **fault},
@@ -387,6 +393,7 @@ def vehicle_parameters(design, common: dict) -> dict:
 
     choices = plant_choices(c)
     shared = {**common, "plant_substeps": int(c["plant_substeps"]), "vehicle_file": vehicle_file}
+    airframe = airframe_arrays(a, c["design_model"], c["notch"])
     return {
         "plant": {
             **shared, **x0(),
@@ -397,7 +404,7 @@ def vehicle_parameters(design, common: dict) -> dict:
             **shared, **x0(), "estimator": estimator_kind(c), "measured": choices["measured"],
             "actuators": estimator_value(c, "actuators"),
             **{k: val for name in ESTIMATOR_ARRAYS
-               for k, val in flat_parameter(name, np.asarray(a[name], float)).items()},
+               for k, val in flat_parameter(name, airframe[name]).items()},
         },
     }  # fmt: skip
 

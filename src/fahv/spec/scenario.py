@@ -126,8 +126,7 @@ def form_run_spec(design: SpecFile, scenario: dict, path: str | Path) -> SpecFil
     Raises
     ------
     SpecError
-        If a variant is not one the design prepared, an estimator is asked of a design
-        that is not of the CM, or the run spec does not validate.
+        If a variant is not one the design prepared, or the run spec does not validate.
     """
     variants = list(scenario.get("variants") or design["variants"])
     extra = [v for v in variants if v not in design["variants"]]
@@ -135,14 +134,6 @@ def form_run_spec(design: SpecFile, scenario: dict, path: str | Path) -> SpecFil
         raise SpecError(
             f"{path}: key 'variants': {extra} not prepared by design {design.name!r} "
             f"(its variants: {list(design['variants'])})"
-        )
-    kind = (scenario.get("estimator") or {}).get("kind", "none")
-    if kind != "none" and design["design_model"] != "cm":
-        raise SpecError(
-            f"{path}: key 'estimator.kind': {kind!r} needs a design of the CM (its nine-state "
-            f"LPV model is the filter's); design {design.name!r} is of the "
-            f"{design['design_model'].upper()}, whose vertices couple the notch's states into "
-            "the airframe's rows"
         )
     data = {k: v for k, v in design.data.items() if k not in DESIGN_ONLY_KEYS}
     data.update({k: scenario[k] for k in ("name", "description", "command", "fault",

@@ -26,6 +26,7 @@ from fahv.config import Check, Field, Section
 from fahv.config.spec import lookup
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
 from fahv.control.base import ATTITUDE_BOUND_DEG
+from fahv.control.mpc.estimator import EST_STARTS
 from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
 from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
 from fahv.sensors.data import CHANNELS, DEFAULT_MEASURED, EXACT_STATE
@@ -219,6 +220,11 @@ ESTIMATOR = (
           "along the elevator column (the design's mpc.est_tau_elevator, Ts in "
           "cm_certified: it takes the estimate's discrepancy wholesale every step); 0: the "
           "design's", unit="s", lo=0.0, hi=1e3, default=0.0),
+    Field("nominal_est_start", "str", "start of the nominal MPC's state-disturbance "
+          "estimate on the estimate: first (its first residual initialises it, as on the "
+          "exact state) or mean (the mean of the residuals so far until its gain takes "
+          "over: one residual of a noisy estimate is mostly the filter's correction)",
+          choices=EST_STARTS, default=EST_STARTS[0]),
     Field("actuators", "str", "actuator model the Kalman filter's predictor and gains "
           "include: ideal (the command acts at once, the default) or second_order (the "
           "vehicle file's servos, as the plant's: four more filter states)",

@@ -41,6 +41,29 @@ def test_estimate_starts_from_the_first_residual():
     np.testing.assert_allclose(est.update_residual(r2), r1 + 0.04, rtol=0, atol=1e-15)
 
 
+def test_the_mean_start_averages_until_the_filter_gain_takes_over():
+    """With mean_start the k-th residual has the gain max(gamma, 1/k): d is the mean of
+    the residuals so far while 1/k > gamma (here 25 of them at gamma 0.04), the same
+    first step as without it, then the fading filter; along the elevator column the
+    same with gamma_e."""
+    rng = np.random.default_rng(3)
+    r = rng.normal(size=(60, 1, 3))
+    est = DisturbanceEstimator(1, 3, 0.04, mean_start=True)
+    for k in range(25):
+        d = est.update_residual(r[k])
+        np.testing.assert_allclose(d, r[: k + 1].mean(axis=0), rtol=0, atol=1e-14)
+    d25 = d.copy()
+    np.testing.assert_allclose(est.update_residual(r[25]), d25 + 0.04 * (r[25] - d25),
+                               rtol=0, atol=1e-15)  # fmt: skip
+    b, scale = np.array([[0.0, 1.0, 0.0]]), np.ones(3)
+    fast = DisturbanceEstimator(1, 3, 0.04, 0.5, scale, mean_start=True)
+    fast.update_residual(np.zeros((1, 3)), b)
+    for _ in range(2):  # gains 1/2, then 1/3 < 0.5: along b at gamma_e, elsewhere 1/k
+        fast.update_residual(np.ones((1, 3)), b)
+    np.testing.assert_allclose(fast.d, [[1 - (1 / 2) * (2 / 3), 0.75, 1 - (1 / 2) * (2 / 3)]],
+                               rtol=0, atol=1e-15)  # fmt: skip
+
+
 def test_estimate_takes_the_elevator_share_at_its_own_gain(design, make_mpc):
     """With gamma_e = 1 along B's elevator column, a 24 % loss on the linear model is
     known at once: two steps after its onset -u_d = (0, (rho_f - 1) delta_e) within 1 %,

@@ -70,6 +70,12 @@ def elevator_share(v, b, scale) -> np.ndarray:
     return np.einsum("...i,...i->...", bs, vs) / np.einsum("...i,...i->...", bs, bs)
 
 
+#: How the estimate starts (node parameter `mpc.est_start`): `first`, the first residual
+#: initialises it (a loop on the exact state); `mean`, the mean of the residuals so far
+#: until the filter's gain takes over (a loop on a noisy state estimate).
+EST_STARTS = ("first", "mean")
+
+
 class DisturbanceEstimator:
     """Constant additive state disturbance d (B, p) of the scheduled model, for B runs.
 
@@ -101,6 +107,13 @@ class DisturbanceEstimator:
         Filter gain in (0, 1] along the elevator column (None: gamma in every direction).
     scale : (p,) array_like, optional
         State scale of the projection's metric (needed with `gamma_e`).
+    mean_start : bool
+        Start as the mean of the residuals so far: the gains are max(gamma, 1/k) and
+        max(gamma_e, 1/k) at the k-th residual, so the first initialises d, as without
+        it, and the filter's own gains take over after 1/gamma residuals (the
+        growing-memory start of a fading-memory filter: the least-squares estimate of a
+        constant from k noisy residuals). For a loop on a state estimate, whose every
+        residual carries the estimator's correction noise (`EST_STARTS`).
 
     Raises
     ------
@@ -110,7 +123,7 @@ class DisturbanceEstimator:
     """
 
     def __init__(self, n_runs: int, p: int, gamma: float, gamma_e: float | None = None,
-                 scale=None) -> None:  # fmt: skip
+                 scale=None, mean_start: bool = False) -> None:  # fmt: skip
         if not 0.0 < gamma <= 1.0:
             raise ValueError(f"estimator gain gamma must be in (0, 1], got {gamma}")
         if gamma_e is not None:
@@ -125,6 +138,9 @@ class DisturbanceEstimator:
         self.d = np.zeros((n_runs, p))
         #: False until the first residual: it initialises d (the filter's start).
         self.started = False
+        self.mean_start = bool(mean_start)
+        #: residuals filtered so far
+        self.n_seen = 0
 
     def update(self, A, B, dx_prev, du_prev, dx) -> np.ndarray:
         """Estimates d (B, p) [state units per step Ts] after one measured step.
@@ -157,14 +173,17 @@ class DisturbanceEstimator:
         docs/theory/nominal_mpc.md) during which the nominal input of the first move
         drifted with it beyond the bounds its QP had enforced.
         """
+        self.n_seen += 1
         if self.started:
+            floor = 1.0 / self.n_seen if self.mean_start else 0.0
+            gamma = max(self.gamma, floor)
             e = r - self.d
-            self.d = self.d + self.gamma * e
+            self.d = self.d + gamma * e
             if self.gamma_e is not None:
                 if b is None:
                     raise ValueError("estimator: gamma_e needs the elevator column b")
                 coef = elevator_share(e, b, self.scale)
-                self.d = self.d + (self.gamma_e - self.gamma) * coef[:, None] * b
+                self.d = self.d + (max(self.gamma_e, floor) - gamma) * coef[:, None] * b
         else:
             self.d = np.array(r, float, copy=True)
             self.started = True

@@ -32,7 +32,7 @@ from fahv.config import Field, Section
 from fahv.control.base import NominalSource, register_nominal
 from fahv.control.command import Command, CommandSchedule
 from fahv.control.mpc.attitude import attitude_bounds
-from fahv.control.mpc.estimator import DisturbanceEstimator, estimator_gains
+from fahv.control.mpc.estimator import EST_STARTS, DisturbanceEstimator, estimator_gains
 from fahv.control.mpc.settings import MPC_SECTION_FIELDS, X_BOX_TO_STATE, MPCSettings
 from fahv.control.mpc.tracking import TRIM_STEP, TrackingMPC
 from fahv.control.reference import lpv_of, mv, trim_map_of
@@ -77,8 +77,17 @@ X_BOX_PARAMETER = Field(
     "all 0: none", lo=-1e3, hi=1e3, length=14, default=(0.0,) * 14,
 )  # fmt: skip
 
+#: Node parameter `mpc.est_start`: how the state-disturbance estimate starts.
+EST_START_PARAMETER = Field(
+    "mpc.est_start", "str", "start of the state-disturbance estimate: first (the first "
+    "residual initialises it, a loop on the exact state) or mean (the mean of the residuals "
+    "so far until the filter's own gain takes over, a loop on a state estimate: scenario "
+    "key estimator.nominal_est_start)", choices=EST_STARTS, default=EST_STARTS[0],
+)  # fmt: skip
+
 #: Node parameters of the nominal MPC: its case section's keys under `mpc.` (`att_max`
-#: as the design's bounds) and the design's `mpc.u_box`, `mpc.hv_box` and `mpc.x_box`.
+#: as the design's bounds), the design's `mpc.u_box`, `mpc.hv_box` and `mpc.x_box`, and
+#: the run's `mpc.est_start`.
 MPC_NODE_PARAMETERS = (
     *(
         ATT_MAX_PARAMETER if f.name == "att_max" else dataclasses.replace(f, name=f"mpc.{f.name}")
@@ -87,6 +96,7 @@ MPC_NODE_PARAMETERS = (
     U_BOX_PARAMETER,
     HV_BOX_PARAMETER,
     X_BOX_PARAMETER,
+    EST_START_PARAMETER,
 )
 
 
@@ -231,7 +241,8 @@ class TrackingMPCNominal(NominalSource):
         self.has_est = est_tau > 0.0
         #: step of the first plan: 1 with an estimate (it starts from the first residual)
         self.k_first_plan = 1 if self.has_est else 0
-        self.est_args = (*estimator_gains(p["Ts"], est_tau, tau_e), np.asarray(p["Dx"], float)[:pe])
+        self.est_args = (*estimator_gains(p["Ts"], est_tau, tau_e), np.asarray(p["Dx"], float)[:pe],
+                         p["mpc.est_start"] == "mean")  # fmt: skip
         self.est = DisturbanceEstimator(B, pe, *self.est_args)
 
     def _init_batch_state(self, B: int, N_p: int) -> None:
