@@ -358,7 +358,8 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
     ----------
     arrays : mapping
         The design's arrays: `A`, `B`, `h_grid`, `V_grid`, `W_h`, `W_V`, `w_max`, `Dx`,
-        `Du` (a CM design, n = 9).
+        `Du` of the CM, n = 9 (a CM design's; an ECM design's CM part,
+        `fahv.model.cascade.airframe_arrays`).
     vehicle : Vehicle
         Nominal parameters and input limits of the predictor.
     data : SensorData

@@ -281,8 +281,8 @@ class EstimatorCore:
     Parameter `estimator`: `none` passes the exact state of the full-state sensor
     (the plant's `measured` = `state`) through, the paper's loop; `kalman` runs the
     gain-scheduled Kalman filter of `fahv.estimation.kalman` on the measured channels,
-    its vertex gains made at start from the design's LPV model and disturbance bound
-    (`design_filter`), its predictor with the plant's actuator model (parameter
+    its vertex gains made at start from the design's LPV model of the CM and its
+    disturbance bound (`design_filter`; an ECM design's CM part, `fahv.model.cascade`), its predictor with the plant's actuator model (parameter
     `actuators`: the servos' states integrated with the airframe). Inputs of step k:
     the Measurement of step k (the trigger) and the controller's command of step k - 1
     (`None` at k = 0), which the filter's prediction takes.
