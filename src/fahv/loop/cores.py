@@ -282,8 +282,9 @@ class EstimatorCore:
     (the plant's `measured` = `state`) through, the paper's loop; `kalman` runs the
     gain-scheduled Kalman filter of `fahv.estimation.kalman` on the measured channels,
     its vertex gains made at start from the design's LPV model of the CM and its
-    disturbance bound (`design_filter`; an ECM design's CM part, `fahv.model.cascade`), its predictor with the plant's actuator model (parameter
-    `actuators`: the servos' states integrated with the airframe). Inputs of step k:
+    disturbance bound (`design_filter`; an ECM design's CM part, `fahv.model.cascade`),
+    its predictor with the plant's actuator model (parameter `actuators`: the servos'
+    states integrated with the airframe). Inputs of step k:
     the Measurement of step k (the trigger) and the controller's command of step k - 1
     (`None` at k = 0), which the filter's prediction takes.
 
