@@ -3,6 +3,7 @@
     fahv campaign CAMPAIGN.yaml [--scenario S] [--out DIR] [--scheduler ADDRESS] [--workers N]
                   [--resume] [--dashboard [ADDRESS]]
     fahv campaign report DIR [--no-figures]
+    fahv campaign compare DIR_A DIR_B [--variant V]
     fahv campaign rerun DIR INDEX [--variant V] [--sil] [--out BAGS]
     fahv campaign rerun RUN [--sil] [--out BAGS]
 
@@ -17,6 +18,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from fahv.campaign.compare import compare_campaigns
 from fahv.campaign.engine import run_campaign
 from fahv.campaign.report import make_report
 from fahv.campaign.rerun import rerun, rerun_file
@@ -79,6 +81,13 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_compare(args) -> int:
+    """Two campaign folders of the same draws compared run by run (B - A), printed."""
+    lines, _ = compare_campaigns(args.dir_a, args.dir_b, args.variant)
+    print("\n".join(lines))
+    return 0
+
+
 def cmd_rerun(args) -> int:
     """One run of a campaign (or any recorded run) again, recorded (MCAP); compares metrics."""
     bags = args.out or ROOT / "bags"
@@ -105,13 +114,18 @@ def cmd_rerun(args) -> int:
 
 
 def _dispatch(args) -> int:
-    """`campaign FILE` / `campaign report DIR` / `campaign rerun DIR INDEX`."""
+    """`campaign FILE` / `report DIR` / `compare DIR_A DIR_B` / `rerun DIR INDEX`."""
     rest = args.rest
     if args.target == "report":
         if len(rest) != 1:
             raise CampaignError("usage: fahv campaign report DIR")
         args.dir = rest[0]
         return cmd_report(args)
+    if args.target == "compare":
+        if len(rest) != 2:
+            raise CampaignError("usage: fahv campaign compare DIR_A DIR_B")
+        args.dir_a, args.dir_b = rest
+        return cmd_compare(args)
     if args.target == "rerun":
         if len(rest) == 1:
             args.dir, args.index = rest[0], None
@@ -131,12 +145,14 @@ def add_parsers(sub) -> None:
     """Add the `campaign` parser."""
     p = sub.add_parser(
         "campaign",
-        help="Monte Carlo campaign on Dask (campaign FILE | report DIR | rerun DIR INDEX)",
+        help="Monte Carlo campaign on Dask (campaign FILE | report DIR | compare DIR_A DIR_B | "
+        "rerun DIR INDEX)",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=__doc__,
     )
-    p.add_argument("target", help="campaign file, or 'report' / 'rerun'")
-    p.add_argument("rest", nargs="*", help="DIR (report), DIR INDEX or RUN (rerun)")
+    p.add_argument("target", help="campaign file, or 'report' / 'compare' / 'rerun'")
+    p.add_argument("rest", nargs="*", help="DIR (report), DIR_A DIR_B (compare), DIR INDEX or "
+                   "RUN (rerun)")  # fmt: skip
     p.add_argument(
         "--out",
         default=None,
@@ -170,7 +186,8 @@ def add_parsers(sub) -> None:
     )
     p.add_argument("--no-report", action="store_true", help="no report at the end")
     p.add_argument("--no-figures", action="store_true", help="report: tables only")
-    p.add_argument("--variant", default=None, help="rerun: variant (default the first)")
+    p.add_argument("--variant", default=None, help="rerun, compare: variant (default the "
+                   "first)")  # fmt: skip
     p.add_argument("--sil", action="store_true", help="rerun through the ROS 2 node graph")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_dispatch)  # fmt: skip

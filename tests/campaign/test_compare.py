@@ -1,0 +1,73 @@
+"""Two campaigns of the same draws compared run by run (fahv campaign compare)."""
+
+import pytest
+from scipy.stats import binomtest
+
+from fahv.campaign import store
+from fahv.campaign.compare import compare_campaigns, requirement_pairs
+from fahv.cli import main
+from fahv.errors import CampaignError
+
+REQ = {"attitude_deg": 0.5, "settling_s": 60.0, "h_final_ft": 10.0, "V_final_fps": 2.0,
+       "confidence": 0.95}  # fmt: skip
+
+
+def _row(i: int, attitude: float, tube: float = 1.0, variant: str = "tube_mpc") -> dict:
+    return {"index": i, "variant": variant, "status": "ok", "alpha_err_max_deg": attitude,
+            "theta_err_max_deg": 0.1, "tube_fraction_inside": tube,
+            "settling_after_command_s": 30.0 + i % 7, "input_limit_violations": 0,
+            "h_err_final_ft": 0.5, "V_err_final_fps": 0.1}  # fmt: skip
+
+
+def _folder(path, rows, seed=7, name="s"):
+    path.mkdir()
+    store.write_manifest(path, {"campaign": {"seed": seed, "dispersions": {"fault": {}},
+                                             "requirements": REQ, "variants": ["tube_mpc"]},
+                                "case": {"name": name}})  # fmt: skip
+    store.write_part(path, store.RESULTS, "part-001-00000", rows)
+    return path
+
+
+def _pair(tmp_path):
+    """40 runs: A misses the attitude at 0-9, B at 5-7 and 30-31 (and its tube at 0-2)."""
+    a = [_row(i, 0.55 if i < 10 else 0.45) for i in range(40)]
+    b = [_row(i, 0.55 if 5 <= i < 8 or i in (30, 31) else 0.45, 0.0 if i < 3 else 1.0)
+         for i in range(40)]  # fmt: skip
+    return _folder(tmp_path / "a", a, name="first"), _folder(tmp_path / "b", b, name="mean")
+
+
+def test_each_requirement_is_counted_pair_by_pair(tmp_path):
+    """Attitude: 30 / 35 passing, 2 only in A, 7 only in B, McNemar p = binomtest(2, 9);
+    every requirement but the tube: B's tube misses do not count there, they do in all."""
+    _, _ = _pair(tmp_path)
+    rows_a = store.read_rows(tmp_path / "a")
+    rows_b = store.read_rows(tmp_path / "b")
+    got = {r.key: r for r in requirement_pairs(rows_a, rows_b, REQ)}
+    att = got["attitude"]
+    assert (att.n, att.pass_a, att.pass_b, att.only_a, att.only_b) == (40, 30, 35, 2, 7)
+    assert att.p_mcnemar == pytest.approx(binomtest(2, 9, 0.5).pvalue, rel=1e-12)
+    assert att.ci_b[0] < 35 / 40 < att.ci_b[1]
+    assert (got["all_but_tube"].pass_a, got["all_but_tube"].pass_b) == (30, 35)
+    assert (got["all"].pass_a, got["all"].pass_b) == (30, 32)  # B fails its tube at 0-2
+    assert got["settling"].p_mcnemar == 1.0 and got["settling"].pass_b == 40
+
+
+def test_the_command_prints_the_table_and_the_paired_metrics(tmp_path, capsys):
+    a, b = _pair(tmp_path)
+    assert main(["campaign", "compare", str(a), str(b)]) == 0
+    out = capsys.readouterr().out
+    assert "B (" in out and "scenario mean) against A (" in out
+    assert "| attitude error within +/- 0.5 deg | 30 [" in out
+    assert "| 2 | 7 | 0.18 |" in out  # binomtest(2, 9): p = 0.1797
+    assert "## Paired comparison: B (b) - A (a)" in out
+
+
+def test_campaigns_of_other_draws_are_refused(tmp_path):
+    a, _ = _pair(tmp_path)
+    other = _folder(tmp_path / "c", [_row(i, 0.4) for i in range(40)], seed=8)
+    with pytest.raises(CampaignError, match=r"differ in the campaign key 'seed'"):
+        compare_campaigns(a, other)
+    with pytest.raises(CampaignError, match=r"is not a campaign folder"):
+        compare_campaigns(a, tmp_path / "nowhere")
+    with pytest.raises(CampaignError, match=r"variant 'rmpc' is not in both"):
+        compare_campaigns(a, tmp_path / "b", "rmpc")
