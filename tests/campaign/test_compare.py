@@ -56,10 +56,10 @@ def test_the_command_prints_the_table_and_the_paired_metrics(tmp_path, capsys):
     a, b = _pair(tmp_path)
     assert main(["campaign", "compare", str(a), str(b)]) == 0
     out = capsys.readouterr().out
-    assert "B (" in out and "scenario mean) against A (" in out
+    assert "B (" in out and ", tube_mpc, scenario mean) against A (" in out
     assert "| attitude error within +/- 0.5 deg | 30 [" in out
     assert "| 2 | 7 | 0.18 |" in out  # binomtest(2, 9): p = 0.1797
-    assert "## Paired comparison: B (b) - A (a)" in out
+    assert "## Paired comparison: B (b, tube_mpc) - A (a, tube_mpc)" in out
 
 
 def test_campaigns_of_other_draws_are_refused(tmp_path):
@@ -69,5 +69,19 @@ def test_campaigns_of_other_draws_are_refused(tmp_path):
         compare_campaigns(a, other)
     with pytest.raises(CampaignError, match=r"is not a campaign folder"):
         compare_campaigns(a, tmp_path / "nowhere")
-    with pytest.raises(CampaignError, match=r"variant 'rmpc' is not in both"):
+    with pytest.raises(CampaignError, match=r"variant 'rmpc' is not in .*a \(its variants"):
         compare_campaigns(a, tmp_path / "b", "rmpc")
+    with pytest.raises(CampaignError, match=r"variant 'rmpc' is not in .*b \(its variants"):
+        compare_campaigns(a, tmp_path / "b", "tube_mpc", "rmpc")
+
+
+def test_a_law_is_compared_with_another_from_its_own_campaign(tmp_path):
+    """Variant W of B against variant V of A, on the same draws."""
+    a, _ = _pair(tmp_path)
+    other = _folder(tmp_path / "c", [_row(i, 0.4, variant="rmpc") for i in range(40)])
+    (tmp_path / "c" / store.MANIFEST).write_text((tmp_path / "c" / store.MANIFEST).read_text()
+                                                 .replace('"tube_mpc"', '"rmpc"'))  # fmt: skip
+    lines, pairs = compare_campaigns(a, other, "tube_mpc", "rmpc")
+    att = {p.key: p for p in pairs}["attitude"]
+    assert (att.pass_a, att.pass_b, att.only_a, att.only_b) == (30, 40, 0, 10)
+    assert lines[0].startswith("# B (") and ", rmpc, scenario s) against A (" in lines[0]

@@ -131,7 +131,8 @@ def _manifest(folder: Path) -> dict:
     return man
 
 
-def compare_campaigns(dir_a, dir_b, variant: str | None = None) -> tuple[list[str], list]:
+def compare_campaigns(dir_a, dir_b, variant: str | None = None,
+                      variant_b: str | None = None) -> tuple[list[str], list]:  # fmt: skip
     """The run-by-run comparison of two campaign folders of the same draws.
 
     Parameters
@@ -139,7 +140,10 @@ def compare_campaigns(dir_a, dir_b, variant: str | None = None) -> tuple[list[st
     dir_a, dir_b : path
         Campaign folders; differences are B - A.
     variant : str, optional
-        The variant compared (default: the first variant of A that B also ran).
+        The variant of A compared (default: the first variant of A that B also ran).
+    variant_b : str, optional
+        The variant of B compared, when another (default: `variant`): a law against
+        another over the same draws, each from its own campaign.
 
     Returns
     -------
@@ -152,7 +156,7 @@ def compare_campaigns(dir_a, dir_b, variant: str | None = None) -> tuple[list[st
     CampaignError
         If a folder is not a campaign folder, the two differ in seed, dispersions or
         requirements (their draws or verdicts are not the same), they share no variant
-        or no run index, or `variant` is not in both.
+        (without `variant_b`) or no run index, or a variant is not in its campaign.
     """
     a, b = Path(dir_a), Path(dir_b)
     ma, mb = _manifest(a), _manifest(b)
@@ -160,20 +164,23 @@ def compare_campaigns(dir_a, dir_b, variant: str | None = None) -> tuple[list[st
         if ma["campaign"].get(key) != mb["campaign"].get(key):
             raise CampaignError(f"{a} and {b} differ in the campaign key {key!r}: their runs "
                                 "are not the same draws, so they do not pair")  # fmt: skip
-    common = [v for v in ma["campaign"]["variants"] if v in mb["campaign"]["variants"]]
-    if variant is None and not common:
-        raise CampaignError(f"{a} and {b} share no variant")
-    v = variant or common[0]
-    if v not in common:
-        raise CampaignError(f"variant {v!r} is not in both campaigns (common: {common})")
-    la, lb = f"A ({a.name})", f"B ({b.name})"
+    va_all, vb_all = ma["campaign"]["variants"], mb["campaign"]["variants"]
+    common = [v for v in va_all if v in vb_all]
+    if variant is None and variant_b is None and not common:
+        raise CampaignError(f"{a} and {b} share no variant: name them (--variant, --variant-b)")
+    v = variant or (common[0] if common and variant_b is None else va_all[0])
+    w = variant_b or v
+    for name, folder, have in ((v, a, va_all), (w, b, vb_all)):
+        if name not in have:
+            raise CampaignError(f"variant {name!r} is not in {folder} (its variants: {have})")
+    la, lb = f"A ({a.name}, {v})", f"B ({b.name}, {w})"
     rows_a = [dict(r, variant=la) for r in store.read_rows(a) if r["variant"] == v]
-    rows_b = [dict(r, variant=lb) for r in store.read_rows(b) if r["variant"] == v]
+    rows_b = [dict(r, variant=lb) for r in store.read_rows(b) if r["variant"] == w]
     req = ma["campaign"]["requirements"]
     pairs = requirement_pairs(rows_a, rows_b, req)
     if not pairs or pairs[0].n == 0:
-        raise CampaignError(f"{a} and {b} have no run index of variant {v!r} in common")
-    lines = [f"# {v}: B ({b}, scenario {mb['case'].get('name', '?')}) against A ({a}, "
+        raise CampaignError(f"{a} ({v}) and {b} ({w}) have no run index in common")
+    lines = [f"# B ({b}, {w}, scenario {mb['case'].get('name', '?')}) against A ({a}, {v}, "
              f"scenario {ma['case'].get('name', '?')}), run by run", "",
              f"{pairs[0].n} run indices in both; passing runs with two-sided 95 % "
              "Clopper-Pearson intervals; discordant pairs and the exact McNemar test.", "",

@@ -3,7 +3,7 @@
     fahv campaign CAMPAIGN.yaml [--scenario S] [--out DIR] [--scheduler ADDRESS] [--workers N]
                   [--resume] [--dashboard [ADDRESS]]
     fahv campaign report DIR [--no-figures]
-    fahv campaign compare DIR_A DIR_B [--variant V]
+    fahv campaign compare DIR_A DIR_B [--variant V] [--variant-b W]
     fahv campaign rerun DIR INDEX [--variant V] [--sil] [--out BAGS]
     fahv campaign rerun RUN [--sil] [--out BAGS]
 
@@ -83,7 +83,7 @@ def cmd_report(args) -> int:
 
 def cmd_compare(args) -> int:
     """Two campaign folders of the same draws compared run by run (B - A), printed."""
-    lines, _ = compare_campaigns(args.dir_a, args.dir_b, args.variant)
+    lines, _ = compare_campaigns(args.dir_a, args.dir_b, args.variant, args.variant_b)
     print("\n".join(lines))
     return 0
 
@@ -188,6 +188,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--no-figures", action="store_true", help="report: tables only")
     p.add_argument("--variant", default=None, help="rerun, compare: variant (default the "
                    "first)")  # fmt: skip
+    p.add_argument("--variant-b", default=None, help="compare: the variant of DIR_B, when "
+                   "another than --variant's")  # fmt: skip
     p.add_argument("--sil", action="store_true", help="rerun through the ROS 2 node graph")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_dispatch)  # fmt: skip
