@@ -29,7 +29,7 @@ def test_the_filter_of_the_ecm_design_is_given_the_cm_part(case2_implementable):
     assert len(p["state_estimator"]["w_max"]) == 9
     assert p["nominal_trajectory"]["mpc.est_start"] == "mean"
     assert p["nominal_trajectory"]["mpc.est_tau"] == 5.0
-    assert node_parameters(design)["nominal_trajectory"]["A_shape"] == [6, 11, 11]
+    assert p["nominal_trajectory"]["A_shape"] == [6, 11, 11]
 
 
 def test_case2_meets_the_requirements_on_the_estimate(case2_implementable):

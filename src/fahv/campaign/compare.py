@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fahv.campaign import store
-from fahv.campaign.paired import paired_stats, paired_text
+from fahv.campaign.paired import mcnemar_p, paired_stats, paired_text
 from fahv.campaign.report import REQUIREMENTS, verdicts
 from fahv.errors import CampaignError
 
@@ -66,19 +66,19 @@ class RequirementPair:
 def clopper_pearson(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
     """Two-sided Clopper-Pearson interval of a pass rate, k passes in n runs.
 
+    `scipy.stats.binomtest(k, n).proportion_ci(method="exact")`; (nan, nan) for n = 0.
+
     Examples
     --------
     >>> [round(v, 4) for v in clopper_pearson(893, 1000)]
     [0.8722, 0.9115]
     """
-    from scipy.stats import beta
+    from scipy.stats import binomtest
 
     if n == 0:
         return (math.nan, math.nan)
-    a = 1.0 - confidence
-    lo = float(beta.ppf(a / 2, k, n - k + 1)) if k > 0 else 0.0
-    hi = float(beta.ppf(1 - a / 2, k + 1, n - k)) if k < n else 1.0
-    return lo, hi
+    ci = binomtest(k, n).proportion_ci(confidence_level=confidence, method="exact")
+    return float(ci.low), float(ci.high)
 
 
 def _passes(row: dict, req: dict) -> dict[str, bool]:
@@ -105,8 +105,6 @@ def requirement_pairs(rows_a: list[dict], rows_b: list[dict], req: dict) -> list
         In the order of `COMPARED`; a requirement not applicable to a run (the tube of a
         law without one) counts as not passing.
     """
-    from scipy.stats import binomtest
-
     va = {r["index"]: _passes(r, req) for r in rows_a}
     vb = {r["index"]: _passes(r, req) for r in rows_b}
     idx = sorted(va.keys() & vb.keys())
@@ -116,10 +114,9 @@ def requirement_pairs(rows_a: list[dict], rows_b: list[dict], req: dict) -> list
         b = [vb[i].get(key, False) for i in idx]
         only_a = sum(x and not y for x, y in zip(a, b, strict=True))
         only_b = sum(y and not x for x, y in zip(a, b, strict=True))
-        disc = only_a + only_b
-        p = float(binomtest(only_a, disc, 0.5).pvalue) if disc else 1.0
         out.append(RequirementPair(key, label.format(**req), len(idx), sum(a), sum(b), only_a,
-                                   only_b, p, clopper_pearson(sum(a), len(idx)),
+                                   only_b, mcnemar_p(only_a, only_b),
+                                   clopper_pearson(sum(a), len(idx)),
                                    clopper_pearson(sum(b), len(idx))))  # fmt: skip
     return out
 

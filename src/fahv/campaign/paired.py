@@ -94,6 +94,23 @@ def pairs(rows: list[dict], a: str, b: str, completed: bool = True) -> list[tupl
     return [(ra[i], rb[i]) for i in sorted(ra.keys() & rb.keys())]
 
 
+def mcnemar_p(only_a: int, only_b: int) -> float:
+    """Exact McNemar test of equal probabilities from the discordant pairs' counts.
+
+    The two-sided binomial test (`scipy.stats.binomtest`) of only_a successes in
+    only_a + only_b trials at 1/2; 1 without discordant pairs (McNemar 1947).
+
+    Examples
+    --------
+    >>> round(mcnemar_p(2, 7), 4), mcnemar_p(0, 0)
+    (0.1797, 1.0)
+    """
+    from scipy.stats import binomtest
+
+    disc = only_a + only_b
+    return float(binomtest(only_a, disc, 0.5).pvalue) if disc else 1.0
+
+
 def completion(rows: list[dict], a: str, b: str) -> dict:
     """Paired completion counts over the indices run in both variants.
 
@@ -104,18 +121,15 @@ def completion(rows: list[dict], a: str, b: str) -> dict:
         variant completed), `n`, and `p_mcnemar`: exact McNemar test (two-sided
         binomial test on the discordant pairs) of equal completion probabilities.
     """
-    from scipy.stats import binomtest
-
     ra = {r["index"]: r["status"] == "ok" for r in rows if r["variant"] == a}
     rb = {r["index"]: r["status"] == "ok" for r in rows if r["variant"] == b}
     idx = sorted(ra.keys() & rb.keys())
     both = sum(ra[i] and rb[i] for i in idx)
     only_a = sum(ra[i] and not rb[i] for i in idx)
     only_b = sum(rb[i] and not ra[i] for i in idx)
-    disc = only_a + only_b
-    p = binomtest(only_a, disc, 0.5).pvalue if disc else 1.0
     return {"n": len(idx), "both": both, "only_a": only_a, "only_b": only_b,
-            "neither": len(idx) - both - only_a - only_b, "p_mcnemar": float(p)}  # fmt: skip
+            "neither": len(idx) - both - only_a - only_b,
+            "p_mcnemar": mcnemar_p(only_a, only_b)}  # fmt: skip
 
 
 def paired_stats(
