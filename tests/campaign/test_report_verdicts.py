@@ -10,7 +10,8 @@ REQ = {"attitude_deg": 0.5, "settling_s": 60.0, "h_final_ft": 10.0, "V_final_fps
 ROW = {
     "status": "ok", "alpha_err_max_deg": 0.3, "theta_err_max_deg": 0.4,
     "tube_fraction_inside": 1.0, "settling_after_command_s": 42.0,
-    "input_limit_violations": 0, "h_err_final_ft": -0.5, "V_err_final_fps": 0.1,
+    "input_limit_violations": 0, "input_rate_violations": 0, "h_err_final_ft": -0.5,
+    "V_err_final_fps": 0.1,
 }  # fmt: skip
 
 
@@ -30,6 +31,17 @@ def test_one_miss_fails_all_and_not_applicable_is_not_a_miss():
     assert no_tube["tube"] is None and no_tube["all"] is True
     gone = verdicts({"status": "failed", "alpha_err_max_deg": None}, REQ)  # no metrics
     assert gone["completes"] is False and gone["all"] is False
+    assert gone["input_rates"] is False
+
+
+def test_a_command_beyond_a_servo_rate_fails_the_rates_and_all():
+    """One step beyond the rate limit fails "input_rates" and "all" (the positions still
+    pass); a row of an earlier version, without the metric, has it not applicable."""
+    fast = verdicts({**ROW, "input_rate_violations": 1}, REQ)
+    assert fast["input_rates"] is False and fast["all"] is False
+    assert fast["input_limits"] is True
+    old = verdicts({k: v for k, v in ROW.items() if k != "input_rate_violations"}, REQ)
+    assert old["input_rates"] is None and old["all"] is True
 
 
 def test_nominal_range_is_checked_against_the_certified_range_and_not_in_all():

@@ -56,9 +56,10 @@ def test_estimation_of_an_ecm_design_is_refused(capsys):
 
 
 def test_estimation_names_what_its_bounds_leave_out_and_scales_the_noise(tmp_path, capsys):
-    """A scenario on servos with a sensor fault: the bounds are printed, and two notes
-    say that neither the fault nor the servos are in them. With sensors a hundred times
-    quieter the tube of the estimate fits (0.86 and 0.63 of the room, measured)."""
+    """A scenario on servos its filter does not model, with a sensor fault: the bounds are
+    printed, and two notes say that neither the fault nor the servos are in them. With
+    sensors a hundred times quieter the tube of the estimate fits (0.86 and 0.63 of the
+    room, measured)."""
     import yaml
 
     d = yaml.safe_load(open("offline_design/scenarios/case1_kalman.yaml"))
@@ -75,8 +76,8 @@ def test_estimation_names_what_its_bounds_leave_out_and_scales_the_noise(tmp_pat
     assert m and float(m.group(1)) == pytest.approx(0.855, rel=0.05)
     assert float(m.group(2)) == pytest.approx(0.63, rel=0.05)
     assert "note: the scenario's sensor fault (stuck) is not in these bounds" in out
-    assert "note: the scenario's actuators (second_order) are neither in the filter's model " \
-           "nor in these bounds" in out  # fmt: skip
+    assert "note: the scenario's actuators (second_order) are not in the filter's model " \
+           "(estimator.actuators ideal), so not in these bounds" in out  # fmt: skip
 
 
 @pytest.mark.parametrize("scale", ["0", "nan", "-1"])

@@ -161,3 +161,28 @@ def test_hardover_commands_the_limit_of_its_side(vehicle):
         FaultInjector(make_fault("hardover", 1.0, {"side": 1.0}))
     with pytest.raises(ConfigError, match="parameter 'side' must be -1 or 1"):
         make_fault("hardover", 1.0, {"side": 0.5})
+
+
+def test_the_servos_rate_limits_reach_the_input_limits_and_not_the_design(vehicle):
+    """The vehicle file's elevator servo (100 deg/s each way, Phi without one) gives the
+    rate limits a run's commands are checked against (`InputLimits.rate_incr/decr`,
+    `fahv.runs.metrics.rate_violations`); they stay out of the vehicle's physics hash,
+    so a design is not stale when only the servos change; without servo data no rate
+    is limited."""
+    from fahv.model.vehicle import physics_hash
+    from fahv.runs.metrics import rate_violations
+
+    lim = vehicle.limits
+    assert lim.rate_incr == (math.inf, pytest.approx(math.radians(100.0), rel=1e-15))
+    assert lim.rate_decr == lim.rate_incr
+    data = load_yaml(resources.files("fahv.data").joinpath("vehicle_parker2007.yaml").read_text())
+    data["actuators"]["second_order"]["delta_e"]["rate_limit_decr"]["value"] = 50.0
+    slower = vehicle_from_mapping(data)
+    assert slower.limits.rate_decr[1] == pytest.approx(math.radians(50.0), rel=1e-15)
+    assert physics_hash(slower) == physics_hash(vehicle)
+    u = np.zeros((4, 2))
+    u[1, 1] = -math.radians(1.5)  # -75 deg/s, then +75 deg/s, then +0 (Ts = 0.02 s)
+    assert rate_violations(u, 0.02, lim) == 0
+    assert rate_violations(u, 0.02, slower.limits) == 1  # the step down only
+    del data["actuators"]
+    assert vehicle_from_mapping(data).limits.rate_incr == (math.inf, math.inf)

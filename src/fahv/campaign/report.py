@@ -8,6 +8,8 @@ completes       the run ends without exception, with a finite state, inside the
                 flight envelope (status `ok`)
 attitude        max |alpha - alpha_r| and max |theta - theta_r| <= attitude_deg
 input_limits    no step with a command beyond the actuator limits (sec. 5.1)
+input_rates     no step whose command asks a servo for more than its rate limit
+                (the vehicle file's servos; n/a for rows without the metric)
 tube            tube error inside Z (tau Z) at every step (n/a for laws without tube)
 settling        |h - h_c| <= 10 ft and |V - V_c| <= 2 ft/s reached within
                 settling_s after the command stops moving, and held to the end
@@ -47,6 +49,7 @@ REQUIREMENTS = (
     ("completes", "run completes (no exception, finite state, inside the envelope)"),
     ("attitude", "attitude error within +/- {attitude_deg:g} deg"),
     ("input_limits", "commands within the input limits"),
+    ("input_rates", "commands within the servos' rate limits"),
     ("tube", "tube error inside Z at every step"),
     ("settling", "settled within {settling_s:g} s of the command"),
     ("final_h", "final |h - h_c| <= {h_final_ft:g} ft"),
@@ -138,11 +141,13 @@ def _each(row: dict, req: dict) -> dict[str, bool | None]:
     """The verdicts of `verdicts` but "all"."""
     att = max(metric(row, "alpha_err_max_deg"), metric(row, "theta_err_max_deg"))
     tube = metric(row, "tube_fraction_inside")
+    rates = metric(row, "input_rate_violations")
     settle = metric(row, "settling_after_command_s")
     return {
         "completes": row["status"] == "ok",
         "attitude": bool(att <= req["attitude_deg"]),
         "input_limits": metric(row, "input_limit_violations") == 0,
+        "input_rates": None if math.isnan(rates) else bool(rates == 0),
         "tube": None if math.isnan(tube) else bool(tube == 1.0),
         "settling": bool(settle <= req["settling_s"]),
         "final_h": bool(abs(metric(row, "h_err_final_ft")) <= req["h_final_ft"]),

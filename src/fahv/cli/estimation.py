@@ -11,6 +11,7 @@ from fahv.cli.common import add_vehicle_option
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.errors import SpecError
 from fahv.estimation.kalman import W_SIGMAS, design_filter, measurement_covariance
+from fahv.loop.cores import servos_of
 from fahv.model.vehicle import STATE_NAMES, STATE_UNITS
 from fahv.sensors.data import CHANNEL_UNITS, load_sensors, measured_channels, replace_channel
 from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, estimator_value, plant_choices
@@ -56,6 +57,7 @@ def study_lines(study, measured, design_name: str) -> list[str]:
                "sensors and this filter" if att > ATTITUDE_BOUND_DEG else
                f"within the attitude requirement ({ATTITUDE_BOUND_DEG} deg)")  # fmt: skip
     share = "certified" if study.tube_certified else "NOT certified"
+    servos = ", the servos' included (not shown)" if len(cov.std) > len(Z_NAMES) else ""
     return [
         f"estimator: gain-scheduled Kalman filter on {', '.join(measured)} of design "
         f"{design_name} ({R} LPV vertices: {R * R} pairs of model and gain vertex), "
@@ -65,7 +67,7 @@ def study_lines(study, measured, design_name: str) -> list[str]:
         f">= 0; the LMI held {cov.pairs_held} pairs)",
         f"  1 sigma: {state_values(cov.std)}",
         f"  whole run with p >= {study.p} ({study.r_state:.2f} sigma, union bound over the "
-        f"steps and the 11 states): {state_values(study.run_bound)}",
+        f"steps and the {len(cov.std)} states{servos}): {state_values(study.run_bound)}",
         f"noise as a bounded sequence (|v| <= {channel_values(measured, study.v_max)}: "
         f"the bound a whole run stays within with p >= {study.p}): worst case at a frozen "
         f"vertex (exact, reached): {state_values(study.noise_worst, range(5))}: {verdict}",
@@ -122,8 +124,14 @@ def tube_lines(of) -> list[str]:
     ]
 
 
-def chance_lines(pt, arrays, p: float, steps: int, R: int) -> list[str]:
-    """The lines `fahv estimation` prints of a `fahv.estimation.closed_loop.ProbabilisticTube`."""
+def chance_lines(pt, arrays, p: float, steps: int, R: int, tau: float = 1.0,
+                 rate_step: float = np.inf) -> list[str]:  # fmt: skip
+    """The lines `fahv estimation` prints of a `fahv.estimation.closed_loop.ProbabilisticTube`.
+
+    `tau` is the adjustable law's factor (eq. 53-54), `rate_step` the elevator servo's
+    rate limit times Ts [rad per step] (inf: none), which the command's step is held
+    against.
+    """
     from fahv.estimation.closed_loop import attitude_chance, radii
 
     r_step, r_run = radii(p, steps)
@@ -134,10 +142,16 @@ def chance_lines(pt, arrays, p: float, steps: int, R: int) -> list[str]:
     verdict = ("certified with probability >= p" if ok else
                f"NOT certified; nominal rows of {deg(need[0]):.3f} / {deg(need[1]):.3f} deg "
                "would be")  # fmt: skip
+    law = "F" if tau == 1.0 else f"{tau:g} F"
+    xi = "[t; e]" if len(pt.Sigma) == 8 + len(Z_NAMES) else "[t; servo states; e]"
+    run_step = r_run * pt.std_step[1]
+    rate = ("" if not np.isfinite(rate_step) else
+            f" ({'within' if run_step <= rate_step else 'BEYOND'} the servo's "
+            f"{deg(rate_step):.3f} deg per step)")  # fmt: skip
     return [
-        f"probabilistic tube of the loop on the estimate (u = v + F (x_hat - x_bar); t = x - "
-        f"x_bar, the eight states after h): covariance bound of [t; e] driven by the sensor "
-        f"noise over the {R * R} pairs, re-checked exactly (smallest eigenvalue "
+        f"probabilistic tube of the loop on the estimate (u = v + {law} (x_hat - x_bar); t = "
+        f"x - x_bar, the eight states after h): covariance bound of {xi} driven by the "
+        f"sensor noise over the {R * R} pairs, re-checked exactly (smallest eigenvalue "
         f"{pt.min_eig:.3g} >= 0; the LMI held {pt.pairs_held} pairs)",
         f"  1 sigma of t: {state_values(np.r_[0.0, pt.std_t], range(1, 5))}; of the tube's "
         f"input u - v: Phi {pt.std_u[0]:.3g}, delta_e {deg(pt.std_u[1]):.3g} deg; of its step: "
@@ -146,7 +160,7 @@ def chance_lines(pt, arrays, p: float, steps: int, R: int) -> list[str]:
         f"theta {deg(r_step * pt.std_t[2]):.4f} deg, delta_e step "
         f"{deg(r_step * pt.std_step[1]):.3f} deg; whole run ({r_run:.2f} sigma): alpha "
         f"{deg(r_run * pt.std_t[1]):.4f}, theta {deg(r_run * pt.std_t[2]):.4f} deg, delta_e "
-        f"step {deg(r_run * pt.std_step[1]):.3f} deg",
+        f"step {deg(run_step):.3f} deg{rate}",
         f"  attitude (whole run, p >= {p}): nominal rows {deg(arrays['att_max'][0]):.3f} + "
         f"support of Z {deg(arrays['att_support'][0]):.3f} / {deg(arrays['att_support'][1]):.3f}"
         f" + noise part reach {deg(reach[0]):.3f} / {deg(reach[1]):.3f} deg (requirement "
@@ -179,7 +193,11 @@ def cmd_estimation(args) -> int:
     measured = measured_channels(plant_choices(c)["measured"])
     data = scaled_noise(load_sensors(args.vehicle), measured, args.noise_scale)
     a = design.arrays
-    flt = design_filter(a, vehicle, data, measured, c["Ts"], c["plant_substeps"], a["x0"][None])
+    actuators = plant_choices(c)["actuators"]
+    in_filter = estimator_value(c, "actuators") != "ideal"
+    servos = servos_of(vehicle, estimator_value(c, "actuators"), "state_estimator")
+    flt = design_filter(a, vehicle, data, measured, c["Ts"], c["plant_substeps"], a["x0"][None],
+                        servos)  # fmt: skip
     cert = design.summary["certificate"]
     level = cert["level"] if "level" in cert else cert["rpi_level"]
     study = estimate_study(flt, a, data, measured, c["Ts"], round(c["duration"] / c["Ts"]),
@@ -193,23 +211,28 @@ def cmd_estimation(args) -> int:
     of = output_feedback_tube(flt, a, study.covariance.S, study.r_joint, study.v_max)
     for line in tube_lines(of):
         print(line)
-    js = joint_system(study.system, a["A"], a["B"], a["F"])
-    g_max = np.r_[np.asarray(a["w_max"], float), 0.0, 0.0]
+    tau = float(estimator_value(c, "tube_tau")) or float(c["tube"]["tau"])
+    js = joint_system(study.system, a["A"], a["B"], tau * np.asarray(a["F"], float),
+                      flt.servos, c["Ts"])  # fmt: skip
+    g_max = np.zeros(len(study.system.sigma))
+    g_max[:9] = a["w_max"]
     pt = probabilistic_tube(js, measurement_covariance(measured, data), g_max)
-    for line in chance_lines(pt, a, study.p, study.steps, study.system.n_vertices):
+    rate_step = (min(vehicle.limits.rate_incr[1], vehicle.limits.rate_decr[1]) * c["Ts"]
+                 if actuators != "ideal" else np.inf)  # fmt: skip
+    for line in chance_lines(pt, a, study.p, study.steps, study.system.n_vertices, tau,
+                             rate_step):  # fmt: skip
         print(line)
     fault = (c.get("sensor_fault") or {}).get("kind", "none")
     if fault != "none":
         print(f"note: the scenario's sensor fault ({fault}) is not in these bounds: they are "
               "the healthy sensors'")  # fmt: skip
-    actuators = plant_choices(c)["actuators"]
-    if actuators != "ideal":
-        in_filter = estimator_value(c, "actuators") != "ideal"
-        where = ("in the scenario's filter (estimator.actuators) but not" if in_filter
-                 else "neither in the filter's model nor")  # fmt: skip
-        print(f"note: the scenario's actuators ({actuators}) are {where} in these bounds: "
-              "they are of the filter without servo states, whose LPV model takes the "
-              "applied input as the command")  # fmt: skip
+    if actuators != "ideal" and not in_filter:
+        print(f"note: the scenario's actuators ({actuators}) are not in the filter's model "
+              "(estimator.actuators ideal), so not in these bounds: they are of the loop "
+              "whose LPV model takes the command as the applied input")  # fmt: skip
+    elif in_filter and actuators == "ideal":
+        print("note: the filter models servos (estimator.actuators) the plant does not have "
+              "(plant.actuators ideal): these bounds are of a plant with them")  # fmt: skip
     print(f"estimation: {time.monotonic() - t0:.1f} s")
     return 0
 

@@ -9,8 +9,18 @@ vertex j gives the joint system of xi = [t; e] (8 + 11,)
     t_k+1 = (A_i + B_i F) t_k - B_i F E e_k + w_k,
     e_k+1 = M_ij e_k + G_j g_k + N_j v_k+1,
 
-with E = [0 I_8 0] the rows of z the tube reads. By linearity t is the sum of three
-parts:
+with E = [0 I_8 0] the rows of z the tube reads. With the plant's servos between the
+command and the airframe (the vehicle file's, in the filter's model too) the deviation
+gains the servo states' deviation sigma = s - S v from the nominal command's rest
+(S puts a constant command at each servo's position, rate 0; `fahv.estimation.
+servo_model.servo_step`'s Phi_s, Gamma_s, P_s, P_u):
+
+    t_k+1     = (A_i + B_i P_u F) t_k + B_i P_s sigma_k - B_i P_u F E e_k + w_k,
+    sigma_k+1 = Phi_s sigma_k + Gamma_s F t_k - Gamma_s F E e_k + S (v_k - v_k+1),
+
+the nominal command's step v_k+1 - v_k (held within the nominal's rate rows) left with
+the model error. With the adjustable law (eq. 53-54) F is tau F. By linearity t is the
+sum of three parts:
 
 - the part driven by w under A_i + B_i F: the state-feedback tube, inside Z by the
   design's certificate (eq. 24-28);
@@ -39,6 +49,7 @@ import numpy as np
 import scipy.linalg
 
 from fahv.estimation.error_bound import ErrorSystem, covariance_bound, peak_to_peak
+from fahv.estimation.servo_model import N_SERVO, servo_step
 from fahv.sensors.measure import noise_bound
 
 #: Tube states: the eight states after h (V, alpha, theta, q, eta_1, eta_1_dot, eta_2,
@@ -48,40 +59,47 @@ TUBE = slice(1, 9)
 
 @dataclass(frozen=True)
 class JointSystem:
-    """The joint system of [t; e] at every pair of model vertex i and gain vertex j.
+    """The joint system of xi = [t; sigma; e] at every pair of model vertex i and gain vertex j.
+
+    n_xi = 8 + n_s + n_z: the tube states t, the plant's servo states sigma (n_s = 4, or
+    0 with ideal actuators) and the filter's error e (n_z = 11, or 15 with servos).
 
     Attributes
     ----------
     system : ErrorSystem
-        M: (R, R, 19, 19) the joint matrices; G: (R, 19, 11) the map of g into e;
-        N: (R, 19, n_y) the map of v into e; sigma: (19,) the scales (the frozen
-        vertices' largest stationary standard deviation of t, the filter's of e).
+        M: (R, R, n_xi, n_xi) the joint matrices; G: (R, n_xi, n_z) the map of g into e;
+        N: (R, n_xi, n_y) the map of v into e; sigma: (n_xi,) the scales (the frozen
+        vertices' largest stationary standard deviation of [t; sigma], the filter's of e).
     F8 : (2, 8) ndarray
-        The tube gain on the eight states [Phi, rad per unit of each state].
-    E : (8, 11) ndarray
+        The tube gain on the eight states [Phi, rad per unit of each state] (tau F with
+        the adjustable law).
+    E : (8, n_z) ndarray
         The rows of z the tube reads.
+    n_s : int
+        Servo states of the plant in xi (0: ideal actuators).
     """
 
     system: ErrorSystem
     F8: np.ndarray
     E: np.ndarray
+    n_s: int = 0
 
     def input_rows(self) -> np.ndarray:
-        """The map of xi to the tube's input u - v = F (t - E e).
+        """The map of xi to the tube's command u - v = F (t - E e).
 
         Returns
         -------
-        (2, 19) ndarray
-            [F, -F E], in Phi and rad per unit of each state of xi.
+        (2, n_xi) ndarray
+            [F, 0, -F E], in Phi and rad per unit of each state of xi.
         """
-        return np.hstack([self.F8, -self.F8 @ self.E])
+        return np.hstack([self.F8, np.zeros((2, self.n_s)), -self.F8 @ self.E])
 
     def step_rows(self) -> tuple[np.ndarray, np.ndarray]:
         """The maps of (xi_k, v_k+1) to the input's step (u - v)_k+1 - (u - v)_k per pair.
 
         Returns
         -------
-        H : (R, R, 2, 19) ndarray
+        H : (R, R, 2, n_xi) ndarray
             Rows of xi_k.
         J : (R, 2, n_y) ndarray
             Rows of v_k+1 (gain vertex j).
@@ -98,19 +116,45 @@ def _stationary_std(A: np.ndarray, Bw: np.ndarray) -> np.ndarray:
     return np.sqrt(np.max(out, axis=0))
 
 
-def joint_system(es: ErrorSystem, A: np.ndarray, B: np.ndarray, F: np.ndarray) -> JointSystem:
+def _deviation_loop(A8, B8, F8, servos, Ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """The closed loop of [t; sigma] and its map of the tube's command (module docstring).
+
+    Returns (R, 8 + n_s, 8 + n_s) A_cl and (R, 8 + n_s, 2) B_c: [t; sigma]+ = A_cl [t;
+    sigma] + B_c F (-E e) at the pairs; n_s = 4 with servos, else 0.
+    """
+    if servos is None:
+        return A8 + B8 @ F8, B8
+    Phi, Gam, Ps, Pu = servo_step(np.asarray(servos, float), Ts)
+    R, n_s = len(A8), len(Phi)
+    Acl = np.zeros((R, 8 + n_s, 8 + n_s))
+    Acl[:, :8, :8] = A8 + B8 @ Pu @ F8
+    Acl[:, :8, 8:] = B8 @ Ps
+    Acl[:, 8:, :8] = Gam @ F8
+    Acl[:, 8:, 8:] = Phi
+    return Acl, np.concatenate([B8 @ Pu, np.broadcast_to(Gam, (R, n_s, 2))], axis=1)
+
+
+def joint_system(es: ErrorSystem, A: np.ndarray, B: np.ndarray, F: np.ndarray,
+                 servos=None, Ts: float = 0.0) -> JointSystem:  # fmt: skip
     """The joint system of the tube law on a filter's estimate (module docstring).
 
     Parameters
     ----------
     es : ErrorSystem
-        The filter's error system (`fahv.estimation.error_bound.error_system`), 11 states.
+        The filter's error system (`fahv.estimation.error_bound.error_system`), 11 states,
+        or 15 with the servos in the filter.
     A : (R, 9, 9) ndarray
         The design's LPV vertices A_i (eq. 12), deviation coordinates.
     B : (R, 9, 2) ndarray
         Their B_i.
     F : (2, 9) ndarray
-        The tube gain (LMI 24; its h column is zero).
+        The tube gain (LMI 24; its h column is zero), times tau for the adjustable law
+        (eq. 53-54).
+    servos : (2, 6) ndarray, optional
+        The plant's servos (`fahv.model.actuators.kernel_parameters`), the filter's own:
+        the command reaches the airframe through them. None: ideal actuators.
+    Ts : float
+        Control period [s] (with servos).
 
     Returns
     -------
@@ -119,32 +163,40 @@ def joint_system(es: ErrorSystem, A: np.ndarray, B: np.ndarray, F: np.ndarray) -
     Raises
     ------
     ValueError
-        If F reads h, the shapes do not match, or a frozen vertex's A_i + B_i F is not
-        stable (no stationary covariance).
+        If F reads h, the shapes do not match (the filter's states and the servos
+        included), or a frozen vertex's closed loop of [t; sigma] is not stable (no
+        stationary covariance).
     """
     A, B, F = (np.asarray(a, float) for a in (A, B, F))
     R, nz = es.n_vertices, es.M.shape[-1]
+    n_s = 0 if servos is None else N_SERVO
     if A.shape != (R, 9, 9) or B.shape != (R, 9, 2) or F.shape != (2, 9):
         raise ValueError(f"joint_system: A {A.shape}, B {B.shape}, F {F.shape} do not match "
                          f"{R} vertices of the CM")  # fmt: skip
+    if nz != 11 + n_s:
+        raise ValueError(f"joint_system: a filter of {nz} states with "
+                         f"{'the' if n_s else 'no'} servos in the plant; the filter's model "
+                         "must have the plant's actuators")  # fmt: skip
     if np.any(F[:, 0] != 0.0):
         raise ValueError("joint_system: F reads h; the tube's eight states are after h")
     A8, B8, F8 = A[:, TUBE, TUBE], B[:, TUBE], F[:, TUBE]
     E = np.eye(nz)[TUBE]
-    Acl = A8 + B8 @ F8
+    Acl, Bc = _deviation_loop(A8, B8, F8, servos, Ts)
     rho = max(np.abs(np.linalg.eigvals(Acl)).max(axis=1))
     if not rho < 1.0:
-        raise ValueError(f"joint_system: A_i + B_i F is not stable at a vertex (rho {rho:.6f})")
-    n = 8 + nz
+        raise ValueError(f"joint_system: the loop on the estimate is not stable at a vertex "
+                         f"(rho {rho:.6f})")  # fmt: skip
+    nt = 8 + n_s
+    n = nt + nz
     M = np.zeros((R, R, n, n))
-    M[:, :, :8, :8] = Acl[:, None]
-    M[:, :, :8, 8:] = -(B8 @ F8 @ E)[:, None]
-    M[:, :, 8:, 8:] = es.M
-    G = np.concatenate([np.zeros((R, 8, es.G.shape[2])), es.G], axis=1)
-    N = np.concatenate([np.zeros((R, 8, es.N.shape[2])), es.N], axis=1)
-    # scale of t: the frozen vertices' response to the estimation error at its own scale
-    scale_t = _stationary_std(Acl, B8 @ F8 @ E * es.sigma[None, None, :])
-    return JointSystem(ErrorSystem(M, G, N, np.concatenate([scale_t, es.sigma])), F8, E)
+    M[:, :, :nt, :nt] = Acl[:, None]
+    M[:, :, :nt, nt:] = -(Bc @ F8 @ E)[:, None]
+    M[:, :, nt:, nt:] = es.M
+    G = np.concatenate([np.zeros((R, nt, es.G.shape[2])), es.G], axis=1)
+    N = np.concatenate([np.zeros((R, nt, es.N.shape[2])), es.N], axis=1)
+    # scale of [t; sigma]: the frozen vertices' response to the estimation error at its scale
+    scale_t = _stationary_std(Acl, Bc @ F8 @ E * es.sigma[None, None, :])
+    return JointSystem(ErrorSystem(M, G, N, np.concatenate([scale_t, es.sigma])), F8, E, n_s)
 
 
 @dataclass(frozen=True)
@@ -153,8 +205,9 @@ class ProbabilisticTube:
 
     Attributes
     ----------
-    Sigma : (19, 19) ndarray
-        Common covariance bound of [t; e] at every vertex pair, re-checked exactly.
+    Sigma : (n_xi, n_xi) ndarray
+        Common covariance bound of xi = [t; sigma; e] at every vertex pair, re-checked
+        exactly (`JointSystem`).
     min_eig : float
         Its exact re-check: the smallest eigenvalue of Sigma - A Sigma A' - N R_v N'
         over the pairs, scaled coordinates (>= 0).
@@ -185,8 +238,9 @@ def model_part(js: JointSystem, g_max: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     js : JointSystem
-    g_max : (11,) array_like
-        Bounds of g = [w (9); w_d (2)], in the states' units.
+    g_max : (n_z,) array_like
+        Bounds of g = [w (9); w_d (2)] (and zeros for the filter's servo states), in the
+        states' units.
 
     Returns
     -------
@@ -207,7 +261,7 @@ def probabilistic_tube(js: JointSystem, R_v: np.ndarray, g_max: np.ndarray) -> P
     js : JointSystem
     R_v : (n_y, n_y) ndarray
         The sensors' white-noise covariance.
-    g_max : (11,) array_like
+    g_max : (n_z,) array_like
         Bounds of the model error g for `model_part`.
 
     Returns

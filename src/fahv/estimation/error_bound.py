@@ -9,7 +9,10 @@ augmented state z = [x; d] (11,) obeys, for a model vertex i and a gain vertex j
 
 with A_z,i = [[A_i, B_i], [0, I]] (`fahv.estimation.kalman.augmented`), C_z = [C 0],
 g_k = [w_k; w_d,k] the one-step model error (inside the design's W, eq. 13-19) and the
-input disturbance's step, v the sensors' white noise. The gains are scheduled on the
+input disturbance's step, v the sensors' white noise. A filter with the servos' states
+has z = [x; d; s] (15,) and A_z,i of `fahv.estimation.servo_model.with_servos`
+(`GainScheduledKalman.model_vertices`); the servos' model is exact, so g's last four
+entries are zero. The gains are scheduled on the
 estimate and the model on the true state, so every pair (i, j) is a vertex of the
 error system. The error splits, by linearity, into a part driven by the noise and a
 part driven by g:
@@ -39,7 +42,7 @@ import cvxpy as cp
 import numpy as np
 
 from fahv.errors import DesignError
-from fahv.estimation.kalman import GainScheduledKalman, augmented
+from fahv.estimation.kalman import GainScheduledKalman
 from fahv.synthesis.lmi import dual_support, solve_lmi
 
 #: Strict margin of the covariance LMI (in the coordinates scaled by the filter's own
@@ -53,13 +56,14 @@ class ErrorSystem:
 
     Attributes
     ----------
-    M : (R, R, 11, 11) ndarray
-        M_ij = (I - L_j C_z) A_z,i: model vertex i, gain vertex j.
-    G : (R, 11, 11) ndarray
-        G_j = I - L_j C_z, the map of the model error g = [w; w_d].
-    N : (R, 11, n_y) ndarray
+    M : (R, R, n_z, n_z) ndarray
+        M_ij = (I - L_j C_z) A_z,i: model vertex i, gain vertex j; n_z = 11 (z = [x; d]),
+        or 15 with the servos' states.
+    G : (R, n_z, n_z) ndarray
+        G_j = I - L_j C_z, the map of the model error g = [w; w_d] (zero on the servos).
+    N : (R, n_z, n_y) ndarray
         N_j = -L_j, the map of the noise v.
-    sigma : (11,) ndarray
+    sigma : (n_z,) ndarray
         The largest steady-state standard deviation of each error state over the
         vertices (the filter's own, `GainScheduledKalman.P`): the scale of the analysis.
     """
@@ -90,15 +94,11 @@ def error_system(flt: GainScheduledKalman) -> ErrorSystem:
     Raises
     ------
     ValueError
-        If the filter has no covariances (`P` None) or has servo states.
+        If the filter has no covariances (`P` None).
     """
     if flt.P is None:
         raise ValueError("error_system: the filter has no steady-state covariances (P)")
-    if flt.servos is not None:
-        raise ValueError("error_system: the bounds are of a filter without servo states "
-                         "(design_filter without servos)")
-    A = np.asarray(flt.lpv.A, float)
-    Az = augmented(A, np.asarray(flt.lpv.B, float))
+    Az = flt.model_vertices()
     n = Az.shape[1]
     Cz = np.hstack([flt.C, np.zeros((len(flt.C), n - flt.C.shape[1]))])
     G = np.eye(n)[None] - np.einsum("jik,kl->jil", flt.L, Cz)
@@ -113,7 +113,7 @@ class CovarianceBound:
 
     Attributes
     ----------
-    S : (11, 11) ndarray
+    S : (n_z, n_z) ndarray
         The bound [units of z squared].
     min_eig : float
         Smallest eigenvalue of S - M_ij S M_ij' - N_j R_v N_j' over all pairs, in the
@@ -128,7 +128,7 @@ class CovarianceBound:
 
     @property
     def std(self) -> np.ndarray:
-        """sqrt(diag S) (11,): the bound on each state's error standard deviation."""
+        """sqrt(diag S) (n_z,): the bound on each state's error standard deviation."""
         return np.sqrt(np.diag(self.S))
 
 
@@ -210,7 +210,7 @@ def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10) -> Covaria
 
 
 def _frozen(es: ErrorSystem) -> tuple[np.ndarray, np.ndarray]:
-    """The matched vertices' M_ii (R, 11, 11) and their inputs [G_i, N_i] (R, 11, p)."""
+    """The matched vertices' M_ii (R, n_z, n_z) and their inputs [G_i, N_i] (R, n_z, p)."""
     R = es.n_vertices
     M = es.M[np.arange(R), np.arange(R)]
     return M, np.concatenate([es.G, es.N], axis=2)
@@ -235,12 +235,12 @@ def peak_to_peak(es: ErrorSystem, xi_max: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     es : ErrorSystem
-    xi_max : (11 + n_y,) array_like
+    xi_max : (n_z + n_y,) array_like
         Bounds of [w (9); w_d (2); v (n_y)] (zero: that input off).
 
     Returns
     -------
-    (R, 11) ndarray
+    (R, n_z) ndarray
         Worst |e_s| at each frozen vertex [units of z].
 
     Raises
@@ -278,14 +278,14 @@ def worst_sequence(es: ErrorSystem, xi_max, vertex: int, state: int,
     Parameters
     ----------
     es : ErrorSystem
-    xi_max : (11 + n_y,) array_like
+    xi_max : (n_z + n_y,) array_like
     vertex, state : int
     steps : int
         T.
 
     Returns
     -------
-    (T, 11 + n_y) ndarray
+    (T, n_z + n_y) ndarray
         xi_1 .. xi_T; from e_0 = 0, e_T,s is the sum of the first T terms of
         `peak_to_peak`'s series.
     """

@@ -260,6 +260,18 @@ class GainScheduledKalman:
         w = self.lpv.weights(self.x[:, H], self.x[:, V])
         return np.sqrt(np.einsum("br,rii->bi", w, self.P[:, :9, :9]))
 
+    def model_vertices(self) -> np.ndarray:
+        """The linear model of z at the LPV vertices, the one the gains were designed on.
+
+        Returns
+        -------
+        (R, n_z, n_z) ndarray
+            `augmented` (n_z = 11), or with the servos
+            `fahv.estimation.servo_model.with_servos` (n_z = 15).
+        """
+        A, B = np.asarray(self.lpv.A, float), np.asarray(self.lpv.B, float)
+        return augmented(A, B) if self.servos is None else with_servos(A, B, self.servos, self.Ts)
+
     def gains(self) -> np.ndarray:
         """The scheduled gains at the current estimates' (h, V).
 

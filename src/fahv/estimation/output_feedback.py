@@ -36,7 +36,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fahv.estimation.kalman import augmented
 from fahv.synthesis.feedback import design_tube
 
 #: Contraction factors tried by the tube LMI (the state-feedback tube of the LPV
@@ -78,7 +77,7 @@ def error_part(L: np.ndarray, Cz: np.ndarray, Az: np.ndarray, S: np.ndarray,
     Cz : (n_y, n_z) ndarray
         Output matrix of z.
     Az : (R, n_z, n_z) ndarray
-        Model vertices of z (`fahv.estimation.kalman.augmented`).
+        Model vertices of z (`GainScheduledKalman.model_vertices`).
     S : (n_z, n_z) ndarray
         Covariance bound of the posterior error.
     r : float
@@ -215,7 +214,7 @@ def output_feedback_tube(flt, arrays, S: np.ndarray, r: float,
         If a tube LMI fails (`tube_fit`).
     """
     L = np.asarray(flt.L, float)
-    Az = augmented(np.asarray(flt.lpv.A, float), np.asarray(flt.lpv.B, float))
+    Az = flt.model_vertices()
     Cz = np.hstack([flt.C, np.zeros((len(flt.C), Az.shape[1] - flt.C.shape[1]))])
     sensor = sensor_part(L, v_max)
     return OutputFeedbackTube(

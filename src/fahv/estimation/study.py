@@ -192,7 +192,7 @@ def estimate_study(flt, arrays, data: SensorData, measured: Sequence[str], Ts: f
     noise = zeros.copy()
     noise[n:] = v_max
     model = zeros.copy()
-    model[:n] = np.concatenate([np.asarray(arrays["w_max"], float), w_d])
+    model[:11] = np.concatenate([np.asarray(arrays["w_max"], float), w_d])  # servos: exact
     r_joint = float(np.sqrt(scipy.stats.chi2.isf((1.0 - p) / steps, n)))
     share = tube_share(np.asarray(arrays["B"], float), np.asarray(arrays["F"], float),
                        np.asarray(arrays["N"], float), cov.S[:9, :9], r_joint)  # fmt: skip

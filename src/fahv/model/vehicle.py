@@ -202,7 +202,7 @@ class VehicleParams:
 
 @dataclass(frozen=True)
 class InputLimits:
-    """Actuator limits of sec. 5.1: Phi in [Phi_min, Phi_max], delta_e in rad.
+    """Actuator limits: the positions of sec. 5.1 and the servos' rates.
 
     Attributes
     ----------
@@ -210,18 +210,24 @@ class InputLimits:
         Fuel-to-air ratio range [-].
     delta_e_min, delta_e_max : float
         Elevator range [rad].
+    rate_incr, rate_decr : (2,) tuple of float
+        Largest rate of increase and of decrease of (Phi, delta_e) [1/s, rad/s]: the
+        rate limits of the vehicle file's physical servos (`actuators.second_order`,
+        JSBSim's `rate_limit`), whatever actuator model a run simulates; `inf`: none.
 
     Examples
     --------
     >>> lim = InputLimits(0.0, 1.5, -0.5, 0.5)
-    >>> lim.u_min.tolist(), lim.u_max.tolist()
-    ([0.0, -0.5], [1.5, 0.5])
+    >>> lim.u_min.tolist(), lim.u_max.tolist(), lim.rate_incr
+    ([0.0, -0.5], [1.5, 0.5], (inf, inf))
     """
 
     Phi_min: float
     Phi_max: float
     delta_e_min: float
     delta_e_max: float
+    rate_incr: tuple[float, float] = (math.inf, math.inf)
+    rate_decr: tuple[float, float] = (math.inf, math.inf)
 
     @property
     def u_min(self) -> np.ndarray:
@@ -373,10 +379,14 @@ def vehicle_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Ve
             raise VehicleDataError(f"{path}: 'scales.{key}' = {s} must be > 0")
         return s
 
+    actuators = actuators_from_mapping(data.get("actuators"), path)
+    servos = actuators.get("second_order", {})
+    rates = [tuple(getattr(servos[c], f"rate_limit_{d}") if c in servos else math.inf
+                   for c in ("Phi", "delta_e")) for d in ("incr", "decr")]  # fmt: skip
     return Vehicle(
         params=VehicleParams(**values),
         envelope=Envelope(h_lo, h_hi, v_lo, v_hi),
-        limits=InputLimits(phi_lo, phi_hi, math.radians(de_lo), math.radians(de_hi)),
+        limits=InputLimits(phi_lo, phi_hi, math.radians(de_lo), math.radians(de_hi), *rates),
         state_scale=np.array(
             [scale(k) for k in STATE_NAMES[:4]] + [scale("q")] + [scale(k) for k in STATE_NAMES[5:]]
         ),
@@ -384,7 +394,7 @@ def vehicle_from_mapping(data: Mapping[str, Any], path: str = "<mapping>") -> Ve
         representative=tuple(representative),
         source_file=path,
         name=str(data.get("name", "")),
-        actuators=actuators_from_mapping(data.get("actuators"), path),
+        actuators=actuators,
     )
 
 
@@ -467,7 +477,7 @@ def read_vehicle_file(path: str | Path | None = None) -> tuple[Any, str]:
 def physics_hash(vehicle: Vehicle) -> str:
     """sha256 of the numbers that define a vehicle (16 hex characters).
 
-    Its parameters, envelope, input limits and scales, rounded to nothing: every bit of
+    Its parameters, envelope, input position limits and scales, rounded to nothing: every bit of
     every value. Comments, provenance notes and layout of the file do not enter, so a
     design stays valid when only the file's notes change. Raises nothing.
 
@@ -493,7 +503,9 @@ def physics_hash(vehicle: Vehicle) -> str:
     numbers = {
         "params": dataclasses.asdict(vehicle.params),
         "envelope": dataclasses.asdict(vehicle.envelope),
-        "limits": dataclasses.asdict(vehicle.limits),
+        # the position limits (the servos' rates are actuator data, outside the design)
+        "limits": {k: v for k, v in dataclasses.asdict(vehicle.limits).items()
+                   if not k.startswith("rate_")},  # fmt: skip
         "state_scale": [float(v).hex() for v in vehicle.state_scale],
         "input_scale": [float(v).hex() for v in vehicle.input_scale],
     }

@@ -214,6 +214,61 @@ def input_rates(run: RunResult) -> dict[str, float]:
     return out
 
 
+def has_servos(run: RunResult) -> bool:
+    """Whether the run's actuators have dynamics (a servo between command and position).
+
+    Ideal actuators (the paper's plant) put the applied input of step k - 1 at the
+    position of step k (`RunResult.u_actuator`); any servo lags it. A run without
+    recorded positions has none known (False).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> u = np.array([[0.1, 0.0], [0.2, 0.01]])
+    >>> has_servos(SimpleNamespace(u_applied=u, u_actuator=np.vstack([[np.nan] * 2, u[:1]])))
+    False
+    >>> has_servos(SimpleNamespace(u_applied=u, u_actuator=np.full((2, 2), np.nan)))
+    True
+    """
+    if run.u_actuator is None or len(run.u_actuator) < 2:
+        return False
+    return not np.array_equal(run.u_actuator[1:], run.u_applied[:-1], equal_nan=True)
+
+
+def rate_violations(u: np.ndarray, Ts: float, limits) -> int:
+    """Steps whose command asks a servo for more than its rate limit.
+
+    Parameters
+    ----------
+    u : (N, 2) ndarray
+        Commands [Phi, delta_e (rad)] at the steps of period Ts.
+    Ts : float
+        Control period [s].
+    limits : fahv.model.vehicle.InputLimits
+        Its `rate_incr`, `rate_decr` (2,) [1/s, rad/s] (JSBSim's `rate_limit` of the
+        vehicle file's servos; `inf`: none).
+
+    Returns
+    -------
+    int
+        Steps k (of N - 1) with (u_k+1 - u_k) / Ts above `rate_incr` or below
+        -`rate_decr` for either input (beyond a relative 1e-9, rounding).
+
+    Examples
+    --------
+    >>> from fahv.model.vehicle import InputLimits
+    >>> lim = InputLimits(0.0, 1.5, -0.5, 0.5, (1.0, 1.0), (1.0, 0.4))
+    >>> rate_violations(np.array([[0.0, 0.0], [0.01, -0.01], [0.0, 0.0]]), 0.02, lim)
+    1
+    """
+    du = np.diff(np.asarray(u, float), axis=0) / Ts
+    incr = np.asarray(limits.rate_incr, float) * (1.0 + 1e-9)
+    decr = np.asarray(limits.rate_decr, float) * (1.0 + 1e-9)
+    with np.errstate(invalid="ignore"):
+        over = (du > incr) | (-du > decr)
+    return int(np.count_nonzero(over.any(axis=1)))
+
+
 def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, float]:
     """Metrics of a run (the issue's table): tracking, attitude, flexible, inputs, tube.
 
@@ -221,7 +276,10 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     ----------
     run : RunResult
     limits : fahv.model.vehicle.InputLimits
-        Actuator limits (sec. 5.1) the commands u (N, 2) are checked against.
+        Actuator limits (sec. 5.1) the commands u (N, 2) are checked against, and the
+        servos' rate limits: `input_rate_violations` (`rate_violations`) for a run whose
+        actuators have dynamics (`has_servos`), NaN for ideal ones, which have no rate
+        limit (the paper's plant).
     t_fault : float, optional
         Fault onset [s]; by default the first step with the fault active. None (no
         active fault) or beyond the run: the flexible RMS is over the run.
@@ -314,6 +372,8 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
         "delta_e_min_deg": float(np.degrees(u[:, 1].min())),
         "delta_e_max_deg": float(np.degrees(u[:, 1].max())),
         "input_limit_violations": int(np.count_nonzero(viol.max(axis=1) > 0.0)),
+        "input_rate_violations": rate_violations(u, float(t[1] - t[0]), limits)
+        if t.size > 1 and has_servos(run) else math.nan,
         **input_rates(run),
         "tube_fraction_inside": float(np.mean(lvl <= 1.0))
         if np.all(np.isfinite(lvl))

@@ -63,6 +63,7 @@ METRIC_ROWS = (
     ("delta_e_min_deg", "delta_e min [deg]", "{:.3f}"),
     ("delta_e_max_deg", "delta_e max [deg]", "{:.3f}"),
     ("input_limit_violations", "steps with a command beyond limits", "{}"),
+    ("input_rate_violations", "steps with a command beyond the servos' rate limits", "{}"),
     ("delta_e_rate_max_degps", "max |d delta_e / dt| of the command [deg/s]", "{:.1f}"),
     ("delta_e_actuator_rate_max_degps", "max |d delta_e / dt| of the actuator [deg/s]",
      "{:.1f}"),

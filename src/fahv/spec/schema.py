@@ -222,9 +222,14 @@ ESTIMATOR = (
           "design's", unit="s", lo=0.0, hi=1e3, default=0.0),
     Field("nominal_est_start", "str", "start of the nominal MPC's state-disturbance "
           "estimate on the estimate: first (its first residual initialises it, as on the "
-          "exact state) or mean (the mean of the residuals so far until its gain takes "
-          "over: one residual of a noisy estimate is mostly the filter's correction)",
+          "exact state), mean (the mean of the residuals so far until its gain takes "
+          "over: one residual of a noisy estimate is mostly the filter's correction) or "
+          "zero (from d = 0 with its own gain from the first residual)",
           choices=EST_STARTS, default=EST_STARTS[0]),
+    Field("tube_tau", "float", "adjustable factor tau of the tube law on the estimate, "
+          "u = v + tau F (x_hat - x_bar) (eq. 53-54; replaces the design's tube.tau in the "
+          "run: a lower gain passes less of the estimate's noise to the servos); 0: the "
+          "design's", lo=0.0, hi=1.0, default=0.0, equation="eq. (53-54)"),
     Field("actuators", "str", "actuator model the Kalman filter's predictor and gains "
           "include: ideal (the command acts at once, the default) or second_order (the "
           "vehicle file's servos, as the plant's: four more filter states)",

@@ -48,7 +48,7 @@ def test_the_mean_start_averages_until_the_filter_gain_takes_over():
     same with gamma_e."""
     rng = np.random.default_rng(3)
     r = rng.normal(size=(60, 1, 3))
-    est = DisturbanceEstimator(1, 3, 0.04, mean_start=True)
+    est = DisturbanceEstimator(1, 3, 0.04, start="mean")
     for k in range(25):
         d = est.update_residual(r[k])
         np.testing.assert_allclose(d, r[: k + 1].mean(axis=0), rtol=0, atol=1e-14)
@@ -56,12 +56,30 @@ def test_the_mean_start_averages_until_the_filter_gain_takes_over():
     np.testing.assert_allclose(est.update_residual(r[25]), d25 + 0.04 * (r[25] - d25),
                                rtol=0, atol=1e-15)  # fmt: skip
     b, scale = np.array([[0.0, 1.0, 0.0]]), np.ones(3)
-    fast = DisturbanceEstimator(1, 3, 0.04, 0.5, scale, mean_start=True)
+    fast = DisturbanceEstimator(1, 3, 0.04, 0.5, scale, start="mean")
     fast.update_residual(np.zeros((1, 3)), b)
     for _ in range(2):  # gains 1/2, then 1/3 < 0.5: along b at gamma_e, elsewhere 1/k
         fast.update_residual(np.ones((1, 3)), b)
     np.testing.assert_allclose(fast.d, [[1 - (1 / 2) * (2 / 3), 0.75, 1 - (1 / 2) * (2 / 3)]],
                                rtol=0, atol=1e-15)  # fmt: skip
+
+
+def test_the_zero_start_filters_the_first_residual_at_the_filter_gain():
+    """With start "zero" d starts at 0 and every residual, the first included, has the
+    filter's gain gamma (gamma_e along the elevator column): one residual moves d by
+    gamma of itself, where "first" takes it whole; an unknown start is refused."""
+    b, scale = np.array([[0.0, 1.0, 0.0]]), np.ones(3)
+    est = DisturbanceEstimator(1, 3, 0.04, 0.5, scale, start="zero")
+    np.testing.assert_array_equal(est.d, np.zeros((1, 3)))
+    d = est.update_residual(np.ones((1, 3)), b)
+    np.testing.assert_allclose(d, [[0.04, 0.5, 0.04]], rtol=0, atol=1e-15)
+    d = est.update_residual(np.ones((1, 3)), b)
+    np.testing.assert_allclose(d, [[0.04 + 0.04 * 0.96, 0.75, 0.04 + 0.04 * 0.96]],
+                               rtol=0, atol=1e-15)  # fmt: skip
+    first = DisturbanceEstimator(1, 3, 0.04, 0.5, scale)
+    np.testing.assert_array_equal(first.update_residual(np.ones((1, 3)), b), np.ones((1, 3)))
+    with pytest.raises(ValueError, match="start must be one of"):
+        DisturbanceEstimator(1, 3, 0.04, start="last")
 
 
 def test_estimate_takes_the_elevator_share_at_its_own_gain(design, make_mpc):

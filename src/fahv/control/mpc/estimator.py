@@ -72,8 +72,10 @@ def elevator_share(v, b, scale) -> np.ndarray:
 
 #: How the estimate starts (node parameter `mpc.est_start`): `first`, the first residual
 #: initialises it (a loop on the exact state); `mean`, the mean of the residuals so far
-#: until the filter's gain takes over (a loop on a noisy state estimate).
-EST_STARTS = ("first", "mean")
+#: until the filter's gain takes over (a loop on a noisy state estimate); `zero`, from
+#: d = 0 with the filter's own gains from the first residual on (no single residual
+#: moves the steady input by more than gamma of itself).
+EST_STARTS = ("first", "mean", "zero")
 
 
 class DisturbanceEstimator:
@@ -107,23 +109,27 @@ class DisturbanceEstimator:
         Filter gain in (0, 1] along the elevator column (None: gamma in every direction).
     scale : (p,) array_like, optional
         State scale of the projection's metric (needed with `gamma_e`).
-    mean_start : bool
-        Start as the mean of the residuals so far: the gains are max(gamma, 1/k) and
-        max(gamma_e, 1/k) at the k-th residual, so the first initialises d, as without
-        it, and the filter's own gains take over after 1/gamma residuals (the
+    start : str
+        How d starts (`EST_STARTS`). `first`: the first residual initialises d.
+        `mean`: the mean of the residuals so far, the gains max(gamma, 1/k) and
+        max(gamma_e, 1/k) at the k-th residual, so the first initialises d, as with
+        `first`, and the filter's own gains take over after 1/gamma residuals (the
         growing-memory start of a fading-memory filter: the least-squares estimate of a
-        constant from k noisy residuals). For a loop on a state estimate, whose every
-        residual carries the estimator's correction noise (`EST_STARTS`).
+        constant from k noisy residuals). `zero`: d = 0 and the filter's own gains from
+        the first residual on. `mean` and `zero` are for a loop on a state estimate,
+        whose every residual carries the estimator's correction noise.
 
     Raises
     ------
     ValueError
-        If a gain is not in (0, 1], or `gamma_e` comes without a positive `scale` of
-        length p.
+        If a gain is not in (0, 1], `gamma_e` comes without a positive `scale` of
+        length p, or `start` is not one of `EST_STARTS`.
     """
 
     def __init__(self, n_runs: int, p: int, gamma: float, gamma_e: float | None = None,
-                 scale=None, mean_start: bool = False) -> None:  # fmt: skip
+                 scale=None, start: str = EST_STARTS[0]) -> None:  # fmt: skip
+        if start not in EST_STARTS:
+            raise ValueError(f"estimator start must be one of {EST_STARTS}, got {start!r}")
         if not 0.0 < gamma <= 1.0:
             raise ValueError(f"estimator gain gamma must be in (0, 1], got {gamma}")
         if gamma_e is not None:
@@ -136,9 +142,10 @@ class DisturbanceEstimator:
         self.gamma_e = None if gamma_e is None else float(gamma_e)
         self.scale = scale
         self.d = np.zeros((n_runs, p))
-        #: False until the first residual: it initialises d (the filter's start).
-        self.started = False
-        self.mean_start = bool(mean_start)
+        #: False until the first residual initialises d (`first`, `mean`); `zero` starts
+        #: the filter at d = 0.
+        self.started = start == "zero"
+        self.mean_start = start == "mean"
         #: residuals filtered so far
         self.n_seen = 0
 

@@ -80,9 +80,10 @@ X_BOX_PARAMETER = Field(
 #: Node parameter `mpc.est_start`: how the state-disturbance estimate starts.
 EST_START_PARAMETER = Field(
     "mpc.est_start", "str", "start of the state-disturbance estimate: first (the first "
-    "residual initialises it, a loop on the exact state) or mean (the mean of the residuals "
-    "so far until the filter's own gain takes over, a loop on a state estimate: scenario "
-    "key estimator.nominal_est_start)", choices=EST_STARTS, default=EST_STARTS[0],
+    "residual initialises it, a loop on the exact state), mean (the mean of the residuals "
+    "so far until the filter's own gain takes over) or zero (from d = 0 with the filter's "
+    "gain), both for a loop on a state estimate: scenario key estimator.nominal_est_start)",
+    choices=EST_STARTS, default=EST_STARTS[0],
 )  # fmt: skip
 
 #: Node parameters of the nominal MPC: its case section's keys under `mpc.` (`att_max`
@@ -242,7 +243,7 @@ class TrackingMPCNominal(NominalSource):
         #: step of the first plan: 1 with an estimate (it starts from the first residual)
         self.k_first_plan = 1 if self.has_est else 0
         self.est_args = (*estimator_gains(p["Ts"], est_tau, tau_e), np.asarray(p["Dx"], float)[:pe],
-                         p["mpc.est_start"] == "mean")  # fmt: skip
+                         p["mpc.est_start"])  # fmt: skip
         self.est = DisturbanceEstimator(B, pe, *self.est_args)
 
     def _init_batch_state(self, B: int, N_p: int) -> None:
