@@ -14,7 +14,13 @@ from fahv.estimation.kalman import W_SIGMAS, design_filter, measurement_covarian
 from fahv.loop.cores import servos_of
 from fahv.model.vehicle import STATE_NAMES, STATE_UNITS
 from fahv.sensors.data import CHANNEL_UNITS, load_sensors, measured_channels, replace_channel
-from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, estimator_value, plant_choices
+from fahv.spec.schema import (
+    NO_ESTIMATOR,
+    estimator_kind,
+    estimator_value,
+    law_tau,
+    plant_choices,
+)
 
 #: Names and units of the filter's state z = [x; d] (`fahv.estimation.kalman`).
 Z_NAMES = (*STATE_NAMES, "d_Phi", "d_delta_e")
@@ -211,7 +217,7 @@ def cmd_estimation(args) -> int:
     of = output_feedback_tube(flt, a, study.covariance.S, study.r_joint, study.v_max)
     for line in tube_lines(of):
         print(line)
-    tau = float(estimator_value(c, "tube_tau")) or float(c["tube"]["tau"])
+    tau = law_tau(c)
     js = joint_system(study.system, a["A"], a["B"], tau * np.asarray(a["F"], float),
                       flt.servos, c["Ts"])  # fmt: skip
     g_max = np.zeros(len(study.system.sigma))

@@ -44,6 +44,7 @@ from fahv.spec.schema import (
     TS,
     estimator_kind,
     estimator_value,
+    law_tau,
     plant_choices,
     sensor_fault_values,
 )
@@ -319,10 +320,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         x0_meas[4] = 0.0  # the filter starts in steady state at q = 0 (trim)
     if n == 11:
         x0_meas = np.concatenate([x0_meas, np.zeros(2)])
-    tau = float(c["tube"]["tau"]) if law.has_tube else 1.0
-    tau_est = float(estimator_value(c, "tube_tau")) if estimator_kind(c) != NO_ESTIMATOR else 0.0
-    if law.has_tube and tau_est > 0.0:  # the scenario's, for the tube law on the estimate
-        tau = tau_est
+    tau = law_tau(c) if law.has_tube else 1.0
     vehicle_file = design.summary.get("provenance", {}).get("vehicle_file", "")
     fault = {"kind": f["kind"], "t_onset": float(f["t_onset"]), "vehicle_file": vehicle_file,
              **{p.name: f[p.name] for p in FAULTS[f["kind"]].parameters}}  # fmt: skip

@@ -287,6 +287,25 @@ def estimator_kind(spec) -> str:
     return estimator_value(spec, "kind")
 
 
+def law_tau(spec) -> float:
+    """The adjustable factor tau the tube law of a run spec runs with (eq. 53-54).
+
+    The scenario's `estimator.tube_tau` for a loop on the estimate (when set, > 0), the
+    design's `tube.tau` otherwise.
+
+    Examples
+    --------
+    >>> law_tau({"tube": {"tau": 1.0}, "estimator": {"kind": "kalman", "tube_tau": 0.8}})
+    0.8
+    >>> law_tau({"tube": {"tau": 1.0}, "estimator": {"kind": "none", "tube_tau": 0.8}})
+    1.0
+    """
+    tau_est = float(estimator_value(spec, "tube_tau"))
+    if estimator_kind(spec) != NO_ESTIMATOR and tau_est > 0.0:
+        return tau_est
+    return float(spec["tube"]["tau"])
+
+
 def plant_section() -> Section:
     """The `plant` section of a scenario and a run spec: optional, left out when absent.
 
