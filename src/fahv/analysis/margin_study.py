@@ -37,7 +37,6 @@ from fahv.model.trim import TrimMap
 from fahv.plant.rk4 import params_records, perturbed_records
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.spec.artefacts import variant_gain_key
-from fahv.spec.schema import law_tau
 
 
 @dataclass(frozen=True)
@@ -85,7 +84,7 @@ def notch_settings(design) -> list[NotchSetting]:
         raise ValueError(f"margins: a nine-state design is needed, this one has {design.n_x} "
                          "states (the ECM models the notch in its plant)")  # fmt: skip
     case, a = design.case, design.arrays
-    tau = law_tau(case)
+    tau = float(case["tube"]["tau"])
     out = []
     for name in case["variants"]:
         v = VARIANTS[name]

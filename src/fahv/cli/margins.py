@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from fahv.analysis.margin_figures import margin_figures
@@ -94,7 +95,13 @@ def estimate_rows(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple[
     """
     from fahv.campaign.spec import scenario_path
     from fahv.spec.scenario import load_scenario
-    from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, estimator_value, plant_choices
+    from fahv.spec.schema import (
+        NO_ESTIMATOR,
+        estimator_kind,
+        estimator_value,
+        law_tau,
+        plant_choices,
+    )
 
     path = scenario_path(arg)
     if not path.is_file() or path.resolve() == resolve_design_file(arg).resolve():
@@ -115,10 +122,13 @@ def estimate_rows(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple[
                         c["plant_substeps"], a["x0"][None], servos)  # fmt: skip
     actuators = ("ideal actuators" if servos is None else
                  f"the {model} servos in the plant and the filter, linear")  # fmt: skip
+    tau, tau_design = law_tau(c), float(c["tube"]["tau"])
+    settings = [replace(s, F=s.F * (tau / tau_design)) for s in study.settings]
+    law = "F" if tau == 1.0 else f"{tau:g} F"
     line = (f"the law on the Kalman estimate of {', '.join(measured)} (scenario {path.stem}; "
-            f"{actuators}): u = v + F x_hat, broken at the elevator command, the filter fed "
-            "the commanded input")  # fmt: skip
-    return estimated_margins(stored, flt, study.settings), line
+            f"{actuators}): u = v + {law} x_hat, broken at the elevator command, the filter "
+            "fed the commanded input")  # fmt: skip
+    return estimated_margins(stored, flt, settings), line
 
 
 def cmd_margins(args) -> int:
