@@ -1,5 +1,6 @@
 """Checks shared by the estimation bounds' tests: the exact re-check of a covariance bound
-at every vertex pair, and the sample variance of its system under random switching."""
+at every vertex pair, the sample variance of its system under random switching, and the
+nonlinear loop's deviation from its nominal against a probabilistic tube."""
 
 import numpy as np
 import pytest
@@ -32,7 +33,33 @@ def switched_variance(es, S: np.ndarray, R_v: np.ndarray, runs: int, steps: int,
     return e.var(axis=0)
 
 
+def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0):
+    """The nonlinear loop (`tube_mpc` of the design's scenario, `duration` s) against the
+    probabilistic tube `pt`: the standard deviations over t >= t_from of t = x - x_r - x_n
+    in V, alpha, theta and q and of the elevator command's step, as fractions of the
+    bound's (4,) and (); the largest |t| of alpha and theta (2,) and the bound's whole-run
+    radius at p = 0.99 in the same units (2,)."""
+    from fahv.estimation.closed_loop import radii
+    from fahv.loop.simulate import simulate
+    from fahv.model.vehicle import ALPHA, IQ, THETA, V
+
+    run = simulate(design, "tube_mpc", duration=duration)
+    k = run.t >= t_from
+    t = (run.x - run.x_r - run.x_n[:, :9])[k]
+    ratio = t[:, [V, ALPHA, THETA, IQ]].std(axis=0) / pt.std_t[:4]
+    step = np.diff(run.u[k, 1]).std() / pt.std_step[1]
+    print("measured / bound:", np.round(ratio, 3), round(step, 3))
+    _, r_run = radii(0.99, len(run.t))
+    return ratio, step, np.abs(t[:, [ALPHA, THETA]]).max(axis=0), r_run * pt.std_t[1:3]
+
+
 @pytest.fixture
 def bound_checks():
     """The two checks: (pair_min_eig, switched_variance)."""
     return pair_min_eig, switched_variance
+
+
+@pytest.fixture
+def deviation_check():
+    """`loop_deviation`: the nonlinear loop against a probabilistic tube."""
+    return loop_deviation

@@ -11,8 +11,6 @@ from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.estimation.closed_loop import attitude_chance, joint_system, probabilistic_tube, radii
 from fahv.estimation.error_bound import error_system
 from fahv.estimation.kalman import design_filter, measurement_covariance
-from fahv.loop.simulate import simulate
-from fahv.model.vehicle import ALPHA, IQ, THETA, V
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors
 
 MEASURED = list(DEFAULT_MEASURED)
@@ -67,7 +65,7 @@ def test_random_switching_stays_below_the_joint_bound(tube, bound_checks):
     assert ratio.max() > 0.5
 
 
-def test_the_nonlinear_loop_deviates_as_the_bound_says(kalman_design, tube):
+def test_the_nonlinear_loop_deviates_as_the_bound_says(kalman_design, tube, deviation_check):
     """case1_kalman's tube_mpc on the estimate, 100 s (before the fault), sensor seed 0:
     over 40-100 s the standard deviation of t = x - x_r - x_n in V, alpha, theta and q,
     and of the elevator command's step, is within 10 % of the bound's (the bound is of the
@@ -77,16 +75,10 @@ def test_the_nonlinear_loop_deviates_as_the_bound_says(kalman_design, tube):
     within the whole run's radius at p = 0.99 (measured 0.055 deg against 0.102)."""
     design, _ = kalman_design
     js, pt = tube
-    run = simulate(design, "tube_mpc", duration=100.0)
-    k = run.t >= 40.0
-    t = (run.x - run.x_r - run.x_n[:, :9])[k]
-    ratio = t[:, [V, ALPHA, THETA, IQ]].std(axis=0) / pt.std_t[:4]
-    step = np.diff(run.u[k, 1]).std() / pt.std_step[1]
-    print("measured / bound:", np.round(ratio, 3), round(step, 3))
+    ratio, step, largest, reach = deviation_check(design, pt)
     assert np.all(np.abs(ratio - 1.0) < 0.1), ratio
     assert abs(step - 1.0) < 0.1, step
-    _, r_run = radii(0.99, len(run.t))
-    assert np.all(np.abs(t[:, [ALPHA, THETA]]).max(axis=0) <= r_run * pt.std_t[1:3])
+    assert np.all(largest <= reach)
 
 
 def test_the_attitude_is_not_certified_on_the_estimate(kalman_design, tube):

@@ -173,12 +173,12 @@ def joint_system(es: ErrorSystem, A: np.ndarray, B: np.ndarray, F: np.ndarray,
     if A.shape != (R, 9, 9) or B.shape != (R, 9, 2) or F.shape != (2, 9):
         raise ValueError(f"joint_system: A {A.shape}, B {B.shape}, F {F.shape} do not match "
                          f"{R} vertices of the CM")  # fmt: skip
+    if np.any(F[:, 0] != 0.0):
+        raise ValueError("joint_system: F reads h; the tube's eight states are after h")
     if nz != 11 + n_s:
         raise ValueError(f"joint_system: a filter of {nz} states with "
                          f"{'the' if n_s else 'no'} servos in the plant; the filter's model "
                          "must have the plant's actuators")  # fmt: skip
-    if np.any(F[:, 0] != 0.0):
-        raise ValueError("joint_system: F reads h; the tube's eight states are after h")
     A8, B8, F8 = A[:, TUBE, TUBE], B[:, TUBE], F[:, TUBE]
     E = np.eye(nz)[TUBE]
     Acl, Bc = _deviation_loop(A8, B8, F8, servos, Ts)
