@@ -33,17 +33,18 @@ def switched_variance(es, S: np.ndarray, R_v: np.ndarray, runs: int, steps: int,
     return e.var(axis=0)
 
 
-def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0):
-    """The nonlinear loop (`tube_mpc` of the design's scenario, `duration` s) against the
-    probabilistic tube `pt`: the standard deviations over t >= t_from of t = x - x_r - x_n
-    in V, alpha, theta and q and of the elevator command's step, as fractions of the
-    bound's (4,) and (); the largest |t| of alpha and theta (2,) and the bound's whole-run
-    radius at p = 0.99 in the same units (2,)."""
+def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0, overrides=None):
+    """The nonlinear loop (`tube_mpc` of the design's scenario, `duration` s, node
+    parameter `overrides` as `simulate`'s) against the probabilistic tube `pt`: the
+    standard deviations over t >= t_from of t = x - x_r - x_n in V, alpha, theta and q and
+    of the elevator command's step, as fractions of the bound's (4,) and (); the largest
+    |t| of alpha and theta (2,) and the bound's whole-run radius at p = 0.99 in the same
+    units (2,)."""
     from fahv.estimation.closed_loop import radii
     from fahv.loop.simulate import simulate
     from fahv.model.vehicle import ALPHA, IQ, THETA, V
 
-    run = simulate(design, "tube_mpc", duration=duration)
+    run = simulate(design, "tube_mpc", duration=duration, overrides=overrides)
     k = run.t >= t_from
     t = (run.x - run.x_r - run.x_n[:, :9])[k]
     ratio = t[:, [V, ALPHA, THETA, IQ]].std(axis=0) / pt.std_t[:4]

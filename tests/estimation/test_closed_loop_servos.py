@@ -91,3 +91,25 @@ def js_servos(vehicle):
 
     return kernel_parameters(vehicle.actuators["second_order"], vehicle.limits.u_min,
                              vehicle.limits.u_max)  # fmt: skip
+
+
+@pytest.mark.parametrize("s_mass, s_aero", [(-1, -1), (-1, 1), (1, -1), (1, 1)])
+def test_the_bound_holds_at_the_corners_of_the_uncertainty_box(implementable, s_mass, s_aero,
+                                                             deviation_check):
+    """The same nonlinear loop with the simulated vehicle at a corner of the sec. 5.1 box
+    (m and I_yy at s_mass, the eight other parameters at s_aero; 100 s, sensor seed 0):
+    alpha, theta and q of t and the command's step within 15 % of the bound (measured
+    0.88-1.04 and 0.94-0.98), and the largest |t| of alpha and theta within the run's
+    radius at p = 0.99 (measured up to 0.100 deg against 0.105 on the light corners). V is
+    not held: a dispersed vehicle's speed drifts from the nominal's by its model error,
+    which the noise's bound leaves out (1.07-2.20 of it at these corners)."""
+    from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+
+    design, vehicle, _, _, pt = implementable
+    nominal = vehicle.params
+    plant = {f"params.{k}": getattr(nominal, k) * (1.0 + (s_mass if k in ("m", "I_yy") else
+                                                           s_aero) * rel)
+             for k, rel in PAPER_UNCERTAINTY.items()}  # fmt: skip
+    ratio, step, largest, reach = deviation_check(design, pt, overrides={"plant": plant})
+    assert np.all(np.abs(ratio[1:] - 1.0) < 0.15) and abs(step - 1.0) < 0.15, (ratio, step)
+    assert np.all(largest <= reach)
