@@ -242,7 +242,7 @@ def test_report_command_prints_a_summary_and_the_path(reference, capsys):
     assert main(["campaign", "report", str(out), "--no-figures"]) == 0
     text = capsys.readouterr().out
     assert f"report: {out / 'report' / 'report.md'}" in text
-    assert "## Worst" not in text and len(text.splitlines()) <= 13
+    assert "## Worst" not in text and len(text.splitlines()) <= 14
     # the paper's design (W not closed over its domain) certifies none of the draws
     assert "\n  all, certified | not certified draws: tube_mpc 0/0 | " in text
     rep = (out / "report" / "report.md").read_text()

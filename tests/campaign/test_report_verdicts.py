@@ -31,7 +31,7 @@ def test_one_miss_fails_all_and_not_applicable_is_not_a_miss():
     assert no_tube["tube"] is None and no_tube["all"] is True
     gone = verdicts({"status": "failed", "alpha_err_max_deg": None}, REQ)  # no metrics
     assert gone["completes"] is False and gone["all"] is False
-    assert gone["input_rates"] is False
+    assert gone["input_rates"] is None  # whether it had servos is not known
 
 
 def test_a_command_beyond_a_servo_rate_fails_the_rates_and_all():

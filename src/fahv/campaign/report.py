@@ -9,7 +9,8 @@ completes       the run ends without exception, with a finite state, inside the
 attitude        max |alpha - alpha_r| and max |theta - theta_r| <= attitude_deg
 input_limits    no step with a command beyond the actuator limits (sec. 5.1)
 input_rates     no step whose command asks a servo for more than its rate limit
-                (the vehicle file's servos; n/a for rows without the metric)
+                (the vehicle file's servos; n/a for rows without the metric: ideal
+                actuators, a run that raised, datasets of earlier versions)
 tube            tube error inside Z (tau Z) at every step (n/a for laws without tube)
 settling        |h - h_c| <= 10 ft and |V - V_c| <= 2 ft/s reached within
                 settling_s after the command stops moving, and held to the end
@@ -19,10 +20,11 @@ final_V         |V - V_c| at the end <= V_final_fps
 
 With two or more variants, each other variant is compared with the first run by run
 on the same draws (`fahv.campaign.paired`: paired differences with confidence
-intervals, figures). A run without metrics (it raised) fails every requirement. Failure-probability
-bound: with k failures in n runs, the one-sided Clopper-Pearson upper bound at
-confidence C, `beta.ppf(C, k + 1, n - k)`; for k = 0 it is the zero-failure bound
-1 - (1 - C)^(1/n) (n runs without a failure show p < that bound at confidence C).
+intervals, figures). A run without metrics (it raised) fails every requirement but the
+tube and the rates (n/a for it). Failure-probability bound: with k failures in n runs,
+the one-sided Clopper-Pearson upper bound at confidence C, `beta.ppf(C, k + 1, n - k)`;
+for k = 0 it is the zero-failure bound 1 - (1 - C)^(1/n) (n runs without a failure show
+p < that bound at confidence C).
 """
 
 from __future__ import annotations
@@ -102,7 +104,7 @@ def verdicts(row: dict, req: dict, certified: dict | None = None) -> dict[str, b
     """
     has = row.get("alpha_err_max_deg") is not None
     if not has:
-        return {k: (False if k not in ("tube", "nominal_range") else None)
+        return {k: (False if k not in ("tube", "input_rates", "nominal_range") else None)
                 for k, _ in REQUIREMENTS}  # fmt: skip
     out = _each(row, req)
     out["all"] = all(v for v in out.values() if v is not None)
