@@ -8,7 +8,7 @@ import pytest
 
 from fahv.certificate.verified import load_or_design
 from fahv.control.base import ATTITUDE_BOUND_DEG
-from fahv.estimation.closed_loop import attitude_chance, joint_system, probabilistic_tube, radii
+from fahv.estimation.closed_loop import attitude_chance, joint_system, loop_tube, radii
 from fahv.estimation.error_bound import error_system
 from fahv.estimation.kalman import design_filter, measurement_covariance
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors
@@ -29,10 +29,7 @@ def tube(kalman_design):
     design, vehicle = kalman_design
     a, data = design.arrays, load_sensors()
     flt = design_filter(a, vehicle, data, MEASURED, 0.02, 5, a["x0"][None])
-    js = joint_system(error_system(flt), a["A"], a["B"], a["F"])
-    pt = probabilistic_tube(js, measurement_covariance(MEASURED, data),
-                            np.r_[a["w_max"], 0.0, 0.0])  # fmt: skip
-    return js, pt
+    return loop_tube(error_system(flt), flt, a, 1.0, measurement_covariance(MEASURED, data))
 
 
 def test_the_joint_bound_holds_at_every_pair(tube, bound_checks):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fahv.certificate.verified import load_or_design
-from fahv.estimation.closed_loop import joint_system, probabilistic_tube, radii
+from fahv.estimation.closed_loop import joint_system, loop_tube, radii
 from fahv.estimation.error_bound import error_system
 from fahv.estimation.kalman import design_filter, measurement_covariance
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors
@@ -25,11 +25,7 @@ def implementable():
     a, data = design.arrays, load_sensors()
     flt = design_filter(a, vehicle, data, MEASURED, 0.02, 5, a["x0"][None],
                         vehicle.actuators["second_order"])  # fmt: skip
-    es = error_system(flt)
-    js = joint_system(es, a["A"], a["B"], tau * np.asarray(a["F"], float), flt.servos, 0.02)
-    g_max = np.zeros(15)
-    g_max[:9] = a["w_max"]
-    pt = probabilistic_tube(js, measurement_covariance(MEASURED, data), g_max)
+    js, pt = loop_tube(error_system(flt), flt, a, tau, measurement_covariance(MEASURED, data))
     return design, vehicle, tau, js, pt
 
 

@@ -180,7 +180,7 @@ def chance_lines(pt, arrays, p: float, steps: int, R: int, tau: float = 1.0,
 def cmd_estimation(args) -> int:
     """Print the bounds of a scenario's Kalman filter and the tube's room for them."""
     # cvxpy and scipy.stats: here only
-    from fahv.estimation.closed_loop import joint_system, probabilistic_tube
+    from fahv.estimation.closed_loop import loop_tube
     from fahv.estimation.output_feedback import output_feedback_tube
     from fahv.estimation.study import estimate_study
 
@@ -218,11 +218,7 @@ def cmd_estimation(args) -> int:
     for line in tube_lines(of):
         print(line)
     tau = law_tau(c)
-    js = joint_system(study.system, a["A"], a["B"], tau * np.asarray(a["F"], float),
-                      flt.servos, c["Ts"])  # fmt: skip
-    g_max = np.zeros(len(study.system.sigma))
-    g_max[:9] = a["w_max"]
-    pt = probabilistic_tube(js, measurement_covariance(measured, data), g_max)
+    _, pt = loop_tube(study.system, flt, a, tau, measurement_covariance(measured, data))
     rate_step = (min(vehicle.limits.rate_incr[1], vehicle.limits.rate_decr[1]) * c["Ts"]
                  if actuators != "ideal" else np.inf)  # fmt: skip
     for line in chance_lines(pt, a, study.p, study.steps, study.system.n_vertices, tau,

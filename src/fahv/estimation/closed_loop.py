@@ -289,6 +289,41 @@ def probabilistic_tube(js: JointSystem, R_v: np.ndarray, g_max: np.ndarray) -> P
     )  # fmt: skip
 
 
+def loop_tube(es: ErrorSystem, flt, arrays, tau: float,
+              R_v: np.ndarray) -> tuple[JointSystem, ProbabilisticTube]:  # fmt: skip
+    """The probabilistic tube of a design's tube law tau F on a filter's estimate.
+
+    Parameters
+    ----------
+    es : ErrorSystem
+        The filter's error system (`fahv.estimation.error_bound.error_system` of `flt`).
+    flt : fahv.estimation.kalman.GainScheduledKalman
+        The filter; its servos, if any, are the plant's (`joint_system`).
+    arrays : mapping
+        The design's arrays: `A` (R, 9, 9), `B` (R, 9, 2), `F` (2, 9), `w_max` (9,).
+    tau : float
+        The adjustable factor the law runs with (eq. 53-54; `fahv.spec.schema.law_tau`).
+    R_v : (n_y, n_y) ndarray
+        The sensors' white-noise covariance.
+
+    Returns
+    -------
+    (JointSystem, ProbabilisticTube)
+        The model error's bound g_max is the design's W on the nine states, zero on the
+        input disturbance and the servo states.
+
+    Raises
+    ------
+    ValueError, DesignError
+        As `joint_system` and `probabilistic_tube`.
+    """
+    js = joint_system(es, arrays["A"], arrays["B"], tau * np.asarray(arrays["F"], float),
+                      flt.servos, flt.Ts)  # fmt: skip
+    g_max = np.zeros(len(es.sigma))
+    g_max[:9] = arrays["w_max"]
+    return js, probabilistic_tube(js, R_v, g_max)
+
+
 def radii(p: float, steps: int) -> tuple[float, float]:
     """Gaussian radii in standard deviations: one step, and a whole run (union bound).
 
