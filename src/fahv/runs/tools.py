@@ -136,6 +136,7 @@ NAN_WORDS = {
     "tube_fraction_inside": "no tube",
     "tube_level_max": "no tube",
     "tube_error_h_max_ft": "no tube",
+    "input_rate_violations": "no servos",
 }
 
 
