@@ -14,11 +14,11 @@ from fahv.analysis.estimated_loop import (
     estimated_loop_systems,
     estimated_margins,
     filter_models,
-    servo_plants,
 )
 from fahv.analysis.margin_study import notch_settings, vertex_plants
 from fahv.analysis.margins import closed_loop, loop_systems
 from fahv.estimation.kalman import design_filter
+from fahv.estimation.servo_model import servo_plants
 from fahv.model.actuators import kernel_parameters
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.workspace import ROOT

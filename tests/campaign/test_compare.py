@@ -38,7 +38,8 @@ def _pair(tmp_path):
 
 def test_each_requirement_is_counted_pair_by_pair(tmp_path):
     """Attitude: 30 / 35 passing, 2 only in A, 7 only in B, McNemar p = binomtest(2, 9);
-    every requirement but the tube: B's tube misses do not count there, they do in all."""
+    every requirement but the tube: B's tube misses do not count there, they do in all; the
+    servos' rate, which no row carries, is left out."""
     _, _ = _pair(tmp_path)
     rows_a = store.read_rows(tmp_path / "a")
     rows_b = store.read_rows(tmp_path / "b")
@@ -50,6 +51,7 @@ def test_each_requirement_is_counted_pair_by_pair(tmp_path):
     assert (got["all_but_tube"].pass_a, got["all_but_tube"].pass_b) == (30, 35)
     assert (got["all"].pass_a, got["all"].pass_b) == (30, 32)  # B fails its tube at 0-2
     assert got["settling"].p_mcnemar == 1.0 and got["settling"].pass_b == 40
+    assert "input_rates" not in got  # no row has the servos' rate metric: left out
 
 
 def test_the_command_prints_the_table_and_the_paired_metrics(tmp_path, capsys):

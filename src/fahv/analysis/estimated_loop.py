@@ -38,7 +38,7 @@ from fahv.analysis.margins import (
     worst_case,
 )
 from fahv.estimation.kalman import augmented
-from fahv.estimation.servo_model import N_SERVO, servo_step, with_servos
+from fahv.estimation.servo_model import servo_plants, servo_step, with_servos
 from fahv.model.notch import NotchFilter
 from fahv.model.vehicle import DELTA_E, IQ, PHI
 
@@ -147,35 +147,6 @@ def filter_models(A, B, servos=None, Ts: float = 0.0) -> tuple[np.ndarray, np.nd
     B_z = np.concatenate([B @ Pu, np.zeros((P, m, m)), np.broadcast_to(Gam, (P,) + Gam.shape)],
                          axis=1)  # fmt: skip
     return with_servos(A, B, servos, Ts), B_z
-
-
-def servo_plants(A, B, servos, Ts: float) -> tuple[np.ndarray, np.ndarray]:
-    """The airframe with its servos at plant points: the state [x; s], the command u.
-
-    x+ = A x + B (P_s s + P_u u), s+ = Phi s + Gamma u
-    (`fahv.estimation.servo_model.servo_step`: the servos' exact discretisation over
-    the held step, without their rate limits).
-
-    Parameters
-    ----------
-    A : (P, n, n) ndarray
-    B : (P, n, m) ndarray
-    servos : (2, 6) ndarray
-        `fahv.model.actuators.kernel_parameters` of the plant's servos.
-    Ts : float
-        Control period [s].
-
-    Returns
-    -------
-    A_p : (P, n + 4, n + 4) ndarray
-    B_p : (P, n + 4, m) ndarray
-    """
-    A, B = np.asarray(A, float), np.asarray(B, float)
-    Phi, Gam, Ps, Pu = servo_step(servos, Ts)
-    P, n, m = B.shape
-    A_p = np.zeros((P, n + N_SERVO, n + N_SERVO))
-    A_p[:, :n, :n], A_p[:, :n, n:], A_p[:, n:, n:] = A, B @ Ps, Phi
-    return A_p, np.concatenate([B @ Pu, np.broadcast_to(Gam, (P,) + Gam.shape)], axis=1)
 
 
 def estimated_closed_loop(A_L, B_L, C_L) -> np.ndarray:

@@ -103,13 +103,17 @@ def requirement_pairs(rows_a: list[dict], rows_b: list[dict], req: dict) -> list
     -------
     list of RequirementPair
         In the order of `COMPARED`; a requirement not applicable to a run (the tube of a
-        law without one) counts as not passing.
+        law without one) counts as not passing, and one applicable to no run of either
+        list (the servos' rate on ideal actuators, a metric earlier datasets lack) is
+        left out.
     """
     va = {r["index"]: _passes(r, req) for r in rows_a}
     vb = {r["index"]: _passes(r, req) for r in rows_b}
     idx = sorted(va.keys() & vb.keys())
     out = []
     for key, label in COMPARED:
+        if not any(key in va[i] or key in vb[i] for i in idx):
+            continue
         a = [va[i].get(key, False) for i in idx]
         b = [vb[i].get(key, False) for i in idx]
         only_a = sum(x and not y for x, y in zip(a, b, strict=True))

@@ -49,7 +49,7 @@ import numpy as np
 import scipy.linalg
 
 from fahv.estimation.error_bound import ErrorSystem, covariance_bound, peak_to_peak
-from fahv.estimation.servo_model import N_SERVO, servo_step
+from fahv.estimation.servo_model import N_SERVO, servo_plants
 from fahv.sensors.measure import noise_bound
 
 #: Tube states: the eight states after h (V, alpha, theta, q, eta_1, eta_1_dot, eta_2,
@@ -120,18 +120,14 @@ def _deviation_loop(A8, B8, F8, servos, Ts: float) -> tuple[np.ndarray, np.ndarr
     """The closed loop of [t; sigma] and its map of the tube's command (module docstring).
 
     Returns (R, 8 + n_s, 8 + n_s) A_cl and (R, 8 + n_s, 2) B_c: [t; sigma]+ = A_cl [t;
-    sigma] + B_c F (-E e) at the pairs; n_s = 4 with servos, else 0.
+    sigma] + B_c F (-E e) at the pairs, with the airframe and servos of `servo_plants`;
+    n_s = 4 with servos, else 0.
     """
     if servos is None:
         return A8 + B8 @ F8, B8
-    Phi, Gam, Ps, Pu = servo_step(np.asarray(servos, float), Ts)
-    R, n_s = len(A8), len(Phi)
-    Acl = np.zeros((R, 8 + n_s, 8 + n_s))
-    Acl[:, :8, :8] = A8 + B8 @ Pu @ F8
-    Acl[:, :8, 8:] = B8 @ Ps
-    Acl[:, 8:, :8] = Gam @ F8
-    Acl[:, 8:, 8:] = Phi
-    return Acl, np.concatenate([B8 @ Pu, np.broadcast_to(Gam, (R, n_s, 2))], axis=1)
+    A_p, B_p = servo_plants(A8, B8, np.asarray(servos, float), Ts)
+    F_p = np.hstack([F8, np.zeros((F8.shape[0], A_p.shape[1] - 8))])  # the tube reads t only
+    return A_p + B_p @ F_p, B_p
 
 
 def joint_system(es: ErrorSystem, A: np.ndarray, B: np.ndarray, F: np.ndarray,

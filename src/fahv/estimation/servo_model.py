@@ -103,3 +103,32 @@ def with_servos(A: np.ndarray, B: np.ndarray, AP: np.ndarray, Ts: float) -> np.n
     out[:, n + m:, n:n + m] = Gam
     out[:, n + m:, n + m:] = Phi
     return out
+
+
+def servo_plants(A, B, servos, Ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """The airframe with its servos at plant points: the state [x; s], the command u.
+
+    x+ = A x + B (P_s s + P_u u), s+ = Phi s + Gamma u
+    (`servo_step`: the servos' exact discretisation over the held step, without their
+    rate limits).
+
+    Parameters
+    ----------
+    A : (P, n, n) ndarray
+    B : (P, n, m) ndarray
+    servos : (2, 6) ndarray
+        `fahv.model.actuators.kernel_parameters` of the plant's servos.
+    Ts : float
+        Control period [s].
+
+    Returns
+    -------
+    A_p : (P, n + 4, n + 4) ndarray
+    B_p : (P, n + 4, m) ndarray
+    """
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    Phi, Gam, Ps, Pu = servo_step(servos, Ts)
+    P, n, m = B.shape
+    A_p = np.zeros((P, n + N_SERVO, n + N_SERVO))
+    A_p[:, :n, :n], A_p[:, :n, n:], A_p[:, n:, n:] = A, B @ Ps, Phi
+    return A_p, np.concatenate([B @ Pu, np.broadcast_to(Gam, (P,) + Gam.shape)], axis=1)
