@@ -60,13 +60,16 @@ def test_the_command_step_stays_within_the_servo_rate_for_a_run(implementable):
 def test_the_nonlinear_implementable_loop_deviates_as_the_bound_says(implementable,
                                                                      deviation_check):
     """case1_implementable's tube_mpc, 100 s (before the fault), sensor seed 0: over 40-100 s
-    the standard deviation of t = x - x_r - x_n in V, alpha, theta and q within 15 % of
-    the bound's, the elevator command's step within 10 % (measured 1.004, 0.949, 0.946,
-    0.895 and 0.943 of it), and the largest |t| of alpha and theta within the whole
-    run's radius at p = 0.99 (measured 0.056 deg against 0.110)."""
+    the standard deviation of t = x - x_r - x_n in alpha, theta and q within 15 % of the
+    bound's, the elevator command's step within 10 % (measured 0.946, 0.945, 0.893 and
+    0.966 of it), and the largest |t| of alpha and theta within the run's radius at
+    p = 0.99 (measured 0.057 deg against 0.105). V's is 1.23 of the bound's and held
+    below 1.35: the nominal's disturbance estimate at 2 s passes the estimate's noise on
+    to the nominal's speed, which the bound leaves out (1.004 at 5 s, measured on
+    case1_implementable_slow_estimate)."""
     design, _, _, _, pt = implementable
     ratio, step, largest, reach = deviation_check(design, pt)
-    assert np.all(np.abs(ratio - 1.0) < 0.15), ratio
+    assert np.all(np.abs(ratio[1:] - 1.0) < 0.15) and ratio[0] < 1.35, ratio
     assert abs(step - 1.0) < 0.1, step
     assert np.all(largest <= reach)
 
@@ -95,10 +98,10 @@ def test_the_bound_holds_at_the_corners_of_the_uncertainty_box(implementable, s_
     """The same nonlinear loop with the simulated vehicle at a corner of the sec. 5.1 box
     (m and I_yy at s_mass, the eight other parameters at s_aero; 100 s, sensor seed 0):
     alpha, theta and q of t and the command's step within 15 % of the bound (measured
-    0.88-1.04 and 0.94-0.98), and the largest |t| of alpha and theta within the run's
-    radius at p = 0.99 (measured up to 0.100 deg against 0.105 on the light corners). V is
-    not held: a dispersed vehicle's speed drifts from the nominal's by its model error,
-    which the noise's bound leaves out (1.07-2.20 of it at these corners)."""
+    0.88-1.04 and 0.96-1.00), and the largest |t| of alpha and theta within the run's
+    radius at p = 0.99 (measured up to 0.102 deg against 0.105). V is not held: a
+    dispersed vehicle's speed drifts from the nominal's by its model error, which the
+    noise's bound leaves out (1.19-1.45 of it at these corners)."""
     from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
     design, vehicle, _, _, pt = implementable
@@ -109,3 +112,22 @@ def test_the_bound_holds_at_the_corners_of_the_uncertainty_box(implementable, s_
     ratio, step, largest, reach = deviation_check(design, pt, overrides={"plant": plant})
     assert np.all(np.abs(ratio[1:] - 1.0) < 0.15) and abs(step - 1.0) < 0.15, (ratio, step)
     assert np.all(largest <= reach)
+
+
+def test_the_flight_path_disturbance_joins_the_error_system(implementable):
+    """A filter with the flight-path disturbance (16 states with the servos): its error
+    system's covariance bound holds at every pair (the exact re-check), its joint system
+    with the servos has 28 states, and d_gamma's error is bounded (1 sigma 2.1e-5 rad/s from
+    the sensors' noise, 10 %)."""
+    from fahv.estimation.error_bound import covariance_bound
+
+    design, vehicle, tau, _, _ = implementable
+    a = design.arrays
+    flt = design_filter(a, vehicle, load_sensors(), MEASURED, 0.02, 5, a["x0"][None],
+                        vehicle.actuators["second_order"], flight_path=True)  # fmt: skip
+    es = error_system(flt)
+    cov = covariance_bound(es, measurement_covariance(MEASURED, load_sensors()))
+    assert es.M.shape[-1] == 16 and cov.min_eig >= 0.0
+    assert np.sqrt(cov.S[-1, -1]) == pytest.approx(2.1e-5, rel=0.1)
+    js = joint_system(es, a["A"], a["B"], tau * a["F"], js_servos(vehicle), 0.02)
+    assert js.system.M.shape[-1] == 28

@@ -37,7 +37,7 @@ from fahv.analysis.margins import (
     spectral_radius,
     worst_case,
 )
-from fahv.estimation.kalman import augmented
+from fahv.estimation.kalman import augmented, with_flight_path
 from fahv.estimation.servo_model import servo_plants, servo_step, with_servos
 from fahv.model.notch import NotchFilter
 from fahv.model.vehicle import DELTA_E, IQ, PHI
@@ -119,7 +119,8 @@ def estimated_loop(A, B, F, notch: NotchFilter | None, Ts: float, A_z, B_z, L, C
     return A_L, B_L, np.ascontiguousarray(C_L)
 
 
-def filter_models(A, B, servos=None, Ts: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def filter_models(A, B, servos=None, Ts: float = 0.0,
+                  flight_path: bool = False) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The filter's linear model at plant points: (A_z, B_z), z = [x; d] or [x; d; s].
 
     Parameters
@@ -130,7 +131,9 @@ def filter_models(A, B, servos=None, Ts: float = 0.0) -> tuple[np.ndarray, np.nd
     servos : (2, 6) ndarray, optional
         The filter's servos (`GainScheduledKalman.servos`); None: ideal actuators.
     Ts : float
-        Control period [s] (with servos).
+        Control period [s] (with servos or the flight-path disturbance).
+    flight_path : bool
+        z ends with the flight-path disturbance (`fahv.estimation.kalman.with_flight_path`).
 
     Returns
     -------
@@ -142,11 +145,15 @@ def filter_models(A, B, servos=None, Ts: float = 0.0) -> tuple[np.ndarray, np.nd
     A, B = np.asarray(A, float), np.asarray(B, float)
     P, n, m = B.shape
     if servos is None:
-        return augmented(A, B), np.concatenate([B, np.zeros((P, m, m))], axis=1)
-    _, Gam, _, Pu = servo_step(servos, Ts)
-    B_z = np.concatenate([B @ Pu, np.zeros((P, m, m)), np.broadcast_to(Gam, (P,) + Gam.shape)],
-                         axis=1)  # fmt: skip
-    return with_servos(A, B, servos, Ts), B_z
+        A_z, B_z = augmented(A, B), np.concatenate([B, np.zeros((P, m, m))], axis=1)
+    else:
+        _, Gam, _, Pu = servo_step(servos, Ts)
+        A_z = with_servos(A, B, servos, Ts)
+        B_z = np.concatenate([B @ Pu, np.zeros((P, m, m)),
+                              np.broadcast_to(Gam, (P,) + Gam.shape)], axis=1)  # fmt: skip
+    if flight_path:
+        A_z, B_z = with_flight_path(A_z, Ts), np.concatenate([B_z, np.zeros((P, 1, m))], axis=1)
+    return A_z, B_z
 
 
 def estimated_closed_loop(A_L, B_L, C_L) -> np.ndarray:
@@ -228,7 +235,8 @@ def estimated_margins(design, flt, settings) -> list:
         for name, (A_, B_, L_) in points.items():
             plant = (A_, B_) if flt.servos is None else servo_plants(A_, B_, flt.servos, Ts)
             loops = estimated_loop(*plant, s.F, s.notch, Ts,
-                                   *filter_models(A_, B_, flt.servos, Ts), L_, flt.C)
+                                   *filter_models(A_, B_, flt.servos, Ts, flt.flight_path), L_,
+                                   flt.C)
             rho = spectral_radius(estimated_closed_loop(*loops))
             systems = estimated_loop_systems(*loops, Ts)
             got = [loop_margins(sys, r, omega, a["omega_flex"][0],

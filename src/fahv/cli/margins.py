@@ -119,7 +119,8 @@ def estimate_rows(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple[
     model = estimator_value(c, "actuators")
     servos = servos_of(vehicle, model, "state_estimator")
     flt = design_filter(a, vehicle, load_sensors(vehicle_file), measured, c["Ts"],
-                        c["plant_substeps"], a["x0"][None], servos)  # fmt: skip
+                        c["plant_substeps"], a["x0"][None], servos,
+                        estimator_value(c, "flight_path_disturbance"))  # fmt: skip
     actuators = ("ideal actuators" if servos is None else
                  f"the {model} servos in the plant and the filter, linear")  # fmt: skip
     tau, tau_design = law_tau(c), float(c["tube"]["tau"])

@@ -171,7 +171,7 @@ def joint_system(es: ErrorSystem, A: np.ndarray, B: np.ndarray, F: np.ndarray,
                          f"{R} vertices of the CM")  # fmt: skip
     if np.any(F[:, 0] != 0.0):
         raise ValueError("joint_system: F reads h; the tube's eight states are after h")
-    if nz != 11 + n_s:
+    if nz - n_s not in (11, 12):  # [x; d; s], and d_gamma if the filter has it
         raise ValueError(f"joint_system: a filter of {nz} states with "
                          f"{'the' if n_s else 'no'} servos in the plant; the filter's model "
                          "must have the plant's actuators")  # fmt: skip

@@ -188,8 +188,11 @@ def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10) -> Covaria
         cons = [S - Ms[i, j] @ S @ Ms[i, j].T - Qs[j] >> COVARIANCE_MARGIN * np.eye(n)
                 for i, j in held]  # fmt: skip
         if not solve_lmi(cp.Problem(cp.Minimize(cp.trace(S)), cons)):
-            raise DesignError(f"covariance bound: the LMI on {len(held)} vertex pairs is "
-                              "infeasible (the filter's error is not stable at every pair)")
+            rho = max(np.abs(np.linalg.eigvals(es.M[i, j])).max() for i, j in held)
+            why = ("a pair is not stable" if rho >= 1.0 else "each pair is stable: the LMI "
+                   "is infeasible or the solver failed numerically")  # fmt: skip
+            raise DesignError(f"covariance bound: the solver found no bound on {len(held)} "
+                              f"vertex pairs (largest spectral radius {rho:.6f}; {why})")
         Sv = 0.5 * (S.value + S.value.T)
         margins = _pair_margins(Sv, Qs, Ms)
         bad = [(int(i), int(j)) for i, j in np.argwhere(margins < 0.0) if (i, j) not in held]

@@ -8,6 +8,12 @@ flexible states included, to run the tube law on it. The filter here:
 - estimates with the state an input disturbance d (2,), a random walk added to the
   command (the offset-free disturbance model of Pannocchia and Rawlings 2003): an
   actuator fault or a model error then moves d, not a bias of x;
+- optionally (`design_filter`'s `flight_path`) a flight-path disturbance d_gamma, a
+  random walk added to the flight-path angle's rate [rad/s] (a lift or mass error of
+  the flown vehicle, which neither input's column carries): it enters alpha as
+  alpha_k+1 -= Ts d_gamma (gamma = theta - alpha): with it a model error has a
+  disturbance in each equation it enters (speed: d on Phi, pitch rate: d on delta_e,
+  flight path: d_gamma), and h and theta follow by the model's exact kinematics;
 - predicts with the nominal nonlinear CM (`fahv.plant.rk4.rk4_cm`, the plant's own
   kernel with the vehicle file's nominal parameters) under the command the controller
   sent plus d (the flight computer does not know the actuator fault);
@@ -40,7 +46,7 @@ import scipy.linalg
 from fahv.estimation.servo_model import N_SERVO, with_servos
 from fahv.model.actuators import kernel_parameters
 from fahv.model.lpv import PolytopicLPV
-from fahv.model.vehicle import H, V
+from fahv.model.vehicle import ALPHA, H, V
 from fahv.plant.rk4 import compile_kernels, params_records, rk4_cm, rk4_cm_act
 from fahv.sensors.data import SensorData
 from fahv.sensors.measure import output_matrix
@@ -126,10 +132,42 @@ W_SIGMAS = 3.0
 #: 0.02 and 0.5 deg/sqrt(s) (a 10 % loss of a 13 deg elevator, 1.3 deg, is followed in
 #: seconds; the noise it lets into d stays small against the inputs' ranges).
 D_INTENSITY = np.array([0.02, np.radians(0.5)])
+#: Random-walk intensity of the flight-path disturbance d_gamma [rad/s per sqrt(s)] and
+#: its scale [rad/s]: the light and heavy corners of the sec. 5.1 box miss the nominal's
+#: flight-path rate by the order of the scale at trim (lift / (m V) with a mass error of
+#: a few percent); 3e-5 followed it within the step's first seconds and left the least
+#: noise in the altitude estimate among 3e-5, 1e-4 and 3e-4 (docs/theory/estimation.md).
+FLIGHT_PATH_INTENSITY = 3e-5
+FLIGHT_PATH_SCALE = 1e-3
 #: Process noise of the servo states per step, as a share of their scales (position: the
 #: input's scale, rate: it times omega_n): their model is exact, this keeps the Riccati
 #: equation regular.
 SERVO_NOISE = 1e-3
+
+
+def with_flight_path(Az: np.ndarray, Ts: float) -> np.ndarray:
+    """The vertices of z with the flight-path disturbance appended as its last state.
+
+    d_gamma+ = d_gamma, and alpha+ gains -Ts d_gamma (module docstring): the column the
+    predictor applies after each step.
+
+    Parameters
+    ----------
+    Az : (R, n_z, n_z) ndarray
+        Vertices of z whose first nine states are the CM's (`augmented`, `with_servos`).
+    Ts : float
+        Step [s].
+
+    Returns
+    -------
+    (R, n_z + 1, n_z + 1) ndarray
+    """
+    R_, n, _ = Az.shape
+    out = np.zeros((R_, n + 1, n + 1))
+    out[:, :n, :n] = Az
+    out[:, ALPHA, n] = -Ts
+    out[:, n, n] = 1.0
+    return out
 
 
 def augmented(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -155,7 +193,9 @@ def augmented(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 class GainScheduledKalman:
     """The filter of B runs: `correct` with y_k, then `predict` with the command u_k.
 
-    Its state z = [x; d] is the CM state (9,) and the input disturbance (2,).
+    Its state z = [x; d] is the CM state (9,) and the input disturbance (2,), then the
+    servos' four states and the flight-path disturbance d_gamma, each if the filter has
+    them.
 
     Parameters
     ----------
@@ -163,7 +203,7 @@ class GainScheduledKalman:
         The design's LPV model (its weights schedule the gains).
     L : (R, n_z, n_y) ndarray
         Vertex gains of z (`kalman_gains` on `augmented`; n_z = 11, or 15 with servos:
-        `fahv.estimation.servo_model.with_servos`).
+        `fahv.estimation.servo_model.with_servos`; one more with `flight_path`).
     C : (n_y, 9) ndarray
         Output matrix of x (`output_matrix`).
     params : VehicleParams
@@ -184,21 +224,25 @@ class GainScheduledKalman:
         the four actuator states `a`, which the predictor integrates with the airframe by
         the plant's own kernel (`fahv.plant.rk4.rk4_cm_act`) and the correction moves
         by their rows of L. None: ideal actuators.
+    flight_path : bool
+        z ends with the flight-path disturbance d_gamma [rad/s] (`with_flight_path`).
 
     Raises
     ------
     ValueError
-        If L is not of z's rows (11, or 15 with servos) and C's outputs, or servos is not
-        (2, 6).
+        If L is not of z's rows (11, 15 with servos, one more with `flight_path`) and
+        C's outputs, or servos is not (2, 6).
     """
 
     def __init__(self, lpv: PolytopicLPV, L, C, params, limits, Ts: float, n_sub: int, x0,
-                 P=None, servos=None) -> None:  # fmt: skip
+                 P=None, servos=None, flight_path: bool = False) -> None:  # fmt: skip
         self.lpv, self.L, self.C = lpv, np.asarray(L, float), np.asarray(C, float)
         self.servos = None if servos is None else np.ascontiguousarray(servos, float)
         if self.servos is not None and self.servos.shape != (2, 6):
             raise ValueError(f"estimator: servo data of shape {self.servos.shape}, expected (2, 6)")
-        n_z = 11 if self.servos is None else 11 + N_SERVO
+        self.flight_path = bool(flight_path)
+        self.n_s = 0 if self.servos is None else N_SERVO
+        n_z = 11 + self.n_s + self.flight_path
         if self.L.shape[1:] != (n_z, self.C.shape[0]):
             raise ValueError(f"estimator: gains of shape {self.L.shape[1:]}, expected "
                              f"{(n_z, self.C.shape[0])}")  # fmt: skip
@@ -222,7 +266,8 @@ class GainScheduledKalman:
         """
         self.z[runs, :9] = np.asarray(x0, float)[runs]
         self.z[runs, 9:11] = 0.0
-        self.z[runs, 11:] = np.nan  # the servos: at rest at the first command (`predict`)
+        self.z[runs, 11 : 11 + self.n_s] = np.nan  # the servos: at rest at the first command
+        self.z[runs, 11 + self.n_s :] = 0.0  # d_gamma
 
     @property
     def x(self) -> np.ndarray:
@@ -241,7 +286,12 @@ class GainScheduledKalman:
         [Phi, Phi_dot 1/s, delta_e rad, delta_e_dot rad/s]; NaN before a run's first
         prediction, which starts them at rest at its input.
         """
-        return self.z[:, 11:]
+        return self.z[:, 11 : 11 + self.n_s]
+
+    @property
+    def d_gamma(self) -> np.ndarray:
+        """The flight-path disturbance estimates (B,) [rad/s] (zeros without it; a copy)."""
+        return self.z[:, -1].copy() if self.flight_path else np.zeros(len(self.z))
 
     def sigma(self) -> np.ndarray:
         """Standard deviation of each state's error at the current estimates' (h, V).
@@ -267,10 +317,12 @@ class GainScheduledKalman:
         -------
         (R, n_z, n_z) ndarray
             `augmented` (n_z = 11), or with the servos
-            `fahv.estimation.servo_model.with_servos` (n_z = 15).
+            `fahv.estimation.servo_model.with_servos` (n_z = 15); `with_flight_path`
+            appends d_gamma.
         """
         A, B = np.asarray(self.lpv.A, float), np.asarray(self.lpv.B, float)
-        return augmented(A, B) if self.servos is None else with_servos(A, B, self.servos, self.Ts)
+        Az = augmented(A, B) if self.servos is None else with_servos(A, B, self.servos, self.Ts)
+        return with_flight_path(Az, self.Ts) if self.flight_path else Az
 
     def gains(self) -> np.ndarray:
         """The scheduled gains at the current estimates' (h, V).
@@ -310,7 +362,7 @@ class GainScheduledKalman:
         return self.x.copy()
 
     def predict(self, u: np.ndarray) -> None:
-        """Predict z_k+1|k from z_k|k under the command of step k (d held).
+        """Predict z_k+1|k from z_k|k under the command of step k (d and d_gamma held).
 
         Parameters
         ----------
@@ -320,18 +372,19 @@ class GainScheduledKalman:
         u = np.atleast_2d(np.asarray(u, float)) + self.d
         u = np.ascontiguousarray(np.clip(u, self.limits.u_min, self.limits.u_max))
         x = np.ascontiguousarray(self.x)
+        a = self.a.copy()
         if self.servos is None:
             x = rk4_cm(x, u, self.rec, self.Ts, self.n_sub)
         else:
-            a = self.a.copy()
             new = np.isnan(a[:, 0])
             a[new] = 0.0
             a[new, ::2] = u[new]
             x, a = rk4_cm_act(x, np.ascontiguousarray(a), u, self.rec, self.servos,
                               np.zeros(len(u), bool), self.Ts, self.n_sub)  # fmt: skip
-            self.z = np.concatenate([x, self.d, a], axis=1)
-            return
-        self.z = np.concatenate([x, self.d], axis=1)
+        rest = self.z[:, 11 + self.n_s :]  # d_gamma (or nothing)
+        if self.flight_path:
+            x[:, ALPHA] -= self.Ts * rest[:, 0]
+        self.z = np.concatenate([x, self.d, a, rest], axis=1)
 
 
 def estimate_history(estimator: GainScheduledKalman, y: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -359,7 +412,8 @@ def estimate_history(estimator: GainScheduledKalman, y: np.ndarray, u: np.ndarra
 
 
 def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts: float,
-                  n_sub: int, x0, servos=None) -> GainScheduledKalman:  # fmt: skip
+                  n_sub: int, x0, servos=None, flight_path: bool = False
+                  ) -> GainScheduledKalman:  # fmt: skip
     """The filter of a design: its LPV model, gains with Q_w from its bound w_max.
 
     Q_w = diag((w_max / 3)^2): the design's one-step disturbance bound (eq. 13-19) read
@@ -387,6 +441,9 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
         file's `actuators.second_order`): the predictor integrates them (the gains stay
         those of the airframe, whose ZOH model takes the servo's lag as process noise).
         None: ideal actuators.
+    flight_path : bool
+        Estimate the flight-path disturbance d_gamma too (`with_flight_path`; process
+        noise `FLIGHT_PATH_INTENSITY`^2 Ts).
 
     Returns
     -------
@@ -417,7 +474,12 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
         s_scale = np.column_stack([Du, Du * AP[:, 1]]).ravel()  # [Phi, Phi_dot, de, de_dot]
         q.append((SERVO_NOISE * s_scale) ** 2)
         scale.append(s_scale)
+    if flight_path:
+        Az = with_flight_path(Az, Ts)
+        q.append(np.array([FLIGHT_PATH_INTENSITY**2 * Ts]))
+        scale.append(np.array([FLIGHT_PATH_SCALE]))
     Cz = np.hstack([C, np.zeros((len(C), Az.shape[1] - 9))])
     L, P = kalman_gains(Az, Cz, np.diag(np.concatenate(q)),
                         measurement_covariance(measured, data), np.concatenate(scale))  # fmt: skip
-    return GainScheduledKalman(lpv, L, C, vehicle.params, vehicle.limits, Ts, n_sub, x0, P, AP)
+    return GainScheduledKalman(lpv, L, C, vehicle.params, vehicle.limits, Ts, n_sub, x0, P, AP,
+                               flight_path)  # fmt: skip

@@ -323,7 +323,8 @@ class EstimatorCore:
         servos = servos_of(veh, p["actuators"], "state_estimator")
         try:
             self.filter = design_filter(arrays, veh, load_sensors(p["vehicle_file"] or None),
-                                        measured, p["Ts"], p["plant_substeps"], x0, servos)
+                                        measured, p["Ts"], p["plant_substeps"], x0, servos,
+                                        p["flight_path_disturbance"])  # fmt: skip
         except (ValueError, KeyError) as exc:
             raise ParameterError(f"state_estimator: parameter 'estimator' = {self.kind!r}: "
                                  f"{exc}") from exc  # fmt: skip

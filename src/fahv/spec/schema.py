@@ -234,6 +234,11 @@ ESTIMATOR = (
           "include: ideal (the command acts at once, the default) or second_order (the "
           "vehicle file's servos, as the plant's: four more filter states)",
           choices=ACTUATOR_MODELS, default=IDEAL),
+    Field("flight_path_disturbance", "bool", "the Kalman filter also estimates a "
+          "disturbance of the flight-path angle's rate (a lift or mass error of the flown "
+          "vehicle, which the input disturbance does not carry): one more filter state; "
+          "without it a dispersed vehicle's altitude estimate keeps an offset",
+          default=False),
 )  # fmt: skip
 
 
