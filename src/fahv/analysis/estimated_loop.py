@@ -37,8 +37,8 @@ from fahv.analysis.margins import (
     spectral_radius,
     worst_case,
 )
-from fahv.estimation.kalman import augmented, with_flight_path
-from fahv.estimation.servo_model import servo_plants, servo_step, with_servos
+from fahv.estimation.kalman import filter_model
+from fahv.estimation.servo_model import servo_plants, servo_step
 from fahv.model.notch import NotchFilter
 from fahv.model.vehicle import DELTA_E, IQ, PHI
 
@@ -138,22 +138,22 @@ def filter_models(A, B, servos=None, Ts: float = 0.0,
     Returns
     -------
     A_z : (P, n_z, n_z) ndarray
+        `fahv.estimation.kalman.filter_model`.
     B_z : (P, n_z, m) ndarray
-        `fahv.estimation.kalman.augmented` with B_z = [B; 0], or
-        `fahv.estimation.servo_model.with_servos` with the command through the servos.
+        The command's column: [B; 0], or with servos through them ([B P_u; 0; Gamma]);
+        0 on d_gamma.
     """
     A, B = np.asarray(A, float), np.asarray(B, float)
     P, n, m = B.shape
     if servos is None:
-        A_z, B_z = augmented(A, B), np.concatenate([B, np.zeros((P, m, m))], axis=1)
+        B_z = np.concatenate([B, np.zeros((P, m, m))], axis=1)
     else:
         _, Gam, _, Pu = servo_step(servos, Ts)
-        A_z = with_servos(A, B, servos, Ts)
         B_z = np.concatenate([B @ Pu, np.zeros((P, m, m)),
                               np.broadcast_to(Gam, (P,) + Gam.shape)], axis=1)  # fmt: skip
     if flight_path:
-        A_z, B_z = with_flight_path(A_z, Ts), np.concatenate([B_z, np.zeros((P, 1, m))], axis=1)
-    return A_z, B_z
+        B_z = np.concatenate([B_z, np.zeros((P, 1, m))], axis=1)
+    return filter_model(A, B, servos, Ts, flight_path), B_z
 
 
 def estimated_closed_loop(A_L, B_L, C_L) -> np.ndarray:

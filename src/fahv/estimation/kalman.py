@@ -190,6 +190,36 @@ def augmented(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return out
 
 
+def filter_model(A: np.ndarray, B: np.ndarray, servos=None, Ts: float = 0.0,
+                 flight_path: bool = False) -> np.ndarray:  # fmt: skip
+    """The linear model of the filter's state z at given airframe points.
+
+    z = [x; d] (`augmented`), [x; d; s] with servos
+    (`fahv.estimation.servo_model.with_servos`), then d_gamma if `flight_path`
+    (`with_flight_path`): the one layout the filter, its error system and the margin
+    analysis share.
+
+    Parameters
+    ----------
+    A : (R, 9, 9) ndarray
+    B : (R, 9, 2) ndarray
+        The airframe at R points (the LPV vertices, eq. 12, or plant points).
+    servos : (2, 6) ndarray, optional
+        The filter's servos (`fahv.model.actuators.kernel_parameters`); None: ideal.
+    Ts : float
+        Step [s] (with servos or the flight-path disturbance).
+    flight_path : bool
+        Append the flight-path disturbance.
+
+    Returns
+    -------
+    (R, n_z, n_z) ndarray
+        n_z = 11, 15 with servos, one more with `flight_path`.
+    """
+    Az = augmented(A, B) if servos is None else with_servos(A, B, servos, Ts)
+    return with_flight_path(Az, Ts) if flight_path else Az
+
+
 class GainScheduledKalman:
     """The filter of B runs: `correct` with y_k, then `predict` with the command u_k.
 
@@ -288,11 +318,6 @@ class GainScheduledKalman:
         """
         return self.z[:, 11 : 11 + self.n_s]
 
-    @property
-    def d_gamma(self) -> np.ndarray:
-        """The flight-path disturbance estimates (B,) [rad/s] (zeros without it; a copy)."""
-        return self.z[:, -1].copy() if self.flight_path else np.zeros(len(self.z))
-
     def sigma(self) -> np.ndarray:
         """Standard deviation of each state's error at the current estimates' (h, V).
 
@@ -316,13 +341,10 @@ class GainScheduledKalman:
         Returns
         -------
         (R, n_z, n_z) ndarray
-            `augmented` (n_z = 11), or with the servos
-            `fahv.estimation.servo_model.with_servos` (n_z = 15); `with_flight_path`
-            appends d_gamma.
+            `filter_model` at the vertices.
         """
         A, B = np.asarray(self.lpv.A, float), np.asarray(self.lpv.B, float)
-        Az = augmented(A, B) if self.servos is None else with_servos(A, B, self.servos, self.Ts)
-        return with_flight_path(Az, self.Ts) if self.flight_path else Az
+        return filter_model(A, B, self.servos, self.Ts, self.flight_path)
 
     def gains(self) -> np.ndarray:
         """The scheduled gains at the current estimates' (h, V).
@@ -467,15 +489,12 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
     scale = [np.asarray(arrays["Dx"], float), Du]
     AP = None if servos is None else kernel_parameters(servos, vehicle.limits.u_min,
                                                        vehicle.limits.u_max)  # fmt: skip
-    if AP is None:
-        Az = augmented(A, B)
-    else:  # the servos' states: the model is exact, their process noise only regularises
-        Az = with_servos(A, B, AP, Ts)
+    Az = filter_model(A, B, AP, Ts, flight_path)
+    if AP is not None:  # the servos' states: the model is exact, their noise only regularises
         s_scale = np.column_stack([Du, Du * AP[:, 1]]).ravel()  # [Phi, Phi_dot, de, de_dot]
         q.append((SERVO_NOISE * s_scale) ** 2)
         scale.append(s_scale)
     if flight_path:
-        Az = with_flight_path(Az, Ts)
         q.append(np.array([FLIGHT_PATH_INTENSITY**2 * Ts]))
         scale.append(np.array([FLIGHT_PATH_SCALE]))
     Cz = np.hstack([C, np.zeros((len(C), Az.shape[1] - 9))])
