@@ -81,6 +81,9 @@ def draw_figures(out: Path, data: dict, per_variant: dict, cols: list[str]) -> l
         for ax in axes.ravel()[len(cols) :]:
             ax.axis("off")
         axes[0, 0].set_ylabel(label, fontsize=8)
+        handles, names = axes[0, 0].get_legend_handles_labels()
+        if handles:  # one legend for the panels: the variants' colours
+            fig.legend(handles, names, loc="upper right", fontsize=7, markerscale=3)
         fig.suptitle(f"{label} against the dispersed values", fontsize=9)
         _margins(fig, hspace=0.45, wspace=0.3)
         p = rep / f"scatter_{key}.png"
