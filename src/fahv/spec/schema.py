@@ -226,6 +226,11 @@ ESTIMATOR = (
           "over: one residual of a noisy estimate is mostly the filter's correction) or "
           "zero (from d = 0 with its own gain from the first residual)",
           choices=EST_STARTS, default=EST_STARTS[0]),
+    Field("nominal_att_max", "float", "the nominal MPC's attitude rows on the estimate, "
+          "|alpha - alpha_r| and |theta - theta_r| (replaces the design's mpc.att_max in the "
+          "run, at most it: lower rows leave room for the estimate's noise and keep the "
+          "nominal inside the range the tube covers); 0: the design's", unit="deg",
+          lo=0.0, hi=5.0, default=0.0),
     Field("tube_tau", "float", "adjustable factor tau of the tube law on the estimate, "
           "u = v + tau F (x_hat - x_bar) (eq. 53-54; replaces the design's tube.tau in the "
           "run: a lower gain passes less of the estimate's noise to the servos); 0: the "
