@@ -212,37 +212,32 @@ ESTIMATOR = (
           "a full-state sensor, the paper's loop) or kalman (a gain-scheduled Kalman filter "
           "on the measured channels)", choices=ESTIMATORS, default=NO_ESTIMATOR),
     Field("nominal_est_tau", "float", "time constant of the nominal MPC's state-disturbance "
-          "estimate when the flight computer estimates the state (replaces the design's "
-          "mpc.est_tau in the run: the estimate is noisier than the exact state it was "
-          "designed for, and the filter estimates an input disturbance itself); 0: the "
-          "design's", unit="s", lo=0.0, hi=1e3, default=0.0),
+          "estimate on the estimate (replaces the design's mpc.est_tau in the run: the estimate "
+          "is noisier than the exact state it was designed for, and the filter estimates an "
+          "input disturbance itself); 0: the design's", unit="s", lo=0.0, hi=1e3, default=0.0),
     Field("nominal_est_tau_elevator", "float", "the same for the nominal MPC's estimate "
           "along the elevator column (the design's mpc.est_tau_elevator, Ts in "
           "cm_certified: it takes the estimate's discrepancy wholesale every step); 0: the "
           "design's", unit="s", lo=0.0, hi=1e3, default=0.0),
-    Field("nominal_est_start", "str", "start of the nominal MPC's state-disturbance "
-          "estimate on the estimate: first (its first residual initialises it, as on the "
-          "exact state), mean (the mean of the residuals so far until its gain takes "
-          "over: one residual of a noisy estimate is mostly the filter's correction) or "
-          "zero (from d = 0 with its own gain from the first residual)",
-          choices=EST_STARTS, default=EST_STARTS[0]),
-    Field("nominal_att_max", "float", "the nominal MPC's attitude rows on the estimate, "
-          "|alpha - alpha_r| and |theta - theta_r| (replaces the design's mpc.att_max in the "
-          "run, at most it: lower rows leave room for the estimate's noise and keep the "
-          "nominal inside the range the tube covers); 0: the design's", unit="deg",
-          lo=0.0, hi=5.0, default=0.0),
-    Field("tube_tau", "float", "adjustable factor tau of the tube law on the estimate, "
-          "u = v + tau F (x_hat - x_bar) (eq. 53-54; replaces the design's tube.tau in the "
-          "run: a lower gain passes less of the estimate's noise to the servos); 0: the "
-          "design's", lo=0.0, hi=1.0, default=0.0, equation="eq. (53-54)"),
+    Field("nominal_est_start", "str", "start of the nominal MPC's state-disturbance estimate "
+          "on the estimate: first (its first residual, as on the exact state), mean (the mean "
+          "of the residuals until its gain takes over: one residual of a noisy estimate is "
+          "mostly the filter's correction) or zero (d = 0, its own gain from the first "
+          "residual)", choices=EST_STARTS, default=EST_STARTS[0]),
+    Field("nominal_att_max", "float", "the nominal MPC's attitude rows on the estimate (replaces "
+          "the design's mpc.att_max in the run, at most it: room within the attitude requirement "
+          "for the estimate's noise); 0: the design's", unit="deg", lo=0.0, hi=5.0, default=0.0),
+    Field("tube_tau", "float", "adjustable factor tau of the tube law on the estimate, u = v + "
+          "tau F (x_hat - x_bar) (replaces the design's tube.tau in the run: a lower gain passes "
+          "less of the estimate's noise to the servos); 0: the design's", lo=0.0, hi=1.0,
+          default=0.0, equation="eq. (53-54)"),
     Field("actuators", "str", "actuator model the Kalman filter's predictor and gains "
           "include: ideal (the command acts at once, the default) or second_order (the "
           "vehicle file's servos, as the plant's: four more filter states)",
           choices=ACTUATOR_MODELS, default=IDEAL),
-    Field("flight_path_disturbance", "bool", "the Kalman filter also estimates a "
-          "disturbance of the flight-path angle's rate (a lift or mass error of the flown "
-          "vehicle, which the input disturbance does not carry): one more filter state; "
-          "without it a dispersed vehicle's altitude estimate keeps an offset",
+    Field("flight_path_disturbance", "bool", "the Kalman filter also estimates a disturbance "
+          "of the flight-path angle's rate (a lift or mass error, which the input disturbance "
+          "does not carry): without it a dispersed vehicle's altitude estimate keeps an offset",
           default=False),
 )  # fmt: skip
 
