@@ -387,15 +387,14 @@ def _nominal_on_estimate(nominal: dict, c: dict) -> dict:
         If `estimator.nominal_att_max` exceeds the design's attitude rows: rows wider
         than the design's would take the nominal outside the range its tube covers.
     """
-    est = c.get("estimator") or {}
     if "mpc.est_tau" not in nominal or estimator_kind(c) == NO_ESTIMATOR:
         return nominal
     for key in ("est_tau", "est_tau_elevator"):
-        tau_s = float(est.get(f"nominal_{key}", 0.0))
+        tau_s = float(estimator_value(c, f"nominal_{key}"))
         if tau_s > 0.0:
             nominal[f"mpc.{key}"] = tau_s
     nominal["mpc.est_start"] = estimator_value(c, "nominal_est_start")
-    att = float(est.get("nominal_att_max", 0.0))
+    att = float(estimator_value(c, "nominal_att_max"))
     if att > 0.0 and "mpc.att_max" in nominal:
         design_rows = [float(v) for v in nominal["mpc.att_max"]]
         if att > max(design_rows) + 1e-9:
