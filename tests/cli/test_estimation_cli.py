@@ -59,13 +59,15 @@ def test_estimation_names_what_its_bounds_leave_out_and_scales_the_noise(tmp_pat
     """A scenario on servos its filter does not model, with a sensor fault: the bounds are
     printed, and two notes say that neither the fault nor the servos are in them. With
     sensors a hundred times quieter the tube of the estimate fits (0.86 and 0.63 of the
-    room, measured)."""
+    room, measured). The attitude's reach starts from the rows the scenario's nominal
+    flies (estimator.nominal_att_max 0.37 deg, the design's 0.40)."""
     import yaml
 
     d = yaml.safe_load(open("offline_design/scenarios/case1_kalman.yaml"))
     d["name"] = "kalman_servo"
     d.setdefault("plant", {})["actuators"] = "second_order"
     d["sensor_fault"] = {"kind": "stuck", "channel": "h", "t_onset": 50.0}
+    d["estimator"]["nominal_att_max"] = 0.37
     path = tmp_path / "kalman_servo.yaml"
     path.write_text(yaml.safe_dump(d, sort_keys=False))
     assert main(["estimation", str(path), "--noise-scale", "0.01"]) == 0
@@ -76,6 +78,7 @@ def test_estimation_names_what_its_bounds_leave_out_and_scales_the_noise(tmp_pat
     assert m and float(m.group(1)) == pytest.approx(0.855, rel=0.05)
     assert float(m.group(2)) == pytest.approx(0.63, rel=0.05)
     assert "note: the scenario's sensor fault (stuck) is not in these bounds" in out
+    assert "attitude (whole run, p >= 0.99): nominal rows 0.370 + support of Z 0.100" in out
     assert "note: the scenario's actuators (second_order) are not in the filter's model " \
            "(estimator.actuators ideal), so not in these bounds" in out  # fmt: skip
 

@@ -49,9 +49,11 @@ def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0, ov
     t = (run.x - run.x_r - run.x_n[:, :9])[k]
     ratio = t[:, [V, ALPHA, THETA, IQ]].std(axis=0) / pt.std_t[:4]
     step = np.diff(run.u[k, 1]).std() / pt.std_step[1]
-    print("measured / bound:", np.round(ratio, 3), round(step, 3))
     _, r_run = radii(0.99, len(run.t))
-    return ratio, step, np.abs(t[:, [ALPHA, THETA]]).max(axis=0), r_run * pt.std_t[1:3]
+    largest, reach = np.abs(t[:, [ALPHA, THETA]]).max(axis=0), r_run * pt.std_t[1:3]
+    print("measured / bound:", np.round(ratio, 3), round(step, 3), "largest / radius [deg]:",
+          np.round(np.degrees(largest), 3), np.round(np.degrees(reach), 3))
+    return ratio, step, largest, reach
 
 
 @pytest.fixture

@@ -12,6 +12,7 @@ from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.errors import DesignError, SpecError
 from fahv.estimation.kalman import W_SIGMAS, design_filter, measurement_covariance
 from fahv.loop.cores import servos_of
+from fahv.loop.params import node_parameters
 from fahv.model.vehicle import STATE_NAMES, STATE_UNITS
 from fahv.sensors.data import CHANNEL_UNITS, load_sensors, measured_channels, replace_channel
 from fahv.spec.schema import (
@@ -131,18 +132,20 @@ def tube_lines(of) -> list[str]:
 
 
 def chance_lines(pt, arrays, p: float, steps: int, R: int, tau: float = 1.0,
-                 rate_step: float = np.inf) -> list[str]:  # fmt: skip
+                 rate_step: float = np.inf, rows=None) -> list[str]:  # fmt: skip
     """The lines `fahv estimation` prints of a `fahv.estimation.closed_loop.ProbabilisticTube`.
 
     `tau` is the adjustable law's factor (eq. 53-54), `rate_step` the elevator servo's
     rate limit times Ts [rad per step] (inf: none), which the command's step is held
-    against.
+    against; `rows` (2,) the nominal's attitude rows the loop flies [rad] (None: the
+    design's `att_max`; a scenario's `estimator.nominal_att_max` sets them lower).
     """
     from fahv.estimation.closed_loop import attitude_chance, radii
 
     r_step, r_run = radii(p, steps)
     req = np.radians(ATTITUDE_BOUND_DEG)
-    reach, need = attitude_chance(pt, arrays["att_max"], arrays["att_support"], r_run, req)
+    rows = np.asarray(arrays["att_max"] if rows is None else rows, float)
+    reach, need = attitude_chance(pt, rows, arrays["att_support"], r_run, req)
     ok = bool(np.all(reach <= req))
     deg = np.degrees
     verdict = ("certified with probability >= p" if ok else
@@ -167,7 +170,7 @@ def chance_lines(pt, arrays, p: float, steps: int, R: int, tau: float = 1.0,
         f"{deg(r_step * pt.std_step[1]):.3f} deg; whole run ({r_run:.2f} sigma): alpha "
         f"{deg(r_run * pt.std_t[1]):.4f}, theta {deg(r_run * pt.std_t[2]):.4f} deg, delta_e "
         f"step {deg(run_step):.3f} deg{rate}",
-        f"  attitude (whole run, p >= {p}): nominal rows {deg(arrays['att_max'][0]):.3f} + "
+        f"  attitude (whole run, p >= {p}): nominal rows {deg(rows[0]):.3f} + "
         f"support of Z {deg(arrays['att_support'][0]):.3f} / {deg(arrays['att_support'][1]):.3f}"
         f" + noise part reach {deg(reach[0]):.3f} / {deg(reach[1]):.3f} deg (requirement "
         f"{ATTITUDE_BOUND_DEG} deg): {verdict}",
@@ -225,8 +228,10 @@ def cmd_estimation(args) -> int:
     except DesignError as exc:  # a verdict, after the bounds above
         pt = None
         print(f"probabilistic tube of the loop: not computed ({exc})")
+    rows = np.radians(node_parameters(design)["nominal_trajectory"]["mpc.att_max"])
     for line in () if pt is None else chance_lines(pt, a, study.p, study.steps,
-                                                    study.system.n_vertices, tau, rate_step):
+                                                    study.system.n_vertices, tau, rate_step,
+                                                    rows):  # fmt: skip
         print(line)
     fault = (c.get("sensor_fault") or {}).get("kind", "none")
     if fault != "none":
