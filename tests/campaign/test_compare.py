@@ -87,3 +87,19 @@ def test_a_law_is_compared_with_another_from_its_own_campaign(tmp_path):
     att = {p.key: p for p in pairs}["attitude"]
     assert (att.pass_a, att.pass_b, att.only_a, att.only_b) == (30, 40, 0, 10)
     assert lines[0].startswith("# B (") and ", rmpc, scenario s) against A (" in lines[0]
+
+
+def test_a_plants_rate_limit_is_not_applicable_against_ideal_actuators(tmp_path, capsys):
+    """Ideal actuators (A: no rate limit, the metric NaN) against servos (B: 38 of 40 runs
+    within the rate): the servos' rate is n/a on A's side, neither counted as 0 passes
+    nor tested; every requirement but the tube still counts B's two rate misses."""
+    a = [dict(_row(i, 0.45), input_rate_violations=float("nan")) for i in range(40)]
+    b = [dict(_row(i, 0.45), input_rate_violations=3 if i < 2 else 0) for i in range(40)]
+    a, b = _folder(tmp_path / "a", a), _folder(tmp_path / "b", b)
+    got = {r.key: r for r in requirement_pairs(store.read_rows(a), store.read_rows(b), REQ)}
+    rates = got["input_rates"]
+    assert (rates.pass_a, rates.pass_b, rates.only_a, rates.only_b) == (None, 38, None, None)
+    assert rates.ci_b[0] < 38 / 40 < rates.ci_b[1]
+    assert (got["all_but_tube"].pass_a, got["all_but_tube"].pass_b) == (40, 38)
+    assert main(["campaign", "compare", str(a), str(b)]) == 0
+    assert "| commands within the servos' rate limits | n/a | 38 [" in capsys.readouterr().out

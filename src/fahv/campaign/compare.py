@@ -28,6 +28,11 @@ from fahv.errors import CampaignError
 COMPARED = (*((k, label) for k, label in REQUIREMENTS if k != "nominal_range"),
             ("all_but_tube", "every requirement but the tube, at once"))  # fmt: skip
 
+#: Requirements of the plant rather than the law: on a side where no run has them (the
+#: servos' rate on ideal actuators, which have no rate limit) they are not applicable,
+#: shown as n/a, not counted as failed.
+PLANT_ONLY = ("input_rates",)
+
 #: The campaign-file keys that must agree for the draws to be the same.
 SAME_DRAWS = ("seed", "dispersions", "requirements")
 
@@ -41,14 +46,15 @@ class RequirementPair:
     key, label : str
     n : int
         Run indices in both.
-    pass_a, pass_b : int
-        Runs passing in each.
-    only_a, only_b : int
-        Discordant pairs: indices passing in one campaign only.
+    pass_a, pass_b : int or None
+        Runs passing in each (None: not applicable on that side, `PLANT_ONLY`).
+    only_a, only_b : int or None
+        Discordant pairs: indices passing in one campaign only (None with a side n/a).
     p_mcnemar : float
-        Exact McNemar test of equal pass probabilities (1 without discordant pairs).
+        Exact McNemar test of equal pass probabilities (1 without discordant pairs; NaN
+        with a side n/a).
     ci_a, ci_b : (float, float)
-        Two-sided 95 % Clopper-Pearson intervals of each pass rate.
+        Two-sided 95 % Clopper-Pearson intervals of each pass rate (NaN where n/a).
     """
 
     key: str
@@ -103,9 +109,10 @@ def requirement_pairs(rows_a: list[dict], rows_b: list[dict], req: dict) -> list
     -------
     list of RequirementPair
         In the order of `COMPARED`; a requirement not applicable to a run (the tube of a
-        law without one) counts as not passing, and one applicable to no run of either
-        list (the servos' rate on ideal actuators, a metric earlier datasets lack) is
-        left out.
+        law without one) counts as not passing, one applicable to no run of either list
+        (the servos' rate on ideal actuators, a metric earlier datasets lack) is left
+        out, and a `PLANT_ONLY` one applicable to no run of one list (ideal actuators
+        against servos) is n/a on that side: pass counts None, no McNemar test.
     """
     va = {r["index"]: _passes(r, req) for r in rows_a}
     vb = {r["index"]: _passes(r, req) for r in rows_b}
@@ -113,6 +120,14 @@ def requirement_pairs(rows_a: list[dict], rows_b: list[dict], req: dict) -> list
     out = []
     for key, label in COMPARED:
         if not any(key in va[i] or key in vb[i] for i in idx):
+            continue
+        if key in PLANT_ONLY and not all(any(key in v[i] for i in idx) for v in (va, vb)):
+            counts = [sum(v[i][key] for i in idx) if any(key in v[i] for i in idx) else None
+                      for v in (va, vb)]  # fmt: skip
+            cis = [(math.nan, math.nan) if c is None else clopper_pearson(c, len(idx))
+                   for c in counts]  # fmt: skip
+            out.append(RequirementPair(key, label.format(**req), len(idx), *counts, None, None,
+                                       math.nan, *cis))  # fmt: skip
             continue
         a = [va[i].get(key, False) for i in idx]
         b = [vb[i].get(key, False) for i in idx]
@@ -187,9 +202,15 @@ def compare_campaigns(dir_a, dir_b, variant: str | None = None,
              "Clopper-Pearson intervals; discordant pairs and the exact McNemar test.", "",
              "| requirement | A | B | only A | only B | McNemar p |",
              "|---|---|---|---|---|---|"]  # fmt: skip
+    def cell(k, ci) -> str:
+        return "n/a" if k is None else f"{k} [{ci[0]:.4f}, {ci[1]:.4f}]"
+
     for r in pairs:
-        lines.append(f"| {r.label} | {r.pass_a} [{r.ci_a[0]:.4f}, {r.ci_a[1]:.4f}] | "
-                     f"{r.pass_b} [{r.ci_b[0]:.4f}, {r.ci_b[1]:.4f}] | {r.only_a} | "
-                     f"{r.only_b} | {r.p_mcnemar:.3g} |")  # fmt: skip
+        if r.only_a is None:  # a plant's requirement the other side's plant does not have
+            lines.append(f"| {r.label} | {cell(r.pass_a, r.ci_a)} | {cell(r.pass_b, r.ci_b)} "
+                         "| - | - | - |")  # fmt: skip
+            continue
+        lines.append(f"| {r.label} | {cell(r.pass_a, r.ci_a)} | {cell(r.pass_b, r.ci_b)} | "
+                     f"{r.only_a} | {r.only_b} | {r.p_mcnemar:.3g} |")  # fmt: skip
     res = paired_stats(rows_a + rows_b, la, lb, req["confidence"])
     return lines + [""] + paired_text(res, la, lb), pairs
