@@ -122,8 +122,8 @@ def requirement_pairs(rows_a: list[dict], rows_b: list[dict], req: dict) -> list
         if not any(key in va[i] or key in vb[i] for i in idx):
             continue
         if key in PLANT_ONLY and not all(any(key in v[i] for i in idx) for v in (va, vb)):
-            counts = [sum(v[i][key] for i in idx) if any(key in v[i] for i in idx) else None
-                      for v in (va, vb)]  # fmt: skip
+            counts = [sum(v[i].get(key, False) for i in idx)
+                      if any(key in v[i] for i in idx) else None for v in (va, vb)]  # fmt: skip
             cis = [(math.nan, math.nan) if c is None else clopper_pearson(c, len(idx))
                    for c in counts]  # fmt: skip
             out.append(RequirementPair(key, label.format(**req), len(idx), *counts, None, None,
