@@ -79,7 +79,7 @@ def test_case2_on_the_case1_design_against_the_baseline_and_without_the_notch():
                                [101.1, -69.4], atol=1.0)  # fmt: skip
 
 
-def test_case2_on_the_case1_design_on_the_exact_state():
+def test_case2_on_the_case1_design_on_the_exact_state(figures):
     """Scenario case2_cm, the exact-state side of case2_implementable_cm (ideal actuators,
     the controller on the exact state, the design's tau = 1; the same vehicle): settles
     2.9 / 4.3 s after the ramps' end, the attitude within 0.217 / 0.167 deg, the tube error
@@ -88,9 +88,6 @@ def test_case2_on_the_case1_design_on_the_exact_state():
     _, design, vehicle = load_or_design("offline_design/scenarios/case2_cm.yaml",
                                         log=lambda *_: None, variants=["tube_mpc"])  # fmt: skip
     m = metrics(simulate(design, "tube_mpc"), vehicle.limits)
-    np.testing.assert_allclose([m["settling_time_h_s"], m["settling_time_V_s"]], [82.9, 84.3],
-                               atol=0.5)  # fmt: skip
-    np.testing.assert_allclose([m["alpha_err_max_deg"], m["theta_err_max_deg"]],
-                               [0.217, 0.167], atol=0.01)  # fmt: skip
-    assert m["tube_fraction_inside"] == 1.0 and m["input_limit_violations"] == 0
+    figures(m, (82.9, 84.3), (0.217, 0.167))
+    assert m["tube_fraction_inside"] == 1.0
     assert m["eta_1_dot_rms_after_fault"] == pytest.approx(0.0073, rel=0.03)
