@@ -88,3 +88,18 @@ def test_a_noise_scale_that_is_not_positive_is_refused(scale, capsys):
     assert main(["estimation", "offline_design/scenarios/case1_kalman.yaml", "--noise-scale",
                  scale]) == 2  # fmt: skip
     assert "--noise-scale must be a positive number" in capsys.readouterr().err
+
+
+def test_rows_wider_than_the_designs_are_refused_before_any_bound(tmp_path, capsys):
+    """estimator.nominal_att_max above the design's 0.40 deg: exit status 2 and an error
+    naming the key, before the bounds' work (as a run refuses it)."""
+    import yaml
+
+    d = yaml.safe_load(open("offline_design/scenarios/case1_implementable.yaml"))
+    d["estimator"]["nominal_att_max"] = 0.45
+    path = tmp_path / "wide_rows.yaml"
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    assert main(["estimation", str(path)]) == 2
+    captured = capsys.readouterr()
+    assert "estimator.nominal_att_max = 0.45 deg exceeds the design's attitude rows" in captured.err
+    assert "probabilistic tube" not in captured.out

@@ -199,6 +199,8 @@ def cmd_estimation(args) -> int:
                         f"of the "
                         f"{c['design_model'].upper()}: the bounds are those of the tube law "
                         "of a CM design (its eight-state tube) on the estimate")  # fmt: skip
+    # the rows the scenario's nominal flies (estimator.nominal_att_max); a bad value fails here
+    rows = np.radians(node_parameters(design)["nominal_trajectory"]["mpc.att_max"])
     measured = measured_channels(plant_choices(c)["measured"])
     data = scaled_noise(load_sensors(args.vehicle), measured, args.noise_scale)
     a = design.arrays
@@ -228,7 +230,6 @@ def cmd_estimation(args) -> int:
     except DesignError as exc:  # a verdict, after the bounds above
         pt = None
         print(f"probabilistic tube of the loop: not computed ({exc})")
-    rows = np.radians(node_parameters(design)["nominal_trajectory"]["mpc.att_max"])
     for line in () if pt is None else chance_lines(pt, a, study.p, study.steps,
                                                     study.system.n_vertices, tau, rate_step,
                                                     rows):  # fmt: skip
