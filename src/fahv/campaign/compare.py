@@ -205,12 +205,10 @@ def compare_campaigns(dir_a, dir_b, variant: str | None = None,
     def cell(k, ci) -> str:
         return "n/a" if k is None else f"{k} [{ci[0]:.4f}, {ci[1]:.4f}]"
 
-    for r in pairs:
-        if r.only_a is None:  # a plant's requirement the other side's plant does not have
-            lines.append(f"| {r.label} | {cell(r.pass_a, r.ci_a)} | {cell(r.pass_b, r.ci_b)} "
-                         "| - | - | - |")  # fmt: skip
-            continue
+    for r in pairs:  # no discordant pairs where one side's plant lacks the requirement
+        test = ("- | - | -" if r.only_a is None else
+                f"{r.only_a} | {r.only_b} | {r.p_mcnemar:.3g}")  # fmt: skip
         lines.append(f"| {r.label} | {cell(r.pass_a, r.ci_a)} | {cell(r.pass_b, r.ci_b)} | "
-                     f"{r.only_a} | {r.only_b} | {r.p_mcnemar:.3g} |")  # fmt: skip
+                     f"{test} |")  # fmt: skip
     res = paired_stats(rows_a + rows_b, la, lb, req["confidence"])
     return lines + [""] + paired_text(res, la, lb), pairs
