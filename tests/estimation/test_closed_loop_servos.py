@@ -124,7 +124,7 @@ def test_the_flight_path_disturbance_joins_the_error_system(implementable):
     design, vehicle, tau, _, _ = implementable
     a = design.arrays
     flt = design_filter(a, vehicle, load_sensors(), MEASURED, 0.02, 5, a["x0"][None],
-                        vehicle.actuators["second_order"], flight_path=True)  # fmt: skip
+                        vehicle.actuators["second_order"], "flight_path")  # fmt: skip
     es = error_system(flt)
     cov = covariance_bound(es, measurement_covariance(MEASURED, load_sensors()))
     assert es.M.shape[-1] == 16 and cov.min_eig >= 0.0

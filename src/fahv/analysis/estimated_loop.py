@@ -120,7 +120,7 @@ def estimated_loop(A, B, F, notch: NotchFilter | None, Ts: float, A_z, B_z, L, C
 
 
 def filter_models(A, B, servos=None, Ts: float = 0.0,
-                  flight_path: bool = False) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+                  disturbance=None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The filter's linear model at plant points: (A_z, B_z), z = [x; d] or [x; d; s].
 
     Parameters
@@ -131,9 +131,10 @@ def filter_models(A, B, servos=None, Ts: float = 0.0,
     servos : (2, 6) ndarray, optional
         The filter's servos (`GainScheduledKalman.servos`); None: ideal actuators.
     Ts : float
-        Control period [s] (with servos or the flight-path disturbance).
-    flight_path : bool
-        z ends with the flight-path disturbance (`fahv.estimation.kalman.with_flight_path`).
+        Control period [s] (with servos or a state disturbance).
+    disturbance : StateDisturbance, optional
+        z ends with this state disturbance (`GainScheduledKalman.disturbance`,
+        `fahv.estimation.kalman.with_state_disturbance`); None: none.
 
     Returns
     -------
@@ -141,7 +142,7 @@ def filter_models(A, B, servos=None, Ts: float = 0.0,
         `fahv.estimation.kalman.filter_model`.
     B_z : (P, n_z, m) ndarray
         The command's column: [B; 0], or with servos through them ([B P_u; 0; Gamma]);
-        0 on d_gamma.
+        0 on d_s.
     """
     A, B = np.asarray(A, float), np.asarray(B, float)
     P, n, m = B.shape
@@ -151,9 +152,9 @@ def filter_models(A, B, servos=None, Ts: float = 0.0,
         _, Gam, _, Pu = servo_step(servos, Ts)
         B_z = np.concatenate([B @ Pu, np.zeros((P, m, m)),
                               np.broadcast_to(Gam, (P,) + Gam.shape)], axis=1)  # fmt: skip
-    if flight_path:
+    if disturbance is not None:
         B_z = np.concatenate([B_z, np.zeros((P, 1, m))], axis=1)
-    return filter_model(A, B, servos, Ts, flight_path), B_z
+    return filter_model(A, B, servos, Ts, disturbance), B_z
 
 
 def estimated_closed_loop(A_L, B_L, C_L) -> np.ndarray:
@@ -235,7 +236,7 @@ def estimated_margins(design, flt, settings) -> list:
         for name, (A_, B_, L_) in points.items():
             plant = (A_, B_) if flt.servos is None else servo_plants(A_, B_, flt.servos, Ts)
             loops = estimated_loop(*plant, s.F, s.notch, Ts,
-                                   *filter_models(A_, B_, flt.servos, Ts, flt.flight_path), L_,
+                                   *filter_models(A_, B_, flt.servos, Ts, flt.disturbance), L_,
                                    flt.C)
             rho = spectral_radius(estimated_closed_loop(*loops))
             systems = estimated_loop_systems(*loops, Ts)

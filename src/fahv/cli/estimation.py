@@ -208,7 +208,7 @@ def cmd_estimation(args) -> int:
     in_filter = estimator_value(c, "actuators") != "ideal"
     servos = servos_of(vehicle, estimator_value(c, "actuators"), "state_estimator")
     flt = design_filter(a, vehicle, data, measured, c["Ts"], c["plant_substeps"], a["x0"][None],
-                        servos, estimator_value(c, "flight_path_disturbance"))  # fmt: skip
+                        servos, estimator_value(c, "state_disturbance"))  # fmt: skip
     cert = design.summary["certificate"]
     level = cert["level"] if "level" in cert else cert["rpi_level"]
     study = estimate_study(flt, a, data, measured, c["Ts"], round(c["duration"] / c["Ts"]),

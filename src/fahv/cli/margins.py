@@ -120,7 +120,7 @@ def estimate_rows(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple[
     servos = servos_of(vehicle, model, "state_estimator")
     flt = design_filter(a, vehicle, load_sensors(vehicle_file), measured, c["Ts"],
                         c["plant_substeps"], a["x0"][None], servos,
-                        estimator_value(c, "flight_path_disturbance"))  # fmt: skip
+                        estimator_value(c, "state_disturbance"))  # fmt: skip
     actuators = ("ideal actuators" if servos is None else
                  f"the {model} servos in the plant and the filter, linear")  # fmt: skip
     tau, tau_design = law_tau(c), float(c["tube"]["tau"])

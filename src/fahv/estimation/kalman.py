@@ -8,12 +8,10 @@ flexible states included, to run the tube law on it. The filter here:
 - estimates with the state an input disturbance d (2,), a random walk added to the
   command (the offset-free disturbance model of Pannocchia and Rawlings 2003): an
   actuator fault or a model error then moves d, not a bias of x;
-- optionally (`design_filter`'s `flight_path`) a flight-path disturbance d_gamma, a
-  random walk added to the flight-path angle's rate [rad/s] (a lift or mass error of
-  the flown vehicle, which neither input's column carries): it enters alpha as
-  alpha_k+1 -= Ts d_gamma (gamma = theta - alpha): with it a model error has a
-  disturbance in each equation it enters (speed: d on Phi, pitch rate: d on delta_e,
-  flight path: d_gamma), and h and theta follow by the model's exact kinematics;
+- optionally (`design_filter`'s `disturbance`) a third disturbance d_s, a random walk
+  added to the rate of one state (`fahv.estimation.state_disturbance`: the flight-path
+  angle's, d_gamma, or the altitude's, d_h), which takes up a lift or mass error of the
+  flown vehicle that neither input's column carries;
 - predicts with the nominal nonlinear CM (`fahv.plant.rk4.rk4_cm`, the plant's own
   kernel with the vehicle file's nominal parameters) under the command the controller
   sent plus d (the flight computer does not know the actuator fault);
@@ -44,9 +42,10 @@ import numpy as np
 import scipy.linalg
 
 from fahv.estimation.servo_model import N_SERVO, with_servos
+from fahv.estimation.state_disturbance import StateDisturbance, state_disturbance
 from fahv.model.actuators import kernel_parameters
 from fahv.model.lpv import PolytopicLPV
-from fahv.model.vehicle import ALPHA, H, V
+from fahv.model.vehicle import H, V
 from fahv.plant.rk4 import compile_kernels, params_records, rk4_cm, rk4_cm_act
 from fahv.sensors.data import SensorData
 from fahv.sensors.measure import output_matrix
@@ -132,24 +131,18 @@ W_SIGMAS = 3.0
 #: 0.02 and 0.5 deg/sqrt(s) (a 10 % loss of a 13 deg elevator, 1.3 deg, is followed in
 #: seconds; the noise it lets into d stays small against the inputs' ranges).
 D_INTENSITY = np.array([0.02, np.radians(0.5)])
-#: Random-walk intensity of the flight-path disturbance d_gamma [rad/s per sqrt(s)] and
-#: its scale [rad/s]: the light and heavy corners of the sec. 5.1 box miss the nominal's
-#: flight-path rate by the order of the scale at trim (lift / (m V) with a mass error of
-#: a few percent); 3e-5 followed it within the step's first seconds and left the least
-#: noise in the altitude estimate among 3e-5, 1e-4 and 3e-4 (docs/theory/estimation.md).
-FLIGHT_PATH_INTENSITY = 3e-5
-FLIGHT_PATH_SCALE = 1e-3
 #: Process noise of the servo states per step, as a share of their scales (position: the
 #: input's scale, rate: it times omega_n): their model is exact, this keeps the Riccati
 #: equation regular.
 SERVO_NOISE = 1e-3
 
 
-def with_flight_path(Az: np.ndarray, Ts: float) -> np.ndarray:
-    """The vertices of z with the flight-path disturbance appended as its last state.
+def with_state_disturbance(Az: np.ndarray, Ts: float, dist: StateDisturbance) -> np.ndarray:
+    """The vertices of z with a state disturbance d_s appended as its last state.
 
-    d_gamma+ = d_gamma, and alpha+ gains -Ts d_gamma (module docstring): the column the
-    predictor applies after each step.
+    d_s+ = d_s, and x[dist.row]+ gains dist.sign Ts d_s
+    (`fahv.estimation.state_disturbance`): the column the predictor applies after each
+    step.
 
     Parameters
     ----------
@@ -157,6 +150,8 @@ def with_flight_path(Az: np.ndarray, Ts: float) -> np.ndarray:
         Vertices of z whose first nine states are the CM's (`augmented`, `with_servos`).
     Ts : float
         Step [s].
+    dist : StateDisturbance
+        The disturbance.
 
     Returns
     -------
@@ -165,7 +160,7 @@ def with_flight_path(Az: np.ndarray, Ts: float) -> np.ndarray:
     R_, n, _ = Az.shape
     out = np.zeros((R_, n + 1, n + 1))
     out[:, :n, :n] = Az
-    out[:, ALPHA, n] = -Ts
+    out[:, dist.row, n] = dist.sign * Ts
     out[:, n, n] = 1.0
     return out
 
@@ -191,12 +186,12 @@ def augmented(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 
 
 def filter_model(A: np.ndarray, B: np.ndarray, servos=None, Ts: float = 0.0,
-                 flight_path: bool = False) -> np.ndarray:  # fmt: skip
+                 disturbance: StateDisturbance | None = None) -> np.ndarray:  # fmt: skip
     """The linear model of the filter's state z at given airframe points.
 
     z = [x; d] (`augmented`), [x; d; s] with servos
-    (`fahv.estimation.servo_model.with_servos`), then d_gamma if `flight_path`
-    (`with_flight_path`): the one layout the filter, its error system and the margin
+    (`fahv.estimation.servo_model.with_servos`), then d_s if `disturbance`
+    (`with_state_disturbance`): the one layout the filter, its error system and the margin
     analysis share.
 
     Parameters
@@ -207,25 +202,24 @@ def filter_model(A: np.ndarray, B: np.ndarray, servos=None, Ts: float = 0.0,
     servos : (2, 6) ndarray, optional
         The filter's servos (`fahv.model.actuators.kernel_parameters`); None: ideal.
     Ts : float
-        Step [s] (with servos or the flight-path disturbance).
-    flight_path : bool
-        Append the flight-path disturbance.
+        Step [s] (with servos or a state disturbance).
+    disturbance : StateDisturbance, optional
+        Append it (`fahv.estimation.state_disturbance`); None: none.
 
     Returns
     -------
     (R, n_z, n_z) ndarray
-        n_z = 11, 15 with servos, one more with `flight_path`.
+        n_z = 11, 15 with servos, one more with `disturbance`.
     """
     Az = augmented(A, B) if servos is None else with_servos(A, B, servos, Ts)
-    return with_flight_path(Az, Ts) if flight_path else Az
+    return Az if disturbance is None else with_state_disturbance(Az, Ts, disturbance)
 
 
 class GainScheduledKalman:
     """The filter of B runs: `correct` with y_k, then `predict` with the command u_k.
 
     Its state z = [x; d] is the CM state (9,) and the input disturbance (2,), then the
-    servos' four states and the flight-path disturbance d_gamma, each if the filter has
-    them.
+    servos' four states and the state disturbance d_s, each if the filter has them.
 
     Parameters
     ----------
@@ -233,7 +227,7 @@ class GainScheduledKalman:
         The design's LPV model (its weights schedule the gains).
     L : (R, n_z, n_y) ndarray
         Vertex gains of z (`kalman_gains` on `augmented`; n_z = 11, or 15 with servos:
-        `fahv.estimation.servo_model.with_servos`; one more with `flight_path`).
+        `fahv.estimation.servo_model.with_servos`; one more with `disturbance`).
     C : (n_y, 9) ndarray
         Output matrix of x (`output_matrix`).
     params : VehicleParams
@@ -254,25 +248,26 @@ class GainScheduledKalman:
         the four actuator states `a`, which the predictor integrates with the airframe by
         the plant's own kernel (`fahv.plant.rk4.rk4_cm_act`) and the correction moves
         by their rows of L. None: ideal actuators.
-    flight_path : bool
-        z ends with the flight-path disturbance d_gamma [rad/s] (`with_flight_path`).
+    disturbance : str, optional
+        A name of `fahv.estimation.state_disturbance.STATE_DISTURBANCE_NAMES`: z ends with
+        that disturbance d_s (`with_state_disturbance`); `none` (the default): it does not.
 
     Raises
     ------
     ValueError
-        If L is not of z's rows (11, 15 with servos, one more with `flight_path`) and
-        C's outputs, or servos is not (2, 6).
+        If L is not of z's rows (11, 15 with servos, one more with `disturbance`) and
+        C's outputs, servos is not (2, 6), or the disturbance is unknown.
     """
 
     def __init__(self, lpv: PolytopicLPV, L, C, params, limits, Ts: float, n_sub: int, x0,
-                 P=None, servos=None, flight_path: bool = False) -> None:  # fmt: skip
+                 P=None, servos=None, disturbance: str = "none") -> None:  # fmt: skip
         self.lpv, self.L, self.C = lpv, np.asarray(L, float), np.asarray(C, float)
         self.servos = None if servos is None else np.ascontiguousarray(servos, float)
         if self.servos is not None and self.servos.shape != (2, 6):
             raise ValueError(f"estimator: servo data of shape {self.servos.shape}, expected (2, 6)")
-        self.flight_path = bool(flight_path)
+        self.disturbance = state_disturbance(disturbance)
         self.n_s = 0 if self.servos is None else N_SERVO
-        n_z = 11 + self.n_s + self.flight_path
+        n_z = 11 + self.n_s + (self.disturbance is not None)
         if self.L.shape[1:] != (n_z, self.C.shape[0]):
             raise ValueError(f"estimator: gains of shape {self.L.shape[1:]}, expected "
                              f"{(n_z, self.C.shape[0])}")  # fmt: skip
@@ -297,7 +292,7 @@ class GainScheduledKalman:
         self.z[runs, :9] = np.asarray(x0, float)[runs]
         self.z[runs, 9:11] = 0.0
         self.z[runs, 11 : 11 + self.n_s] = np.nan  # the servos: at rest at the first command
-        self.z[runs, 11 + self.n_s :] = 0.0  # d_gamma
+        self.z[runs, 11 + self.n_s :] = 0.0  # d_s
 
     @property
     def x(self) -> np.ndarray:
@@ -344,7 +339,7 @@ class GainScheduledKalman:
             `filter_model` at the vertices.
         """
         A, B = np.asarray(self.lpv.A, float), np.asarray(self.lpv.B, float)
-        return filter_model(A, B, self.servos, self.Ts, self.flight_path)
+        return filter_model(A, B, self.servos, self.Ts, self.disturbance)
 
     def gains(self) -> np.ndarray:
         """The scheduled gains at the current estimates' (h, V).
@@ -384,7 +379,7 @@ class GainScheduledKalman:
         return self.x.copy()
 
     def predict(self, u: np.ndarray) -> None:
-        """Predict z_k+1|k from z_k|k under the command of step k (d and d_gamma held).
+        """Predict z_k+1|k from z_k|k under the command of step k (d and d_s held).
 
         Parameters
         ----------
@@ -403,9 +398,9 @@ class GainScheduledKalman:
             a[new, ::2] = u[new]
             x, a = rk4_cm_act(x, np.ascontiguousarray(a), u, self.rec, self.servos,
                               np.zeros(len(u), bool), self.Ts, self.n_sub)  # fmt: skip
-        rest = self.z[:, 11 + self.n_s :]  # d_gamma (or nothing)
-        if self.flight_path:
-            x[:, ALPHA] -= self.Ts * rest[:, 0]
+        rest = self.z[:, 11 + self.n_s :]  # d_s (or nothing)
+        if self.disturbance is not None:
+            x[:, self.disturbance.row] += self.disturbance.sign * self.Ts * rest[:, 0]
         self.z = np.concatenate([x, self.d, a, rest], axis=1)
 
 
@@ -434,7 +429,7 @@ def estimate_history(estimator: GainScheduledKalman, y: np.ndarray, u: np.ndarra
 
 
 def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts: float,
-                  n_sub: int, x0, servos=None, flight_path: bool = False
+                  n_sub: int, x0, servos=None, disturbance: str = "none"
                   ) -> GainScheduledKalman:  # fmt: skip
     """The filter of a design: its LPV model, gains with Q_w from its bound w_max.
 
@@ -463,9 +458,10 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
         file's `actuators.second_order`): the predictor integrates them (the gains stay
         those of the airframe, whose ZOH model takes the servo's lag as process noise).
         None: ideal actuators.
-    flight_path : bool
-        Estimate the flight-path disturbance d_gamma too (`with_flight_path`; process
-        noise `FLIGHT_PATH_INTENSITY`^2 Ts).
+    disturbance : str, optional
+        Estimate this state disturbance d_s too (a name of
+        `fahv.estimation.state_disturbance.STATE_DISTURBANCE_NAMES`; process noise its
+        intensity^2 Ts); `none` (the default): no.
 
     Returns
     -------
@@ -475,7 +471,8 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
     Raises
     ------
     ValueError
-        If the design is not of the nine CM states, or a vertex gain does not exist.
+        If the design is not of the nine CM states, a vertex gain does not exist, or the
+        disturbance is unknown.
     """
     A = np.asarray(arrays["A"], float)
     if A.shape[1:] != (9, 9):
@@ -489,16 +486,17 @@ def design_filter(arrays, vehicle, data: SensorData, measured: Sequence[str], Ts
     scale = [np.asarray(arrays["Dx"], float), Du]
     AP = None if servos is None else kernel_parameters(servos, vehicle.limits.u_min,
                                                        vehicle.limits.u_max)  # fmt: skip
-    Az = filter_model(A, B, AP, Ts, flight_path)
+    dist = state_disturbance(disturbance)
+    Az = filter_model(A, B, AP, Ts, dist)
     if AP is not None:  # the servos' states: the model is exact, their noise only regularises
         s_scale = np.column_stack([Du, Du * AP[:, 1]]).ravel()  # [Phi, Phi_dot, de, de_dot]
         q.append((SERVO_NOISE * s_scale) ** 2)
         scale.append(s_scale)
-    if flight_path:
-        q.append(np.array([FLIGHT_PATH_INTENSITY**2 * Ts]))
-        scale.append(np.array([FLIGHT_PATH_SCALE]))
+    if dist is not None:
+        q.append(np.array([dist.intensity**2 * Ts]))
+        scale.append(np.array([dist.scale]))
     Cz = np.hstack([C, np.zeros((len(C), Az.shape[1] - 9))])
     L, P = kalman_gains(Az, Cz, np.diag(np.concatenate(q)),
                         measurement_covariance(measured, data), np.concatenate(scale))  # fmt: skip
     return GainScheduledKalman(lpv, L, C, vehicle.params, vehicle.limits, Ts, n_sub, x0, P, AP,
-                               flight_path)  # fmt: skip
+                               disturbance)  # fmt: skip

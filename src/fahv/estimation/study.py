@@ -26,7 +26,6 @@ from fahv.estimation.error_bound import (
 )
 from fahv.estimation.kalman import (
     D_INTENSITY,
-    FLIGHT_PATH_INTENSITY,
     W_SIGMAS,
     measurement_covariance,
 )
@@ -198,8 +197,8 @@ def estimate_study(flt, arrays, data: SensorData, measured: Sequence[str], Ts: f
     noise[n:] = v_max
     model = zeros.copy()
     model[:11] = np.concatenate([np.asarray(arrays["w_max"], float), w_d])  # servos: exact
-    if flt.flight_path:  # d_gamma's random walk, as d's
-        model[n - 1] = W_SIGMAS * FLIGHT_PATH_INTENSITY * np.sqrt(Ts)
+    if flt.disturbance is not None:  # d_s's random walk, as d's
+        model[n - 1] = W_SIGMAS * flt.disturbance.intensity * np.sqrt(Ts)
     r_joint = float(np.sqrt(scipy.stats.chi2.isf((1.0 - p) / steps, n)))
     share = tube_share(np.asarray(arrays["B"], float), np.asarray(arrays["F"], float),
                        np.asarray(arrays["N"], float), cov.S[:9, :9], r_joint)  # fmt: skip

@@ -324,7 +324,7 @@ class EstimatorCore:
         try:
             self.filter = design_filter(arrays, veh, load_sensors(p["vehicle_file"] or None),
                                         measured, p["Ts"], p["plant_substeps"], x0, servos,
-                                        p["flight_path_disturbance"])  # fmt: skip
+                                        p["state_disturbance"])  # fmt: skip
         except (ValueError, KeyError) as exc:
             raise ParameterError(f"state_estimator: parameter 'estimator' = {self.kind!r}: "
                                  f"{exc}") from exc  # fmt: skip

@@ -25,6 +25,7 @@ from fahv.config import Field
 from fahv.config.spec import validate_flat
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS, variant_notch
 from fahv.errors import ConfigError, ParameterError
+from fahv.estimation.state_disturbance import NO_DISTURBANCE, STATE_DISTURBANCE_NAMES
 from fahv.loop.graph import CONTROLLER_NODES
 from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
 from fahv.model.cascade import AIRFRAME_ARRAYS, airframe_arrays
@@ -87,9 +88,9 @@ def _estimator_fields() -> tuple[Field, ...]:
         Field("actuators", "str", "actuator model the Kalman filter's predictor integrates "
               "(scenario estimator.actuators): ideal or the vehicle file's second_order "
               "servos", choices=ACTUATOR_MODELS, default=IDEAL),
-        Field("flight_path_disturbance", "bool", "the Kalman filter also estimates a "
-              "flight-path disturbance (scenario estimator.flight_path_disturbance)",
-              default=False),
+        Field("state_disturbance", "str", "the Kalman filter's third disturbance "
+              "(scenario estimator.state_disturbance): none, flight_path or altitude_rate",
+              choices=STATE_DISTURBANCE_NAMES, default=NO_DISTURBANCE),
         _matrix("x0", "initial estimate x_0|-1 (9,) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]"),
         *(_matrix(name, f"the filter's CM LPV model: {name} of a CM design, of an ECM "
                   "design's CM part (fahv.model.cascade)")
@@ -438,7 +439,7 @@ def vehicle_parameters(design, common: dict) -> dict:
         "state_estimator": {
             **shared, **x0(), "estimator": estimator_kind(c), "measured": choices["measured"],
             "actuators": estimator_value(c, "actuators"),
-            "flight_path_disturbance": bool(estimator_value(c, "flight_path_disturbance")),
+            "state_disturbance": estimator_value(c, "state_disturbance"),
             **{k: val for name in ESTIMATOR_ARRAYS
                for k, val in flat_parameter(name, airframe[name]).items()},
         },

@@ -27,6 +27,7 @@ from fahv.config.spec import lookup
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.control.mpc.estimator import EST_STARTS
+from fahv.estimation.state_disturbance import NO_DISTURBANCE, STATE_DISTURBANCE_NAMES
 from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
 from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
 from fahv.sensors.data import CHANNELS, DEFAULT_MEASURED, EXACT_STATE
@@ -231,14 +232,13 @@ ESTIMATOR = (
           "tau F (x_hat - x_bar) (replaces the design's tube.tau in the run: a lower gain passes "
           "less of the estimate's noise to the servos); 0: the design's", lo=0.0, hi=1.0,
           default=0.0, equation="eq. (53-54)"),
-    Field("actuators", "str", "actuator model the Kalman filter's predictor and gains "
-          "include: ideal (the command acts at once, the default) or second_order (the "
-          "vehicle file's servos, as the plant's: four more filter states)",
-          choices=ACTUATOR_MODELS, default=IDEAL),
-    Field("flight_path_disturbance", "bool", "the Kalman filter also estimates a disturbance "
-          "of the flight-path angle's rate (a lift or mass error, which the input disturbance "
-          "does not carry): without it a dispersed vehicle's altitude estimate keeps an offset",
-          default=False),
+    Field("actuators", "str", "actuator model of the Kalman filter's predictor and gains: "
+          "ideal (the command acts at once) or second_order (the vehicle file's servos, as "
+          "the plant's: four more filter states)", choices=ACTUATOR_MODELS, default=IDEAL),
+    Field("state_disturbance", "str", "the Kalman filter's third disturbance, a random walk on "
+          "a state's rate: none, flight_path (d_gamma) or altitude_rate (d_h); without one a "
+          "vehicle of another mass keeps an offset in its altitude estimate",
+          choices=STATE_DISTURBANCE_NAMES, default=NO_DISTURBANCE),
 )  # fmt: skip
 
 
