@@ -196,8 +196,8 @@ def load_design(out_dir: str | Path) -> Design:
 
 
 #: Library packages a design depends on (their source is hashed into the provenance).
-DESIGN_PACKAGES = ("config", "synthesis", "model", "plant", "sensors", "control", "spec", "bounds",
-                   "tube", "onset", "certificate", "design")  # fmt: skip
+DESIGN_PACKAGES = ("config", "synthesis", "model", "plant", "sensors", "control", "estimation",
+                   "spec", "bounds", "tube", "onset", "certificate", "design")  # fmt: skip
 
 
 def save_arrays(arrays: dict, path: str | Path) -> Path:
