@@ -33,13 +33,15 @@ def switched_variance(es, S: np.ndarray, R_v: np.ndarray, runs: int, steps: int,
     return e.var(axis=0)
 
 
-def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0, overrides=None):
+def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0, overrides=None,
+                   split_mean: bool = False):  # fmt: skip
     """The nonlinear loop (`tube_mpc` of the design's scenario, `duration` s, node
     parameter `overrides` as `simulate`'s) against the probabilistic tube `pt`: the
     standard deviations over t >= t_from of t = x - x_r - x_n in V, alpha, theta and q and
     of the elevator command's step, as fractions of the bound's (4,) and (); the largest
-    |t| of alpha and theta (2,) and the bound's whole-run radius at p = 0.99 in the same
-    units (2,)."""
+    |t| of alpha and theta (2,), or with `split_mean` the pair (mean of t, largest
+    |t - mean|) of alpha and theta ((2,), (2,)); the bound's whole-run radius at p = 0.99
+    in the same units (2,)."""
     from fahv.estimation.closed_loop import radii
     from fahv.loop.simulate import simulate
     from fahv.model.vehicle import ALPHA, IQ, THETA, V
@@ -50,10 +52,14 @@ def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0, ov
     ratio = t[:, [V, ALPHA, THETA, IQ]].std(axis=0) / pt.std_t[:4]
     step = np.diff(run.u[k, 1]).std() / pt.std_step[1]
     _, r_run = radii(0.99, len(run.t))
-    largest, reach = np.abs(t[:, [ALPHA, THETA]]).max(axis=0), r_run * pt.std_t[1:3]
-    print("measured / bound:", np.round(ratio, 3), round(step, 3), "largest / radius [deg]:",
-          np.round(np.degrees(largest), 3), np.round(np.degrees(reach), 3))
-    return ratio, step, largest, reach
+    att = t[:, [ALPHA, THETA]]
+    largest, reach = np.abs(att).max(axis=0), r_run * pt.std_t[1:3]
+    mean = att.mean(axis=0)
+    about = np.abs(att - mean).max(axis=0)
+    print("measured / bound:", np.round(ratio, 3), round(step, 3), "largest, mean, largest "
+          "about it / radius [deg]:", *(np.round(np.degrees(a), 3)
+                                        for a in (largest, mean, about, reach)))  # fmt: skip
+    return ratio, step, ((mean, about) if split_mean else largest), reach
 
 
 @pytest.fixture
