@@ -2,6 +2,8 @@
 at every vertex pair, the sample variance of its system under random switching, and the
 nonlinear loop's deviation from its nominal against a probabilistic tube."""
 
+from typing import NamedTuple
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -33,15 +35,24 @@ def switched_variance(es, S: np.ndarray, R_v: np.ndarray, runs: int, steps: int,
     return e.var(axis=0)
 
 
-def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0, overrides=None,
-                   split_mean: bool = False):  # fmt: skip
+class Deviation(NamedTuple):
+    """The nonlinear loop's deviation from its nominal against a probabilistic tube
+    (`loop_deviation`): standard deviations as fractions of the bound's, attitude parts of
+    t in rad, (2,) arrays for alpha and theta."""
+
+    ratio: np.ndarray  # (4,) std of t in V, alpha, theta, q over the bound's
+    step: float  # std of the elevator command's step over the bound's
+    largest: np.ndarray  # largest |t|
+    mean: np.ndarray  # mean of t: the model error's part
+    about: np.ndarray  # largest |t - mean|: the noise's part
+    reach: np.ndarray  # the bound's whole-run radius at p = 0.99
+
+
+def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0,
+                   overrides=None) -> Deviation:  # fmt: skip
     """The nonlinear loop (`tube_mpc` of the design's scenario, `duration` s, node
-    parameter `overrides` as `simulate`'s) against the probabilistic tube `pt`: the
-    standard deviations over t >= t_from of t = x - x_r - x_n in V, alpha, theta and q and
-    of the elevator command's step, as fractions of the bound's (4,) and (); the largest
-    |t| of alpha and theta (2,), or with `split_mean` the pair (mean of t, largest
-    |t - mean|) of alpha and theta ((2,), (2,)); the bound's whole-run radius at p = 0.99
-    in the same units (2,)."""
+    parameter `overrides` as `simulate`'s) against the probabilistic tube `pt`, over
+    t >= t_from, t = x - x_r - x_n (`Deviation`)."""
     from fahv.estimation.closed_loop import radii
     from fahv.loop.simulate import simulate
     from fahv.model.vehicle import ALPHA, IQ, THETA, V
@@ -49,17 +60,17 @@ def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0, ov
     run = simulate(design, "tube_mpc", duration=duration, overrides=overrides)
     k = run.t >= t_from
     t = (run.x - run.x_r - run.x_n[:, :9])[k]
-    ratio = t[:, [V, ALPHA, THETA, IQ]].std(axis=0) / pt.std_t[:4]
-    step = np.diff(run.u[k, 1]).std() / pt.std_step[1]
-    _, r_run = radii(0.99, len(run.t))
     att = t[:, [ALPHA, THETA]]
-    largest, reach = np.abs(att).max(axis=0), r_run * pt.std_t[1:3]
+    _, r_run = radii(0.99, len(run.t))
     mean = att.mean(axis=0)
-    about = np.abs(att - mean).max(axis=0)
-    print("measured / bound:", np.round(ratio, 3), round(step, 3), "largest, mean, largest "
-          "about it / radius [deg]:", *(np.round(np.degrees(a), 3)
-                                        for a in (largest, mean, about, reach)))  # fmt: skip
-    return ratio, step, ((mean, about) if split_mean else largest), reach
+    dev = Deviation(t[:, [V, ALPHA, THETA, IQ]].std(axis=0) / pt.std_t[:4],
+                    float(np.diff(run.u[k, 1]).std() / pt.std_step[1]),
+                    np.abs(att).max(axis=0), mean, np.abs(att - mean).max(axis=0),
+                    r_run * pt.std_t[1:3])  # fmt: skip
+    att_deg = (np.round(np.degrees(a), 3) for a in (dev.largest, mean, dev.about, dev.reach))
+    print("measured / bound:", np.round(dev.ratio, 3), round(dev.step, 3),
+          "largest, mean, largest about it, radius [deg]:", *att_deg)  # fmt: skip
+    return dev
 
 
 @pytest.fixture
