@@ -2,9 +2,7 @@
 plant's servos, the filter with their states and the scenario's altitude-rate disturbance,
 the adjustable law tau F): the joint bound holds at every pair, the nonlinear loop of
 case1_implementable deviates as it says, and the command's step it predicts for a whole
-run stays within the elevator servo's rate; the figures of docs/theory/estimation.md. The
-runs are case1_implementable_cold_start's: the same loop with the steps at t = 0, so that
-the window after the climb (40-100 s) is that of the figures."""
+run stays within the elevator servo's rate; the figures of docs/theory/estimation.md."""
 
 import numpy as np
 import pytest
@@ -16,7 +14,7 @@ from fahv.estimation.kalman import design_filter, measurement_covariance
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors
 
 MEASURED = list(DEFAULT_MEASURED)
-SCENARIO = "offline_design/scenarios/case1_implementable_cold_start.yaml"
+SCENARIO = "offline_design/scenarios/case1_implementable.yaml"
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +60,7 @@ def test_the_command_step_stays_within_the_servo_rate_for_a_run(implementable):
 
 def test_the_nonlinear_implementable_loop_deviates_as_the_bound_says(implementable,
                                                                      deviation_check):
-    """The loop's tube_mpc, 100 s (before the fault), sensor seed 0: over 40-100 s
+    """case1_implementable's tube_mpc, 100 s (before the fault), sensor seed 0: over 40-100 s
     the standard deviation of t = x - x_r - x_n in alpha, theta and q within 15 % of the
     bound's, the elevator command's step within 10 % (measured 0.944, 0.942, 0.891 and
     0.965 of it), and the largest |t| of alpha and theta within the run's radius at
