@@ -217,6 +217,26 @@ def test_case1_implementable_meets_the_requirements_within_the_servos_rate(figur
     assert m["tube_level_max"] > 1.0
 
 
+def test_the_cruise_scenario_steps_after_its_estimates_converged(figures):
+    """Scenario case1_implementable_cruise (the loop without the altitude-rate disturbance,
+    the steps after 20 s of cruise and the loss 100 s after them; sensor seed 0): the
+    steps come at 20 s and h and V settle within 60 s of them, the attitude within
+    0.5 deg, every command within the servo's rate (measured: settled at 54.9 s and
+    53.0 s, 34.9 s and 33.0 s after the steps; 0.427 / 0.358 deg; 70.7 deg/s)."""
+    _, design, vehicle = load_or_design("offline_design/scenarios/case1_implementable_cruise.yaml",
+                                        log=lambda *_: None, variants=["tube_mpc"],
+                                        allow_uncertified=True)  # fmt: skip
+    t_step = design.case["command"]["t_start"]
+    assert t_step == 20.0 and design.case["fault"]["t_onset"] == t_step + 100.0
+    assert design.case["estimator"]["state_disturbance"] == "none"
+    run = simulate(design, "tube_mpc")
+    assert np.all(run.h_c[run.t < t_step] == run.h_c[0])  # the cruise holds the command
+    m = metrics(run, vehicle.limits)
+    assert max(m["settling_time_h_s"], m["settling_time_V_s"]) - t_step <= 60.0, m
+    figures(m, (54.90, 53.02), (0.427, 0.358))
+    assert m["input_rate_violations"] == 0
+
+
 def test_a_state_disturbance_takes_up_the_altitude_estimates_offset():
     """case1_implementable with the light corner's mass and inertia (s_m = s_I_yy = -1, the
     rest nominal), 100 s, mean estimate errors over 60-100 s. Without a state disturbance
