@@ -197,8 +197,8 @@ def test_the_filter_with_the_servos_estimates_the_bending_rates_better():
 
 
 def test_case1_implementable_meets_the_requirements_within_the_servos_rate(figures):
-    """Scenario case1_implementable as the main job's second run flies it (300 s, the 10 %
-    loss at 100 s, sensor seed 0): h and V settle within 60 s of the step, the attitude
+    """Scenario case1_implementable, the implementable loop at the paper's timing (300 s,
+    the 10 % loss at 100 s, sensor seed 0): h and V settle within 60 s of the step, the attitude
     within 0.5 deg, every command within its limits and within the elevator servo's
     100 deg/s (measured 36.0 s and 33.5 s, 0.408 / 0.333 deg, largest rate 70.6 deg/s;
     without the altitude-rate disturbance, `case1_implementable_no_altitude_rate`,
@@ -218,8 +218,9 @@ def test_case1_implementable_meets_the_requirements_within_the_servos_rate(figur
 
 
 def test_the_cruise_scenario_steps_after_its_estimates_converged(figures):
-    """Scenario case1_implementable_cruise (the loop without the altitude-rate disturbance,
-    the steps after 20 s of cruise and the loss 100 s after them; sensor seed 0): the
+    """Scenario case1_implementable_cruise as the main job's second run flies it (the loop
+    without the altitude-rate disturbance, the steps after 20 s of cruise and the loss
+    100 s after them; sensor seed 0): the
     steps come at 20 s and h and V settle within 60 s of them, the attitude within
     0.5 deg, every command within the servo's rate (measured: settled at 54.9 s and
     53.0 s, 34.9 s and 33.0 s after the steps; 0.427 / 0.358 deg; 70.7 deg/s)."""
