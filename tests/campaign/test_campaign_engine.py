@@ -19,6 +19,7 @@ from fahv.campaign.report import failure_bound, make_report, verdicts
 from fahv.campaign.rerun import rerun
 from fahv.campaign.spec import load_campaign
 from fahv.runs.bag import read_run, run_result_of
+from fahv.runs.metrics import settling_after
 
 VOLATILE = ("wall_s", "session")  # the only columns that may differ between sessions
 
@@ -325,7 +326,7 @@ def test_lost_scheduler_keeps_finished_runs_and_resume_completes(reference, tmp_
     ("h", "V", "expected"), [(5.0, math.nan, math.nan), (math.nan, 5.0, math.nan), (3.0, 7.0, 6.0)]
 )
 def test_settling_after_command(h, V, expected):
-    got = engine.settling_after({"settling_time_h_s": h, "settling_time_V_s": V}, 1.0)
+    got = settling_after({"settling_time_h_s": h, "settling_time_V_s": V}, 1.0)
     assert got == expected or (math.isnan(got) and math.isnan(expected))
 
 

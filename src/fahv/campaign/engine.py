@@ -25,7 +25,6 @@ the interruptions (only `wall_s` and `session` differ).
 from __future__ import annotations
 
 import json
-import math
 import os
 import socket
 import time
@@ -52,22 +51,6 @@ from fahv.version import __version__
 
 #: Decimation of the stored trajectories [s between samples].
 TRAJECTORY_DT = 0.5
-
-
-def command_end(run: RunResult) -> float:
-    """Time the command stops moving [s] (as `fahv.runs.metrics.metrics` takes it)."""
-    moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
-    return float(run.t[moving[-1]]) if moving.size else 0.0
-
-
-def settling_after(m: dict, t_end: float) -> float:
-    """Settling time of h and V together after the command stopped moving [s].
-
-    NaN unless both settle (`settling_time_h_s` and `settling_time_V_s` of the
-    metrics, absolute times); `t_end` from `command_end`.
-    """
-    ts = (m["settling_time_h_s"], m["settling_time_V_s"])
-    return math.nan if any(map(math.isnan, ts)) else max(ts) - t_end
 
 
 def envelope_exit(run: RunResult, envelope) -> str | None:
@@ -159,13 +142,9 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
                 row.update(status="failed", reason=failure or why)
             else:
                 exit_reason = envelope_exit(run, veh.envelope)
-                t_end = command_end(run)
-                settle = settling_after(m, t_end)
                 row.update(
                     status="ok" if failure is None and exit_reason is None else "failed",
                     reason="; ".join(r for r in (failure, exit_reason) if r),
-                    t_command_end_s=t_end,
-                    settling_after_command_s=settle,
                     **m,
                 )
                 trajs.append({"index": int(i), "variant": variant, **trajectory(run)})

@@ -81,13 +81,31 @@ def settling_times(run: RunResult) -> tuple[float, float]:
     (float, float)
         (t_s of h, t_s of V) [s], simulated time.
     """
-    t = run.t
-    moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
-    t_cmd_end = float(t[moving[-1]]) if moving.size else 0.0
+    t, t_cmd_end = run.t, command_end(run)
     return (
         _settling_time(t, run.x[:, H] - run.h_c, SETTLE_TOL["h"], t_cmd_end),
         _settling_time(t, run.x[:, V] - run.V_c, SETTLE_TOL["V"], t_cmd_end),
     )
+
+
+def command_end(run: RunResult) -> float:
+    """Time the case command stops moving [s] (0 for a constant command).
+
+    The last step at which h_c or V_c differs from its final value; settling is
+    measured from it (`settling_times`), the requirement's "after the command".
+    """
+    moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
+    return float(run.t[moving[-1]]) if moving.size else 0.0
+
+
+def settling_after(m: dict, t_end: float) -> float:
+    """Settling time of h and V together after the command stopped moving [s].
+
+    NaN unless both settle (`settling_time_h_s` and `settling_time_V_s` of the
+    metrics, absolute times); `t_end` from `command_end`.
+    """
+    ts = (m["settling_time_h_s"], m["settling_time_V_s"])
+    return math.nan if any(map(math.isnan, ts)) else max(ts) - t_end
 
 
 @functools.lru_cache(maxsize=4)
@@ -300,12 +318,15 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     trim at its own (h, V) (`nominal_deviation`) and `nominal_h_min_ft` ...
     `nominal_V_max_fps` its range: what the tube's certificate assumes of the nominal
     (the campaign report checks them against the design's certified range).
-    The elevator's largest rates are `input_rates`'. Tracking errors are against the
-    case command. Flexible RMS values are over t >= t_fault (the whole run without
-    fault); `t_fault_s` is the onset within the run (NaN: no fault within the run, so
-    the "after fault" values are over the whole run). `tube_error_h_max_ft` is the
-    largest altitude part of the tube error, |h - h_r - h_n| (with `mpc.h_reset` it
-    returns to 0 at every re-plan; NaN without a tube).
+    `settling_after_command_s` is the later settling time of h and V counted from
+    `t_command_end_s` (`command_end`), the time the requirement's 60 s run from (NaN
+    unless both settle). The elevator's largest rates are `input_rates`'. Tracking
+    errors are against the case command. Flexible RMS values are over t >= t_fault
+    (the whole run without fault); `t_fault_s` is the onset within the run (NaN: no
+    fault within the run, so the "after fault" values are over the whole run).
+    `tube_error_h_max_ft` is the largest altitude part of the tube error,
+    |h - h_r - h_n| (with `mpc.h_reset` it returns to 0 at every re-plan; NaN without
+    a tube).
     """
     t, x = run.t, run.x
     if t.size == 0:
@@ -343,9 +364,14 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
         }  # fmt: skip
     lmi = {f"rmpc_lmi_{c}": int(v) for c, v in zip(LMI_COUNTS, run.lmi_counts, strict=True)}
     qp = {f"nominal_qp_{c}": int(v) for c, v in zip(QP_COUNTS, run.qp_counts, strict=True)}
+    t_end = command_end(run)
     return {
         "settling_time_h_s": ts_h,
         "settling_time_V_s": ts_V,
+        "t_command_end_s": t_end,
+        "settling_after_command_s": settling_after(
+            {"settling_time_h_s": ts_h, "settling_time_V_s": ts_V}, t_end
+        ),
         # after settling: only for a run that settled (NaN otherwise)
         "h_err_max_after_settle_ft": float(np.abs(eh[after]).max()) if settled else math.nan,
         "V_err_max_after_settle_fps": float(np.abs(eV[after]).max()) if settled else math.nan,

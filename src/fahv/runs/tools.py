@@ -32,6 +32,7 @@ from fahv.verdict import METADATA_KEYS, Verdict
 METRIC_ROWS = (
     ("settling_time_h_s", "settling time h (10 ft) [s]", "{:.1f}"),
     ("settling_time_V_s", "settling time V (2 ft/s) [s]", "{:.1f}"),
+    ("settling_after_command_s", "settling of h and V after the command [s]", "{:.1f}"),
     ("h_err_final_ft", "h error at the end [ft]", "{:.2f}"),
     ("V_err_final_fps", "V error at the end [ft/s]", "{:.2f}"),
     ("h_err_rms_after_settle_ft", "h RMS error after settling [ft]", "{:.2f}"),
@@ -131,6 +132,7 @@ NAN_WORDS = {
     "t_fault_s": "none in the run",
     "settling_time_h_s": "never",
     "settling_time_V_s": "never",
+    "settling_after_command_s": "never",
     "h_err_rms_after_settle_ft": "never settled",
     "V_err_rms_after_settle_fps": "never settled",
     "tube_fraction_inside": "no tube",
