@@ -116,3 +116,21 @@ def test_the_certified_and_the_not_certified_draws_are_counted_apart():
     old = {v: [{k: x for k, x in r.items() if k != "coverage"} for r in rs]
            for v, rs in rows.items()}  # fmt: skip
     assert coverage_lines(data, old) == ({}, [])
+
+
+def test_histograms_of_a_metric_no_run_has_are_drawn_without_warnings(tmp_path):
+    """A baseline that never settles and has no tube (NaN in every row) still gets every
+    histogram, marked as empty, and matplotlib warns of no empty legend."""
+    import warnings
+
+    from fahv.campaign.figures import WORST_METRICS, draw_figures
+
+    (tmp_path / "trajectories").mkdir()
+    rows = [{**ROW, "index": i, "settling_after_command_s": math.nan,
+             "tube_fraction_inside": math.nan, "tube_level_max": math.nan,
+             "tube_error_h_max_ft": math.nan} for i in range(3)]  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        paths = draw_figures(tmp_path, {"requirements": REQ}, {"rmpc": rows}, cols=[])
+    assert {p.name for p in paths} == {f"hist_{k}.png" for k, *_ in WORST_METRICS}
+    assert all(p.stat().st_size > 5000 for p in paths)

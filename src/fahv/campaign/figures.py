@@ -57,7 +57,11 @@ def draw_figures(out: Path, data: dict, per_variant: dict, cols: list[str]) -> l
             ax.axvline(req[req_key], color="r", ls="--", label=f"requirement {req[req_key]:g}")
         ax.set_xlabel(label)
         ax.set_ylabel("runs")
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+        if not ax.patches:  # e.g. no run settled, or no variant has a tube
+            ax.text(0.5, 0.5, "no run has a finite value", transform=ax.transAxes,
+                    ha="center", va="center")  # fmt: skip
         _margins(fig, top=0.15)
         p = rep / f"hist_{key}.png"
         fig.savefig(p, dpi=110)
