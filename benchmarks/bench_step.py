@@ -5,12 +5,14 @@ graph adds the DDS hops on top (its per-step time is printed by the plant node a
 `fahv sil` as the real-time factor).
 
 Usage: .venv/bin/python benchmarks/bench_step.py [--scenario SCENARIO] [--design DIR]
-       [--steps 2000] [--kalman] [--smoke]
+       [--steps 2000] [--kalman] [--allow-uncertified] [--smoke]
 
 The scenario (default offline_design/scenarios/case1_paper.yaml, Case 1 on the paper's
 design) runs on its stored design, or on the artefact folder `--design DIR` (as
 `fahv simulate --design`). `--kalman` runs the state estimator's Kalman filter on the
-sensors h, V, theta, q (default: the scenario's estimator). `--smoke` runs 20 steps in
+sensors h, V, theta, q (default: the scenario's estimator). `--allow-uncertified` runs a
+scenario beyond what its design certifies (the implementable loops), as `fahv simulate`
+does. `--smoke` runs 20 steps in
 seconds: CI's check that the benchmark still runs (its figures mean nothing).
 """
 
@@ -40,6 +42,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=2000, help="steps timed after step 0")
     ap.add_argument("--kalman", action="store_true",
                     help=f"the Kalman filter on the sensors {KALMAN_CHANNELS}")  # fmt: skip
+    ap.add_argument("--allow-uncertified", action="store_true",
+                    help="run a scenario beyond what its design certifies")  # fmt: skip
     ap.add_argument("--smoke", action="store_true",
                     help=f"{SMOKE_STEPS} steps (CI: the benchmark still runs)")  # fmt: skip
     args = ap.parse_args()
@@ -47,7 +51,8 @@ def main() -> None:
     if args.smoke:
         print(f"smoke: {n} steps (the figures mean nothing)")
     _, design, _ = load_or_design(
-        args.scenario, args.design, log=io.StringIO().write, variants=["tube_mpc"]
+        args.scenario, args.design, log=io.StringIO().write, variants=["tube_mpc"],
+        allow_uncertified=args.allow_uncertified,
     )
     p = node_parameters(design, "tube_mpc")
     if args.kalman:
