@@ -113,5 +113,9 @@ def test_a_peer_that_ended_the_run_with_a_verdict_is_no_failure():
                 reason=v.text(), verdict=v.as_dict()))  # fmt: skip
     assert p.run_verdict() == v
     assert p.failed() == [] and p.failed_verdict() is None  # the run ended, nobody failed
+    # announced before the exit: a node lingering for its last messages' delivery
+    early = table("plant")
+    early.update(st("nominal_trajectory", 9, state="running", k=275, verdict=v.as_dict()))
+    assert early.run_verdict() == v and early.failed() == []
     p.update(st("tube_mpc", 10, state="exited", exit_status=3, k=275, reason="tube_mpc: x"))
     assert p.failed() == ["tube_mpc (exited with status 3 at step 275: tube_mpc: x)"]

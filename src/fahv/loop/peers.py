@@ -204,17 +204,22 @@ class Peers:
         return [d for d in found if d is not None]
 
     def run_verdict(self) -> Verdict | None:
-        """The verdict that ended this run, as a peer that exited with it announced it.
+        """The verdict that ended this run, as a peer that found or learnt it announced it.
+
+        A node announces the verdict as soon as it has it, in every status it publishes
+        after (its heartbeats while it lingers for its last messages' delivery, then its
+        exit): its peers stop with it at once, not only when it exits, which may be
+        after their own watchdog's time without a step.
 
         Returns
         -------
         fahv.verdict.Verdict or None
-            None while no peer of the run exited with a verdict (or the status is not
+            None while no peer of the run announced a verdict (or the status is not
             one: another program's).
         """
         for n in self.peers():
             s = self.own(n)
-            if s is not None and s["state"] == "exited" and s.get("verdict"):
+            if s is not None and s.get("verdict"):
                 try:
                     return Verdict.from_dict(s["verdict"])
                 except ValueError:

@@ -287,6 +287,28 @@ def rate_violations(u: np.ndarray, Ts: float, limits) -> int:
     return int(np.count_nonzero(over.any(axis=1)))
 
 
+def _own_trim_metrics(run: RunResult) -> dict[str, float]:
+    """Largest attitude errors against the dispersed vehicle's own trim [deg] ({} if unknown)."""
+    own = own_trim_attitude(run)
+    if own is None:
+        return {}
+    d = np.degrees(np.abs(run.x[:, ALPHA : THETA + 1] - own))
+    return {"alpha_err_own_trim_max_deg": float(d[:, 0].max()),
+            "theta_err_own_trim_max_deg": float(d[:, 1].max())}  # fmt: skip
+
+
+def _nominal_range_metrics(run: RunResult) -> dict[str, float]:
+    """The nominal's largest deviations (`NOMINAL_KEYS`) and its h, V range (a tube's run)."""
+    dev = np.abs(nominal_deviation(run)).max(axis=0)
+    dev[:3] = np.degrees(dev[:3])
+    out = {k: float(v) for k, v in zip(NOMINAL_KEYS, dev, strict=True)}
+    hn, Vn = run.x_r[:, H] + run.x_n[:, H], run.x_r[:, V] + run.x_n[:, V]
+    return out | {
+        "nominal_h_min_ft": float(hn.min()), "nominal_h_max_ft": float(hn.max()),
+        "nominal_V_min_fps": float(Vn.min()), "nominal_V_max_fps": float(Vn.max()),
+    }  # fmt: skip
+
+
 def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, float]:
     """Metrics of a run (the issue's table): tracking, attitude, flexible, inputs, tube.
 
@@ -346,22 +368,8 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     u, lo, hi = run.u, limits.u_min, limits.u_max
     viol = np.maximum(np.maximum(lo - u, u - hi), 0.0)
     lvl = run.tube_level
-    own = own_trim_attitude(run)
-    own_m = {}
-    if own is not None:
-        d = np.degrees(np.abs(x[:, ALPHA : THETA + 1] - own))
-        own_m = {"alpha_err_own_trim_max_deg": float(d[:, 0].max()),
-                 "theta_err_own_trim_max_deg": float(d[:, 1].max())}  # fmt: skip
-    nom_m = {}
-    if np.all(np.isfinite(lvl)):  # a tube, so a nominal: its range (the tube's assumption)
-        dev = np.abs(nominal_deviation(run)).max(axis=0)
-        dev[:3] = np.degrees(dev[:3])
-        nom_m = {k: float(v) for k, v in zip(NOMINAL_KEYS, dev, strict=True)}
-        hn, Vn = run.x_r[:, H] + run.x_n[:, H], run.x_r[:, V] + run.x_n[:, V]
-        nom_m |= {
-            "nominal_h_min_ft": float(hn.min()), "nominal_h_max_ft": float(hn.max()),
-            "nominal_V_min_fps": float(Vn.min()), "nominal_V_max_fps": float(Vn.max()),
-        }  # fmt: skip
+    own_m = _own_trim_metrics(run)
+    nom_m = _nominal_range_metrics(run) if np.all(np.isfinite(lvl)) else {}
     lmi = {f"rmpc_lmi_{c}": int(v) for c, v in zip(LMI_COUNTS, run.lmi_counts, strict=True)}
     qp = {f"nominal_qp_{c}": int(v) for c, v in zip(QP_COUNTS, run.qp_counts, strict=True)}
     t_end = command_end(run)

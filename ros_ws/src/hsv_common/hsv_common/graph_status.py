@@ -217,8 +217,8 @@ class GraphStatus:
         Raises
         ------
         RunEnded
-            If a peer exited with the run's verdict (`fahv.verdict`): this node
-            ends with the same verdict.
+            If a peer announced the run's verdict (`fahv.verdict`): this node
+            ends with the same verdict (and announces it at once, as its peer did).
         WatchdogError
             If a peer exited with an error; the message is
             `fahv.loop.peers.Peers.failed_verdict`: the root cause (a peer that
@@ -227,6 +227,7 @@ class GraphStatus:
         ended = self.peers.run_verdict()
         if ended is not None:
             self.verdict = ended
+            self.publish()
             raise RunEnded.of(ended)
         verdict = self.peers.failed_verdict()
         if verdict is not None:

@@ -176,7 +176,8 @@ class LockstepNode(Node):
             try:
                 outputs = self.on_step(self.k, inputs)
             except RunEnded as exc:  # the core ended the run: raised by poll, out of the
-                self.status.verdict = exc.verdict  # callback (its last status carries it)
+                self.status.verdict = exc.verdict  # callback; announced now, as every
+                self.status.publish()  # status after (the peers stop at once)
                 self.ended = exc
                 return
             self.publish(outputs)
@@ -239,6 +240,7 @@ class LockstepNode(Node):
                     self.on_ready()
                 except RunEnded as exc:  # e.g. the plant's initial state outside the envelope
                     self.status.verdict = exc.verdict
+                    self.status.publish()
                     raise
             return
         self.check_watchdog()
