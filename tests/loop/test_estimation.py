@@ -222,7 +222,7 @@ def test_the_cruise_scenario_steps_after_its_estimates_converged(figures):
     without the altitude-rate disturbance, the steps after 20 s of cruise and the loss
     100 s after them; sensor seed 0): the steps come at 20 s and h and V settle within
     60 s of them, the attitude within 0.5 deg, every command within the servo's rate
-    (measured: settled at 54.9 s and 53.0 s, 34.9 s and 33.0 s after the steps;
+    (measured: settled at 54.9 s and 53.0 s, 34.92 s after the command stopped moving;
     0.427 / 0.358 deg; largest rate 70.7 deg/s, held within 1 deg/s as the default's)."""
     _, design, vehicle = load_or_design("offline_design/scenarios/case1_implementable_cruise.yaml",
                                         log=lambda *_: None, variants=["tube_mpc"],
@@ -233,8 +233,9 @@ def test_the_cruise_scenario_steps_after_its_estimates_converged(figures):
     run = simulate(design, "tube_mpc")
     assert np.all(run.h_c[run.t < t_step] == run.h_c[0])  # the cruise holds the command
     m = metrics(run, vehicle.limits)
-    assert m["t_command_end_s"] == pytest.approx(t_step, abs=0.021)  # one step of Ts
-    assert m["settling_after_command_s"] == pytest.approx(34.90, abs=0.05), m
+    Ts = design.case["Ts"]
+    assert m["t_command_end_s"] == pytest.approx(t_step - Ts, abs=1e-9)  # the last step before
+    assert m["settling_after_command_s"] == pytest.approx(34.92, abs=0.021), m  # one step
     figures(m, (54.90, 53.02), (0.427, 0.358))
     assert m["input_rate_violations"] == 0
     assert m["delta_e_rate_max_degps"] == pytest.approx(70.7, abs=1.0)

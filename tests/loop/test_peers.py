@@ -1,6 +1,7 @@
 """The rules a node applies to its peers' statuses (fahv.loop.peers), without a graph."""
 
 import json
+import time
 
 import pytest
 
@@ -116,6 +117,25 @@ def test_a_peer_that_ended_the_run_with_a_verdict_is_no_failure():
     # announced before the exit: a node lingering for its last messages' delivery
     early = table("plant")
     early.update(st("nominal_trajectory", 9, state="running", k=275, verdict=v.as_dict()))
-    assert early.run_verdict() == v and early.failed() == []
+    assert early.run_verdict() == v
+    # another run's verdict is not this run's
+    other = table("plant")
+    other.update(st("nominal_trajectory", 9, run="run-b", state="running", verdict=v.as_dict()))
+    assert other.run_verdict() is None
+
+
+def test_no_verdict_is_taken_while_the_same_run_runs_twice():
+    """A node of the run lingering with its verdict beside a second instance of it (the
+    run started again from the same parameter file): the verdict may be the old one's, so
+    none is taken; the foreign-graph check stops both."""
+    from fahv.verdict import Verdict
+
+    v = Verdict("nominal_out_of_domain", "nominal_trajectory", 275, 5.5, "the nominal left")
+    now = time.time()
+    p = table("plant")
+    p.update(st("nominal_trajectory", 9, state="running", stamp=now, verdict=v.as_dict()))
+    assert p.run_verdict() == v
+    p.update(st("nominal_trajectory", 10, state="ready", stamp=now))
+    assert p.twins() == ["nominal_trajectory"] and p.run_verdict() is None
     p.update(st("tube_mpc", 10, state="exited", exit_status=3, k=275, reason="tube_mpc: x"))
     assert p.failed() == ["tube_mpc (exited with status 3 at step 275: tube_mpc: x)"]

@@ -105,8 +105,8 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
     dict
         `rows` (one dict per run: index, variant, seeds, dispersed values,
         `coverage` (its coverage verdict, `fahv.runs.sil.run_coverage`), status,
-        reason, every metric of `fahv.runs.metrics.metrics`, `t_command_end_s`,
-        `settling_after_command_s`, `wall_s`), `trajectories` (per completed
+        reason, every metric of `fahv.runs.metrics.metrics` (`settling_after_command_s`
+        among them), `wall_s`), `trajectories` (per completed
         run), `wall_s` of the batch, `host`.
     """
     t0 = time.perf_counter()

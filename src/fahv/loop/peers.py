@@ -81,8 +81,8 @@ def status(
     stamp : float, optional
         Wall time of this status [s]; now by default.
     verdict : dict, optional
-        With `state` "exited": the verdict that ended the run
-        (`fahv.verdict.Verdict.as_dict`), found by this node or learnt from a peer.
+        The verdict that ended the run (`fahv.verdict.Verdict.as_dict`), found by this
+        node or learnt from a peer: in every status from then on, the exit's included.
 
     Raises
     ------
@@ -215,8 +215,12 @@ class Peers:
         -------
         fahv.verdict.Verdict or None
             None while no peer of the run announced a verdict (or the status is not
-            one: another program's).
+            one: another program's), and while a node of this run has two alive
+            instances (`twins`: the same run started twice, which the foreign-graph
+            check stops; the verdict may be the other instance's).
         """
+        if self.twins():
+            return None
         for n in self.peers():
             s = self.own(n)
             if s is not None and s.get("verdict"):

@@ -91,8 +91,10 @@ def settling_times(run: RunResult) -> tuple[float, float]:
 def command_end(run: RunResult) -> float:
     """Time the case command stops moving [s] (0 for a constant command).
 
-    The last step at which h_c or V_c differs from its final value; settling is
-    measured from it (`settling_times`), the requirement's "after the command".
+    The last step at which h_c or V_c still differs from its final value, one step
+    (Ts) before the command holds it: a step at t_start gives t_start - Ts. Settling is
+    measured from it (`settling_times`), the requirement's "after the command", so
+    the settling counted is at most one step longer than from the step itself.
     """
     moving = np.nonzero((run.h_c != run.h_c[-1]) | (run.V_c != run.V_c[-1]))[0]
     return float(run.t[moving[-1]]) if moving.size else 0.0

@@ -91,7 +91,8 @@ class GraphStatus:
         self.extra_since: dict[str, float] = {}  # topic -> first time it had extra publishers
         self.said_stay = False
         self._held: str | None = None
-        #: The verdict that ended the run (fahv.verdict.Verdict), announced at close.
+        #: The verdict that ended the run (fahv.verdict.Verdict), announced at once and
+        #: in every status after it.
         self.verdict = None
         self._key: list = []
         self._lock = threading.Lock()

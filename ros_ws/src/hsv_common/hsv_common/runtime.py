@@ -10,7 +10,7 @@ Exit status of a node (`main`), also in docs/guide/sil.md:
 4   stopped by SIGINT / SIGTERM before the end
 5   another graph in the ROS domain that joined first (or cannot be told apart)
 6   the run ended with a verdict (`fahv.verdict`), found by this node's core
-    or learnt from a peer's last status
+    or learnt from a peer's status
 ==  =====================================================================
 """
 
