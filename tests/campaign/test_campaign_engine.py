@@ -326,7 +326,7 @@ def test_lost_scheduler_keeps_finished_runs_and_resume_completes(reference, tmp_
     ("h", "V", "expected"), [(5.0, math.nan, math.nan), (math.nan, 5.0, math.nan), (3.0, 7.0, 6.0)]
 )
 def test_settling_after_command(h, V, expected):
-    got = settling_after({"settling_time_h_s": h, "settling_time_V_s": V}, 1.0)
+    got = settling_after(h, V, 1.0)
     assert got == expected or (math.isnan(got) and math.isnan(expected))
 
 

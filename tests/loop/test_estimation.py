@@ -19,6 +19,9 @@ from fahv.runs.metrics import metrics
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors
 from fahv.sensors.measure import output_matrix, true_outputs
 
+#: Case 1 on the implementable loop at the paper's timing (the loop-physics figures)
+IMPLEMENTABLE = "offline_design/scenarios/case1_implementable.yaml"
+
 DURATION = 60.0
 #: Steps left out before the error is measured (the filter's transient) [steps].
 SETTLE = 500
@@ -166,7 +169,7 @@ def test_the_filter_with_the_servos_estimates_the_bending_rates_better():
     eta_1_dot below 0.8 of it, and alpha as well within 5 % (measured 0.036 against 0.33,
     0.087 against 0.127, 0.0136 deg both; both filters with the scenario's altitude-rate
     disturbance)."""
-    _, design, vehicle = load_or_design("offline_design/scenarios/case1_implementable.yaml",
+    _, design, vehicle = load_or_design(IMPLEMENTABLE,
                                         log=lambda *_: None, variants=["tube_mpc"],
                                         allow_uncertified=True)  # fmt: skip
     from fahv.loop.params import node_parameters
@@ -206,7 +209,7 @@ def test_case1_implementable_meets_the_requirements_within_the_servos_rate(figur
     with the first residual as the nominal estimate's start and the design's F,
     `case1_implementable_first_start`, the first step asked 132.5 deg/s). Not certified:
     the estimate's error leaves the tube (largest level 2.57)."""
-    _, design, vehicle = load_or_design("offline_design/scenarios/case1_implementable.yaml",
+    _, design, vehicle = load_or_design(IMPLEMENTABLE,
                                         log=lambda *_: None, variants=["tube_mpc"],
                                         allow_uncertified=True)  # fmt: skip
     m = metrics(simulate(design, "tube_mpc"), vehicle.limits)
@@ -254,7 +257,7 @@ def test_a_state_disturbance_takes_up_the_altitude_estimates_offset():
     altitude's error 4.78 +/- 0.3 ft and alpha's 0.098 +/- 0.01 deg."""
     from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
-    _, design, vehicle = load_or_design("offline_design/scenarios/case1_implementable.yaml",
+    _, design, vehicle = load_or_design(IMPLEMENTABLE,
                                         log=lambda *_: None, variants=["tube_mpc"],
                                         allow_uncertified=True)  # fmt: skip
     nominal = vehicle.params
@@ -290,7 +293,7 @@ def test_the_nominal_attitude_rows_on_the_estimate(figures):
     from fahv.errors import ConfigError
     from fahv.loop.params import node_parameters
 
-    _, design, _ = load_or_design("offline_design/scenarios/case1_implementable.yaml",
+    _, design, _ = load_or_design(IMPLEMENTABLE,
                                   log=lambda *_: None, variants=["tube_mpc"],
                                   allow_uncertified=True)  # fmt: skip
     assert design.case["mpc"]["att_max"] == 0.40

@@ -65,7 +65,7 @@ def estimate_errors(run: RunResult) -> dict:
     }
 
 
-def settling_times(run: RunResult) -> tuple[float, float]:
+def settling_times(run: RunResult, t_cmd_end: float | None = None) -> tuple[float, float]:
     """Settling times of the altitude and the velocity [s] (NaN: never settled).
 
     The first time after the case command stops moving from which |h - h_c| <=
@@ -75,13 +75,16 @@ def settling_times(run: RunResult) -> tuple[float, float]:
     ----------
     run : RunResult
         A run of N >= 1 steps.
+    t_cmd_end : float, optional
+        `command_end(run)` [s] if already known (computed here otherwise).
 
     Returns
     -------
     (float, float)
         (t_s of h, t_s of V) [s], simulated time.
     """
-    t, t_cmd_end = run.t, command_end(run)
+    t = run.t
+    t_cmd_end = command_end(run) if t_cmd_end is None else t_cmd_end
     return (
         _settling_time(t, run.x[:, H] - run.h_c, SETTLE_TOL["h"], t_cmd_end),
         _settling_time(t, run.x[:, V] - run.V_c, SETTLE_TOL["V"], t_cmd_end),
@@ -100,14 +103,23 @@ def command_end(run: RunResult) -> float:
     return float(run.t[moving[-1]]) if moving.size else 0.0
 
 
-def settling_after(m: dict, t_end: float) -> float:
-    """Settling time of h and V together after the command stopped moving [s].
+def settling_after(ts_h: float, ts_V: float, t_end: float = 0.0) -> float:
+    """Settling time of h and V together, counted from `t_end` [s].
 
-    NaN unless both settle (`settling_time_h_s` and `settling_time_V_s` of the
-    metrics, absolute times); `t_end` from `command_end`.
+    Parameters
+    ----------
+    ts_h, ts_V : float
+        Settling times of h and V [s, simulated time] (`settling_times`; NaN: never).
+    t_end : float
+        Time to count from [s]: `command_end` for the requirement's "after the
+        command", 0 for the run's time.
+
+    Returns
+    -------
+    float
+        max(ts_h, ts_V) - t_end [s]; NaN unless both settle.
     """
-    ts = (m["settling_time_h_s"], m["settling_time_V_s"])
-    return math.nan if any(map(math.isnan, ts)) else max(ts) - t_end
+    return math.nan if math.isnan(ts_h) or math.isnan(ts_V) else max(ts_h, ts_V) - t_end
 
 
 @functools.lru_cache(maxsize=4)
@@ -358,8 +370,9 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     if t_fault is None and np.any(run.fault_active):
         t_fault = float(t[np.argmax(run.fault_active)])
     eh, eV = x[:, H] - run.h_c, x[:, V] - run.V_c
-    ts_h, ts_V = settling_times(run)
-    t_settle = max(ts_h, ts_V) if not (math.isnan(ts_h) or math.isnan(ts_V)) else math.nan
+    t_end = command_end(run)
+    ts_h, ts_V = settling_times(run, t_end)
+    t_settle = settling_after(ts_h, ts_V)
     settled = not math.isnan(t_settle)
     after = t >= (t_settle if settled else t[-1])
     in_run = t_fault is not None and t_fault < t[-1]
@@ -374,14 +387,11 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     nom_m = _nominal_range_metrics(run) if np.all(np.isfinite(lvl)) else {}
     lmi = {f"rmpc_lmi_{c}": int(v) for c, v in zip(LMI_COUNTS, run.lmi_counts, strict=True)}
     qp = {f"nominal_qp_{c}": int(v) for c, v in zip(QP_COUNTS, run.qp_counts, strict=True)}
-    t_end = command_end(run)
     return {
         "settling_time_h_s": ts_h,
         "settling_time_V_s": ts_V,
         "t_command_end_s": t_end,
-        "settling_after_command_s": settling_after(
-            {"settling_time_h_s": ts_h, "settling_time_V_s": ts_V}, t_end
-        ),
+        "settling_after_command_s": settling_after(ts_h, ts_V, t_end),
         # after settling: only for a run that settled (NaN otherwise)
         "h_err_max_after_settle_ft": float(np.abs(eh[after]).max()) if settled else math.nan,
         "V_err_max_after_settle_fps": float(np.abs(eV[after]).max()) if settled else math.nan,
