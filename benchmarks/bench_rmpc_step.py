@@ -41,23 +41,11 @@ def stats(name: str, t) -> None:
     )
 
 
-def main() -> None:
-    """Run Case 1 with timers around the law and the step; print the figures."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--steps", type=int, default=15000)
-    ap.add_argument("--batch", type=int, default=100)
-    ap.add_argument("--smoke", action="store_true",
-                    help="tiny size (CI: the benchmark still runs)")  # fmt: skip
-    args = ap.parse_args()
-    batch_steps = 200
-    if args.smoke:
-        args.steps, args.batch, batch_steps = SMOKE_STEPS, SMOKE_BATCH, SMOKE_BATCH_STEPS
-        print(f"smoke: {args.steps} steps, a batch of B = {args.batch} over {batch_steps} "
-              "steps (the figures mean nothing)")  # fmt: skip
-    _, design, _ = load_or_design(
-        "offline_design/scenarios/case1_paper.yaml", log=io.StringIO().write, variants=["rmpc"]
-    )
-    law_t, core_t, steps = [], [], []
+def _timed_run(design, steps: int):
+    """Case 1 in process with timers around the law, the controller core and each step.
+
+    Returns the run and the three lists of times [s]."""
+    law_t, core_t, step_t = [], [], []
     law_step, core_step = RMPCLaw.step, ControllerCore.on_inputs
 
     def timed_law(self, *a):
@@ -77,27 +65,26 @@ def main() -> None:
         for k in it:
             yield k
             t1 = time.perf_counter()
-            steps.append(t1 - t0)
+            step_t.append(t1 - t0)
             t0 = t1
 
     RMPCLaw.step, ControllerCore.on_inputs = timed_law, timed_core
     try:
         t0 = time.perf_counter()
-        run = simulate(design, "rmpc", args.steps * design.case["Ts"], progress=step_timer)
+        run = simulate(design, "rmpc", steps * design.case["Ts"], progress=step_timer)
         wall = time.perf_counter() - t0
     finally:
         RMPCLaw.step, ControllerCore.on_inputs = law_step, core_step
     print(f"Case 1 rmpc, {run.t.size} steps in process: wall {wall:.2f} s")
-    stats("law step (RMPCLaw.step), B = 1", law_t)
-    stats("controller core (messages + law), B = 1", core_t)
-    stats("whole in-process step, B = 1", steps)
-    # the law alone on the recorded states, B = 1, each step timed in 5 passes; the
-    # minimum per step drops preemption by other processes (a loaded machine)
+    return run, law_t, core_t, step_t
+
+
+def _law_alone(p, run) -> None:
+    """The law alone on the run's recorded states, B = 1, each step timed in 5 passes.
+
+    The minimum per step drops preemption by other processes (a loaded machine)."""
     from types import SimpleNamespace
 
-    from fahv.loop.params import node_parameters, validate
-
-    p = validate("rmpc", node_parameters(design, "rmpc")["rmpc"])
     law1, lanes1 = RMPCLaw(p, 1), Lanes(1, strict=False)
     xs, refs = run.x.copy(), run.x_r.copy()
     xs[:, 4] = run.q_f  # the controller sees q'
@@ -111,8 +98,12 @@ def main() -> None:
             law1.step(k, x, ref, lanes1)
             per[rep, k] = time.perf_counter() - t0
     stats("law step, B = 1, min of 5 passes per step", per.min(axis=0))
-    # a batch: the same recorded states and references stacked B times
-    B = args.batch
+
+
+def _law_batch(p, run, B: int, batch_steps: int) -> None:
+    """The law on a batch: the run's recorded states and references stacked B times."""
+    from types import SimpleNamespace
+
     law = RMPCLaw(p, B)
     lanes = Lanes(B, strict=False)
     rng = np.random.default_rng(0)
@@ -125,6 +116,33 @@ def main() -> None:
         law.step(0, x, ref, lanes)
         times.append((time.perf_counter() - t0) / B)
     stats(f"law step per run, batch of B = {B}", times)
+
+
+def main() -> None:
+    """Run Case 1 with timers around the law and the step; print the figures."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=15000)
+    ap.add_argument("--batch", type=int, default=100)
+    ap.add_argument("--smoke", action="store_true",
+                    help="tiny size (CI: the benchmark still runs)")  # fmt: skip
+    args = ap.parse_args()
+    batch_steps = 200
+    if args.smoke:
+        args.steps, args.batch, batch_steps = SMOKE_STEPS, SMOKE_BATCH, SMOKE_BATCH_STEPS
+        print(f"smoke: {args.steps} steps, a batch of B = {args.batch} over {batch_steps} "
+              "steps (the figures mean nothing)")  # fmt: skip
+    _, design, _ = load_or_design(
+        "offline_design/scenarios/case1_paper.yaml", log=io.StringIO().write, variants=["rmpc"]
+    )
+    run, law_t, core_t, step_t = _timed_run(design, args.steps)
+    stats("law step (RMPCLaw.step), B = 1", law_t)
+    stats("controller core (messages + law), B = 1", core_t)
+    stats("whole in-process step, B = 1", step_t)
+    from fahv.loop.params import node_parameters, validate
+
+    p = validate("rmpc", node_parameters(design, "rmpc")["rmpc"])
+    _law_alone(p, run)
+    _law_batch(p, run, args.batch, batch_steps)
 
 
 if __name__ == "__main__":

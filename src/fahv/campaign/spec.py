@@ -47,12 +47,9 @@ def _ordered(section: str, key: str) -> Check:
     return Check(key, ok, "must be [low, high] with low <= high")
 
 
-def campaign_spec() -> Section:
-    """The campaign-file declaration (fault kinds and variants from their registries).
-
-    One declaration, kept whole: the file's schema reads top to bottom as the file does.
-    """
-    uncertainty = Section(
+def _uncertainty_section() -> Section:
+    """The campaign file's `dispersions.uncertainty` section."""
+    return Section(
         "uncertainty",
         (
             Field("method", "str", "uniform in the box, its corners (index bits), a Latin "
@@ -65,7 +62,11 @@ def campaign_spec() -> Section:
         ),
         "plant parameters p (1 + s_p scale rel_p), s_p in [-1, 1] (sec. 5.1)",
     )  # fmt: skip
-    fault = Section(
+
+
+def _fault_section() -> Section:
+    """The campaign file's `dispersions.fault` section (kinds from the fault registry)."""
+    return Section(
         "fault",
         (
             Field("kinds", "strs", "fault kinds drawn with equal probability (empty: the "
@@ -79,7 +80,11 @@ def campaign_spec() -> Section:
         checks=(_ordered("fault", "onset"), _ordered("fault", "loss"),
                 _ordered("fault", "bias_deg")),
     )  # fmt: skip
-    command = Section(
+
+
+def _command_section() -> Section:
+    """The campaign file's `dispersions.command` section."""
+    return Section(
         "command",
         (
             _range("dh", "altitude step h_c - h0 range (negative: descent)", "ft",
@@ -90,7 +95,11 @@ def campaign_spec() -> Section:
         "command step sizes and directions (kept inside the envelope)",
         checks=(_ordered("command", "dh"), _ordered("command", "dV")),
     )  # fmt: skip
-    initial = Section(
+
+
+def _initial_section() -> Section:
+    """The campaign file's `dispersions.initial` section."""
+    return Section(
         "initial",
         (
             _range("h0", "initial trim altitude range", "ft", lo=0.0, hi=2e5),
@@ -99,7 +108,11 @@ def campaign_spec() -> Section:
         "initial trim point (the plant starts at the trim there)",
         checks=(_ordered("initial", "h0"), _ordered("initial", "V0")),
     )  # fmt: skip
-    requirements = Section(
+
+
+def _requirements_section() -> Section:
+    """The campaign file's `requirements` section."""
+    return Section(
         "requirements",
         (
             Field("attitude_deg", "float", "bound on the attitude errors alpha - alpha_r and "
@@ -116,6 +129,14 @@ def campaign_spec() -> Section:
         ),
         "requirement verdicts of the report",
     )  # fmt: skip
+
+
+def campaign_spec() -> Section:
+    """The campaign-file declaration (fault kinds and variants from their registries).
+
+    The schema reads top to bottom as the file does; each dispersion and the
+    requirements are sections of their own (`_uncertainty_section` ...).
+    """
     return Section(
         "",
         (
@@ -133,9 +154,10 @@ def campaign_spec() -> Section:
                   lo=0.0, default=0.0),
             Field("batch_size", "int", "runs per Dask task (simulated together)", lo=1,
                   hi=10_000, default=50),
-            Section("dispersions", (uncertainty, fault, command, initial),
+            Section("dispersions", (_uncertainty_section(), _fault_section(),
+                                     _command_section(), _initial_section()),
                     "what varies from run to run"),
-            requirements,
+            _requirements_section(),
         ),
         "campaign file",
     )  # fmt: skip

@@ -463,10 +463,14 @@ def cmd_results(args) -> int:
 
 
 def add_parsers(sub) -> None:
-    """Add the parsers of this command group.
+    """Add the parsers of this command group: simulate, sil, paper-figures, results."""
+    _add_simulate_parser(sub)
+    _add_sil_parser(sub)
+    _add_results_parsers(sub)
 
-    One declaration, kept whole: the options of each command read as its usage.
-    """
+
+def _add_simulate_parser(sub) -> None:
+    """`fahv simulate`: the options read as its usage."""
     p = sub.add_parser("simulate", help="in-process closed loop of a scenario, metrics table")
     p.add_argument(
         "case", metavar="scenario", help="scenario file, e.g. offline_design/scenarios/case1.yaml"
@@ -486,6 +490,10 @@ def add_parsers(sub) -> None:
     p.add_argument("--json", action="store_true")
     add_vehicle_option(p)
     p.set_defaults(func=cmd_simulate)
+
+
+def _add_sil_parser(sub) -> None:
+    """`fahv sil`: the options read as its usage."""
     p = sub.add_parser(
         "sil", help="the ROS 2 node graph of a scenario in lockstep, recorded to bags/<run>/ (MCAP)"
     )
@@ -522,6 +530,10 @@ def add_parsers(sub) -> None:
     p.add_argument("--json", action="store_true", help="metrics as JSON")
     add_vehicle_option(p)
     p.set_defaults(func=cmd_sil)
+
+
+def _add_results_parsers(sub) -> None:
+    """`fahv paper-figures` and `fahv results`: the paper's cases, all variants."""
     p = sub.add_parser(
         "paper-figures",
         help="simulate Cases 1 and 2 (all variants, recorded; the paper's law on "
