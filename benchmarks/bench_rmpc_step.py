@@ -44,7 +44,8 @@ def stats(name: str, t) -> None:
 def _timed_run(design, steps: int):
     """Case 1 in process with timers around the law, the controller core and each step.
 
-    Returns the run and the three lists of times [s]."""
+    Returns the run and the three lists of times [s].
+    """
     law_t, core_t, step_t = [], [], []
     law_step, core_step = RMPCLaw.step, ControllerCore.on_inputs
 
@@ -82,7 +83,8 @@ def _timed_run(design, steps: int):
 def _law_alone(p, run) -> None:
     """The law alone on the run's recorded states, B = 1, each step timed in 5 passes.
 
-    The minimum per step drops preemption by other processes (a loaded machine)."""
+    The minimum per step drops preemption by other processes (a loaded machine).
+    """
     from types import SimpleNamespace
 
     law1, lanes1 = RMPCLaw(p, 1), Lanes(1, strict=False)

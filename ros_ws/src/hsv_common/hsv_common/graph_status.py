@@ -126,6 +126,14 @@ class GraphStatus:
             except Exception:  # the context is shutting down: the node is leaving anyway
                 return
 
+    def announce(self, verdict) -> None:
+        """Hold the run's verdict (`fahv.verdict.Verdict`) and publish it at once.
+
+        Every status after carries it, and the peers stop with it (`check_failed_peer`).
+        """
+        self.verdict = verdict
+        self.publish()
+
     def set_state(self, state: str, k: int | None = None) -> None:
         """Change the announced state (and step) and publish it at once."""
         self.state = state
@@ -227,8 +235,7 @@ class GraphStatus:
         """
         ended = self.peers.run_verdict()
         if ended is not None:
-            self.verdict = ended
-            self.publish()
+            self.announce(ended)
             raise RunEnded.of(ended)
         verdict = self.peers.failed_verdict()
         if verdict is not None:

@@ -176,8 +176,7 @@ class LockstepNode(Node):
             try:
                 outputs = self.on_step(self.k, inputs)
             except RunEnded as exc:  # the core ended the run: raised by poll, out of the
-                self.status.verdict = exc.verdict  # callback; announced now, as every
-                self.status.publish()  # status after (the peers stop at once)
+                self.status.announce(exc.verdict)  # callback; the peers stop at once
                 self.ended = exc
                 return
             self.publish(outputs)
@@ -239,8 +238,7 @@ class LockstepNode(Node):
                 try:
                     self.on_ready()
                 except RunEnded as exc:  # e.g. the plant's initial state outside the envelope
-                    self.status.verdict = exc.verdict
-                    self.status.publish()
+                    self.status.announce(exc.verdict)
                     raise
             return
         self.check_watchdog()
