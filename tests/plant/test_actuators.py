@@ -37,7 +37,7 @@ def servo_run(setup, a0, u, n, held=False):
     X, A = tp.x_r[None].copy(), np.array([a0], float)
     out = [A[0].copy()]
     for _ in range(n):
-        X, A = rk4_cm_act(X, A, np.array([u], float), rec, ap, np.array([held]), DT, 1)
+        X, A = rk4_cm_act(X, A, np.array([u], float), rec, ap[None], np.array([held]), DT, 1)
         out.append(A[0].copy())
     return np.array(out)
 

@@ -46,7 +46,7 @@ from fahv.estimation.state_disturbance import StateDisturbance, state_disturbanc
 from fahv.model.actuators import kernel_parameters
 from fahv.model.lpv import PolytopicLPV
 from fahv.model.vehicle import H, V
-from fahv.plant.rk4 import compile_kernels, params_records, rk4_cm, rk4_cm_act
+from fahv.plant.rk4 import compile_kernels, params_records, rk4_cm, rk4_cm_act, servo_lanes
 from fahv.sensors.data import SensorData
 from fahv.sensors.measure import output_matrix
 
@@ -277,6 +277,9 @@ class GainScheduledKalman:
         self.restart(np.ones(len(x0), dtype=bool), x0)
         self.rec = params_records([params] * len(x0))
         self.limits, self.Ts, self.n_sub = limits, float(Ts), int(n_sub)
+        #: The servos once per run, as the kernel takes them (B, 2, 6).
+        self._servo_lanes = (np.zeros((0, 2, 6)) if self.servos is None
+                             else servo_lanes(self.servos, len(x0)))  # fmt: skip
         compile_kernels(self.rec, self.servos)  # the predictor's kernel now, not in a timed step
 
     def restart(self, runs: np.ndarray, x0: np.ndarray) -> None:
@@ -374,7 +377,9 @@ class GainScheduledKalman:
         if y.shape != (len(self.x), self.C.shape[0]):
             raise ValueError(f"estimator: y has shape {y.shape}, expected "
                              f"{(len(self.x), self.C.shape[0])}")  # fmt: skip
-        innovation = y - self.x @ self.C.T
+        # each run's (1, 9) @ (9, n_y) product, as a run alone computes it: a (B, 9) @
+        # (9, n_y) product is one BLAS call whose bits depend on B
+        innovation = y - np.matmul(self.x[:, None, :], self.C.T)[:, 0, :]
         self.z = self.z + np.einsum("bij,bj->bi", self.gains(), innovation)
         return self.x.copy()
 
@@ -396,7 +401,9 @@ class GainScheduledKalman:
             new = np.isnan(a[:, 0])
             a[new] = 0.0
             a[new, ::2] = u[new]
-            x, a = rk4_cm_act(x, np.ascontiguousarray(a), u, self.rec, self.servos,
+            if self._servo_lanes.shape[0] != len(u):
+                self._servo_lanes = servo_lanes(self.servos, len(u))
+            x, a = rk4_cm_act(x, np.ascontiguousarray(a), u, self.rec, self._servo_lanes,
                               np.zeros(len(u), bool), self.Ts, self.n_sub)  # fmt: skip
         rest = self.z[:, 11 + self.n_s :]  # d_s (or nothing)
         if self.disturbance is not None:

@@ -12,8 +12,10 @@ still compare the two with `array_equal`).
 
 Grouping
     Runs share a batch when every parameter except their own (`PER_RUN`: the
-    plant's parameters and initial state, the command and the initial measured state
-    of the nominal part, the whole fault) is the same; other runs go to other groups.
+    plant's parameters, initial state, servo and sensor data, sensor seed and sensor
+    fault, the estimator's initial estimate, the command and the initial measured
+    state of the nominal part, the whole fault) is the same; other runs go to other
+    groups.
 
 Failures
     A run that fails (non-finite state, an infeasible first solve, a bad override)
@@ -32,10 +34,13 @@ import numpy as np
 from fahv.lanes import Lanes
 from fahv.loop.params import controller_node
 from fahv.loop.simulate import History, Loop, RunResult, run_info, run_parameters
+from fahv.spec.plant_dispersion import PLANT_DISPERSION
 
 #: Node parameters a run may have of its own inside a batch (prefixes end with '.').
 PER_RUN = {
-    "plant": ("x0", "params.", "stuck", "stuck_onset"),
+    "plant": ("x0", "params.", "stuck", "stuck_onset", "sensor_seed", "sensor_fault.",
+              *(f.name for f in PLANT_DISPERSION)),
+    "state_estimator": ("x0",),
     "nominal_trajectory": ("x0", "command."),
     "fault_injector": None,  # everything
 }
@@ -55,13 +60,22 @@ def shared_signature(p: dict) -> bytes:
         for name in sorted(p[node]):
             if _own(node, name):
                 continue
-            v = p[node][name]
-            parts.append(f"{node}.{name}=".encode())
-            if isinstance(v, np.ndarray):
-                parts.append(repr(v.shape).encode() + np.ascontiguousarray(v).tobytes())
-            else:
-                parts.append(repr(v).encode())
+            parts.append(f"{node}.{name}=".encode() + _value_bytes(p[node][name]))
     return b"\x00".join(parts)
+
+
+def _value_bytes(v) -> bytes:
+    """Bytes that identify a parameter value: its type, shape and every bit of its numbers.
+
+    Arrays and lists of numbers (the flattened matrices of a parameter file) by their
+    raw bytes, the rest by `repr` (exact for floats too, but slow on long lists).
+    """
+    if isinstance(v, (list, tuple)) and v and all(type(e) is float for e in v):
+        v = np.asarray(v, dtype=float)
+    if isinstance(v, np.ndarray) and v.dtype != object:
+        head = f"{type(v).__name__}{v.dtype.str}{v.shape}".encode()
+        return head + np.ascontiguousarray(v).tobytes()
+    return repr(v).encode()
 
 
 def simulate_batch(

@@ -53,6 +53,7 @@ from fahv.sensors.data import (
     measured_channels,
 )
 from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_from_section
+from fahv.spec.plant_dispersion import sensor_dispersion_of, servo_factors
 from fahv.spec.schema import NO_ESTIMATOR
 from fahv.verdict import RunEnded
 
@@ -80,7 +81,8 @@ def servos_of(vehicle, model: str, node: str = "plant"):
 def sensors_of(p: dict, runs: Sequence[dict], vehicles: dict):
     """The sensors of a batch's plant (parameters `measured`, `vehicle_file`); None: none.
 
-    Each run's seed is its `sensor_seed`, its sensor fault its `sensor_fault.*`;
+    Each run's seed is its `sensor_seed`, its sensor fault its `sensor_fault.*`, its
+    noise levels and biases its `sensor_*` factors (`fahv.spec.plant_dispersion`);
     `measured` = `state` is the exact full-state sensor (`ExactState`).
 
     Parameters
@@ -118,7 +120,8 @@ def sensors_of(p: dict, runs: Sequence[dict], vehicles: dict):
     if key not in vehicles:
         vehicles[key] = load_sensors(p["vehicle_file"] or None)
     seeds = [r["sensor_seed"] for r in runs]
-    return Sensors(vehicles[key], seeds, p["Ts"], measured, faults)
+    dispersion = [sensor_dispersion_of(r) for r in runs]
+    return Sensors(vehicles[key], seeds, p["Ts"], measured, faults, dispersion)
 
 
 def sensor_fault_of(run: dict, measured: Sequence[str]):
@@ -193,7 +196,7 @@ class PlantCore:
             [r["stuck_onset"] if r["stuck"] else np.inf for r in runs], float
         )  # fmt: skip
         self.plant = Plant(params, veh.limits, self.x0, p["Ts"], p["plant_substeps"],
-                           servos_of(veh, p["actuators"]))  # fmt: skip
+                           servos_of(veh, p["actuators"]), [servo_factors(r) for r in runs])  # fmt: skip
         self.sensors = sensors_of(p, runs, vehicles)
         names = () if self.sensors is None else self.sensors.names
         self._channels = (",".join(names),) * len(runs)

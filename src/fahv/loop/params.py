@@ -18,6 +18,7 @@ row-major with their shape in `<name>_shape`. No ROS import here.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 
@@ -32,7 +33,7 @@ from fahv.model.cascade import AIRFRAME_ARRAYS, airframe_arrays
 from fahv.plant.faults import FAULT_KIND, FAULTS, T_ONSET, fault_fields
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.sensors.data import EXACT_STATE
-from fahv.sensors.faults import sensor_fault_fields
+from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_fields
 from fahv.spec.artefacts import variant_gain_key
 from fahv.spec.schema import (
     COMMAND,
@@ -101,12 +102,24 @@ def _estimator_fields() -> tuple[Field, ...]:
 def specs() -> dict[str, tuple[Field, ...]]:
     """Parameters of every loop node, by node name (built from the registries).
 
+    Built once per set of registered laws, nominal sources and fault kinds (a campaign validates
+    every node of every run: the declarations are not rebuilt each time); the caller
+    gets its own dict.
+
     Returns
     -------
     dict
         `{node: (Field, ...)}` for plant, fault_injector, notch_filter,
         nominal_trajectory and each controller node name.
     """
+    entries = tuple((name, entry) for registry in (LAWS, NOMINAL_SOURCES, FAULTS, SENSOR_FAULTS)
+                    for name, entry in registry.items())  # fmt: skip
+    return dict(_specs_of(entries))
+
+
+@functools.lru_cache(maxsize=4)
+def _specs_of(entries: tuple) -> dict[str, tuple[Field, ...]]:
+    """`specs` for the registered `entries` ((name, entry) pairs of the registries)."""
     controller = (
         *COMMON,
         Field("law", "str", "control law", choices=LAWS.names),

@@ -20,7 +20,9 @@ All model functions accept real or complex arrays (complex-step differentiation 
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -431,13 +433,21 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
         ...
     fahv.errors.VehicleDataError: vehicle file not found: no/such/vehicle.yaml
     """
-    data, name = read_vehicle_file(path)
-    vehicle = vehicle_from_mapping(data, name)
+    return _vehicle_of_text(*vehicle_file_text(path))
+
+
+@functools.lru_cache(maxsize=16)
+def _vehicle_of_text(text: str, name: str) -> Vehicle:
+    """The validated vehicle of a file's text (parsed once per process and content)."""
+    vehicle = vehicle_from_mapping(parse_vehicle_text(text, name), name)
     return dataclasses.replace(vehicle, data_hash=physics_hash(vehicle))
 
 
 def read_vehicle_file(path: str | Path | None = None) -> tuple[Any, str]:
     """The parsed YAML of a vehicle file and the name its errors give it.
+
+    The file is read at each call and parsed once per process and content
+    (`parse_vehicle_text`): a campaign's runs read it, they do not parse it again.
 
     Parameters
     ----------
@@ -456,6 +466,30 @@ def read_vehicle_file(path: str | Path | None = None) -> tuple[Any, str]:
     VehicleDataError
         If the file does not exist, cannot be read or is not valid YAML.
     """
+    text, name = vehicle_file_text(path)
+    return parse_vehicle_text(text, name), name
+
+
+def vehicle_file_text(path: str | Path | None = None) -> tuple[str, str]:
+    """The text of a vehicle file and the name its errors give it.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        Vehicle file; `None` reads the packaged one (`DEFAULT_VEHICLE_FILE`).
+
+    Returns
+    -------
+    text : str
+        The file's content.
+    name : str
+        The file's path, or `<packaged>/vehicle_parker2007.yaml`.
+
+    Raises
+    ------
+    VehicleDataError
+        If the file does not exist or cannot be read.
+    """
     if path is None:
         ref = resources.files("fahv.data").joinpath(DEFAULT_VEHICLE_FILE)
         text, name = ref.read_text(), f"<packaged>/{DEFAULT_VEHICLE_FILE}"
@@ -468,8 +502,27 @@ def read_vehicle_file(path: str | Path | None = None) -> tuple[Any, str]:
             raise VehicleDataError(f"vehicle file not found: {name}") from None
         except OSError as exc:
             raise VehicleDataError(f"cannot read vehicle file {name}: {exc}") from None
+    return text, name
+
+
+def parse_vehicle_text(text: str, name: str) -> Any:
+    """The parsed YAML document of a vehicle file's text (a fresh copy at each call).
+
+    Parsed once per process and content (PyYAML's pure-Python loader takes about
+    0.1 s for the packaged file); each caller gets its own copy of the document.
+
+    Raises
+    ------
+    VehicleDataError
+        If the text is not valid YAML (names the file `name`).
+    """
+    return copy.deepcopy(_parsed(text, name))
+
+
+@functools.lru_cache(maxsize=16)
+def _parsed(text: str, name: str) -> Any:
     try:
-        return load_yaml(text), name
+        return load_yaml(text)
     except yaml.YAMLError as exc:
         raise VehicleDataError(f"{name}: not valid YAML: {exc}") from None
 

@@ -75,15 +75,21 @@ class Plant:
         Servo of each input, `{"Phi": Servo, "delta_e": Servo}`
         (`fahv.model.actuators`); None: ideal actuators (no dynamics). The servos
         start at rest at the first command.
+    servo_scale : (B, 3) array_like, optional
+        Per vehicle, factors on its servos' natural frequency omega_n, damping ratio
+        zeta and rate limits (both servos alike; a campaign's actuator dispersion);
+        ones by default (the vehicle file's servos, bit for bit).
 
     Raises
     ------
     ValueError
-        If x0 does not have 9 finite values per vehicle, or the counts differ.
+        If x0 does not have 9 finite values per vehicle, the counts differ, or a
+        servo factor is not positive and finite (zeta: not negative).
     """
 
     def __init__(
-        self, params, limits: InputLimits, x0, Ts: float, n_sub: int, actuators=None
+        self, params, limits: InputLimits, x0, Ts: float, n_sub: int, actuators=None,
+        servo_scale=None,
     ) -> None:
         from fahv.plant import rk4
 
@@ -99,11 +105,14 @@ class Plant:
         self.params: Sequence[VehicleParams] = plist
         self.limits, self.Ts, self.n_sub = limits, float(Ts), int(n_sub)
         self.x = x
-        #: Servo data (2, 6) of the kernel; None for ideal actuators.
+        #: Servo data (B, 2, 6) of the kernel, each vehicle's; None for ideal actuators.
         self.servos = None
         if actuators is not None:
             self._kernel_act = rk4.rk4_cm_act
-            self.servos = kernel_parameters(actuators, limits.u_min, limits.u_max)
+            self.servos = scaled_servos(
+                kernel_parameters(actuators, limits.u_min, limits.u_max),
+                np.ones((len(plist), 3)) if servo_scale is None else servo_scale,
+            )  # fmt: skip
         #: Actuator states (B, 4) [Phi, Phi_dot 1/s, delta_e rad, delta_e_dot rad/s]
         #: (None before the first step; rates zero for ideal actuators).
         self.a: np.ndarray | None = None
@@ -154,3 +163,45 @@ class Plant:
             self.Ts, self.n_sub,
         )  # fmt: skip
         return self.x
+
+
+#: Columns of a servo factor row (`scaled_servos`): what each multiplies.
+SERVO_FACTORS = ("omega_n", "zeta", "rate_limit")
+
+
+def scaled_servos(servos: np.ndarray, factors) -> np.ndarray:
+    """Each vehicle's servo data: `servos` with its natural frequency, damping, rates scaled.
+
+    Parameters
+    ----------
+    servos : (2, 6) ndarray
+        Kernel rows of the vehicle file's servos [zeta, omega_n, rate_limit_incr,
+        rate_limit_decr, min, max] (`fahv.model.actuators.kernel_parameters`).
+    factors : (B, 3) array_like
+        Per vehicle, factors on omega_n, zeta and both rate limits (`SERVO_FACTORS`),
+        applied to both servos; a factor of 1 keeps the value bit for bit.
+
+    Returns
+    -------
+    (B, 2, 6) ndarray
+        The kernel's servo data of each vehicle (`fahv.plant.rk4.rk4_cm_act`).
+
+    Raises
+    ------
+    ValueError
+        If `factors` is not (B, 3), an omega_n or rate factor is not > 0, a zeta
+        factor is negative, or one is not finite.
+    """
+    f = np.asarray(factors, dtype=float)
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise ValueError(f"servo factors of shape {f.shape}, expected (B, 3) {SERVO_FACTORS}")
+    bad = ~np.isfinite(f) | (f[:, [0, 2]] <= 0.0).any(axis=1)[:, None] | (f[:, [1]] < 0.0)
+    if bad.any():
+        b = int(np.flatnonzero(bad.any(axis=1))[0])
+        raise ValueError(f"servo factors {dict(zip(SERVO_FACTORS, f[b].tolist()))} of vehicle "
+                         f"{b}: omega_n and rate_limit must be > 0, zeta >= 0")  # fmt: skip
+    out = np.repeat(np.asarray(servos, dtype=np.float64)[None], len(f), axis=0)
+    out[:, :, 1] *= f[:, 0:1]
+    out[:, :, 0] *= f[:, 1:2]
+    out[:, :, 2:4] *= f[:, 2:3, None]
+    return np.ascontiguousarray(out)

@@ -212,10 +212,10 @@ def rk4_cm_act(X, A, U, P, AP, held, Ts, n_sub):  # pragma: no cover - compiled
         Commands [Phi, delta_e rad] (already saturated).
     P : (B,) ndarray of PARAMS_DTYPE
         Parameters of each vehicle.
-    AP : (2, 6) float64 ndarray
-        Servo of Phi and of delta_e: [zeta, omega_n rad/s, rate_limit_incr,
-        rate_limit_decr (input unit/s, inf: none), min, max]
-        (`fahv.model.actuators.kernel_parameters`).
+    AP : (B, 2, 6) float64 ndarray
+        Servos of each vehicle, of Phi and of delta_e: [zeta, omega_n rad/s,
+        rate_limit_incr, rate_limit_decr (input unit/s, inf: none), min, max]
+        (`fahv.model.actuators.kernel_parameters`; a campaign disperses them per run).
     held : (B,) bool ndarray
         The elevator actuator is held (fault `stuck`): its position and rate frozen.
     Ts : float
@@ -236,26 +236,27 @@ def rk4_cm_act(X, A, U, P, AP, held, Ts, n_sub):  # pragma: no cover - compiled
         vp = P[b]
         uc = U[b]
         h = held[b]
+        ap = AP[b]
         x = X[b].copy()
         a = A[b].copy()
         if h:
             a[3] = 0.0
         for _ in range(n_sub):
-            k1 = dynamics.cm_rhs(x, _position(a, AP), vp)
-            j1 = _servo_rhs(a, uc, AP, h)
+            k1 = dynamics.cm_rhs(x, _position(a, ap), vp)
+            j1 = _servo_rhs(a, uc, ap, h)
             a2 = a + 0.5 * dt * j1
-            k2 = dynamics.cm_rhs(x + 0.5 * dt * k1, _position(a2, AP), vp)
-            j2 = _servo_rhs(a2, uc, AP, h)
+            k2 = dynamics.cm_rhs(x + 0.5 * dt * k1, _position(a2, ap), vp)
+            j2 = _servo_rhs(a2, uc, ap, h)
             a3 = a + 0.5 * dt * j2
-            k3 = dynamics.cm_rhs(x + 0.5 * dt * k2, _position(a3, AP), vp)
-            j3 = _servo_rhs(a3, uc, AP, h)
+            k3 = dynamics.cm_rhs(x + 0.5 * dt * k2, _position(a3, ap), vp)
+            j3 = _servo_rhs(a3, uc, ap, h)
             a4 = a + dt * j3
-            k4 = dynamics.cm_rhs(x + dt * k3, _position(a4, AP), vp)
-            j4 = _servo_rhs(a4, uc, AP, h)
+            k4 = dynamics.cm_rhs(x + dt * k3, _position(a4, ap), vp)
+            j4 = _servo_rhs(a4, uc, ap, h)
             x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
             a_prev = a
             a = a + dt / 6.0 * (j1 + 2.0 * j2 + 2.0 * j3 + j4)
-            _limit(a, a_prev, AP, dt)
+            _limit(a, a_prev, ap, dt)
         out[b] = x
         out_a[b] = a
     return out, out_a
@@ -277,10 +278,26 @@ def compile_kernels(P: np.ndarray, servos: np.ndarray | None = None) -> None:
     ----------
     P : (B,) ndarray of PARAMS_DTYPE
         Parameter records (the first one is used).
-    servos : (2, 6) ndarray, optional
-        Servo data of `rk4_cm_act` (`fahv.model.actuators.kernel_parameters`).
+    servos : (2, 6) or (B, 2, 6) ndarray, optional
+        Servo data of `rk4_cm_act` (`fahv.model.actuators.kernel_parameters`; the
+        first vehicle's is used).
     """
     X, U, P1 = np.ones((1, 9)), np.zeros((1, 2)), np.ascontiguousarray(P[:1])
     rk4_cm(X, U, P1, 0.0, 1)
     if servos is not None:
-        rk4_cm_act(X, np.zeros((1, 4)), U, P1, servos, np.zeros(1, bool), 0.0, 1)
+        AP = np.ascontiguousarray(np.reshape(servos, (-1, 2, 6))[:1], dtype=np.float64)
+        rk4_cm_act(X, np.zeros((1, 4)), U, P1, AP, np.zeros(1, bool), 0.0, 1)
+
+
+def servo_lanes(servos: np.ndarray, n_runs: int) -> np.ndarray:
+    """Servo data (2, 6) repeated for `n_runs` vehicles: the (B, 2, 6) of `rk4_cm_act`.
+
+    Raises
+    ------
+    ValueError
+        If `servos` is not of shape (2, 6) or (n_runs, 2, 6).
+    """
+    AP = np.asarray(servos, dtype=np.float64)
+    if AP.shape not in ((2, 6), (n_runs, 2, 6)):
+        raise ValueError(f"servo data of shape {AP.shape}, expected (2, 6) or ({n_runs}, 2, 6)")
+    return np.ascontiguousarray(np.broadcast_to(AP, (n_runs, 2, 6)))

@@ -16,6 +16,7 @@ Angles may be given in deg (deg/s for rates): they are converted to rad.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +24,7 @@ from typing import Any
 
 from fahv.errors import VehicleDataError
 from fahv.model.entries import check_section, read_entry, unit_factors
-from fahv.model.vehicle import read_vehicle_file
+from fahv.model.vehicle import parse_vehicle_text, vehicle_file_text
 
 #: Measurable channels, in output order.
 CHANNELS: tuple[str, ...] = ("h", "V", "theta", "q", "alpha")
@@ -248,8 +249,13 @@ def load_sensors(path: str | Path | None = None) -> SensorData:
     >>> s.channels["V"].stddev, round(math.degrees(s.channels["q"].stddev), 6)
     (1.0, 0.18)
     """
-    data, name = read_vehicle_file(path)
-    return sensors_from_mapping(data, name)
+    return _sensors_of_text(*vehicle_file_text(path))
+
+
+@functools.lru_cache(maxsize=16)
+def _sensors_of_text(text: str, name: str) -> SensorData:
+    """The validated sensors of a vehicle file's text (once per process and content)."""
+    return sensors_from_mapping(parse_vehicle_text(text, name), name)
 
 
 def replace_channel(data: SensorData, name: str, **changes: Any) -> SensorData:

@@ -158,6 +158,31 @@ def noise_bound(stddev: float, n_steps: int, p: float) -> float:
     return stddev * -NormalDist().inv_cdf((1.0 - p) / (2.0 * n_steps))
 
 
+#: Columns of a run's sensor dispersion (`Sensors`' `dispersion`): factor on every
+#: channel's white-noise stddev, factor on its turn-on bias stddev, shift of its turn-on
+#: bias mean [its white-noise stddevs].
+SENSOR_DISPERSION = ("stddev", "bias_stddev", "bias_mean")
+
+
+def sensor_dispersion(dispersion, n_runs: int) -> np.ndarray:
+    """The (B, 3) sensor dispersion of `n_runs` runs (`SENSOR_DISPERSION`); None: none.
+
+    Raises
+    ------
+    ValueError
+        If it is not (B, 3), not finite, or a factor is negative.
+    """
+    if dispersion is None:
+        out = np.zeros((n_runs, 3))
+        out[:, :2] = 1.0
+        return out
+    d = np.asarray(dispersion, dtype=float)
+    if d.shape != (n_runs, 3) or not np.all(np.isfinite(d)) or (d[:, :2] < 0.0).any():
+        raise ValueError(f"sensor dispersion {d.tolist()}: expected ({n_runs}, 3) finite "
+                         f"values {SENSOR_DISPERSION}, the factors >= 0")  # fmt: skip
+    return d
+
+
 class Sensors:
     """The sensors of B runs: y_k (B, n_y) from the true state x_k, step by step.
 
@@ -178,14 +203,21 @@ class Sensors:
         Channels, in output order (default h, V, theta, q).
     faults : sequence of SensorFaultKind or None, optional
         One-run fault of each run (None: healthy), length B.
+    dispersion : (B, 3) array_like, optional
+        Per run, every channel's white-noise stddev and turn-on bias stddev scaled by
+        the first two columns, its turn-on bias mean moved by the third times its
+        stddev (`SENSOR_DISPERSION`; a campaign's sensor dispersion). By default
+        (1, 1, 0): the vehicle file's sensors, bit for bit.
 
     Raises
     ------
     ValueError
-        If `faults` does not have B entries or a fault's channel is not measured.
+        If `faults` does not have B entries, a fault's channel is not measured, or
+        `dispersion` is not (B, 3) with finite, non-negative factors.
     """
 
-    def __init__(self, data, seeds, Ts: float, measured=DEFAULT_MEASURED, faults=None) -> None:
+    def __init__(self, data, seeds, Ts: float, measured=DEFAULT_MEASURED, faults=None,
+                 dispersion=None) -> None:  # fmt: skip
         self.data, self.Ts = data, float(Ts)
         self.seeds = np.atleast_1d(np.asarray(seeds, dtype=np.uint64))
         self.names = tuple(measured)
@@ -226,11 +258,15 @@ class Sensors:
         #: Per channel, the discrete lag's gain 1 - exp(-C_1 Ts); channels without a lag.
         self._lag_gain = np.array([-math.expm1(-n.lag * self.Ts) for n in self.noise])
         self._lagged_off = np.array([n.lag == 0.0 for n in self.noise])
+        disp = sensor_dispersion(dispersion, B)
+        #: White-noise stddev of each run and channel (B, n_y).
+        self._std = self._const[_STD] * disp[:, 0:1]
         #: Turn-on bias of each run and channel (B, n_y), drawn at step 0.
         self.turn_on = np.zeros((B, n_y))
         for j, (c, n) in enumerate(zip(self.names, self.noise, strict=True)):
             z = normals(self.seeds, CHANNEL_IDS[c], 0, STREAM_TURN_ON_BIAS)[:, 0]
-            self.turn_on[:, j] = n.bias_mean + n.bias_stddev * z
+            mean = n.bias_mean + disp[:, 2] * n.stddev
+            self.turn_on[:, j] = mean + (n.bias_stddev * disp[:, 1]) * z
 
     def _delayed(self, z: np.ndarray) -> np.ndarray:
         """True outputs of step k - delay per channel (the first ones before step delay)."""
@@ -258,7 +294,7 @@ class Sensors:
                 a = c[_GM_A]
                 self._gm[:, due] = a * self._gm[:, due] + dyn * np.sqrt(1.0 - a * a) * w
         bias = c[_BIAS] + self.turn_on[:, due] + c[_DRIFT] * k * self.Ts + self._gm[:, due]
-        return z + bias + (c[_MEAN] + c[_STD] * normals_grid(self.seeds, ids, k)[..., 0])
+        return z + bias + (c[_MEAN] + self._std[:, due] * normals_grid(self.seeds, ids, k)[..., 0])
 
     def measure(self, k: int, x: np.ndarray) -> np.ndarray:
         """The measurement of step k from the true states x_k of the B runs.
@@ -337,7 +373,7 @@ class ExactState:
 
 
 def measure_history(data: SensorData, seeds, Ts: float, x: np.ndarray, measured=DEFAULT_MEASURED,
-                    faults=None) -> np.ndarray:  # fmt: skip
+                    faults=None, dispersion=None) -> np.ndarray:  # fmt: skip
     """The measurements of whole runs from their state histories (a run's record).
 
     The same numbers as `Sensors.measure` called step by step during the runs: y is a
@@ -357,6 +393,8 @@ def measure_history(data: SensorData, seeds, Ts: float, x: np.ndarray, measured=
         Channels, in output order.
     faults : sequence of SensorFaultKind or None, optional
         One-run fault of each run (None: healthy).
+    dispersion : (B, 3) array_like, optional
+        Each run's sensor dispersion (`Sensors`); None: none.
 
     Returns
     -------
@@ -365,6 +403,6 @@ def measure_history(data: SensorData, seeds, Ts: float, x: np.ndarray, measured=
     x = np.asarray(x, dtype=float)
     single = x.ndim == 2
     xs = x[:, None, :] if single else x
-    sensors = Sensors(data, seeds, Ts, measured, faults)
+    sensors = Sensors(data, seeds, Ts, measured, faults, dispersion)
     y = np.stack([sensors.measure(k, xs[k]) for k in range(xs.shape[0])])
     return y[:, 0, :] if single else y

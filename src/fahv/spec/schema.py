@@ -32,6 +32,7 @@ from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
 from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
 from fahv.sensors.data import CHANNELS, DEFAULT_MEASURED, EXACT_STATE
 from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_fields
+from fahv.spec.plant_dispersion import PLANT_DISPERSION
 
 TS = Field("Ts", "float", "control period Ts", unit="s", lo=0.0, hi=0.1, lo_open=True)
 DURATION = Field("duration", "float", "simulated duration of a run", unit="s", lo=0.0, lo_open=True)
@@ -179,20 +180,25 @@ PLANT = (
           default=EXACT_STATE),
     Field("sensor_seed", "int", "seed of the run's sensor noise (with the channel and the "
           "step, it keys every draw)", lo=0, default=0),
+    *PLANT_DISPERSION,
 )  # fmt: skip
 
 
 def plant_choices(spec) -> dict:
     """The simulated plant's choices of a run spec or scenario (its `plant` section).
 
-    `actuators`, `measured` and `sensor_seed`, each at its default where the section (or
-    the key) is absent: ideal actuators; seed 0; the exact state for the estimator
-    `none`, h, V, theta and the gyro's q for the Kalman filter.
+    `actuators`, `measured`, `sensor_seed` and the servo and sensor factors
+    (`fahv.spec.plant_dispersion`), each at its default where the section (or the key)
+    is absent: ideal actuators; seed 0; the exact state for the estimator `none`, h,
+    V, theta and the gyro's q for the Kalman filter; the vehicle file's servos and
+    sensors.
 
     Examples
     --------
-    >>> plant_choices({})
-    {'actuators': 'ideal', 'measured': 'state', 'sensor_seed': 0}
+    >>> {k: v for k, v in plant_choices({}).items() if k in ("actuators", "measured")}
+    {'actuators': 'ideal', 'measured': 'state'}
+    >>> plant_choices({})["servo_omega_n_factor"], plant_choices({})["sensor_bias_mean_shift"]
+    (1.0, 0.0)
     >>> plant_choices({"estimator": {"kind": "kalman"}})["measured"]
     'h,V,theta,q'
     """
