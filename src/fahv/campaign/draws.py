@@ -39,7 +39,15 @@ from fahv.sensors.data import EXACT_STATE
 from fahv.spec.schema import plant_choices
 
 #: Random stream of each group of dispersed values.
-STREAMS = {"uncertainty": 0, "fault": 1, "command": 2, "initial": 3}
+STREAMS = {"uncertainty": 0, "fault": 1, "command": 2, "initial": 3, "actuators": 4,
+           "sensors": 5}
+#: Plant parameter (`fahv.spec.plant_dispersion`) of each actuator and sensor dispersion.
+HARDWARE = {
+    "actuators": {"omega_n": "servo_omega_n_factor", "zeta": "servo_zeta_factor",
+                  "rate_limit": "servo_rate_limit_factor"},
+    "sensors": {"stddev": "sensor_stddev_factor", "bias_stddev": "sensor_bias_stddev_factor",
+                "bias_mean": "sensor_bias_mean_shift"},
+}  # fmt: skip
 #: spawn_key of the campaign-wide Latin hypercube.
 LHS_KEY = 2**32 - 1
 
@@ -63,7 +71,7 @@ def _lhs(seed: int, runs: int, d: int) -> np.ndarray:
 
 
 def dispersed_groups(data: dict) -> list[str]:
-    """Groups a campaign disperses, in stream order (uncertainty, fault, command, initial)."""
+    """Groups a campaign disperses, in stream order (uncertainty, ..., actuators, sensors)."""
     d = data["dispersions"]
     out = []
     if d["uncertainty"]["method"] != "none":
@@ -74,6 +82,7 @@ def dispersed_groups(data: dict) -> list[str]:
         out.append("command")
     if d["initial"]["h0"] or d["initial"]["V0"]:
         out.append("initial")
+    out += [group for group in HARDWARE if any(d[group].values())]
     return out
 
 
@@ -105,7 +114,10 @@ def draw(data: dict, case: dict, index: int) -> dict:
         parameters; `fault.kind`, `fault.t_onset` [s], `fault.loss`,
         `fault.rho_f`, `fault.bias_deg` [deg]; `command.dh` [ft], `command.dV`
         [ft/s], `command.h_c`, `command.V_c`; `initial.h0` [ft], `initial.V0`
-        [ft/s]; `sensor_seed` (the run's seed of the sensors' noise, `run_seed`)
+        [ft/s]; `actuators.omega_n`, `actuators.zeta`, `actuators.rate_limit`
+        (factors on the servos'), `sensors.stddev`, `sensors.bias_stddev` (factors on
+        the sensors'), `sensors.bias_mean` [stddevs]; `sensor_seed` (the run's seed of
+        the sensors' noise, `run_seed`)
         when the case's plant measures through noisy sensors (an estimator reads
         them), so that every run draws its own noise.
 
@@ -155,6 +167,12 @@ def draw(data: dict, case: dict, index: int) -> dict:
         V_c = V0 + dV if d["command"]["dV"] else cmd["V_c"]
         out.update({"command.dh": h_c - h0, "command.dV": V_c - V0, "command.h_c": h_c,
                     "command.V_c": V_c})  # fmt: skip
+    for group, keys in HARDWARE.items():
+        if group in groups:  # every factor drawn, the absent ones at the scenario's value
+            rng = run_rng(seed, index, group)
+            plant = plant_choices(case)
+            out.update({f"{group}.{k}": _uniform(rng, d[group][k], plant[name])
+                        for k, name in keys.items()})  # fmt: skip
     if plant_choices(case)["measured"] != EXACT_STATE:
         out["sensor_seed"] = run_seed(seed, index)
     return out
@@ -186,12 +204,18 @@ def overrides(values: dict, design, variant: str) -> dict:
         `fault_injector`: kind, onset and size; `nominal_trajectory`: the command
         and its initial state. Groups that are not dispersed are left out, so the
         run keeps the scenario's values (its seeded parameter draw, fault, command,
-        start); `plant.sensor_seed` when drawn, and the initial trim also as the
+        start); `plant.sensor_seed` and the servo and sensor factors when drawn
+        (`HARDWARE`), and the initial trim also as the
         `state_estimator`'s initial estimate.
     """
     ov: dict = {}
     if "sensor_seed" in values:
         ov["plant"] = {"sensor_seed": int(values["sensor_seed"])}
+    for group, keys in HARDWARE.items():
+        drawn = {name: float(values[f"{group}.{k}"]) for k, name in keys.items()
+                 if f"{group}.{k}" in values}  # fmt: skip
+        if drawn:
+            ov.setdefault("plant", {}).update(drawn)
     s = {k.split(".", 1)[1]: v for k, v in values.items() if k.startswith("s.")}
     if s:
         veh = _vehicle(design.summary.get("provenance", {}).get("vehicle_file", ""))
@@ -246,4 +270,5 @@ def scatter_columns(data: dict) -> list[str]:
                              ("fault.bias_deg", "bias_deg")) if f[key]]  # fmt: skip
     out += [f"command.{k}" for k in ("dh", "dV") if d["command"][k]]
     out += [f"initial.{k}" for k in ("h0", "V0") if d["initial"][k]]
+    out += [f"{group}.{k}" for group, keys in HARDWARE.items() for k in keys if d[group][k]]
     return out

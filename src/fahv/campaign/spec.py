@@ -25,11 +25,14 @@ from fahv.config import Check, Field, Section, validate
 from fahv.config.yamlio import load_yaml
 from fahv.control import VARIANTS
 from fahv.errors import CampaignError, SpecError
+from fahv.model.actuators import IDEAL
 from fahv.model.vehicle import load_vehicle
 from fahv.plant.faults import FAULTS
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
+from fahv.sensors.data import EXACT_STATE
 from fahv.spec.files import SpecFile
 from fahv.spec.scenario import load_scenario
+from fahv.spec.schema import plant_choices
 
 #: Ways to draw the uncertain parameters of sec. 5.1.
 METHODS = ("uniform", "corners", "lhs", "none")
@@ -110,6 +113,41 @@ def _initial_section() -> Section:
     )  # fmt: skip
 
 
+def _actuators_section() -> Section:
+    """The campaign file's `dispersions.actuators` section (factors on the vehicle file's)."""
+    return Section(
+        "actuators",
+        (
+            _range("omega_n", "factor on the natural frequency omega_n of both servos",
+                   lo=0.0, lo_open=True, hi=100.0),
+            _range("zeta", "factor on the damping ratio zeta of both servos", lo=0.0, hi=100.0),
+            _range("rate_limit", "factor on the rate limits of both servos", lo=0.0,
+                   lo_open=True, hi=100.0),
+        ),
+        "the simulated plant's servos (scenario plant.actuators second_order); the Kalman "
+        "filter keeps the vehicle file's",
+        checks=tuple(_ordered("actuators", k) for k in ("omega_n", "zeta", "rate_limit")),
+    )  # fmt: skip
+
+
+def _sensors_section() -> Section:
+    """The campaign file's `dispersions.sensors` section (factors on the vehicle file's)."""
+    return Section(
+        "sensors",
+        (
+            _range("stddev", "factor on every measured channel's white-noise stddev",
+                   lo=0.0, hi=100.0),
+            _range("bias_stddev", "factor on every measured channel's turn-on bias stddev",
+                   lo=0.0, hi=100.0),
+            _range("bias_mean", "shift of every measured channel's turn-on bias mean, in its "
+                   "white-noise stddevs", lo=-100.0, hi=100.0),
+        ),
+        "the simulated plant's sensors (a scenario with an estimator); the Kalman filter "
+        "keeps the vehicle file's",
+        checks=tuple(_ordered("sensors", k) for k in ("stddev", "bias_stddev", "bias_mean")),
+    )  # fmt: skip
+
+
 def _requirements_section() -> Section:
     """The campaign file's `requirements` section."""
     return Section(
@@ -155,7 +193,8 @@ def campaign_spec() -> Section:
             Field("batch_size", "int", "runs per Dask task (simulated together)", lo=1,
                   hi=10_000, default=50),
             Section("dispersions", (_uncertainty_section(), _fault_section(),
-                                     _command_section(), _initial_section()),
+                                     _command_section(), _initial_section(),
+                                     _actuators_section(), _sensors_section()),
                     "what varies from run to run"),
             _requirements_section(),
         ),
@@ -320,6 +359,20 @@ def check_campaign(data: dict, run_spec: SpecFile, source: str, vehicle=None) ->
             raise _fail(source, f"dispersions.command.{key}", f"takes the command outside the "
                         f"flight envelope [{lo}, {hi}]: commanded values {min(ends)} to "
                         f"{max(ends)}")  # fmt: skip
+    _check_hardware(data["dispersions"], run_spec, source)
+
+
+def _check_hardware(d: dict, run_spec: SpecFile, source: str) -> None:
+    """Servo and sensor dispersions need servos and sensors in the scenario's plant."""
+    plant = plant_choices(run_spec.data)
+    if any(d["actuators"].values()) and plant["actuators"] == IDEAL:
+        key = next(k for k, v in d["actuators"].items() if v)
+        raise _fail(source, f"dispersions.actuators.{key}", f"disperses servos, but the "
+                    f"scenario {run_spec.name} flies ideal actuators (plant.actuators)")  # fmt: skip
+    if any(d["sensors"].values()) and plant["measured"] == EXACT_STATE:
+        key = next(k for k, v in d["sensors"].items() if v)
+        raise _fail(source, f"dispersions.sensors.{key}", f"disperses sensors, but the "
+                    f"scenario {run_spec.name} reads the exact state (plant.measured)")  # fmt: skip
 
 
 def campaign_from_mapping(data, source: str = "<mapping>", run_spec: SpecFile | None = None,

@@ -138,18 +138,36 @@ def rk4_cm(X, U, P, Ts, n_sub):  # pragma: no cover - compiled
     B = X.shape[0]
     out = np.empty_like(X)
     dt = Ts / n_sub
+    xs = np.empty(9)  # the stages' states, written in place (no array per stage)
     for b in range(B):
         vp = P[b]
         u = U[b]
         x = X[b].copy()
         for _ in range(n_sub):
             k1 = dynamics.cm_rhs(x, u, vp)
-            k2 = dynamics.cm_rhs(x + 0.5 * dt * k1, u, vp)
-            k3 = dynamics.cm_rhs(x + 0.5 * dt * k2, u, vp)
-            k4 = dynamics.cm_rhs(x + dt * k3, u, vp)
-            x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            _stage(x, 0.5 * dt, k1, xs)
+            k2 = dynamics.cm_rhs(xs, u, vp)
+            _stage(x, 0.5 * dt, k2, xs)
+            k3 = dynamics.cm_rhs(xs, u, vp)
+            _stage(x, dt, k3, xs)
+            k4 = dynamics.cm_rhs(xs, u, vp)
+            _rk4_sum(x, dt / 6.0, k1, k2, k3, k4)
         out[b] = x
     return out
+
+
+@numba.njit(cache=True)
+def _stage(x, c, k, out):  # pragma: no cover - compiled
+    """out = x + c k, element by element (numpy's `x + c * k`, the same operations)."""
+    for i in range(x.size):
+        out[i] = x[i] + c * k[i]
+
+
+@numba.njit(cache=True)
+def _rk4_sum(x, c, k1, k2, k3, k4):  # pragma: no cover - compiled
+    """x <- x + c (k1 + 2 k2 + 2 k3 + k4) in place, in numpy's order of operations."""
+    for i in range(x.size):
+        x[i] = x[i] + c * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
 
 
 @numba.njit(cache=True)
@@ -232,6 +250,7 @@ def rk4_cm_act(X, A, U, P, AP, held, Ts, n_sub):  # pragma: no cover - compiled
     out = np.empty_like(X)
     out_a = np.empty_like(A)
     dt = Ts / n_sub
+    xs = np.empty(9)  # the stages' airframe states, written in place
     for b in range(B):
         vp = P[b]
         uc = U[b]
@@ -245,15 +264,18 @@ def rk4_cm_act(X, A, U, P, AP, held, Ts, n_sub):  # pragma: no cover - compiled
             k1 = dynamics.cm_rhs(x, _position(a, ap), vp)
             j1 = _servo_rhs(a, uc, ap, h)
             a2 = a + 0.5 * dt * j1
-            k2 = dynamics.cm_rhs(x + 0.5 * dt * k1, _position(a2, ap), vp)
+            _stage(x, 0.5 * dt, k1, xs)
+            k2 = dynamics.cm_rhs(xs, _position(a2, ap), vp)
             j2 = _servo_rhs(a2, uc, ap, h)
             a3 = a + 0.5 * dt * j2
-            k3 = dynamics.cm_rhs(x + 0.5 * dt * k2, _position(a3, ap), vp)
+            _stage(x, 0.5 * dt, k2, xs)
+            k3 = dynamics.cm_rhs(xs, _position(a3, ap), vp)
             j3 = _servo_rhs(a3, uc, ap, h)
             a4 = a + dt * j3
-            k4 = dynamics.cm_rhs(x + dt * k3, _position(a4, ap), vp)
+            _stage(x, dt, k3, xs)
+            k4 = dynamics.cm_rhs(xs, _position(a4, ap), vp)
             j4 = _servo_rhs(a4, uc, ap, h)
-            x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            _rk4_sum(x, dt / 6.0, k1, k2, k3, k4)
             a_prev = a
             a = a + dt / 6.0 * (j1 + 2.0 * j2 + 2.0 * j3 + j4)
             _limit(a, a_prev, ap, dt)

@@ -105,6 +105,15 @@ def _kkt_measures(H, f, A_c, bl, bu, y, lam, big, primal_tol, kkt_tol):  # pragm
     Ay = np.empty(ny + nc)
     Ay[:ny] = y
     Ay[ny:] = A_c @ y
+    # A_c' lam from the rows with a multiplier only (an active-set solver's multipliers
+    # are zero off its active set): a second pass over A_c, the QP's largest array and
+    # often out of cache in a campaign batch, would cost as much as the first
+    glam = lam[:ny].copy()
+    for i in range(nc):
+        li = lam[ny + i]
+        if li != 0.0:
+            for j in range(ny):
+                glam[j] += A_c[i, j] * li
     viol = 0.0
     ay_max = 0.0
     for i in range(ny + nc):
@@ -114,7 +123,6 @@ def _kkt_measures(H, f, A_c, bl, bu, y, lam, big, primal_tol, kkt_tol):  # pragm
         if bu[i] < big:
             viol = max(viol, Ay[i] - bu[i])
     grad = H @ y + f
-    glam = lam[:ny] + A_c.T @ lam[ny:]
     res = 0.0
     g_max = 0.0
     l_max = 0.0

@@ -17,6 +17,7 @@ eq. (12) or the CM of eq. (1)-(3).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -148,9 +149,9 @@ class MPCSettings:
     hv_box: np.ndarray | None = None
     x_box: np.ndarray | None = None
 
-    @property
+    @functools.cached_property
     def has_rate_rows(self) -> bool:
-        """True if the QP carries the rate rows of `du_max`."""
+        """True if the QP carries the rate rows of `du_max` (read at every re-plan)."""
         return bool(np.all(np.isfinite(self.du_max)))
 
     @classmethod
