@@ -44,10 +44,10 @@ FIGURES = {
         rf"^law step per run, batch of B = 4\s+n=\s*20\s+median {NUM} ms",
     ],
     "bench_campaign": [
-        rf"^  one run, simulate\(\)\s+{NUM} runs/s\s+\(\s*{NUM} s per 300 s run; 1000 runs:",
-        rf"^  one batch, simulate_batch \(B = 2\)\s+{NUM} runs/s",
-        rf"^  campaign, LocalCluster 1 worker\(s\)\s+{NUM} runs/s",
-        rf"^  two processes get {NUM}x one process",
+        rf"^\| exact state \| one run, `simulate` \| {NUM} \({NUM}\) \|$",
+        rf"^\| implementable \| a batch of 2, `simulate_batch` \| {NUM} \({NUM}\) \|$",
+        rf"^\| implementable \| campaign, 1 worker \| {NUM} \({NUM}\) \|$",
+        rf"^\| implementable \| share of the re-plans .* \| {NUM} % \|$",
     ],
     "bench_certificate": [
         rf"^vertex_levels: 256 vertices x 256 corners of W_8 in {NUM} s \({NUM} ms per "

@@ -1,5 +1,6 @@
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -75,6 +76,20 @@ def _edit(write_campaign, tmp_name, edit):
         (lambda d: d.update(runs=0), "runs", "must be in [1, 1e+06]"),
         (lambda d: d.pop("seed"), "seed", "missing key"),
         (lambda d: d.update(scenario="nope.yaml"), "scenario", "does not load"),
+        # a servo or a sensor that is not physical, before any run
+        (lambda d: d["dispersions"].update(actuators={"omega_n": [0.0, 1.2]}),
+         "dispersions.actuators.omega_n", "must be in (0, 100]"),
+        (lambda d: d["dispersions"].update(actuators={"zeta": [-0.1, 1.0]}),
+         "dispersions.actuators.zeta", "must be in [0, 100]"),
+        (lambda d: d["dispersions"].update(actuators={"rate_limit": [1.1, 0.9]}),
+         "dispersions.actuators.rate_limit", "low <= high"),
+        (lambda d: d["dispersions"].update(sensors={"stddev": [-1.0, 1.0]}),
+         "dispersions.sensors.stddev", "must be in [0, 100]"),
+        # servos and sensors dispersed on a loop that has neither (case1: the paper's)
+        (lambda d: d["dispersions"].update(actuators={"omega_n": [0.9, 1.1]}),
+         "dispersions.actuators.omega_n", "flies ideal actuators"),
+        (lambda d: d["dispersions"].update(sensors={"stddev": [0.9, 1.1]}),
+         "dispersions.sensors.stddev", "reads the exact state"),
     ],
 )  # fmt: skip
 def test_bad_campaign_files_fail_naming_the_key(write_campaign, edit, key, words):
@@ -154,3 +169,30 @@ def test_the_nominal_range_warning_uses_the_campaigns_vehicle(tmp_path):
     assert "[85000, 86500] ft" in h_c and "[85005, 86495] ft" in h_c
     [h_c] = [w for w in load_campaign(path, vehicle=wide).warnings if "commanded h_c" in w]
     assert "[85000, 86500] ft" in h_c and "[85005, 86995] ft" in h_c
+
+
+def test_the_hardware_campaign_disperses_the_servos_and_sensors_on_the_same_draws():
+    """Each run its own servo and sensor factors, within the file's ranges, to the plant;
+    its vehicle, fault and noise seed those of the same run of case1_implementable_1000."""
+    from fahv.campaign.draws import draw, overrides
+    from fahv.certificate.verified import load_or_design
+
+    folder = ROOT / "offline_design" / "campaigns"
+    c = load_campaign(folder / "case1_implementable_hardware.yaml")
+    plain = load_campaign(folder / "case1_implementable_1000.yaml")
+    for i in (0, 7, 999):
+        same = draw(plain.data, plain.run_spec.data, i)
+        assert {k: v for k, v in draw(c.data, c.run_spec.data, i).items() if k in same} == same
+    d = c["dispersions"]
+    assert d["actuators"] == {"omega_n": [0.8, 1.2], "zeta": [0.8, 1.2], "rate_limit": [0.9, 1.1]}
+    assert d["sensors"]["stddev"] == [0.8, 1.25] and d["sensors"]["bias_mean"] == [-0.5, 0.5]
+    values = [draw(c.data, c.run_spec.data, i) for i in range(50)]
+    omega = np.array([v["actuators.omega_n"] for v in values])
+    assert 0.8 <= omega.min() < 0.9 and 1.1 < omega.max() <= 1.2
+    assert all(v["sensors.bias_stddev"] == 1.0 for v in values)  # not dispersed
+    _, design, _ = load_or_design(c.run_spec.path, log=lambda *_: None, allow_uncertified=True,
+                                  variants=["tube_mpc"])  # fmt: skip
+    plant = overrides(values[0], design, "tube_mpc")["plant"]
+    assert plant["servo_omega_n_factor"] == values[0]["actuators.omega_n"]
+    assert plant["sensor_bias_mean_shift"] == values[0]["sensors.bias_mean"]
+    assert plant["sensor_seed"] == values[0]["sensor_seed"]

@@ -136,3 +136,25 @@ def test_ecm_trim_has_zero_filter_states(vehicle):
     tp = trim(vehicle, 85500.0, 7900.0, "ecm", notch=notch)
     m = make_model("ecm", vehicle, notch)
     assert np.max(np.abs(m.f(tp.x_r_ecm, tp.u_r) / m.state_scale(vehicle, notch))) < 1e-8
+
+
+def test_a_vehicle_file_is_parsed_once_per_content(tmp_path, monkeypatch):
+    """A campaign loads the vehicle many times: parsed once per process and content, read
+    again each time, so an edited file is seen; every caller gets its own document."""
+    from fahv.model import vehicle as vehicle_module
+    from fahv.sensors.data import load_sensors
+
+    path = tmp_path / "vehicle.yaml"
+    text = (vehicle_module.resources.files("fahv.data") / "vehicle_parker2007.yaml").read_text()
+    path.write_text(text)
+    calls = []
+    parse = vehicle_module.load_yaml
+    monkeypatch.setattr(vehicle_module, "load_yaml", lambda t: calls.append(1) or parse(t))
+    a = load_vehicle(path)
+    assert load_vehicle(path) is a and load_sensors(path) is load_sensors(path)
+    assert len(calls) == 1
+    doc, _ = vehicle_module.read_vehicle_file(path)
+    doc["params"] = None  # a caller's copy: the cache is untouched
+    assert load_sensors(path) is not None and len(calls) == 1
+    path.write_text(text.replace("name: parker2007-curve-fit", "name: edited"))
+    assert load_vehicle(path).name == "edited" and len(calls) == 2

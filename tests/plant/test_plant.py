@@ -152,3 +152,20 @@ def test_perturbed_records_are_perturb_vectorised_to_the_bit():
         perturbed_records(vp, PAPER_UNCERTAINTY, 1.5 * signs[:2])
     with pytest.raises(ValueError, match="unknown parameter 'mass'"):
         perturbed_records(vp, {"mass": 0.1}, np.zeros((1, 1)))
+
+
+def test_servo_factors_scale_each_vehicles_servos_and_refuse_what_is_not_physical():
+    """Kernel rows [zeta, omega_n, rate_incr, rate_decr, min, max]: omega_n, zeta and both
+    rate limits scaled per vehicle, the position limits kept; ones keep every bit."""
+    from fahv.plant.integrator import scaled_servos
+
+    base = np.array([[0.7, 50.0, 1.0, 2.0, 0.0, 1.5], [0.6, 150.0, 1.7, 1.7, -0.5, 0.5]])
+    out = scaled_servos(base, [[1.0, 1.0, 1.0], [0.5, 2.0, 0.8]])
+    assert out.shape == (2, 2, 6) and np.array_equal(out[0], base)
+    np.testing.assert_array_equal(out[1, :, 1], base[:, 1] * 0.5)
+    np.testing.assert_array_equal(out[1, :, 0], base[:, 0] * 2.0)
+    np.testing.assert_array_equal(out[1, :, 2:4], base[:, 2:4] * 0.8)
+    np.testing.assert_array_equal(out[1, :, 4:], base[:, 4:])
+    for bad in ([0.0, 1.0, 1.0], [1.0, -0.1, 1.0], [1.0, 1.0, 0.0], [1.0, math.nan, 1.0]):
+        with pytest.raises(ValueError, match="omega_n and rate_limit must be > 0, zeta >= 0"):
+            scaled_servos(base, [bad])

@@ -196,3 +196,25 @@ def test_a_dropout_with_a_duration_resumes_sampling():
     y = measure_history(data, [1], 0.02, x, measured=("h",), faults=[fault])[:, 0]
     # steps 5, 6, 7 (t = 0.10, 0.12, 0.14 < 0.16) hold step 4's 1040 ft; step 8 samples again
     np.testing.assert_array_equal(y, [1000, 1010, 1020, 1030, 1040, 1040, 1040, 1040, 1080, 1090])
+
+
+def test_a_runs_sensor_dispersion_scales_its_noise_and_shifts_its_bias():
+    """(stddev x 2, bias_stddev x 1, bias mean + 0.5 stddev): the same draws, the noise
+    twice as large, every channel offset by half its stddev; (1, 1, 0): bit for bit the
+    undispersed sensors. A negative factor is refused."""
+    data = load_sensors()
+    x = np.zeros((3, 9))
+    x[:, 0], x[:, 1] = 85500.0, 7900.0
+    base = Sensors(data, [5, 5, 5], 0.02)
+    disp = Sensors(data, [5, 5, 5], 0.02, dispersion=[[1, 1, 0], [2, 1, 0], [1, 1, 0.5]])
+    true = true_outputs(x, data, base.names)
+    for k in range(20):
+        y0, y1 = base.measure(k, x), disp.measure(k, x)
+        assert np.array_equal(y1[0], y0[0])
+        np.testing.assert_allclose(y1[1] - true[1], 2.0 * (y0[1] - true[1]), rtol=1e-9,
+                                   atol=1e-9 * np.abs(true[1]).max())  # fmt: skip
+        std = np.array([data.channels[c].stddev for c in base.names])
+        np.testing.assert_allclose(y1[2] - y0[2], 0.5 * std, rtol=1e-6,
+                                   atol=1e-9 * np.abs(true[2]).max())  # fmt: skip
+    with pytest.raises(ValueError, match="factors >= 0"):
+        Sensors(data, [5], 0.02, dispersion=[[-1.0, 1.0, 0.0]])

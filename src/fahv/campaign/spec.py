@@ -368,7 +368,8 @@ def _check_hardware(d: dict, run_spec: SpecFile, source: str) -> None:
     if any(d["actuators"].values()) and plant["actuators"] == IDEAL:
         key = next(k for k, v in d["actuators"].items() if v)
         raise _fail(source, f"dispersions.actuators.{key}", f"disperses servos, but the "
-                    f"scenario {run_spec.name} flies ideal actuators (plant.actuators)")  # fmt: skip
+                    f"scenario {run_spec.name} flies ideal actuators "
+                    "(plant.actuators)")  # fmt: skip
     if any(d["sensors"].values()) and plant["measured"] == EXACT_STATE:
         key = next(k for k, v in d["sensors"].items() if v)
         raise _fail(source, f"dispersions.sensors.{key}", f"disperses sensors, but the "

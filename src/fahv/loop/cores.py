@@ -196,7 +196,8 @@ class PlantCore:
             [r["stuck_onset"] if r["stuck"] else np.inf for r in runs], float
         )  # fmt: skip
         self.plant = Plant(params, veh.limits, self.x0, p["Ts"], p["plant_substeps"],
-                           servos_of(veh, p["actuators"]), [servo_factors(r) for r in runs])  # fmt: skip
+                           servos_of(veh, p["actuators"]),
+                           [servo_factors(r) for r in runs])  # fmt: skip
         self.sensors = sensors_of(p, runs, vehicles)
         names = () if self.sensors is None else self.sensors.names
         self._channels = (",".join(names),) * len(runs)

@@ -198,8 +198,9 @@ def scaled_servos(servos: np.ndarray, factors) -> np.ndarray:
     bad = ~np.isfinite(f) | (f[:, [0, 2]] <= 0.0).any(axis=1)[:, None] | (f[:, [1]] < 0.0)
     if bad.any():
         b = int(np.flatnonzero(bad.any(axis=1))[0])
-        raise ValueError(f"servo factors {dict(zip(SERVO_FACTORS, f[b].tolist()))} of vehicle "
-                         f"{b}: omega_n and rate_limit must be > 0, zeta >= 0")  # fmt: skip
+        given = dict(zip(SERVO_FACTORS, f[b].tolist(), strict=True))
+        raise ValueError(f"servo factors {given} of vehicle {b}: omega_n and rate_limit "
+                         "must be > 0, zeta >= 0")  # fmt: skip
     out = np.repeat(np.asarray(servos, dtype=np.float64)[None], len(f), axis=0)
     out[:, :, 1] *= f[:, 0:1]
     out[:, :, 0] *= f[:, 1:2]

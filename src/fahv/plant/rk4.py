@@ -158,14 +158,14 @@ def rk4_cm(X, U, P, Ts, n_sub):  # pragma: no cover - compiled
 
 @numba.njit(cache=True)
 def _stage(x, c, k, out):  # pragma: no cover - compiled
-    """out = x + c k, element by element (numpy's `x + c * k`, the same operations)."""
+    """Write x + c k into `out`, element by element (numpy's `x + c * k`, the same bits)."""
     for i in range(x.size):
         out[i] = x[i] + c * k[i]
 
 
 @numba.njit(cache=True)
 def _rk4_sum(x, c, k1, k2, k3, k4):  # pragma: no cover - compiled
-    """x <- x + c (k1 + 2 k2 + 2 k3 + k4) in place, in numpy's order of operations."""
+    """Add c (k1 + 2 k2 + 2 k3 + k4) to x in place, in numpy's order of operations."""
     for i in range(x.size):
         x[i] = x[i] + c * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
 
