@@ -2,26 +2,30 @@
 
 For the exact-state loop (campaign `case1`: the paper's loop on `cm_certified`) and the
 implementable loop (campaign `case1_implementable_1000`: servos, noisy sensors, the Kalman
-filter), each dispersed as its campaign file says and shortened to DURATION seconds of
-simulated time, the cost of a 300 s run
+filter), each dispersed as its campaign file says, the cost of a 300 s run
 
-- of a single run (`simulate`),
-- of a batch of B runs stepped together (`simulate_batch`, B in BATCHES),
-- of a campaign on a LocalCluster of 1 and of 2 Dask workers (CAMPAIGN_RUNS runs),
+- of a single run (`simulate`) and of a batch of B runs stepped together
+  (`simulate_batch`, B in BATCHES): runs of DURATION seconds, each figure the time of
+  building the runs (the same call for one step) plus their stepping scaled to 300 s;
+- of a campaign of whole 300 s runs on a LocalCluster of 1 and of 2 Dask workers
+  (CAMPAIGN_RUNS runs in batches of half of them, at most 100: cluster start, design
+  scatter, metrics and Parquet writes included),
 
-with the microseconds per step per run and the share of the nominal MPC's re-plans (QP
-rows, solve and KKT re-check: `TrackingMPC.solve`) in the batch of 50.
+with the microseconds per step per run, the share of the nominal MPC's re-plans (QP
+rows, solve and KKT re-check: `TrackingMPC.solve`) in the batch of 50, and where the
+time of the largest batch goes, part by part of the step.
 
 The same measurements run on an earlier commit (`--baseline`, by default the commit
 before the batched implementable loop): a git worktree of it, its own library, campaign
 files and shipped designs, measured by this same script in a process of its own, in the
 same session, alternating with the working tree's so that the machine's load falls on
-both alike. Figures per 300 s run are extrapolated from DURATION-second runs, which hold
-the steps' transient and most of the re-schedulings: a full 300 s run costs less per
-simulated second.
+both alike. The DURATION-second runs hold the steps' transient and most of the QP's
+re-schedulings: their stepping, scaled to 300 s, costs more per simulated second than a
+whole run's (the campaign lines fly whole runs).
 
 Usage: .venv/bin/python benchmarks/bench_campaign.py [--duration S] [--batches 1,10,50,200]
-           [--campaign-runs N] [--baseline REV | --no-baseline] [--write-docs] [--smoke]
+           [--campaign-runs N] [--campaign-duration S] [--baseline REV | --no-baseline]
+           [--write-docs] [--smoke]
 
 `--write-docs` writes the table into docs/results/speed.md (between its
 `bench_campaign` markers). `--smoke` runs the same code path at a tiny size in seconds
@@ -154,26 +158,37 @@ def _campaign_wall(c, runs: int, duration: float, batch: int, workers: int) -> f
 
 
 def measure(loop: str, duration: float, batches: list[int], campaign_runs: int,
-            workers: list[int]) -> dict:  # fmt: skip
-    """Seconds of each measurement of one loop in this process's checkout (a dict)."""
+            workers: list[int], campaign_duration: float = FULL) -> dict:  # fmt: skip
+    """Seconds of each measurement of one loop in this process's checkout (a dict).
+
+    Each entry is (setup [s], wall [s], runs): `setup` the time of building the runs
+    (the same call for one step), `wall` that of the call for `duration` seconds; a
+    campaign's entry is its wall time for `campaign_duration`-second runs, scaled to
+    `duration`, with no setup apart.
+    """
     from fahv.loop.batch import simulate_batch
     from fahv.loop.simulate import simulate
 
     campaign_file, variant = LOOPS[loop]
     c, design, ovs = _design_and_overrides(campaign_file, variant, max(batches))
     simulate(design, variant, 1.0, overrides=ovs[0])  # imports, compiled kernels: not timed
+
+    def clock(f, *args):
+        t0 = time.perf_counter()
+        f(*args)
+        return time.perf_counter() - t0
+
     out: dict = {}
-    t0 = time.perf_counter()
-    simulate(design, variant, duration, overrides=ovs[0])
-    out["single"] = (time.perf_counter() - t0, 1)
+    setup = clock(lambda: simulate(design, variant, TS, overrides=ovs[0]))
+    out["single"] = (setup, clock(lambda: simulate(design, variant, duration, overrides=ovs[0])), 1)
     spent = _qp_clock()
     for b in batches:
+        setup = clock(simulate_batch, design, variant, ovs[:b], TS)  # building the runs
         spent.clear()
-        t0 = time.perf_counter()
-        simulate_batch(design, variant, ovs[:b], duration)
-        out[f"batch {b}"] = (time.perf_counter() - t0, b)
+        wall = clock(simulate_batch, design, variant, ovs[:b], duration)
+        out[f"batch {b}"] = (setup, wall, b)
         if b == 50 or (b == max(batches) and "qp_share" not in out):
-            out["qp_share"] = (sum(spent) / out[f"batch {b}"][0], b)
+            out["qp_share"] = (sum(spent) / wall, b)
     parts = _part_clocks()  # the largest batch once more, each part of the step clocked
     t0 = time.perf_counter()
     simulate_batch(design, variant, ovs[: max(batches)], duration)
@@ -182,9 +197,9 @@ def measure(loop: str, duration: float, batches: list[int], campaign_runs: int,
     parts["rest of the loop (messages, history)"] = wall - sum(parts.values())
     out["parts"] = {"batch": max(batches), "wall": wall, "seconds": parts}
     batch = max(1, min(100, campaign_runs // 2))
-    for w in workers:
-        out[f"campaign {w}"] = (_campaign_wall(c, campaign_runs, duration, batch, w),
-                                campaign_runs)  # fmt: skip
+    for w in workers:  # whole runs: a campaign's setup, scatter and writes as they are
+        wall = _campaign_wall(c, campaign_runs, campaign_duration, batch, w)
+        out[f"campaign {w}"] = (0.0, wall * duration / campaign_duration, campaign_runs)
     return out
 
 
@@ -194,7 +209,8 @@ def _run_checkout(root: Path, args, loop: str) -> dict:
     env = {**os.environ, "PYTHONPATH": str(root / "src")}
     cmd = [sys.executable, str(Path(__file__).resolve()), "--measure", loop,
            "--duration", str(args.duration), "--batches", args.batches,
-           "--campaign-runs", str(args.campaign_runs), "--workers", args.workers]  # fmt: skip
+           "--campaign-runs", str(args.campaign_runs), "--workers", args.workers,
+           "--campaign-duration", str(args.campaign_duration)]  # fmt: skip
     r = subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True)
     if r.returncode:
         sys.exit(f"bench_campaign: {' '.join(cmd)} in {root} failed:\n{r.stderr[-3000:]}")
@@ -209,8 +225,20 @@ def _worktree(rev: str) -> Path:
     return path
 
 
-def _per_run(seconds: float, runs: int, duration: float) -> float:
-    return seconds / runs * FULL / duration
+def _cpu_model() -> str:
+    """The processor's model name (Linux), else what `platform` knows of it."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _per_run(setup: float, wall: float, runs: int, duration: float) -> float:
+    """Seconds per 300 s run: the setup once, the stepping scaled from `duration`."""
+    return (setup + (wall - setup) * FULL / duration) / runs
 
 
 def _rows(results: dict, duration: float) -> list[tuple[str, str, dict]]:
@@ -270,8 +298,8 @@ def parts_table(results: dict, duration: float, version: str) -> str:
 def write_docs(text: str) -> None:
     """Put the table between the markers of docs/results/speed.md."""
     page = DOCS.read_text()
-    head, rest = page.split(MARK[0] + "\n")
-    _, tail = rest.split("\n" + MARK[1])
+    head, rest = page.split(MARK[0], 1)
+    _, tail = rest.split(MARK[1], 1)
     DOCS.write_text(head + MARK[0] + "\n" + text + "\n" + MARK[1] + tail)
 
 
@@ -279,7 +307,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=20.0, help="simulated time per run [s]")
     ap.add_argument("--batches", default="1,10,50,200", help="batch sizes B, comma-separated")
-    ap.add_argument("--campaign-runs", type=int, default=40, help="runs of each campaign")
+    ap.add_argument("--campaign-runs", type=int, default=20, help="runs of each campaign")
+    ap.add_argument("--campaign-duration", type=float, default=FULL,
+                    help="simulated time of each campaign run [s]")  # fmt: skip
     ap.add_argument("--workers", default="1,2", help="worker counts of the campaigns")
     ap.add_argument("--baseline", default=BASELINE, help="commit measured beside the tree")
     ap.add_argument("--no-baseline", action="store_true", help="the working tree alone")
@@ -289,18 +319,22 @@ def main() -> None:
     args = ap.parse_args()
     if args.smoke:
         args.duration, args.batches, args.campaign_runs, args.workers = 1.0, "1,2", 2, "1"
+        args.campaign_duration = 1.0
         args.no_baseline = True
     if args.measure:
         out = measure(args.measure, args.duration, [int(b) for b in args.batches.split(",")],
-                      args.campaign_runs, [int(w) for w in args.workers.split(",")])  # fmt: skip
+                      args.campaign_runs, [int(w) for w in args.workers.split(",")],
+                      args.campaign_duration)  # fmt: skip
         print(json.dumps(out))
         return
     checkouts = {"working tree": ROOT}
     if not args.no_baseline:
         checkouts = {args.baseline: _worktree(args.baseline), **checkouts}
-    print(f"{platform.node()}: {os.cpu_count()} cores, {platform.processor() or platform.machine()}"
-          f"; {args.duration:g} s runs, batches {args.batches}, campaigns of "
-          f"{args.campaign_runs} runs on {args.workers} worker(s)")  # fmt: skip
+    machine = (f"{_cpu_model()}, {os.cpu_count()} cores; runs of {args.duration:g} s alone and "
+               f"in batches of {args.batches} (each figure: the runs' building once, their "
+               f"stepping scaled to 300 s), campaigns of {args.campaign_runs} runs of "
+               f"{args.campaign_duration:g} s on {args.workers} worker(s)")  # fmt: skip
+    print(machine)
     results: dict = {loop: {} for loop in LOOPS}
     try:
         for loop in LOOPS:  # the versions alternate loop by loop (the machine's load on both)
@@ -314,7 +348,7 @@ def main() -> None:
             if root != ROOT:
                 subprocess.run(["git", "worktree", "remove", "--force", str(root)], cwd=ROOT,
                                capture_output=True)  # fmt: skip
-    text = table(results, args.duration, list(checkouts))
+    text = f"Measured on: {machine}.\n\n" + table(results, args.duration, list(checkouts))
     batch = results[next(iter(LOOPS))]["working tree"]["parts"]["batch"]
     text += (f"\n\nWhere the time of a batch of {batch} goes in the working tree (each part "
              "of the step clocked in process):\n\n"

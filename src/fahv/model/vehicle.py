@@ -438,8 +438,14 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
 
 @functools.lru_cache(maxsize=16)
 def _vehicle_of_text(text: str, name: str) -> Vehicle:
-    """The validated vehicle of a file's text (parsed once per process and content)."""
+    """The validated vehicle of a file's text (parsed once per process and content).
+
+    Every caller shares it: its arrays are read-only, so that no caller changes another's
+    vehicle (a change raises where it is made).
+    """
     vehicle = vehicle_from_mapping(parse_vehicle_text(text, name), name)
+    for array in (vehicle.state_scale, vehicle.input_scale):
+        array.setflags(write=False)
     return dataclasses.replace(vehicle, data_hash=physics_hash(vehicle))
 
 
