@@ -517,6 +517,18 @@ def parse_vehicle_text(text: str, name: str) -> Any:
     Parsed once per process and content (PyYAML's pure-Python loader takes about
     0.1 s for the packaged file); each caller gets its own copy of the document.
 
+    Parameters
+    ----------
+    text : str
+        The file's content (`vehicle_file_text`).
+    name : str
+        The name its errors give the file.
+
+    Returns
+    -------
+    Any
+        The parsed document (its sections are checked by their readers).
+
     Raises
     ------
     VehicleDataError
