@@ -73,21 +73,25 @@ def _design_and_overrides(campaign_file: str, variant: str, n: int):
     return c, design, [overrides(draw(c.data, design.case, i), design, variant) for i in range(n)]
 
 
+def _clocked(f, add):
+    """`f` with a clock: each call's duration [s] passed to `add`."""
+
+    def run(*args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return f(*args, **kwargs)
+        finally:
+            add(time.perf_counter() - t0)
+
+    return run
+
+
 def _qp_clock():
     """Wrap `TrackingMPC.solve` with a clock; returns the list of its durations [s]."""
     from fahv.control.mpc import tracking
 
     spent: list[float] = []
-    solve = tracking.TrackingMPC.solve
-
-    def timed(self, *args, **kwargs):
-        t0 = time.perf_counter()
-        try:
-            return solve(self, *args, **kwargs)
-        finally:
-            spent.append(time.perf_counter() - t0)
-
-    tracking.TrackingMPC.solve = timed
+    tracking.TrackingMPC.solve = _clocked(tracking.TrackingMPC.solve, spent.append)
     return spent
 
 
@@ -116,13 +120,7 @@ def _part_clocks():
     spent["nominal MPC: re-plans (QP)"] = 0.0
 
     def clocked(label, f):
-        def run(*args, **kwargs):
-            t0 = time.perf_counter()
-            try:
-                return f(*args, **kwargs)
-            finally:
-                spent[label] += time.perf_counter() - t0
-        return run
+        return _clocked(f, lambda dt: spent.__setitem__(label, spent[label] + dt))
 
     build = sim.Loop.__init__
 
