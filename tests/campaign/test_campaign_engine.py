@@ -248,6 +248,11 @@ def test_report_command_prints_a_summary_and_the_path(reference, capsys):
     assert "\n  all, certified | not certified draws: tube_mpc 0/0 | " in text
     rep = (out / "report" / "report.md").read_text()
     assert "## Worst 3 runs per metric" in rep
+    # every reason a draw is not certified with its numbers, no template left ('#')
+    reasons = rep.split("Why draws are not certified")[1].split("\n## ")[0]
+    listed = [line for line in reasons.splitlines() if line.startswith("- ")]
+    assert listed and all("#" not in line for line in listed), reasons
+    assert any(re.search(r"onset loss [\d.]+ to [\d.]+ % above", line) for line in listed)
     att = sum(verdicts(r, c["requirements"])["attitude"] for r in store.read_rows(out))
     assert re.search(rf"attitude\s+{att}/12 ", text), text
     # the worst-run tables print what their label says: |h - h_c|, |V - V_c| (absolute)

@@ -196,3 +196,30 @@ def test_the_hardware_campaign_disperses_the_servos_and_sensors_on_the_same_draw
     assert plant["servo_omega_n_factor"] == values[0]["actuators.omega_n"]
     assert plant["sensor_bias_mean_shift"] == values[0]["sensors.bias_mean"]
     assert plant["sensor_seed"] == values[0]["sensor_seed"]
+
+
+def test_a_copied_campaign_file_runs_sized_from_the_command_line(tmp_path, monkeypatch, capsys):
+    """A shipped campaign copied elsewhere finds its scenario by name; --runs and
+    --duration size it without editing it, into a folder named with its size."""
+    from fahv.cli import campaign as cli
+    from fahv.runs.workspace import ROOT
+
+    copy = tmp_path / "elsewhere" / "case1.yaml"
+    copy.parent.mkdir()
+    copy.write_text((ROOT / "offline_design" / "campaigns" / "case1.yaml").read_text())
+    seen = {}
+
+    def capture(campaign, out, **_):
+        seen.update(campaign=campaign, out=out)
+        raise CampaignError("stopped by the test")
+
+    monkeypatch.setattr(cli, "run_campaign", capture)
+    assert main(["campaign", str(copy), "--runs", "20", "--duration", "60"]) == 2
+    c = seen["campaign"]
+    assert (c.data["runs"], c.data["duration"]) == (20, 60.0)
+    assert Path(c.run_spec.path).resolve() == (ROOT / "offline_design" / "scenarios"
+                                               / "case1.yaml").resolve()  # fmt: skip
+    assert seen["out"].name == "case1-20runs-60s"
+    assert "campaign case1: 20 draws x 1 variant(s), runs of 60 s" in capsys.readouterr().err
+    with pytest.raises(CampaignError, match="'runs' must be in"):
+        load_campaign(copy, runs=0)

@@ -79,7 +79,7 @@ def test_the_certified_and_the_not_certified_draws_are_counted_apart():
     """Synthetic rows of two variants over five draws: draws 0 and 1 certified, 2 to 4
     not (an onset beyond the certified one, a fault kind outside the design's, an open
     certificate); each group gets its own pass rates and Clopper-Pearson bounds, and the
-    reasons are counted with their numbers (not those in names) as #."""
+    reasons are counted with each number (not those in names) as its range over the draws."""
     from fahv.campaign.report import Report, coverage_lines, failure_bound
 
     onset = "onset loss {} % above the certified 8.07 %"
@@ -108,7 +108,7 @@ def test_the_certified_and_the_not_certified_draws_are_counted_apart():
         "| settled within 60 s of the command | 2/2 (100.0 %), p_fail < 0.776 | "
         "1/2 (50.0 %), p_fail < 0.975 |" in text
     )
-    assert "- 2 x onset loss # % above the certified # %" in text
+    assert "- 2 x onset loss 12.5 to 20 % above the certified 8.07 %" in text
     assert f"- 1 x {stuck}" in text and f"- 1 x {paper}" in text
     rep = Report("", {v: {k: (0, 0, 0.0) for k, _ in REQUIREMENTS} for v in "ab"}, [], 10, table)
     assert "  all, certified | not certified draws: a 2/2 | 3/3; b 1/2 | 0/3" in rep.summary()

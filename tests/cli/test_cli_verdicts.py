@@ -45,6 +45,15 @@ COVERAGE = {
     "bias": "not certified: onset of a 2 deg bias (the onset lines certify losses only)",
     **{k: OUTSIDE.format(k) for k in ("stuck", "dropout", "hardover", "elevator_travel")},
 }
+#: The coverage line each run prints: which part of the run the certificate covers.
+UP_TO = "certified up to the fault's onset at t = 20 s, not after it: "
+PRINTED = {
+    **COVERAGE,
+    "none": "certified: the certificate covers the whole run",
+    "loss_of_effectiveness": UP_TO + COVERAGE["loss_of_effectiveness"].removeprefix(
+        "not certified: "),
+    "bias": UP_TO + COVERAGE["bias"].removeprefix("not certified: "),
+}
 
 
 @pytest.fixture
@@ -61,7 +70,8 @@ def plugin_faults(monkeypatch):
 def case1_with(tmp_path: Path, kind: str, actuators: str | None = None) -> Path:
     """A copy of Case 1 with the fault `kind` at `ONSET` (and an actuator model)."""
     spec = yaml.safe_load(CASE1.read_text())
-    spec["fault"] = {"kind": kind, "t_onset": ONSET, **PARAMS.get(kind, {})}
+    onset = {} if kind == "none" else {"t_onset": ONSET}  # none has no onset
+    spec["fault"] = {"kind": kind, **onset, **PARAMS.get(kind, {})}
     if actuators is not None:
         spec["plant"] = {"actuators": actuators}
     path = tmp_path / f"case1_{kind}.yaml"
@@ -84,7 +94,7 @@ def simulate_kind(kind: str, tmp_path: Path, capsys, actuators: str | None = Non
     assert "Traceback" not in err
     # the coverage verdict, once, before the metrics; the same in the run file
     assert printed.out.count("coverage: ") == 1
-    assert f"coverage: {COVERAGE[kind]}\ncase case1, design " in printed.out
+    assert f"coverage: {PRINTED[kind]}\ncase case1, design " in printed.out
     (bag,) = out.iterdir()
     rec = read_run(bag)
     assert rec.metadata["coverage"] == COVERAGE[kind]
@@ -143,6 +153,7 @@ def test_actuator_faults_with_servo_dynamics_end_with_their_verdict(
               "model: the tube and the nominal ellipsoid are certified for ideal actuators")
     both = COVERAGE[kind].replace("not certified: ", f"not certified: {servos}; ")
     monkeypatch.setitem(COVERAGE, kind, both)
+    monkeypatch.setitem(PRINTED, kind, both)
     rc, err, rec = simulate_kind(kind, tmp_path, capsys, "second_order")
     assert "the actuator model 'second_order' (plant.actuators) is not in the design" in err
     check_verdict(kind, rc, err, rec, capsys)

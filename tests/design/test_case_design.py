@@ -47,6 +47,17 @@ def test_scenario_files_load():
         (lambda d: d.pop("rmpc"), "missing section 'rmpc' .required when a variant uses"),
         (lambda d: d["disturbance"].update(sample=3), "unknown key 'disturbance.sample'"),
         (lambda d: d.pop("Ts"), "missing key 'Ts'"),
+        # a key of another fault kind is refused, naming the kind it belongs to
+        (lambda d: d["fault"].update(kind="bias", bias_deg=1.0),
+         r"key 'fault.rho_f' is used only when fault.kind is loss_of_effectiveness, and here "
+         r"it is not \(fault.kind is 'bias'\)"),
+        (lambda d: d["fault"].update(kind="stuck"), r"key 'fault.rho_f' .*'stuck'"),
+        (lambda d: d["fault"].update(kind="hardover", side=1.0), r"'fault.rho_f' .*'hardover'"),
+        (lambda d: d["fault"].update(kind="dropout"), r"'fault.rho_f' .*'dropout'"),
+        (lambda d: d["fault"].update(bias_deg=0.0), r"'fault.bias_deg' is used only when "
+         r"fault.kind is bias"),
+        (lambda d: d["command"].update(t_ramp=5.0), r"'command.t_ramp' is used only when "
+         r"command.kind is ramp"),
     ],
 )
 def test_bad_case_rejected_naming_key(raw, mutate, match):
@@ -54,6 +65,13 @@ def test_bad_case_rejected_naming_key(raw, mutate, match):
     mutate(d)
     with pytest.raises(SpecError, match=match):
         spec_file(d, "bad.yaml")
+
+
+def test_an_unused_key_holding_its_default_is_accepted(raw):
+    """`t_ramp: 0.0` under a step means what its absence means: nothing is ignored."""
+    d = copy.deepcopy(raw)
+    d["command"].update(kind="step", t_ramp=0.0)
+    assert spec_file(d, "ok.yaml")["command"]["t_ramp"] == 0.0
 
 
 def test_missing_or_broken_case_file(tmp_path):

@@ -10,8 +10,8 @@ from fahv.design.pipeline import run_design
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import read_run, run_result_of
+from fahv.runs.judged import run_vehicle
 from fahv.runs.sil import run_sil
-from fahv.runs.tools import run_vehicle
 from fahv.spec.artefacts import load_design, save_design, stale_reason
 from fahv.spec.files import spec_file
 

@@ -47,6 +47,7 @@ from fahv.model.vehicle import ALPHA, THETA, H, V, load_vehicle
 from fahv.runs.metrics import metrics
 from fahv.runs.sil import run_coverage
 from fahv.spec.artefacts import load_design, save_design
+from fahv.spec.plant_dispersion import rate_limit_factor
 from fahv.version import __version__
 
 #: Decimation of the stored trajectories [s between samples].
@@ -126,7 +127,9 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
         results[j] = res
     veh = _vehicle(design.summary.get("provenance", {}).get("vehicle_file", ""))
     rows, trajs = [], []
-    for i, vals, res, cov in zip(indices, values, results, covered, strict=True):
+    factors = dict(zip(where, (rate_limit_factor(case, ov) for ov in ovs), strict=True))
+    for j, (i, vals, res, cov) in enumerate(zip(indices, values, results, covered,
+                                                strict=True)):  # fmt: skip
         row = {"index": int(i), "variant": variant, "campaign_seed": seed,
                "run_seed": run_seed(seed, i), **vals, "coverage": cov}  # fmt: skip
         failure = f"{type(res).__name__}: {res}" if isinstance(res, BaseException) else None
@@ -136,7 +139,8 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
         else:
             # a failed run keeps the metrics and trajectory of the steps it flew
             try:
-                m = metrics(run, veh.limits)
+                # judged against the rates of the run's own (dispersed) servos
+                m = metrics(run, veh.limits.with_rate_factor(factors.get(j, 1.0)))
             except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
                 why = f"metrics: {type(exc).__name__}: {exc}"
                 row.update(status="failed", reason=failure or why)

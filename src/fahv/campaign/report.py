@@ -45,6 +45,7 @@ from fahv.campaign.draws import scatter_columns
 from fahv.campaign.figures import WORST_METRICS, draw_figures, metric
 from fahv.campaign.paired import paired_figures, paired_stats, paired_text
 from fahv.spec.coverage import NOT_CERTIFIED, is_certified
+from fahv.spec.requirements import judge, limits_of
 
 #: Requirements in report order: (key, description).
 REQUIREMENTS = (
@@ -140,21 +141,9 @@ def nominal_in_range(row: dict, certified: dict | None) -> bool | None:
 
 
 def _each(row: dict, req: dict) -> dict[str, bool | None]:
-    """The verdicts of `verdicts` but "all"."""
-    att = max(metric(row, "alpha_err_max_deg"), metric(row, "theta_err_max_deg"))
-    tube = metric(row, "tube_fraction_inside")
-    rates = metric(row, "input_rate_violations")
-    settle = metric(row, "settling_after_command_s")
-    return {
-        "completes": row["status"] == "ok",
-        "attitude": bool(att <= req["attitude_deg"]),
-        "input_limits": metric(row, "input_limit_violations") == 0,
-        "input_rates": None if math.isnan(rates) else bool(rates == 0),
-        "tube": None if math.isnan(tube) else bool(tube == 1.0),
-        "settling": bool(settle <= req["settling_s"]),
-        "final_h": bool(abs(metric(row, "h_err_final_ft")) <= req["h_final_ft"]),
-        "final_V": bool(abs(metric(row, "V_err_final_fps")) <= req["V_final_fps"]),
-    }
+    """The verdicts of `verdicts` but "all" (`fahv.spec.requirements.judge`)."""
+    judged = judge(row, limits_of({"requirements": req}), completed=row["status"] == "ok")
+    return {j.requirement.key: j.passed for j in judged}
 
 
 @dataclass
@@ -180,21 +169,28 @@ class Report:
     figures: list
     n_runs: int
     by_coverage: dict = dataclass_field(default_factory=dict)
+    confidence: float = 0.95
 
     def summary(self) -> str:
         """A few lines for the terminal: runs, then each requirement's pass count per variant.
 
-        The whole report (worst runs, figures) is the file `DIR/report/report.md`.
+        Each count with its pass rate and the upper bound on the failure probability
+        (`failure_bound` at the campaign's confidence). The whole report (worst runs,
+        figures) is the file `DIR/report/report.md`.
         """
         variants = list(self.table)
         width = max(len(k) for k, _ in REQUIREMENTS)
-        lines = [f"{self.n_runs} runs; requirement: runs passing / applicable per variant"]
-        lines.append(f"  {'':<{width}}  " + "  ".join(f"{v:>18}" for v in variants))
+        lines = [f"{self.n_runs} runs; requirement: runs passing / applicable per variant "
+                 f"(pass rate; failure probability below the bound at confidence "
+                 f"{self.confidence:g}, Clopper-Pearson)"]  # fmt: skip
+        lines.append(f"  {'':<{width}}  " + "  ".join(f"{v:>34}" for v in variants))
         for key, _ in REQUIREMENTS:
             cells = []
             for v in variants:
-                ok, n, _bound = self.table[v][key]
-                cells.append(f"{'n/a' if n == 0 else f'{ok}/{n} ({100.0 * ok / n:.1f} %)':>18}")
+                ok, n, bound = self.table[v][key]
+                cell = "n/a" if n == 0 else (f"{ok}/{n} ({100.0 * ok / n:.1f} %; p_fail < "
+                                             f"{100.0 * bound:.2g} %)")  # fmt: skip
+                cells.append(f"{cell:>34}")
             lines.append(f"  {key:<{width}}  " + "  ".join(cells))
         if self.by_coverage:  # "every requirement at once" of each group of draws
             c, u = (self.by_coverage[g] for g in COVERAGE_GROUPS)
@@ -286,7 +282,7 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
     rep = out / "report"
     rep.mkdir(exist_ok=True)
     (rep / "report.md").write_text(text)
-    return Report(text, table, figs, len(rows), by_coverage)
+    return Report(text, table, figs, len(rows), by_coverage, req["confidence"])
 
 
 def header_lines(man: dict, rows: list[dict]) -> list[str]:
@@ -430,15 +426,54 @@ def coverage_lines(data: dict, per_variant: dict, certified=None) -> tuple[dict,
         verd = {v: [verdicts(r, req, certified) for r in rs] for v, rs in sub.items()}
         table[group], rate = rate_table(data, verd)
         lines += ["", f"### {group}: {n} of {len(draws)} draws", ""] + rate
-    why = Counter(
-        re.sub(r"(?<![A-Za-z_])-?\d+(\.\d+)?", "#", reason)  # not in names: case1_paper
-        for c in draws.values() if c.startswith(NOT_CERTIFIED)
+    why = reason_counts(
+        reason for c in draws.values() if c.startswith(NOT_CERTIFIED)
         for reason in c.removeprefix(NOT_CERTIFIED).split("; ")
     )  # fmt: skip
     if why:
-        lines += ["", "Why draws are not certified (draws per reason):", ""]
-        lines += [f"- {n} x {reason}" for reason, n in why.most_common()]
+        lines += ["", "Why draws are not certified (draws per reason, the range of each "
+                  "number over those draws):", ""]  # fmt: skip
+        lines += [f"- {n} x {reason}" for reason, n in why]
     return table, lines
+
+
+#: A number in a reason (not inside a name such as case1_paper).
+_NUMBER = re.compile(r"(?<![A-Za-z_\d.])-?\d+(?:\.\d+)?")
+
+
+def reason_counts(reasons) -> list[tuple[str, int]]:
+    """Reasons of the same wording counted together, each number as its range.
+
+    Parameters
+    ----------
+    reasons : iterable of str
+        One sentence per draw and reason (`fahv.spec.coverage.Coverage.reasons`).
+
+    Returns
+    -------
+    list of (str, int)
+        The reason with each of its numbers written as the range over the draws that give
+        it (`onset loss 10.2 to 23.9 % above the certified 8.07 %`, a number the draws
+        share once), and the number of draws; most frequent first.
+
+    Examples
+    --------
+    >>> reason_counts(["onset loss 12 % above 8.07 %", "onset loss 20.5 % above 8.07 %"])
+    [('onset loss 12 to 20.5 % above 8.07 %', 2)]
+    """
+    groups: dict[str, list[list[float]]] = {}
+    for reason in reasons:
+        key = _NUMBER.sub("\x00", reason)
+        groups.setdefault(key, []).append([float(x) for x in _NUMBER.findall(reason)])
+    out = []
+    for key, numbers in groups.items():
+        pieces = key.split("\x00")
+        text = pieces[0]
+        for column, piece in zip(zip(*numbers, strict=True), pieces[1:], strict=True):
+            lo, hi = min(column), max(column)
+            text += (f"{lo:g}" if lo == hi else f"{lo:g} to {hi:g}") + piece
+        out.append((text, len(numbers)))
+    return sorted(out, key=lambda item: -item[1])
 
 
 def worst_lines(data: dict, per_variant: dict, shown: list[str], worst: int) -> list[str]:

@@ -28,11 +28,12 @@ from fahv.campaign.draws import _vehicle, draw, overrides
 from fahv.errors import CampaignError, RunError
 from fahv.loop.simulate import simulate, simulate_parameters
 from fahv.runs.bag import PARAMS, read_run, run_result_of, start_metadata
+from fahv.runs.judged import run_limits
 from fahv.runs.metrics import metrics
 from fahv.runs.sil import recorder_metadata, run_graph, run_parameter_file, run_sil
-from fahv.runs.tools import run_vehicle
 from fahv.runs.writer import RunWriter
 from fahv.spec.artefacts import load_design
+from fahv.spec.plant_dispersion import rate_limit_factor
 
 
 @dataclass
@@ -154,7 +155,7 @@ def rerun(
     m = {}
     if run is not None:
         veh = _vehicle(design.summary.get("provenance", {}).get("vehicle_file", ""))
-        m = metrics(run, veh.limits)
+        m = metrics(run, veh.limits.with_rate_factor(rate_limit_factor(design.case, ov)))
     diff = {}
     if recorded is not None:
         for k, v in m.items():
@@ -212,7 +213,7 @@ def rerun_file(
             f"{rec.path} holds no parameter file ({PARAMS}): a run of an earlier version; "
             "rerun it from its campaign folder (fahv campaign rerun DIR INDEX) or its case"
         )
-    limits = run_vehicle(rec).limits
+    limits = run_limits(rec)
     recorded = metrics(run_result_of(rec), limits)
     meta = {**start_metadata(rec.metadata), "rerun_of": str(rec.path.resolve())}
     content = {k: {"ros__parameters": dict(v["ros__parameters"])} for k, v in params.items()}

@@ -31,6 +31,7 @@ from fahv.plant.faults import FAULTS
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.sensors.data import EXACT_STATE
 from fahv.spec.files import SpecFile
+from fahv.spec.requirements import REQUIREMENT_FIELDS
 from fahv.spec.scenario import load_scenario
 from fahv.spec.schema import plant_choices
 
@@ -149,23 +150,15 @@ def _sensors_section() -> Section:
 
 
 def _requirements_section() -> Section:
-    """The campaign file's `requirements` section."""
+    """The campaign file's `requirements` section: a scenario's limits and a confidence."""
     return Section(
         "requirements",
         (
-            Field("attitude_deg", "float", "bound on the attitude errors alpha - alpha_r and "
-                  "theta - theta_r (absolute)", unit="deg", lo=0.0, lo_open=True, default=0.5),
-            Field("settling_s", "float", "settling (h within 10 ft of h_c and V within 2 ft/s "
-                  "of V_c, held to the end) within this time after the command stops moving",
-                  unit="s", lo=0.0, lo_open=True, default=60.0),
-            Field("h_final_ft", "float", "bound on the final altitude error h - h_c (absolute)",
-                  unit="ft", lo=0.0, lo_open=True, default=10.0),
-            Field("V_final_fps", "float", "bound on the final velocity error V - V_c (absolute)",
-                  unit="ft/s", lo=0.0, lo_open=True, default=2.0),
+            *REQUIREMENT_FIELDS,
             Field("confidence", "float", "confidence C of the failure-probability bounds",
                   lo=0.0, hi=1.0, lo_open=True, hi_open=True, default=0.95),
         ),
-        "requirement verdicts of the report",
+        "requirement verdicts of the report (fahv.spec.requirements)",
     )  # fmt: skip
 
 
@@ -409,23 +402,50 @@ def campaign_from_mapping(data, source: str = "<mapping>", run_spec: SpecFile | 
         except SpecError as exc:
             raise _fail(source, "scenario", f"names a scenario that does not load: {exc}") from None
     vehicle = load_vehicle() if vehicle is None else vehicle
-    check_campaign(v.values, run_spec, source, vehicle)
-    return Campaign(Path(source), v.values, run_spec, vehicle)
+    values = _scenario_limits(v.values, v.defaults_used, run_spec)
+    check_campaign(values, run_spec, source, vehicle)
+    return Campaign(Path(source), values, run_spec, vehicle)
+
+
+def _scenario_limits(values: dict, defaults_used: dict, run_spec: SpecFile) -> dict:
+    """The campaign's requirements: the limits it sets, the scenario's where it sets none.
+
+    A limit the campaign file leaves out takes its scenario's `requirements` value (the
+    paper's when the scenario sets none either), so a scenario's runs are judged alike
+    alone and in a campaign.
+    """
+    own = run_spec.data.get("requirements") or {}
+    req = dict(values["requirements"])
+    for f in REQUIREMENT_FIELDS:
+        if f"requirements.{f.name}" in defaults_used and f.name in own:
+            req[f.name] = own[f.name]
+    return {**values, "requirements": req}
 
 
 def scenario_path(name: str, base: Path | None = None) -> Path:
-    """A campaign's scenario: a path relative to `base`, or a name in scenarios/."""
+    """A campaign's scenario: a path relative to `base`, or a scenario's name.
+
+    A name (no `.yaml`) is looked up in the `scenarios/` folder beside the campaign's
+    folder (`offline_design/campaigns/x.yaml` -> `offline_design/scenarios/<name>.yaml`),
+    then in `offline_design/scenarios/` of the working folder: a campaign file that names
+    its scenario runs from wherever it is copied.
+    """
     p = Path(base or ".") / name
-    if not p.suffix and not p.is_file():
-        p = Path("offline_design") / "scenarios" / f"{name}.yaml"
-    return p
+    if p.suffix or p.is_file():
+        return p
+    tries = [Path(base or ".").parent / "scenarios" / f"{name}.yaml",
+             Path("offline_design") / "scenarios" / f"{name}.yaml"]  # fmt: skip
+    return next((t for t in tries if t.is_file()), tries[-1])
 
 
-def load_campaign(path: str | Path, vehicle=None, scenario: str | None = None) -> Campaign:
+def load_campaign(path: str | Path, vehicle=None, scenario: str | None = None,
+                  runs: int | None = None, duration: float | None = None) -> Campaign:  # fmt: skip
     """Read and validate a campaign file (and its scenario file).
 
     `scenario` (a path or a name in offline_design/scenarios/) replaces the file's
-    own `scenario`: the same dispersions around another scenario or design.
+    own `scenario`: the same dispersions around another scenario or design. `runs` and
+    `duration` [s] replace the file's (`fahv campaign FILE --runs N --duration S`: the
+    first N draws of the same campaign, each run S seconds long), validated as the file's.
 
     Raises
     ------
@@ -439,6 +459,9 @@ def load_campaign(path: str | Path, vehicle=None, scenario: str | None = None) -
         data = load_yaml(p.read_text())
     except Exception as exc:  # yaml errors carry the line number
         raise CampaignError(f"{p}: not a valid YAML file: {exc}") from None
+    if isinstance(data, dict):
+        sized = {k: v for k, v in (("runs", runs), ("duration", duration)) if v is not None}
+        data = {**data, **sized}
     if scenario is not None and isinstance(data, dict):
         data = {
             **data,

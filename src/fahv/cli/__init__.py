@@ -46,7 +46,7 @@ EXIT_INTERRUPTED = 130
 COMMANDS = {
     "trim": "modelling", "tp": "modelling", "figures": "modelling", "tube": "modelling",
     "design": "design", "verify": "design", "margins": "margins", "estimation": "estimation",
-    "simulate": "run", "sil": "run", "replay": "replay", "paper-figures": "run",
+    "simulate": "run", "sil": "sil", "replay": "replay", "paper-figures": "run",
     "results": "run", "inspect": "inspect", "export": "inspect", "compare": "inspect",
     "plot": "inspect", "campaign": "campaign", "index": "index",
 }  # fmt: skip

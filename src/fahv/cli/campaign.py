@@ -1,7 +1,7 @@
 """`fahv campaign`: Monte Carlo campaigns on Dask, their report, and reruns of one run.
 
-    fahv campaign CAMPAIGN.yaml [--scenario S] [--out DIR] [--scheduler ADDRESS] [--workers N]
-                  [--resume] [--dashboard [ADDRESS]]
+    fahv campaign CAMPAIGN.yaml [--scenario S] [--runs N] [--duration S] [--out DIR]
+                  [--scheduler ADDRESS] [--workers N] [--resume] [--dashboard [ADDRESS]]
     fahv campaign report DIR [--no-figures]
     fahv campaign compare DIR_A DIR_B [--variant V] [--variant-b W]
     fahv campaign rerun DIR INDEX [--variant V] [--sil] [--out BAGS]
@@ -37,10 +37,14 @@ def _err(line: str) -> None:
 def cmd_run(args) -> int:
     """Run (or `--resume`) a campaign file; print the report's summary and path at the end."""
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    campaign = load_campaign(args.target, scenario=args.scenario)
+    campaign = load_campaign(args.target, scenario=args.scenario, runs=args.runs,
+                             duration=args.duration)  # fmt: skip
     for line in campaign.warnings:
         _err(f"warning: {line}")
-    out = Path(args.out) if args.out else ROOT / "campaigns" / campaign.name
+    out = Path(args.out) if args.out else ROOT / "campaigns" / _folder_name(campaign, args)
+    _err(f"campaign {campaign.name}: {campaign.data['runs']} draws x "
+         f"{len(campaign.data['variants'])} variant(s), runs of {_run_seconds(campaign):g} s, "
+         f"into {out}")  # fmt: skip
     res = run_campaign(
         campaign,
         out,
@@ -67,17 +71,37 @@ def cmd_run(args) -> int:
              f"  fahv campaign {args.target} --out {out} --resume")  # fmt: skip
         return INTERRUPTED
     if not args.no_report:
-        rep = make_report(out, figures=True)
+        rep = make_report(out, figures=not args.no_figures)
         print(rep.summary())
-        print(f"report: {out / 'report' / 'report.md'} (worst runs, figures)")
+        print(f"report: {out / 'report' / 'report.md'} ({_contents(args)})")
     return 0 if res.missing == 0 else 1
+
+
+def _contents(args) -> str:
+    """What the written report holds (its figures unless --no-figures)."""
+    return "pass rates, worst runs" + ("" if args.no_figures else ", figures")
+
+
+def _folder_name(campaign, args) -> str:
+    """The campaign's default folder: its name, with the size when --runs/--duration set it."""
+    size = []
+    if args.runs is not None:
+        size.append(f"{args.runs}runs")
+    if args.duration is not None:
+        size.append(f"{args.duration:g}s")
+    return "-".join([campaign.name, *size])
+
+
+def _run_seconds(campaign) -> float:
+    """Simulated time of each run [s]: the campaign's, or its scenario's (duration 0)."""
+    return campaign.data["duration"] or campaign.run_spec["duration"]
 
 
 def cmd_report(args) -> int:
     """Report of a campaign folder written (tables, figures); its summary printed."""
     rep = make_report(args.dir, figures=not args.no_figures)
     print(rep.summary())
-    print(f"report: {Path(args.dir) / 'report' / 'report.md'} (worst runs, figures)")
+    print(f"report: {Path(args.dir) / 'report' / 'report.md'} ({_contents(args)})")
     return 0
 
 
@@ -175,6 +199,10 @@ def add_parsers(sub) -> None:
         help="run the campaign's dispersions around this scenario (file or name) "
         "instead of the one the campaign file names",
     )
+    p.add_argument("--runs", type=int, default=None, help="run only the first N draws "
+                   "(default: the file's runs; the default folder gets the size)")
+    p.add_argument("--duration", type=float, default=None, help="simulated time of each "
+                   "run [s] (default: the file's)")
     p.add_argument("--resume", action="store_true", help="complete the missing runs of DIR")
     p.add_argument(
         "--dashboard",

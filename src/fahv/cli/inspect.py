@@ -6,6 +6,7 @@ from pathlib import Path
 
 from fahv.cli.common import read_run_warned, to_json
 from fahv.runs.bag import bag_paths
+from fahv.runs.judged import run_limits
 from fahv.runs.plots import group_figure, save_figure
 from fahv.runs.plots_context import clip_runs, plotted_run, run_labels
 from fahv.runs.plots_frequency import spectra_figure
@@ -22,14 +23,13 @@ from fahv.runs.tools import (
     export_run,
     format_metrics,
     format_summary,
-    run_vehicle,
     summarize,
 )
 
 
 def _with_limits(rec):
     """(recording, actuator limits of the vehicle the run was made with)."""
-    return rec, run_vehicle(rec).limits
+    return rec, run_limits(rec)
 
 
 def cmd_inspect(args) -> int:

@@ -253,7 +253,9 @@ def validate(
     ------
     error
         Naming the source and the dotted key: unknown key, missing required key or
-        section, wrong type, out of range, failed cross-field check.
+        section, wrong type, out of range, failed cross-field check, a key its
+        condition leaves unused (`fault.rho_f` under `fault.kind: bias`; accepted
+        only when it holds its default, which means what its absence means).
     """
     defaults: dict[str, Any] = {}
     pending: list = []
@@ -336,7 +338,30 @@ def _conditional(e, data, out, root, key, present, source, error, defaults, pend
         return
     if not present and e.required:
         raise error(f"{source}: missing key '{key}' (required when {e.when_text})")
+    if present and not used:
+        if not e.required and data[e.name] == e.default:  # means what its absence means
+            out[e.name] = e.default
+            return
+        # a key of another kind would be ignored
+        raise error(f"{source}: {_unused_key_message(key, e.when_text, root)}")
     out[e.name] = _value(e, data, key, source, error, defaults)
+
+
+def _unused_key_message(key: str, when_text: str, root: Mapping) -> str:
+    """Why a present key that its condition leaves unused is refused, naming both keys.
+
+    `when_text` names its subject relative to the key's section ("kind is loss" in
+    `fault`) or in full ("command.kind is ramp"); the subject's value is quoted.
+    """
+    parent = key.rpartition(".")[0]
+    subject, _, rest = when_text.partition(" is ")
+    if parent and rest and "." not in subject:
+        subject = f"{parent}.{subject}"
+    condition = f"{subject} is {rest}" if rest else when_text
+    value = lookup(root, subject) if rest else None
+    now = f" ({subject} is {value!r})" if value is not None else ""
+    return (f"key '{key}' is used only when {condition}, and here it is not{now}: "
+            "remove it (it would be ignored)")
 
 
 def _value(f: Field, data: Mapping, key: str, source: str, error, defaults) -> Any:

@@ -40,6 +40,7 @@ from fahv.errors import VehicleDataError
 from fahv.model.actuators import Servo, actuators_from_mapping
 from fahv.model.entries import finite_number, read_entry
 from fahv.model.envelope import Envelope
+from fahv.model.limits import InputLimits
 
 # Named indices: CM / DM state (eq. 7).
 H, V, ALPHA, THETA, IQ, ETA1, ETA1_DOT, ETA2, ETA2_DOT = range(9)
@@ -200,46 +201,6 @@ class VehicleParams:
         (330.0, 300.0)
         """
         return dataclasses.replace(self, **changes)
-
-
-@dataclass(frozen=True)
-class InputLimits:
-    """Actuator limits: the positions of sec. 5.1 and the servos' rates.
-
-    Attributes
-    ----------
-    Phi_min, Phi_max : float
-        Fuel-to-air ratio range [-].
-    delta_e_min, delta_e_max : float
-        Elevator range [rad].
-    rate_incr, rate_decr : (2,) tuple of float
-        Largest rate of increase and of decrease of (Phi, delta_e) [1/s, rad/s]: the
-        rate limits of the vehicle file's physical servos (`actuators.second_order`,
-        JSBSim's `rate_limit`), whatever actuator model a run simulates; `inf`: none.
-
-    Examples
-    --------
-    >>> lim = InputLimits(0.0, 1.5, -0.5, 0.5)
-    >>> lim.u_min.tolist(), lim.u_max.tolist(), lim.rate_incr
-    ([0.0, -0.5], [1.5, 0.5], (inf, inf))
-    """
-
-    Phi_min: float
-    Phi_max: float
-    delta_e_min: float
-    delta_e_max: float
-    rate_incr: tuple[float, float] = (math.inf, math.inf)
-    rate_decr: tuple[float, float] = (math.inf, math.inf)
-
-    @property
-    def u_min(self) -> np.ndarray:
-        """Lower input bounds, shape (2,), [-, rad]."""
-        return np.array([self.Phi_min, self.delta_e_min])
-
-    @property
-    def u_max(self) -> np.ndarray:
-        """Upper input bounds, shape (2,), [-, rad]."""
-        return np.array([self.Phi_max, self.delta_e_max])
 
 
 @dataclass(frozen=True)

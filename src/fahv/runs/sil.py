@@ -32,6 +32,7 @@ from fahv.loop.params import case_with, controller_node, node_parameters, parame
 from fahv.plant.faults import FAULTS
 from fahv.runs.workspace import ROOT, WS, ensure_built, ros_env
 from fahv.spec.coverage import Coverage, coverage
+from fahv.spec.requirements import limits_of
 from fahv.version import code_version
 
 #: `use_sim_time` of the graph's nodes. The loop runs on the step index k and t_k that
@@ -142,6 +143,7 @@ def run_metadata(
         "Ts": c["Ts"],
         "duration": duration,
         "coverage": run_coverage(design, duration, nodes).text(),
+        "requirements": json.dumps(limits_of(c), sort_keys=True),
         **{k: prov[k] for k in PROVENANCE_KEYS if k in prov},
         **fault,
         **{f"plant_params.{k}": float(v) for k, v in params.items()},

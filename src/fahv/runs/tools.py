@@ -21,11 +21,14 @@ import numpy as np
 
 from fahv.errors import RunError
 from fahv.loop.graph import TOPICS
-from fahv.model.vehicle import load_vehicle
 from fahv.msg import MSG_DIR
-from fahv.runs.bag import Recording, run_result_of, step_anomalies
+from fahv.runs.bag import Recording, step_anomalies
+from fahv.runs.judged import run_judgements, run_metrics
 from fahv.runs.latency import TIMESTAMPS_FILE, format_latencies, run_latencies
-from fahv.runs.metrics import metrics
+from fahv.spec.requirements import (
+    verdict_record,
+    verdict_table,
+)
 from fahv.verdict import METADATA_KEYS, Verdict
 
 #: Rows of the metrics table: (key of `fahv.runs.metrics.metrics`, label, format).
@@ -39,7 +42,6 @@ METRIC_ROWS = (
     ("V_err_rms_after_settle_fps", "V RMS error after settling [ft/s]", "{:.2f}"),
     ("alpha_err_max_deg", "max |alpha - alpha_r| [deg]", "{:.3f}"),
     ("theta_err_max_deg", "max |theta - theta_r| [deg]", "{:.3f}"),
-    ("attitude_within_0.5deg", "attitude within +/-0.5 deg", "{}"),
     (
         "alpha_err_own_trim_max_deg",
         "max |alpha - own trim alpha_r,p| [deg]",
@@ -50,10 +52,12 @@ METRIC_ROWS = (
         "max |theta - own trim theta_r,p| [deg]",
         "{:.3f}",
     ),
-    ("estimate_err_h_rms_ft", "state estimate: RMS error of h [ft]", "{:.2f}"),
-    ("estimate_err_V_rms_fps", "state estimate: RMS error of V [ft/s]", "{:.3f}"),
-    ("estimate_err_alpha_max_deg", "state estimate: max |alpha error| [deg]", "{:.4f}"),
-    ("estimate_err_theta_max_deg", "state estimate: max |theta error| [deg]", "{:.4f}"),
+    ("estimate_err_h_rms_ft", "state estimate: RMS error of h, t >= 10 s [ft]", "{:.2f}"),
+    ("estimate_err_V_rms_fps", "state estimate: RMS error of V, t >= 10 s [ft/s]", "{:.3f}"),
+    ("estimate_err_alpha_max_deg", "state estimate: max |alpha error|, t >= 10 s [deg]",
+     "{:.4f}"),
+    ("estimate_err_theta_max_deg", "state estimate: max |theta error|, t >= 10 s [deg]",
+     "{:.4f}"),
     ("eta_1_dev_peak", "peak |eta_1 - eta_1,r|", "{:.4f}"),
     ("eta_2_dev_peak", "peak |eta_2 - eta_2,r|", "{:.4f}"),
     ("t_fault_s", "fault onset [s]", "{:.2f}"),
@@ -63,10 +67,13 @@ METRIC_ROWS = (
     ("Phi_max", "Phi max", "{:.4f}"),
     ("delta_e_min_deg", "delta_e min [deg]", "{:.3f}"),
     ("delta_e_max_deg", "delta_e max [deg]", "{:.3f}"),
-    ("input_limit_violations", "steps with a command beyond limits", "{}"),
+    ("input_limit_violations", "steps with a command (before the fault injector) beyond limits",
+     "{}"),
     ("input_rate_violations", "steps with a command beyond the servos' rate limits", "{}"),
-    ("delta_e_rate_max_degps", "max |d delta_e / dt| of the command [deg/s]", "{:.1f}"),
-    ("delta_e_actuator_rate_max_degps", "max |d delta_e / dt| of the actuator [deg/s]",
+    ("delta_e_rate_max_degps", "max |d delta_e / dt| of the command (before the fault "
+     "injector), step to step [deg/s]", "{:.1f}"),
+    ("delta_e_actuator_rate_max_degps", "max |d delta_e / dt| of the actuator position, "
+     "step to step (the servo's peak within a step is higher) [deg/s]",
      "{:.1f}"),
     ("tube_fraction_inside", "fraction of steps with e in Z", "{:.4f}"),
     ("tube_level_max", "max e' N^-1 e", "{:.4f}"),
@@ -347,20 +354,6 @@ def export_run(rec: Recording, out_dir: str | Path, fmt: str = "csv") -> list[Pa
     return [*written, dictionary, info]
 
 
-def run_metrics(rec: Recording, limits) -> tuple[dict | None, str]:
-    """Metrics of a run, or None and the reason when it holds no complete step.
-
-    Parameters
-    ----------
-    rec : fahv.runs.bag.Recording
-    limits : fahv.model.vehicle.InputLimits
-    """
-    run = run_result_of(rec)
-    if run.t.size == 0:
-        return None, "no complete step on every loop topic: no metrics"
-    return metrics(run, limits), f"{run.t.size} complete steps"
-
-
 def summarize(rec: Recording, limits) -> dict:
     """Everything `fahv inspect` reports about a run, as plain JSON-able data.
 
@@ -391,6 +384,7 @@ def summarize(rec: Recording, limits) -> dict:
         }
     span = rec.sim_span
     m, note = run_metrics(rec, limits)
+    judged = run_judgements(rec.metadata, m)
     recorder = {
         k.removeprefix("anomalies").replace(".", "/"): int(v)
         for k, v in rec.metadata.items()
@@ -407,6 +401,7 @@ def summarize(rec: Recording, limits) -> dict:
         "step_anomalies": {t: v for t, v in step_anomalies(rec).items() if rec.topics.get(t)},
         "metrics": m,
         "metrics_note": note,
+        "requirements": None if judged is None else verdict_record(judged),
         "latency": run_latencies(rec.attachment(TIMESTAMPS_FILE), rec.params()),
     }
 
@@ -470,6 +465,8 @@ def format_summary(s: dict, column: str | None = None) -> str:
     else:
         lines.append(f"metrics ({s['metrics_note']}):")
         lines.append(format_metrics({column or md.get("variant", "run"): s["metrics"]}))
+        lines += ["", "requirements (limits recorded with the run):",
+                  verdict_table(run_judgements(md, s["metrics"]))]
     if s.get("latency"):
         lines += ["", format_latencies(s["latency"])]
     return "\n".join(lines)
@@ -516,14 +513,3 @@ def compare(a: dict, b: dict, names: tuple[str, str]) -> dict:
         "table": {names[0]: ma, names[1]: mb, "B - A": diff},
         "metadata": {k: (a["metadata"].get(k), b["metadata"].get(k)) for k in keys},
     }
-
-
-def run_vehicle(rec: Recording):
-    """The vehicle a recorded run was made with (metadata `vehicle_file`; packaged if "").
-
-    Raises
-    ------
-    VehicleDataError
-        If the recorded vehicle file is gone or invalid (the message names it).
-    """
-    return load_vehicle(rec.metadata.get("vehicle_file") or None)

@@ -51,10 +51,15 @@ class Coverage:
     run_anyway : tuple of str
         Outside what the certificate claims (fault kind, onset, an open certificate):
         such a run runs, with its verdict.
+    until : float or None
+        When the only reasons are the fault's onset (a loss above the certified onset
+        loss, a bias): its onset time [s], before which the certificate covers the run
+        (the plant has no fault yet). None otherwise.
     """
 
     refused: tuple[str, ...] = ()
     run_anyway: tuple[str, ...] = ()
+    until: float | None = None
 
     @property
     def certified(self) -> bool:
@@ -67,8 +72,21 @@ class Coverage:
         return self.refused + self.run_anyway
 
     def text(self) -> str:
-        """`certified` or `not certified: <reason>; <reason> ...`."""
+        """`certified` or `not certified: <reason>; <reason> ...` (stored, counted)."""
         return CERTIFIED if self.certified else NOT_CERTIFIED + "; ".join(self.reasons)
+
+    def describe(self) -> str:
+        """The coverage line a run prints: which part of the run the certificate covers.
+
+        `certified: the certificate covers the whole run`, `certified up to the fault's
+        onset at t = 100 s, not after it: <reasons>`, or `not certified: <reasons>`.
+        """
+        if self.certified:
+            return f"{CERTIFIED}: the certificate covers the whole run"
+        if self.until is not None:
+            return (f"{CERTIFIED} up to the fault's onset at t = {self.until:g} s, not after "
+                    f"it: {'; '.join(self.reasons)}")  # fmt: skip
+        return self.text()
 
 
 def is_certified(text: str | None) -> bool | None:
@@ -195,5 +213,8 @@ def coverage(design: Design, spec: dict, vehicle=None, duration: float | None = 
     d = float(spec["duration"] if duration is None else duration)
     spec = {**spec, "fault": acting_fault(spec["fault"], d)}
     refused = uncertified(design, spec, vehicle)
-    run_anyway = design_reasons(design) + fault_reasons(design, spec["fault"])
-    return Coverage(tuple(refused), tuple(run_anyway))
+    own, onset = design_reasons(design), fault_reasons(design, spec["fault"])
+    until = None  # before a covered kind's onset the plant has no fault yet
+    if onset and not (refused or own) and spec["fault"]["kind"] in COVERED_KINDS:
+        until = float(spec["fault"]["t_onset"])
+    return Coverage(tuple(refused), tuple(own + onset), until)

@@ -13,6 +13,8 @@ that is not positive, a negative damping ratio, a negative noise level.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from fahv.config import Field
 
 #: Servo fields, in the column order of `fahv.plant.integrator.SERVO_FACTORS`.
@@ -47,3 +49,27 @@ def servo_factors(run) -> list[float]:
 def sensor_dispersion_of(run) -> list[float]:
     """The sensor dispersion [stddev, bias_stddev, bias_mean] of one run's plant parameters."""
     return [float(run[f.name]) for f in SENSOR_FIELDS]
+
+
+def rate_limit_factor(run_spec: Mapping, nodes: Mapping | None = None) -> float:
+    """The factor on the servos' rate limits a run flies with (1: the vehicle file's).
+
+    Parameters
+    ----------
+    run_spec : mapping
+        The run spec's data (its optional `plant` section).
+    nodes : mapping, optional
+        The run's node parameters or overrides `{node: {name: value}}` (a campaign run's
+        drawn `plant.servo_rate_limit_factor`), or a run's ROS parameter file
+        `{node: {"ros__parameters": {...}}}`; they take precedence.
+
+    Returns
+    -------
+    float
+        For `fahv.model.vehicle.InputLimits.with_rate_factor`: a run is judged against
+        the rates of its own servos.
+    """
+    plant = dict((run_spec or {}).get("plant") or {})
+    given = (nodes or {}).get("plant") or {}
+    plant.update(given.get("ros__parameters", given))
+    return float(plant.get("servo_rate_limit_factor", 1.0))

@@ -40,6 +40,7 @@ from fahv.spec.estimator import (  # noqa: F401 - the scenario schema's estimato
     law_tau,
 )
 from fahv.spec.plant_dispersion import PLANT_DISPERSION
+from fahv.spec.requirements import requirements_section
 
 TS = Field("Ts", "float", "control period Ts", unit="s", lo=0.0, hi=0.1, lo_open=True)
 DURATION = Field("duration", "float", "simulated duration of a run", unit="s", lo=0.0, lo_open=True)
@@ -315,7 +316,7 @@ SCENARIO_KEYS = (
     "estimator", "duration", "variants",
 )
 #: Optional scenario sections a run spec holds only when the scenario sets them.
-OPTIONAL_SECTIONS = ("plant", "sensor_fault", "estimator")
+OPTIONAL_SECTIONS = ("plant", "sensor_fault", "estimator", "requirements")
 
 
 def _law_sections() -> tuple:
@@ -439,6 +440,7 @@ def run_spec() -> Section:
             plant_section(),
             sensor_fault_section(),
             estimator_section(),
+            requirements_section(),
             _variants("variants to run (law + notch setting)"),
         ),
         "run spec",
@@ -499,6 +501,7 @@ def scenario_spec() -> Section:
             plant_section(),
             sensor_fault_section(),
             estimator_section(),
+            requirements_section(),
             _variants("variants to run (a subset of the design's; empty: the design's)"),
         ),
         "scenario file",
