@@ -6,9 +6,12 @@ import pytest
 
 from fahv.cli import main
 
+#: The loop on the Kalman estimate without servos (a study scenario).
+KALMAN = "studies/kalman_exact_design/scenarios/case1_kalman.yaml"
+
 
 def test_estimation_prints_each_bound_and_the_tubes_verdict(capsys):
-    assert main(["estimation", "offline_design/scenarios/case1_kalman.yaml"]) == 0
+    assert main(["estimation", KALMAN]) == 0
     out = capsys.readouterr().out
     assert "gain-scheduled Kalman filter on h, V, theta, q of design cm_certified (20 LPV " \
            "vertices: 400 pairs" in out  # fmt: skip
@@ -50,7 +53,7 @@ def test_estimation_of_a_scenario_without_an_estimator_is_refused(capsys):
 
 def test_estimation_of_an_ecm_design_is_refused(capsys):
     """Case 2 flies on the estimate, but these bounds are of a CM design's tube law."""
-    assert main(["estimation", "offline_design/scenarios/case2_implementable.yaml"]) == 2
+    assert main(["estimation", "studies/case2_on_cm/scenarios/case2_implementable.yaml"]) == 2
     assert "design 'ecm_paper' is of the ECM: the bounds are those of the tube law of a CM " \
            "design" in capsys.readouterr().err  # fmt: skip
 
@@ -63,7 +66,7 @@ def test_estimation_names_what_its_bounds_leave_out_and_scales_the_noise(tmp_pat
     flies (estimator.nominal_att_max 0.37 deg, the design's 0.40)."""
     import yaml
 
-    d = yaml.safe_load(open("offline_design/scenarios/case1_kalman.yaml"))
+    d = yaml.safe_load(open(KALMAN))
     d["name"] = "kalman_servo"
     d.setdefault("plant", {})["actuators"] = "second_order"
     d["sensor_fault"] = {"kind": "stuck", "channel": "h", "t_onset": 50.0}
@@ -85,8 +88,7 @@ def test_estimation_names_what_its_bounds_leave_out_and_scales_the_noise(tmp_pat
 
 @pytest.mark.parametrize("scale", ["0", "nan", "-1"])
 def test_a_noise_scale_that_is_not_positive_is_refused(scale, capsys):
-    assert main(["estimation", "offline_design/scenarios/case1_kalman.yaml", "--noise-scale",
-                 scale]) == 2  # fmt: skip
+    assert main(["estimation", KALMAN, "--noise-scale", scale]) == 2
     assert "--noise-scale must be a positive number" in capsys.readouterr().err
 
 

@@ -14,7 +14,8 @@ from fahv.runs.workspace import ROOT
 def test_margins_prints_the_table_and_writes_the_figures(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(ROOT)
     # case1_kalman: its design cm_certified, and its filter on h, V, theta and q
-    assert main(["margins", "case1_kalman", "--out", str(tmp_path), "--format", "pdf"]) == 0
+    kalman = "studies/kalman_exact_design/scenarios/case1_kalman.yaml"
+    assert main(["margins", kalman, "--out", str(tmp_path), "--format", "pdf"]) == 0
     out = capsys.readouterr().out
     assert "GM+ [dB]" in out and "DM phase [deg]" in out
     rows = [line.split() for line in out.splitlines() if line.startswith(("delta_e ", "q "))]

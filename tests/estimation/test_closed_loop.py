@@ -14,7 +14,7 @@ from fahv.estimation.kalman import design_filter, measurement_covariance
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors
 
 MEASURED = list(DEFAULT_MEASURED)
-SCENARIO = "offline_design/scenarios/case1_kalman.yaml"
+SCENARIO = "studies/kalman_exact_design/scenarios/case1_kalman.yaml"
 
 
 @pytest.fixture(scope="module")

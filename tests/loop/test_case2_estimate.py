@@ -10,7 +10,7 @@ from fahv.loop.params import node_parameters
 from fahv.loop.simulate import simulate
 from fahv.runs.metrics import metrics
 
-SCENARIO = "offline_design/scenarios/case2_implementable.yaml"
+SCENARIO = "studies/case2_on_cm/scenarios/case2_implementable.yaml"
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +60,7 @@ def test_case2_on_the_case1_design_against_the_baseline_and_without_the_notch():
     mode's rate after the fault is 38 % larger on the gyro-fed estimate (0.465 against
     0.338 1/s), with the same tracking; the RMPC on the same estimate never settles and
     ends 101 ft and 69 ft/s off the command. Measured: 83.1 / 84.2 s, 0.239 / 0.196 deg."""
-    _, design, vehicle = load_or_design("offline_design/scenarios/case2_implementable_cm.yaml",
+    _, design, vehicle = load_or_design("studies/case2_on_cm/scenarios/case2_implementable_cm.yaml",
                                         log=lambda *_: None, allow_uncertified=True)  # fmt: skip
     m = {v: metrics(simulate(design, v), vehicle.limits)
          for v in ("tube_mpc", "tube_mpc_no_notch", "rmpc")}  # fmt: skip
@@ -85,7 +85,7 @@ def test_case2_on_the_case1_design_on_the_exact_state(figures):
     2.9 / 4.3 s after the ramps' end, the attitude within 0.217 / 0.167 deg, the tube error
     inside Z at every step, and the first mode's rate after the fault 0.0073 1/s, a
     forty-sixth of the implementable loop's 0.338 (docs/results/cases.md)."""
-    _, design, vehicle = load_or_design("offline_design/scenarios/case2_cm.yaml",
+    _, design, vehicle = load_or_design("studies/case2_on_cm/scenarios/case2_cm.yaml",
                                         log=lambda *_: None, variants=["tube_mpc"])  # fmt: skip
     m = metrics(simulate(design, "tube_mpc"), vehicle.limits)
     figures(m, (82.9, 84.3), (0.217, 0.167))

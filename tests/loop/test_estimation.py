@@ -134,7 +134,7 @@ def test_case1_kalman_meets_the_requirements_on_the_estimate():
     the tube (largest level 6.2)."""
     from fahv.loop.params import node_parameters
 
-    _, design, vehicle = load_or_design("offline_design/scenarios/case1_kalman.yaml",
+    _, design, vehicle = load_or_design("studies/kalman_exact_design/scenarios/case1_kalman.yaml",
                                         log=lambda *_: None, variants=["tube_mpc"],
                                         allow_uncertified=True)  # fmt: skip
     assert design.case["mpc"]["est_tau"] == 0.1
@@ -308,8 +308,8 @@ def test_the_nominal_attitude_rows_on_the_estimate(figures):
     with pytest.raises(ConfigError, match="estimator.nominal_att_max"):
         rows(nominal_att_max=0.45)
     _, wide, vehicle = load_or_design(
-        "offline_design/scenarios/case1_implementable_design_rows.yaml", log=lambda *_: None,
-        variants=["tube_mpc"], allow_uncertified=True)  # fmt: skip
+        "studies/implementable_settings/scenarios/case1_implementable_design_rows.yaml",
+        log=lambda *_: None, variants=["tube_mpc"], allow_uncertified=True)  # fmt: skip
     assert node_parameters(wide)["nominal_trajectory"]["mpc.att_max"] == pytest.approx(
         [0.40, 0.40], abs=1e-12)  # fmt: skip
     m = metrics(simulate(wide, "tube_mpc"), vehicle.limits)

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from fahv.config import Check, Field, Section, validate
+from fahv.config.extends import resolve_extends
 from fahv.config.yamlio import load_yaml
 from fahv.control import VARIANTS
 from fahv.errors import CampaignError, SpecError
@@ -438,6 +439,28 @@ def scenario_path(name: str, base: Path | None = None) -> Path:
     return next((t for t in tries if t.is_file()), tries[-1])
 
 
+def _read(path: Path) -> Any:
+    """A campaign file's YAML content.
+
+    Raises
+    ------
+    CampaignError
+        If the file is missing or not YAML (with the line of the error).
+    """
+    if not path.is_file():
+        raise CampaignError(f"campaign file not found: {path}")
+    try:
+        return load_yaml(path.read_text())
+    except Exception as exc:  # yaml errors carry the line number
+        raise CampaignError(f"{path}: not a valid YAML file: {exc}") from None
+
+
+def _campaign_candidates(name: str, folder: Path) -> list[Path]:
+    """Where `extends: <name>` of a campaign file is looked for, from its folder."""
+    return [folder / f"{name}.yaml", folder.parent / "campaigns" / f"{name}.yaml",
+            Path("offline_design") / "campaigns" / f"{name}.yaml"]  # fmt: skip
+
+
 def load_campaign(path: str | Path, vehicle=None, scenario: str | None = None,
                   runs: int | None = None, duration: float | None = None) -> Campaign:  # fmt: skip
     """Read and validate a campaign file (and its scenario file).
@@ -455,10 +478,8 @@ def load_campaign(path: str | Path, vehicle=None, scenario: str | None = None,
     p = Path(path)
     if not p.is_file():
         raise CampaignError(f"campaign file not found: {p}")
-    try:
-        data = load_yaml(p.read_text())
-    except Exception as exc:  # yaml errors carry the line number
-        raise CampaignError(f"{p}: not a valid YAML file: {exc}") from None
+    data = resolve_extends(_read(p), p, _read, _campaign_candidates, CampaignError,
+                           path_keys=("scenario",))  # fmt: skip
     if isinstance(data, dict):
         sized = {k: v for k, v in (("runs", runs), ("duration", duration)) if v is not None}
         data = {**data, **sized}

@@ -116,7 +116,8 @@ def resolve_design_file(path: str | Path) -> Path:
         else:
             raise SpecError(f"no design or scenario named {path!r} in offline_design/")
     data = read_yaml_file(p, "design or scenario file")
-    if isinstance(data, dict) and "design" in data and "design_step" not in data:
+    scenario = "design" in data or "extends" in data if isinstance(data, dict) else False
+    if scenario and "design_step" not in data:  # a scenario (whole, or extending another)
         return load_scenario(p).design_file
     return p
 

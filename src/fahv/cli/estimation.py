@@ -266,7 +266,7 @@ def add_parsers(sub) -> None:
         "nominal, LMI re-checked exactly) with the attitude it reaches with probability p.",
     )
     p.add_argument("scenario", help="scenario file with estimator.kind kalman, e.g. "
-                   "offline_design/scenarios/case1_kalman.yaml")  # fmt: skip
+                   "studies/kalman_exact_design/scenarios/case1_kalman.yaml")  # fmt: skip
     p.add_argument("--design-dir", default=None, help="artefact folder of the stored design")
     p.add_argument("--probability", type=float, default=0.99,
                    help="probability of the run-long statements (default 0.99)")  # fmt: skip

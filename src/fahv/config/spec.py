@@ -137,6 +137,8 @@ class Field:
         if self.type in _ITEM:
             if not isinstance(value, list | tuple):
                 raise error(f"{where} must be a list of {self.type[:-1]}, got {value!r}")
+            if not value and self.default == ():  # the empty default, given (an extension
+                return []  # turning off what its base sets)
             if self.length is not None and len(value) != self.length:
                 raise error(f"{where} must have {self.length} entries, got {value!r}")
             if not value:

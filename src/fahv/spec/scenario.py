@@ -24,9 +24,11 @@ import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from fahv.config.extends import resolve_extends
 from fahv.control import LAWS, VARIANTS
 from fahv.errors import SpecError
 from fahv.model.trim import TrimMap
@@ -188,7 +190,27 @@ def load_scenario(path: str | Path) -> Scenario:
         If the scenario or its design file is missing, malformed, or names a variant
         the design did not prepare.
     """
-    return scenario_from_mapping(read_yaml_file(path, "scenario file"), path)
+    return scenario_from_mapping(read_scenario_file(path), path)
+
+
+def read_scenario_file(path: str | Path) -> Any:
+    """A scenario file's content with its `extends:` chain merged in (`fahv.config.extends`).
+
+    A base given by name is `<name>.yaml` beside the file, in the `scenarios/` folder
+    beside the file's folder, then in `offline_design/scenarios/` of the working folder.
+
+    Raises
+    ------
+    SpecError
+        If the file or a base is missing or not YAML, or `extends` makes a cycle.
+    """
+    def find(name: str, folder: Path) -> list[Path]:
+        return [folder / f"{name}.yaml", folder.parent / "scenarios" / f"{name}.yaml",
+                Path("offline_design") / "scenarios" / f"{name}.yaml"]  # fmt: skip
+
+    return resolve_extends(read_yaml_file(path, "scenario file"), Path(path),
+                           lambda p: read_yaml_file(p, "scenario file"), find, SpecError,
+                           path_keys=("design",))  # fmt: skip
 
 
 def load_run_spec(path: str | Path) -> SpecFile:
