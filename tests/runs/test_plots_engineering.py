@@ -121,12 +121,32 @@ def test_inputs_show_the_actuator_and_the_tightened_limits_in_their_units():
     assert {round(v, 9) for v in expected} <= {round(v, 9) for v in _hlines(de)}
 
 
-def test_input_rates_are_finite_differences_of_the_applied_input():
-    fig = input_rate_figure([dataclasses.replace(_plotted(), run=_run(slope=0.5))])
+def test_input_rates_are_finite_differences_of_the_command():
+    """The command (before the fault injector), not the applied input: a stuck elevator
+    applies 0 while the command ramps; ideal actuators draw no rate limit and say so."""
+    run = _run(slope=0.5)
+    run = dataclasses.replace(run, u_applied=np.zeros_like(run.u))
+    fig = input_rate_figure([dataclasses.replace(_plotted(), run=run)])
     line = fig.axes[0].get_lines()[0]
     assert line.get_xdata()[0] == pytest.approx(TS)  # at the later step of each difference
     np.testing.assert_allclose(line.get_ydata(), 0.5, atol=1e-9)  # dPhi/dt [1/s]
     np.testing.assert_allclose(fig.axes[1].get_lines()[0].get_ydata(), 0.0, atol=1e-9)
+    assert "ideal actuators (no rate limit): case1 / tube_mpc" in fig.axes[1].texts[0].get_text()
+
+
+def test_input_rates_draw_the_servo_and_its_own_rate_limit():
+    """With servos (the position lags the command) the servo's position rate is drawn
+    beside the command's, and the elevator's rate limit at the vehicle file's 100 deg/s
+    times the run's factor: 50 deg/s with a factor of 0.5."""
+    run = _run(slope=0.5)
+    lag = np.vstack([run.u[:1], run.u[:-1] * 0.9])
+    run = dataclasses.replace(run, u_actuator=lag)
+    half = load_vehicle().limits.with_rate_factor(0.5)
+    fig = input_rate_figure([dataclasses.replace(_plotted(), run=run, limits=half)])
+    labels = [ln.get_label() for ln in fig.axes[1].get_lines()]
+    assert labels[:2] == ["case1 / tube_mpc: command", "case1 / tube_mpc: servo position"]
+    assert {round(v, 6) for v in _hlines(fig.axes[1])} >= {50.0, -50.0}
+    assert "case1 / tube_mpc: rate limit 50" in labels
 
 
 def test_the_estimate_figure_draws_x_hat_less_x_in_the_panels_units():
@@ -151,7 +171,8 @@ def test_the_fault_onset_is_drawn_at_t_onset_on_every_panel():
         for ax in fig.axes:
             xs = [ln.get_xdata() for ln in ax.get_lines()]
             assert any(len(x) == 2 and x[0] == x[1] == 10.0 for x in xs)
-        assert "fault onset, t = 10 s" in [t.get_text() for t in fig.axes[0].get_legend().texts]
+        legend = [t.get_text() for t in fig.axes[0].get_legend().texts]
+        assert "fault onset of case1 / tube_mpc, t = 10 s" in legend  # each run its own
     clipped = clip_runs(runs, 0.0, 5.0)  # onset outside the window: no line
     assert mark_onsets(error_figure(clipped), clipped) == []
     assert fault_onset({"fault_kind": "loss_of_effectiveness", "fault_t_onset": "100.0"}) == 100.0

@@ -22,6 +22,7 @@ from fahv.loop.simulate import RunResult
 from fahv.model.vehicle import InputLimits, load_vehicle
 from fahv.runs.bag import run_result_of
 from fahv.runs.workspace import ROOT
+from fahv.spec.plant_dispersion import rate_limit_factor
 from fahv.spec.store import design_dir
 
 
@@ -36,7 +37,8 @@ class PlottedRun:
     run : RunResult
         The run's histories, N steps.
     limits : InputLimits or None
-        Actuator limits of the run's vehicle (sec. 5.1) [-, rad].
+        Actuator limits of the run's vehicle (sec. 5.1) [-, rad], its servos' rate
+        limits times the run's `servo_rate_limit_factor` [1/s, rad/s].
     u_lo, u_hi : (2,) ndarray or None
         Tightened input limits of eq. (30) the nominal input keeps to [-, rad] (None
         for a law without them or a run without its parameter file).
@@ -175,7 +177,7 @@ def plotted_run(rec, label: str) -> PlottedRun:
     return PlottedRun(
         label=label,
         run=run,
-        limits=vehicle.limits,
+        limits=vehicle.limits.with_rate_factor(rate_limit_factor({}, params)),
         u_lo=None if u_lo is None else np.asarray(u_lo, float),
         u_hi=None if u_hi is None else np.asarray(u_hi, float),
         omega_z=float(notch["omega_z"]) if notch.get("enabled") else None,

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from fahv.model.vehicle import ALPHA, IQ, THETA, H, V
-from fahv.runs.metrics import ATTITUDE_BOUND_DEG, SETTLE_TOL
+from fahv.runs.metrics import ATTITUDE_BOUND_DEG, SETTLE_TOL, has_servos
 from fahv.runs.plots import LINESTYLES, plt
 
 #: Tracking-error panels: (quantity, unit, function of a RunResult -> (N,) values,
@@ -50,7 +50,7 @@ ESTIMATE_PANELS = (
 INPUT_PANELS = (("Phi [-]", 0, 1.0), ("delta_e [deg]", 1, float(np.degrees(1.0))))
 
 #: Colour of the requirement bands and of the fault onset line.
-BAND_COLOUR, ONSET_COLOUR = "tab:green", "tab:red"
+BAND_COLOUR = "tab:green"
 
 
 def line_style(i: int) -> dict:
@@ -66,34 +66,35 @@ def _band(ax, bound: float, label: str | None) -> None:
 
 
 def mark_onsets(fig, runs: list) -> list[float]:
-    """Draw the fault onset of the runs as a vertical line on every panel of `fig`.
+    """Draw each run's fault onset as a vertical line in its colour on every panel of `fig`.
 
     Parameters
     ----------
     fig : matplotlib.figure.Figure
         A figure over time (x axis: t [s]).
     runs : list of PlottedRun
-        The runs drawn; each distinct `t_onset` within the time span of the runs is
-        drawn once, labelled on the first panel.
+        The runs drawn, in drawing order (their colours are `line_style`'s); each run's
+        `t_onset` within the time span of the runs is drawn, labelled with the run on the
+        first panel (`fault onset of <run>, t = 100 s`).
 
     Returns
     -------
     list of float
-        The onset times drawn [s] (empty: no fault in the window).
+        The distinct onset times drawn [s] (empty: no fault in the window).
     """
     t_lo = min(float(r.run.t[0]) for r in runs)
     t_hi = max(float(r.run.t[-1]) for r in runs)
-    onsets = sorted({r.t_onset for r in runs if r.t_onset is not None})
-    onsets = [t for t in onsets if t_lo <= t <= t_hi]
+    marked = [(i, r) for i, r in enumerate(runs)
+              if r.t_onset is not None and t_lo <= r.t_onset <= t_hi]  # fmt: skip
     for ax in fig.axes:
-        for t in onsets:
-            ax.axvline(t, color=ONSET_COLOUR, lw=1.0, ls=":", zorder=0.5)
-    if onsets and fig.axes:  # named in the legend of the first panel
+        for i, r in marked:
+            ax.axvline(r.t_onset, color=line_style(i)["color"], lw=1.0, ls=":", zorder=0.5)
+    if marked and fig.axes:  # named in the legend of the first panel
         first = fig.axes[0]
-        first.lines[-1].set_label("fault onset, t = " + ", ".join(f"{t:g}" for t in onsets) + " s")
-        if first.get_legend() is not None:
-            first.legend(loc="best", fontsize=7)
-    return onsets
+        for (_, r), line in zip(marked, first.lines[-len(marked):], strict=True):
+            line.set_label(f"fault onset of {r.label}, t = {r.t_onset:g} s")
+        first.legend(loc="best", fontsize=7)
+    return sorted({r.t_onset for _, r in marked})
 
 
 def _panels(runs: list, rows: int, cols: int, figsize: tuple):
@@ -217,9 +218,14 @@ def input_figure(runs: list):
 
 
 def input_rate_figure(runs: list):
-    """Rates of the applied input: finite differences (u_k - u_(k-1)) / Ts.
+    """Input rates: the controller's command and, with servos, the servo's position.
 
-    The vehicle data define no actuator rate limits, so no limit line is drawn.
+    Finite differences (u_k - u_(k-1)) / Ts of the command the controller sends (before
+    the fault injector: what it asks of the servo) as solid lines, and of the actuator's
+    position where the run has servos (`fahv.runs.metrics.has_servos`) as thin lines of
+    the same colour; the servos' rate limits of each run (the vehicle file's times the
+    run's `servo_rate_limit_factor`, `PlottedRun.limits`) as dashed lines. A run on
+    ideal actuators has no rate limit: it is named in a note.
 
     Parameters
     ----------
@@ -239,17 +245,37 @@ def input_rate_figure(runs: list):
     """
     fig, axes = _panels(runs, len(INPUT_PANELS), 1, (8, 5.4))
     units = ("dPhi/dt [1/s]", "d delta_e/dt [deg/s]")
+    ideal = []
     for ax, (_, j, scale), unit in zip(axes, INPUT_PANELS, units, strict=True):
+        drawn = set()
         for i, r in enumerate(runs):
-            t, u = r.run.t, r.run.u_applied[:, j]
-            if t.size > 1:
-                ax.plot(t[1:], scale * np.diff(u) / np.diff(t), label=r.label, **line_style(i))
+            t, style = r.run.t, line_style(i)
+            if t.size < 2:
+                continue
+            ax.plot(t[1:], scale * np.diff(r.run.u[:, j]) / np.diff(t),
+                    label=f"{r.label}: command", **style)  # fmt: skip
+            servos = has_servos(r.run)
+            if servos:
+                pos = r.run.u_actuator[:, j]
+                ax.plot(t[1:], scale * np.diff(pos) / np.diff(t), color=style["color"], lw=0.6,
+                        alpha=0.7, label=f"{r.label}: servo position")  # fmt: skip
+            elif j == 0:
+                ideal.append(r.label)
+            lim = None if r.limits is None or not servos else (
+                r.limits.rate_incr[j], r.limits.rate_decr[j])
+            if lim is not None and np.all(np.isfinite(lim)) and lim not in drawn:
+                drawn.add(lim)
+                ax.axhline(scale * lim[0], color=style["color"], ls="--", lw=0.9,
+                           label=f"{r.label}: rate limit {scale * lim[0]:g}")  # fmt: skip
+                ax.axhline(-scale * lim[1], color=style["color"], ls="--", lw=0.9)
         ax.set_ylabel(unit)
         ax.grid(True, alpha=0.3)
-    axes[0].legend(loc="best", fontsize=7)
-    axes[-1].text(0.99, 0.02, "no rate limits in the vehicle data", transform=axes[-1].transAxes,
-                  ha="right", va="bottom", fontsize=7, color="0.4")  # fmt: skip
-    _finish(fig, axes[:, None], "Input rates (applied input, after the fault injector)")
+        ax.legend(loc="best", fontsize=7)
+    if ideal:
+        axes[-1].text(0.01, 0.06, "ideal actuators (no rate limit): " + ", ".join(ideal),
+                      transform=axes[-1].transAxes, ha="left", va="bottom", fontsize=7,
+                      color="0.4")  # fmt: skip
+    _finish(fig, axes[:, None], "Input rates: command (before the fault injector), servo position")
     return fig
 
 
@@ -321,7 +347,7 @@ def estimate_figure(runs: list):
             ax.plot(r.run.t, scale * (x_hat[:, j] - r.run.x[:, j]), label=r.label,
                     **line_style(i))  # fmt: skip
         ax.axhline(0.0, color="k", lw=0.6)
-        ax.set_ylabel(f"{name}_hat - {name} [{unit}]")
+        ax.set_ylabel(f"{name}_hat - {name}\n[{unit}]")
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="best", fontsize=7)
     _finish(fig, axes[:, None], "State estimate error (what the controller read, less the truth)")
