@@ -6,7 +6,19 @@
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
+# Debian's Chromium for the report pages' browser test (tests/conftest.py), beside the
+# venv's installation; the test names what is missing if this fails
+browser_log="$(mktemp)"
+{
+  command -v chromium || { apt-get update -qq && apt-get install -y -qq --no-install-recommends chromium; }
+} > "$browser_log" 2>&1 &
+browser=$!
 bash scripts/setup.sh --venv-only
+if ! wait "$browser"; then
+  echo "[browser] warning: Chromium did not install (the browser test will fail):" >&2
+  tail -n 5 "$browser_log" >&2
+fi
+rm -f "$browser_log"
 docs_log="$(mktemp)"
 trap 'rm -f "$docs_log"' EXIT
 # the documentation site (site/), strict, beside the workspace build, the linters and the

@@ -364,3 +364,38 @@ def hand_graph():
 def exit_statuses():
     """Per-node exit statuses of a hand-started graph's output (`_exit_statuses`)."""
     return _exit_statuses
+
+
+#: Debian's Chromium, which scripts/test.sh installs for the browser test.
+CHROMIUM = "/usr/bin/chromium"
+
+
+@pytest.fixture(scope="session")
+def rendered_body():
+    """`rendered_body(page) -> {attribute: value}` of <body> once headless Chromium loaded it.
+
+    The report pages write how many of their images loaded into `data-images-loaded`
+    (`fahv.runs.report_page.COUNT_IMAGES`). Chromium starts with a fresh profile and
+    without background networking (this machine's network is closed).
+    """
+    import re
+    import tempfile
+
+    if not Path(CHROMIUM).is_file():
+        pytest.fail(f"{CHROMIUM} is missing: scripts/test.sh installs Debian's chromium "
+                    "(apt-get install chromium) for this test")  # fmt: skip
+
+    def render(page: Path) -> dict:
+        with tempfile.TemporaryDirectory() as profile:
+            out = subprocess.run(
+                [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                 "--no-first-run", "--disable-background-networking", "--disable-sync",
+                 "--disable-component-update", f"--user-data-dir={profile}",
+                 "--virtual-time-budget=10000", "--dump-dom", page.resolve().as_uri()],
+                capture_output=True, text=True, timeout=120, check=True,
+            ).stdout  # fmt: skip
+        body = re.search(r"<body([^>]*)>", out)
+        assert body, f"Chromium rendered no <body> of {page}"
+        return dict(re.findall(r'([\w-]+)="([^"]*)"', body.group(1)))
+
+    return render

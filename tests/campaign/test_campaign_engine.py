@@ -351,3 +351,22 @@ def test_sessions_are_recorded_in_the_manifest(reference):
     assert [(s["session"], s["new"], s["failed"]) for s in sessions] == [(1, 12, 0)]
     assert sessions[0]["engine"] == "LocalCluster(2)" and sessions[0]["wall_s"] > 0
     assert "Part 1 (LocalCluster(2)): 12 runs (0 failed) in" in make_report(out, False).text
+
+
+def test_the_report_page_of_a_campaign_has_its_bounds_and_figures(reference, capsys,
+                                                                   rendered_body):  # fmt: skip
+    """`fahv report DIR`: the pass rates with their bounds, the worst runs and every figure
+    of the report in one page, the figures embedded; Chromium loads every image."""
+    from fahv.cli import main
+
+    _, out = reference
+    assert main(["report", str(out)]) == 0
+    page = out / "report" / "report.html"
+    assert capsys.readouterr().out.strip() == f"report: {page}"
+    text = page.read_text()
+    assert "p_fail &lt;" in text  # the console summary's bounds, escaped
+    assert "Worst 3 runs per metric" in text and "<table>" in text
+    n = text.count('src="data:image/png;base64,')
+    assert n >= 3 and 'src="' + "hist" not in text  # every figure inside the page
+    body = rendered_body(page)
+    assert body["data-images"] == body["data-images-loaded"] == str(n)

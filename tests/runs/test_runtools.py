@@ -254,3 +254,38 @@ def test_paper_figures_take_the_paper_law_from_the_vertex_case(monkeypatch, tmp_
                                                   plots.LABELS["rmpc"]]  # fmt: skip
     assert paper not in drawn["fig11_case1_flexible.png"]
     assert "fig14_case2_trajectory.png" not in drawn  # no Case 2 run
+
+
+def test_the_report_page_of_a_run_holds_its_verdict_and_every_figure(runs, capsys, tmp_path,
+                                                                      rendered_body):  # fmt: skip
+    """`fahv report RUN`: one self-contained page, written atomically beside the run; its
+    verdict table has every requirement, its 9 figures are embedded PNGs, and Chromium
+    loads all 9."""
+    import base64
+    from html.parser import HTMLParser
+
+    bag, _ = runs["tube_mpc"]
+    rc, out, _ = _cli(capsys, "report", bag)
+    page = bag / "report.html"
+    assert rc == 0 and out.strip() == f"report: {page}"
+    assert not list(bag.glob("*.part"))
+    text = page.read_text()
+    srcs = []
+
+    class Images(HTMLParser):
+        def handle_starttag(self, tag, attrs):
+            if tag == "img":
+                srcs.append(dict(attrs)["src"])
+
+    Images().feed(text)
+    assert len(srcs) == 9
+    for src in srcs:  # every image is in the page: no file beside it
+        head, data = src.split(",", 1)
+        assert head == "data:image/png;base64"
+        assert base64.b64decode(data)[:8] == b"\x89PNG\r\n\x1a\n"
+    for key in ("completes", "attitude", "input_limits", "input_rates", "tube", "settling",
+                "final_h", "final_V"):  # fmt: skip
+        assert f"<td class=\"\">{key}</td>" in text
+    assert "verdict: " in text and "<b>coverage:</b>" in text
+    body = rendered_body(page)
+    assert body["data-images"] == body["data-images-loaded"] == "9"

@@ -17,6 +17,7 @@ Subcommands:
     fahv inspect   topics, metadata, step anomalies and metrics of a run
     fahv export    one CSV / Parquet table per topic, with units
     fahv compare   metrics of two runs side by side
+    fahv report    one HTML page of a run or a campaign: verdict, coverage, metrics, figures
     fahv replay    republish a run over DDS, e.g. into a fresh tube_mpc node
     fahv campaign  Monte Carlo campaign on Dask; campaign report DIR; campaign rerun DIR INDEX
     fahv index     index of offline_design/ from the files' descriptions
@@ -48,7 +49,7 @@ COMMANDS = {
     "design": "design", "verify": "design", "margins": "margins", "estimation": "estimation",
     "simulate": "run", "sil": "sil", "replay": "replay", "paper-figures": "run",
     "results": "run", "inspect": "inspect", "export": "inspect", "compare": "inspect",
-    "plot": "inspect", "campaign": "campaign", "index": "index",
+    "plot": "inspect", "report": "report", "campaign": "campaign", "index": "index",
 }  # fmt: skip
 
 

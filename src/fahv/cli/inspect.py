@@ -6,18 +6,10 @@ from pathlib import Path
 
 from fahv.cli.common import read_run_warned, to_json
 from fahv.runs.bag import bag_paths
+from fahv.runs.figures import run_figures
 from fahv.runs.judged import run_limits
-from fahv.runs.plots import group_figure, save_figure
+from fahv.runs.plots import save_figure
 from fahv.runs.plots_context import clip_runs, plotted_run, run_labels
-from fahv.runs.plots_frequency import spectra_figure
-from fahv.runs.plots_time import (
-    error_figure,
-    estimate_figure,
-    input_figure,
-    input_rate_figure,
-    mark_onsets,
-    tube_figure,
-)
 from fahv.runs.tools import (
     compare,
     export_run,
@@ -67,37 +59,15 @@ def cmd_compare(args) -> int:
     return 0
 
 
-#: Paper-style groups `fahv plot` writes (`fahv.runs.plots.GROUPS`; its own
-#: input and tube figures replace the groups of those names).
-PLOT_GROUPS = ("trajectory", "attitude", "flexible")
-
-#: The engineering figures `fahv plot` writes: file name -> function of the runs.
-PLOT_FIGURES = {
-    "errors": error_figure,
-    "inputs": input_figure,
-    "input_rates": input_rate_figure,
-    "tube": tube_figure,
-    "estimate": estimate_figure,
-}
-
-
 def cmd_plot(args) -> int:
     """Figures of one or several recorded runs, overlaid, over a time window."""
     recs = [read_run_warned(path) for path in args.runs]
     labels = run_labels(args.runs, [r.metadata for r in recs])
     runs = clip_runs([plotted_run(r, lab) for r, lab in zip(recs, labels, strict=True)],
                      args.t0, args.t1)  # fmt: skip
-    out, fmt = Path(args.out), args.format
-    for group in PLOT_GROUPS:
-        fig = group_figure(group, [(r.label, r.run) for r in runs])
-        mark_onsets(fig, runs)
-        print(save_figure(fig, out / f"{group}.{fmt}"))
-    for name, make in PLOT_FIGURES.items():
-        fig = make(runs)
-        mark_onsets(fig, runs)
-        print(save_figure(fig, out / f"{name}.{fmt}"))
-    after = args.t0 is None and args.t1 is None  # a chosen window is the spectra's
-    print(save_figure(spectra_figure(runs, after), out / f"spectra.{fmt}"))
+    whole = args.t0 is None and args.t1 is None  # a chosen window is the spectra's
+    for name, fig in run_figures(runs, whole):
+        print(save_figure(fig, Path(args.out) / f"{name}.{args.format}"))
     return 0
 
 
