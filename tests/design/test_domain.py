@@ -104,3 +104,27 @@ def test_certified_range_is_the_box_less_the_tube_and_holds_the_nominal_box():
     assert line.startswith("the certificate covers a nominal anywhere in the scheduling box")
     with pytest.raises(ValueError, match="scheduling box"):
         certified_range(box, d["F"], 100.0 * d["N"], float(d["H"]))  # a tube wider than the box
+
+
+def test_a_box_too_small_for_the_tube_names_the_design_key_and_a_value_that_holds():
+    """The shortfall of each coordinate is mapped to the design file's key that gives it
+    room (eight_state.reach[i] in its units, h_margin for h), with the room now plus the
+    shortfall and 1 % (rounded up to four digits): eta_2 short by 0.00281 with 0.24 of
+    reach needs 0.2452; alpha short by 0.001 rad with 0.573 deg needs 0.6366 deg."""
+    from fahv.bounds.domain import SchedulingBox, shortfall_fixes
+
+    nominal = SchedulingBox(np.array([85005.0, 7705.0, -0.007, -0.007, -0.2, -0.05]),
+                            np.array([86495.0, 8295.0, 0.007, 0.007, 1.1, 0.12]),
+                            np.array([0.012, 0.5, 3.5, 0.3, 3.5]))  # fmt: skip
+    box = SchedulingBox(np.array([85000.0, 7700.0, -0.017, -0.017, -0.28, -0.13]),
+                        np.array([86500.0, 8300.0, 0.017, 0.017, 1.18, 0.2]),
+                        np.array([0.03, 1.2, 13.0, 0.54, 9.1]))  # fmt: skip
+    fixes = shortfall_fixes({"eta_2": 0.00281, "lo alpha": 0.001, "hi alpha": 0.0005,
+                             "hi h": 3.0}, box, nominal)  # fmt: skip
+    assert fixes == [
+        "eight_state.reach[7] (eta_2) to at least 0.2452 (now 0.24)",
+        "eight_state.reach[0] (alpha) to at least 0.6366 (now 0.573)",  # the larger side
+        "eight_state.h_margin to at least 8.08 (now 5)",
+    ]
+    grown = SchedulingBox(box.lo, box.hi, box.other_half + np.r_[0, 0, 0, 0.2452 - 0.24, 0])
+    assert grown.margin_to(nominal)[2][3] >= 0.24 + 0.00281  # the value given holds

@@ -141,3 +141,30 @@ def test_a_missing_design_names_the_command(tmp_path):
     shutil.rmtree(root / "designs" / "cm_paper")
     with pytest.raises(DesignError, match=r"no stored design .* run `fahv design"):
         load_or_design(_scenario(root, "c1"), log=lambda *_: None)
+
+
+def test_a_scenario_names_its_vehicle_file_relative_to_itself(tmp_path):
+    """`vehicle:` in a scenario, a file beside it: a vehicle 3 % heavier has no stored
+    design, and the refusal gives the whole command that designs for it between
+    backticks, ready to paste; `--vehicle` on the command line takes precedence."""
+    import re
+
+    from fahv.model.vehicle import vehicle_file_text
+    from fahv.runs.workspace import ROOT
+
+    data = yaml.safe_load(vehicle_file_text()[0])
+    data["parameters"]["m"]["value"] = 1.03 * float(data["parameters"]["m"]["value"])
+    (tmp_path / "heavy.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    case1 = ROOT / "offline_design" / "scenarios" / "case1.yaml"
+    path = tmp_path / "case1_heavy.yaml"
+    path.write_text(f"extends: {case1}\nvehicle: heavy.yaml\n")
+    assert load_scenario(path).vehicle_file == tmp_path / "heavy.yaml"
+    with pytest.raises(DesignError) as info:
+        load_or_design(str(path), log=lambda *_: None)
+    fix = re.search(r"run `([^`]+)`$", str(info.value))
+    assert fix and fix.group(1) == (f"fahv design offline_design/designs/cm_certified.yaml "
+                                    f"--vehicle {tmp_path / 'heavy.yaml'}")  # fmt: skip
+    data["parameters"]["m"]["value"] *= 0.97 / 1.03
+    (tmp_path / "light.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    with pytest.raises(DesignError, match=r"--vehicle \S*light\.yaml`$"):  # the command line's
+        load_or_design(str(path), vehicle_file=str(tmp_path / "light.yaml"), log=lambda *_: None)

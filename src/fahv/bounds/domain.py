@@ -265,6 +265,60 @@ def box_shortfall(box: SchedulingBox, nominal: SchedulingBox, F_8, N_8, H: float
     return {n: float(-v) for n, v in zip(names, reach, strict=True) if v < 0}
 
 
+#: The design-file key that sets each coordinate's room in the scheduling box, and the
+#: factor from the coordinate's units to the key's: (key, index or None, factor).
+_ROOM_KEYS = {
+    "h": ("eight_state.h_margin", None, 1.0), "V": ("eight_state.V_margin", None, 1.0),
+    **{c: ("eight_state.reach", i, f) for i, (c, f) in enumerate(zip(
+        ("alpha", "theta", "Phi", "delta_e", *OTHER_COORDINATES),
+        (180 / np.pi, 180 / np.pi, 1.0, 180 / np.pi, 180 / np.pi, 1.0, 1.0, 1.0, 1.0),
+        strict=True))},
+}  # fmt: skip
+
+
+def shortfall_fixes(short: dict, box: SchedulingBox, nominal: SchedulingBox) -> list[str]:
+    """For each coordinate `box_shortfall` names, the design-file key and a value that holds.
+
+    A side of h or V is short when the nominal's range comes too near the envelope's edge:
+    `eight_state.h_margin` / `V_margin` must grow by the shortfall. Any other coordinate
+    is short when the scheduling box reaches too little beyond the nominal box:
+    `eight_state.reach[i]` must grow by it (in the key's units: deg for the attitude, the
+    elevator and q). The value given is the shortfall added to the box's reach now, 1 %
+    more, rounded up at the fourth significant digit.
+
+    Parameters
+    ----------
+    short : dict
+        `box_shortfall`'s {coordinate: shortfall [coordinate units]}.
+    box, nominal : SchedulingBox
+        The scheduling box and the nominal box the design made.
+
+    Returns
+    -------
+    list of str
+        One sentence per coordinate, e.g. `eight_state.reach[7] (eta_2) to at least 0.2453
+        (now 0.24)`; the stronger side where both sides of a coordinate are short.
+    """
+    lo, hi, oth = box.margin_to(nominal)
+    now = {**{f"lo {c}": v for c, v in zip(BOX_COORDINATES, lo, strict=True)},
+           **{f"hi {c}": v for c, v in zip(BOX_COORDINATES, hi, strict=True)},
+           **dict(zip(OTHER_COORDINATES, oth, strict=True))}  # fmt: skip
+    need: dict[str, tuple[float, float, str]] = {}
+    for name, gap in short.items():
+        coord = name.split()[-1]
+        key, i, factor = _ROOM_KEYS[coord]
+        value = (now[name] + gap) * factor  # the room on that side grows by the gap
+        label = f"{key}[{i}] ({coord})" if i is not None else key
+        if label not in need or value > need[label][0]:
+            need[label] = (value, now[name] * factor, coord)
+    out = []
+    for label, (value, have, _) in need.items():
+        target = float(np.format_float_positional(value * 1.01, precision=4, unique=False,
+                                                  fractional=False, trim="-"))  # fmt: skip
+        out.append(f"{label} to at least {target:g} (now {have:.4g})")
+    return out
+
+
 def certified_range(box: SchedulingBox, F_8, N_8, H: float) -> SchedulingBox:
     """The nominal points the tube set's certificate covers: the scheduling box less the tube.
 

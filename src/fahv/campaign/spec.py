@@ -396,13 +396,15 @@ def campaign_from_mapping(data, source: str = "<mapping>", run_spec: SpecFile | 
         the key `scenario`.
     """
     v = validate(campaign_spec(), data, source, CampaignError)
+    named = None  # the vehicle file the scenario names
     if run_spec is None:
         path = scenario_path(v.values["scenario"], base)
         try:
-            run_spec = load_scenario(path).run_spec
+            scenario = load_scenario(path)
         except SpecError as exc:
             raise _fail(source, "scenario", f"names a scenario that does not load: {exc}") from None
-    vehicle = load_vehicle() if vehicle is None else vehicle
+        run_spec, named = scenario.run_spec, scenario.vehicle_file
+    vehicle = load_vehicle(named) if vehicle is None else vehicle
     values = _scenario_limits(v.values, v.defaults_used, run_spec)
     check_campaign(values, run_spec, source, vehicle)
     return Campaign(Path(source), values, run_spec, vehicle)

@@ -61,7 +61,7 @@ def load_or_design(
     """
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     scenario = load_scenario(scenario_path)
-    vehicle = load_vehicle(vehicle_file)
+    vehicle = load_vehicle(vehicle_file or scenario.vehicle_file)  # --vehicle first
     _, design, folder = stored_design(scenario.design_file, design_folder, vehicle)
     if verified_design(design, vehicle, folder, log) is not None:
         log(f"design {folder.name}: every certificate re-checked (cached for this code)")

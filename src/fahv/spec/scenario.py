@@ -78,6 +78,12 @@ class Scenario:
     run_spec: SpecFile
 
     @property
+    def vehicle_file(self) -> Path | None:
+        """The vehicle data file the scenario names (relative to it), None: the packaged."""
+        v = self.data.get("vehicle") or ""
+        return (self.path.parent / v) if v else None
+
+    @property
     def name(self) -> str:
         """Scenario name (run names)."""
         return self.data["name"]
@@ -210,7 +216,7 @@ def read_scenario_file(path: str | Path) -> Any:
 
     return resolve_extends(read_yaml_file(path, "scenario file"), Path(path),
                            lambda p: read_yaml_file(p, "scenario file"), find, SpecError,
-                           path_keys=("design",))  # fmt: skip
+                           path_keys=("design", "vehicle"))  # fmt: skip
 
 
 def load_run_spec(path: str | Path) -> SpecFile:

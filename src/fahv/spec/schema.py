@@ -490,6 +490,9 @@ def scenario_spec() -> Section:
                 "str",
                 "name of the design it runs on (offline_design/designs/<design>.yaml)",
             ),
+            Field("vehicle", "str", "vehicle data file (YAML), relative to the scenario file; "
+                  "empty: the packaged vehicle (--vehicle on the command line takes "
+                  "precedence)", default=""),
             DURATION,
             _command_section(),
             fault_section(),

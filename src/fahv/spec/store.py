@@ -57,9 +57,10 @@ def stored_design(design_file: Path, design_folder=None, vehicle=None):
     vehicle = load_vehicle() if vehicle is None else vehicle
     spec = load_design_file(design_file)
     folder = design_dir(spec.path, spec.name, design_folder, vehicle)
-    fix = f"run `fahv design {spec.path}`" + (
+    command = f"fahv design {spec.path}" + (
         "" if vehicle.packaged else f" --vehicle {vehicle.source_file}"
     )
+    fix = f"run `{command}`"  # the whole command between the backticks, to paste
     try:
         design = load_design(folder)
     except DesignError as exc:

@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fahv.bounds.domain import SchedulingBox, box_shortfall
+from fahv.bounds.domain import SchedulingBox, box_shortfall, shortfall_fixes
 from fahv.bounds.one_step_bound import altitude_bound
 from fahv.bounds.vertices import NominalVertices
 from fahv.errors import DesignError
@@ -121,7 +121,9 @@ def close_tube_set(
                 "eight-state tube: the scheduling box does not hold the nominal box grown by "
                 "the tube (short by "
                 + ", ".join(f"{n} {v:.3g}" for n, v in short.items())
-                + "); grow the box or shrink the nominal's ranges"
+                + "). In the design file, set "
+                + "; ".join(shortfall_fixes(short, nv.box, nominal))
+                + ", or shrink the nominal box (eight_state.attitude, Phi, delta_e, other)"
             )
         if np.all(ratio <= 1.0):
             level, _ = worst_level(A_8, B_8, F_8, N_8, W_8)
