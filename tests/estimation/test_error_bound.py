@@ -149,3 +149,18 @@ def test_the_filters_correction_bounds_are_reached(certified, study):
     v = rng.uniform(-1, 1, (2000, len(v_max))) * v_max
     assert np.abs(np.einsum("jsy,py->jsp", L, v)).max(axis=(0, 2)).max() <= sens.max()
     assert np.all(np.abs(np.einsum("jsy,py->jsp", L, v)).max(axis=(0, 2)) <= sens + 1e-15)
+
+
+def test_a_bound_started_from_its_own_pairs_is_the_same_bound(study):
+    """`start`: the pairs the last solve held make the same S in one solve (so a study can
+    ship them as a warm start); pairs that are not vertex pairs are refused, named."""
+    from fahv.estimation.error_bound import covariance_bound
+
+    cov = study.covariance
+    Rv = measurement_covariance(MEASURED, load_sensors())
+    again = covariance_bound(study.system, Rv, start=cov.pairs)
+    assert again.pairs == cov.pairs and again.pairs_held == cov.pairs_held
+    np.testing.assert_allclose(again.S, cov.S, rtol=1e-9, atol=0)
+    assert again.min_eig >= 0.0
+    with pytest.raises(ValueError, match=r"start pairs \[\(20, 0\)\] are not vertex pairs"):
+        covariance_bound(study.system, Rv, start=[(0, 0), (20, 0)])

@@ -217,6 +217,8 @@ class ProbabilisticTube:
         That of its step from one step to the next [Phi, rad per step].
     model_t : (8,) ndarray
         Frozen-vertex worst case of t by the model error through the estimate (`model_part`).
+    pairs : tuple of (int, int)
+        The pairs the last solve held (`CovarianceBound.pairs`: a `start` for one solve).
     """
 
     Sigma: np.ndarray
@@ -226,6 +228,7 @@ class ProbabilisticTube:
     std_u: np.ndarray
     std_step: np.ndarray
     model_t: np.ndarray
+    pairs: tuple = ()
 
 
 def model_part(js: JointSystem, g_max: np.ndarray) -> np.ndarray:
@@ -249,7 +252,8 @@ def model_part(js: JointSystem, g_max: np.ndarray) -> np.ndarray:
     return peak_to_peak(es, xi).max(axis=0)[:8]
 
 
-def probabilistic_tube(js: JointSystem, R_v: np.ndarray, g_max: np.ndarray) -> ProbabilisticTube:
+def probabilistic_tube(js: JointSystem, R_v: np.ndarray, g_max: np.ndarray,
+                       start=None) -> ProbabilisticTube:  # fmt: skip
     """Bound the noise-driven deviation of the loop on the estimate (module docstring).
 
     Parameters
@@ -259,6 +263,8 @@ def probabilistic_tube(js: JointSystem, R_v: np.ndarray, g_max: np.ndarray) -> P
         The sensors' white-noise covariance.
     g_max : (n_z,) array_like
         Bounds of the model error g for `model_part`.
+    start : sequence of (int, int), optional
+        The covariance bound's first pairs (`covariance_bound`'s `start`).
 
     Returns
     -------
@@ -272,7 +278,7 @@ def probabilistic_tube(js: JointSystem, R_v: np.ndarray, g_max: np.ndarray) -> P
         If a frozen vertex of the joint system is not stable (`model_part`).
 
     """
-    cov = covariance_bound(js.system, R_v)
+    cov = covariance_bound(js.system, R_v, start=start)
     S = cov.S
     Fx = js.input_rows()
     H, J = js.step_rows()
@@ -281,12 +287,12 @@ def probabilistic_tube(js: JointSystem, R_v: np.ndarray, g_max: np.ndarray) -> P
     return ProbabilisticTube(
         S, cov.min_eig, cov.pairs_held, np.sqrt(np.diag(S)[:8]),
         np.sqrt(np.einsum("ab,bc,ac->a", Fx, S, Fx)), np.sqrt(step_var.max(axis=(0, 1))),
-        model_part(js, g_max),
+        model_part(js, g_max), cov.pairs,
     )  # fmt: skip
 
 
-def loop_tube(es: ErrorSystem, flt, arrays, tau: float,
-              R_v: np.ndarray) -> tuple[JointSystem, ProbabilisticTube]:  # fmt: skip
+def loop_tube(es: ErrorSystem, flt, arrays, tau: float, R_v: np.ndarray,
+              start=None) -> tuple[JointSystem, ProbabilisticTube]:  # fmt: skip
     """The probabilistic tube of a design's tube law tau F on a filter's estimate.
 
     Parameters
@@ -301,6 +307,8 @@ def loop_tube(es: ErrorSystem, flt, arrays, tau: float,
         The adjustable factor the law runs with (eq. 53-54; `fahv.spec.schema.law_tau`).
     R_v : (n_y, n_y) ndarray
         The sensors' white-noise covariance.
+    start : sequence of (int, int), optional
+        The covariance bound's first pairs (`covariance_bound`'s `start`).
 
     Returns
     -------
@@ -317,7 +325,7 @@ def loop_tube(es: ErrorSystem, flt, arrays, tau: float,
                       flt.servos, flt.Ts)  # fmt: skip
     g_max = np.zeros(len(es.sigma))
     g_max[:9] = arrays["w_max"]
-    return js, probabilistic_tube(js, R_v, g_max)
+    return js, probabilistic_tube(js, R_v, g_max, start)
 
 
 def radii(p: float, steps: int) -> tuple[float, float]:

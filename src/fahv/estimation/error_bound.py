@@ -120,11 +120,15 @@ class CovarianceBound:
         scaled coordinates (the exact re-check: >= 0).
     pairs_held : int
         Vertex pairs the last LMI solve held (constraint generation).
+    pairs : tuple of (int, int)
+        Those pairs (model vertex, gain vertex), in the solve's order: given back as
+        `start`, the same bound takes one solve.
     """
 
     S: np.ndarray
     min_eig: float
     pairs_held: int
+    pairs: tuple = ()
 
     @property
     def std(self) -> np.ndarray:
@@ -138,7 +142,8 @@ def _pair_margins(Ss: np.ndarray, Qs: np.ndarray, Ms: np.ndarray) -> np.ndarray:
     return np.linalg.eigvalsh(0.5 * (lhs + np.swapaxes(lhs, -1, -2)))[..., 0]
 
 
-def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10) -> CovarianceBound:
+def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10,
+                     start=None) -> CovarianceBound:  # fmt: skip
     """The smallest (in trace, scaled) common covariance bound of the noise-driven error.
 
     Solves min trace(S) s.t. S - M_ij S M_ij' - N_j R_v N_j' >= COVARIANCE_MARGIN I in the
@@ -157,6 +162,10 @@ def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10) -> Covaria
         Covariance of the sensors' white noise (`fahv.estimation.kalman.measurement_covariance`).
     add : int
         Pairs added per pass.
+    start : sequence of (int, int), optional
+        The pairs the first solve holds (default the matched pairs (i, i)): a bound's own
+        `pairs` make it again in one solve. The re-check over every pair is the same
+        whatever the start, so a start changes the work, never what is certified.
 
     Returns
     -------
@@ -167,6 +176,8 @@ def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10) -> Covaria
     DesignError
         If the LMI is infeasible or the solver fails, or the re-check fails at a pair
         the solve held (naming it and the eigenvalue).
+    ValueError
+        If a pair of `start` is not a vertex pair of the system.
 
     Examples
     --------
@@ -182,7 +193,12 @@ def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10) -> Covaria
     Ns = es.N / D[None, :, None]
     Qs = np.einsum("jab,bc,jdc->jad", Ns, np.asarray(R_v, float), Ns)
     R, n = es.n_vertices, len(D)
-    held, released = [(i, i) for i in range(R)], set()
+    held = [(i, i) for i in range(R)] if start is None else [(int(i), int(j)) for i, j in start]
+    outside = [p for p in held if not (0 <= p[0] < R and 0 <= p[1] < R)]
+    if outside or not held:
+        raise ValueError(f"covariance_bound: start pairs {outside or held} are not vertex "
+                         f"pairs of the {R}-vertex system")  # fmt: skip
+    released: set = set()
     while True:
         S = cp.Variable((n, n), symmetric=True)
         cons = [S - Ms[i, j] @ S @ Ms[i, j].T - Qs[j] >> COVARIANCE_MARGIN * np.eye(n)
@@ -209,7 +225,7 @@ def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10) -> Covaria
         i, j = np.unravel_index(np.argmin(margins), margins.shape)
         raise DesignError(f"covariance bound: re-check failed at model vertex {i}, gain vertex "
                           f"{j}: smallest eigenvalue {worst:.3e} < 0")  # fmt: skip
-    return CovarianceBound(Sv * np.outer(D, D), worst, len(held))
+    return CovarianceBound(Sv * np.outer(D, D), worst, len(held), tuple(held))
 
 
 def _frozen(es: ErrorSystem) -> tuple[np.ndarray, np.ndarray]:
