@@ -12,13 +12,19 @@ from fahv.errors import CampaignError
 ROOT = Path(__file__).resolve().parents[2]
 
 
+PAPER = ROOT / "studies" / "paper_design" / "campaigns"
+
+
 @pytest.mark.parametrize(
-    "name, scenario",
-    [("case1.yaml", "case1"), ("envelope.yaml", "case1"), ("case1_paper.yaml", "case1_paper"),
-     ("paired.yaml", "case1_paper"), ("case2.yaml", "case2")],
+    "path, scenario",
+    [(ROOT / "offline_design" / "campaigns" / "case1.yaml", "case1"),
+     (ROOT / "offline_design" / "campaigns" / "envelope.yaml", "case1"),
+     (PAPER / "case1_paper.yaml", "case1_paper"), (PAPER / "paired.yaml", "case1_paper"),
+     (ROOT / "offline_design" / "campaigns" / "case2.yaml", "case2")],
+    ids=lambda v: v.name if isinstance(v, Path) else v,
 )  # fmt: skip
-def test_shipped_campaign_files_validate(name, scenario):
-    c = load_campaign(ROOT / "offline_design" / "campaigns" / name)
+def test_shipped_campaign_files_validate(path, scenario):
+    c = load_campaign(path)
     assert c.run_spec.name == scenario
     assert c.duration == 300.0
     assert set(c["variants"]) <= set(c.run_spec["variants"])
@@ -33,7 +39,7 @@ def test_a_campaign_runs_around_another_scenario():
 
 
 def test_the_paper_design_campaign_draws_losses_beyond_its_range():
-    c = load_campaign(ROOT / "offline_design" / "campaigns" / "case1_paper.yaml")
+    c = load_campaign(PAPER / "case1_paper.yaml")
     assert c["runs"] == 1000
     f = c["dispersions"]["fault"]
     assert f["kinds"] == ["loss_of_effectiveness"] and f["loss"] == [0.0, 0.3]
@@ -178,7 +184,8 @@ def test_the_hardware_campaign_disperses_the_servos_and_sensors_on_the_same_draw
     from fahv.certificate.verified import load_or_design
 
     folder = ROOT / "offline_design" / "campaigns"
-    c = load_campaign(folder / "case1_implementable_hardware.yaml")
+    c = load_campaign(ROOT / "studies" / "hardware_tolerances" / "campaigns"
+                      / "case1_implementable_hardware.yaml")  # fmt: skip
     plain = load_campaign(folder / "case1_implementable_1000.yaml")
     for i in (0, 7, 999):
         same = draw(plain.data, plain.run_spec.data, i)

@@ -27,6 +27,9 @@ def test_margins_prints_the_table_and_writes_the_figures(tmp_path, capsys, monke
     dp = next(r for r in on_estimate if r[3:6] == ["omega_1", "design", "point"])
     assert float(dp[6]) == pytest.approx(5.0, abs=0.1) and float(dp[8]) == pytest.approx(30.1,
                                                                                       abs=0.3)
+    # the classical requirement said of the loop on the estimate too (5.0 dB, 30.1 deg)
+    assert re.search(r"the loop on the estimate, break at delta_e on x_hat, notch omega_1, design "
+                     r"point: GM\+ 5\.0 dB, PM 30\.1 deg; 6 dB / 45 deg met: no", out), out
     # 2 breaks x (4 settings at the design point and the corner, 2 over the vertices)
     assert len(rows) == 2 * (4 * 2 + 2)
     q_on = next(r for r in rows if r[:4] == ["q", "omega_1", "design", "point"])

@@ -7,7 +7,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from fahv.analysis.margin_figures import margin_figures
-from fahv.analysis.margin_report import margin_table, notch_summary
+from fahv.analysis.margin_report import margin_table, meets, notch_summary
 from fahv.analysis.margin_study import margin_study
 from fahv.cli.common import add_vehicle_option, vehicle_of
 from fahv.cli.design import resolve_design_file
@@ -153,6 +153,10 @@ def cmd_margins(args) -> int:
     if rows:
         print(line)
         print(margin_table(rows, markdown=args.markdown))
+        for r in rows:  # the classical requirement, said for the loop on the estimate too
+            print(f"the loop on the estimate, break at {r.break_at}, notch {r.notch}, "
+                  f"{r.point}: GM+ {r.gm_up_db:.1f} dB, PM {r.pm_deg:.1f} deg; "
+                  f"6 dB / 45 deg met: {'yes' if meets(r) else 'no'}")  # fmt: skip
     for label, rho in study.corner_rho.items():
         print(
             f"notch {label}: closed loop stable at {int((rho < 1).sum())} of {len(rho)} "
