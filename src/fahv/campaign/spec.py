@@ -23,7 +23,6 @@ from typing import Any
 
 from fahv.config import Check, Field, Section, validate
 from fahv.config.extends import resolve_extends
-from fahv.config.yamlio import load_yaml
 from fahv.control import VARIANTS
 from fahv.errors import CampaignError, SpecError
 from fahv.model.actuators import IDEAL
@@ -31,7 +30,7 @@ from fahv.model.vehicle import load_vehicle
 from fahv.plant.faults import FAULTS
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.sensors.data import EXACT_STATE
-from fahv.spec.files import SpecFile
+from fahv.spec.files import SpecFile, read_yaml_file
 from fahv.spec.requirements import REQUIREMENT_FIELDS
 from fahv.spec.scenario import load_scenario
 from fahv.spec.schema import plant_choices
@@ -442,19 +441,14 @@ def scenario_path(name: str, base: Path | None = None) -> Path:
 
 
 def _read(path: Path) -> Any:
-    """A campaign file's YAML content.
+    """A campaign file's YAML content (`fahv.spec.files.read_yaml_file`).
 
     Raises
     ------
     CampaignError
         If the file is missing or not YAML (with the line of the error).
     """
-    if not path.is_file():
-        raise CampaignError(f"campaign file not found: {path}")
-    try:
-        return load_yaml(path.read_text())
-    except Exception as exc:  # yaml errors carry the line number
-        raise CampaignError(f"{path}: not a valid YAML file: {exc}") from None
+    return read_yaml_file(path, "campaign file", CampaignError)
 
 
 def _campaign_candidates(name: str, folder: Path) -> list[Path]:

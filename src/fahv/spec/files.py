@@ -67,21 +67,23 @@ def spec_file(data: Any, path: str = "<mapping>", spec: Section | None = None) -
     return SpecFile(Path(path), v.values, v.defaults_used)
 
 
-def read_yaml_file(path: str | Path, what: str) -> Any:
+def read_yaml_file(path: str | Path, what: str, error: type = SpecError) -> Any:
     """The YAML content of a file.
 
     Raises
     ------
-    SpecError
-        If the file is missing or is not YAML (naming the file, `what` it should be).
+    error
+        `SpecError` by default (a campaign file's: `CampaignError`): if the file is
+        missing or is not YAML (naming the file, `what` it should be, the YAML error's
+        line).
     """
     p = Path(path)
     if not p.is_file():
-        raise SpecError(f"{what} not found: {p}")
+        raise error(f"{what} not found: {p}")
     try:
         return load_yaml(p.read_text())
     except Exception as exc:  # yaml errors carry the line number
-        raise SpecError(f"{p}: not a valid YAML file: {exc}") from None
+        raise error(f"{p}: not a valid YAML file: {exc}") from None
 
 
 def load_design_file(path: str | Path) -> SpecFile:
