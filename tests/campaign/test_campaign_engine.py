@@ -364,7 +364,8 @@ def test_the_report_page_of_a_campaign_has_its_bounds_and_figures(reference, cap
     page = out / "report" / "report.html"
     assert capsys.readouterr().out.strip() == f"report: {page}"
     text = page.read_text()
-    assert "p_fail &lt;" in text  # the console summary's bounds, escaped
+    assert "p_fail &lt;" in text  # each pass rate's bound
+    assert "<td>final |h - h_c| &lt;= 10 ft</td>" in text  # a cell of its own, not split
     assert "Worst 3 runs per metric" in text and "<table>" in text
     n = text.count('src="data:image/png;base64,')
     assert n >= 3 and 'src="' + "hist" not in text  # every figure inside the page

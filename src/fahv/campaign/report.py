@@ -372,7 +372,8 @@ def rate_table(data: dict, verd: dict) -> tuple[dict, list[str]]:
             cells.append(
                 "n/a" if n == 0 else f"{ok}/{n} ({100.0 * ok / n:.1f} %), p_fail < {bound:.3g}"
             )
-        lines.append(f"| {desc.format(**req)} | " + " | ".join(cells) + " |")
+        text = desc.format(**req).replace("|", "\\|")  # |h - h_c| inside a table cell
+        lines.append(f"| {text} | " + " | ".join(cells) + " |")
     return table, lines
 
 

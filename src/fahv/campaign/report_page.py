@@ -9,7 +9,6 @@ images counted once loaded (`fahv.runs.report_page.page`).
 
 from __future__ import annotations
 
-import html
 import re
 from pathlib import Path
 
@@ -41,7 +40,7 @@ def campaign_page(out_dir: str | Path) -> str:
         If the folder holds no campaign dataset (`make_report`).
     """
     folder = Path(out_dir)
-    rep = make_report(folder, figures=True)
+    make_report(folder, figures=True)
     text = (folder / "report" / "report.md").read_text()
     body = markdown.markdown(text, extensions=["tables"])
 
@@ -50,9 +49,7 @@ def campaign_page(out_dir: str | Path) -> str:
         return f'<img alt="{m.group(1)}" src="{embedded_png(src) if src.is_file() else m.group(2)}"'
 
     body = _IMG.sub(inline, body)
-    summary = f"<pre>{html.escape(rep.summary())}</pre>"
-    return page(f"Campaign {folder.name}", f"<h1>Campaign {html.escape(folder.name)}</h1>\n"
-                f"{summary}\n{body}")  # fmt: skip
+    return page(f"Campaign {folder.name}", body)
 
 
 def write_campaign_page(out_dir: str | Path, out: str | Path | None = None) -> Path:
