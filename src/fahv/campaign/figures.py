@@ -8,11 +8,13 @@ beside its tables (`make_report`).
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
 
 from fahv.campaign import store
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 
 #: Metrics of the worst-run tables and histograms: (column, label, how it is made
 #: "worse = larger", requirement key of the histogram line).
@@ -27,6 +29,40 @@ WORST_METRICS = (
     ("eta_1_dot_rms_after_fault", "RMS eta_1_dot after the fault [1/s]", abs, None),
     ("delta_e_max_deg", "max delta_e [deg]", abs, None),
 )
+
+
+#: Axis words of the dispersed columns: column -> (label with its unit, factor).
+_AXES = {
+    "fault.t_onset": ("fault onset [s]", 1.0), "fault.loss": ("loss 1 - rho_f [%]", 100.0),
+    "fault.bias_deg": ("elevator bias [deg]", 1.0),
+    "command.dh": ("commanded climb dh [ft]", 1.0), "command.dV": ("commanded dV [ft/s]", 1.0),
+    "initial.h0": ("initial h0 [ft]", 1.0), "initial.V0": ("initial V0 [ft/s]", 1.0),
+    "actuators.omega_n": ("servo omega_n factor [-]", 1.0),
+    "actuators.zeta": ("servo zeta factor [-]", 1.0),
+    "actuators.rate_limit": ("servo rate limit factor [-]", 1.0),
+    "sensors.stddev": ("sensor noise factor [-]", 1.0),
+    "sensors.bias_stddev": ("sensor bias stddev factor [-]", 1.0),
+    "sensors.bias_mean": ("sensor bias mean [stddevs]", 1.0),
+}  # fmt: skip
+
+
+def axis_of(column: str, data: dict) -> tuple[str, float]:
+    """The scatter axis of a dispersed column: (label with its unit, factor on the value).
+
+    An uncertain parameter's draw s_p becomes the parameter's change from its nominal
+    value in percent, s_p x scale x rel_p x 100 (sec. 5.1: p = p_nominal (1 + s_p scale
+    rel_p)); the other columns keep their value in their own unit.
+
+    Examples
+    --------
+    >>> axis_of("s.m", {"dispersions": {"uncertainty": {"scale": 1.0}}})
+    ('m from its nominal [%]', 10.0)
+    """
+    if column.startswith("s."):
+        p = column[2:]
+        scale = data["dispersions"]["uncertainty"]["scale"]
+        return f"{p} from its nominal [%]", 100.0 * scale * PAPER_UNCERTAINTY.get(p, 1.0)
+    return _AXES.get(column, (column, 1.0))
 
 
 def metric(row: dict, key: str) -> float:
@@ -54,7 +90,9 @@ def draw_figures(out: Path, data: dict, per_variant: dict, cols: list[str]) -> l
             if x.size:
                 ax.hist(x, bins=30, alpha=0.6, label=f"{v} (n = {x.size})")
         if req_key is not None:
-            ax.axvline(req[req_key], color="r", ls="--", label=f"requirement {req[req_key]:g}")
+            unit = re.search(r"\[([^\]]+)\]$", label)
+            words = f"requirement {req[req_key]:g}" + (f" {unit.group(1)}" if unit else "")
+            ax.axvline(req[req_key], color="r", ls="--", label=words)
         ax.set_xlabel(label)
         ax.set_ylabel("runs")
         if ax.get_legend_handles_labels()[0]:
@@ -73,14 +111,16 @@ def draw_figures(out: Path, data: dict, per_variant: dict, cols: list[str]) -> l
         nr = math.ceil(len(cols) / nc)
         fig, axes = plt.subplots(nr, nc, figsize=(3.2 * nc, 2.6 * nr), squeeze=False)
         for ax, c in zip(axes.ravel(), cols, strict=False):
+            name, factor = axis_of(c, data)
             for v, rs in per_variant.items():
-                pts = [(metric(r, c), worse(metric(r, key))) for r in rs if r.get(key) is not None]
+                pts = [(factor * metric(r, c), worse(metric(r, key))) for r in rs
+                       if r.get(key) is not None]  # fmt: skip
                 if pts:
                     a = np.array(pts)
                     ax.plot(a[:, 0], a[:, 1], ".", ms=3, label=v)
             if req_key is not None:
                 ax.axhline(req[req_key], color="r", ls="--", lw=0.8)
-            ax.set_xlabel(c, fontsize=8)
+            ax.set_xlabel(name, fontsize=8)
             ax.tick_params(labelsize=7)
         for ax in axes.ravel()[len(cols) :]:
             ax.axis("off")
