@@ -12,7 +12,7 @@ import yaml
 from fahv.certificate.verified import load_or_design
 from fahv.errors import DesignError, SpecError
 from fahv.model.vehicle import load_vehicle
-from fahv.spec.scenario import load_scenario, run_spec_data, uncertified
+from fahv.spec.scenario import load_scenario, read_scenario_file, run_spec_data, uncertified
 from fahv.spec.store import stored_design
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -32,7 +32,7 @@ def _copy_tree(tmp_path: Path) -> Path:
 
 
 def _scenario(root: Path, name: str, **changes) -> Path:
-    d = yaml.safe_load(PAPER.read_text())
+    d = read_scenario_file(PAPER)  # the whole scenario, its `extends:` merged in
     d["name"] = name
     for key, value in changes.items():
         section, _, field = key.partition(".")

@@ -15,7 +15,7 @@ from pathlib import Path
 import markdown
 
 from fahv.campaign.report import make_report
-from fahv.runs.report_page import embedded_png, page
+from fahv.runs.report_page import embedded_png, page, write_page
 
 #: An image of the report's Markdown, as the Markdown library writes it.
 _IMG = re.compile(r'<img alt="([^"]*)" src="([^"]+)"')
@@ -61,9 +61,4 @@ def write_campaign_page(out_dir: str | Path, out: str | Path | None = None) -> P
         As `campaign_page`.
     """
     target = Path(out) if out else Path(out_dir) / "report" / "report.html"
-    text = campaign_page(out_dir)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_suffix(".html.part")
-    tmp.write_text(text)
-    tmp.replace(target)
-    return target
+    return write_page(target, campaign_page(out_dir))

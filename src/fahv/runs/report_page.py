@@ -22,7 +22,7 @@ from fahv.runs.judged import run_judgements, run_limits
 from fahv.runs.plots import plt
 from fahv.runs.plots_context import plotted_run, run_labels
 from fahv.runs.tools import METRIC_ROWS, summarize
-from fahv.spec.requirements import overall
+from fahv.spec.requirements import overall, overall_line, verdict_rows
 
 #: The page's style: plain, readable, printable.
 STYLE = """
@@ -82,22 +82,6 @@ def _cell_class(i: int, cell: str, numeric) -> str:
     return "num" if i in numeric else ""
 
 
-def _verdict_rows(judgements) -> list[list[str]]:
-    """The verdict table's rows (requirement, measured, value, limit, margin, verdict)."""
-    rows = []
-    for j in judgements:
-        r, unit = j.requirement, "" if j.requirement.unit == "-" else f" {j.requirement.unit}"
-        if r.key == "completes":
-            value, limit, margin = ("yes" if j.passed else "ended early"), "", ""
-        elif j.value != j.value:  # NaN: not measured
-            value, limit, margin = r.nan, f"{j.limit:.4g}{unit}", ""
-        else:
-            value, limit = f"{j.value:.4g}{unit}", f"{j.limit:.4g}{unit}"
-            margin = f"{j.margin:.4g}{unit}"
-        rows.append([r.key, r.signal, value, limit, margin, j.word])
-    return rows
-
-
 def run_page(path: str | Path) -> str:
     """The HTML page of one recorded run (module notes).
 
@@ -128,12 +112,10 @@ def run_page(path: str | Path) -> str:
         parts.append(f"<p class=\"FAIL\">No metrics: {html.escape(s['metrics_note'])}</p>")
     else:
         word = "PASS" if overall(judged) else "FAIL"
-        missed = [j.requirement.key for j in judged if j.passed is False]
-        why = "every applicable requirement met" if not missed else ", ".join(missed)
-        parts.append(f"<p class=\"verdict {word}\">verdict: {word} ({html.escape(why)})</p>")
+        parts.append(f"<p class=\"verdict {word}\">{html.escape(overall_line(judged))}</p>")
         parts.append("<h2>Requirements</h2>" + table(
             ["requirement", "measured", "value", "limit", "margin", "verdict"],
-            _verdict_rows(judged), {2, 3, 4}))  # fmt: skip
+            [list(r) for r in verdict_rows(judged)], {2, 3, 4}))  # fmt: skip
     parts.append(f"<p><b>coverage:</b> {html.escape(md.get('coverage', 'not recorded'))}</p>")
     parts.append("<h2>Run</h2>" + table(["key", "value"], [[k, str(v)] for k, v in md.items()]))
     if s["metrics"] is not None:
@@ -159,9 +141,13 @@ def write_run_page(path: str | Path, out: str | Path | None = None) -> Path:
     from fahv.runs.bag import bag_paths
 
     folder, _ = bag_paths(path)
-    target = Path(out) if out else folder / "report.html"
+    return write_page(Path(out) if out else folder / "report.html", run_page(path))
+
+
+def write_page(target: Path, text: str) -> Path:
+    """Write a page whole or not at all (a `.part` file renamed over it); returns `target`."""
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = target.with_suffix(".html.part")
-    tmp.write_text(run_page(path))
+    tmp.write_text(text)
     tmp.replace(target)
     return target

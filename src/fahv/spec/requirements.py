@@ -249,6 +249,30 @@ def _number(v: float, unit: str) -> str:
     return f"{v:.4g}" if abs(v) < 1000 else f"{v:.0f}"
 
 
+def verdict_rows(judgements: list[Judgement]) -> list[tuple[str, ...]]:
+    """The cells of the verdict table: requirement, measured, value, limit, margin, verdict.
+
+    Values, limits and margins with their unit (counts as integers, else four significant
+    digits); a value not measured as what its NaN means (`Requirement.nan`), with no
+    margin; `completes` as yes / ended early. The terminal (`verdict_table`) and the
+    report page (`fahv.runs.report_page`) print these same cells.
+    """
+    rows = []
+    for j in judgements:
+        r = j.requirement
+        unit = "" if r.unit == "-" else f" {r.unit}"
+        if r is COMPLETES:
+            value, limit, margin = ("yes" if j.passed else "ended early"), "", ""
+        elif math.isnan(j.value):
+            value, limit, margin = r.nan, f"{_number(j.limit, r.unit)}{unit}", ""
+        else:
+            value = f"{_number(j.value, r.unit)}{unit}"
+            limit = f"{_number(j.limit, r.unit)}{unit}"
+            margin = f"{_number(j.margin, r.unit)}{unit}"
+        rows.append((r.key, r.signal, value, limit, margin, j.word))
+    return rows
+
+
 def verdict_table(judgements: list[Judgement], name: str = "") -> str:
     """The verdict table of one run: requirement, value, limit, margin, verdict; then overall.
 
@@ -262,31 +286,25 @@ def verdict_table(judgements: list[Judgement], name: str = "") -> str:
     Returns
     -------
     str
-        One row per requirement (what it measures, the value and limit with their unit,
-        the margin limit - value, PASS/FAIL/n/a), then `verdict: PASS` or `verdict:
+        One row per requirement (`verdict_rows`), then `verdict: PASS` or `verdict:
         FAIL (<missed requirements>)`.
     """
-    rows = [("requirement", "measured", "value", "limit", "margin", "verdict")]
-    for j in judgements:
-        r = j.requirement
-        unit = "" if r.unit == "-" else f" {r.unit}"
-        if r is COMPLETES:
-            value, limit, margin = ("yes" if j.passed else "ended early"), "", ""
-        elif math.isnan(j.value):
-            value, limit, margin = r.nan, f"{_number(j.limit, r.unit)}{unit}", ""
-        else:
-            value = f"{_number(j.value, r.unit)}{unit}"
-            limit = f"{_number(j.limit, r.unit)}{unit}"
-            margin = f"{_number(j.margin, r.unit)}{unit}"
-        rows.append((r.key, r.signal, value, limit, margin, j.word))
+    rows = [("requirement", "measured", "value", "limit", "margin", "verdict"),
+            *verdict_rows(judgements)]  # fmt: skip
     widths = [max(len(row[i]) for row in rows) for i in range(6)]
     lines = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in
                        enumerate(zip(row, widths, strict=True))).rstrip() for row in rows]
+    lines.append(overall_line(judgements, name))
+    return "\n".join(lines)
+
+
+def overall_line(judgements: list[Judgement], name: str = "") -> str:
+    """`verdict of <name>: PASS (every applicable requirement met)` or `...: FAIL (<missed>)`."""
     missed = [j.requirement.key for j in judgements if j.passed is False]
     who = f" of {name}" if name else ""
-    lines.append(f"verdict{who}: PASS (every applicable requirement met)" if not missed
-                 else f"verdict{who}: FAIL ({', '.join(missed)})")  # fmt: skip
-    return "\n".join(lines)
+    if not missed:
+        return f"verdict{who}: PASS (every applicable requirement met)"
+    return f"verdict{who}: FAIL ({', '.join(missed)})"
 
 
 def verdict_record(judgements: list[Judgement]) -> dict:
