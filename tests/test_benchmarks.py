@@ -27,7 +27,7 @@ FIGURES = {
         rf"^  whole step\s+{NUM} ms/step \(real-time factor {NUM}\)$",
     ],
     "bench_qp": [
-        rf"^nominal QP \(build \+ solve \+ check\)\s+n=\s*[1-9]\d*\s+median {NUM} ms\s+"
+        rf"^nominal re-plan \(QP vectors, solve, check\)\s+n=\s*[1-9]\d*\s+median {NUM} ms\s+"
         rf"p99 {NUM} ms\s+max {NUM} ms$",
         rf"^whole step\s+n=\s*100\s+median {NUM} ms\s+p99 {NUM} ms\s+max {NUM} ms$",
         r"^QP counters \(.*\): \[\d+, \d+, \d+, \d+\]$",

@@ -23,6 +23,7 @@ def test_infeasible_qp_takes_the_fallback_and_is_counted(design):
         src.step(k, k * 0.02, x, None)
     assert mpc.stats.solves == 1 and mpc.stats.fallback == 0
     mpc.u_hi = mpc.u_lo - 1.0  # empty input set from now on
+    src.vectors.put(0, mpc)  # the batch's copy of the run's QP parts
     for k in range(25, 25 * 32):
         out = src.step(k, k * 0.02, x, None)
     assert np.all(np.isfinite(out.u_n))

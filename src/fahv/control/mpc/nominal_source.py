@@ -9,31 +9,34 @@ reference (x_r, u_r) at the artificial set point and the nominal deviation (x_n,
 that the ancillary law u = u_r + u_n + tau F (x - x_r - x_n) of eq. (36) / (54) of
 Yang et al. (2022) acts on. The nominal state moves by the scheduled LPV model of
 eq. (12) or by the nonlinear CM of eq. (1)-(3) (`mpc.nominal_model`). Also here: its
-node parameters (the case section's keys under `mpc.` and the design's boxes) and
+node parameters' values (`fahv.control.mpc.parameters`) and
 its offline part (the terminal ingredients' re-check and the attitude bounds).
 
 Batch
     `TrackingMPCNominal` runs B runs at once: the fast step (estimator,
     plan interpolation, nominal model, output) is one numpy computation over the
     batch, whose per-run items are the BLAS calls of one run's computation, so a
-    run's numbers do not depend on its batch; the re-plans (one QP per run every M
-    steps) are a loop over the runs, each with its own
-    `fahv.control.mpc.tracking.TrackingMPC`.
+    run's numbers do not depend on its batch. At a re-plan (every M steps) the QPs'
+    linear costs and row bounds of all runs are one computation too
+    (`fahv.control.mpc.row_bounds`); the solves are a loop over the runs, each with
+    its own `fahv.control.mpc.tracking.TrackingMPC` (its rows, DAQP workspace and
+    scheduling).
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
 
-from fahv.config import Field, Section
+from fahv.config import Section
 from fahv.control.base import NominalSource, register_nominal
 from fahv.control.command import Command, CommandSchedule
 from fahv.control.mpc.attitude import attitude_bounds
-from fahv.control.mpc.estimator import EST_STARTS, DisturbanceEstimator, estimator_gains
-from fahv.control.mpc.settings import MPC_SECTION_FIELDS, X_BOX_TO_STATE, MPCSettings
+from fahv.control.mpc.estimator import DisturbanceEstimator, estimator_gains
+from fahv.control.mpc.parameters import MPC_NODE_PARAMETERS, node_values
+from fahv.control.mpc.row_bounds import QPVectors
+from fahv.control.mpc.settings import MPC_SECTION_FIELDS, MPCSettings
 from fahv.control.mpc.tracking import TRIM_STEP, TrackingMPC
 from fahv.control.reference import lpv_of, mv, trim_map_of
 from fahv.errors import DesignError, RunError
@@ -42,63 +45,6 @@ from fahv.model.notch import DiscreteNotch, NotchFilter
 from fahv.model.vehicle import load_vehicle
 from fahv.msg import NominalTrajectory
 from fahv.verdict import RunEnded
-
-#: Node parameter `mpc.att_max`: the bounds the design chose (alpha, theta).
-ATT_MAX_PARAMETER = Field(
-    "mpc.att_max", "floats", "bounds on the nominal |alpha - alpha_r| and |theta - theta_r| "
-    "(from the nominal trim) of the QP's attitude rows, from the design (the default only "
-    "fills the parameter of runs without the nominal MPC)", unit="deg", lo=0.0,
-    lo_open=True, hi=10.0, length=2, default=(0.35, 0.35),
-)  # fmt: skip
-
-#: Node parameter `mpc.u_box`: the nominal box's input ranges the design assumed.
-U_BOX_PARAMETER = Field(
-    "mpc.u_box", "floats", "rows on the manoeuvre part of the nominal input (the input minus "
-    "the set point's steady input, trim plus estimate shift): Phi lo, Phi hi, delta_e lo, "
-    "delta_e hi (Phi -, delta_e deg), from the design's nominal box less the box corners' "
-    "trim offsets (tube.form eight_state); all 0: no rows", lo=-30.0, hi=30.0, length=4,
-    default=(0.0, 0.0, 0.0, 0.0),
-)  # fmt: skip
-
-#: Node parameter `mpc.hv_box`: the nominal box's h and V ranges the design assumed.
-HV_BOX_PARAMETER = Field(
-    "mpc.hv_box", "floats", "the nominal's altitude and speed range: h lo, h hi [ft], V lo, "
-    "V hi [ft/s], from the design's nominal box (tube.form eight_state: the envelope less "
-    "eight_state.h_margin, V_margin); the set point stays in it and rows keep the predicted "
-    "nominal in it; all 0: none", lo=0.0, hi=1e6, length=4, default=(0.0, 0.0, 0.0, 0.0),
-)  # fmt: skip
-
-#: Node parameter `mpc.x_box`: the range of the nominal's other states the certificate covers.
-X_BOX_PARAMETER = Field(
-    "mpc.x_box", "floats", "the range the tube's certificate covers for the nominal's alpha, "
-    "theta [deg], q [deg/s], eta_1, eta_1_dot, eta_2, eta_2_dot (from the nominal vehicle's "
-    "trim at the nominal's own h, V): 7 lows then 7 highs, from the design (tube.form "
-    "eight_state: the scheduling box less the tube); rows keep the predicted nominal in it; "
-    "all 0: none", lo=-1e3, hi=1e3, length=14, default=(0.0,) * 14,
-)  # fmt: skip
-
-#: Node parameter `mpc.est_start`: how the state-disturbance estimate starts.
-EST_START_PARAMETER = Field(
-    "mpc.est_start", "str", "start of the state-disturbance estimate: first (the first "
-    "residual initialises it, a loop on the exact state), mean (the mean of the residuals "
-    "so far until the filter's own gain takes over) or zero (from d = 0 with the filter's "
-    "gain), both for a loop on a state estimate: scenario key estimator.nominal_est_start)",
-    choices=EST_STARTS, default=EST_STARTS[0],
-)  # fmt: skip
-
-#: Node parameters of the nominal MPC: its case section's keys under `mpc.` (`att_max`
-#: as the design's bounds), the design's `mpc.u_box`, `mpc.hv_box` and `mpc.x_box`, and
-#: the run's `mpc.est_start`.
-MPC_NODE_PARAMETERS = (
-    *(
-        ATT_MAX_PARAMETER if f.name == "att_max" else dataclasses.replace(f, name=f"mpc.{f.name}")
-        for f in MPC_SECTION_FIELDS
-    ),
-    U_BOX_PARAMETER,
-    HV_BOX_PARAMETER,
-    X_BOX_PARAMETER,
-    EST_START_PARAMETER,
-)
 
 
 def _mpc_uses(root) -> bool:
@@ -201,6 +147,8 @@ class TrackingMPCNominal(NominalSource):
         self._init_estimate(p, B)
         self.command = CommandSchedule([Command.of_parameters(r) for r in runs])
         self._init_batch_state(B, st.N_p)
+        #: the runs' QP parts their re-plans read, stacked (filled at each scheduling)
+        self.vectors: QPVectors | None = None
         for b in range(B):
             try:
                 self._schedule(b, self.TH[b])
@@ -349,39 +297,71 @@ class TrackingMPCNominal(NominalSource):
                 f"theta = {np.degrees(x[3]):.2f} deg")  # fmt: skip
 
     def _copy_schedule(self, b: int) -> None:
-        """Copy run b's scheduled model into the batch arrays."""
+        """Copy run b's scheduled model and its QP's parts into the batch arrays."""
         mpc = self.mpcs[b]
+        if self.vectors is None:
+            self.vectors = QPVectors(mpc, len(self.mpcs))
+        self.vectors.put(b, mpc)
         pe = self.p_est
         self.XRS[b], self.URS[b], self.THS[b] = mpc.x_r_s, mpc.u_r_s, mpc.theta_s
         self.GX[b], self.GU[b], self.A[b], self.Bm[b] = mpc.Gx, mpc.Gu, mpc.A, mpc.B
         self.HX[b], self.HU[b] = mpc.Hx[:, :pe], mpc.Hu[:, :pe]
         self.EA[b], self.EB[b] = mpc.A[:pe, :pe], mpc.B[:pe]
 
-    def _plan(self, b: int, cmd: np.ndarray) -> bool:
-        """Re-plan run b: reschedule if needed, solve its QP, or fall back (counted).
+    def _reschedule_if_due(self, b: int) -> None:
+        """Reschedule run b's QP at its nominal operating point if it moved far enough.
+
+        The QP is scheduled at the nominal's (h, V) of X_n, not at the set point: the set
+        point may sit a steady offset away from the state it holds.
+
+        Raises
+        ------
+        RunEnded
+            As `_reschedule`.
+        """
+        mpc = self.mpcs[b]
+        if not np.all(np.abs(self.XN[b, :2] - mpc.theta_s) <= mpc.s.reschedule):
+            self._reschedule(b, self.XN[b, :2])
+
+    def _qp_arguments(self, cmd: np.ndarray) -> tuple:
+        """Every run's QP arguments and its first QP's vectors, in one pass over the batch.
+
+        Returns (z0 (B, n), u_base (B, 2), x_d (B, n), u_prev (B, 2) or None, f, bl, bu)
+        (`fahv.control.mpc.row_bounds.QPVectors.compute`). The rate rows' start
+        (`mpc.du_max`) is the input of the last fast step with its estimate part moved
+        to the estimate's new steady input. u_d follows the estimate at every fast step,
+        the rows bound the plan's part: measured from the last input as applied, the first
+        re-plan after a loss's onset had to cancel the estimate's jump (a 10-14 % loss:
+        the plan pitched up and the vehicle rose 15-34 ft; docs/theory/nominal_mpc.md,
+        "The re-plan's rate row").
+        """
+        B = self.XN.shape[0]
+        if self.has_est:
+            d = np.ascontiguousarray(self.est_ss.d)
+            x_d = np.matmul(self.HX, d[:, :, None])[:, :, 0]  # each run's HX[b] @ d[b]
+            u_d = np.matmul(self.HU, d[:, :, None])[:, :, 0]
+        else:
+            x_d, u_d = np.zeros((B, self.n)), np.zeros((B, 2))
+        z0, u_base = self.XN - self.XRS - x_d, self.URS + u_d
+        u_prev = self.U_NOM + (u_d - self.U_D) if self.k > 0 else None
+        with np.errstate(all="ignore"):  # a run that has ended may hold NaN
+            f, bl, bu = self.vectors.compute(z0, u_base, cmd, x_d, u_prev)
+        return z0, u_base, x_d, u_prev, f, bl, bu
+
+    def _plan(self, b: int, cmd: np.ndarray, qp: tuple) -> bool:
+        """Re-plan run b: solve its QP (`qp`: `_qp_arguments`), or fall back (counted).
 
         Returns True when the plan moved the set point `TH[b]`: its trim `TRX[b]`,
         `TRU[b]` is then due (evaluated for all such runs at once by `step`).
         """
         mpc, ly = self.mpcs[b], self.mpcs[b].layout
-        # schedule at the nominal operating point (h, V of X_n), not at the set point:
-        # the set point may sit a steady offset away from the state it holds
-        if not np.all(np.abs(self.XN[b, :2] - mpc.theta_s) <= mpc.s.reschedule):
-            self._reschedule(b, self.XN[b, :2])
-        if self.has_est:
-            d = self.est_ss.d[b]
-            x_d, u_d = self.HX[b] @ d, self.HU[b] @ d
-        else:
-            x_d, u_d = np.zeros(self.n), np.zeros(2)
-        args = (self.XN[b] - mpc.x_r_s - x_d, mpc.u_r_s + u_d, cmd, x_d)
-        # the rate rows' start (mpc.du_max): the input of the last fast step with its
-        # estimate part moved to the estimate's new steady input. u_d follows the estimate
-        # at every fast step, the rows bound the plan's part: measured from the last
-        # input as applied, the first re-plan after a loss's onset had to cancel the
-        # estimate's jump (a 10-14 % loss: the plan pitched up and the vehicle rose
-        # 15-34 ft; docs/theory/nominal_mpc.md, "The re-plan's rate row")
-        u_prev = self.U_NOM[b] + (u_d - self.U_D[b]) if self.k > 0 else None
-        y, why, recovered = self._solve_with_recovery(mpc, args, u_prev)
+        z0, u_base, x_d, u_prev, f, bl, bu = qp
+        u_prev_b = None if u_prev is None else u_prev[b]
+        args = (z0[b], u_base[b], cmd[b], x_d[b])
+        y, why = mpc.solve_qp(f[b], bl[b], bu[b])
+        recovered = False
+        if y is None:
+            y, why, recovered = self._recover(mpc, args, u_prev_b, why)
         if y is not None:
             if recovered:
                 mpc.stats.recovered += 1
@@ -405,22 +385,19 @@ class TrackingMPCNominal(NominalSource):
         return False
 
     @staticmethod
-    def _solve_with_recovery(mpc: TrackingMPC, args: tuple, u_prev):
-        """The QP, then the recovery QPs: (y or None, why, whether a recovery planned).
+    def _recover(mpc: TrackingMPC, args: tuple, u_prev, why: str):
+        """The recovery QPs after a rejected QP: (y or None, why, whether one planned).
 
         The recovery frees the set point on the trim map (no trust region), then also
         drops the steady-input rows (`TrackingMPC.solve`, `relax_steady`).
         """
-        y, why = mpc.solve(*args, u_prev=u_prev)
-        recovered = False
-        if y is None:  # recovery: the set point free on the trim map (no trust region)
-            y, why_rec = mpc.solve(*args, recover=True, u_prev=u_prev)
-            if y is None:  # then without the steady-input rows (solve: relax_steady)
-                y, why_st = mpc.solve(*args, recover=True, u_prev=u_prev, relax_steady=True)
-                why = f"{why}; steady input relaxed" if y is not None else why
-                why_rec = f"{why_rec}; without the steady-input rows: {why_st}"
-            recovered = y is not None
-            why = why if y is not None else f"{why}; recovery: {why_rec}"
+        y, why_rec = mpc.solve(*args, recover=True, u_prev=u_prev)
+        if y is None:  # then without the steady-input rows (solve: relax_steady)
+            y, why_st = mpc.solve(*args, recover=True, u_prev=u_prev, relax_steady=True)
+            why = f"{why}; steady input relaxed" if y is not None else why
+            why_rec = f"{why_rec}; without the steady-input rows: {why_st}"
+        recovered = y is not None
+        why = why if y is not None else f"{why}; recovery: {why_rec}"
         return y, why, recovered
 
     # -- the batched fast step ----------------------------------------------------------
@@ -457,13 +434,17 @@ class TrackingMPCNominal(NominalSource):
         if self.h_reset:  # the nominal's altitude to the measured one (e_h = 0)
             alive = self.lanes.alive
             self.XN[alive, 0] = np.asarray(x, float)[alive, 0]
-        moved = []
         for b in np.flatnonzero(self.lanes.alive):
             try:
-                if self._plan(int(b), np.array([h_c[b], V_c[b]])):
-                    moved.append(b)
+                self._reschedule_if_due(int(b))
             except RunEnded as exc:  # the run ends alone (a batch goes on)
                 self.lanes.fail(int(b), exc)
+        live = np.flatnonzero(self.lanes.alive)
+        moved = []
+        if live.size:  # every run's QP vectors at once, then each run's solve
+            cmd = np.stack([np.asarray(h_c, float), np.asarray(V_c, float)], axis=1)
+            qp = self._qp_arguments(cmd)
+            moved = [b for b in live if self._plan(int(b), cmd, qp)]
         if moved:  # the trims of the new set points, in one evaluation of the map
             self.TRX[moved], self.TRU[moved] = self.trim_map.at(*self.TH[moved].T)
         self._counts = self._qp_counts()
@@ -566,29 +547,8 @@ class TrackingMPCNominal(NominalSource):
 
     @classmethod
     def node_values(cls, arrays: dict, case: dict) -> dict:
-        """`mpc.*` node parameters from the case's `mpc` section (defaults if absent).
+        """`mpc.*` node parameters from the case's `mpc` section and the design's arrays.
 
-        `mpc.att_max` is the design's attitude bounds (`attitude_bounds`).
+        `fahv.control.mpc.parameters.node_values`.
         """
-        mpc = case.get("mpc") or {f.name: f.default for f in MPC_SECTION_FIELDS}
-        out = {
-            f"mpc.{k}": ([float(x) for x in v] if isinstance(v, tuple | list) else v)
-            for k, v in mpc.items()
-        }
-        out["mpc.att_max"] = [float(v) for v in np.degrees(arrays["att_max"])]
-        xb = arrays.get("x_box")  # (2, 7) [lo, hi] of the certified range (states 2..8)
-        out["mpc.x_box"] = (
-            [0.0] * 14 if xb is None else [float(v) for v in (xb / X_BOX_TO_STATE).reshape(-1)]
-        )  # fmt: skip
-        hv = arrays.get("hv_box")  # (2, 2) [[h lo, V lo], [h hi, V hi]] of the design
-        out["mpc.hv_box"] = (
-            [0.0] * 4 if hv is None
-            else [float(hv[0, 0]), float(hv[1, 0]), float(hv[0, 1]), float(hv[1, 1])]
-        )  # fmt: skip
-        box = arrays.get("u_box")  # (2, 2) [[Phi lo, de lo], [Phi hi, de hi]] of the design
-        out["mpc.u_box"] = (
-            [0.0] * 4 if box is None
-            else [float(box[0, 0]), float(box[1, 0]),
-                  float(np.degrees(box[0, 1])), float(np.degrees(box[1, 1]))]
-        )  # fmt: skip
-        return out
+        return node_values(arrays, case)

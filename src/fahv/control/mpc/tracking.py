@@ -60,6 +60,7 @@ from fahv.control.mpc.qp_layout import (
     rate_rows,
     tracking_cost,
 )
+from fahv.control.mpc.row_bounds import QP_NO_BOUND, QPVectors
 from fahv.control.mpc.settings import MPCSettings
 from fahv.errors import DesignError
 from fahv.synthesis.qp import NO_BOUND, check_kkt, compile_kernel
@@ -70,9 +71,6 @@ from fahv.synthesis.qp import NO_BOUND, check_kkt, compile_kernel
 TRIM_STEP = (10.0, 5.0)
 #: Solver status of a successful DAQP solve.
 DAQP_OPTIMAL = (1, 2)
-#: The QP's "no bound": a bound at or beyond it reads as none.
-QP_NO_BOUND = 1e30
-
 assert NO_BOUND < QP_NO_BOUND  # the QP's "no bound" must read as none in check_kkt
 
 
@@ -168,9 +166,8 @@ class TrackingMPC:
         self.theta_s = None
         self.last_y = None
         self._qp = None  # DAQP workspace (daqp.Model) of the current scheduling
-        # bounds of the rows that have none on one side (terminal rows, steady input)
-        self._no_lo_t = np.full(2 * n, -QP_NO_BOUND)
-        self._no_hi_u, self._no_lo_u = np.full(self.m, QP_NO_BOUND), np.full(self.m, -QP_NO_BOUND)
+        #: f and the rows' bounds of this QP (a batch of one, `fahv.control.mpc.row_bounds`)
+        self.vectors = None
         compile_kernel()  # at construction: a node's start-up, not its first timed step
 
     @property
@@ -181,6 +178,8 @@ class TrackingMPC:
     @u_lo.setter
     def u_lo(self, value) -> None:
         self._u_lo = np.asarray(value, float)
+        if self.vectors is not None:  # this QP's own vectors read it (a batch: its `put`)
+            self.vectors.put(0, self)
 
     @property
     def u_hi(self) -> np.ndarray:
@@ -190,6 +189,8 @@ class TrackingMPC:
     @u_hi.setter
     def u_hi(self, value) -> None:
         self._u_hi = np.asarray(value, float)
+        if self.vectors is not None:  # this QP's own vectors read it (a batch: its `put`)
+            self.vectors.put(0, self)
 
     # -- scheduling ----------------------------------------------------------------
     def _trim_and_jacobian(self, h: float, V: float):
@@ -236,6 +237,9 @@ class TrackingMPC:
         self.Gx, self.Gu = Gx, Gu
         self._prediction_rows(A, B, Gx, Gu)
         self._constraint_matrix()
+        if self.vectors is None:
+            self.vectors = QPVectors(self, 1)
+        self.vectors.put(0, self)
         self._qp = None
         try:
             self.Hx, self.Hu = steady_state_shift(A, B, self.Dx, self.Du)
@@ -274,7 +278,6 @@ class TrackingMPC:
             # u_0, narrows the bounds of the first m input rows instead (solve: a second
             # copy of those rows would be a degenerate set for the active-set solver)
             self.Rate_y, self.Rate_z = rate_rows(Phi_w, Gam_w, Psi_w, C, S, K, Du, ly)
-            self._rate_scaled = np.tile(s.du_max / Du, s.N_p - 1)
 
     def _constraint_matrix(self) -> None:
         """Rows of the QP (state independent): inputs, terminal box, steady input, attitude.
@@ -398,78 +401,16 @@ class TrackingMPC:
             `fahv.synthesis.qp.check_kkt`); a rejected QP raises nothing, the
             caller falls back.
         """
-        e_theta = (self.theta_s - cmd) / self.theta_scale
-        f = 2.0 * (self.Fz @ z0)
-        f[self.layout.delta] += 2.0 * self.s.t_w * e_theta
-        bl, bu = self._row_bounds(z0, u_base, x_off, recover, u_prev, relax_steady)
-        return self._solve_qp(f, bl, bu)
-
-    def _row_bounds(self, z0, u_base, x_off, recover, u_prev, relax_steady):
-        """Lower and upper bounds (bl, bu) of y's simple bounds and of the rows of `A_c`.
-
-        In the order of `_constraint_matrix`; arguments as `solve`.
-        """
-        s, m = self.s, self.m
-        u_off = (self.U_z @ z0).reshape(s.N_p, m) + u_base
-        parts = [self._move_start_bounds(z0, u_base, u_off, x_off, recover, u_prev, relax_steady)]
-        if s.hv_box is not None:  # widened to hold the start (the reset h may lie outside)
-            hv = (self.Hv_z @ z0).reshape(-1, 2) + self.x_r_s[:2]
-            h0 = z0[:2] + self.x_r_s[:2]
-            hv_lo, hv_hi = np.minimum(s.hv_box[0], h0), np.maximum(s.hv_box[1], h0)
-            parts.append(((hv_lo - hv).reshape(-1), (hv_hi - hv).reshape(-1)))
-        if s.x_box is not None:  # from the trim at the nominal's own (h, V), with x_d
-            xd = np.zeros(7) if x_off is None else np.asarray(x_off, float)[2:9]
-            start = z0[2:9] - self.T_own @ z0[0:2] + xd  # widened to hold the start
-            xb_lo, xb_hi = np.minimum(s.x_box[0], start), np.maximum(s.x_box[1], start)
-            xb = (self.Xb_z @ z0).reshape(-1, 7) + xd
-            parts.append(((xb_lo - xb).reshape(-1), (xb_hi - xb).reshape(-1)))
-        if s.has_rate_rows:
-            rz = self.Rate_z @ z0
-            parts.append((-self._rate_scaled - rz, self._rate_scaled - rz))
-        uf_off = (self.Uf_z @ z0).reshape(-1, m) + u_base
-        parts.append((((self._u_lo - uf_off) / self.Du).reshape(-1),
-                      ((self._u_hi - uf_off) / self.Du).reshape(-1)))  # fmt: skip
-        if s.u_box is not None:  # the manoeuvre part K zeta + c = u_off - u_base + Du (row y)
-            for off in (u_off - u_base, uf_off - u_base):
-                parts.append((((s.u_box[0] - off) / self.Du).reshape(-1),
-                              ((s.u_box[1] - off) / self.Du).reshape(-1)))  # fmt: skip
-        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
-
-    def _move_start_bounds(self, z0, u_base, u_off, x_off, recover, u_prev, relax_steady):
-        """Bounds (bl, bu) of y and of the move-start, terminal, steady and attitude rows.
-
-        `u_off` (N_p, m) is the move-start inputs at y = 0; the other arguments as
-        `solve`.
-        Per-move rows come as (N_p, m) and (n_att, 2) blocks broadcast against their
-        (m,) / (2,) bounds (the same element-wise operations as tiling the bounds).
-        """
-        s, m = self.s, self.m
-        lo_b, hi_b = (self._lo_b_rec, self._hi_b_rec) if recover else (self._lo_b, self._hi_b)
-        lo_u = ((self._u_lo - u_off) / self.Du).reshape(-1)
-        hi_u = ((self._u_hi - u_off) / self.Du).reshape(-1)
-        if s.has_rate_rows and u_prev is not None:  # u_0 within du_max of the input before
-            c0 = (u_off[0] - np.asarray(u_prev, float)) / self.Du
-            du = s.du_max / self.Du
-            lo_u[:m] = np.maximum(lo_u[:m], -du - c0)
-            hi_u[:m] = np.minimum(hi_u[:m], du - c0)
-        tz = self.Tb_z @ z0
-        att = (self.Att_z @ z0).reshape(-1, 2)
-        a_max = np.minimum(np.broadcast_to(s.att_max, (2,)), 1e3)
-        att_lo, att_hi = -a_max, a_max
-        if x_off is not None:
-            off = np.asarray(x_off, float)[2:4]
-            att_lo, att_hi = np.minimum(att_lo - off, 0.0), np.maximum(att_hi - off, 0.0)
-        s_hi = self._no_hi_u if relax_steady else (self.u_hi - u_base) / self.Du
-        s_lo = self._no_lo_u if relax_steady else (self.u_lo - u_base) / self.Du
-        bu = np.concatenate(
-            [hi_b, hi_u, -tz, tz, s_hi, self._no_hi_u, (att_hi - att).reshape(-1)]
+        z0 = np.asarray(z0, float)
+        x_d = np.zeros(self.n) if x_off is None else np.asarray(x_off, float)
+        u_p = None if u_prev is None else np.asarray(u_prev, float)[None]
+        f, bl, bu = self.vectors.compute(
+            z0[None], np.asarray(u_base, float)[None], np.asarray(cmd, float)[None], x_d[None],
+            u_p, recover, relax_steady,
         )  # fmt: skip
-        bl = np.concatenate(
-            [lo_b, lo_u, self._no_lo_t, self._no_lo_u, s_lo, (att_lo - att).reshape(-1)]
-        )  # fmt: skip
-        return bl, bu
+        return self.solve_qp(f[0], bl[0], bu[0])
 
-    def _solve_qp(self, f, bl, bu):
+    def solve_qp(self, f, bl, bu):
         """Solve with DAQP (warm start) and check the solution: (y or None, "ok" or why).
 
         A new workspace per scheduling (H and `A_c` fixed until then); between re-plans
