@@ -34,7 +34,7 @@ from fahv.control.base import LAWS, VARIANTS, variant_notch
 from fahv.model.lpv import PolytopicLPV
 from fahv.model.notch import NotchFilter
 from fahv.model.trim import TrimMap
-from fahv.plant.rk4 import params_records, perturbed_records
+from fahv.plant.rk4 import perturbed_records
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.spec.artefacts import variant_gain_key
 
@@ -167,27 +167,6 @@ def corner_plants(design, vehicle) -> Plants:
     J = jacobians(np.repeat(x_r, C, 0), np.repeat(u_r, C, 0), recs, case["Ts"],
                   case["plant_substeps"], scale)  # fmt: skip
     return Plants(tuple(f"corner {c}" for c in range(C)), J[:, :, :9], J[:, :, 9:])
-
-
-def nominal_plant(design, vehicle) -> Plants:
-    """The nominal vehicle's one-period Jacobian at the design point (check of the LPV).
-
-    Parameters
-    ----------
-    design : fahv.spec.artefacts.Design
-    vehicle : fahv.model.vehicle.Vehicle
-
-    Returns
-    -------
-    Plants
-        The point "nominal vehicle".
-    """
-    a, case = design.arrays, design.case
-    tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
-    x_r, u_r = tm.at([case["design_step"]["h0"]], [case["design_step"]["V0"]])
-    J = jacobians(x_r, u_r, params_records([vehicle.params]), case["Ts"],
-                  case["plant_substeps"], np.r_[a["Dx"], a["Du"]])  # fmt: skip
-    return Plants(("nominal vehicle",), J[:, :, :9], J[:, :, 9:])
 
 
 @dataclass

@@ -46,7 +46,7 @@ EXIT_INTERRUPTED = 130
 #: pipeline, Dask or the campaign statistics (a test checks the table is complete).
 COMMANDS = {
     "trim": "modelling", "tp": "modelling", "figures": "modelling", "tube": "modelling",
-    "design": "design", "verify": "design", "margins": "margins", "estimation": "estimation",
+    "design": "design", "verify": "design", "margins": "margins",
     "simulate": "run", "sil": "sil", "replay": "replay", "paper-figures": "run",
     "results": "run", "inspect": "inspect", "export": "inspect", "compare": "inspect",
     "plot": "inspect", "report": "report", "campaign": "campaign", "index": "index",
@@ -75,18 +75,27 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of `fahv`; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
     command = next((a for a in argv if not a.startswith("-")), None)
-    args = build_parser(command).parse_args(argv)
+    return run_parsed(build_parser(command).parse_args(argv), "fahv")
+
+
+def run_parsed(args: argparse.Namespace, prog: str) -> int:
+    """Run a parsed subcommand (`args.func`) and return its exit status.
+
+    Ctrl-C and SIGTERM stop it cleanly (`EXIT_INTERRUPTED`); bad input (`FahvError`,
+    `ValueError`, `OSError`) prints `<prog> <command>: error: ...` and returns 2. Also the
+    entry point of the studies' command (`fahv_studies.cli`).
+    """
     with stop_signals():
         try:
             return args.func(args)
         except RunInterrupted as exc:
-            print(f"fahv {args.command}: {exc}", file=sys.stderr)
+            print(f"{prog} {args.command}: {exc}", file=sys.stderr)
             return EXIT_INTERRUPTED
         except KeyboardInterrupt:
-            print(f"fahv {args.command}: interrupted", file=sys.stderr)
+            print(f"{prog} {args.command}: interrupted", file=sys.stderr)
             return EXIT_INTERRUPTED
         except (FahvError, ValueError, OSError) as exc:
-            print(f"fahv {args.command}: error: {exc}", file=sys.stderr)
+            print(f"{prog} {args.command}: error: {exc}", file=sys.stderr)
             return 2
 
 

@@ -53,9 +53,9 @@ def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0,
     """The nonlinear loop (`tube_mpc` of the design's scenario, `duration` s, node
     parameter `overrides` as `simulate`'s) against the probabilistic tube `pt`, over
     t >= t_from, t = x - x_r - x_n (`Deviation`)."""
-    from fahv.estimation.closed_loop import radii
     from fahv.loop.simulate import simulate
     from fahv.model.vehicle import ALPHA, IQ, THETA, V
+    from fahv_studies.estimation.closed_loop import radii
 
     run = simulate(design, "tube_mpc", duration=duration, overrides=overrides)
     k = run.t >= t_from

@@ -1,10 +1,10 @@
-"""`fahv estimation`: the bounds of a scenario's Kalman filter as a user reads them."""
+"""`fahv-studies estimation`: the bounds of a scenario's Kalman filter as a user reads them."""
 
 import re
 
 import pytest
 
-from fahv.cli import main
+from fahv_studies.cli import main
 
 #: The loop on the Kalman estimate without servos (a study scenario).
 KALMAN = "studies/kalman_exact_design/scenarios/case1_kalman.yaml"

@@ -1,4 +1,8 @@
-"""`fahv estimation`: what can be certified about a scenario's state estimate, and what cannot."""
+"""`fahv-studies estimation`: what can be certified about a scenario's state estimate.
+
+And what cannot: the filter's error bounds, the output-feedback tube, the probabilistic
+tube of the loop on the estimate (`fahv_studies.estimation`).
+"""
 
 from __future__ import annotations
 
@@ -56,7 +60,10 @@ def channel_values(measured, v) -> str:
 
 
 def study_lines(study, measured, design_name: str) -> list[str]:
-    """The lines `fahv estimation` prints of an `fahv.estimation.study.EstimateStudy`."""
+    """The lines `fahv-studies estimation` prints of an `EstimateStudy`.
+
+    `fahv_studies.estimation.study.EstimateStudy`.
+    """
     cov, R = study.covariance, study.system.n_vertices
     att = np.degrees(study.noise_worst[2:4]).max()
     verdict = (f"above the attitude requirement ({ATTITUDE_BOUND_DEG} deg) from the estimate "
@@ -105,9 +112,9 @@ def scaled_noise(data, measured, scale: float):
 
 
 def tube_lines(of) -> list[str]:
-    """The lines `fahv estimation` prints of an `OutputFeedbackTube`.
+    """The lines `fahv-studies estimation` prints of an `OutputFeedbackTube`.
 
-    `of` is a `fahv.estimation.output_feedback.OutputFeedbackTube`.
+    `of` is a `fahv_studies.estimation.output_feedback.OutputFeedbackTube`.
     """
 
     def fit(t) -> str:
@@ -133,14 +140,16 @@ def tube_lines(of) -> list[str]:
 
 def chance_lines(pt, arrays, p: float, steps: int, R: int, tau: float = 1.0,
                  rate_step: float = np.inf, rows=None) -> list[str]:  # fmt: skip
-    """The lines `fahv estimation` prints of a `fahv.estimation.closed_loop.ProbabilisticTube`.
+    """The lines `fahv-studies estimation` prints of a `ProbabilisticTube`.
+
+    `fahv_studies.estimation.closed_loop.ProbabilisticTube`.
 
     `tau` is the adjustable law's factor (eq. 53-54), `rate_step` the elevator servo's
     rate limit times Ts [rad per step] (inf: none), which the command's step is held
     against; `rows` (2,) the nominal's attitude rows the loop flies [rad] (None: the
     design's `att_max`; a scenario's `estimator.nominal_att_max` sets them lower).
     """
-    from fahv.estimation.closed_loop import attitude_chance, radii
+    from fahv_studies.estimation.closed_loop import attitude_chance, radii
 
     r_step, r_run = radii(p, steps)
     req = np.radians(ATTITUDE_BOUND_DEG)
@@ -183,9 +192,9 @@ def chance_lines(pt, arrays, p: float, steps: int, R: int, tau: float = 1.0,
 def cmd_estimation(args) -> int:
     """Print the bounds of a scenario's Kalman filter and the tube's room for them."""
     # cvxpy and scipy.stats: here only
-    from fahv.estimation.closed_loop import loop_tube
-    from fahv.estimation.output_feedback import output_feedback_tube
-    from fahv.estimation.study import estimate_study
+    from fahv_studies.estimation.closed_loop import loop_tube
+    from fahv_studies.estimation.output_feedback import output_feedback_tube
+    from fahv_studies.estimation.study import estimate_study
 
     t0 = time.monotonic()
     spec, design, vehicle = load_or_design(args.scenario, args.design_dir, args.vehicle,

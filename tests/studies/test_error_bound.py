@@ -1,4 +1,4 @@
-"""The bounds of the Kalman filter's estimation error (fahv.estimation.error_bound, study):
+"""The bounds of the Kalman filter's estimation error (fahv_studies.estimation.error_bound, study):
 the covariance bound holds at every pair of model and gain vertex and above every frozen
 vertex's own covariance, random switching stays below it, the frozen worst case is
 reached by its sequence, and the nonlinear loop's error stays within the bounds; the
@@ -9,12 +9,12 @@ import pytest
 import scipy.linalg
 
 from fahv.certificate.verified import load_or_design
-from fahv.estimation.error_bound import peak_to_peak, worst_sequence
 from fahv.estimation.kalman import design_filter, measurement_covariance
-from fahv.estimation.study import estimate_study, white_noise_only
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import ALPHA, THETA, H, V
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors, replace_channel
+from fahv_studies.estimation.error_bound import peak_to_peak, worst_sequence
+from fahv_studies.estimation.study import estimate_study, white_noise_only
 
 MEASURED = list(DEFAULT_MEASURED)
 STEPS = 15000  # a 300 s run
@@ -118,12 +118,12 @@ def test_noise_beyond_white_is_refused():
 
 
 def test_the_filters_correction_bounds_are_reached(certified, study):
-    """The row bounds of the estimate's correction (fahv.estimation.output_feedback) are
+    """The row bounds of the estimate's correction (fahv_studies.estimation.output_feedback) are
     exact: the sign vector of a gain row at its noise bounds reaches the sensor part, and
     the ellipsoid's support point at the worst pair of vertices reaches the error part;
     random points of the ellipsoid and of the noise box stay within them."""
     from fahv.estimation.kalman import augmented
-    from fahv.estimation.output_feedback import error_part, sensor_part
+    from fahv_studies.estimation.output_feedback import error_part, sensor_part
 
     _, design, vehicle = certified
     a, data = design.arrays, load_sensors()
@@ -154,7 +154,7 @@ def test_the_filters_correction_bounds_are_reached(certified, study):
 def test_a_bound_started_from_its_own_pairs_is_the_same_bound(study):
     """`start`: the pairs the last solve held make the same S in one solve (so a study can
     ship them as a warm start); pairs that are not vertex pairs are refused, named."""
-    from fahv.estimation.error_bound import covariance_bound
+    from fahv_studies.estimation.error_bound import covariance_bound
 
     cov = study.covariance
     Rv = measurement_covariance(MEASURED, load_sensors())

@@ -3,7 +3,7 @@
 On the estimate the tube law is u = v + F (x_hat - x_bar) (eq. 36 with the estimate in
 place of the state). With t = x - x_bar the true state's deviation from the nominal (the
 eight states after h, as in the tube) and e = z - z_hat the filter's a-posteriori error
-(`fahv.estimation.error_bound`), the LPV model (eq. 11-12) at model vertex i and gain
+(`fahv_studies.estimation.error_bound`), the LPV model (eq. 11-12) at model vertex i and gain
 vertex j gives the joint system of xi = [t; e] (8 + 11,)
 
     t_k+1 = (A_i + B_i F) t_k - B_i F E e_k + w_k,
@@ -26,7 +26,7 @@ sum of three parts:
   design's certificate (eq. 24-28);
 - **the part driven by the sensor noise v** through the estimate, a Gaussian sequence:
   `joint_covariance` bounds its covariance at every pair (i, j) with one matrix Sigma
-  (the LMI of `fahv.estimation.error_bound.covariance_bound` on the joint system,
+  (the LMI of `fahv_studies.estimation.error_bound.covariance_bound` on the joint system,
   re-checked exactly), so that at every step each state, input and input step stays
   within r sqrt(Sigma_ss) with the Gaussian probability of r; this is a probabilistic
   reachable set (Hewing and Zeilinger, "Stochastic model predictive control for linear
@@ -48,9 +48,9 @@ from statistics import NormalDist
 import numpy as np
 import scipy.linalg
 
-from fahv.estimation.error_bound import ErrorSystem, covariance_bound, peak_to_peak
 from fahv.estimation.servo_model import N_SERVO, servo_plants
 from fahv.sensors.measure import noise_bound
+from fahv_studies.estimation.error_bound import ErrorSystem, covariance_bound, peak_to_peak
 
 #: Tube states: the eight states after h (V, alpha, theta, q, eta_1, eta_1_dot, eta_2,
 #: eta_2_dot), as the tube of the design.
@@ -137,7 +137,7 @@ def joint_system(es: ErrorSystem, A: np.ndarray, B: np.ndarray, F: np.ndarray,
     Parameters
     ----------
     es : ErrorSystem
-        The filter's error system (`fahv.estimation.error_bound.error_system`), 11 states,
+        The filter's error system (`fahv_studies.estimation.error_bound.error_system`), 11 states,
         or 15 with the servos in the filter.
     A : (R, 9, 9) ndarray
         The design's LPV vertices A_i (eq. 12), deviation coordinates.
@@ -245,7 +245,7 @@ def model_part(js: JointSystem, g_max: np.ndarray) -> np.ndarray:
     -------
     (8,) ndarray
         max over the frozen vertices of the worst |t_s|
-        (`fahv.estimation.error_bound.peak_to_peak`).
+        (`fahv_studies.estimation.error_bound.peak_to_peak`).
     """
     es = js.system
     xi = np.concatenate([np.asarray(g_max, float), np.zeros(es.N.shape[2])])
@@ -298,7 +298,7 @@ def loop_tube(es: ErrorSystem, flt, arrays, tau: float, R_v: np.ndarray,
     Parameters
     ----------
     es : ErrorSystem
-        The filter's error system (`fahv.estimation.error_bound.error_system` of `flt`).
+        The filter's error system (`fahv_studies.estimation.error_bound.error_system` of `flt`).
     flt : fahv.estimation.kalman.GainScheduledKalman
         The filter; its servos, if any, are the plant's (`joint_system`).
     arrays : mapping

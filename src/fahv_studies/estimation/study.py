@@ -1,12 +1,13 @@
 """The bounds of a design's Kalman filter on a scenario's sensors, and the tube's room for them.
 
-`estimate_study` gathers what `fahv estimation` prints (`fahv.estimation.error_bound`
-for the bounds): the noise-driven error's covariance bound over every vertex pair and
-the radius within which a whole run stays with probability p; the exact frozen-vertex
-worst cases of the noise and of the model error taken as bounded sequences; and what
-the noise-driven error adds to the tube's one-step level when the tube law feeds back
-the estimate (u = v + F (x_hat - x_bar), so e+ = A_cl e + w - B F e_x with e_x the
-estimation error: eq. (36) with the estimate in place of the state).
+`estimate_study` gathers what `fahv-studies estimation` prints
+(`fahv_studies.estimation.error_bound` for the bounds): the noise-driven error's
+covariance bound over every vertex pair and the radius within which a whole run stays
+with probability p; the exact frozen-vertex worst cases of the noise and of the model
+error taken as bounded sequences; and what the noise-driven error adds to the tube's
+one-step level when the tube law feeds back the estimate (u = v + F (x_hat - x_bar), so
+e+ = A_cl e + w - B F e_x with e_x the estimation error: eq. (36) with the estimate in
+place of the state).
 """
 
 from __future__ import annotations
@@ -17,13 +18,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.stats
 
-from fahv.estimation.error_bound import (
-    CovarianceBound,
-    ErrorSystem,
-    covariance_bound,
-    error_system,
-    peak_to_peak,
-)
 from fahv.estimation.kalman import (
     D_INTENSITY,
     W_SIGMAS,
@@ -31,6 +25,13 @@ from fahv.estimation.kalman import (
 )
 from fahv.sensors.data import SensorData
 from fahv.sensors.measure import noise_bound
+from fahv_studies.estimation.error_bound import (
+    CovarianceBound,
+    ErrorSystem,
+    covariance_bound,
+    error_system,
+    peak_to_peak,
+)
 
 #: Noise parameters a bound of white noise does not cover: a channel with any of them
 #: non-zero is refused by `white_noise_only`.
