@@ -84,3 +84,27 @@ def test_every_part_of_the_library_has_an_api_page():
     documented = set(re.findall(r"^::: fahv\.(\w+)", api, re.MULTILINE))
     assert sorted(parts - documented) == []
     assert sorted(documented - parts) == []
+    assert re.search(r"^::: fahv_studies$", api, re.MULTILINE)  # the studies' package
+
+
+def _verdict_cells(lines: list[str]) -> dict[str, list[str]]:
+    """Requirement -> its last four cells (value, limit, margin, verdict) of a verdict table."""
+    rows = {}
+    for line in lines:
+        cells = re.split(r"\s{2,}", line.strip())
+        if len(cells) >= 5 and cells[-1] in ("PASS", "FAIL", "n/a"):
+            rows[cells[0]] = cells[-4:]
+    return rows
+
+
+def test_the_readmes_verdict_example_is_the_generated_table():
+    """The README's excerpt of Case 1's verdict table has the numbers of the table the
+    command wrote into the runs guide (`fahv simulate ... case1.yaml`, marker
+    case1-verdict, checked current by the docs build), row for row, and its last line."""
+    guide = (DOCS / "guide" / "runs.md").read_text()
+    generated = guide.split("<!-- case1-verdict -->\n", 1)[1].split("<!-- /case1-verdict -->")[0]
+    readme = (ROOT / "README.md").read_text()
+    excerpt = readme.split("    requirement  measured", 1)[1].split("\n\n", 1)[0].splitlines()
+    ours, theirs = _verdict_cells(excerpt), _verdict_cells(generated.splitlines())
+    assert ours and all(theirs[k] == cells for k, cells in ours.items()), (ours, theirs)
+    assert excerpt[-1].strip() == generated.rstrip().splitlines()[-1].strip()

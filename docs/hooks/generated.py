@@ -37,12 +37,13 @@ TABLES = {
     "node-table": ("fahv.loop.graph", "markdown_table"),
     "registry-tables": ("fahv.loop.graph", "registry_tables"),
     "margins-table": ("fahv.cli.margins", "docs_table"),
+    "case1-verdict": ("fahv.cli.run", "docs_verdict_table"),
 }
 #: Specs whose table is `fahv.config.spec.markdown(spec())`; the others return Markdown.
 SPECS = {"design-keys", "scenario-keys", "campaign-keys"}
 
 CLI_MARKER = "<!-- fahv-cli -->"
-MARKER = re.compile(r"<!-- ([a-z-]+) -->\n(.*?)<!-- /\1 -->", re.DOTALL)
+MARKER = re.compile(r"<!-- ([a-z0-9-]+) -->\n(.*?)<!-- /\1 -->", re.DOTALL)
 
 #: An autorefs target holding ", " is a bracketed list in a docstring (units such as
 #: `[ft, ft/s]` after `[h, V]`, an index such as `[:, c_i]`), which Markdown reads as

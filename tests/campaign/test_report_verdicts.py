@@ -5,6 +5,7 @@ import math
 import pytest
 
 from fahv.campaign.report import REQUIREMENTS, verdicts
+from fahv.spec.requirements import judge, verdict_rows
 
 REQ = {"attitude_deg": 0.5, "settling_s": 60.0, "h_final_ft": 10.0, "V_final_fps": 2.0}
 ROW = {
@@ -18,7 +19,8 @@ ROW = {
 def test_a_run_meeting_every_requirement_passes_all():
     v = verdicts(ROW, REQ)
     assert set(v) == {k for k, _ in REQUIREMENTS}
-    assert all(x for k, x in v.items() if k != "nominal_range")
+    assert all(x for k, x in v.items() if k not in ("nominal_range", "settling_fault"))
+    assert v["settling_fault"] is None  # no fault in the row
     assert v["nominal_range"] is None  # no certified range given
 
 
@@ -32,6 +34,43 @@ def test_one_miss_fails_all_and_not_applicable_is_not_a_miss():
     gone = verdicts({"status": "failed", "alpha_err_max_deg": None}, REQ)  # no metrics
     assert gone["completes"] is False and gone["all"] is False
     assert gone["input_rates"] is None  # whether it had servos is not known
+
+
+def test_settling_not_reached_fails_only_a_run_that_went_on_for_the_limit():
+    """A run that has not settled fails the settling only if it went on for 60 s after
+    the command stopped moving; a shorter one did not measure it (not applicable)."""
+    unsettled = {**ROW, "settling_after_command_s": math.nan, "t_command_end_s": 0.0}
+    assert verdicts({**unsettled, "t_final_s": 59.9}, REQ)["settling"] is None
+    assert verdicts({**unsettled, "t_final_s": 60.0}, REQ)["settling"] is False
+    assert verdicts({**unsettled, "t_final_s": 59.9}, REQ)["all"] is True
+
+
+def test_the_settling_after_a_fault_is_judged_from_its_onset():
+    """A fault at t = 100 s after a command that stopped at t = 0: settled 20 s after it
+    passes, 70 s fails, never settled fails in a 300 s run and is not measured in a run
+    that ends 30 s after the onset; no fault, a fault while the command moves, or a row of
+    an earlier version (without the metric): not applicable."""
+    fault = {**ROW, "t_command_end_s": 0.0, "t_fault_s": 100.0, "t_final_s": 300.0}
+    assert verdicts({**fault, "settling_after_fault_s": 20.0}, REQ)["settling_fault"] is True
+    late = verdicts({**fault, "settling_after_fault_s": 70.0}, REQ)
+    assert late["settling_fault"] is False and late["all"] is False
+    never = {**fault, "settling_after_fault_s": math.nan}
+    assert verdicts(never, REQ)["settling_fault"] is False
+    assert verdicts({**never, "t_final_s": 130.0}, REQ)["settling_fault"] is None
+    assert verdicts({**never, "t_fault_s": math.nan}, REQ)["settling_fault"] is None
+    assert verdicts({**never, "t_command_end_s": 120.0}, REQ)["settling_fault"] is None
+    assert verdicts({**ROW, "t_fault_s": 100.0}, REQ)["settling_fault"] is None
+
+
+def test_the_tube_of_a_loop_on_the_estimate_is_reported_not_judged():
+    """Outside Z on the exact state fails the tube; on a state estimate (its errors
+    measured) the same level is not judged: the certificate assumes the exact state."""
+    outside = {**ROW, "tube_fraction_inside": 0.97, "tube_level_max": 1.8}
+    assert verdicts(outside, REQ)["tube"] is False
+    on_estimate = verdicts({**outside, "estimate_err_h_rms_ft": 1.2}, REQ)
+    assert on_estimate["tube"] is None and on_estimate["all"] is True
+    rows = {r[0]: r for r in verdict_rows(judge({**outside, "estimate_err_h_rms_ft": 1.2}))}
+    assert rows["tube"][2:] == ("1.8", "1", "not judged: on the estimate", "n/a")
 
 
 def test_a_command_beyond_a_servo_rate_fails_the_rates_and_all():

@@ -58,7 +58,9 @@ def test_a_passing_run_prints_every_requirement_and_exits_0_with_check(tmp_path,
     verdicts = {k: cells[-1] for k, cells in table(out).items()}
     assert verdicts == {"completes": "PASS", "attitude": "PASS", "input_limits": "PASS",
                         "input_rates": "n/a", "tube": "PASS", "settling": "PASS",
-                        "final_h": "PASS", "final_V": "PASS"}  # fmt: skip
+                        "settling_fault": "n/a", "final_h": "PASS",
+                        "final_V": "PASS"}  # fmt: skip
+    assert table(out)["settling_fault"][1] == "no fault after the command"  # onset t = 100 s
     assert "verdict of case1 tube_mpc: PASS" in out
     settling = record(CASE1, capsys)["requirements"]["settling"]
     assert settling["value"] == pytest.approx(33.4, abs=0.1)  # [s] after the command

@@ -55,6 +55,7 @@ REQUIREMENTS = (
     ("input_rates", "commands within the servos' rate limits"),
     ("tube", "tube error inside Z at every step"),
     ("settling", "settled within {settling_s:g} s of the command"),
+    ("settling_fault", "settled within {settling_s:g} s of a fault after the command"),
     ("final_h", "final |h - h_c| <= {h_final_ft:g} ft"),
     ("final_V", "final |V - V_c| <= {V_final_fps:g} ft/s"),
     ("all", "every requirement at once"),
@@ -105,7 +106,8 @@ def verdicts(row: dict, req: dict, certified: dict | None = None) -> dict[str, b
     """
     has = row.get("alpha_err_max_deg") is not None
     if not has:
-        return {k: (False if k not in ("tube", "input_rates", "nominal_range") else None)
+        not_applicable = ("tube", "input_rates", "settling_fault", "nominal_range")
+        return {k: (False if k not in not_applicable else None)
                 for k, _ in REQUIREMENTS}  # fmt: skip
     out = _each(row, req)
     out["all"] = all(v for v in out.values() if v is not None)

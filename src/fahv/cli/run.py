@@ -242,6 +242,39 @@ def print_verdicts(scenario: str, judged: dict[str, list]) -> None:
         print(verdict_table(js, f"{scenario} {v}"))
 
 
+def docs_verdict_table() -> str:
+    """The verdict table `fahv simulate offline_design/scenarios/case1.yaml --no-record` prints.
+
+    For the docs build's hook (`docs/hooks/generated.py`, marker `case1-verdict`): the
+    command run in process on the repository's scenario (`fahv.runs.workspace.ROOT`),
+    its table as an indented block.
+
+    Returns
+    -------
+    str
+        The lines after `requirements of case1 tube_mpc:`, each indented by four spaces.
+
+    Raises
+    ------
+    FahvError
+        If the command fails or prints no verdict table.
+    """
+    import contextlib
+    import io
+
+    from fahv.cli import main
+
+    out = io.StringIO()
+    scenario = ROOT / "offline_design" / "scenarios" / "case1.yaml"
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        rc = main(["simulate", str(scenario), "--no-record"])
+    text = out.getvalue()
+    if rc != 0 or "\nrequirements of " not in text:
+        raise FahvError(f"fahv simulate {scenario} exited {rc} without a verdict table")
+    table = text.split("\nrequirements of ", 1)[1].split("\n", 1)[1]
+    return "\n".join(f"    {line}" for line in table.rstrip("\n").splitlines())
+
+
 def exit_status(check: bool, judged: dict[str, list]) -> int:
     """0, or with `--check` `EXIT_REQUIREMENTS` when a run missed a requirement."""
     if check and not all(overall(js) for js in judged.values()):

@@ -122,6 +122,20 @@ def settling_after(ts_h: float, ts_V: float, t_end: float = 0.0) -> float:
     return math.nan if math.isnan(ts_h) or math.isnan(ts_V) else max(ts_h, ts_V) - t_end
 
 
+def _settling_after_fault(run: RunResult, t_fault: float | None, t_cmd_end: float) -> float:
+    """Settling of h and V together counted from the fault's onset [s] (sec. 5.1).
+
+    The later of the first times after the onset from which |h - h_c| and |V - V_c|
+    stay within `SETTLE_TOL` to the end, minus the onset (0: the fault never moved them
+    out). NaN without a fault in the run, for an onset before the command stops moving
+    (the settling after the command holds it), or when they never settle.
+    """
+    if t_fault is None or t_fault <= t_cmd_end:
+        return math.nan
+    ts = settling_times(run, t_fault)
+    return settling_after(*ts, t_fault)
+
+
 @functools.lru_cache(maxsize=4)
 def _vehicle(path: str):
     return load_vehicle(path or None)
@@ -356,7 +370,10 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
     (the campaign report checks them against the design's certified range).
     `settling_after_command_s` is the later settling time of h and V counted from
     `t_command_end_s` (`command_end`), the time the requirement's 60 s run from (NaN
-    unless both settle). The elevator's largest rates are `input_rates`'. Tracking
+    unless both settle); `settling_after_fault_s` the same counted from a fault's onset
+    after the command stopped moving (`_settling_after_fault`); `t_final_s` the time of
+    the last step (how long after the command or the onset the run was watched). The
+    elevator's largest rates are `input_rates`'. Tracking
     errors are against the case command. Flexible RMS values are over t >= t_fault
     (the whole run without fault); `t_fault_s` is the onset within the run (NaN: no
     fault within the run, so the "after fault" values are over the whole run).
@@ -392,6 +409,8 @@ def metrics(run: RunResult, limits, t_fault: float | None = None) -> dict[str, f
         "settling_time_V_s": ts_V,
         "t_command_end_s": t_end,
         "settling_after_command_s": settling_after(ts_h, ts_V, t_end),
+        "settling_after_fault_s": _settling_after_fault(run, tf if in_run else None, t_end),
+        "t_final_s": float(t[-1]),
         # after settling: only for a run that settled (NaN otherwise)
         "h_err_max_after_settle_ft": float(np.abs(eh[after]).max()) if settled else math.nan,
         "V_err_max_after_settle_fps": float(np.abs(eV[after]).max()) if settled else math.nan,

@@ -20,9 +20,13 @@ input_limits    steps whose command (the controller's, before the fault injector
 input_rates     steps whose command asks a servo for more than its rate limit: 0 (n/a:
                 ideal actuators, which have no rate)
 tube            max e' N^-1 e (the tube error's level in Z) over the run <= 1 (n/a: a
-                law without a tube)
+                law without a tube; not judged on a loop on a state estimate, which the
+                tube's certificate does not cover: its level is reported)
 settling        |h - h_c| <= 10 ft and |V - V_c| <= 2 ft/s reached within the limit
-                after the command stops moving and held to the end
+                after the command stops moving and held to the end (n/a: a run that
+                ends before the limit without settling)
+settling_fault  the same within the limit after a fault's onset that comes after the
+                command stops moving (n/a: no such fault, or a run that ends first)
 final_h         |h - h_c| at the run's last step <= limit
 final_V         |V - V_c| at the run's last step <= limit
 ==============  =======================================================================
@@ -98,6 +102,14 @@ class Requirement:
         `verdict(metrics) -> bool | None` where the verdict is read from another metric
         than the value (the tube: every step inside Z, a row of any version); by default
         value <= limit.
+    start : callable, optional
+        `start(metrics) -> float` [s]: when the time the value measures starts (the
+        command stops moving, the fault's onset). A value never reached is then a
+        failure only if the run went on for the limit after the start; a shorter run did
+        not measure it.
+    absent : str
+        Where a NaN start means the requirement does not apply, why (e.g. no fault in
+        the run); empty: a NaN start (a row without the metrics) is a failure.
     """
 
     key: str
@@ -107,6 +119,8 @@ class Requirement:
     limit: Callable[[Mapping], float]
     nan: str = "n/a"
     verdict: Callable[[Mapping], bool | None] | None = None
+    start: Callable[[Mapping], float] | None = None
+    absent: str = ""
 
 
 def _metric(name: str) -> Callable[[Mapping], float]:
@@ -139,10 +153,35 @@ def _tube_level(m: Mapping) -> float:
         "tube_level_max")(m)
 
 
+def on_estimate(m: Mapping) -> bool:
+    """The loop read a state estimate (its errors measured), not the exact state."""
+    return not math.isnan(_metric("estimate_err_h_rms_ft")(m))
+
+
 def _inside_z(m: Mapping) -> bool | None:
-    """Every step's tube error inside Z (None: no tube error at every step)."""
+    """Every step's tube error inside Z.
+
+    None where the tube is not judged: no tube error at every step, or a loop on a state
+    estimate (the tube's certificate assumes the exact state; its level is reported).
+    """
     fraction = _metric("tube_fraction_inside")(m)
-    return None if math.isnan(fraction) else bool(fraction == 1.0)
+    return None if math.isnan(fraction) or on_estimate(m) else bool(fraction == 1.0)
+
+
+def _command_end(m: Mapping) -> float:
+    """When the command stops moving [s] (the settling requirement's start)."""
+    return _metric("t_command_end_s")(m)
+
+
+def _fault_onset(m: Mapping) -> float:
+    """The fault's onset [s] when it comes after the command stops moving, else NaN.
+
+    NaN too for a row without `settling_after_fault_s` (written before it was measured).
+    """
+    if "settling_after_fault_s" not in m:
+        return math.nan
+    onset, end = _metric("t_fault_s")(m), _command_end(m)
+    return onset if onset > end else math.nan
 
 
 #: Every requirement in report order.
@@ -158,8 +197,12 @@ REQUIREMENTS = (
     Requirement("tube", "max tube level e' N^-1 e over the run (inside Z: <= 1)", "-",
                 _tube_level, lambda lim: 1.0, verdict=_inside_z),
     Requirement("settling", "settling of h (10 ft) and V (2 ft/s) after the command stops "
-                "moving", "s", _metric("settling_after_command_s"),
-                lambda lim: lim["settling_s"], nan="never"),
+                "moving, held to the end", "s", _metric("settling_after_command_s"),
+                lambda lim: lim["settling_s"], nan="never", start=_command_end),
+    Requirement("settling_fault", "settling of h (10 ft) and V (2 ft/s) after a fault's "
+                "onset (after the command), held to the end", "s",
+                _metric("settling_after_fault_s"), lambda lim: lim["settling_s"],
+                nan="never", start=_fault_onset, absent="no fault after the command"),
     Requirement("final_h", "|h - h_c| at the last step", "ft", _largest("h_err_final_ft"),
                 lambda lim: lim["h_final_ft"], nan="never measured"),
     Requirement("final_V", "|V - V_c| at the last step", "ft/s", _largest("V_err_final_fps"),
@@ -180,12 +223,16 @@ class Judgement:
         Its upper bound [the requirement's unit].
     passed : bool or None
         Met (True), missed (False), does not apply to this run (None).
+    note : str
+        Why a requirement was not judged where its value alone does not say it (a run
+        too short to measure it, no fault after the command, a loop on the estimate).
     """
 
     requirement: Requirement
     value: float
     limit: float
     passed: bool | None
+    note: str = ""
 
     @property
     def margin(self) -> float:
@@ -225,12 +272,33 @@ def judge(metrics: Mapping, limits: Mapping | None = None, completed: bool = Tru
         v, bound = r.value(metrics), float(r.limit(lim))
         if r.verdict is not None:
             passed = r.verdict(metrics)
+            note = "not judged: on the estimate" if passed is None and on_estimate(metrics) else ""
+            out.append(Judgement(r, v, bound, passed, note))
         elif math.isnan(v):
-            passed = None if r.nan == "n/a" else False
+            out.append(_not_reached(r, metrics, bound))
         else:
-            passed = bool(v <= bound)
-        out.append(Judgement(r, v, bound, passed))
+            out.append(Judgement(r, v, bound, bool(v <= bound)))
     return out
+
+
+def _not_reached(r: Requirement, metrics: Mapping, bound: float) -> Judgement:
+    """The judgement of a value that was not measured or never reached (NaN).
+
+    A failure where it means one (`Requirement.nan` other than "n/a") and the run went on
+    for the limit after the requirement's start; else not applicable, with the reason.
+    """
+    if r.nan == "n/a":
+        return Judgement(r, math.nan, bound, None)
+    if r.start is None:
+        return Judgement(r, math.nan, bound, False)
+    t0 = r.start(metrics)
+    if math.isnan(t0):
+        return Judgement(r, math.nan, bound, None, r.absent) if r.absent else Judgement(
+            r, math.nan, bound, False)
+    watched = _metric("t_final_s")(metrics) - t0
+    if watched < bound:  # the run ended before the limit: not measured
+        return Judgement(r, math.nan, bound, None, f"not measured: run ends {watched:.4g} s after")
+    return Judgement(r, math.nan, bound, False)
 
 
 #: The run ended as planned (its value 0, or 1 when it ended early).
@@ -264,11 +332,11 @@ def verdict_rows(judgements: list[Judgement]) -> list[tuple[str, ...]]:
         if r is COMPLETES:
             value, limit, margin = ("yes" if j.passed else "ended early"), "", ""
         elif math.isnan(j.value):
-            value, limit, margin = r.nan, f"{_number(j.limit, r.unit)}{unit}", ""
+            value, limit, margin = j.note or r.nan, f"{_number(j.limit, r.unit)}{unit}", ""
         else:
             value = f"{_number(j.value, r.unit)}{unit}"
             limit = f"{_number(j.limit, r.unit)}{unit}"
-            margin = f"{_number(j.margin, r.unit)}{unit}"
+            margin = j.note or f"{_number(j.margin, r.unit)}{unit}"
         rows.append((r.key, r.signal, value, limit, margin, j.word))
     return rows
 
