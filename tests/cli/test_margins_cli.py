@@ -39,5 +39,6 @@ def test_margins_prints_the_table_and_writes_the_figures(tmp_path, capsys, monke
     assert "stable at 1024 of 1024 parameter box corners" in out
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == ["margins_cm_certified_bode_delta_e.pdf", "margins_cm_certified_bode_q.pdf",
+                     "margins_cm_certified_estimate_nichols.pdf",
                      "margins_cm_certified_nichols.pdf"]  # fmt: skip
     assert all((tmp_path / n).stat().st_size > 10_000 for n in names)

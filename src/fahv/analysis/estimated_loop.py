@@ -222,24 +222,12 @@ def estimated_margins(design, flt, settings) -> list:
         If the shapes disagree (`estimated_loop`).
     """
     a, Ts = design.arrays, float(design.case["Ts"])
-    step = design.case["design_step"]
-    w = flt.lpv.weights([step["h0"]], [step["V0"]])[0]
-    A_p, B_p = flt.lpv.systems([step["h0"]], [step["V0"]])
-    points = {
-        "design point": (A_p, B_p, np.einsum("r,rab->ab", w, flt.L)[None]),
-        "vertex": (np.asarray(a["A"], float), np.asarray(a["B"], float),
-                   np.asarray(flt.L, float)),
-    }  # fmt: skip
+    points = _points(design, flt)
     omega = frequency_grid(Ts, a["omega_flex"])
     rows = []
     for s in settings:
         for name, (A_, B_, L_) in points.items():
-            plant = (A_, B_) if flt.servos is None else servo_plants(A_, B_, flt.servos, Ts)
-            loops = estimated_loop(*plant, s.F, s.notch, Ts,
-                                   *filter_models(A_, B_, flt.servos, Ts, flt.disturbance), L_,
-                                   flt.C)
-            rho = spectral_radius(estimated_closed_loop(*loops))
-            systems = estimated_loop_systems(*loops, Ts)
+            systems, rho = _systems(flt, s, A_, B_, L_, Ts)
             got = [loop_margins(sys, r, omega, a["omega_flex"][0],
                                 ("delta_e on x_hat", s.label, f"{name} {i}" if len(rho) > 1
                                  else name))
@@ -247,3 +235,51 @@ def estimated_margins(design, flt, settings) -> list:
             worst = f"worst of {len(got)} vertices"
             rows.append(got[0] if len(got) == 1 else worst_case(got, worst))
     return rows
+
+
+def _points(design, flt) -> dict[str, tuple]:
+    """The plant points of `estimated_margins`: the design point and the LPV vertices.
+
+    Returns {name: (A (P, n, n), B (P, n, m), L (P, n_z, n_y))}: the design step's
+    (h0, V0) with the filter's gain blended by its weights (P = 1), and every vertex with
+    its own gain.
+    """
+    a, step = design.arrays, design.case["design_step"]
+    w = flt.lpv.weights([step["h0"]], [step["V0"]])[0]
+    A_p, B_p = flt.lpv.systems([step["h0"]], [step["V0"]])
+    return {
+        "design point": (A_p, B_p, np.einsum("r,rab->ab", w, flt.L)[None]),
+        "vertex": (np.asarray(a["A"], float), np.asarray(a["B"], float),
+                   np.asarray(flt.L, float)),
+    }  # fmt: skip
+
+
+def _systems(flt, setting, A_, B_, L_, Ts: float) -> tuple[list, np.ndarray]:
+    """The loop on the estimate at the points (A_, B_, L_) for one notch setting.
+
+    Returns (P SISO `control.StateSpace` loops broken at the elevator, their closed loops'
+    spectral radii (P,)).
+    """
+    plant = (A_, B_) if flt.servos is None else servo_plants(A_, B_, flt.servos, Ts)
+    loops = estimated_loop(*plant, setting.F, setting.notch, Ts,
+                           *filter_models(A_, B_, flt.servos, Ts, flt.disturbance), L_, flt.C)
+    return estimated_loop_systems(*loops, Ts), spectral_radius(estimated_closed_loop(*loops))
+
+
+def design_point_loops(design, flt, settings) -> list[tuple]:
+    """The loop on the estimate at the design point, per notch setting (for its figures).
+
+    Parameters
+    ----------
+    design, flt, settings
+        As `estimated_margins`.
+
+    Returns
+    -------
+    list of (fahv.analysis.margin_study.NotchSetting, control.StateSpace)
+        The SISO loop broken at the elevator (its servo's command with servos) at the
+        design point, the one `estimated_margins`' "design point" rows are of.
+    """
+    A_, B_, L_ = _points(design, flt)["design point"]
+    Ts = float(design.case["Ts"])
+    return [(s, _systems(flt, s, A_, B_, L_, Ts)[0][0]) for s in settings]

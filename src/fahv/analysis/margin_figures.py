@@ -6,6 +6,8 @@ python-control's frequency responses. Marked: the flexible-mode frequencies omeg
 omega_2 and the notch frequency omega_z, each loop's gain crossover of its phase margin
 and its phase crossover of its nearer gain margin, and on the Nichols charts the
 critical points (-180 deg + k 360 deg, 0 dB) and the 6 dB / 45 deg box about them.
+For a scenario whose law acts on the Kalman estimate, a Nichols figure of that loop too
+(`estimate_nichols_figure`).
 """
 
 from __future__ import annotations
@@ -117,26 +119,73 @@ def nichols_figure(study: MarginStudy, design, path: Path) -> Path:
         `path`.
     """
     fig, axes = plt.subplots(1, len(BREAKS), figsize=(11.0, 5.0))
-    g, p = REQUIREMENT["gain_db"], REQUIREMENT["phase_deg"]
     for ax, break_at in zip(axes, BREAKS, strict=True):
-        for s, w, resp, _ in _responses(study, design, break_at):
-            phase = np.degrees(np.unwrap(np.angle(resp)))
-            mag = 20 * np.log10(np.abs(resp))
-            (line,) = ax.plot(phase, mag, lw=1.1, label=f"notch {s.label}")
-            i = int(np.argmin(np.abs(w - study.omega_flex[0])))
-            ax.plot(phase[i], mag[i], "^", color=line.get_color(), ms=6)
-        for c in _critical_phases(*ax.get_xlim()):
-            ax.plot(c, 0.0, "k+", ms=10)
-            ax.add_patch(plt.Rectangle((c - p, -g), 2 * p, 2 * g, fill=False, ls="--",
-                                       color="tab:red", lw=0.8))  # fmt: skip
-        ax.set_ylim(max(ax.get_ylim()[0], -60.0), min(ax.get_ylim()[1], 60.0))
-        ax.set_title(f"broken at {break_at} (^: omega_1; box: +-{g:g} dB, +-{p:g} deg)",
-                     fontsize=9)  # fmt: skip
-        ax.set_xlabel("phase of L [deg]")
-        ax.set_ylabel("|L| [dB]")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
+        curves = [(f"notch {s.label}", w, resp)
+                  for s, w, resp, _ in _responses(study, design, break_at)]  # fmt: skip
+        _nichols_axes(ax, curves, study.omega_flex[0], f"broken at {break_at}")
     fig.suptitle(f"{study.design_name}: Nichols charts at the design point")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+def _nichols_axes(ax, curves, omega_1: float, title: str) -> None:
+    """Nichols curves (label, omega (F,) [rad/s], L (F,) complex) on `ax`, the box marked.
+
+    Each curve's point at omega_1 (^), the critical points (+) and the 6 dB / 45 deg box
+    about each (`fahv.analysis.margin_report.REQUIREMENT`).
+    """
+    g, p = REQUIREMENT["gain_db"], REQUIREMENT["phase_deg"]
+    for label, w, resp in curves:
+        phase = np.degrees(np.unwrap(np.angle(resp)))
+        mag = 20 * np.log10(np.abs(resp))
+        (line,) = ax.plot(phase, mag, lw=1.1, label=label)
+        i = int(np.argmin(np.abs(w - omega_1)))
+        ax.plot(phase[i], mag[i], "^", color=line.get_color(), ms=6)
+    for c in _critical_phases(*ax.get_xlim()):
+        ax.plot(c, 0.0, "k+", ms=10)
+        ax.add_patch(plt.Rectangle((c - p, -g), 2 * p, 2 * g, fill=False, ls="--",
+                                   color="tab:red", lw=0.8))  # fmt: skip
+    ax.set_ylim(max(ax.get_ylim()[0], -60.0), min(ax.get_ylim()[1], 60.0))
+    ax.set_title(f"{title} (^: omega_1; box: +-{g:g} dB, +-{p:g} deg)", fontsize=9)
+    ax.set_xlabel("phase of L [deg]")
+    ax.set_ylabel("|L| [dB]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+
+
+def estimate_nichols_figure(study: MarginStudy, loops, rows, title: str, path: Path) -> Path:
+    """Nichols chart of the loop on the estimate at the design point, every notch setting.
+
+    Parameters
+    ----------
+    study : fahv.analysis.margin_study.MarginStudy
+        The design's study (its period and flexible-mode frequencies).
+    loops : list of (NotchSetting, control.StateSpace)
+        `fahv.analysis.estimated_loop.design_point_loops`.
+    rows : list of fahv.analysis.margins.LoopMargins
+        `fahv.analysis.estimated_loop.estimated_margins` of the same settings: each
+        curve's label gives its design-point margins.
+    title : str
+        What the loop is (the filter and the scenario).
+    path : Path
+        File to write (png or pdf).
+
+    Returns
+    -------
+    Path
+        `path`.
+    """
+    w = frequency_grid(study.Ts, study.omega_flex)
+    curves = []
+    for s, sys in loops:
+        r = next(r for r in rows if r.notch == s.label and r.point == "design point")
+        label = f"notch {s.label}: PM {r.pm_deg:.1f} deg, GM+ {r.gm_up_db:.1f} dB"
+        curves.append((label, w, np.ravel(control.frequency_response(sys, w).complex)))
+    fig, ax = plt.subplots(figsize=(7.0, 5.5))
+    _nichols_axes(ax, curves, study.omega_flex[0], "broken at delta_e, law on x_hat")
+    fig.suptitle(f"{study.design_name}: {title}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

@@ -110,26 +110,58 @@ def estimate_rows(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple[
     if estimator_kind(c) == NO_ESTIMATOR:
         return [], ""
     from fahv.analysis.estimated_loop import estimated_margins
-    from fahv.estimation.kalman import design_filter
-    from fahv.loop.cores import servos_of
-    from fahv.sensors.data import load_sensors, measured_channels
+    from fahv.sensors.data import measured_channels
 
-    measured = measured_channels(plant_choices(c)["measured"])
-    a = stored.arrays
+    flt, settings = estimate_filter(arg, study, stored, vehicle, vehicle_file)
     model = estimator_value(c, "actuators")
-    servos = servos_of(vehicle, model, "state_estimator")
-    flt = design_filter(a, vehicle, load_sensors(vehicle_file), measured, c["Ts"],
-                        c["plant_substeps"], a["x0"][None], servos,
-                        estimator_value(c, "state_disturbance"))  # fmt: skip
-    actuators = ("ideal actuators" if servos is None else
+    actuators = ("ideal actuators" if flt.servos is None else
                  f"the {model} servos in the plant and the filter, linear")  # fmt: skip
-    tau, tau_design = law_tau(c), float(c["tube"]["tau"])
-    settings = [replace(s, F=s.F * (tau / tau_design)) for s in study.settings]
+    tau = law_tau(c)
     law = "F" if tau == 1.0 else f"{tau:g} F"
+    measured = measured_channels(plant_choices(c)["measured"])
     line = (f"the law on the Kalman estimate of {', '.join(measured)} (scenario {path.stem}; "
             f"{actuators}): u = v + {law} x_hat, broken at the elevator command, the filter "
             "fed the commanded input")  # fmt: skip
     return estimated_margins(stored, flt, settings), line
+
+
+def estimate_filter(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple:
+    """The scenario's Kalman filter and the notch settings with its law's gain tau F.
+
+    Arguments as `estimate_rows` (`arg` a scenario with an estimator).
+
+    Returns
+    -------
+    (fahv.estimation.kalman.GainScheduledKalman, list of NotchSetting)
+    """
+    from fahv.campaign.spec import scenario_path
+    from fahv.estimation.kalman import design_filter
+    from fahv.loop.cores import servos_of
+    from fahv.sensors.data import load_sensors, measured_channels
+    from fahv.spec.scenario import load_scenario
+    from fahv.spec.schema import estimator_value, law_tau, plant_choices
+
+    c = load_scenario(scenario_path(arg)).run_spec.data
+    measured = measured_channels(plant_choices(c)["measured"])
+    a = stored.arrays
+    servos = servos_of(vehicle, estimator_value(c, "actuators"), "state_estimator")
+    flt = design_filter(a, vehicle, load_sensors(vehicle_file), measured, c["Ts"],
+                        c["plant_substeps"], a["x0"][None], servos,
+                        estimator_value(c, "state_disturbance"))  # fmt: skip
+    tau, tau_design = law_tau(c), float(c["tube"]["tau"])
+    return flt, [replace(s, F=s.F * (tau / tau_design)) for s in study.settings]
+
+
+def _estimate_figure(args, study, stored, vehicle, rows, line: str) -> Path:
+    """The Nichols figure of the loop on the estimate (`estimate_nichols_figure`)."""
+    from fahv.analysis.estimated_loop import design_point_loops
+    from fahv.analysis.margin_figures import estimate_nichols_figure
+
+    flt, settings = estimate_filter(args.design, study, stored, vehicle, args.vehicle)
+    loops = design_point_loops(stored, flt, settings)
+    title = line.split(" (", 1)[0] + f", scenario {Path(args.design).stem}"
+    out = Path(args.out) / f"margins_{study.design_name}_estimate_nichols.{args.format}"
+    return estimate_nichols_figure(study, loops, rows, title, out)
 
 
 def cmd_margins(args) -> int:
@@ -163,7 +195,10 @@ def cmd_margins(args) -> int:
             f"parameter box corners (largest spectral radius {rho.max():.6f})"
         )
     if args.out:
-        for path in margin_figures(study, stored, Path(args.out), args.format):
+        paths = margin_figures(study, stored, Path(args.out), args.format)
+        if rows:
+            paths.append(_estimate_figure(args, study, stored, vehicle, rows, line))
+        for path in paths:
             print(f"wrote {path}")
     print(f"margins: {time.monotonic() - t0:.1f} s")
     return 0
