@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import NamedTuple
 
 from fahv.analysis.margin_figures import margin_figures
 from fahv.analysis.margin_report import margin_table, meets, notch_summary
@@ -73,15 +74,39 @@ def _markdown(study) -> str:
         f"- {line}" for line in notch_summary(rows))  # fmt: skip
 
 
-def estimate_rows(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple[list, str]:
+class EstimateLoop(NamedTuple):
+    """The law on a scenario's Kalman estimate: its margins and what `--out` draws of it.
+
+    Attributes
+    ----------
+    rows : list of fahv.analysis.margins.LoopMargins
+        `fahv.analysis.estimated_loop.estimated_margins` of every notch setting.
+    line : str
+        The line that names the filter, the law and the break.
+    flt : fahv.estimation.kalman.GainScheduledKalman
+        The scenario's filter (`fahv.estimation.kalman.design_filter`).
+    settings : list of fahv.analysis.margin_study.NotchSetting
+        The notch settings with the law's gain tau F.
+    """
+
+    rows: list
+    line: str
+    flt: object
+    settings: list
+
+
+def estimate_loop(arg: str, study, stored, vehicle, vehicle_file=None) -> EstimateLoop | None:
     """The margins of the law on the Kalman estimate when `arg` is a scenario with one.
+
+    The scenario is read and its filter designed once, for the table and the figure.
 
     Parameters
     ----------
     arg : str
         The command's argument (a design or a scenario, `resolve_design_file`).
     study : fahv.analysis.margin_study.MarginStudy
-        The study of its design (the notch settings).
+        The study of its design (the notch settings; their F scaled by the scenario's
+        tau over the design's, eq. 53-54).
     stored : fahv.spec.artefacts.Design
     vehicle : fahv.model.vehicle.Vehicle
     vehicle_file : str, optional
@@ -89,79 +114,51 @@ def estimate_rows(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple[
 
     Returns
     -------
-    (list of LoopMargins, str)
-        The rows (`fahv.analysis.estimated_loop.estimated_margins`) and the line that
-        names the filter; ([], "") for a design or a scenario without an estimator.
+    EstimateLoop or None
+        None for a design or a scenario without an estimator.
     """
     from fahv.campaign.spec import scenario_path
     from fahv.spec.scenario import load_scenario
-    from fahv.spec.schema import (
-        NO_ESTIMATOR,
-        estimator_kind,
-        estimator_value,
-        law_tau,
-        plant_choices,
-    )
+    from fahv.spec.schema import NO_ESTIMATOR, estimator_kind, estimator_value, law_tau
 
     path = scenario_path(arg)
     if not path.is_file() or path.resolve() == resolve_design_file(arg).resolve():
-        return [], ""
+        return None
     c = load_scenario(path).run_spec.data
     if estimator_kind(c) == NO_ESTIMATOR:
-        return [], ""
+        return None
     from fahv.analysis.estimated_loop import estimated_margins
-    from fahv.sensors.data import measured_channels
-
-    flt, settings = estimate_filter(arg, study, stored, vehicle, vehicle_file)
-    model = estimator_value(c, "actuators")
-    actuators = ("ideal actuators" if flt.servos is None else
-                 f"the {model} servos in the plant and the filter, linear")  # fmt: skip
-    tau = law_tau(c)
-    law = "F" if tau == 1.0 else f"{tau:g} F"
-    measured = measured_channels(plant_choices(c)["measured"])
-    line = (f"the law on the Kalman estimate of {', '.join(measured)} (scenario {path.stem}; "
-            f"{actuators}): u = v + {law} x_hat, broken at the elevator command, the filter "
-            "fed the commanded input")  # fmt: skip
-    return estimated_margins(stored, flt, settings), line
-
-
-def estimate_filter(arg: str, study, stored, vehicle, vehicle_file=None) -> tuple:
-    """The scenario's Kalman filter and the notch settings with its law's gain tau F.
-
-    Arguments as `estimate_rows` (`arg` a scenario with an estimator).
-
-    Returns
-    -------
-    (fahv.estimation.kalman.GainScheduledKalman, list of NotchSetting)
-    """
-    from fahv.campaign.spec import scenario_path
     from fahv.estimation.kalman import design_filter
     from fahv.loop.cores import servos_of
     from fahv.sensors.data import load_sensors, measured_channels
-    from fahv.spec.scenario import load_scenario
-    from fahv.spec.schema import estimator_value, law_tau, plant_choices
+    from fahv.spec.schema import plant_choices
 
-    c = load_scenario(scenario_path(arg)).run_spec.data
     measured = measured_channels(plant_choices(c)["measured"])
-    a = stored.arrays
-    servos = servos_of(vehicle, estimator_value(c, "actuators"), "state_estimator")
+    a, model = stored.arrays, estimator_value(c, "actuators")
+    servos = servos_of(vehicle, model, "state_estimator")
     flt = design_filter(a, vehicle, load_sensors(vehicle_file), measured, c["Ts"],
                         c["plant_substeps"], a["x0"][None], servos,
                         estimator_value(c, "state_disturbance"))  # fmt: skip
     tau, tau_design = law_tau(c), float(c["tube"]["tau"])
-    return flt, [replace(s, F=s.F * (tau / tau_design)) for s in study.settings]
+    settings = [replace(s, F=s.F * (tau / tau_design)) for s in study.settings]
+    actuators = ("ideal actuators" if servos is None else
+                 f"the {model} servos in the plant and the filter, linear")  # fmt: skip
+    law = "F" if tau == 1.0 else f"{tau:g} F"
+    line = (f"the law on the Kalman estimate of {', '.join(measured)} (scenario {path.stem}; "
+            f"{actuators}): u = v + {law} x_hat, broken at the elevator command, the filter "
+            "fed the commanded input")  # fmt: skip
+    return EstimateLoop(estimated_margins(stored, flt, settings), line, flt, settings)
 
 
-def _estimate_figure(args, study, stored, vehicle, rows, line: str) -> Path:
+def _estimate_figure(args, study, stored, est: EstimateLoop) -> Path:
     """The Nichols figure of the loop on the estimate (`estimate_nichols_figure`)."""
     from fahv.analysis.estimated_loop import design_point_loops
     from fahv.analysis.margin_figures import estimate_nichols_figure
 
-    flt, settings = estimate_filter(args.design, study, stored, vehicle, args.vehicle)
-    loops = design_point_loops(stored, flt, settings)
-    title = line.split(" (", 1)[0] + f", scenario {Path(args.design).stem}"
+    loops = design_point_loops(stored, est.flt, est.settings)
+    title = est.line.split(" (", 1)[0] + f", scenario {Path(args.design).stem}"
     out = Path(args.out) / f"margins_{study.design_name}_estimate_nichols.{args.format}"
-    return estimate_nichols_figure(study, loops, rows, title, out)
+    return estimate_nichols_figure(study, loops, est.rows, title, out)
 
 
 def cmd_margins(args) -> int:
@@ -181,11 +178,11 @@ def cmd_margins(args) -> int:
         print(margin_table(study.table_rows()))
         for line in notch_summary(study.table_rows()):
             print(line)
-    rows, line = estimate_rows(args.design, study, stored, vehicle, args.vehicle)
-    if rows:
-        print(line)
-        print(margin_table(rows, markdown=args.markdown))
-        for r in rows:  # the classical requirement, said for the loop on the estimate too
+    est = estimate_loop(args.design, study, stored, vehicle, args.vehicle)
+    if est is not None:
+        print(est.line)
+        print(margin_table(est.rows, markdown=args.markdown))
+        for r in est.rows:  # the classical requirement, said for the loop on the estimate too
             print(f"the loop on the estimate, break at {r.break_at}, notch {r.notch}, "
                   f"{r.point}: GM+ {r.gm_up_db:.1f} dB, PM {r.pm_deg:.1f} deg; "
                   f"6 dB / 45 deg met: {'yes' if meets(r) else 'no'}")  # fmt: skip
@@ -196,8 +193,8 @@ def cmd_margins(args) -> int:
         )
     if args.out:
         paths = margin_figures(study, stored, Path(args.out), args.format)
-        if rows:
-            paths.append(_estimate_figure(args, study, stored, vehicle, rows, line))
+        if est is not None:
+            paths.append(_estimate_figure(args, study, stored, est))
         for path in paths:
             print(f"wrote {path}")
     print(f"margins: {time.monotonic() - t0:.1f} s")

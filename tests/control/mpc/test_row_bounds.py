@@ -42,7 +42,7 @@ def test_a_batchs_vectors_are_each_runs_own_bit_for_bit(design, make_mpc):
             f, bl, bu = batch.compute(z0, u_base, cmd, x_d, prev, recover, relax)
             assert bl.shape == bu.shape == (B, mpcs[0].layout.ny + mpcs[0].A_c.shape[0])
             for b, mpc in enumerate(mpcs):
-                one = mpc.vectors.compute(z0[b:b + 1], u_base[b:b + 1], cmd[b:b + 1],
+                one = QPVectors.of(mpc).compute(z0[b:b + 1], u_base[b:b + 1], cmd[b:b + 1],
                                           x_d[b:b + 1], None if prev is None else prev[b:b + 1],
                                           recover, relax)  # fmt: skip
                 for got, want in zip((f, bl, bu), one, strict=True):

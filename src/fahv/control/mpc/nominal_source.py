@@ -35,7 +35,7 @@ from fahv.control.command import Command, CommandSchedule
 from fahv.control.mpc.attitude import attitude_bounds
 from fahv.control.mpc.estimator import DisturbanceEstimator, estimator_gains
 from fahv.control.mpc.parameters import MPC_NODE_PARAMETERS, node_values
-from fahv.control.mpc.row_bounds import QPVectors
+from fahv.control.mpc.row_bounds import QPVectors, stacked_mv
 from fahv.control.mpc.settings import MPC_SECTION_FIELDS, MPCSettings
 from fahv.control.mpc.tracking import TRIM_STEP, TrackingMPC
 from fahv.control.reference import lpv_of, mv, trim_map_of
@@ -338,8 +338,7 @@ class TrackingMPCNominal(NominalSource):
         B = self.XN.shape[0]
         if self.has_est:
             d = np.ascontiguousarray(self.est_ss.d)
-            x_d = np.matmul(self.HX, d[:, :, None])[:, :, 0]  # each run's HX[b] @ d[b]
-            u_d = np.matmul(self.HU, d[:, :, None])[:, :, 0]
+            x_d, u_d = stacked_mv(self.HX, d), stacked_mv(self.HU, d)
         else:
             x_d, u_d = np.zeros((B, self.n)), np.zeros((B, 2))
         z0, u_base = self.XN - self.XRS - x_d, self.URS + u_d

@@ -8,7 +8,7 @@ disturbance estimate's shift x_d. A campaign batch re-plans all its runs at the 
 step: `QPVectors` holds the parts of every run's QP that those vectors read, stacked
 along a leading axis of B runs (copied at each run's scheduling, `put`), and `compute`
 evaluates them for all runs in one pass of numpy calls, instead of about forty calls per
-run. A single QP is a batch of one (`TrackingMPC.solve`).
+run. A single QP is a batch of one (`QPVectors.of`, `TrackingMPC.solve`).
 
 A run's vectors do not depend on its batch, bit for bit: every product is a stacked
 `np.matmul` of a run's (rows, n) matrix with its (n,) vector, which numpy evaluates
@@ -28,8 +28,20 @@ PARTS = ("theta_s", "x_r_s", "Fz", "U_z", "Uf_z", "Tb_z", "Att_z", "u_lo", "u_hi
 QP_NO_BOUND = 1e30
 
 
-def _mv(M: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """M[b] @ v[b] for every run b: (B, r, n) and (B, n) -> (B, r), each slice as alone."""
+def stacked_mv(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """M[b] @ v[b] for every run b, each product the BLAS call of the run alone.
+
+    Parameters
+    ----------
+    M : (B, r, n) ndarray
+    v : (B, n) ndarray
+
+    Returns
+    -------
+    (B, r) ndarray
+        Bit for bit each run's `M[b] @ v[b]` (a stacked `np.matmul`, evaluated slice by
+        slice; `np.einsum` would sum in another order).
+    """
     return np.matmul(M, v[:, :, None])[:, :, 0]
 
 
@@ -64,6 +76,13 @@ class QPVectors:
         n, m = self.n, self.m
         self._no_lo_t = np.full((B, 2 * n), -QP_NO_BOUND)
         self._no_hi_u, self._no_lo_u = np.full((B, m), QP_NO_BOUND), np.full((B, m), -QP_NO_BOUND)
+
+    @classmethod
+    def of(cls, mpc) -> QPVectors:
+        """A batch of one: the vectors of `mpc`'s own QP at its current scheduling."""
+        one = cls(mpc, 1)
+        one.put(0, mpc)
+        return one
 
     def put(self, b: int, mpc) -> None:
         """Copy run b's scheduled parts into the stack.
@@ -102,7 +121,7 @@ class QPVectors:
         """
         P, s = self.parts, self.s
         e_theta = (P["theta_s"] - cmd) / self.theta_scale
-        f = 2.0 * _mv(P["Fz"], z0)
+        f = 2.0 * stacked_mv(P["Fz"], z0)
         f[:, self.layout.delta] += 2.0 * s.t_w * e_theta
         bl, bu = self._row_bounds(z0, u_base, x_off, recover, u_prev, relax_steady)
         return f, bl, bu
@@ -110,25 +129,25 @@ class QPVectors:
     def _row_bounds(self, z0, u_base, x_off, recover, u_prev, relax_steady):
         """Bounds (bl, bu) (B, ny + rows) of y and of the rows, in `_constraint_matrix`'s order."""
         P, s, m, B = self.parts, self.s, self.m, z0.shape[0]
-        u_off = _mv(P["U_z"], z0).reshape(B, s.N_p, m) + u_base[:, None]
+        u_off = stacked_mv(P["U_z"], z0).reshape(B, s.N_p, m) + u_base[:, None]
         parts = [self._move_start_bounds(z0, u_base, u_off, x_off, recover, u_prev, relax_steady)]
         if s.hv_box is not None:  # widened to hold the start (the reset h may lie outside)
-            hv = _mv(P["Hv_z"], z0).reshape(B, -1, 2) + P["x_r_s"][:, None, :2]
+            hv = stacked_mv(P["Hv_z"], z0).reshape(B, -1, 2) + P["x_r_s"][:, None, :2]
             h0 = z0[:, :2] + P["x_r_s"][:, :2]
             hv_lo, hv_hi = np.minimum(s.hv_box[0], h0), np.maximum(s.hv_box[1], h0)
             parts.append(((hv_lo[:, None] - hv).reshape(B, -1),
                           (hv_hi[:, None] - hv).reshape(B, -1)))  # fmt: skip
         if s.x_box is not None:  # from the trim at the nominal's own (h, V), with x_d
             xd = x_off[:, 2:9]
-            start = z0[:, 2:9] - _mv(P["T_own"], np.ascontiguousarray(z0[:, 0:2])) + xd
+            start = z0[:, 2:9] - stacked_mv(P["T_own"], np.ascontiguousarray(z0[:, 0:2])) + xd
             xb_lo, xb_hi = np.minimum(s.x_box[0], start), np.maximum(s.x_box[1], start)
-            xb = _mv(P["Xb_z"], z0).reshape(B, -1, 7) + xd[:, None]
+            xb = stacked_mv(P["Xb_z"], z0).reshape(B, -1, 7) + xd[:, None]
             parts.append(((xb_lo[:, None] - xb).reshape(B, -1),
                           (xb_hi[:, None] - xb).reshape(B, -1)))  # fmt: skip
         if s.has_rate_rows:
-            rz = _mv(P["Rate_z"], z0)
+            rz = stacked_mv(P["Rate_z"], z0)
             parts.append((-self._rate_scaled - rz, self._rate_scaled - rz))
-        uf_off = _mv(P["Uf_z"], z0).reshape(B, -1, m) + u_base[:, None]
+        uf_off = stacked_mv(P["Uf_z"], z0).reshape(B, -1, m) + u_base[:, None]
         parts.append((((P["u_lo"][:, None] - uf_off) / self.Du).reshape(B, -1),
                       ((P["u_hi"][:, None] - uf_off) / self.Du).reshape(B, -1)))  # fmt: skip
         if s.u_box is not None:  # the manoeuvre part K zeta + c = u_off - u_base + Du (row y)
@@ -155,19 +174,19 @@ class QPVectors:
             du = s.du_max / self.Du
             lo_u[:, :m] = np.maximum(lo_u[:, :m], -du - c0)
             hi_u[:, :m] = np.minimum(hi_u[:, :m], du - c0)
-        tz = _mv(P["Tb_z"], z0)
-        att = _mv(P["Att_z"], z0).reshape(B, -1, 2)
+        tz = stacked_mv(P["Tb_z"], z0)
+        att = stacked_mv(P["Att_z"], z0).reshape(B, -1, 2)
         a_max = np.minimum(np.broadcast_to(s.att_max, (2,)), 1e3)
         off = x_off[:, 2:4]
         att_lo, att_hi = np.minimum(-a_max - off, 0.0), np.maximum(a_max - off, 0.0)
-        s_hi = self._no_hi_u[:B] if relax_steady else (P["u_hi"] - u_base) / self.Du
-        s_lo = self._no_lo_u[:B] if relax_steady else (P["u_lo"] - u_base) / self.Du
+        s_hi = self._no_hi_u if relax_steady else (P["u_hi"] - u_base) / self.Du
+        s_lo = self._no_lo_u if relax_steady else (P["u_lo"] - u_base) / self.Du
         bu = np.concatenate(
-            [hi_b, hi_u, -tz, tz, s_hi, self._no_hi_u[:B], (att_hi[:, None] - att).reshape(B, -1)],
+            [hi_b, hi_u, -tz, tz, s_hi, self._no_hi_u, (att_hi[:, None] - att).reshape(B, -1)],
             axis=1,
         )  # fmt: skip
         bl = np.concatenate(
-            [lo_b, lo_u, self._no_lo_t[:B], self._no_lo_u[:B], s_lo,
+            [lo_b, lo_u, self._no_lo_t, self._no_lo_u, s_lo,
              (att_lo[:, None] - att).reshape(B, -1)],
             axis=1,
         )  # fmt: skip

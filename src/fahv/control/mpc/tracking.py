@@ -166,8 +166,6 @@ class TrackingMPC:
         self.theta_s = None
         self.last_y = None
         self._qp = None  # DAQP workspace (daqp.Model) of the current scheduling
-        #: f and the rows' bounds of this QP (a batch of one, `fahv.control.mpc.row_bounds`)
-        self.vectors = None
         compile_kernel()  # at construction: a node's start-up, not its first timed step
 
     @property
@@ -178,8 +176,6 @@ class TrackingMPC:
     @u_lo.setter
     def u_lo(self, value) -> None:
         self._u_lo = np.asarray(value, float)
-        if self.vectors is not None:  # this QP's own vectors read it (a batch: its `put`)
-            self.vectors.put(0, self)
 
     @property
     def u_hi(self) -> np.ndarray:
@@ -189,8 +185,6 @@ class TrackingMPC:
     @u_hi.setter
     def u_hi(self, value) -> None:
         self._u_hi = np.asarray(value, float)
-        if self.vectors is not None:  # this QP's own vectors read it (a batch: its `put`)
-            self.vectors.put(0, self)
 
     # -- scheduling ----------------------------------------------------------------
     def _trim_and_jacobian(self, h: float, V: float):
@@ -237,9 +231,6 @@ class TrackingMPC:
         self.Gx, self.Gu = Gx, Gu
         self._prediction_rows(A, B, Gx, Gu)
         self._constraint_matrix()
-        if self.vectors is None:
-            self.vectors = QPVectors(self, 1)
-        self.vectors.put(0, self)
         self._qp = None
         try:
             self.Hx, self.Hu = steady_state_shift(A, B, self.Dx, self.Du)
@@ -404,7 +395,7 @@ class TrackingMPC:
         z0 = np.asarray(z0, float)
         x_d = np.zeros(self.n) if x_off is None else np.asarray(x_off, float)
         u_p = None if u_prev is None else np.asarray(u_prev, float)[None]
-        f, bl, bu = self.vectors.compute(
+        f, bl, bu = QPVectors.of(self).compute(
             z0[None], np.asarray(u_base, float)[None], np.asarray(cmd, float)[None], x_d[None],
             u_p, recover, relax_steady,
         )  # fmt: skip
@@ -415,6 +406,21 @@ class TrackingMPC:
 
         A new workspace per scheduling (H and `A_c` fixed until then); between re-plans
         only f and the bounds move. A failed solve drops the workspace.
+
+        Parameters
+        ----------
+        f : (ny,) ndarray
+            Linear cost (`fahv.control.mpc.row_bounds.QPVectors.compute`).
+        bl, bu : (ny + rows,) ndarray
+            Bounds of y and of the rows of `A_c` (scaled units; 1e30: none).
+
+        Returns
+        -------
+        y : (ny,) ndarray or None
+            The solution, None if the solver failed or the solution fails the KKT re-check
+            (`fahv.synthesis.qp.check_kkt`); nothing is raised.
+        info : str
+            "ok" or why it was rejected.
         """
         if self._qp is None:
             self._qp = daqp_module().Model()
