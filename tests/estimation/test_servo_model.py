@@ -31,7 +31,7 @@ def test_the_discrete_servos_are_the_kernels_without_limits():
         u = rng.normal(size=2) * [0.1, 0.05]
         a, pos = s[None].copy(), [s[::2].copy()]
         for _ in range(n):
-            _, a = rk4_cm_act(x, a, u[None], rec, AP[None], np.zeros(1, bool), TS / n, 1)
+            _, a, _ = rk4_cm_act(x, a, u[None], rec, AP[None], np.zeros(1, bool), TS / n, 1)
             pos.append(a[0, ::2].copy())
         pos = np.array(pos)
         avg = (pos[1:] + pos[:-1]).sum(axis=0) / (2 * n)

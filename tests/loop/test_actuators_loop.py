@@ -6,6 +6,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 
 from fahv.loop.batch import simulate_batch
 from fahv.loop.simulate import simulate
@@ -34,6 +35,8 @@ def test_ideal_actuators_leave_the_loop_bit_for_bit(design):
     # the positions on /hsv/state: the input applied over the step before (NaN at k = 0)
     assert np.isnan(base.u_actuator[0]).all()
     assert np.array_equal(base.u_actuator[1:], np.clip(base.u_applied[:-1], lim.u_min, lim.u_max))
+    assert np.isnan(base.u_actuator_rate_peak).all()  # ideal actuators have no rate
+    assert "delta_e_servo_rate_peak_degps" not in input_rates(base)
 
 
 def test_second_order_actuators_in_simulate_and_the_batch(design):
@@ -52,7 +55,7 @@ def test_second_order_actuators_in_simulate_and_the_batch(design):
     batch = simulate_batch(design, "tube_mpc", ovs, DURATION)
     for ov, res in zip(ovs, batch, strict=True):
         single = simulate(design, "tube_mpc", DURATION, overrides=ov)
-        for f in ("x", "u", "u_applied", "u_actuator"):
+        for f in ("x", "u", "u_applied", "u_actuator", "u_actuator_rate_peak"):
             assert np.array_equal(getattr(single, f), getattr(res, f), equal_nan=True), f
     free, stuck, hard = batch
     lag = free.u_actuator[1:] - free.u_applied[:-1]
@@ -70,3 +73,9 @@ def test_second_order_actuators_in_simulate_and_the_batch(design):
     rates = input_rates(hard)
     assert 99.9 <= rates["delta_e_actuator_rate_max_degps"] <= 100.0 * (1 + 1e-9)
     assert rates["delta_e_rate_max_degps"] > 1000.0
+    assert rates["delta_e_servo_rate_peak_degps"] == pytest.approx(100.0, rel=1e-12)
+    # within a step the free servo moves at least as fast as its step-to-step average
+    free_rates = input_rates(free)
+    assert (free_rates["delta_e_servo_rate_peak_degps"]
+            >= free_rates["delta_e_actuator_rate_max_degps"] * (1 - 1e-9))  # fmt: skip
+    assert np.isnan(free.u_actuator_rate_peak[0]).all()

@@ -10,7 +10,8 @@ from fahv.loop.simulate import run_parameters, simulate
 
 SCENARIO = "offline_design/scenarios/case1_implementable.yaml"
 FIELDS = ("t", "x", "q_f", "x_r", "x_n", "u", "u_applied", "h_c", "V_c", "h_g", "V_g",
-          "tube_level", "fault_active", "lmi_counts", "qp_counts", "u_actuator", "y",
+          "tube_level", "fault_active", "lmi_counts", "qp_counts", "u_actuator",
+          "u_actuator_rate_peak", "y",
           "x_hat")  # fmt: skip
 #: Long enough for the first re-plans and the faults' onsets, short for CI [s].
 DURATION = 2.0

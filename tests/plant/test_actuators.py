@@ -37,7 +37,7 @@ def servo_run(setup, a0, u, n, held=False):
     X, A = tp.x_r[None].copy(), np.array([a0], float)
     out = [A[0].copy()]
     for _ in range(n):
-        X, A = rk4_cm_act(X, A, np.array([u], float), rec, ap[None], np.array([held]), DT, 1)
+        X, A, _ = rk4_cm_act(X, A, np.array([u], float), rec, ap[None], np.array([held]), DT, 1)
         out.append(A[0].copy())
     return np.array(out)
 
@@ -186,3 +186,26 @@ def test_the_servos_rate_limits_reach_the_input_limits_and_not_the_design(vehicl
     assert rate_violations(u, 0.02, slower.limits) == 1  # the step down only
     del data["actuators"]
     assert vehicle_from_mapping(data).limits.rate_incr == (math.inf, math.inf)
+
+
+@pytest.mark.parametrize("dde_deg", [0.5, 17.6])
+def test_the_peak_rate_within_a_period_is_the_largest_of_its_sub_steps(vehicle, setup, dde_deg):
+    """One period of 5 sub-steps returns each servo's peak |rate|: the largest |rate state|
+    of the 5 sub-steps one at a time, to the bit, and at least its position's average rate
+    over the period (0.5 deg from rest: 1.42 times it); on a 17.6 deg step the elevator's
+    peak is its 100 deg/s rate limit."""
+    tp, ap, rec = setup
+    a0 = [tp.u_r[0], 0.0, tp.u_r[1], 0.0]
+    u = tp.u_r + [0.05, math.radians(dde_deg)]
+    one_by_one = servo_run(setup, a0, u, 5)
+    X, A, peak = rk4_cm_act(tp.x_r[None].copy(), np.array([a0], float), np.array([u], float),
+                            rec, ap[None], np.array([False]), 5 * DT, 5)  # fmt: skip
+    assert np.array_equal(A[0], one_by_one[-1])
+    assert peak[0, 0] == np.abs(one_by_one[1:, 1]).max()
+    assert peak[0, 1] == np.abs(one_by_one[1:, 3]).max()
+    average = abs(one_by_one[-1, 2] - a0[2]) / (5 * DT)
+    assert peak[0, 1] >= average * (1 - 1e-12)
+    if dde_deg < 10:
+        assert peak[0, 1] == pytest.approx(1.42 * average, rel=0.01)
+    else:
+        assert peak[0, 1] == vehicle.actuators["second_order"]["delta_e"].rate_limit_incr

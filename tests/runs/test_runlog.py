@@ -15,8 +15,8 @@ from fahv.runs.metrics import metrics
 from fahv.runs.sil import run_metadata
 from fahv.runs.writer import RunWriter
 
-#: The fields of a VehicleState message: the state and the actuator positions.
-STATE_MSG = (*STATE_FIELDS, "phi_a", "delta_e_a")
+#: The fields of a VehicleState message: the state, the actuator positions and rates.
+STATE_MSG = (*STATE_FIELDS, "phi_a", "delta_e_a", "phi_a_rate_peak", "delta_e_a_rate_peak")
 N = 150  # 3 s at Ts = 0.02
 
 

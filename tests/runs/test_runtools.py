@@ -89,7 +89,9 @@ def test_export_tables_have_named_columns_units_and_the_recorded_values(runs, tm
     files = export_run(read_run(bag), tmp_path / "pq", "parquet")
     assert {f.name for f in files} >= {"hsv_state.parquet", "hsv_nominal.parquet", "columns.csv"}
     state = pq.read_table(tmp_path / "pq" / "hsv_state.parquet")
-    assert state.column_names == ["k", "t", *STATE_FIELDS, "phi_a", "delta_e_a"]
+    assert state.column_names == ["k", "t", *STATE_FIELDS, "phi_a", "delta_e_a", "phi_a_rate_peak",
+                                  "delta_e_a_rate_peak"]  # fmt: skip
+    assert state.schema.field("delta_e_a_rate_peak").metadata[b"unit"] == b"rad/s"
     assert state.schema.field("alpha").metadata[b"unit"] == b"rad"
     assert state.schema.field("delta_e_a").metadata[b"unit"] == b"rad"
     np.testing.assert_array_equal(state.column("delta_e_a").to_numpy(), run.u_actuator[:, 1])

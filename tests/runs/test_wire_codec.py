@@ -138,3 +138,19 @@ def test_the_loop_types_are_those_of_ros_2_jazzy():
         assert typestore().generate_msgdef(msgtype) == jazzy.generate_msgdef(msgtype), msgtype
         assert typestore().hash_rihs01(msgtype) == jazzy.hash_rihs01(msgtype), msgtype
     assert set(STANDARD_TYPES) <= set(jazzy.types)
+
+
+def test_a_run_recorded_before_the_servo_rates_existed_reads_them_as_nan():
+    """/hsv/state of an older run has no `*_rate_peak` fields: they read as NaN, and any
+    other missing field is still an error naming it."""
+    from fahv.msg import VehicleState
+
+    x, u_a = np.arange(9.0)[None], np.array([[0.2, 0.1]])
+    lane = VehicleState.of(3, 0.06, x, u_a, np.array([[0.5, 1.0]])).lane(0)
+    assert (lane["phi_a_rate_peak"], lane["delta_e_a_rate_peak"]) == (0.5, 1.0)
+    old = {k: v for k, v in lane.items() if not k.endswith("_rate_peak")}
+    msg = VehicleState.from_lanes([old])
+    assert np.array_equal(msg.x(), x) and np.array_equal(msg.u_a(), u_a)
+    assert np.isnan(msg.rate_peak()).all() and msg.rate_peak().shape == (1, 2)
+    with pytest.raises(KeyError, match="delta_e_a"):
+        VehicleState.from_lanes([{k: v for k, v in old.items() if k != "delta_e_a"}])

@@ -403,7 +403,7 @@ class GainScheduledKalman:
             a[new, ::2] = u[new]
             if self._servo_lanes.shape[0] != len(u):
                 self._servo_lanes = servo_lanes(self.servos, len(u))
-            x, a = rk4_cm_act(x, np.ascontiguousarray(a), u, self.rec, self._servo_lanes,
+            x, a, _ = rk4_cm_act(x, np.ascontiguousarray(a), u, self.rec, self._servo_lanes,
                               np.zeros(len(u), bool), self.Ts, self.n_sub)  # fmt: skip
         rest = self.z[:, 11 + self.n_s :]  # d_s (or nothing)
         if self.disturbance is not None:

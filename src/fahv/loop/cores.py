@@ -241,7 +241,7 @@ class PlantCore:
             self.lanes.fail_mask(bad, ended)
         if not self.lanes.alive.all():
             self._reset(~self.lanes.alive)
-        return VehicleState.of(self.k, t, self.plant.x, self.plant.positions)
+        return VehicleState.of(self.k, t, self.plant.x, self.plant.positions, self.plant.rate_peak)
 
     def measurement(self) -> Measurement:
         """Measurement of the current step k from the true states (after `state`).

@@ -89,6 +89,9 @@ class RunResult:
     u_actuator : (N, 2) ndarray or None
         Actuator positions [Phi, delta_e rad] at t_k (/hsv/state; NaN at step 0;
         ideal actuators: the applied input of step k - 1); None if not given.
+    u_actuator_rate_peak : (N, 2) ndarray or None
+        Each servo's peak |rate| [1/s, rad/s] within [t_k-1, t_k] (/hsv/state; NaN at
+        step 0 and for ideal actuators, which have no rate); None if not given.
     y : (N, n_y) ndarray or None
         Sensor measurement of each step (/hsv/measurement, channels in
         `info["measured"]`); None if not given.
@@ -114,6 +117,7 @@ class RunResult:
     info: dict = field(default_factory=dict)
     qp_counts: np.ndarray = field(default_factory=lambda: np.zeros(4, dtype=int))
     u_actuator: np.ndarray | None = None
+    u_actuator_rate_peak: np.ndarray | None = None
     y: np.ndarray | None = None
     x_hat: np.ndarray | None = None
 
@@ -151,6 +155,7 @@ class History:
             "tube_level": np.empty((N, B)),
             "fault_active": np.empty((N, B), dtype=bool),
             "u_actuator": np.empty((N, B, 2)),
+            "u_actuator_rate_peak": np.empty((N, B, 2)),
             "x_hat": np.empty((N, B, 9)),
         }
         if n_y:
@@ -195,6 +200,7 @@ class History:
         a["tube_level"][k] = tube.level
         a["fault_active"][k] = fs.active
         a["u_actuator"][k] = state.u_a()
+        a["u_actuator_rate_peak"][k] = state.rate_peak()
         a["x_hat"][k] = a["x"][k] if est is None else est.x()
         if "y" in a:
             a["y"][k] = meas.y

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -55,6 +56,9 @@ class LoopMessage:
     """
 
     HEADER: ClassVar[tuple[str, ...]] = ()
+    #: Fields added after runs were recorded without them: `from_lanes` reads them as
+    #: NaN when a run's lanes lack them (a float64 field each).
+    OPTIONAL: ClassVar[tuple[str, ...]] = ()
 
     @classmethod
     @functools.cache  # every codec call asks: built once per class (the classes are frozen)
@@ -112,7 +116,7 @@ class LoopMessage:
         Raises
         ------
         KeyError
-            Naming a missing field.
+            Naming a missing field (not one of `OPTIONAL`).
         ValueError
             If `lanes` is empty or an array field has different lengths.
         """
@@ -120,7 +124,10 @@ class LoopMessage:
             raise ValueError(f"{cls.__name__}: a message needs at least one lane")
         values = {}
         for name, ros, _ in cls.ros_fields():
-            col = [d[name] for d in lanes]
+            if name in cls.OPTIONAL and name not in lanes[0]:
+                col = [math.nan] * len(lanes)
+            else:
+                col = [d[name] for d in lanes]
             if name in STEP_FIELDS:
                 values[name] = col[0]
             elif ros == "float64":
@@ -181,7 +188,7 @@ class VehicleState(StateColumns):
         "Plant state x_k of the coupling model CM (Yang et al. 2022, eq. 1-3) at step k.",
         "Published by the plant at t_k = k * Ts, before it integrates [t_k, t_k+1],",
         "with the actuator positions at t_k (ideal actuators: the command held over",
-        "[t_k-1, t_k]).",
+        "[t_k-1, t_k]) and each servo's peak rate within [t_k-1, t_k].",
     )
     phi_a: np.ndarray = _f(
         "float64", "actuator position: Phi at the engine [-] (NaN before the first command)"
@@ -189,20 +196,46 @@ class VehicleState(StateColumns):
     delta_e_a: np.ndarray = _f(
         "float64", "actuator position: elevator deflection [rad] (NaN before the first command)"
     )
+    phi_a_rate_peak: np.ndarray = _f(
+        "float64", "Phi servo: peak |rate| within [t_k-1, t_k] [1/s] (NaN: no servo, or step 0)"
+    )
+    delta_e_a_rate_peak: np.ndarray = _f(
+        "float64",
+        "elevator servo: peak |rate| within [t_k-1, t_k] [rad/s] (NaN: no servo, or step 0)",
+    )
+
+    OPTIONAL: ClassVar[tuple[str, ...]] = ("phi_a_rate_peak", "delta_e_a_rate_peak")
 
     @classmethod
-    def of(cls, k: int, t: float, x: np.ndarray, u_a: np.ndarray | None = None) -> VehicleState:
-        """Message of step k from the plant states x (B, 9) and actuator positions u_a (B, 2).
+    def of(
+        cls, k: int, t: float, x: np.ndarray, u_a: np.ndarray | None = None,
+        rate_peak: np.ndarray | None = None,
+    ) -> VehicleState:
+        """Message of step k: plant states, actuator positions, the servos' peak rates.
 
-        The columns are copied; `u_a` None (before the first command) gives NaN.
+        x (B, 9) are the states, u_a (B, 2) [Phi, rad] the actuator positions and
+        rate_peak (B, 2) [1/s, rad/s] the servos' peak |rate| within the period before
+        (`fahv.plant.rk4.rk4_cm_act`). The columns are copied; `u_a` None (before the
+        first command) and `rate_peak` None (ideal actuators, or before the first
+        command) give NaN.
         """
         x = np.array(x, dtype=float)
-        u_a = np.full((len(x), 2), np.nan) if u_a is None else np.array(u_a, dtype=float)
-        return cls(k, t, *(x[:, i] for i in range(9)), u_a[:, 0], u_a[:, 1])
+        nan = np.full((len(x), 2), np.nan)
+        u_a = nan if u_a is None else np.array(u_a, dtype=float)
+        peak = nan if rate_peak is None else np.array(rate_peak, dtype=float)
+        return cls(k, t, *(x[:, i] for i in range(9)), u_a[:, 0], u_a[:, 1], peak[:, 0],
+                   peak[:, 1])  # fmt: skip
 
     def u_a(self) -> np.ndarray:
         """Actuator positions (B, 2) [Phi, delta_e rad] (NaN before the first command)."""
         return np.stack([np.asarray(self.phi_a, float), np.asarray(self.delta_e_a, float)], axis=1)
+
+    def rate_peak(self) -> np.ndarray:
+        """Servos' peak |rate| (B, 2) [1/s, rad/s] within the period before t_k (NaN: none)."""
+        return np.stack(
+            [np.asarray(self.phi_a_rate_peak, float), np.asarray(self.delta_e_a_rate_peak, float)],
+            axis=1,
+        )
 
 
 @dataclass(frozen=True)

@@ -116,6 +116,9 @@ class Plant:
         #: Actuator states (B, 4) [Phi, Phi_dot 1/s, delta_e rad, delta_e_dot rad/s]
         #: (None before the first step; rates zero for ideal actuators).
         self.a: np.ndarray | None = None
+        #: Each servo's peak |rate| (B, 2) [1/s, rad/s] within the last period (None
+        #: before the first step and for ideal actuators, which have no rate).
+        self.rate_peak: np.ndarray | None = None
         rk4.compile_kernels(self.records, self.servos)  # now, not in a timed step
 
     @property
@@ -158,7 +161,7 @@ class Plant:
             self.a = np.zeros((len(u), 4))
             self.a[:, ::2] = u
         hold = np.zeros(len(u), bool) if held is None else np.asarray(held, bool).reshape(-1)
-        self.x, self.a = self._kernel_act(
+        self.x, self.a, self.rate_peak = self._kernel_act(
             self.x, self.a, u, self.records, self.servos, np.ascontiguousarray(hold),
             self.Ts, self.n_sub,
         )  # fmt: skip

@@ -244,11 +244,15 @@ def rk4_cm_act(X, A, U, P, AP, held, Ts, n_sub):  # pragma: no cover - compiled
     Returns
     -------
     tuple of ndarray
-        Airframe states (B, 9) and actuator states (B, 4) at the end of the interval.
+        Airframe states (B, 9) and actuator states (B, 4) at the end of the interval,
+        and each servo's peak |rate| within it (B, 2) [input unit/s]: the largest |rate
+        state| after the limits of any of the n_sub RK4 steps (what a servo's rate
+        limit bounds; the step-to-step difference of its position is an average).
     """
     B = X.shape[0]
     out = np.empty_like(X)
     out_a = np.empty_like(A)
+    peak = np.zeros((B, 2))
     dt = Ts / n_sub
     xs = np.empty(9)  # the stages' airframe states, written in place
     for b in range(B):
@@ -279,9 +283,11 @@ def rk4_cm_act(X, A, U, P, AP, held, Ts, n_sub):  # pragma: no cover - compiled
             a_prev = a
             a = a + dt / 6.0 * (j1 + 2.0 * j2 + 2.0 * j3 + j4)
             _limit(a, a_prev, ap, dt)
+            for j in range(2):
+                peak[b, j] = max(peak[b, j], abs(a[2 * j + 1]))
         out[b] = x
         out_a[b] = a
-    return out, out_a
+    return out, out_a, peak
 
 
 def compile_kernels(P: np.ndarray, servos: np.ndarray | None = None) -> None:

@@ -222,12 +222,13 @@ def own_trim_attitude(run: RunResult) -> np.ndarray | None:
 
 
 def input_rates(run: RunResult) -> dict[str, float]:
-    """The elevator's largest rate: of the command and of the actuator's position.
+    """The elevator's largest rate: of the command, of the servo's position, of the servo.
 
     Parameters
     ----------
     run : RunResult
-        With `u` (N, 2) and, if recorded, `u_actuator` (N, 2) [Phi, rad].
+        With `u` (N, 2) and, if recorded, `u_actuator` (N, 2) [Phi, rad] and
+        `u_actuator_rate_peak` (N, 2) [1/s, rad/s].
 
     Returns
     -------
@@ -235,7 +236,10 @@ def input_rates(run: RunResult) -> dict[str, float]:
         `delta_e_rate_max_degps`: max |u_k+1 - u_k| / Ts of the commanded elevator
         [deg/s], what the controller asks of the servo; `delta_e_actuator_rate_max_degps`:
         the same of the actuator's position (what flies; ideal actuators: the applied
-        command), left out without `u_actuator`. NaN for a run of fewer than two steps.
+        command), left out without `u_actuator`; `delta_e_servo_rate_peak_degps`: the
+        servo's largest |rate| within any step (its rate state, which its rate limit
+        bounds; above the step-to-step average), left out for a run without servos.
+        NaN for a run of fewer than two steps.
 
     Examples
     --------
@@ -257,6 +261,9 @@ def input_rates(run: RunResult) -> dict[str, float]:
     out = {"delta_e_rate_max_degps": rate(run.u)}
     if run.u_actuator is not None:
         out["delta_e_actuator_rate_max_degps"] = rate(run.u_actuator)
+    peak = getattr(run, "u_actuator_rate_peak", None)
+    if peak is not None and np.isfinite(peak[:, 1]).any():
+        out["delta_e_servo_rate_peak_degps"] = float(np.degrees(np.nanmax(peak[:, 1])))
     return out
 
 

@@ -223,8 +223,11 @@ def input_rate_figure(runs: list):
     Finite differences (u_k - u_(k-1)) / Ts of the command the controller sends (before
     the fault injector: what it asks of the servo) as solid lines, and of the actuator's
     position where the run has servos (`fahv.runs.metrics.has_servos`) as thin lines of
-    the same colour; the servos' rate limits of each run (the vehicle file's times the
-    run's `servo_rate_limit_factor`, `PlottedRun.limits`) as dashed lines. A run on
+    the same colour, and the envelope +/- of the servo's peak |rate| within the steps of
+    each second (its rate state, which the rate limit bounds;
+    `RunResult.u_actuator_rate_peak`) as a thick line; the servos' rate
+    limits of each run (the vehicle file's times the run's `servo_rate_limit_factor`,
+    `PlottedRun.limits`) as dashed lines. A run on
     ideal actuators has no rate limit: it is named in a note.
 
     Parameters
@@ -259,6 +262,13 @@ def input_rate_figure(runs: list):
                 pos = r.run.u_actuator[:, j]
                 ax.plot(t[1:], scale * np.diff(pos) / np.diff(t), color=style["color"], lw=0.6,
                         alpha=0.7, label=f"{r.label}: servo position")  # fmt: skip
+                envelope = _peak_envelope(t, r.run.u_actuator_rate_peak, j)
+                if envelope is not None:
+                    tw, v = envelope
+                    for sign, label in ((1.0, f"{r.label}: servo's peak |rate| per second"),
+                                        (-1.0, None)):  # fmt: skip
+                        ax.plot(tw, sign * scale * v, color=style["color"], lw=1.4,
+                                drawstyle="steps-post", zorder=3, label=label)  # fmt: skip
             elif j == 0:
                 ideal.append(r.label)
             lim = None if r.limits is None or not servos else (
@@ -275,8 +285,25 @@ def input_rate_figure(runs: list):
         axes[-1].text(0.01, 0.06, "ideal actuators (no rate limit): " + ", ".join(ideal),
                       transform=axes[-1].transAxes, ha="left", va="bottom", fontsize=7,
                       color="0.4")  # fmt: skip
-    _finish(fig, axes[:, None], "Input rates: command (before the fault injector), servo position")
+    _finish(fig, axes[:, None],
+            "Input rates: command (before the fault injector), servo position and peak rate")
     return fig
+
+
+def _peak_envelope(t: np.ndarray, peak: np.ndarray | None, j: int):
+    """The largest servo |rate| of input j in each second of a run.
+
+    From `RunResult.u_actuator_rate_peak` (N, 2) and the times t (N,) [s]: the start
+    times (M,) [s] of the seconds and their largest peak |rate| (M,); None without a
+    finite value (ideal actuators).
+    """
+    if peak is None or not np.isfinite(peak[:, j]).any():
+        return None
+    per = max(1, int(round(1.0 / float(t[1] - t[0]))))
+    starts = np.arange(0, len(t), per)
+    v = np.array([np.nanmax(c) if np.isfinite(c).any() else np.nan
+                  for c in np.split(peak[:, j], starts[1:])])  # fmt: skip
+    return t[starts], v
 
 
 def tube_figure(runs: list):

@@ -74,8 +74,9 @@ METRIC_ROWS = (
     ("delta_e_rate_max_degps", "max |d delta_e / dt| of the command (before the fault "
      "injector), step to step [deg/s]", "{:.1f}"),
     ("delta_e_actuator_rate_max_degps", "max |d delta_e / dt| of the actuator position, "
-     "step to step (the servo's peak within a step is higher) [deg/s]",
-     "{:.1f}"),
+     "step to step [deg/s]", "{:.1f}"),
+    ("delta_e_servo_rate_peak_degps", "max |d delta_e / dt| of the servo within a step "
+     "(its rate state, which its rate limit bounds) [deg/s]", "{:.1f}"),
     ("tube_fraction_inside", "fraction of steps with e in Z", "{:.4f}"),
     ("tube_level_max", "max e' N^-1 e", "{:.4f}"),
     ("tube_error_h_max_ft", "max |e_h| (altitude part of the tube error) [ft]", "{:.3f}"),
