@@ -113,7 +113,7 @@ def shared_design(spec, shipped: str, name: str, tmp_path_factory, worker_id):
     from fahv.spec.artefacts import load_design, save_design
 
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-    previous = load_design(ROOT / "offline_design" / "designs" / shipped).arrays
+    previous = load_design(ROOT / "offline_design" / "designs" / shipped).warm_starts
     if worker_id == "master":  # not distributed
         return run_design(spec, log=lambda *_: None, previous=previous)
     shared = tmp_path_factory.getbasetemp().parent

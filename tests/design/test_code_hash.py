@@ -88,10 +88,58 @@ def test_a_design_stored_with_the_earlier_hash_still_loads(tmp_path):
     from fahv.spec.artefacts import load_design, save_design
 
     d = _small_design()
-    d.summary["design_hash"] = d.legacy_hash()
-    assert d.legacy_hash() != d.content_hash()
+    legacy = d.legacy_hashes()[1]
+    d.summary["design_hash"] = legacy
+    assert legacy != d.content_hash()
     save_design(d, tmp_path / "old")
-    assert load_design(tmp_path / "old").summary["design_hash"] == d.legacy_hash()
+    assert load_design(tmp_path / "old").summary["design_hash"] == legacy
+
+
+def _warm(d, closure=(3, 7), guess=2.0):
+    """`d` with warm starts: a closure's active vertices and the baseline's first guess."""
+    d.warm_starts = {"closure_vertices": np.array(closure), "rmpc_guess_Q": guess * np.eye(2),
+                     "ellipsoid_vertices_steady_0.995": np.array([1, 5])}  # fmt: skip
+    return d
+
+
+def test_warm_starts_are_stored_apart_and_outside_the_hash(tmp_path):
+    """Re-making a design from other warm starts into the same certified arrays keeps its
+    hash and its stored files; the warm starts are in warm_starts.npz, not design.npz, and
+    load back as `warm_starts`; another certified array moves the hash."""
+    from fahv.spec.artefacts import load_design, save_design
+
+    d = _warm(_small_design())
+    assert d.content_hash() == _small_design().content_hash()
+    assert _warm(_small_design(), closure=(1, 2), guess=5.0).content_hash() == d.content_hash()
+    save_design(d, tmp_path / "d")
+    with np.load(tmp_path / "d" / "design.npz") as z:
+        assert sorted(z.files) == ["F", "N"]
+    with np.load(tmp_path / "d" / "warm_starts.npz") as z:
+        assert sorted(z.files) == sorted(d.warm_starts)
+    back = load_design(tmp_path / "d")
+    assert sorted(back.arrays) == ["F", "N"] and back.content_hash() == d.content_hash()
+    assert np.array_equal(back.warm_starts["closure_vertices"], [3, 7])
+    files = {f.name: f.read_bytes() for f in (tmp_path / "d").iterdir()}
+    save_design(_warm(_small_design(), closure=(1, 2)), tmp_path / "d")  # same content
+    assert {f.name: f.read_bytes() for f in (tmp_path / "d").iterdir()} == files
+
+
+def test_a_design_stored_with_its_warm_starts_inside_loads_split(tmp_path):
+    """A design.npz of the earlier layout (warm starts beside the certified arrays, the
+    hash over both) loads: the warm starts apart, the hash accepted."""
+    from fahv.spec.artefacts import _json_text, load_design
+
+    d = _warm(_small_design())
+    every = d.legacy_hashes()[0]
+    assert every != d.content_hash()
+    d.summary["design_hash"] = every
+    (tmp_path / "old").mkdir()
+    np.savez(tmp_path / "old" / "design.npz", **d.arrays, **d.warm_starts)
+    (tmp_path / "old" / "design.json").write_text(_json_text(d))
+    back = load_design(tmp_path / "old")
+    assert sorted(back.arrays) == ["F", "N"]
+    assert sorted(back.warm_starts) == sorted(d.warm_starts)
+    assert back.summary["design_hash"] == every
 
 
 def test_remaking_a_design_into_the_same_arrays_keeps_its_files(tmp_path, monkeypatch):

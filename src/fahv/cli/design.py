@@ -19,11 +19,13 @@ from fahv.spec.store import design_dir, stored_design
 def design_and_store(spec, vehicle, out_dir: Path, log=print, cold: bool = False):
     """Design a design file (`spec`) for `vehicle` and store it with its certificate lines.
 
-    Writes `design.npz`, `design.json` and `certificate.txt` (every line the
-    design printed) into `out_dir` atomically. A progress line names the stage at
-    least every 10 s, with the time left estimated from the stage times of the design
-    `out_dir` held before (`fahv.design.stage_clock.StageClock`). The LMIs'
-    constraint generation starts from the active sets that design stored, unless
+    Writes `design.npz` (the certified arrays), `warm_starts.npz`, `design.json` and
+    `certificate.txt` (every line the design printed) into `out_dir` atomically. A
+    progress line names the stage at least every 10 s, with the time left estimated from
+    the stage times of the design `out_dir` held before
+    (`fahv.design.stage_clock.StageClock`). The LMIs' constraint generation starts from
+    the active sets that design stored (its warm starts,
+    `fahv.spec.artefacts.Design.warm_starts`), unless
     `cold` (`previous` of `fahv.design.pipeline.run_design`). A design whose
     arrays and inputs are those of the stored one leaves its files as they are (its
     design hash is its content, `fahv.spec.artefacts.save_design`): the stored
@@ -55,7 +57,7 @@ def design_and_store(spec, vehicle, out_dir: Path, log=print, cold: bool = False
 
     previous = _previous_design(out_dir)
     times = None if previous is None else previous.summary.get("stage_times_s")
-    start = None if cold or previous is None else previous.arrays
+    start = None if cold or previous is None else previous.warm_starts
     with StageClock(times) as clock:
         design = run_design(spec, vehicle, progress=bar, log=both, clock=clock, previous=start)
     design.summary["design_time_s"] = round(time.monotonic() - t0, 1)  # not in the hash

@@ -40,7 +40,7 @@ from fahv.design.stages import (
     vertex_tube_stage,
 )
 from fahv.model.vehicle import load_vehicle
-from fahv.spec.artefacts import Design, provenance
+from fahv.spec.artefacts import Design, provenance, split_warm_starts
 from fahv.spec.files import SpecFile
 from fahv.spec.scenario import design_part, scenario_design
 from fahv.version import __version__
@@ -98,8 +98,8 @@ def run_design(spec: SpecFile, vehicle=None, progress=None, log=print, clock=Non
         Told the start of every stage (and of the tube form's parts): the progress
         lines and the stage times.
     previous : Mapping[str, ndarray], optional
-        The arrays of an earlier design of the same file: where the constraint
-        generation of its LMIs starts (the closure's `closure_vertices` and
+        The warm starts of an earlier design of the same file (`Design.warm_starts`):
+        where the constraint generation of its LMIs starts (the closure's `closure_vertices` and
         `closure_points`, the invariant ellipsoids' `ellipsoid_vertices_*`, the
         baseline's `rmpc_guess_*`). It changes how fast the design runs, not what is certified
         (every certificate is the exact check over every vertex).
@@ -150,6 +150,7 @@ def run_design(spec: SpecFile, vehicle=None, progress=None, log=print, clock=Non
     arrays = laws_stage(c, veh, model, dist, vertex, tube, tightening, nominal, cert, log,
                         previous, early)  # fmt: skip
     summary = summary_of(spec, veh, model, dist, vertex, tube, tightening, nominal, cert)
-    design = Design(c, arrays, summary)
+    certified, warm = split_warm_starts(arrays)
+    design = Design(c, certified, summary, warm)
     design.summary["design_hash"] = design.content_hash()
     return design

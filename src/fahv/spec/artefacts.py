@@ -3,9 +3,13 @@
 A design records where it came from (`provenance`): the design file and its
 content hash, the vehicle data file and its hash, and the version and hash of the library
 code that made it. Its identity, the design hash (`Design.content_hash`), is its
-content: the design file's data, the inputs' hashes and the arrays. The code that made it
-is provenance, not identity, so a design re-made with other code into the same arrays is
-the same design, and `save_design` leaves its stored files as they are.
+content: the design file's data, the inputs' hashes and the certified arrays. The code
+that made it is provenance, not identity, so a design re-made with other code into the
+same arrays is the same design, and `save_design` leaves its stored files as they are.
+Where its LMI solves started (the active vertices and points of constraint generation, the
+baseline's first guess: `Design.warm_starts`) is stored apart, in `warm_starts.npz`, and is
+not part of the hash: a design re-made from other warm starts into the same certified
+arrays keeps its hash.
 `stale_reason` compares a stored design with its design file and vehicle, so a
 design whose inputs changed is refused (with the command that re-makes it), never used.
 Whether the current code still certifies a stored design is what `fahv verify`
@@ -48,14 +52,21 @@ class Design:
         RMPC's nested ellipsoids, gains, cost bounds, design states, scales, step);
         `omega_flex` (2,) flexible-mode frequencies at the initial trim [rad/s];
         `F_<variant>` (2, n), a gain designed for that variant's loop through the notch
-        (`variant_gain_key`), which the variant runs in place of `F`.
+        (`variant_gain_key`), which the variant runs in place of `F`. What is certified
+        (and hashed); no warm start (`is_warm_start`).
     summary : dict
         Scalars: certificates, W breakdown, plant parameters, hash.
+    warm_starts : dict[str, ndarray]
+        Where the LMI solves of the design started, for the next design of the same
+        file (`previous` of `fahv.design.pipeline.run_design`): `closure_vertices`,
+        `closure_points`, `ellipsoid_vertices_<loop>`, `rmpc_guess_Q`,
+        `rmpc_guess_gamma`. They change how fast a design runs, not what it certifies.
     """
 
     case: dict
     arrays: dict = field(default_factory=dict)
     summary: dict = field(default_factory=dict)
+    warm_starts: dict = field(default_factory=dict)
 
     @property
     def n_x(self) -> int:
@@ -66,26 +77,33 @@ class Design:
         """The design hash: sha256 over its content (16 hex characters).
 
         The design data (`case`), the hashes of its inputs (the provenance's
-        `HASHED_PROVENANCE`: design file, vehicle data) and every array (name,
-        shape, bytes). The code version and hash, the paths and the design's times are
-        not hashed: they say how it was made.
+        `HASHED_PROVENANCE`: design file, vehicle data) and every certified array
+        (name, shape, bytes). The code version and hash, the paths, the design's times
+        and the warm starts are not hashed: they say how it was made.
         """
+        return self._hash(self._inputs(), self.arrays)
+
+    def legacy_hashes(self) -> tuple[str, str]:
+        """The design hash as designs stored before the current rules computed it.
+
+        Over the certified arrays and the warm starts together (designs stored before
+        the warm starts were stored apart), and that over the whole provenance (code
+        version and hash, paths, BLAS threads: before the hash left the code out).
+        `load_design` accepts a design stored with either.
+        """
+        every = {**self.arrays, **self.warm_starts}
+        return (self._hash(self._inputs(), every),
+                self._hash(self.summary.get("provenance", {}), every))  # fmt: skip
+
+    def _inputs(self) -> dict:
         prov = self.summary.get("provenance", {})
-        return self._hash({k: prov.get(k) for k in HASHED_PROVENANCE})
+        return {k: prov.get(k) for k in HASHED_PROVENANCE}
 
-    def legacy_hash(self) -> str:
-        """The design hash as designs stored before it left the code out computed it.
-
-        Over the whole provenance (code version and hash, paths, BLAS threads) instead of
-        the inputs' hashes: `load_design` accepts a design stored with it.
-        """
-        return self._hash(self.summary.get("provenance", {}))
-
-    def _hash(self, provenance: dict) -> str:
+    def _hash(self, provenance: dict, arrays: dict) -> str:
         h = hashlib.sha256(json.dumps(self.case, sort_keys=True, default=str).encode())
         h.update(json.dumps(provenance, sort_keys=True).encode())
-        for k in sorted(self.arrays):
-            a = np.ascontiguousarray(self.arrays[k])
+        for k in sorted(arrays):
+            a = np.ascontiguousarray(arrays[k])
             h.update(k.encode())
             h.update(str(a.shape).encode())
             h.update(a.tobytes())
@@ -94,6 +112,22 @@ class Design:
     def plant_params(self, vehicle) -> VehicleParams:
         """The perturbed parameter set of the simulated vehicle (summary['plant_params'])."""
         return dataclasses.replace(vehicle.params, **self.summary["plant_params"])
+
+
+#: Names of the warm-start arrays (`Design.warm_starts`), and prefixes of such names.
+WARM_START_KEYS = ("closure_vertices", "closure_points")
+WARM_START_PREFIXES = ("ellipsoid_vertices_", "rmpc_guess_")
+
+
+def is_warm_start(name: str) -> bool:
+    """Whether the array `name` says where a solve started (`Design.warm_starts`)."""
+    return name in WARM_START_KEYS or name.startswith(WARM_START_PREFIXES)
+
+
+def split_warm_starts(arrays: dict) -> tuple[dict, dict]:
+    """`arrays` split into (certified arrays, warm starts), by `is_warm_start`."""
+    warm = {k: v for k, v in arrays.items() if is_warm_start(k)}
+    return {k: v for k, v in arrays.items() if k not in warm}, warm
 
 
 #: Provenance entries the design hash covers: the contents of the design's inputs.
@@ -129,15 +163,16 @@ def _write_if_changed(path: Path, text: str) -> None:
 
 
 def save_design(design: Design, out_dir: str | Path, extra: dict | None = None) -> Path:
-    """Write `design.npz`, `design.json` and `extra` files into out_dir atomically.
+    """Write `design.npz`, `warm_starts.npz`, `design.json`, `extra` into out_dir atomically.
 
     `extra` maps file names to text (the design adds its certificate lines).
 
     The files are written to a temporary sibling folder that replaces `out_dir` only
     when all of them are complete, so a failure never leaves half an artefact set.
 
-    When `out_dir` already holds a design of the same content (its design hash,
-    `Design.content_hash`), the stored files stay: `design.npz` is not written,
+    `design.npz` holds the certified arrays, `warm_starts.npz` the warm starts (none: no
+    file). When `out_dir` already holds a design of the same content (its design hash,
+    `Design.content_hash`), the stored files stay: the arrays are not written,
     `design.summary` takes the stored `MAKING_KEYS` (the code, paths and times
     that made the stored design), and `design.json` and the `extra` files are
     rewritten only where their text changed. A design re-made into the same arrays from
@@ -156,6 +191,8 @@ def save_design(design: Design, out_dir: str | Path, extra: dict | None = None) 
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
         np.savez(tmp / "design.npz", **design.arrays)
+        if design.warm_starts:
+            np.savez(tmp / WARM_STARTS_FILE, **design.warm_starts)
         (tmp / "design.json").write_text(_json_text(design))
         for name, text in (extra or {}).items():
             (tmp / name).write_text(text)
@@ -171,8 +208,10 @@ def save_design(design: Design, out_dir: str | Path, extra: dict | None = None) 
 def load_design(out_dir: str | Path) -> Design:
     """Read the artefacts written by `save_design`.
 
-    The stored hash is checked against the content (`Design.content_hash`, or
-    `Design.legacy_hash` for a design stored before the hash left the code out).
+    The stored hash is checked against the content (`Design.content_hash`, or one of
+    `Design.legacy_hashes` for a design stored before the current rules). A design stored
+    with its warm starts inside `design.npz` (before they were stored apart) is read
+    into the same `Design`.
 
     Raises
     ------
@@ -184,15 +223,23 @@ def load_design(out_dir: str | Path) -> Design:
         meta = json.loads((out / "design.json").read_text())
         with np.load(out / "design.npz") as z:
             arrays = {k: z[k] for k in z.files}
+        if (out / WARM_STARTS_FILE).exists():
+            with np.load(out / WARM_STARTS_FILE) as z:
+                arrays.update({k: z[k] for k in z.files})
     except (OSError, ValueError, KeyError) as exc:
         raise DesignError(f"design artefacts in {out} are missing or unreadable: {exc}") from None
-    design = Design(meta["case"], arrays, meta["summary"])
+    certified, warm = split_warm_starts(arrays)
+    design = Design(meta["case"], certified, meta["summary"], warm)
     # a run's design (a stored design with a scenario's arrays) keeps the stored design's
     # hash as its identity and records its own content's beside it
     expected = meta["summary"].get("content_hash", meta["summary"].get("design_hash"))
-    if expected not in (design.content_hash(), design.legacy_hash()):
+    if expected not in (design.content_hash(), *design.legacy_hashes()):
         raise DesignError(f"design artefacts in {out} do not match their hash: re-run fahv design")
     return design
+
+
+#: File of a stored design's warm starts, beside `design.npz` (`save_design`).
+WARM_STARTS_FILE = "warm_starts.npz"
 
 
 #: Library packages a design depends on (their source is hashed into the provenance).
