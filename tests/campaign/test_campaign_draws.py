@@ -80,6 +80,23 @@ def test_overrides_carry_the_values_to_the_nodes(campaign, design):
     assert scatter_columns(campaign.data)[-2:] == ["initial.h0", "initial.V0"]
 
 
+def test_a_campaign_on_part_of_the_box_perturbs_by_that_part(campaign, design):
+    """`uncertainty.scale` 0.5: the drawn s_p move each parameter by s_p 0.5 rel_p, in the
+    campaign's runs (`run_batch`'s overrides) and in a rerun alike."""
+    from fahv.campaign.draws import uncertainty_scale
+
+    data = dict(campaign.data)
+    data["dispersions"] = dict(data["dispersions"], uncertainty={
+        **data["dispersions"]["uncertainty"], "scale": 0.5})  # fmt: skip
+    assert uncertainty_scale(data) == 0.5
+    v = draw(data, campaign.run_spec.data, 2)
+    ov = overrides(v, design, "tube_mpc", uncertainty_scale(data))
+    vp = load_vehicle().params
+    for k, r in PAPER_UNCERTAINTY.items():
+        assert ov["plant"][f"params.{k}"] == pytest.approx(
+            getattr(vp, k) * (1 + 0.5 * v[f"s.{k}"] * r), rel=1e-14)
+
+
 def test_a_campaign_on_the_sensors_gives_every_run_its_own_noise(campaign, design):
     """On a case whose estimator reads noisy sensors, each run draws its own sensor seed
     (the plant's `sensor_seed`), a function of (seed, index); on the exact state none."""

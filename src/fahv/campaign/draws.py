@@ -183,7 +183,12 @@ def _vehicle(path: str):
     return load_vehicle(path or None)
 
 
-def overrides(values: dict, design, variant: str) -> dict:
+def uncertainty_scale(data: dict) -> float:
+    """The fraction of the sec. 5.1 box a campaign's s_p span (`dispersions.uncertainty`)."""
+    return float(data["dispersions"]["uncertainty"]["scale"])
+
+
+def overrides(values: dict, design, variant: str, scale: float = 1.0) -> dict:
     """Node parameter overrides `{node: {name: value}}` of one run's dispersed values.
 
     Parameters
@@ -195,6 +200,9 @@ def overrides(values: dict, design, variant: str) -> dict:
         file the nominal parameters).
     variant : str
         The run's variant (notch setting and state dimension of the nominal x0).
+    scale : float
+        The campaign's fraction of the parameter box (`uncertainty_scale`): each drawn
+        parameter is p (1 + s_p scale rel_p).
 
     Returns
     -------
@@ -219,7 +227,8 @@ def overrides(values: dict, design, variant: str) -> dict:
     s = {k.split(".", 1)[1]: v for k, v in values.items() if k.startswith("s.")}
     if s:
         veh = _vehicle(design.summary.get("provenance", {}).get("vehicle_file", ""))
-        vp = perturb(veh.params, PAPER_UNCERTAINTY, s)
+        rel = {k: r * float(scale) for k, r in PAPER_UNCERTAINTY.items()}
+        vp = perturb(veh.params, rel, s)
         ov.setdefault("plant", {}).update(
             {f"params.{k}": float(getattr(vp, k)) for k in PAPER_UNCERTAINTY})
     if "fault.kind" in values:

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from fahv.campaign import store
-from fahv.campaign.draws import _vehicle, draw, overrides, run_seed
+from fahv.campaign.draws import _vehicle, draw, overrides, run_seed, uncertainty_scale
 from fahv.campaign.spec import Campaign
 from fahv.certificate.verified import load_or_design
 from fahv.cluster import dask_client
@@ -86,7 +86,8 @@ def trajectory(run: RunResult, dt: float = TRAJECTORY_DT) -> dict:
     return {k: np.asarray(v, np.float32).tolist() for k, v in cols.items()}
 
 
-def run_batch(design, data: dict, variant: str, indices: list[int], duration: float) -> dict:
+def run_batch(design, data: dict, variant: str, indices: list[int], duration: float,
+              values: list[dict] | None = None) -> dict:  # fmt: skip
     """One Dask task: the runs `indices` of `variant`, their rows and trajectories.
 
     Parameters
@@ -100,6 +101,10 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
         Run indices of the batch.
     duration : float
         Simulated time of each run [s].
+    values : list of dict, optional
+        The dispersed values of each run (`fahv.campaign.draws.draw`'s form); by
+        default the campaign's draws of `indices`. A search over the dispersion space
+        (`fahv.clearance`) gives its own points.
 
     Returns
     -------
@@ -112,12 +117,16 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
     """
     t0 = time.perf_counter()
     case, seed = design.case, data["seed"]
-    values = [draw(data, case, i) for i in indices]
+    if values is None:
+        values = [draw(data, case, i) for i in indices]
+    if len(values) != len(indices):
+        raise ValueError(f"{len(values)} runs' values for {len(indices)} run indices")
+    scale = uncertainty_scale(data)
     results: list = [None] * len(indices)
     ovs, where, covered = [], [], [""] * len(indices)
     for j, v in enumerate(values):
         try:
-            ovs.append(overrides(v, design, variant))
+            ovs.append(overrides(v, design, variant, scale))
             where.append(j)
         except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
             results[j] = exc

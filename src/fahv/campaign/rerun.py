@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fahv.campaign import store
-from fahv.campaign.draws import _vehicle, draw, overrides
+from fahv.campaign.draws import _vehicle, draw, overrides, uncertainty_scale
 from fahv.errors import CampaignError, RunError
 from fahv.loop.simulate import simulate, simulate_parameters
 from fahv.runs.bag import PARAMS, read_run, run_result_of, start_metadata
@@ -119,7 +119,7 @@ def rerun(
         raise CampaignError(f"run index must be in [0, {data['runs']}), got {index}")
     design = load_design(out / "design")
     values = draw(data, design.case, index)
-    ov = overrides(values, design, variant)
+    ov = overrides(values, design, variant, uncertainty_scale(data))
     duration = float(man["duration"])
     recorded = next(
         (r for r in store.read_rows(out) if r["index"] == index and r["variant"] == variant),
