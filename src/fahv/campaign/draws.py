@@ -130,7 +130,7 @@ def draw(data: dict, case: dict, index: int) -> dict:
         raise ValueError(f"run index must be in [0, {data['runs']}), got {index}")
     seed, d = data["seed"], data["dispersions"]
     groups = dispersed_groups(data)
-    out: dict = {}
+    point: dict = {}
     if "uncertainty" in groups:
         u = d["uncertainty"]
         names = list(u["parameters"])
@@ -141,41 +141,114 @@ def draw(data: dict, case: dict, index: int) -> dict:
             s = np.array([1.0 if (corner >> j) & 1 else -1.0 for j in range(len(names))])
         else:
             s = _lhs(seed, data["runs"], len(names))[index]
-        out.update({f"s.{k}": float(v) for k, v in zip(names, s, strict=True)})
-    cmd, cf = case["command"], case["fault"]
+        point.update({f"s.{k}": float(v) for k, v in zip(names, s, strict=True)})
+    defaults = point_defaults(data, case)
     if "fault" in groups:
         f = d["fault"]
         rng = run_rng(seed, index, "fault")
-        kinds = f["kinds"] or [cf["kind"]]
-        kind = kinds[int(rng.integers(len(kinds)))]
-        onset = _uniform(rng, f["onset"], cf["t_onset"])
-        loss = _uniform(rng, f["loss"], 1.0 - cf.get("rho_f", 1.0))
-        bias = _uniform(rng, f["bias_deg"], cf.get("bias_deg", 0.0))
-        out.update({"fault.kind": kind, "fault.t_onset": onset, "fault.loss": loss,
-                    "fault.rho_f": 1.0 - loss, "fault.bias_deg": bias})  # fmt: skip
-    h0, V0 = cmd["h0"], cmd["V0"]
-    if "initial" in groups:
-        rng = run_rng(seed, index, "initial")
-        h0 = _uniform(rng, d["initial"]["h0"], cmd["h0"])
-        V0 = _uniform(rng, d["initial"]["V0"], cmd["V0"])
-        out.update({"initial.h0": h0, "initial.V0": V0})
-    if "command" in groups:
-        rng = run_rng(seed, index, "command")
-        dh = _uniform(rng, d["command"]["dh"], cmd["h_c"] - cmd["h0"])
-        dV = _uniform(rng, d["command"]["dV"], cmd["V_c"] - cmd["V0"])
-        h_c = h0 + dh if d["command"]["dh"] else cmd["h_c"]
-        V_c = V0 + dV if d["command"]["dV"] else cmd["V_c"]
-        out.update({"command.dh": h_c - h0, "command.dV": V_c - V0, "command.h_c": h_c,
-                    "command.V_c": V_c})  # fmt: skip
+        kinds = fault_kinds(data, case)
+        point["fault.kind"] = kinds[int(rng.integers(len(kinds)))]
+        for key, name in (("onset", "fault.t_onset"), ("loss", "fault.loss"),
+                          ("bias_deg", "fault.bias_deg")):  # fmt: skip
+            point[name] = _uniform(rng, f[key], defaults[name])
+    for group, keys in (("initial", ("h0", "V0")), ("command", ("dh", "dV"))):
+        if group in groups:
+            rng = run_rng(seed, index, group)
+            point.update({f"{group}.{k}": _uniform(rng, d[group][k], defaults[f"{group}.{k}"])
+                          for k in keys})  # fmt: skip
     for group, keys in HARDWARE.items():
         if group in groups:  # every factor drawn, the absent ones at the scenario's value
             rng = run_rng(seed, index, group)
-            plant = plant_choices(case)
-            out.update({f"{group}.{k}": _uniform(rng, d[group][k], plant[name])
-                        for k, name in keys.items()})  # fmt: skip
+            point.update({f"{group}.{k}": _uniform(rng, d[group][k], defaults[f"{group}.{k}"])
+                          for k in keys})  # fmt: skip
     if plant_choices(case)["measured"] != EXACT_STATE:
-        out["sensor_seed"] = run_seed(seed, index)
+        point["sensor_seed"] = run_seed(seed, index)
+    return values_at(data, case, point)
+
+
+def fault_kinds(data: dict, case: dict) -> list[str]:
+    """The fault kinds a campaign disperses (the scenario's kind when it names none)."""
+    return list(data["dispersions"]["fault"]["kinds"] or [case["fault"]["kind"]])
+
+
+def point_defaults(data: dict, case: dict) -> dict:
+    """The scenario's value of every dispersible value of a point (`values_at`).
+
+    `fault.t_onset` [s], `fault.loss`, `fault.bias_deg` [deg], `initial.h0` [ft],
+    `initial.V0` [ft/s], `command.dh` [ft], `command.dV` [ft/s], and the factors and
+    shift of `HARDWARE` (`<group>.<key>`), from the campaign's scenario data `case`.
+    """
+    cmd, cf, plant = case["command"], case["fault"], plant_choices(case)
+    out = {"fault.t_onset": cf["t_onset"], "fault.loss": 1.0 - cf.get("rho_f", 1.0),
+           "fault.bias_deg": cf.get("bias_deg", 0.0), "initial.h0": cmd["h0"],
+           "initial.V0": cmd["V0"], "command.dh": cmd["h_c"] - cmd["h0"],
+           "command.dV": cmd["V_c"] - cmd["V0"]}  # fmt: skip
+    for group, keys in HARDWARE.items():
+        out.update({f"{group}.{k}": plant[name] for k, name in keys.items()})
     return out
+
+
+def values_at(data: dict, case: dict, point: dict) -> dict:
+    """The dispersed values of a run (`draw`'s form) at a point of the dispersion space.
+
+    Parameters
+    ----------
+    data : dict
+        Validated campaign.
+    case : dict
+        Validated data of its scenario.
+    point : dict
+        `s.<p>` of the dispersed parameters; `fault.kind`, `fault.t_onset`,
+        `fault.loss`, `fault.bias_deg` when faults are dispersed; `initial.h0`,
+        `initial.V0`, `command.dh`, `command.dV` and the `HARDWARE` values of the
+        groups dispersed (`dispersed_groups`); `sensor_seed` where the scenario
+        measures through sensors. A value the group disperses must be given; the
+        ones the campaign does not range keep the scenario's (`point_defaults`).
+
+    Returns
+    -------
+    dict
+        The values `draw` returns, with the derived `fault.rho_f`, `command.h_c`,
+        `command.V_c` (a command without a dispersed step keeps the scenario's).
+
+    Raises
+    ------
+    KeyError
+        Naming a value of a dispersed group that `point` lacks.
+    """
+    d, cmd = data["dispersions"], case["command"]
+    groups = dispersed_groups(data)
+    out = {k: float(v) for k, v in point.items() if k.startswith("s.")}
+    if "fault" in groups:
+        loss = float(point["fault.loss"])
+        out.update({"fault.kind": point["fault.kind"], "fault.t_onset": point["fault.t_onset"],
+                    "fault.loss": loss, "fault.rho_f": 1.0 - loss,
+                    "fault.bias_deg": point["fault.bias_deg"]})  # fmt: skip
+    h0, V0 = cmd["h0"], cmd["V0"]
+    if "initial" in groups:
+        h0, V0 = point["initial.h0"], point["initial.V0"]
+        out.update({"initial.h0": h0, "initial.V0": V0})
+    if "command" in groups:
+        h_c = h0 + point["command.dh"] if d["command"]["dh"] else cmd["h_c"]
+        V_c = V0 + point["command.dV"] if d["command"]["dV"] else cmd["V_c"]
+        out.update({"command.dh": h_c - h0, "command.dV": V_c - V0, "command.h_c": h_c,
+                    "command.V_c": V_c})  # fmt: skip
+    for group, keys in HARDWARE.items():
+        if group in groups:
+            out.update({f"{group}.{k}": point[f"{group}.{k}"] for k in keys})
+    if "sensor_seed" in point:
+        out["sensor_seed"] = point["sensor_seed"]
+    return out
+
+
+#: Prefixes of the dispersed values in a run's row (`draw`'s keys).
+VALUE_PREFIXES = ("s.", "fault.", "initial.", "command.", "actuators.", "sensors.",
+                  "sensor_seed")  # fmt: skip
+
+
+def row_values(row: dict) -> dict:
+    """The dispersed values of a run (`draw`'s form) read back from its results row."""
+    return {k: v for k, v in row.items() if k.startswith(VALUE_PREFIXES)}
 
 
 @functools.lru_cache(maxsize=4)

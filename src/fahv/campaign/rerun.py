@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fahv.campaign import store
-from fahv.campaign.draws import _vehicle, draw, overrides, uncertainty_scale
+from fahv.campaign.draws import _vehicle, draw, overrides, row_values, uncertainty_scale
 from fahv.errors import CampaignError, RunError
 from fahv.loop.simulate import simulate, simulate_parameters
 from fahv.runs.bag import PARAMS, read_run, run_result_of, start_metadata
@@ -115,16 +115,22 @@ def rerun(
     variant = data["variants"][0] if variant is None else variant
     if variant not in data["variants"]:
         raise CampaignError(f"variant '{variant}' is not in the campaign's {data['variants']}")
-    if not 0 <= index < data["runs"]:
+    clearance = man.get("kind") == "clearance"  # its runs' indices go beyond the draws'
+    if not clearance and not 0 <= index < data["runs"]:
         raise CampaignError(f"run index must be in [0, {data['runs']}), got {index}")
     design = load_design(out / "design")
-    values = draw(data, design.case, index)
-    ov = overrides(values, design, variant, uncertainty_scale(data))
-    duration = float(man["duration"])
     recorded = next(
         (r for r in store.read_rows(out) if r["index"] == index and r["variant"] == variant),
         None,
     )
+    if clearance:  # a searched point: its values are in its row
+        if recorded is None:
+            raise CampaignError(f"{out} holds no run {index} of variant '{variant}'")
+        values = row_values(recorded)
+    else:
+        values = draw(data, design.case, index)
+    ov = overrides(values, design, variant, uncertainty_scale(data))
+    duration = float(man["duration"])
     extra = {
         "campaign": man["name"],
         "campaign_hash": man["hash"],

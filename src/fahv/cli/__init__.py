@@ -49,7 +49,8 @@ COMMANDS = {
     "design": "design", "verify": "design", "margins": "margins",
     "simulate": "run", "sil": "sil", "replay": "replay", "paper-figures": "run",
     "results": "run", "inspect": "inspect", "export": "inspect", "compare": "inspect",
-    "plot": "inspect", "report": "report", "campaign": "campaign", "index": "index",
+    "plot": "inspect", "report": "report", "campaign": "campaign",
+    "clearance": "clearance", "index": "index",
 }  # fmt: skip
 
 
