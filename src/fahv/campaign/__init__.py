@@ -10,4 +10,7 @@
 - `fahv.campaign.report`: pass rates, failure-probability bounds, worst runs;
   `fahv.campaign.figures`: its figures; `fahv.campaign.paired`: the paired comparison.
 - `fahv.campaign.rerun`: one run again, recorded as a run folder (MCAP).
+- `fahv.campaign.robustness`: each requirement's margin on a run, continued past a
+  failure (the clearance search minimises it); `fahv.campaign.attribution`: which
+  dispersed values drive each margin and its failures.
 """

@@ -41,6 +41,7 @@ import numpy as np
 from scipy.stats import beta
 
 from fahv.campaign import store
+from fahv.campaign.attribution import attribute_all, attribution_figure, attribution_lines
 from fahv.campaign.draws import scatter_columns
 from fahv.campaign.figures import WORST_METRICS, draw_figures, metric
 from fahv.campaign.paired import paired_figures, paired_stats, paired_text
@@ -268,17 +269,24 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
         if res["completion"]["both"] < res["completion"]["n"]:  # also with envelope exits
             lines += [""] + paired_text(paired_stats(rows, a, b, conf, completed=False), a, b)
     lines += worst_lines(data, per_variant, shown, worst)
+    drivers = {v: attribute_all(vrows, data) for v, vrows in per_variant.items()}
+    for v, found in drivers.items():
+        if found:
+            lines += attribution_lines(v, found)
     figs: list[Path] = []
     if figures and rows:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
         figs = draw_figures(out, data, per_variant, cols)
-        if paired:
-            import matplotlib
-
-            matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
-
-            for a, b, res in paired:
-                figs += paired_figures(res, a, b, out / "report", plt)
+        for a, b, res in paired:
+            figs += paired_figures(res, a, b, out / "report", plt)
+        for v, found in drivers.items():
+            if found:
+                figs.append(attribution_figure(v, found, out / "report" / f"drivers_{v}.png",
+                                               plt))  # fmt: skip
         lines += ["## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figs]
     text = "\n".join(lines) + "\n"
     rep = out / "report"

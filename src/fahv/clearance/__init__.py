@@ -6,10 +6,9 @@ FM-AG11; Varga, Hansson, Puyou (eds.), *Optimization Based Clearance of Flight C
 Laws*, Springer LNCIS 2012). The search runs a well-kept global optimiser (CMA-ES, or
 scipy's differential evolution) over the campaign's dispersions (`space`), each generation one
 batch of the campaign engine (`evaluate`), on a continuous robustness value of each
-requirement (`robustness`), within a budget of simulations (`search`).
+requirement (`fahv.campaign.robustness`), within a budget of simulations (`search`).
 
 - `fahv.clearance.space`: the campaign's dispersions as a box, a point's run values.
-- `fahv.clearance.robustness`: each requirement's margin, continued past a failure.
 - `fahv.clearance.search`: CMA-ES and differential evolution within a budget.
 - `fahv.clearance.evaluate`: a generation's runs as campaign-engine tasks on Dask.
 - `fahv.clearance.run`: `fahv clearance`'s search per requirement and its folder.

@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from fahv.campaign.engine import run_batch
-from fahv.clearance.robustness import robustness
+from fahv.campaign.robustness import robustness
 from fahv.clearance.space import SearchSpace
 
 

@@ -27,10 +27,10 @@ import numpy as np
 
 from fahv.campaign import store
 from fahv.campaign.draws import row_values
+from fahv.campaign.robustness import SEARCHABLE
 from fahv.campaign.spec import Campaign
 from fahv.certificate.verified import load_or_design
 from fahv.clearance.evaluate import CampaignEvaluator
-from fahv.clearance.robustness import SEARCHABLE
 from fahv.clearance.search import OPTIMIZERS, Search
 from fahv.clearance.space import SearchSpace
 from fahv.cluster import dask_client
@@ -93,7 +93,7 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
     campaign : Campaign
         Its scenario, dispersions, first variant and requirement limits are used.
     requirements : list of str
-        Requirements to search (`fahv.clearance.robustness.SEARCHABLE`).
+        Requirements to search (`fahv.campaign.robustness.SEARCHABLE`).
     budget : int
         Simulations per requirement (and per Monte Carlo).
     out_dir : path

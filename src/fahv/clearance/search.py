@@ -1,6 +1,6 @@
 """The worst-case search: an evolution strategy over a search space, within a budget.
 
-Two maintained optimisers minimise the requirement's margin (`fahv.clearance.robustness`)
+Two maintained optimisers minimise the requirement's margin (`fahv.campaign.robustness`)
 over the box of the search space (`fahv.clearance.space`), each generation's population
 evaluated together, one batch of simulations:
 

@@ -19,8 +19,8 @@ import warnings
 from pathlib import Path
 
 from fahv.campaign import store
+from fahv.campaign.robustness import SEARCHABLE
 from fahv.campaign.spec import load_campaign
-from fahv.clearance.robustness import SEARCHABLE
 from fahv.clearance.run import clear, summary_lines, write_convergence
 from fahv.runs.workspace import ROOT
 

@@ -1,11 +1,11 @@
-"""The margins a clearance minimises (fahv.clearance.robustness) agree with the run verdicts
+"""The margins a clearance minimises (fahv.campaign.robustness) agree with the run verdicts
 (fahv.spec.requirements.judge) and continue past a failure."""
 
 import math
 
 import pytest
 
-from fahv.clearance.robustness import SEARCHABLE, robustness
+from fahv.campaign.robustness import SEARCHABLE, robustness
 from fahv.spec.requirements import judge
 
 #: A run of 300 s: the command ends at 30 s, a fault at 150 s; settled 34 s after the
