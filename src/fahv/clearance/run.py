@@ -85,7 +85,7 @@ def check_request(requirements: list[str], budget: int) -> None:
 def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str | Path,
           scheduler: str | None = None, workers: int | None = None, seed: int = 0,
           noise_seeds: int = 0, with_monte_carlo: bool = False, optimizer: str = "cma",
-          log=print) -> list[Found]:  # fmt: skip
+          population: int | None = None, log=print) -> list[Found]:  # fmt: skip
     """Search the campaign's dispersions for each requirement's worst case; write the folder.
 
     Parameters
@@ -108,6 +108,8 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
         Also run the campaign's first `budget` draws and report their worst.
     optimizer : str
         `cma` or `de` (`fahv.clearance.search.OPTIMIZERS`).
+    population : int, optional
+        Points per generation (the optimiser's default by the budget).
     log : callable
         Progress lines.
 
@@ -138,7 +140,7 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
         "case": campaign.run_spec.data, "duration": campaign.duration,
         "design_hash": design.summary["design_hash"], "code_version": __version__,
         "started": time.strftime("%Y-%m-%d %H:%M:%S"), "budget": budget, "seed": seed,
-        "optimizer": optimizer,
+        "optimizer": optimizer, "population": population,
         "variables": [vars(v) | {"choices": list(v.choices)} for v in space.variables],
         "fixed": space.fixed,
     })  # fmt: skip
@@ -151,7 +153,7 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
         for r in requirements:
             ev.requirement = r
             t0 = time.perf_counter()
-            s = OPTIMIZERS[optimizer](ev, space.bounds, budget, seed)
+            s = OPTIMIZERS[optimizer](ev, space.bounds, budget, seed, population)
             _write_rows(out, r, optimizer, s)
             log(f"{r}: {len(s.margins)} simulations in {time.perf_counter() - t0:.0f} s")
             mc = None

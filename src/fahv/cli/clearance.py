@@ -1,7 +1,7 @@
 """`fahv clearance`: the worst case of each requirement inside a campaign's dispersions.
 
     fahv clearance CAMPAIGN.yaml [--requirement R ...] [--budget N] [--monte-carlo]
-                   [--noise-seeds K] [--optimizer cma|de] [--seed S] [--runs N]
+                   [--noise-seeds K] [--optimizer cma|de] [--population P] [--seed S] [--runs N]
                    [--duration S] [--out DIR] [--scheduler ADDRESS] [--workers N]
 
 Prints, per requirement, the smallest margin the search found (limit - value: negative
@@ -40,7 +40,7 @@ def cmd_clearance(args) -> int:
         f"of {campaign.duration:g} s, into {out}")  # fmt: skip
     found = clear(campaign, requirements, args.budget, out, args.scheduler, args.workers,
                   args.seed, args.noise_seeds, args.monte_carlo, args.optimizer,
-                  log=err)  # fmt: skip
+                  args.population, log=err)  # fmt: skip
     for f in found:
         write_convergence(out, f)
     print("\n".join(summary_lines(store.read_manifest(out))))
@@ -66,6 +66,9 @@ def add_parsers(sub) -> None:
     p.add_argument("--noise-seeds", type=int, default=0,
                    help="search the sensor noise among the campaign's first K runs' seeds "
                    "(default 0: held at run 0's)")
+    p.add_argument("--population", type=int,
+                   help="points per generation (default: CMA-ES a 40th of the budget, 10-40; "
+                   "differential evolution a tenth, 5 to 10 per variable)")
     p.add_argument("--optimizer", choices=("cma", "de"), default="cma",
                    help="CMA-ES (default) or differential evolution")
     p.add_argument("--seed", type=int, default=0, help="seed of the search (default 0)")
