@@ -53,3 +53,33 @@ def test_bad_requests_are_refused_naming_them(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["clearance", CAMPAIGN, "--requirement", "completes"])
     assert "invalid choice: 'completes'" in capsys.readouterr().err
+
+
+def test_the_certificate_check_searches_only_what_the_design_certifies(tmp_path, capsys):
+    """`--certificate` on Case 1: the losses searched stop at cm_certified's certified onset
+    loss (8.07 %, where the campaign ranges to 24 %), every margin is a certified run's,
+    and a tube or attitude held everywhere reads as such, exit status 0."""
+    out = tmp_path / "cert"
+    code = main(["clearance", CAMPAIGN, "--certificate", "--budget", "10", "--duration", "5",
+                 "--workers", "1", "--out", str(out)])  # fmt: skip
+    printed = capsys.readouterr().out
+    assert code == 0
+    man = json.loads((out / "campaign.json").read_text())
+    loss = next(v for v in man["variables"] if v["name"] == "fault.loss")
+    assert loss["hi"] == pytest.approx(0.0807, abs=5e-5) and man["certificate"] is True
+    for e in man["requirements"]:
+        assert e["certificate"] == {"certified_runs": 10, "failures": []}
+    assert "certificate: tube held in all 10 certified runs searched" in printed
+
+
+def test_a_certificate_failure_is_named_with_its_run():
+    from fahv.clearance.run import summary_lines
+
+    worst = {"margin": -0.02, "simulations": 40, "index": 1033}
+    man = {"name": "case1", "budget": 40, "design_hash": "x", "requirements": [
+        {"requirement": "tube", "unit": "-", "search": worst, "monte_carlo": None,
+         "certificate": {"certified_runs": 40, "failures": [1033, 1038]}}]}  # fmt: skip
+    lines = summary_lines(man)
+    assert lines[2].startswith("tube            -0.02 - (40 runs)")
+    assert lines[-1] == ("CERTIFICATE FAILURE: tube missed in 2 certified run(s), the worst "
+                         "run 1033 (fahv campaign rerun DIR INDEX flies it)")  # fmt: skip

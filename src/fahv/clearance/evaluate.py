@@ -17,6 +17,7 @@ import numpy as np
 from fahv.campaign.engine import run_batch
 from fahv.campaign.robustness import robustness
 from fahv.clearance.space import SearchSpace
+from fahv.spec.coverage import is_certified
 
 
 class CampaignEvaluator:
@@ -38,14 +39,17 @@ class CampaignEvaluator:
     tasks : int
         Tasks a generation is split into at least (the workers; more when a generation
         is larger than the campaign's `batch_size`).
+    certified_only : bool
+        A run the design does not certify (its `coverage`, `fahv.spec.coverage`) has no
+        margin (NaN): the certificate check searches the certified runs alone.
     """
 
     def __init__(self, space: SearchSpace, design, variant: str, duration: float, client,
                  limits: dict, rate_limit_degps: float = math.nan,
-                 tasks: int = 1) -> None:  # fmt: skip
+                 tasks: int = 1, certified_only: bool = False) -> None:  # fmt: skip
         self.space, self.variant, self.duration = space, variant, float(duration)
         self.client, self.limits, self.rate = client, limits, float(rate_limit_degps)
-        self.tasks = max(1, int(tasks))
+        self.tasks, self.certified_only = max(1, int(tasks)), bool(certified_only)
         self.design = client.scatter(design, broadcast=True)
         # the next run's index: after the campaign's own draws, which a Monte Carlo runs
         self.count = int(space.data["runs"])
@@ -75,8 +79,13 @@ class CampaignEvaluator:
         return [row for f in futures for row in f.result()["rows"]]
 
     def margins(self, rows: list[dict]) -> list[float]:
-        """The margin of the current `requirement` on each row."""
-        return [robustness(r, self.requirement, self.limits, self.rate) for r in rows]
+        """The margin of the current `requirement` on each row.
+
+        NaN for a run the design does not certify, when only certified runs count.
+        """
+        return [math.nan if self.certified_only and not is_certified(r.get("coverage"))
+                else robustness(r, self.requirement, self.limits, self.rate)
+                for r in rows]  # fmt: skip
 
     def __call__(self, points: np.ndarray) -> tuple[list[float], list[dict]]:
         """(margins, rows) of the runs at `points` (P, d): `search`'s `evaluate`."""

@@ -36,6 +36,7 @@ from fahv.clearance.space import SearchSpace
 from fahv.cluster import dask_client
 from fahv.errors import CampaignError
 from fahv.spec.artefacts import save_design
+from fahv.spec.coverage import certified_onset_loss
 from fahv.spec.requirements import limits_of
 from fahv.spec.schema import plant_choices
 from fahv.version import __version__
@@ -85,7 +86,8 @@ def check_request(requirements: list[str], budget: int) -> None:
 def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str | Path,
           scheduler: str | None = None, workers: int | None = None, seed: int = 0,
           noise_seeds: int = 0, with_monte_carlo: bool = False, optimizer: str = "cma",
-          population: int | None = None, log=print) -> list[Found]:  # fmt: skip
+          population: int | None = None, certificate: bool = False,
+          log=print) -> list[Found]:  # fmt: skip
     """Search the campaign's dispersions for each requirement's worst case; write the folder.
 
     Parameters
@@ -110,6 +112,10 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
         `cma` or `de` (`fahv.clearance.search.OPTIMIZERS`).
     population : int, optional
         Points per generation (the optimiser's default by the budget).
+    certificate : bool
+        Check the design's certificate: search only what it certifies (losses up to its
+        certified onset loss, runs whose coverage is `certified`); a negative margin there
+        is a certificate failure (`certificate_failures`).
     log : callable
         Progress lines.
 
@@ -132,6 +138,11 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
                                   allow_uncertified=True)  # fmt: skip
     variant = campaign["variants"][0]
     limits = limits_of(campaign.data)
+    if certificate:
+        if "fault.loss" in space.names:
+            space = space.within("fault.loss", certified_onset_loss(design))
+        log(f"certificate check of {design.case['name']}: the certified runs alone, losses up "
+            f"to {certified_onset_loss(design):.4g}")  # fmt: skip
     out.mkdir(parents=True, exist_ok=True)
     save_design(design, out / "design")
     store.write_manifest(out, {
@@ -140,7 +151,7 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
         "case": campaign.run_spec.data, "duration": campaign.duration,
         "design_hash": design.summary["design_hash"], "code_version": __version__,
         "started": time.strftime("%Y-%m-%d %H:%M:%S"), "budget": budget, "seed": seed,
-        "optimizer": optimizer, "population": population,
+        "optimizer": optimizer, "population": population, "certificate": certificate,
         "variables": [vars(v) | {"choices": list(v.choices)} for v in space.variables],
         "fixed": space.fixed,
     })  # fmt: skip
@@ -149,7 +160,8 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
     try:
         tasks = len(client.scheduler_info()["workers"]) or 1
         ev = CampaignEvaluator(space, design, variant, campaign.duration, client, limits,
-                               elevator_rate_limit_degps(campaign), tasks)  # fmt: skip
+                               elevator_rate_limit_degps(campaign), tasks,
+                               certified_only=certificate)  # fmt: skip
         for r in requirements:
             ev.requirement = r
             t0 = time.perf_counter()
@@ -167,7 +179,7 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
         client.close()
         if cluster is not None:
             cluster.close()
-    summary = [_summary(f, space) for f in found]
+    summary = [_summary(f, certificate) for f in found]
     man = store.read_manifest(out) or {}
     store.write_manifest(out, {**man, "requirements": summary})
     return found
@@ -179,7 +191,12 @@ def _write_rows(out: Path, requirement: str, search: str, s: Search) -> None:
     store.write_part(out, store.RESULTS, f"part-{requirement}-{search}", rows)
 
 
-def _summary(f: Found, space: SearchSpace) -> dict:
+def certificate_failures(s: Search) -> list[int]:
+    """Indices (run indices) of the certified runs whose margin is negative."""
+    return [int(r["index"]) for r, m in zip(s.rows, s.margins, strict=True) if m < 0.0]
+
+
+def _summary(f: Found, certificate: bool) -> dict:
     """The manifest's entry of one requirement: worst cases and what they cost."""
 
     def worst(s: Search | None) -> dict | None:
@@ -194,8 +211,13 @@ def _summary(f: Found, space: SearchSpace) -> dict:
                 "generation": s.generations[i],
                 "values": row_values(row)}
 
-    return {"requirement": f.requirement, "unit": f.unit, "search": worst(f.search),
-            "monte_carlo": worst(f.monte_carlo)}
+    out = {"requirement": f.requirement, "unit": f.unit, "search": worst(f.search),
+           "monte_carlo": worst(f.monte_carlo)}
+    if certificate:
+        certified = int(np.sum(~np.isnan(np.array(f.search.margins, float))))
+        out["certificate"] = {"certified_runs": certified,
+                              "failures": certificate_failures(f.search)}  # fmt: skip
+    return out
 
 
 
@@ -217,6 +239,17 @@ def summary_lines(manifest: dict) -> list[str]:
         s = cell(e["search"], e["unit"])
         lines.append(f"{e['requirement']:<15} {s:<31} {cell(e['monte_carlo'], e['unit'])}")
     lines.append("margin: limit - value (negative: the requirement fails there)")
+    for e in manifest.get("requirements", []):
+        c = e.get("certificate")
+        if c is None:
+            continue
+        if c["failures"]:
+            lines.append(f"CERTIFICATE FAILURE: {e['requirement']} missed in {len(c['failures'])} "
+                         f"certified run(s), the worst run {e['search']['index']} (fahv campaign "
+                         "rerun DIR INDEX flies it)")  # fmt: skip
+        else:
+            lines.append(f"certificate: {e['requirement']} held in all {c['certified_runs']} "
+                         "certified runs searched")  # fmt: skip
     return lines
 
 

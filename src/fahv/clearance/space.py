@@ -15,7 +15,7 @@ campaign run at other values, through the same overrides and simulator.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -129,6 +129,24 @@ class SearchSpace:
                                 "search (dispersions: uncertainty, fault, initial, command, "
                                 "actuators, sensors)")  # fmt: skip
         return cls(data, case, tuple(out), fixed)
+
+    def within(self, name: str, hi: float) -> SearchSpace:
+        """The space with variable `name`'s upper bound lowered to `hi` (absent: as it is).
+
+        Raises
+        ------
+        CampaignError
+            If `hi` is at or below the variable's lower bound (nothing left to search).
+        """
+        out = []
+        for v in self.variables:
+            if v.name == name and hi < v.hi:
+                if hi <= v.lo:
+                    raise CampaignError(f"{name}: nothing left to search below {hi:g} "
+                                        f"(the campaign's range starts at {v.lo:g})")  # fmt: skip
+                v = replace(v, hi=float(hi))
+            out.append(v)
+        return replace(self, variables=tuple(out))
 
     @property
     def names(self) -> list[str]:

@@ -1,14 +1,17 @@
 """`fahv clearance`: the worst case of each requirement inside a campaign's dispersions.
 
     fahv clearance CAMPAIGN.yaml [--requirement R ...] [--budget N] [--monte-carlo]
-                   [--noise-seeds K] [--optimizer cma|de] [--population P] [--seed S] [--runs N]
-                   [--duration S] [--out DIR] [--scheduler ADDRESS] [--workers N]
+                   [--certificate] [--noise-seeds K] [--optimizer cma|de] [--population P]
+                   [--seed S] [--runs N] [--duration S] [--out DIR] [--scheduler ADDRESS]
+                   [--workers N]
 
+With `--certificate` the search stays inside what the design certifies and a miss there
+is reported as a certificate failure (exit status 1), with the run that reproduces it.
 Prints, per requirement, the smallest margin the search found (limit - value: negative
 where the requirement fails), the simulations it spent and, with `--monte-carlo`, the
 worst of the campaign's first draws of the same budget; writes the folder that
 `fahv.clearance.run` describes. `fahv campaign rerun DIR INDEX [--sil]` flies any of its
-runs again (the worst cases' indices are in `clearance.json`).
+runs again (the worst cases' indices are in its `campaign.json`).
 """
 
 from __future__ import annotations
@@ -29,7 +32,8 @@ def cmd_clearance(args) -> int:
     """Run the search of `args.campaign`; print its table and the folder."""
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     campaign = load_campaign(args.campaign, runs=args.runs, duration=args.duration)
-    requirements = args.requirement or ["attitude", "settling"]
+    requirements = args.requirement or (["tube", "attitude"] if args.certificate
+                                        else ["attitude", "settling"])  # fmt: skip
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else ROOT / "campaigns" / f"{campaign.name}_clearance_{stamp}"
 
@@ -40,12 +44,14 @@ def cmd_clearance(args) -> int:
         f"of {campaign.duration:g} s, into {out}")  # fmt: skip
     found = clear(campaign, requirements, args.budget, out, args.scheduler, args.workers,
                   args.seed, args.noise_seeds, args.monte_carlo, args.optimizer,
-                  args.population, log=err)  # fmt: skip
+                  args.population, args.certificate, log=err)  # fmt: skip
     for f in found:
         write_convergence(out, f)
     print("\n".join(summary_lines(store.read_manifest(out))))
     print(f"clearance folder: {out}")
-    return 0
+    failed = any(e.get("certificate", {}).get("failures") for e in
+                 store.read_manifest(out)["requirements"])  # fmt: skip
+    return 1 if failed else 0
 
 
 def add_parsers(sub) -> None:
@@ -69,6 +75,10 @@ def add_parsers(sub) -> None:
     p.add_argument("--population", type=int,
                    help="points per generation (default: CMA-ES a 40th of the budget, 10-40; "
                    "differential evolution a tenth, 5 to 10 per variable)")
+    p.add_argument("--certificate", action="store_true",
+                   help="check the design's certificate: search only the runs it certifies "
+                   "(losses up to its certified onset loss); a miss there is a certificate "
+                   "failure, exit status 1 (default requirements: tube and attitude)")
     p.add_argument("--optimizer", choices=("cma", "de"), default="cma",
                    help="CMA-ES (default) or differential evolution")
     p.add_argument("--seed", type=int, default=0, help="seed of the search (default 0)")
