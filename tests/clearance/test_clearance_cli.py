@@ -83,3 +83,27 @@ def test_a_certificate_failure_is_named_with_its_run():
     assert lines[2].startswith("tube            -0.02 - (40 runs)")
     assert lines[-1] == ("CERTIFICATE FAILURE: tube missed in 2 certified run(s), the worst "
                          "run 1033 (fahv campaign rerun DIR INDEX flies it)")  # fmt: skip
+
+
+def test_the_worst_case_scenario_file_flies_the_same_run(cleared):
+    """`worst_attitude.yaml` extends the campaign's scenario with the run's values: flown by
+    the simulator from the file alone, every metric equals the searched run's row."""
+    import math
+
+    from fahv.campaign import store
+    from fahv.certificate.verified import load_or_design
+    from fahv.loop.simulate import simulate
+    from fahv.model.vehicle import load_vehicle
+    from fahv.runs.metrics import metrics
+
+    out, man = cleared
+    entry = man["requirements"][0]["search"]
+    assert entry["scenario"] == "worst_attitude.yaml"
+    _, design, _ = load_or_design(str(out / entry["scenario"]), log=lambda *_: None,
+                                  allow_uncertified=True)  # fmt: skip
+    assert design.case["uncertainty"]["s"][0] == entry["values"]["s.m"]
+    m = metrics(simulate(design, "tube_mpc"), load_vehicle().limits)
+    row = next(r for r in store.read_rows(out) if r["index"] == entry["index"])
+    same = [k for k in m if k in row and (m[k] == row[k] or (
+        isinstance(m[k], float) and math.isnan(m[k]) and math.isnan(row[k])))]
+    assert len(same) == len(m) >= 40

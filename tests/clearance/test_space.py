@@ -86,3 +86,19 @@ def test_bad_points_and_an_empty_space_are_refused(tmp_path):
     none = _campaign(tmp_path, uncertainty={"method": "none"})
     with pytest.raises(CampaignError, match="range nothing to search"):
         SearchSpace.of(none.data, none.run_spec.data)
+
+
+def test_a_scenario_names_its_vehicle_by_its_s_p(tmp_path):
+    """`uncertainty.s` of a scenario: ten values in [-1, 1] or none; other lengths and values
+    are refused naming the key."""
+    from fahv.errors import ConfigError
+    from fahv.spec.files import spec_file
+    from fahv.spec.schema import scenario_spec
+
+    base = yaml.safe_load((ROOT / "offline_design/scenarios/case1.yaml").read_text())
+    ok = {**base, "uncertainty": {"seed": 1, "scale": 1.0, "s": [0.5] * 10}}
+    assert spec_file(ok, "ok.yaml", scenario_spec()).data["uncertainty"]["s"] == [0.5] * 10
+    for s, why in (([0.5] * 3, "must be empty or hold 10 values"), ([1.5] * 10, "uncertainty.s")):
+        bad = {**base, "uncertainty": {"seed": 1, "scale": 1.0, "s": s}}
+        with pytest.raises(ConfigError, match=why):
+            spec_file(bad, "bad.yaml", scenario_spec())

@@ -12,6 +12,8 @@ budget, the campaign's own first draws. The folder it writes:
 - `results/`: every run as a campaign row (Parquet) with its `requirement`, `search`
   (`cma`, `de` or `monte_carlo`), `generation` and `margin`;
 - `convergence_<requirement>.png`: the smallest margin against the simulations spent;
+- `worst_<requirement>.yaml`: the worst case as a scenario extending the campaign's
+  (`fahv.clearance.worst`), for `fahv simulate` and `fahv sil`;
 - `design/` and `campaign.json`: the design and the campaign, so that
   `fahv campaign rerun DIR INDEX` flies any run of it again (in process or `--sil`).
 """
@@ -33,6 +35,7 @@ from fahv.certificate.verified import load_or_design
 from fahv.clearance.evaluate import CampaignEvaluator
 from fahv.clearance.search import OPTIMIZERS, Search
 from fahv.clearance.space import SearchSpace
+from fahv.clearance.worst import write_worst_scenario
 from fahv.cluster import dask_client
 from fahv.errors import CampaignError
 from fahv.spec.artefacts import save_design
@@ -180,6 +183,11 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
         if cluster is not None:
             cluster.close()
     summary = [_summary(f, certificate) for f in found]
+    for f, entry in zip(found, summary, strict=True):
+        i = f.search.worst
+        if i is not None:
+            path = write_worst_scenario(campaign, f.search.rows[i], variant, f.requirement, out)
+            entry["search"]["scenario"] = path.name
     man = store.read_manifest(out) or {}
     store.write_manifest(out, {**man, "requirements": summary})
     return found

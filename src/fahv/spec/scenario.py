@@ -33,7 +33,7 @@ from fahv.control import LAWS, VARIANTS
 from fahv.errors import SpecError
 from fahv.model.trim import TrimMap
 from fahv.plant.faults import make_fault
-from fahv.plant.uncertainty import perturbed_params
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturb, perturbed_params
 from fahv.spec.artefacts import Design, load_arrays, save_arrays
 from fahv.spec.context import DesignContext
 from fahv.spec.files import SpecFile, load_design_file, read_yaml_file, spec_file
@@ -384,6 +384,20 @@ def scenario_arrays(
     return out
 
 
+def scenario_params(vehicle, uncertainty: dict) -> dict[str, float]:
+    """The simulated vehicle's uncertain parameters {name: value} of a scenario.
+
+    `uncertainty.s` given: p (1 + s_p scale rel_p) with those s_p (in the order of
+    `fahv.plant.uncertainty.PAPER_UNCERTAINTY`); else the seeded draw
+    (`fahv.plant.uncertainty.perturbed_params`).
+    """
+    if not uncertainty.get("s"):
+        return perturbed_params(vehicle, uncertainty["seed"], uncertainty["scale"])
+    rel = {k: r * float(uncertainty["scale"]) for k, r in PAPER_UNCERTAINTY.items()}
+    vp = perturb(vehicle.params, rel, dict(zip(PAPER_UNCERTAINTY, uncertainty["s"], strict=True)))
+    return {k: float(getattr(vp, k)) for k in PAPER_UNCERTAINTY}
+
+
 def scenario_design(
     design: Design,
     run_spec: SpecFile,
@@ -421,9 +435,7 @@ def scenario_design(
     arrays = {**design.arrays, **scenario_arrays(design, c, vehicle, cache, log, variants)}
     summary = {
         **design.summary,
-        "plant_params": perturbed_params(
-            vehicle, c["uncertainty"]["seed"], c["uncertainty"]["scale"]
-        ),  # fmt: skip
+        "plant_params": scenario_params(vehicle, c["uncertainty"]),
         "scenario_hash": run_spec.content_hash(),
     }
     run = Design(c, arrays, summary)

@@ -28,6 +28,7 @@ from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
 from fahv.plant.faults import FAULT_KIND, T_ONSET, fault_fields
+from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.sensors.data import CHANNELS, DEFAULT_MEASURED, EXACT_STATE
 from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_fields
 from fahv.spec.estimator import (  # noqa: F401 - the scenario schema's estimator section
@@ -283,9 +284,15 @@ def actuator_model(spec) -> str:
     return (spec.get("plant") or {}).get("actuators", IDEAL)
 
 
+#: Uncertain parameters of the sec. 5.1 box (`uncertainty.s` holds one value per each).
+N_UNCERTAIN = len(PAPER_UNCERTAINTY)
 UNCERTAINTY = (
     Field("seed", "int", "seed of the parameter draw s_p ~ U(-1, 1)", lo=0),
     Field("scale", "float", "fraction of the sec. 5.1 parameter box", lo=0.0, hi=1.0),
+    Field("s", "floats", "the vehicle's s_p in [-1, 1] themselves, one per uncertain "
+          f"parameter in the order {', '.join(PAPER_UNCERTAINTY)} (empty: drawn from the "
+          "seed); a clearance's worst case names its vehicle so", lo=-1.0, hi=1.0,
+          default=()),
 )
 
 
@@ -500,6 +507,8 @@ def scenario_spec() -> Section:
                 "uncertainty",
                 UNCERTAINTY,
                 "the simulated vehicle: plant parameters p (1 + s_p scale rel_p), s_p ~ U(-1, 1)",
+                checks=(Check("s", lambda r: len(r["uncertainty"]["s"]) in (0, N_UNCERTAIN),
+                              f"must be empty or hold {N_UNCERTAIN} values"),),
             ),
             plant_section(),
             sensor_fault_section(),
