@@ -23,7 +23,7 @@ TS, B, STEPS = 0.02, 3, 400
 def _params(enabled: bool, filtered: bool = True) -> dict:
     rng = np.random.default_rng(1)
     return {
-        "Ts": TS, "law": "tube_mpc", "tau": 1.0,
+        "Ts": TS, "law": "tube_mpc", "design_model": "cm", "tau": 1.0,
         "F": rng.normal(size=(2, 9)), "N": np.diag(rng.uniform(0.5, 2.0, 9)),
         "notch.enabled": enabled, **{f"notch.{k}": v for k, v in NOTCH.items()},
         "filter_nominal_q": filtered,

@@ -78,11 +78,12 @@ def notch_settings(design) -> list[NotchSetting]:
     Raises
     ------
     ValueError
-        If the design is not a nine-state design.
+        If the design is not on the CM (`design_model` cm).
     """
-    if design.n_x != 9:
-        raise ValueError(f"margins: a nine-state design is needed, this one has {design.n_x} "
-                         "states (the ECM models the notch in its plant)")  # fmt: skip
+    if design.case["design_model"] != "cm":
+        raise ValueError(f"margins: a design on the CM is needed, this one's design_model is "
+                         f"'{design.case['design_model']}' (the ECM models the notch in its "
+                         "plant)")  # fmt: skip
     case, a = design.case, design.arrays
     tau = float(case["tube"]["tau"])
     out = []
@@ -244,7 +245,7 @@ def margin_study(design, vehicle, every_setting: bool = False, corners: bool = T
     Raises
     ------
     ValueError
-        If the design is not a nine-state design.
+        If the design is not on the CM (`design_model` cm).
     """
     Ts, wf = float(design.case["Ts"]), np.asarray(design.arrays["omega_flex"], float)
     study = MarginStudy(name, Ts, wf, notch_settings(design))

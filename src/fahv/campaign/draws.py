@@ -333,7 +333,7 @@ def overrides(values: dict, design, variant: str, scale: float = 1.0) -> dict:
         if p["notch_filter"]["enabled"]:
             x0_meas[4] = 0.0  # as node_parameters: the filter starts in steady state at q = 0
         n = p["nominal_trajectory"]["x0_shape"][0]
-        if n == 11:
+        if design.case["design_model"] == "ecm":  # the notch's two states start at rest
             x0_meas = np.concatenate([x0_meas, np.zeros(2)])
         ov.setdefault("plant", {}).update({"x0": x0.tolist(), "x0_shape": [9]})
         ov["state_estimator"] = {"x0": x0.tolist(), "x0_shape": [9]}

@@ -143,7 +143,7 @@ class TubeMPCLaw(PaperTubeMPCLaw):
     def __init__(self, p: dict, n_runs: int = 1) -> None:
         super().__init__(p, n_runs)
         self.q_filter = None
-        if p["filter_nominal_q"] and p["notch.enabled"] and p["F"].shape[1] == 9:
+        if p["filter_nominal_q"] and p["notch.enabled"] and p["design_model"] == "cm":
             nf = NotchFilter(*(p[f"notch.{k}"] for k in ("omega_z", "eps_z", "omega_p", "eps_p")))
             self.q_filter = DiscreteNotch(nf, p["Ts"], np.zeros(n_runs))
 

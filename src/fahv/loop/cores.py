@@ -456,6 +456,7 @@ class ControllerCore:
         self.n_runs = len(runs)
         self.law = LAWS[p["law"]](p, self.n_runs)
         self.n = p["F"].shape[1]
+        self.ecm = p["design_model"] == "ecm"  # its state: the CM's and the notch's (eq. 40)
         self.tau = p["tau"]
         self.lanes = lanes
         self.k = 0
@@ -474,7 +475,7 @@ class ControllerCore:
         """
         x = state.x()
         x[:, IQ] = np.where(qf.enabled, qf.q_f, x[:, IQ])
-        if self.n == 11:
+        if self.ecm:
             if qf.x_q.shape[1:] != (2,):
                 raise RunError("tube_mpc: the 11-state (ECM) controller needs the notch states")
             x = np.concatenate([x, qf.x_q], axis=1)

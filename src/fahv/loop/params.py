@@ -67,6 +67,15 @@ COMMON = (
 )  # fmt: skip
 
 
+#: The design model the node's arrays are of (the design file's `design_model`): the
+#: state order and dimension every matrix follows.
+DESIGN_MODEL = Field("design_model", "str", "LPV design model the arrays are of: cm (the "
+                     "CM's 9 states) or ecm (11: with the notch's 2 states, eq. 40)",
+                     choices=("cm", "ecm"))  # fmt: skip
+#: State dimension n of each design model.
+DESIGN_MODEL_STATES = {"cm": 9, "ecm": 11}
+
+
 def _matrix(name: str, description: str) -> Field:
     return Field(name, "matrix", description)
 
@@ -123,6 +132,7 @@ def _specs_of(entries: tuple) -> dict[str, tuple[Field, ...]]:
     controller = (
         *COMMON,
         Field("law", "str", "control law", choices=LAWS.names),
+        DESIGN_MODEL,
         Field("tau", "float", "adjustable factor tau (1 for eq. 36)", lo=0.0, hi=1.0,
               lo_open=True, equation="eq. (54)"),
         _matrix("F", "robust feedback gain F (2, n) (LMI 24)"),
@@ -171,6 +181,7 @@ def _specs_of(entries: tuple) -> dict[str, tuple[Field, ...]]:
                   "nonlinear nominal model, mpc.nominal_model 'cm'); empty: the packaged one",
                   default=""),
             *_prefixed(COMMAND, "command."),
+            DESIGN_MODEL,
             Field("nominal", "str", "nominal part of the law (registered nominal source)",
                   choices=NOMINAL_SOURCES.names),
             *(f for _, cls in NOMINAL_SOURCES.items() for f in cls.parameters),
@@ -206,6 +217,13 @@ def _expect(node: str, name: str, arr: np.ndarray, shape: tuple) -> None:
         raise ParameterError(f"{node}: parameter '{name}' has shape {arr.shape}, expected {shape}")
 
 
+def _check_model(node: str, v: dict, name: str, n: int) -> None:
+    """The arrays' state dimension n is the one of the node's `design_model`."""
+    if n != DESIGN_MODEL_STATES[v["design_model"]]:
+        raise ParameterError(f"{node}: parameter '{name}' has {n} states, but design_model "
+                             f"'{v['design_model']}' has {DESIGN_MODEL_STATES[v['design_model']]}")
+
+
 def _check_shapes(node: str, v: dict) -> None:
     """Cross-parameter shape checks of the matrices of one node."""
     if node in ("plant", "state_estimator"):
@@ -215,6 +233,7 @@ def _check_shapes(node: str, v: dict) -> None:
         if A.ndim != 3 or A.shape[1] != A.shape[2]:
             raise ParameterError(f"{node}: parameter 'A' must have shape (R, n, n), got {A.shape}")
         R, n = A.shape[0], A.shape[1]
+        _check_model(node, v, "A", n)
         nh, nv = v["W_h"].shape[-1], v["W_V"].shape[-1]
         for name, shape in (
             ("B", (R, n, 2)),
@@ -237,6 +256,7 @@ def _check_shapes(node: str, v: dict) -> None:
         F = v["F"]
         if F.ndim != 2 or F.shape[0] != 2:
             raise ParameterError(f"{node}: parameter 'F' must have shape (2, n), got {F.shape}")
+        _check_model(node, v, "F", F.shape[1])
         _expect(node, "N", v["N"], (F.shape[1], F.shape[1]))
 
 
@@ -315,7 +335,6 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         raise ParameterError(f"variant '{variant}' is not in the case's variants {c['variants']}")
     v = VARIANTS[variant]
     law = LAWS[v.law]
-    n = a["A"].shape[1]
 
     def mat(name, arr=None):
         return flat_parameter(name, np.asarray(a[name] if arr is None else arr, float))
@@ -335,7 +354,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     x0_meas = x0.copy()
     if enabled:
         x0_meas[4] = 0.0  # the filter starts in steady state at q = 0 (trim)
-    if n == 11:
+    if c["design_model"] == "ecm":  # the notch's two states start at rest
         x0_meas = np.concatenate([x0_meas, np.zeros(2)])
     tau = law_tau(c) if law.has_tube else 1.0
     vehicle_file = design.summary.get("provenance", {}).get("vehicle_file", "")
@@ -345,6 +364,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     controller = {
         **common,
         "law": law.name,
+        "design_model": c["design_model"],
         "tau": tau,
         # the variant's own gain if the design made one for its loop through the notch
         **flat_parameter("F", np.asarray(a.get(variant_gain_key(variant), a["F"]), float)),
@@ -365,6 +385,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
             "plant_substeps": int(c["plant_substeps"]),
             "vehicle_file": vehicle_file,
             **{f"command.{k}": (val if k == "kind" else float(val)) for k, val in cmd.items()},
+            "design_model": c["design_model"],
             "nominal": law.nominal.name,
             "level_max": float(c["nominal"]["level_max"]),
             **nominal,

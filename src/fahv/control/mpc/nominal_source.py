@@ -179,7 +179,7 @@ class TrackingMPCNominal(NominalSource):
         """
         self.filter = None
         self.p_est = 9
-        if self.n == 11:  # ECM: the estimator works in its coordinates (q', x_q, eq. 43)
+        if p["design_model"] == "ecm":  # the estimator works in its coordinates (q', x_q, eq. 43)
             if not p["notch.enabled"]:
                 raise RunError("nominal_trajectory: the 11-state (ECM) design needs the notch on")
             nf = NotchFilter(*(p[f"notch.{k}"] for k in ("omega_z", "eps_z", "omega_p", "eps_p")))
