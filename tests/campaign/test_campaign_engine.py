@@ -1,4 +1,13 @@
-"""Campaigns on a LocalCluster: nothing lost, nothing twice, the same table every way."""
+"""Campaigns on a LocalCluster: nothing lost, nothing twice, the same table every way.
+
+The campaigns fly scenario case1_paper on its shipped design (cm_paper, loaded and
+verified as `fahv campaign` finds it, never designed here). One reference campaign serves
+every test that reads, reports or re-runs a campaign; the campaigns that resume a folder,
+run forced failures or reach an existing cluster share one LocalCluster of one worker
+(`cluster`, warm after its first campaign), so that only the tests about the engine's own
+cluster (one and two workers, a killed worker, Ctrl-C of the command) start one of their
+own.
+"""
 
 import math
 import os
@@ -22,6 +31,8 @@ from fahv.runs.bag import read_run, run_result_of
 from fahv.runs.metrics import settling_after
 
 VOLATILE = ("wall_s", "session")  # the only columns that may differ between sessions
+#: The campaigns' scenario: Case 1 of the paper on its shipped design.
+SCENARIO = Path(__file__).resolve().parents[2] / "offline_design" / "scenarios" / "case1_paper.yaml"
 
 
 def _table(out):
@@ -42,6 +53,44 @@ def _same_tables(a, b):
 def _each_index_once(out, runs):
     rows = store.read_rows(out)
     assert sorted(r["index"] for r in rows) == list(range(runs))
+
+
+@pytest.fixture(scope="module")
+def write_campaign(request, tmp_path_factory):
+    """``write_campaign(name, **changes)`` as in tests/campaign/conftest.py (its `BASE`
+    campaign with the changes), around `SCENARIO` instead of the quick design: the engine
+    runs any stored design alike, and the shipped one is loaded, not designed."""
+    import copy
+
+    import yaml
+
+    conftest = request.config.pluginmanager.get_plugin(str(Path(__file__).with_name(
+        "conftest.py")))  # fmt: skip
+    folder = tmp_path_factory.mktemp("mc")
+
+    def make(name, **changes):
+        data = copy.deepcopy(conftest.BASE)
+        data.update(name=name, scenario=str(SCENARIO))
+        for key, value in changes.items():
+            if key in data["dispersions"]:
+                data["dispersions"][key] = value
+            else:
+                data[key] = value
+        path = folder / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(data))
+        return path
+
+    return make
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """An existing Dask cluster (a LocalCluster of one single-threaded worker) that the
+    campaigns reach by its scheduler's address; it outlives every campaign run on it."""
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
+        yield c
 
 
 @pytest.fixture(scope="module")
@@ -99,7 +148,9 @@ def test_killing_a_worker_mid_campaign_loses_nothing(reference, tmp_path):
     _same_tables(_table(out), _table(dst))
 
 
-def test_ctrl_c_then_resume_completes_exactly_the_missing_runs(reference, tmp_path):
+def test_ctrl_c_then_resume_completes_exactly_the_missing_runs(reference, cluster, tmp_path):
+    """Ctrl-C of `fahv campaign` (its own LocalCluster) keeps the finished batches; a
+    resume (on another cluster) runs exactly the missing runs, the table the reference's."""
     c, out = reference
     dst = tmp_path / "interrupted"
     fahv = Path(sys.executable).parent / "fahv"
@@ -115,7 +166,8 @@ def test_ctrl_c_then_resume_completes_exactly_the_missing_runs(reference, tmp_pa
     assert "--resume" in err
     before = len(store.read_rows(dst))
     assert 0 < before < 12  # interrupted for real: some runs done, some missing
-    res = run_campaign(c, dst, workers=2, resume=True, progress=False, log=lambda *_: None)
+    res = run_campaign(c, dst, scheduler=cluster.scheduler_address, resume=True,
+                       progress=False, log=lambda *_: None)  # fmt: skip
     assert (res.before, res.new, res.missing) == (before, 12 - before, 0)
     _each_index_once(dst, c["runs"])
     _same_tables(_table(out), _table(dst))
@@ -126,14 +178,18 @@ def test_ctrl_c_then_resume_completes_exactly_the_missing_runs(reference, tmp_pa
         run_campaign(c, dst, progress=False)
 
 
-def test_forced_failures_are_recorded_while_the_others_complete(write_campaign, tmp_path):
+def test_forced_failures_are_recorded_while_the_others_complete(write_campaign, cluster,
+                                                                 tmp_path):  # fmt: skip
+    """Failed runs are rows with their reason and metrics; the others complete; the report
+    counts them and bounds the failure probability."""
     # a stuck elevator from t = 0 loses the unstable short period: the vehicle leaves
     # the envelope; the runs without fault complete
     fault = {"kinds": ["none", "stuck"], "onset": [0.0, 0.0]}
     path = write_campaign("fail", runs=6, batch_size=6, duration=10.0, fault=fault, command={},
                           initial={})  # fmt: skip
     c = load_campaign(path)
-    res = run_campaign(c, tmp_path / "f", workers=1, progress=False, log=lambda *_: None)
+    res = run_campaign(c, tmp_path / "f", scheduler=cluster.scheduler_address, progress=False,
+                       log=lambda *_: None)  # fmt: skip
     rows = store.read_rows(tmp_path / "f")
     assert res.failed == sum(r["fault.kind"] == "stuck" for r in rows) > 0
     for r in rows:
@@ -148,12 +204,15 @@ def test_forced_failures_are_recorded_while_the_others_complete(write_campaign, 
     assert bound == pytest.approx(failure_bound(res.failed, 6, 0.95))
 
 
-def test_a_non_finite_parameter_fails_its_run_only(reference, design, monkeypatch):
+def test_a_non_finite_parameter_fails_its_run_only(reference, monkeypatch):
+    from fahv.spec.artefacts import load_design
+
     c, out = reference
+    design = load_design(out / "design")  # the campaign's own
     real = engine.overrides
 
-    def poisoned(values, design, variant):
-        ov = real(values, design, variant)
+    def poisoned(values, design, variant, *scale):
+        ov = real(values, design, variant, *scale)
         if values["s.m"] == poisoned.target:
             ov["plant"]["params.m"] = math.nan
         return ov
@@ -210,9 +269,37 @@ def test_rerun_metadata_and_topics_agree_on_the_run_s_own_fault(reference, tmp_p
     )
 
 
-def test_report_numbers(reference):
+@pytest.fixture(scope="module")
+def report_page(reference):
+    """`fahv report DIR` of the reference campaign, once: (the `make_report` result its page
+    was made from (figures drawn), the page, what the command printed). The figures are
+    drawn once for the tests of the report's numbers and of its page."""
+    import contextlib
+    import io
+
+    from fahv.campaign import report_page as page
+    from fahv.cli import main
+
+    _, out = reference
+    made = []
+
+    def kept(*args, **kwargs):  # the page's own call of make_report, its result kept
+        made.append(make_report(*args, **kwargs))
+        return made[-1]
+
+    printed = io.StringIO()
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(printed):
+        mp.setattr(page, "make_report", kept)
+        assert main(["report", str(out)]) == 0
+    [rep] = made
+    return rep, out / "report" / "report.html", printed.getvalue()
+
+
+def test_report_numbers(reference, report_page):
+    """The report's pass rates, bounds, figures and certified split (`make_report` with
+    figures, as `fahv report` calls it)."""
     c, out = reference
-    rep = make_report(out, figures=True)
+    rep = report_page[0]
     rows = store.read_rows(out)
     req = c["requirements"]
     att = sum(verdicts(r, req)["attitude"] for r in rows)
@@ -279,19 +366,22 @@ def test_failure_bound_is_clopper_pearson(k, n):
     assert np.isnan(failure_bound(0, 0, 0.95)) and failure_bound(5, 5, 0.95) == 1.0
 
 
-def test_existing_cluster_by_scheduler_address(reference, tmp_path):
-    from dask.distributed import LocalCluster
-
+def test_existing_cluster_by_scheduler_address(reference, cluster, tmp_path):
+    """A campaign on a cluster started elsewhere: the same table; the cluster lives on."""
     c, out = reference
-    with LocalCluster(n_workers=1, threads_per_worker=1, dashboard_address=None) as cluster:
-        res = run_campaign(c, tmp_path / "ext", scheduler=cluster.scheduler_address,
-                           progress=False, log=lambda *_: None)  # fmt: skip
-        assert res.missing == 0
-        assert len(cluster.scheduler_info["workers"]) == 1  # the cluster outlives the call
+    res = run_campaign(c, tmp_path / "ext", scheduler=cluster.scheduler_address,
+                       progress=False, log=lambda *_: None)  # fmt: skip
+    assert res.missing == 0
+    assert len(cluster.scheduler_info["workers"]) == 1  # the cluster outlives the call
+    assert store.read_manifest(tmp_path / "ext")["sessions"][0]["engine"] == (
+        cluster.scheduler_address
+    )
     _same_tables(_table(out), _table(tmp_path / "ext"))
 
 
-def test_lost_scheduler_keeps_finished_runs_and_resume_completes(reference, tmp_path):
+def test_lost_scheduler_keeps_finished_runs_and_resume_completes(reference, cluster, tmp_path):
+    """A scheduler lost mid-campaign: the finished batches are kept, the lost ones named;
+    a resume (on another cluster) completes the table."""
     import socket
 
     c, out = reference
@@ -303,7 +393,8 @@ def test_lost_scheduler_keeps_finished_runs_and_resume_completes(reference, tmp_
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     sched = subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port),
                               "--no-dashboard"], **quiet)  # fmt: skip
-    worker = subprocess.Popen([dask, "worker", addr, "--nthreads", "1", "--no-dashboard"], **quiet)
+    worker = subprocess.Popen([dask, "worker", addr, "--nthreads", "1", "--no-dashboard",
+                               "--no-nanny"], **quiet)  # fmt: skip
     try:
         lost = []
 
@@ -324,7 +415,8 @@ def test_lost_scheduler_keeps_finished_runs_and_resume_completes(reference, tmp_
     assert any("scheduler-connection-lost" in e for e in res.errors)
     kept = len(store.read_rows(dst))
     assert kept == res.new >= 2
-    res = run_campaign(c, dst, workers=2, resume=True, progress=False, log=lambda *_: None)
+    res = run_campaign(c, dst, scheduler=cluster.scheduler_address, resume=True,
+                       progress=False, log=lambda *_: None)  # fmt: skip
     assert res.before == kept and res.missing == 0
     _each_index_once(dst, c["runs"])
     _same_tables(_table(out), _table(dst))
@@ -356,21 +448,19 @@ def test_sessions_are_recorded_in_the_manifest(reference):
     assert "Part 1 (LocalCluster(2)): 12 runs (0 failed) in" in make_report(out, False).text
 
 
-def test_the_report_page_of_a_campaign_has_its_bounds_and_figures(reference, capsys,
+def test_the_report_page_of_a_campaign_has_its_bounds_and_figures(reference, report_page,
                                                                    rendered_body):  # fmt: skip
     """`fahv report DIR`: the pass rates with their bounds, the worst runs and every figure
     of the report in one page, the figures embedded; Chromium loads every image."""
-    from fahv.cli import main
-
     _, out = reference
-    assert main(["report", str(out)]) == 0
-    page = out / "report" / "report.html"
-    assert capsys.readouterr().out.strip() == f"report: {page}"
+    rep, page, printed = report_page
+    assert page == out / "report" / "report.html"
+    assert printed.strip() == f"report: {page}"
     text = page.read_text()
     assert "p_fail &lt;" in text  # each pass rate's bound
     assert "<td>final |h - h_c| &lt;= 10 ft</td>" in text  # a cell of its own, not split
     assert "Worst 3 runs per metric" in text and "<table>" in text
     n = text.count('src="data:image/png;base64,')
-    assert n >= 3 and 'src="' + "hist" not in text  # every figure inside the page
+    assert n == len(rep.figures) >= 3 and 'src="' + "hist" not in text  # every figure inside
     body = rendered_body(page)
     assert body["data-images"] == body["data-images-loaded"] == str(n)

@@ -1,3 +1,4 @@
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,49 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 PAPER = ROOT / "studies" / "paper_design" / "campaigns"
+
+
+@pytest.fixture(scope="module")
+def write_campaign(request, make_case, tmp_path_factory):
+    """``write_campaign(name, **changes)`` as in tests/campaign/conftest.py (its `BASE`
+    campaign with the changes), beside the quick case's design file and scenario only.
+
+    Loading and checking a campaign file reads its scenario and the scenario's design file,
+    never the designed arrays: the files here validate without the quick design (half a
+    minute of LMIs) that running a campaign needs.
+    """
+    import json
+
+    from fahv.spec.scenario import design_part
+    from fahv.spec.schema import SCENARIO_KEYS
+
+    conftest = request.config.pluginmanager.get_plugin(str(Path(__file__).with_name(
+        "conftest.py")))  # fmt: skip
+    folder = tmp_path_factory.mktemp("mc_files")
+    case = make_case()  # the case the quick design is made of (tests/conftest.py)
+    c = json.loads(json.dumps(case.data))
+    for sub in ("designs", "scenarios"):
+        (folder / sub).mkdir()
+    dpart = json.loads(json.dumps(design_part(case).data))
+    (folder / "designs" / "quick.yaml").write_text(
+        yaml.safe_dump({**dpart, "name": "quick"}, sort_keys=False))  # fmt: skip
+    scenario = {k: c[k] for k in SCENARIO_KEYS if k in c}
+    (folder / "scenarios" / "quick.yaml").write_text(
+        yaml.safe_dump({**scenario, "design": "quick"}, sort_keys=False))  # fmt: skip
+
+    def make(name, **changes):
+        data = copy.deepcopy(conftest.BASE)
+        data["name"] = name
+        for key, value in changes.items():
+            if key in data["dispersions"]:
+                data["dispersions"][key] = value
+            else:
+                data[key] = value
+        path = folder / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(data))
+        return path
+
+    return make
 
 
 @pytest.mark.parametrize(

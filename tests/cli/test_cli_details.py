@@ -22,6 +22,20 @@ matplotlib.use("Agg")
 CASE1 = ROOT / "offline_design" / "scenarios" / "case1_paper.yaml"
 
 
+@pytest.fixture(scope="module")
+def design(paper_scenario_design):
+    """Case 1 (scenario case1_paper) on its shipped design, as `fahv simulate` runs it
+    (loaded and verified, not designed)."""
+    return paper_scenario_design
+
+
+@pytest.fixture(scope="module")
+def shipped_case():
+    """Case 1's scenario and its shipped design folder, for `fahv sil CASE --design DIR`
+    (its first variant: tube_mpc)."""
+    return CASE1, ROOT / "offline_design" / "designs" / "cm_paper"
+
+
 def test_metrics_table_is_aligned_whatever_the_row_names(design):
     lim = load_vehicle().limits
     m = metrics(simulate(design, "tube_mpc", duration=1.0), lim)
@@ -138,10 +152,10 @@ def test_lmi_certificate_is_reported_against_its_tolerance(design):
 
 
 @pytest.mark.ros
-def test_fahv_sil_says_where_the_run_is_once_and_no_after_fault_metrics(quick_case, tmp_path):
+def test_fahv_sil_says_where_the_run_is_once_and_no_after_fault_metrics(shipped_case, tmp_path):
     """A 1 s SIL run of Case 1 (fault at 100 s): the run folder named once, and the
     flexible RMS labelled over the run, not after a fault that never came."""
-    case_file, art = quick_case
+    case_file, art = shipped_case
     r = subprocess.run(
         [str(ROOT / ".venv" / "bin" / "fahv"), "sil", str(case_file), "--design", str(art),
          "--duration", "1", "--out", str(tmp_path), "--quiet"],
@@ -155,12 +169,12 @@ def test_fahv_sil_says_where_the_run_is_once_and_no_after_fault_metrics(quick_ca
 
 
 @pytest.mark.ros
-def test_fahv_sil_json_writes_only_the_json_to_stdout(quick_case, tmp_path):
+def test_fahv_sil_json_writes_only_the_json_to_stdout(shipped_case, tmp_path):
     """`fahv sil --json`: stdout is one JSON document (the metrics per variant), as with
     `fahv simulate --json`; the run's status lines go to stderr."""
     import json
 
-    case_file, art = quick_case
+    case_file, art = shipped_case
     r = subprocess.run(
         [str(ROOT / ".venv" / "bin" / "fahv"), "sil", str(case_file), "--design", str(art),
          "--duration", "1", "--out", str(tmp_path), "--quiet", "--json"],

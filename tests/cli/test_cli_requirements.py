@@ -4,7 +4,8 @@
 Three runs of Case 1 (60 s, the steps at t = 0, no fault within the run): as shipped (every
 requirement met), with a scenario that asks for settling within 20 s (it settles in
 33.4 s), and on servos whose rate limits are 5 % of the vehicle file's (the controller
-asks the elevator's servo for about 10 deg/s, the limit becomes 5 deg/s).
+asks the elevator's servo for about 10 deg/s, the limit becomes 5 deg/s). The late
+scenario's recorded run (`late_run`) serves both its printed table and `fahv inspect`.
 """
 
 import json
@@ -68,9 +69,24 @@ def test_a_passing_run_prints_every_requirement_and_exits_0_with_check(tmp_path,
     assert settling["unit"] == "s"
 
 
-def test_a_run_that_settles_late_fails_settling_and_check_exits_4(tmp_path, capsys):
-    late = scenario(tmp_path, "case1_settle_20s", requirements={"settling_s": 20.0})
-    rc, out = run(late, capsys, "--no-record")
+@pytest.fixture(scope="module")
+def late_run(tmp_path_factory):
+    """The scenario that asks for settling within 20 s and its run, recorded by `fahv
+    simulate` without --check: (scenario file, exit status, stdout, run folder)."""
+    import contextlib
+    import io
+
+    tmp = tmp_path_factory.mktemp("late")
+    late = scenario(tmp, "case1_settle_20s", requirements={"settling_s": 20.0})
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        rc = main(["simulate", str(late), "--duration", DURATION, "--out", str(tmp / "bags")])
+    (bag,) = (tmp / "bags").iterdir()
+    return late, rc, printed.getvalue(), bag
+
+
+def test_a_run_that_settles_late_fails_settling_and_check_exits_4(late_run, capsys):
+    late, rc, out, _ = late_run
     assert rc == 0  # without --check the exit status is the run's end, not its verdict
     assert table(out)["settling"][-1] == "FAIL"
     assert table(out)["settling"][-2] == "-13.42 s"  # margin: missed by 13.42 s
@@ -90,11 +106,8 @@ def test_a_run_beyond_the_servo_rate_fails_input_rates(tmp_path, capsys):
     assert rates["value"] > 0 and rates["limit"] == 0 and rates["unit"] == "steps"
 
 
-def test_inspect_judges_the_recorded_run_against_its_recorded_limits(tmp_path, capsys):
-    late = scenario(tmp_path, "case1_settle_20s", requirements={"settling_s": 20.0})
-    out_dir = tmp_path / "bags"
-    rc, printed = run(late, capsys, "--out", str(out_dir))
-    (bag,) = out_dir.iterdir()
+def test_inspect_judges_the_recorded_run_against_its_recorded_limits(late_run, capsys):
+    _, _, _, bag = late_run
     assert main(["inspect", str(bag), "--json"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert json.loads(s["metadata"]["requirements"])["settling_s"] == 20.0

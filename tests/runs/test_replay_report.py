@@ -23,11 +23,17 @@ pytestmark = pytest.mark.ros  # every test here runs the built node graph
 T, N = 2.0, 100
 
 
+#: Case 1 (scenario case1_paper, first variant tube_mpc) and its shipped design: what
+#: `fahv sil CASE --design DIR` runs (loaded and verified, not designed).
+SHIPPED_CASE = (ROOT / "offline_design" / "scenarios" / "case1_paper.yaml",
+                ROOT / "offline_design" / "designs" / "cm_paper")  # fmt: skip
+
+
 @pytest.fixture(scope="module")
-def hand_run(quick_case, tmp_path_factory, hand_graph, exit_statuses):
+def hand_run(tmp_path_factory, hand_graph, exit_statuses):
     """The README's graph by hand: `fahv sil --write-params`, then one `ros2 run` per node."""
     tmp = tmp_path_factory.mktemp("hand")
-    lines, started, env, params = hand_graph(quick_case, tmp, T, logs=tmp / "logs")
+    lines, started, env, params = hand_graph(SHIPPED_CASE, tmp, T, logs=tmp / "logs")
     with domain_coordinator.domain_id() as domain:
         env["ROS_DOMAIN_ID"] = str(domain)
         done = subprocess.run(

@@ -43,6 +43,13 @@ def _cli(capsys, *argv):
 
 
 @pytest.fixture(scope="module")
+def design(paper_scenario_design):
+    """Case 1 (scenario case1_paper) on its shipped design, as `fahv simulate` runs it: a
+    run file needs a design, not a new one (loaded, not designed)."""
+    return paper_scenario_design
+
+
+@pytest.fixture(scope="module")
 def run(design, tmp_path_factory):
     """A run of `fahv simulate` (its writer as the command uses it), with timestamps."""
     bag = tmp_path_factory.mktemp("runs") / "case1_tube_mpc_sim_x"

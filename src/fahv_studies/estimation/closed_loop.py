@@ -249,7 +249,7 @@ def model_part(js: JointSystem, g_max: np.ndarray) -> np.ndarray:
     """
     es = js.system
     xi = np.concatenate([np.asarray(g_max, float), np.zeros(es.N.shape[2])])
-    return peak_to_peak(es, xi).max(axis=0)[:8]
+    return peak_to_peak(es, xi, states=range(8)).max(axis=0)
 
 
 def probabilistic_tube(js: JointSystem, R_v: np.ndarray, g_max: np.ndarray,
