@@ -93,13 +93,18 @@ def group_figure(group: str, runs: list, title: str | None = None):
     axes = np.atleast_1d(axes)
     for ax, (ylabel, fn) in zip(axes, panels, strict=True):
         for i, (label, run) in enumerate(runs):  # dashes keep overlapping runs visible
-            ax.plot(run.t, fn(run), lw=1.0, ls=LINESTYLES[i % len(LINESTYLES)], label=label)
+            ax.plot(run.t, fn(run), label=label, **line_style(i))
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
-    if group == "trajectory":
-        label0, r0 = runs[0]
-        axes[0].plot(r0.t, r0.h_c, "k--", lw=0.8, label="command")
-        axes[1].plot(r0.t, r0.V_c, "k--", lw=0.8, label="command")
+    if group == "trajectory":  # each run's own command, thin dash-dots in its colour
+        drawn: list = []
+        for i, (label, run) in enumerate(runs):
+            if any(np.array_equal(run.h_c, h) and np.array_equal(run.V_c, v) for h, v in drawn):
+                continue  # the same command as a run drawn before
+            drawn.append((run.h_c, run.V_c))
+            style = {"color": line_style(i)["color"], "ls": "-.", "lw": 0.9, "zorder": 3}
+            axes[0].plot(run.t, run.h_c, label=f"{label}: command", **style)
+            axes[1].plot(run.t, run.V_c, **style)
     if group == "tube":
         _tube_axis(axes[0], runs)
     axes[0].legend(loc="best", fontsize=8)
@@ -228,6 +233,17 @@ LABELS = {
 
 #: Line style of the i-th run of a figure.
 LINESTYLES = ("-", (0, (5, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)))
+
+
+def line_style(i: int) -> dict:
+    """Line style of the i-th run: colour, dashes, and its place in the drawing order.
+
+    Colours from the cycle, dashes to tell overlaps; the earlier run is drawn over the
+    later, so the first run given (the reference) is never hidden under a noisier one.
+    """
+    return {"lw": 1.0, "ls": LINESTYLES[i % len(LINESTYLES)], "color": f"C{i % 10}",
+            "zorder": 2.5 - 0.01 * i}
+
 
 
 def paper_figures(runs: dict, out_dir: str | Path) -> list[Path]:

@@ -20,8 +20,7 @@ from scipy.signal import welch
 
 from fahv.model.vehicle import ETA1_DOT, IQ
 from fahv.runs.metrics import settling_times
-from fahv.runs.plots import plt
-from fahv.runs.plots_time import line_style
+from fahv.runs.plots import line_style, plt
 
 #: Samples per Welch segment (at most; fewer when the window is shorter).
 NPERSEG = 1024

@@ -27,7 +27,7 @@ import numpy as np
 
 from fahv.model.vehicle import ALPHA, IQ, THETA, H, V
 from fahv.runs.metrics import ATTITUDE_BOUND_DEG, SETTLE_TOL, has_servos
-from fahv.runs.plots import LINESTYLES, plt
+from fahv.runs.plots import line_style, plt
 
 #: Tracking-error panels: (quantity, unit, function of a RunResult -> (N,) values,
 #: requirement bound in that unit). The bounds are the metrics' requirements.
@@ -51,11 +51,6 @@ INPUT_PANELS = (("Phi [-]", 0, 1.0), ("delta_e [deg]", 1, float(np.degrees(1.0))
 
 #: Colour of the requirement bands and of the fault onset line.
 BAND_COLOUR = "tab:green"
-
-
-def line_style(i: int) -> dict:
-    """Line style of the i-th run (colours from the cycle, dashes to tell overlaps)."""
-    return {"lw": 1.0, "ls": LINESTYLES[i % len(LINESTYLES)], "color": f"C{i % 10}"}
 
 
 def _band(ax, bound: float, label: str | None) -> None:
