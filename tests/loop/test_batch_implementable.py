@@ -11,8 +11,7 @@ from fahv.loop.simulate import run_parameters, simulate
 SCENARIO = "offline_design/scenarios/case1_implementable.yaml"
 FIELDS = ("t", "x", "q_f", "x_r", "x_n", "u", "u_applied", "h_c", "V_c", "h_g", "V_g",
           "tube_level", "fault_active", "lmi_counts", "qp_counts", "u_actuator",
-          "u_actuator_rate_peak", "y",
-          "x_hat")  # fmt: skip
+          "u_actuator_rate_peak", "y", "x_hat", "x_hat_sigma")  # fmt: skip
 #: Long enough for the first re-plans and the faults' onsets, short for CI [s].
 DURATION = 2.0
 
@@ -64,6 +63,8 @@ def test_the_batch_gives_each_run_its_bits_alone_and_in_simulate(design):
     # the runs did differ: their own noise, servos and faults
     assert len({r.y[5, 0] for r in batch}) == 4
     assert len({r.u_actuator[10, 1] for r in batch}) == 4
+    # the filter's own standard deviations, positive in every state it estimates
+    assert np.all(batch[0].x_hat_sigma[1:] > 0.0) and batch[0].x_hat_sigma.shape[1] == 9
 
 
 def test_the_servo_data_reach_the_plant(design):

@@ -98,6 +98,10 @@ class RunResult:
     x_hat : (N, 9) ndarray or None
         State estimate x_k|k the controller read (/hsv/state_estimate; the exact state
         for the estimator `none`); None if not given.
+    x_hat_sigma : (N, 9) ndarray or None
+        The estimator's own standard deviation of each state's error (its covariance's
+        diagonal, /hsv/state_estimate `sigma`; NaN where it states none: the exact
+        state); None if not given.
     """
 
     t: np.ndarray
@@ -120,6 +124,7 @@ class RunResult:
     u_actuator_rate_peak: np.ndarray | None = None
     y: np.ndarray | None = None
     x_hat: np.ndarray | None = None
+    x_hat_sigma: np.ndarray | None = None
 
 
 class History:
@@ -157,6 +162,7 @@ class History:
             "u_actuator": np.empty((N, B, 2)),
             "u_actuator_rate_peak": np.empty((N, B, 2)),
             "x_hat": np.empty((N, B, 9)),
+            "x_hat_sigma": np.full((N, B, 9), np.nan),
         }
         if n_y:
             self.a["y"] = np.empty((N, B, n_y))
@@ -202,6 +208,8 @@ class History:
         a["u_actuator"][k] = state.u_a()
         a["u_actuator_rate_peak"][k] = state.rate_peak()
         a["x_hat"][k] = a["x"][k] if est is None else est.x()
+        if est is not None and np.shape(est.sigma)[-1:] == (9,):
+            a["x_hat_sigma"][k] = est.sigma
         if "y" in a:
             a["y"][k] = meas.y
         self._counters = (tube, nom)  # running totals: the last step's are the run's

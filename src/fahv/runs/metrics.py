@@ -51,7 +51,12 @@ def estimate_errors(run: RunResult) -> dict:
         Empty when the run read the exact state (no `x_hat`, or x_hat equal to x);
         else `estimate_err_h_rms_ft`, `estimate_err_V_rms_fps` (rms) and
         `estimate_err_alpha_max_deg`, `estimate_err_theta_max_deg` (largest |error|),
-        over t >= `ESTIMATE_SETTLE_S` (the whole run if shorter).
+        over t >= `ESTIMATE_SETTLE_S` (the whole run if shorter); where the run recorded
+        the filter's own standard deviations (`x_hat_sigma`), the share of those steps
+        whose error of h lies beyond 3 sigma (`estimate_err_h_outside_3sigma_pct`) and
+        the largest such share over h, V, alpha, theta and q
+        (`estimate_err_outside_3sigma_max_pct`) [%]: about 0.3 % for a filter whose
+        covariance accounts for its errors (Gaussian).
     """
     if run.x_hat is None or np.array_equal(run.x_hat, run.x):
         return {}
@@ -62,7 +67,19 @@ def estimate_errors(run: RunResult) -> dict:
         "estimate_err_V_rms_fps": float(np.sqrt(np.mean(e[:, V] ** 2))),
         "estimate_err_alpha_max_deg": float(np.degrees(np.abs(e[:, ALPHA]).max())),
         "estimate_err_theta_max_deg": float(np.degrees(np.abs(e[:, THETA]).max())),
+        **_outside_3sigma(run, keep if keep.any() else slice(None)),
     }
+
+
+def _outside_3sigma(run: RunResult, keep) -> dict:
+    """Shares [%] of the steps `keep` whose estimate error lies beyond the filter's 3 sigma."""
+    sigma = getattr(run, "x_hat_sigma", None)
+    if sigma is None or not np.isfinite(sigma[keep][:, :5]).all():
+        return {}
+    out = np.abs((run.x_hat - run.x)[keep][:, :5]) > 3.0 * sigma[keep][:, :5]
+    pct = 100.0 * out.mean(axis=0)
+    return {"estimate_err_h_outside_3sigma_pct": float(pct[H]),
+            "estimate_err_outside_3sigma_max_pct": float(pct.max())}
 
 
 def settling_times(run: RunResult, t_cmd_end: float | None = None) -> tuple[float, float]:

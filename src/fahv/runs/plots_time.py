@@ -355,7 +355,9 @@ def estimate_figure(runs: list):
     Returns
     -------
     matplotlib.figure.Figure
-        5 panels: x_hat - x of h [ft], V [ft/s], alpha, theta [deg] and q [deg/s].
+        5 panels: x_hat - x of h [ft], V [ft/s], alpha, theta [deg] and q [deg/s], with
+        each filter's own +/- 3 sigma (its covariance's, `RunResult.x_hat_sigma`) shaded in
+        the run's colour where it states one.
 
     Raises
     ------
@@ -368,6 +370,11 @@ def estimate_figure(runs: list):
             x_hat = r.run.x if r.run.x_hat is None else r.run.x_hat
             ax.plot(r.run.t, scale * (x_hat[:, j] - r.run.x[:, j]), label=r.label,
                     **line_style(i))  # fmt: skip
+            sigma = getattr(r.run, "x_hat_sigma", None)
+            if sigma is not None and np.isfinite(sigma[:, j]).any():
+                band = 3.0 * scale * sigma[:, j]
+                ax.fill_between(r.run.t, -band, band, color=line_style(i)["color"], alpha=0.15,
+                                lw=0, label=f"{r.label}: the filter's +/- 3 sigma")  # fmt: skip
         ax.axhline(0.0, color="k", lw=0.6)
         ax.set_ylabel(f"{name}_hat - {name}\n[{unit}]")
         ax.grid(True, alpha=0.3)

@@ -59,6 +59,10 @@ METRIC_ROWS = (
      "{:.4f}"),
     ("estimate_err_theta_max_deg", "state estimate: max |theta error|, t >= 10 s [deg]",
      "{:.4f}"),
+    ("estimate_err_h_outside_3sigma_pct", "state estimate: steps with |h error| beyond the "
+     "filter's 3 sigma, t >= 10 s [%]", "{:.2f}"),
+    ("estimate_err_outside_3sigma_max_pct", "state estimate: the same, largest over h, V, "
+     "alpha, theta, q [%]", "{:.2f}"),
     ("eta_1_dev_peak", "peak |eta_1 - eta_1,r|", "{:.4f}"),
     ("eta_2_dev_peak", "peak |eta_2 - eta_2,r|", "{:.4f}"),
     ("t_fault_s", "fault onset [s]", "{:.2f}"),
