@@ -126,10 +126,9 @@ def specs() -> dict[str, tuple[Field, ...]]:
     return dict(_specs_of(entries))
 
 
-@functools.lru_cache(maxsize=4)
-def _specs_of(entries: tuple) -> dict[str, tuple[Field, ...]]:
-    """`specs` for the registered `entries` ((name, entry) pairs of the registries)."""
-    controller = (
+def _controller_fields() -> tuple[Field, ...]:
+    """Parameters of a controller node: the law, its design model, F, N, the notch."""
+    return (
         *COMMON,
         Field("law", "str", "control law", choices=LAWS.names),
         DESIGN_MODEL,
@@ -143,27 +142,74 @@ def _specs_of(entries: tuple) -> dict[str, tuple[Field, ...]]:
               default=False),
         *(f for _, cls in LAWS.items() for f in cls.parameters),
     )  # fmt: skip
+
+
+def _plant_fields() -> tuple[Field, ...]:
+    """Parameters of the plant node: the vehicle, its state, sensors, faults it simulates."""
+    return (
+        *COMMON,
+        PLANT_SUBSTEPS,
+        Field("vehicle_file", "str", "vehicle data file (YAML); empty: the packaged one",
+              default=""),
+        _matrix("x0", "initial plant state (9,) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]"),
+        *(Field(f"params.{k}", "float", f"true (perturbed) value of vehicle parameter {k}")
+          for k in PAPER_UNCERTAINTY),
+        *PLANT,
+        Field("stuck", "bool", "the run's fault is a stuck elevator (fault kind stuck): "
+              "from stuck_onset the elevator actuator is held at its position (with servo "
+              "dynamics; an ideal actuator's position is the held command)",
+              default=False),
+        Field("stuck_onset", "float", "onset of the stuck elevator (fault t_onset)",
+              unit="s", lo=0.0, default=0.0),
+        Field("rate", "float", "pace of the steps: 0 as fast as the graph steps, r > 0 at "
+              "most r times real time (a graph watched live; fahv sil --rate)", lo=0.0,
+              default=0.0),
+        *_prefixed(sensor_fault_fields(), "sensor_fault."),
+    )  # fmt: skip
+
+
+def _nominal_fields() -> tuple[Field, ...]:
+    """Parameters of the nominal-trajectory node: the command, the nominal's model and MPC."""
+    return (
+        *COMMON,
+        PLANT_SUBSTEPS,
+        Field("vehicle_file", "str", "vehicle data file (YAML) of the nominal vehicle (the "
+              "nonlinear nominal model, mpc.nominal_model 'cm'); empty: the packaged one",
+              default=""),
+        *_prefixed(COMMAND, "command."),
+        DESIGN_MODEL,
+        Field("nominal", "str", "nominal part of the law (registered nominal source)",
+              choices=NOMINAL_SOURCES.names),
+        *(f for _, cls in NOMINAL_SOURCES.items() for f in cls.parameters),
+        *_prefixed(NOTCH, "notch."),
+        _matrix("u_lo", "tightened lower input limits (2,) [-, rad] (eq. 30)"),
+        _matrix("u_hi", "tightened upper input limits (2,) [-, rad] (eq. 30)"),
+        _matrix("Dx", "state scales (n,)"),
+        _matrix("Du", "input scales (2,)"),
+        Field("level_max", "float", "governor bound on x_n' Q^-1 x_n", lo=0.0, hi=1.0,
+              lo_open=True),
+        _matrix("x0", "initial measured state (n,) in design-model order"),
+        _matrix("A", "nominal discrete LPV vertices A_i (R, n, n) (eq. 12)"),
+        _matrix("B", "nominal discrete LPV vertices B_i (R, n, 2) (eq. 12)"),
+        _matrix("h_grid", "TP weight grid in altitude [ft]"),
+        _matrix("V_grid", "TP weight grid in velocity [ft/s]"),
+        _matrix("W_h", "TP weighting functions of h on h_grid (eq. 11)"),
+        _matrix("W_V", "TP weighting functions of V on V_grid (eq. 11)"),
+        _matrix("K", "nominal gain K (2, n) (LMI 32-35)"),
+        _matrix("Q", "certified nominal ellipsoid Q (n, n) (LMI 33)"),
+        _matrix("trim_h", "trim map altitudes [ft]"),
+        _matrix("trim_V", "trim map velocities [ft/s]"),
+        _matrix("trim_x", "trim states (N_h, N_V, n)"),
+        _matrix("trim_u", "trim inputs (N_h, N_V, 2)"),
+    )  # fmt: skip
+
+
+@functools.lru_cache(maxsize=4)
+def _specs_of(entries: tuple) -> dict[str, tuple[Field, ...]]:
+    """`specs` for the registered `entries` ((name, entry) pairs of the registries)."""
+    controller = _controller_fields()
     out = {
-        "plant": (
-            *COMMON,
-            PLANT_SUBSTEPS,
-            Field("vehicle_file", "str", "vehicle data file (YAML); empty: the packaged one",
-                  default=""),
-            _matrix("x0", "initial plant state (9,) [ft, ft/s, rad, rad, rad/s, -, 1/s, -, 1/s]"),
-            *(Field(f"params.{k}", "float", f"true (perturbed) value of vehicle parameter {k}")
-              for k in PAPER_UNCERTAINTY),
-            *PLANT,
-            Field("stuck", "bool", "the run's fault is a stuck elevator (fault kind stuck): "
-                  "from stuck_onset the elevator actuator is held at its position (with servo "
-                  "dynamics; an ideal actuator's position is the held command)",
-                  default=False),
-            Field("stuck_onset", "float", "onset of the stuck elevator (fault t_onset)",
-                  unit="s", lo=0.0, default=0.0),
-            Field("rate", "float", "pace of the steps: 0 as fast as the graph steps, r > 0 at "
-                  "most r times real time (a graph watched live; fahv sil --rate)", lo=0.0,
-                  default=0.0),
-            *_prefixed(sensor_fault_fields(), "sensor_fault."),
-        ),
+        "plant": _plant_fields(),
         "fault_injector": (
             *COMMON,
             Field("vehicle_file", "str", "vehicle data file (YAML) whose input limits a "
@@ -174,39 +220,8 @@ def _specs_of(entries: tuple) -> dict[str, tuple[Field, ...]]:
         ),
         "state_estimator": _estimator_fields(),
         "notch_filter": (*COMMON, *NOTCH),
-        "nominal_trajectory": (
-            *COMMON,
-            PLANT_SUBSTEPS,
-            Field("vehicle_file", "str", "vehicle data file (YAML) of the nominal vehicle (the "
-                  "nonlinear nominal model, mpc.nominal_model 'cm'); empty: the packaged one",
-                  default=""),
-            *_prefixed(COMMAND, "command."),
-            DESIGN_MODEL,
-            Field("nominal", "str", "nominal part of the law (registered nominal source)",
-                  choices=NOMINAL_SOURCES.names),
-            *(f for _, cls in NOMINAL_SOURCES.items() for f in cls.parameters),
-            *_prefixed(NOTCH, "notch."),
-            _matrix("u_lo", "tightened lower input limits (2,) [-, rad] (eq. 30)"),
-            _matrix("u_hi", "tightened upper input limits (2,) [-, rad] (eq. 30)"),
-            _matrix("Dx", "state scales (n,)"),
-            _matrix("Du", "input scales (2,)"),
-            Field("level_max", "float", "governor bound on x_n' Q^-1 x_n", lo=0.0, hi=1.0,
-                  lo_open=True),
-            _matrix("x0", "initial measured state (n,) in design-model order"),
-            _matrix("A", "nominal discrete LPV vertices A_i (R, n, n) (eq. 12)"),
-            _matrix("B", "nominal discrete LPV vertices B_i (R, n, 2) (eq. 12)"),
-            _matrix("h_grid", "TP weight grid in altitude [ft]"),
-            _matrix("V_grid", "TP weight grid in velocity [ft/s]"),
-            _matrix("W_h", "TP weighting functions of h on h_grid (eq. 11)"),
-            _matrix("W_V", "TP weighting functions of V on V_grid (eq. 11)"),
-            _matrix("K", "nominal gain K (2, n) (LMI 32-35)"),
-            _matrix("Q", "certified nominal ellipsoid Q (n, n) (LMI 33)"),
-            _matrix("trim_h", "trim map altitudes [ft]"),
-            _matrix("trim_V", "trim map velocities [ft/s]"),
-            _matrix("trim_x", "trim states (N_h, N_V, n)"),
-            _matrix("trim_u", "trim inputs (N_h, N_V, 2)"),
-        ),
-    }  # fmt: skip
+        "nominal_trajectory": _nominal_fields(),
+    }
     for name in CONTROLLER_NODES:
         out[name] = controller
     return out
