@@ -38,7 +38,7 @@ from pathlib import Path
 
 import yaml
 
-from fahv.runs.workspace import ROOT, WS, ensure_built, ros_env
+from fahv.sil.workspace import ROOT, WS, ensure_built, ros_env
 
 #: Environment variables of the nodes that the benchmark does not pass on (each tree
 #: runs with its own defaults).

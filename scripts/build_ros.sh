@@ -16,5 +16,5 @@ colcon build --event-handlers console_cohesion- summary+ \
   2>&1 | grep -v -E "byte-compiling is disabled|^---$|^--- stderr|^$|had stderr output|doesn't contain any 'local_setup\.\*' files" \
   | tail -n 30
 test -f install/setup.bash || { echo "[build_ros] error: ros_ws/install/setup.bash missing" >&2; exit 1; }
-"$venv/bin/python" -c "from fahv.runs.workspace import write_build_stamp; write_build_stamp()"
+"$venv/bin/python" -c "from fahv.sil.workspace import write_build_stamp; write_build_stamp()"
 echo "[build_ros] ros_ws built ($(ls install | grep -c hsv_) hsv packages)"

@@ -228,7 +228,7 @@ def interrupt_fahv():
     import time
 
     from fahv.runs.bag import read_run
-    from fahv.runs.workspace import ROOT, WS
+    from fahv.sil.workspace import ROOT, WS
 
     def run(args, out, signals, wait_s, timeout_s):
         p = subprocess.Popen(
@@ -296,7 +296,7 @@ def _hand_graph(quick_case, out, duration, watchdog=None, without=(), logs=None)
         order, the environment (without ROS_DOMAIN_ID: the caller takes a free one) and
         the parameter file.
     """
-    from fahv.runs.workspace import ROOT
+    from fahv.sil.workspace import ROOT
 
     case_file, art = quick_case
     params = out / "run.yaml"

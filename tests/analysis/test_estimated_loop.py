@@ -21,8 +21,8 @@ from fahv.estimation.kalman import design_filter
 from fahv.estimation.servo_model import servo_plants
 from fahv.model.actuators import kernel_parameters
 from fahv.model.vehicle import load_vehicle
-from fahv.runs.workspace import ROOT
 from fahv.sensors.data import load_sensors
+from fahv.sil.workspace import ROOT
 from fahv.spec.artefacts import load_design
 
 TS = 0.02

@@ -22,7 +22,7 @@ from fahv.analysis.margins import (
     worst_case,
 )
 from fahv.model.vehicle import IQ
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 from fahv.spec.artefacts import load_design
 from fahv.tube.notch_loop import notch_closed_loop
 

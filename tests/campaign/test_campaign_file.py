@@ -253,7 +253,7 @@ def test_a_copied_campaign_file_runs_sized_from_the_command_line(tmp_path, monke
     """A shipped campaign copied elsewhere finds its scenario by name; --runs and
     --duration size it without editing it, into a folder named with its size."""
     from fahv.cli import campaign as cli
-    from fahv.runs.workspace import ROOT
+    from fahv.sil.workspace import ROOT
 
     copy = tmp_path / "elsewhere" / "case1.yaml"
     copy.parent.mkdir()

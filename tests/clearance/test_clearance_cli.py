@@ -6,7 +6,7 @@ import json
 import pytest
 
 from fahv.cli import main
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 
 CAMPAIGN = str(ROOT / "offline_design/campaigns/case1.yaml")
 

@@ -10,7 +10,7 @@ from fahv.campaign.spec import load_campaign
 from fahv.clearance.space import SearchSpace
 from fahv.errors import CampaignError
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 
 
 def _campaign(tmp_path, scenario="case1", **dispersions):

@@ -15,7 +15,7 @@ from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.metrics import metrics
 from fahv.runs.tools import METRIC_ROWS, format_metrics
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 
 matplotlib.use("Agg")
 

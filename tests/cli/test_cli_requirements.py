@@ -17,7 +17,7 @@ import yaml
 
 from fahv.cli import main
 from fahv.cli.run import EXIT_REQUIREMENTS
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 
 CASE1 = ROOT / "offline_design" / "scenarios" / "case1.yaml"
 DURATION = "60"

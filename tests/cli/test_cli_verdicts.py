@@ -16,7 +16,7 @@ from fahv.cli.run import EXIT_VERDICT
 from fahv.control import load_plugins
 from fahv.plant.faults import FAULTS
 from fahv.runs.bag import read_run
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 
 HERE = Path(__file__).resolve().parent
 CASE1 = ROOT / "offline_design" / "scenarios" / "case1.yaml"

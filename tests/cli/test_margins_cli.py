@@ -8,7 +8,7 @@ import re
 import pytest
 
 from fahv.cli import main
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 
 
 def test_margins_prints_the_table_and_writes_the_figures(tmp_path, capsys, monkeypatch):

@@ -12,7 +12,7 @@ from fahv.certificate.verified import load_or_design
 from fahv.config.extends import merged
 from fahv.errors import CampaignError, SpecError
 from fahv.loop.simulate import simulate
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 from fahv.spec.scenario import load_scenario
 
 SCENARIOS = ROOT / "offline_design" / "scenarios"

@@ -150,7 +150,7 @@ def test_a_scenario_names_its_vehicle_file_relative_to_itself(tmp_path):
     import re
 
     from fahv.model.vehicle import vehicle_file_text
-    from fahv.runs.workspace import ROOT
+    from fahv.sil.workspace import ROOT
 
     data = yaml.safe_load(vehicle_file_text()[0])
     data["parameters"]["m"]["value"] = 1.03 * float(data["parameters"]["m"]["value"])

@@ -136,7 +136,7 @@ def test_a_stuck_elevator_ends_simulate_and_the_batch_with_the_same_verdict():
     trim map (where its Jacobian would be singular); both paths end there, the batch's
     other run completes."""
     from fahv.certificate.verified import load_or_design
-    from fahv.runs.workspace import ROOT
+    from fahv.sil.workspace import ROOT
     from fahv.verdict import RunEnded
 
     _, case1, _ = load_or_design(ROOT / "offline_design/scenarios/case1.yaml", log=lambda *_: None)

@@ -1,4 +1,4 @@
-"""The rules a node applies to its peers' statuses (fahv.loop.peers), without a graph."""
+"""The rules a node applies to its peers' statuses (fahv.sil.peers), without a graph."""
 
 import json
 import time
@@ -6,7 +6,7 @@ import time
 import pytest
 
 from fahv.loop.graph import DEFAULT_GRAPH, STATUS_LOST_S
-from fahv.loop.peers import Peers, parse_status, status
+from fahv.sil.peers import Peers, parse_status, status
 
 T0 = 1_000_000.0
 

@@ -83,7 +83,7 @@ def test_plugin_law_and_fault_run_through_simulate_and_the_batch(dummy, design):
 @pytest.mark.ros
 def test_plugin_law_runs_through_the_graph(dummy, tmp_path):
     from fahv.runs.bag import read_run, run_result_of
-    from fahv.runs.sil import run_sil
+    from fahv.sil.runner import run_sil
 
     res = run_sil(dummy, "half_feedback", duration=1.5, out_dir=tmp_path, quiet=True,
                   log=lambda *_: None)  # fmt: skip

@@ -21,8 +21,8 @@ from fahv.loop.graph import TOPICS
 from fahv.runs.bag import iter_raw, read_run
 from fahv.runs.live import schema_text
 from fahv.runs.messages import decode
-from fahv.runs.workspace import ROOT
 from fahv.runs.writer import RunWriter
+from fahv.sil.workspace import ROOT
 
 pytestmark = pytest.mark.ros  # runs the built node graph
 
@@ -123,7 +123,7 @@ def test_live_view_serves_every_loop_topic_to_a_foxglove_client(quick_case, tmp_
     times = [int(e["timestamp"]) for e in events if e["op"] == "time"]
     assert times and times == sorted(times) and times[-1] == (N - 1) * 20_000_000
     # paced: the plant's N steps took at least (N - 1) Ts / rate of wall time
-    from fahv.runs.workspace import WS
+    from fahv.sil.workspace import WS
 
     plant_log = (WS / "log" / "sil" / Path(bag).name / "logs" / "plant.log").read_text()
     wall = float(re.search(r"done: \d+ steps in ([\d.]+) s wall", plant_log).group(1))

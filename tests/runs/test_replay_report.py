@@ -16,7 +16,7 @@ from fahv.cli import main
 from fahv.loop.graph import TOPICS
 from fahv.runs.bag import bag_paths, iter_raw, read_run, run_result_of
 from fahv.runs.replay import run_replay
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 
 pytestmark = pytest.mark.ros  # every test here runs the built node graph
 

@@ -24,8 +24,8 @@ from fahv.loop.simulate import simulate
 from fahv.runs import replay
 from fahv.runs.bag import bag_paths, read_run
 from fahv.runs.replay import RecordedSteps, compare_outputs, recorded_steps, run_replay
-from fahv.runs.sil import recorder_metadata, run_parameter_file
 from fahv.runs.writer import RunWriter
+from fahv.sil.runner import recorder_metadata, run_parameter_file
 
 N, LAG = 50, 8  # complete steps, then steps with a lagging topic
 LAGGING = "/hsv/nominal"
@@ -154,7 +154,7 @@ def test_the_replay_node_by_hand_keeps_the_complete_steps_too(runs):
     import subprocess
     import sys
 
-    from fahv.runs.workspace import ensure_built, ros_env
+    from fahv.sil.workspace import ensure_built, ros_env
 
     ensure_built()
     code = (

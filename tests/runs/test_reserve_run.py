@@ -1,7 +1,7 @@
-"""Run names of concurrent runs do not collide (fahv.runs.sil.reserve_run), nor those of
+"""Run names of concurrent runs do not collide (fahv.sil.runner.reserve_run), nor those of
 a graph started again with one parameter file (fahv.runs.writer.free_run_folder)."""
 
-from fahv.runs.sil import reserve_run
+from fahv.sil.runner import reserve_run
 
 
 def test_same_second_same_case_gets_distinct_names_and_folders(tmp_path):

@@ -16,7 +16,6 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from fahv.cli import main
 from fahv.loop.graph import TOPICS
 from fahv.loop.simulate import simulate
-from fahv.loop.wire import encode, typestore
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import (
     PARAMS,
@@ -30,8 +29,9 @@ from fahv.runs.bag import (
 from fahv.runs.latency import TIMESTAMPS_FILE, load_timestamps, run_latencies, save_timestamps
 from fahv.runs.messages import LOOP_QOS
 from fahv.runs.metrics import metrics
-from fahv.runs.sil import recorder_metadata, run_parameter_file
 from fahv.runs.writer import RunWriter
+from fahv.sil.runner import recorder_metadata, run_parameter_file
+from fahv.sil.wire import encode, typestore
 
 T, N = 2.0, 100
 

@@ -12,8 +12,8 @@ from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import TruncatedRunWarning, bag_paths, read_run, run_result_of
 from fahv.runs.metrics import metrics
-from fahv.runs.sil import run_metadata
 from fahv.runs.writer import RunWriter
+from fahv.sil.runner import run_metadata
 
 #: The fields of a VehicleState message: the state, the actuator positions and rates.
 STATE_MSG = (*STATE_FIELDS, "phi_a", "delta_e_a", "phi_a_rate_peak", "delta_e_a_rate_peak")

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from fahv.runs.workspace import ensure_built, ros_env
+from fahv.sil.workspace import ensure_built, ros_env
 
 pytestmark = pytest.mark.ros  # imports hsv_common from the built workspace
 

@@ -18,10 +18,10 @@ from fahv.model.vehicle import ALPHA, load_vehicle
 from fahv.msg import MSG_DIR
 from fahv.runs.bag import bag_paths, read_run
 from fahv.runs.metrics import metrics
-from fahv.runs.sil import run_metadata, write_run_params
 from fahv.runs.tools import compare, export_run, field_units, summarize, topic_table
-from fahv.runs.workspace import ROOT
 from fahv.runs.writer import RunWriter
+from fahv.sil.runner import run_metadata, write_run_params
+from fahv.sil.workspace import ROOT
 
 T, N = 2.0, 100
 LAYOUT = ROOT / "ros_ws" / "src" / "hsv_bringup" / "config" / "foxglove_layout.json"

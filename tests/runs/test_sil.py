@@ -16,8 +16,8 @@ from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import iter_raw, read_run, run_result_of
 from fahv.runs.metrics import metrics
 from fahv.runs.replay import run_replay
-from fahv.runs.sil import run_sil
-from fahv.runs.workspace import WS
+from fahv.sil.runner import run_sil
+from fahv.sil.workspace import WS
 
 pytestmark = pytest.mark.ros  # every test here runs the built node graph
 

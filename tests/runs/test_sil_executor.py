@@ -17,8 +17,8 @@ import pytest
 from fahv.loop.graph import TEARDOWN_MARK, TOPICS, teardown_hung
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import read_run, run_result_of
-from fahv.runs.sil import run_sil
-from fahv.runs.workspace import ensure_built, ros_env
+from fahv.sil.runner import run_sil
+from fahv.sil.workspace import ensure_built, ros_env
 
 pytestmark = pytest.mark.ros  # child processes with the built workspace sourced
 

@@ -19,9 +19,9 @@ from fahv.loop.graph import NODES, TOPICS
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import read_run, run_result_of
 from fahv.runs.latency import run_latencies
-from fahv.runs.sil import run_sil
-from fahv.runs.workspace import ROOT, ros_env
 from fahv.runs.writer import RunWriter
+from fahv.sil.runner import run_sil
+from fahv.sil.workspace import ROOT, ros_env
 
 pytestmark = pytest.mark.ros  # every test here runs the built node graph
 

@@ -11,7 +11,7 @@ from fahv.cli import main
 from fahv.cli.run import EXIT_VERDICT
 from fahv.loop.simulate import simulate
 from fahv.runs.bag import read_run, run_result_of
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 from fahv.verdict import RunEnded, Verdict
 
 pytestmark = pytest.mark.ros  # runs the built node graph

@@ -11,7 +11,7 @@ from fahv.loop.simulate import simulate
 from fahv.model.vehicle import load_vehicle
 from fahv.runs.bag import read_run, run_result_of
 from fahv.runs.judged import run_vehicle
-from fahv.runs.sil import run_sil
+from fahv.sil.runner import run_sil
 from fahv.spec.artefacts import load_design, save_design, stale_reason
 from fahv.spec.files import spec_file
 

@@ -1,4 +1,4 @@
-"""The one wire codec of the loop messages (fahv.loop.wire.encode / decode_message).
+"""The one wire codec of the loop messages (fahv.sil.wire.encode / decode_message).
 
 In process: every loop message round-trips exactly (values, dtypes, shapes), with empty
 and non-empty arrays and strings, and the typed path writes the same bytes as the lane
@@ -16,9 +16,9 @@ import pytest
 from rosbags.typesys import Stores, get_typestore
 
 from fahv.loop.graph import TOPICS, clock_msg
-from fahv.loop.wire import STANDARD_TYPES, decode_message, encode, step_of, typestore
 from fahv.msg import MESSAGES, PKG
-from fahv.runs.workspace import ensure_built, ros_env
+from fahv.sil.wire import STANDARD_TYPES, decode_message, encode, step_of, typestore
+from fahv.sil.workspace import ensure_built, ros_env
 
 
 def random_message(cls, rng):
@@ -79,7 +79,7 @@ SCRIPT = (
     "from hsv_common.topics import msg_type_of\n"
     "from fahv.loop.graph import TOPICS, clock_msg\n"
     "from fahv.msg import MESSAGES\n"
-    "from fahv.loop.wire import decode_message, encode\n"
+    "from fahv.sil.wire import decode_message, encode\n"
     + inspect.getsource(random_message)
     + inspect.getsource(assert_same)
     + r"""

@@ -45,7 +45,7 @@ from fahv.loop.batch import simulate_batch
 from fahv.loop.simulate import RunResult
 from fahv.model.vehicle import ALPHA, THETA, H, V, load_vehicle
 from fahv.runs.metrics import metrics
-from fahv.runs.sil import run_coverage
+from fahv.sil.runner import run_coverage
 from fahv.spec.artefacts import load_design, save_design
 from fahv.spec.plant_dispersion import rate_limit_factor
 from fahv.version import __version__
@@ -110,7 +110,7 @@ def run_batch(design, data: dict, variant: str, indices: list[int], duration: fl
     -------
     dict
         `rows` (one dict per run: index, variant, seeds, dispersed values,
-        `coverage` (its coverage verdict, `fahv.runs.sil.run_coverage`), status,
+        `coverage` (its coverage verdict, `fahv.sil.runner.run_coverage`), status,
         reason, every metric of `fahv.runs.metrics.metrics` (`settling_after_command_s`
         among them), `wall_s`), `trajectories` (per completed
         run), `wall_s` of the batch, `host`.

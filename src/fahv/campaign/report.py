@@ -401,7 +401,7 @@ def coverage_lines(data: dict, per_variant: dict, certified=None) -> tuple[dict,
     """Pass rates of the draws the design certifies and of the others, apart.
 
     A draw's group is its runs' coverage verdict (column `coverage`,
-    `fahv.runs.sil.run_coverage`); a dataset of an earlier version, without the
+    `fahv.sil.runner.run_coverage`); a dataset of an earlier version, without the
     column, has no such section.
 
     Parameters

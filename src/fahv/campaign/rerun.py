@@ -6,7 +6,7 @@ a function of (seed, i)), `design/` the design it ran with. In process it goes
 through `fahv.loop.simulate.simulate` with the run's overrides, recorded by
 `fahv.runs.writer.RunWriter`; the batched simulator of the campaign gives the same
 bits, so the metrics equal the recorded row exactly. With `sil=True` the same
-parameters go through the ROS 2 node graph (`fahv.runs.sil.run_sil`). The run
+parameters go through the ROS 2 node graph (`fahv.sil.runner.run_sil`). The run
 file records the run's own values: its fault in the run metadata (`fault_*`), the
 campaign, its hash and seed, the run index and every dispersed value
 (`dispersed.<column>`), and the parameter file of every node.
@@ -30,8 +30,8 @@ from fahv.loop.simulate import simulate, simulate_parameters
 from fahv.runs.bag import PARAMS, read_run, run_result_of, start_metadata
 from fahv.runs.judged import run_limits
 from fahv.runs.metrics import metrics
-from fahv.runs.sil import recorder_metadata, run_graph, run_parameter_file, run_sil
 from fahv.runs.writer import RunWriter
+from fahv.sil.runner import recorder_metadata, run_graph, run_parameter_file, run_sil
 from fahv.spec.artefacts import load_design
 from fahv.spec.plant_dispersion import rate_limit_factor
 

@@ -24,7 +24,7 @@ from fahv.campaign.report import make_report
 from fahv.campaign.rerun import rerun, rerun_file
 from fahv.campaign.spec import load_campaign
 from fahv.errors import CampaignError
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 
 #: Exit status of an interrupted campaign (as a shell reports SIGINT).
 INTERRUPTED = 130

@@ -25,7 +25,7 @@ from fahv.campaign import store
 from fahv.campaign.robustness import SEARCHABLE
 from fahv.campaign.spec import load_campaign
 from fahv.clearance.run import clear, summary_lines, write_convergence
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 
 
 def cmd_clearance(args) -> int:

@@ -13,7 +13,7 @@ from fahv.analysis.margin_study import margin_study
 from fahv.cli.common import add_vehicle_option, vehicle_of
 from fahv.cli.design import resolve_design_file
 from fahv.model.vehicle import load_vehicle
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 from fahv.spec.store import stored_design
 
 #: The design whose table docs/results/margins.md shows (`<!-- margins-table -->`).
@@ -55,7 +55,7 @@ def study_of(design: str, design_dir=None, vehicle=None, every_setting: bool = F
 def docs_table() -> str:
     """The Markdown table and summary `fahv margins cm_certified --markdown` prints.
 
-    The design file of the repository (`fahv.runs.workspace.ROOT`), for the docs
+    The design file of the repository (`fahv.sil.workspace.ROOT`), for the docs
     build's hook (`docs/hooks/generated.py`, marker `margins-table`).
 
     Returns

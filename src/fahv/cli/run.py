@@ -14,18 +14,18 @@ from fahv.cli.common import add_vehicle_option, progress, read_run_warned, to_js
 from fahv.errors import FahvError, RunInterrupted
 from fahv.loop.graph import TOPICS
 from fahv.loop.simulate import simulate
-from fahv.loop.wire import encode
 from fahv.runs.bag import run_result_of
 from fahv.runs.metrics import metrics
-from fahv.runs.sil import (
+from fahv.runs.tools import format_metrics
+from fahv.runs.writer import RunWriter
+from fahv.sil.runner import (
     recorder_metadata,
     run_coverage,
     run_name,
     run_parameter_file,
 )
-from fahv.runs.tools import format_metrics
-from fahv.runs.workspace import ROOT
-from fahv.runs.writer import RunWriter
+from fahv.sil.wire import encode
+from fahv.sil.workspace import ROOT
 from fahv.spec.plant_dispersion import rate_limit_factor
 from fahv.spec.requirements import judge, limits_of, overall, verdict_record, verdict_table
 from fahv.spec.scenario import load_scenario
@@ -246,7 +246,7 @@ def docs_verdict_table() -> str:
     """The verdict table `fahv simulate offline_design/scenarios/case1.yaml --no-record` prints.
 
     For the docs build's hook (`docs/hooks/generated.py`, marker `case1-verdict`): the
-    command run in process on the repository's scenario (`fahv.runs.workspace.ROOT`),
+    command run in process on the repository's scenario (`fahv.sil.workspace.ROOT`),
     its table as an indented block.
 
     Returns

@@ -30,9 +30,9 @@ from fahv.loop.params import controller_node
 from fahv.runs.bag import read_run, run_result_of
 from fahv.runs.judged import run_judgements
 from fahv.runs.metrics import metrics
-from fahv.runs.sil import run_coverage, run_name, run_sil, write_run_params
 from fahv.runs.tools import format_metrics
-from fahv.runs.workspace import ROOT
+from fahv.sil.runner import run_coverage, run_name, run_sil, write_run_params
+from fahv.sil.workspace import ROOT
 from fahv.spec.plant_dispersion import rate_limit_factor
 from fahv.spec.requirements import verdict_record
 from fahv.spec.scenario import load_scenario
@@ -126,7 +126,7 @@ def _plant_rate(args) -> dict | None:
 
 def _write_params_only(args, design, variant: str) -> int:
     """`fahv sil --write-params FILE`: the run's parameter file and how to start the nodes."""
-    from fahv.runs.workspace import ensure_built
+    from fahv.sil.workspace import ensure_built
 
     ensure_built()  # the nodes started by hand are those of the current sources
     out = Path(args.out or ROOT / "bags").resolve()

@@ -1,4 +1,5 @@
 """Recorded runs.
 
-rosbag2/MCAP files, metrics, inspect/export/compare, plots, the SIL runner and replay.
+rosbag2/MCAP files, metrics, inspect/export/compare, plots, replay (the SIL runner is
+`fahv.sil.runner`).
 """

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from fahv.errors import RunError
 from fahv.loop.graph import TOPICS
-from fahv.runs.workspace import WS
+from fahv.sil.workspace import WS
 
 #: Foxglove's default port for a WebSocket connection.
 DEFAULT_PORT = 8765
@@ -29,7 +29,7 @@ def schema_text(topic: str) -> str:
     The definition of the type followed by those it uses, in the rosbag2/MCAP
     concatenated form (`MSG:` sections).
     """
-    from fahv.loop.wire import typestore
+    from fahv.sil.wire import typestore
 
     text, _ = typestore().generate_msgdef(TOPICS[topic], ros_version=2)
     return text

@@ -1,6 +1,6 @@
 """The loop topics' messages in a run file: their QoS and their decoding to dicts.
 
-The CDR bytes in a run file are those of the wire codec `fahv.loop.wire` (the bytes
+The CDR bytes in a run file are those of the wire codec `fahv.sil.wire` (the bytes
 the nodes publish); `decode` reads them back as message dicts, and
 `file_typestore` reads a definition stored in a run file (a run recorded before a
 message changed). `LOOP_QOS` is the channels' `offered_qos_profiles`.
@@ -24,7 +24,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from fahv.errors import RunError
 from fahv.loop import graph
 from fahv.loop.graph import TOPICS
-from fahv.loop.wire import typestore
+from fahv.sil.wire import typestore
 
 _INF = QosTime(2147483647, 4294967295)
 

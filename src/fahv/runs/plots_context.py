@@ -21,7 +21,7 @@ from fahv.errors import FahvError
 from fahv.loop.simulate import RunResult
 from fahv.model.vehicle import InputLimits, load_vehicle
 from fahv.runs.bag import run_result_of
-from fahv.runs.workspace import ROOT
+from fahv.sil.workspace import ROOT
 from fahv.spec.plant_dispersion import rate_limit_factor
 from fahv.spec.store import design_dir
 

@@ -35,8 +35,8 @@ from fahv.runs.bag import (
     stored_metadata,
 )
 from fahv.runs.messages import decode
-from fahv.runs.sil import _runner, reserve_run, run_runner
-from fahv.runs.workspace import WS, ensure_built, ros_env
+from fahv.sil.runner import _runner, reserve_run, run_runner
+from fahv.sil.workspace import WS, ensure_built, ros_env
 
 
 @dataclass

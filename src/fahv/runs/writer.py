@@ -23,9 +23,9 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from fahv.errors import RunError
 from fahv.interrupt import deferred
 from fahv.loop.graph import TOPICS
-from fahv.loop.wire import encode, typestore
 from fahv.runs.bag import PARAMS, RUN_RECORD
 from fahv.runs.messages import LOOP_QOS
+from fahv.sil.wire import encode, typestore
 from fahv.verdict import RunEnded, Verdict, completed
 from fahv.version import code_version
 
@@ -107,7 +107,7 @@ def free_run_folder(path: str | Path) -> Path:
     """`path`, or the first of `<path>-2`, `<path>-3` ... that does not exist.
 
     The name a run started again with the same parameter file records to (the recorder
-    started by hand), as `fahv.runs.sil.reserve_run` names two runs started in the
+    started by hand), as `fahv.sil.runner.reserve_run` names two runs started in the
     same second.
 
     Raises

@@ -45,11 +45,11 @@ from rclpy.node import Node
 
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
-from fahv.loop.wire import step_of
 from fahv.runs.latency import TIMESTAMPS_FILE, timestamps_npz
 from fahv.runs.live import LiveView, live_hint
-from fahv.runs.nodes import RECORDER
 from fahv.runs.writer import RunWriter, free_run_folder
+from fahv.sil.tool_nodes import RECORDER
+from fahv.sil.wire import step_of
 
 #: Pause of the recorder after a spin that recorded messages [s wall time]: the
 #: messages that arrive meanwhile are taken together at the next wake-up. Its lag stays

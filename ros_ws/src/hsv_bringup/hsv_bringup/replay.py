@@ -32,11 +32,11 @@ from rclpy.node import Node
 
 from fahv.errors import ParameterError, RunError
 from fahv.loop.graph import TOPICS
-from fahv.loop.wire import step_of
 from fahv.runs.bag import TruncatedRunWarning, iter_raw
-from fahv.runs.nodes import REPLAY
 from fahv.runs.replay import output_attachments, steps_of
 from fahv.runs.writer import RunWriter
+from fahv.sil.tool_nodes import REPLAY
+from fahv.sil.wire import step_of
 
 
 def load_steps(

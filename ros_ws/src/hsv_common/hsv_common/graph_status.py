@@ -3,7 +3,7 @@
 `GraphStatus` publishes the node's status on `fahv.loop.graph.STATUS_TOPIC`
 (at start, on every change, and as a heartbeat from a thread of its own, so a node busy
 building its core or solving still counts as alive), keeps the peers' statuses in a
-`fahv.loop.peers.Peers` table, and decides:
+`fahv.sil.peers.Peers` table, and decides:
 
 - **ready**: every subscription sees its publisher, every publisher sees each subscriber
   the node table expects among `graph_nodes`, every peer listed in `wait_for` (the
@@ -34,7 +34,7 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 from fahv.loop.graph import GRAPH, STATUS_PERIOD_S, STATUS_TOPIC, producer_of
-from fahv.loop.peers import Peers, parse_status, status
+from fahv.sil.peers import Peers, parse_status, status
 from fahv.verdict import RunEnded
 from hsv_common.runtime import (
     STATUS_QOS,
@@ -230,7 +230,7 @@ class GraphStatus:
             ends with the same verdict (and announces it at once, as its peer did).
         WatchdogError
             If a peer exited with an error; the message is
-            `fahv.loop.peers.Peers.failed_verdict`: the root cause (a peer that
+            `fahv.sil.peers.Peers.failed_verdict`: the root cause (a peer that
             never started or was lost) first.
         """
         ended = self.peers.run_verdict()

@@ -21,7 +21,7 @@ A `LockstepNode` declares the typed parameters of its node
 
 The process around the node (exit codes, signals, executor) is `hsv_common.runtime`,
 the conversion between typed messages and their CDR bytes the library's codec
-(`fahv.loop.wire`).
+(`fahv.sil.wire`).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from rclpy.node import Node
 
 from fahv.loop.graph import GRAPH, PREVIOUS, loop_nodes, n_steps_of, producer_of
 from fahv.loop.params import specs, validate
-from fahv.loop.wire import decode_message, encode, step_of
+from fahv.sil.wire import decode_message, encode, step_of
 from fahv.verdict import RunEnded
 from hsv_common.graph_status import GraphStatus
 from hsv_common.parameters import declare_graph, declare_parameters

@@ -1,7 +1,7 @@
 """ROS parameters of the nodes, generated from the library's configuration fields.
 
 Every node declares its parameters from `fahv.config.Field` declarations
-(`fahv.loop.params.specs` for the loop nodes, `fahv.runs.nodes` for the
+(`fahv.loop.params.specs` for the loop nodes, `fahv.sil.tool_nodes` for the
 recorder and the replay): typed, with a description (unit, range, equation) and the
 numeric range in the descriptor, and validates them once with
 `fahv.config.spec.validate_flat`. A bad value raises

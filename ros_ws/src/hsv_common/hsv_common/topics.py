@@ -1,7 +1,7 @@
 """The generated ROS message class of each loop topic.
 
 The nodes publish and receive the loop messages as CDR bytes, converted by the library's
-one codec (`fahv.loop.wire.encode`, `fahv.loop.wire.decode_message`);
+one codec (`fahv.sil.wire.encode`, `fahv.sil.wire.decode_message`);
 rclpy still needs each topic's generated class to create its publishers and
 subscriptions, and this module names it.
 """

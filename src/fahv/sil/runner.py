@@ -30,7 +30,7 @@ from fahv.errors import RunError
 from fahv.loop.graph import graph_nodes
 from fahv.loop.params import case_with, controller_node, node_parameters, parameter_file
 from fahv.plant.faults import FAULTS
-from fahv.runs.workspace import ROOT, WS, ensure_built, ros_env
+from fahv.sil.workspace import ROOT, WS, ensure_built, ros_env
 from fahv.spec.coverage import Coverage, coverage
 from fahv.spec.requirements import limits_of
 from fahv.version import code_version
