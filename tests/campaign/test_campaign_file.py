@@ -250,8 +250,9 @@ def test_the_hardware_campaign_disperses_the_servos_and_sensors_on_the_same_draw
 
 
 def test_a_copied_campaign_file_runs_sized_from_the_command_line(tmp_path, monkeypatch, capsys):
-    """A shipped campaign copied elsewhere finds its scenario by name; --runs and
-    --duration size it without editing it, into a folder named with its size."""
+    """A shipped campaign copied elsewhere finds its scenario by name, started from another
+    folder too (the project's scenarios); --runs and --duration size it without editing
+    it, into a folder named with its size."""
     from fahv.cli import campaign as cli
     from fahv.sil.workspace import ROOT
 
@@ -265,6 +266,7 @@ def test_a_copied_campaign_file_runs_sized_from_the_command_line(tmp_path, monke
         raise CampaignError("stopped by the test")
 
     monkeypatch.setattr(cli, "run_campaign", capture)
+    monkeypatch.chdir(copy.parent)  # no offline_design/ here
     assert main(["campaign", str(copy), "--runs", "20", "--duration", "60"]) == 2
     c = seen["campaign"]
     assert (c.data["runs"], c.data["duration"]) == (20, 60.0)

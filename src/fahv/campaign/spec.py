@@ -429,14 +429,18 @@ def scenario_path(name: str, base: Path | None = None) -> Path:
 
     A name (no `.yaml`) is looked up in the `scenarios/` folder beside the campaign's
     folder (`offline_design/campaigns/x.yaml` -> `offline_design/scenarios/<name>.yaml`),
-    then in `offline_design/scenarios/` of the working folder: a campaign file that names
-    its scenario runs from wherever it is copied.
+    then in `offline_design/scenarios/` of the working folder, then in the project's own
+    (`fahv.sil.workspace.ROOT`): a campaign file that names its scenario runs from
+    wherever it is copied, started from wherever.
     """
+    from fahv.sil.workspace import ROOT
+
     p = Path(base or ".") / name
     if p.suffix or p.is_file():
         return p
     tries = [Path(base or ".").parent / "scenarios" / f"{name}.yaml",
-             Path("offline_design") / "scenarios" / f"{name}.yaml"]  # fmt: skip
+             Path("offline_design") / "scenarios" / f"{name}.yaml",
+             ROOT / "offline_design" / "scenarios" / f"{name}.yaml"]  # fmt: skip
     return next((t for t in tries if t.is_file()), tries[-1])
 
 
