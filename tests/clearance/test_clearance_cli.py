@@ -33,6 +33,8 @@ def test_the_folder_holds_every_run_the_worst_cases_and_the_figure(cleared, caps
     assert 0.0 < search["margin"] < 0.5 and 0.0 < mc["margin"] < 0.5
     assert set(search["values"]) >= {"s.m", "fault.t_onset", "fault.loss", "fault.rho_f"}
     assert (out / "convergence_attitude.png").stat().st_size > 10_000
+    table = (out / "clearance.md").read_text()
+    assert f"| attitude | {search['margin']:.4g} deg | {search['index']} | 20 |" in table
     assert man["kind"] == "clearance" and man["optimizer"] == "cma"
     assert len(man["variables"]) == 12  # ten parameters, the onset, the loss
 

@@ -6,9 +6,9 @@ the campaign's dispersions (`fahv.clearance.space`), every generation one batch 
 on Dask (`fahv.clearance.evaluate`); optionally beside it a Monte Carlo of the same
 budget, the campaign's own first draws. The folder it writes:
 
-- `clearance.json`: the campaign, design, budget and, per requirement, the worst case
-  found (its margin, point, values, status), the simulations spent, the Monte Carlo's
-  worst;
+- `campaign.json`: the campaign, design, budget and, per requirement, the worst case
+  found (its margin, run index, values, status), the simulations spent, the Monte Carlo's
+  worst; `clearance.md`, the same as a Markdown table (`summary_markdown`);
 - `results/`: every run as a campaign row (Parquet) with its `requirement`, `search`
   (`cma`, `de` or `monte_carlo`), `generation` and `margin`;
 - `convergence_<requirement>.png`: the smallest margin against the simulations spent;
@@ -188,8 +188,9 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
         if i is not None:
             path = write_worst_scenario(campaign, f.search.rows[i], variant, f.requirement, out)
             entry["search"]["scenario"] = path.name
-    man = store.read_manifest(out) or {}
-    store.write_manifest(out, {**man, "requirements": summary})
+    man = {**(store.read_manifest(out) or {}), "requirements": summary}
+    store.write_manifest(out, man)
+    (out / "clearance.md").write_text(summary_markdown(man))
     return found
 
 
@@ -259,6 +260,38 @@ def summary_lines(manifest: dict) -> list[str]:
             lines.append(f"certificate: {e['requirement']} held in all {c['certified_runs']} "
                          "certified runs searched")  # fmt: skip
     return lines
+
+
+def summary_markdown(manifest: dict) -> str:
+    """The clearance's result as Markdown, the file `clearance.md`.
+
+    Per requirement the worst margin found, its run and the values that make it, the
+    simulations spent and the Monte Carlo's worst margin.
+    """
+
+    def margin(w: dict | None, unit: str) -> str:
+        if w is None or w["margin"] is None:
+            return "-"
+        m = w["margin"]
+        return "ended early" if m == -math.inf else f"{m:.4g} {unit}"
+
+    lines = [f"Clearance of campaign `{manifest['name']}` (design {manifest['design_hash']}, "
+             f"{manifest.get('optimizer', 'cma')}, budget {manifest['budget']} runs of "
+             f"{manifest['duration']:g} s per requirement; margin = limit - value)", "",
+             "| requirement | worst margin, search | its run | simulations | worst margin, "
+             "Monte Carlo (same budget) |", "|---|---|---|---|---|"]  # fmt: skip
+    for e in manifest.get("requirements", []):
+        w, mc = e["search"], e["monte_carlo"]
+        lines.append(f"| {e['requirement']} | {margin(w, e['unit'])} | {w.get('index', '-')} "
+                     f"| {w['simulations']} | {margin(mc, e['unit'])} |")  # fmt: skip
+    for e in manifest.get("requirements", []):
+        v = e["search"].get("values") or {}
+        if v:
+            shown = ", ".join(f"{k} {val:.4g}" if isinstance(val, float) else f"{k} {val}"
+                              for k, val in v.items())  # fmt: skip
+            lines += ["", f"Worst case of {e['requirement']} (run {e['search']['index']}, "
+                      f"`{e['search'].get('scenario', '')}`): {shown}."]  # fmt: skip
+    return "\n".join(lines) + "\n"
 
 
 def write_convergence(out_dir: Path, found: Found) -> Path:
