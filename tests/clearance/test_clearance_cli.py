@@ -75,7 +75,7 @@ def test_the_certificate_check_searches_only_what_the_design_certifies(tmp_path,
 
 
 def test_a_certificate_failure_is_named_with_its_run():
-    from fahv.clearance.run import summary_lines
+    from fahv.clearance.report import summary_lines
 
     worst = {"margin": -0.02, "simulations": 40, "index": 1033}
     man = {"name": "case1", "budget": 40, "design_hash": "x", "requirements": [
@@ -109,3 +109,31 @@ def test_the_worst_case_scenario_file_flies_the_same_run(cleared):
     same = [k for k in m if k in row and (m[k] == row[k] or (
         isinstance(m[k], float) and math.isnan(m[k]) and math.isnan(row[k])))]
     assert len(same) == len(m) >= 40
+
+
+def test_the_report_beside_a_finished_campaign(cleared, tmp_path, capsys):
+    """`fahv clearance report DIR --against CAMPAIGN_DIR` adds the worst margin of a finished
+    campaign of the same file (here its first 6 draws of 5 s): the smallest of its runs'
+    margins, in the table, the Markdown and the manifest; another campaign is refused."""
+    import numpy as np
+
+    from fahv.campaign import store
+    from fahv.campaign.robustness import robustness
+
+    out, _ = cleared
+    camp = tmp_path / "camp"
+    assert main(["campaign", CAMPAIGN, "--runs", "6", "--duration", "5", "--workers", "1",
+                 "--out", str(camp), "--no-report"]) == 0  # fmt: skip
+    capsys.readouterr()
+    assert main(["clearance", "report", str(out), "--against", str(camp)]) == 0
+    printed = capsys.readouterr().out
+    rows = store.read_rows(camp)
+    worst = min(robustness(r, "attitude") for r in rows)
+    man = json.loads((out / "campaign.json").read_text())
+    entry = man["requirements"][0]["campaign"]
+    assert entry["runs"] == 6 and entry["margin"] == pytest.approx(worst, abs=1e-12)
+    assert f"{worst:.4g} deg (6 runs)" in printed
+    assert "the campaign's 6 runs" in (out / "clearance.md").read_text()
+    assert np.isfinite(entry["margin"])
+    assert main(["clearance", "report", str(out), "--against", str(out)]) == 2
+    assert "not a campaign of case1" in capsys.readouterr().err

@@ -12,5 +12,6 @@ requirement (`fahv.campaign.robustness`), within a budget of simulations (`searc
 - `fahv.clearance.search`: CMA-ES and differential evolution within a budget.
 - `fahv.clearance.evaluate`: a generation's runs as campaign-engine tasks on Dask.
 - `fahv.clearance.worst`: a worst case as a scenario file.
+- `fahv.clearance.report`: the folder's table, Markdown and figures, beside a campaign's.
 - `fahv.clearance.run`: `fahv clearance`'s search per requirement and its folder.
 """

@@ -8,7 +8,7 @@ budget, the campaign's own first draws. The folder it writes:
 
 - `campaign.json`: the campaign, design, budget and, per requirement, the worst case
   found (its margin, run index, values, status), the simulations spent, the Monte Carlo's
-  worst; `clearance.md`, the same as a Markdown table (`summary_markdown`);
+  worst; `clearance.md`, the same as a Markdown table (`fahv.clearance.report`);
 - `results/`: every run as a campaign row (Parquet) with its `requirement`, `search`
   (`cma`, `de` or `monte_carlo`), `generation` and `margin`;
 - `convergence_<requirement>.png`: the smallest margin against the simulations spent;
@@ -33,6 +33,7 @@ from fahv.campaign.robustness import SEARCHABLE
 from fahv.campaign.spec import Campaign
 from fahv.certificate.verified import load_or_design
 from fahv.clearance.evaluate import CampaignEvaluator
+from fahv.clearance.report import report
 from fahv.clearance.search import OPTIMIZERS, Search
 from fahv.clearance.space import SearchSpace
 from fahv.clearance.worst import write_worst_scenario
@@ -190,7 +191,7 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
             entry["search"]["scenario"] = path.name
     man = {**(store.read_manifest(out) or {}), "requirements": summary}
     store.write_manifest(out, man)
-    (out / "clearance.md").write_text(summary_markdown(man))
+    report(out)
     return found
 
 
@@ -227,95 +228,3 @@ def _summary(f: Found, certificate: bool) -> dict:
         out["certificate"] = {"certified_runs": certified,
                               "failures": certificate_failures(f.search)}  # fmt: skip
     return out
-
-
-
-
-def summary_lines(manifest: dict) -> list[str]:
-    """The console table of a clearance folder's manifest: worst margin per requirement."""
-
-    def cell(w: dict | None, unit: str) -> str:
-        if w is None:
-            return "-"
-        m = w["margin"]
-        text = "n/a" if m is None else ("ended early" if m == -math.inf else f"{m:.4g} {unit}")
-        return f"{text} ({w['simulations']} runs)"
-
-    lines = [f"clearance of {manifest['name']} (budget {manifest['budget']} runs, "
-             f"design {manifest['design_hash']})",
-             "requirement     worst margin, search            worst margin, Monte Carlo"]
-    for e in manifest.get("requirements", []):
-        s = cell(e["search"], e["unit"])
-        lines.append(f"{e['requirement']:<15} {s:<31} {cell(e['monte_carlo'], e['unit'])}")
-    lines.append("margin: limit - value (negative: the requirement fails there)")
-    for e in manifest.get("requirements", []):
-        c = e.get("certificate")
-        if c is None:
-            continue
-        if c["failures"]:
-            lines.append(f"CERTIFICATE FAILURE: {e['requirement']} missed in {len(c['failures'])} "
-                         f"certified run(s), the worst run {e['search']['index']} (fahv campaign "
-                         "rerun DIR INDEX flies it)")  # fmt: skip
-        else:
-            lines.append(f"certificate: {e['requirement']} held in all {c['certified_runs']} "
-                         "certified runs searched")  # fmt: skip
-    return lines
-
-
-def summary_markdown(manifest: dict) -> str:
-    """The clearance's result as Markdown, the file `clearance.md`.
-
-    Per requirement the worst margin found, its run and the values that make it, the
-    simulations spent and the Monte Carlo's worst margin.
-    """
-
-    def margin(w: dict | None, unit: str) -> str:
-        if w is None or w["margin"] is None:
-            return "-"
-        m = w["margin"]
-        return "ended early" if m == -math.inf else f"{m:.4g} {unit}"
-
-    lines = [f"Clearance of campaign `{manifest['name']}` (design {manifest['design_hash']}, "
-             f"{manifest.get('optimizer', 'cma')}, budget {manifest['budget']} runs of "
-             f"{manifest['duration']:g} s per requirement; margin = limit - value)", "",
-             "| requirement | worst margin, search | its run | simulations | worst margin, "
-             "Monte Carlo (same budget) |", "|---|---|---|---|---|"]  # fmt: skip
-    for e in manifest.get("requirements", []):
-        w, mc = e["search"], e["monte_carlo"]
-        lines.append(f"| {e['requirement']} | {margin(w, e['unit'])} | {w.get('index', '-')} "
-                     f"| {w['simulations']} | {margin(mc, e['unit'])} |")  # fmt: skip
-    for e in manifest.get("requirements", []):
-        v = e["search"].get("values") or {}
-        if v:
-            shown = ", ".join(f"{k} {val:.4g}" if isinstance(val, float) else f"{k} {val}"
-                              for k, val in v.items())  # fmt: skip
-            lines += ["", f"Worst case of {e['requirement']} (run {e['search']['index']}, "
-                      f"`{e['search'].get('scenario', '')}`): {shown}."]  # fmt: skip
-    return "\n".join(lines) + "\n"
-
-
-def write_convergence(out_dir: Path, found: Found) -> Path:
-    """`convergence_<requirement>.png`: the smallest margin against simulations spent."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.4, 3.8))
-    for s, label in ((found.search, "search"),
-                     (found.monte_carlo, "Monte Carlo (the campaign's draws)")):  # fmt: skip
-        if s is not None and s.margins:
-            best = s.best_so_far()
-            ax.step(np.arange(1, best.size + 1), np.where(np.isfinite(best), best, np.nan),
-                    where="post", label=label)  # fmt: skip
-    ax.axhline(0.0, color="0.3", lw=0.8, ls="--", label="requirement's limit (margin 0)")
-    ax.set_xlabel("simulations")
-    ax.set_ylabel(f"smallest margin so far [{found.unit}]")
-    ax.set_title(f"Worst case of '{found.requirement}' against the simulations spent")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
-    path = Path(out_dir) / f"convergence_{found.requirement}.png"
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path

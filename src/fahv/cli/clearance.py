@@ -12,6 +12,11 @@ where the requirement fails), the simulations it spent and, with `--monte-carlo`
 worst of the campaign's first draws of the same budget; writes the folder that
 `fahv.clearance.run` describes. `fahv campaign rerun DIR INDEX [--sil]` flies any of its
 runs again (the worst cases' indices are in its `campaign.json`).
+
+    fahv clearance report DIR [--against CAMPAIGN_DIR]
+
+writes the folder's table, `clearance.md` and figures again; `--against` adds the worst
+margins of a finished campaign of the same campaign file (e.g. its 1000 runs).
 """
 
 from __future__ import annotations
@@ -24,12 +29,23 @@ from pathlib import Path
 from fahv.campaign import store
 from fahv.campaign.robustness import SEARCHABLE
 from fahv.campaign.spec import load_campaign
-from fahv.clearance.run import clear, summary_lines, write_convergence
+from fahv.clearance.report import report, summary_lines
+from fahv.clearance.run import clear
+from fahv.errors import CampaignError
 from fahv.sil.workspace import ROOT
 
 
 def cmd_clearance(args) -> int:
-    """Run the search of `args.campaign`; print its table and the folder."""
+    """Run the search of `args.campaign` (or `report DIR`); print its table and the folder."""
+    if args.campaign == "report":
+        if len(args.rest) != 1:
+            raise CampaignError("usage: fahv clearance report DIR [--against CAMPAIGN_DIR]")
+        man = report(args.rest[0], args.against)
+        print("\n".join(summary_lines(man)))
+        print(f"report: {Path(args.rest[0]) / 'clearance.md'}")
+        return 0
+    if args.rest:
+        raise CampaignError(f"unexpected arguments {args.rest} after the campaign file")
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
     campaign = load_campaign(args.campaign, runs=args.runs, duration=args.duration)
     requirements = args.requirement or (["tube", "attitude"] if args.certificate
@@ -42,11 +58,11 @@ def cmd_clearance(args) -> int:
 
     err(f"clearance of {campaign.name}: {', '.join(requirements)}, {args.budget} runs each "
         f"of {campaign.duration:g} s, into {out}")  # fmt: skip
-    found = clear(campaign, requirements, args.budget, out, args.scheduler, args.workers,
-                  args.seed, args.noise_seeds, args.monte_carlo, args.optimizer,
-                  args.population, args.certificate, log=err)  # fmt: skip
-    for f in found:
-        write_convergence(out, f)
+    clear(campaign, requirements, args.budget, out, args.scheduler, args.workers, args.seed,
+          args.noise_seeds, args.monte_carlo, args.optimizer, args.population,
+          args.certificate, log=err)  # fmt: skip
+    if args.against:
+        report(out, args.against)
     print("\n".join(summary_lines(store.read_manifest(out))))
     print(f"clearance folder: {out}")
     failed = any(e.get("certificate", {}).get("failures") for e in
@@ -62,7 +78,11 @@ def add_parsers(sub) -> None:
         "(CMA-ES or differential evolution, batches on Dask)",
         description=__doc__.split("\n\n")[0],
     )
-    p.add_argument("campaign", help="campaign file (its scenario, dispersions, limits)")
+    p.add_argument("campaign", help="campaign file (its scenario, dispersions, limits), or "
+                   "'report' followed by a clearance folder")
+    p.add_argument("rest", nargs="*", help="DIR (report)")
+    p.add_argument("--against", help="a finished campaign folder of the same campaign file: "
+                   "its worst margins beside the search's")
     p.add_argument("--requirement", action="append", choices=tuple(SEARCHABLE),
                    help="requirement to search (repeat; default attitude and settling)")
     p.add_argument("--budget", type=int, default=200,
