@@ -72,13 +72,15 @@ def summary_markdown(manifest: dict) -> str:
     lines = [f"Clearance of campaign `{manifest['name']}` (design {manifest['design_hash']}, "
              f"{manifest.get('optimizer', 'cma')}, budget {manifest['budget']} runs of "
              f"{manifest['duration']:g} s per requirement; margin = limit - value)", "",
-             "| requirement | worst margin, search | its run | simulations | worst margin, "
-             "Monte Carlo (same budget) |" + extra,
-             "|---|---|---|---|---|" + ("---|" if against else "")]  # fmt: skip
+             "| requirement | worst margin, search | its run | simulations | failing runs "
+             "(the first at simulation) | worst margin, Monte Carlo (same budget) |" + extra,
+             "|---|---|---|---|---|---|" + ("---|" if against else "")]  # fmt: skip
     for e in reqs:
         w, mc = e["search"], e["monte_carlo"]
+        f = e.get("failing")
+        failing = "-" if f is None else (f"{f['runs']} ({f['first']})" if f["runs"] else "0")
         row = (f"| {e['requirement']} | {_margin(w, e['unit'])} | {w.get('index', '-')} "
-               f"| {w['simulations']} | {_margin(mc, e['unit'])} |")  # fmt: skip
+               f"| {w['simulations']} | {failing} | {_margin(mc, e['unit'])} |")  # fmt: skip
         if against:
             c = e.get("campaign")
             row += f" {_margin(c, e['unit'])} (run {c['index']}) |" if c else " - |"
@@ -133,6 +135,17 @@ def write_convergence(out_dir: Path, entry: dict, rows: list[dict]) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _failing(rows: list[dict], requirement: str) -> dict:
+    """How many of the search's runs of `requirement` fail (margin < 0), and the first's place.
+
+    `runs` the count, `first` the simulation (1, 2, ...) of the first failing run (None).
+    """
+    m = [r["margin"] for r in sorted(rows, key=lambda r: r["index"])
+         if r.get("requirement") == requirement and r.get("search") != "monte_carlo"]  # fmt: skip
+    bad = [i for i, v in enumerate(m) if v is not None and v < 0.0]
+    return {"runs": len(bad), "first": bad[0] + 1 if bad else None}
 
 
 def campaign_worst(campaign_dir: Path, manifest: dict, requirement: str,
@@ -190,6 +203,8 @@ def report(out_dir: str | Path, against: str | Path | None = None,
         store.write_manifest(out, man)
     rows = store.read_rows(out)
     for e in man["requirements"]:
+        e["failing"] = _failing(rows, e["requirement"])
         write_convergence(out, e, rows)
+    store.write_manifest(out, man)
     (out / "clearance.md").write_text(summary_markdown(man))
     return man
