@@ -97,13 +97,15 @@ def group_figure(group: str, runs: list, title: str | None = None):
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
     if group == "trajectory":  # each run's own command, thin dash-dots in its colour
-        drawn: list = []
-        for i, (label, run) in enumerate(runs):
-            if any(np.array_equal(run.h_c, h) and np.array_equal(run.V_c, v) for h, v in drawn):
-                continue  # the same command as a run drawn before
-            drawn.append((run.h_c, run.V_c))
+        drawn: list = []  # (run index, run) of each distinct command
+        for i, (_, run) in enumerate(runs):
+            if not any(np.array_equal(run.h_c, r.h_c) and np.array_equal(run.V_c, r.V_c)
+                       for _, r in drawn):  # fmt: skip
+                drawn.append((i, run))
+        for i, run in drawn:
+            name = "command" if len(drawn) == 1 else f"{runs[i][0]}: command"
             style = {"color": line_style(i)["color"], "ls": "-.", "lw": 0.9, "zorder": 3}
-            axes[0].plot(run.t, run.h_c, label=f"{label}: command", **style)
+            axes[0].plot(run.t, run.h_c, label=name, **style)
             axes[1].plot(run.t, run.V_c, **style)
     if group == "tube":
         _tube_axis(axes[0], runs)
