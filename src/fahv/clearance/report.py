@@ -86,6 +86,13 @@ def summary_markdown(manifest: dict) -> str:
             row += f" {_margin(c, e['unit'])} (run {c['index']}) |" if c else " - |"
         lines.append(row)
     for e in reqs:
+        c = e.get("certificate")
+        if c is not None:
+            lines += ["", f"Certificate check of {e['requirement']}: " + (
+                f"FAILED in {len(c['failures'])} certified run(s), the worst run "
+                f"{e['search']['index']}." if c["failures"] else
+                f"held in all {c['certified_runs']} certified runs searched.")]
+    for e in reqs:
         v = e["search"].get("values") or {}
         if v:
             shown = ", ".join(f"{k} {val:.4g}" if isinstance(val, float) else f"{k} {val}"
