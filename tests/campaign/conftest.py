@@ -1,4 +1,5 @@
 import copy
+import functools
 
 import pytest
 import yaml
@@ -34,20 +35,24 @@ BASE = {
 }
 
 
+def campaign_file(folder, name, scenario=None, **changes):
+    """Path of campaign file `name` written into `folder`: `BASE` with `changes` (a
+    dispersion group's or a top-level key's) and, given, another `scenario`."""
+    data = copy.deepcopy(BASE)
+    data["name"] = name
+    if scenario is not None:
+        data["scenario"] = scenario
+    for key, value in changes.items():
+        if key in data["dispersions"]:
+            data["dispersions"][key] = value
+        else:
+            data[key] = value
+    path = folder / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
 @pytest.fixture(scope="session")
 def write_campaign(mc_dir):
     """``write_campaign(name, **changes)`` -> path of a campaign file next to the case."""
-
-    def make(name, **changes):
-        data = copy.deepcopy(BASE)
-        data["name"] = name
-        for key, value in changes.items():
-            if key in data["dispersions"]:
-                data["dispersions"][key] = value
-            else:
-                data[key] = value
-        path = mc_dir / f"{name}.yaml"
-        path.write_text(yaml.safe_dump(data))
-        return path
-
-    return make
+    return functools.partial(campaign_file, mc_dir)

@@ -9,6 +9,7 @@ cluster (one and two workers, a killed worker, Ctrl-C of the command) start one 
 own.
 """
 
+import functools
 import math
 import os
 import re
@@ -60,27 +61,10 @@ def write_campaign(request, tmp_path_factory):
     """``write_campaign(name, **changes)`` as in tests/campaign/conftest.py (its `BASE`
     campaign with the changes), around `SCENARIO` instead of the quick design: the engine
     runs any stored design alike, and the shipped one is loaded, not designed."""
-    import copy
-
-    import yaml
-
     conftest = request.config.pluginmanager.get_plugin(str(Path(__file__).with_name(
         "conftest.py")))  # fmt: skip
     folder = tmp_path_factory.mktemp("mc")
-
-    def make(name, **changes):
-        data = copy.deepcopy(conftest.BASE)
-        data.update(name=name, scenario=str(SCENARIO))
-        for key, value in changes.items():
-            if key in data["dispersions"]:
-                data["dispersions"][key] = value
-            else:
-                data[key] = value
-        path = folder / f"{name}.yaml"
-        path.write_text(yaml.safe_dump(data))
-        return path
-
-    return make
+    return functools.partial(conftest.campaign_file, folder, scenario=str(SCENARIO))
 
 
 @pytest.fixture(scope="module")

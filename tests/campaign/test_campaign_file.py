@@ -1,4 +1,4 @@
-import copy
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -44,19 +44,7 @@ def write_campaign(request, make_case, tmp_path_factory):
     (folder / "scenarios" / "quick.yaml").write_text(
         yaml.safe_dump({**scenario, "design": "quick"}, sort_keys=False))  # fmt: skip
 
-    def make(name, **changes):
-        data = copy.deepcopy(conftest.BASE)
-        data["name"] = name
-        for key, value in changes.items():
-            if key in data["dispersions"]:
-                data["dispersions"][key] = value
-            else:
-                data[key] = value
-        path = folder / f"{name}.yaml"
-        path.write_text(yaml.safe_dump(data))
-        return path
-
-    return make
+    return functools.partial(conftest.campaign_file, folder)
 
 
 @pytest.mark.parametrize(
