@@ -16,6 +16,7 @@ import numpy as np
 
 from fahv.campaign import store
 from fahv.campaign.robustness import robustness
+from fahv.clearance.search import Search
 from fahv.errors import CampaignError
 
 
@@ -102,11 +103,6 @@ def summary_markdown(manifest: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _best_so_far(margins: list[float]) -> np.ndarray:
-    m = np.nan_to_num(np.array(margins, float), nan=np.inf)
-    return np.minimum.accumulate(m) if m.size else m
-
-
 def write_convergence(out_dir: Path, entry: dict, rows: list[dict]) -> Path:
     """`convergence_<requirement>.png`: the smallest margin against simulations spent.
 
@@ -124,7 +120,9 @@ def write_convergence(out_dir: Path, entry: dict, rows: list[dict]) -> Path:
         mine = [r for r in rows if r.get("requirement") == req
                 and (r.get("search") == "monte_carlo") == (kind == "monte_carlo")]  # fmt: skip
         if mine:
-            best = _best_so_far([r["margin"] for r in sorted(mine, key=lambda r: r["index"])])
+            ordered = sorted(mine, key=lambda r: r["index"])
+            best = Search(margins=[np.nan if r["margin"] is None else r["margin"]
+                                   for r in ordered]).best_so_far()  # fmt: skip
             ax.step(np.arange(1, best.size + 1), np.where(np.isfinite(best), best, np.nan),
                     where="post", label=label)  # fmt: skip
     c = entry.get("campaign")

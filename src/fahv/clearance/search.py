@@ -37,6 +37,8 @@ from scipy.stats import qmc
 #: Objective value of a margin that does not apply (NaN) and of a run that ended early
 #: (-inf): finite stand-ins, the first never chosen as worst, the second always.
 NOT_APPLICABLE, ENDED_EARLY = 1e9, -1e9
+#: What an optimiser calls: points X (P, d) -> (margins (P,), rows (P,)).
+Evaluate = Callable[[np.ndarray], tuple[list[float], list[dict]]]
 
 
 @dataclass
@@ -100,10 +102,7 @@ def _box(bounds) -> tuple[np.ndarray, np.ndarray]:
 
 
 def cma_search(
-    evaluate: Callable[[np.ndarray], tuple[list[float], list[dict]]],
-    bounds: list[tuple[float, float]],
-    budget: int,
-    seed: int = 0,
+    evaluate: Evaluate, bounds: list[tuple[float, float]], budget: int, seed: int = 0,
     population: int | None = None,
 ) -> Search:
     """Minimise a margin over a box with CMA-ES, one batch per generation.
@@ -148,10 +147,7 @@ def population_size(budget: int, n_variables: int) -> int:
 
 
 def differential_evolution_search(
-    evaluate: Callable[[np.ndarray], tuple[list[float], list[dict]]],
-    bounds: list[tuple[float, float]],
-    budget: int,
-    seed: int = 0,
+    evaluate: Evaluate, bounds: list[tuple[float, float]], budget: int, seed: int = 0,
     population: int | None = None,
 ) -> Search:
     """Minimise a margin over a box with differential evolution, one batch per generation.
