@@ -1,9 +1,12 @@
 """Which QP solver for the nominal MPC: the QPs of a Case 1 run, solved by each candidate.
 
-Run: .venv/bin/python benchmarks/bench_qp_solvers.py [--steps 15000] [--repeat 3] [--smoke]
+Run: .venv/bin/python benchmarks/bench_qp_solvers.py [--steps 15000] [--repeat 3]
+         [--scenario FILE] [--smoke]
 
-Records every QP the nominal MPC of `tube_mpc` hands to DAQP during a Case 1 run
-(in process; scenario offline_design/scenarios/case1_paper.yaml, on the paper's design),
+Records every QP the nominal MPC of `tube_mpc` hands to its solver during a run (in
+process; by default Case 1 on the paper's design, offline_design/scenarios/case1_paper.yaml;
+`--scenario` another, e.g. case1_implementable.yaml, whose QPs have the certificate's
+state-range rows),
 then solves the same sequence with each installed candidate, in order, the way the MPC
 would use it: a solver keeps its factorisation/workspace while H and the constraint
 matrix are unchanged (they change only when the MPC is rescheduled) and gets the vectors
@@ -11,8 +14,10 @@ updated and the previous solution as warm start where its API allows.
 Prints per solver: median, p99 and max time per QP (best of `--repeat` passes), QPs
 it did not solve, the worst constraint violation and the worst objective gap to DAQP.
 
-Candidates: DAQP (dual active set), OSQP (ADMM), Clarabel (interior point, no warm
-start), PIQP (proximal interior point), ProxSuite ProxQP (augmented Lagrangian).
+Candidates: DAQP (dual active set) on every row (the project's), DAQP on a working set
+of rows grown from the violated ones (constraint generation: class DAQPWorkingRows), OSQP
+(ADMM), Clarabel (interior point, no warm start), PIQP (proximal interior point),
+ProxSuite ProxQP (augmented Lagrangian).
 PIQP and ProxSuite are not project dependencies; the table says so when missing
 (`pip install piqp proxsuite` to compare them).
 
@@ -36,49 +41,26 @@ BIG = 1e29  # |bound| >= BIG: no bound (DAQP's convention in the MPC)
 SMOKE_STEPS = 100
 
 
-def record(steps: int) -> list[tuple]:
-    """QPs (H, f, A_c, bu, bl) of a Case 1 tube_mpc run, in the order they were solved."""
-    import daqp
+def record(steps: int, scenario: str) -> list[tuple]:
+    """QPs (H, f, A_c, bu, bl) of a `tube_mpc` run of `scenario`, in the order solved.
 
+    Every QP the nominal MPC hands to its solver (`TrackingMPC.solve_qp`, whole: every
+    row of the constraint matrix).
+    """
     qps = []
+    solve_qp = tracking.TrackingMPC.solve_qp
 
-    class RecordingModel:
-        """A DAQP workspace that records the QP of each solve (the MPC's calls only)."""
+    def recording(mpc, f, bl, bu):
+        qps.append((mpc.H, f.copy(), mpc.A_c, bu.copy(), bl.copy()))
+        return solve_qp(mpc, f, bl, bu)
 
-        def __init__(self):
-            self.model, self.qp = daqp.Model(), None
-
-        @property
-        def settings(self):
-            return self.model.settings
-
-        @settings.setter
-        def settings(self, value):
-            self.model.settings = value
-
-        def setup(self, H, f, A, bu, bl, **kw):
-            self.qp = (H, f.copy(), A, bu.copy(), bl.copy())
-            return self.model.setup(H, f, A, bu, bl, **kw)
-
-        def update(self, f, bupper, blower):
-            self.qp = (self.qp[0], f.copy(), self.qp[2], bupper.copy(), blower.copy())
-            return self.model.update(f=f, bupper=bupper, blower=blower)
-
-        def solve(self):
-            qps.append(self.qp)
-            return self.model.solve()
-
-    class Recorder:
-        """Stands for the `daqp` module in `fahv.control.mpc.tracking.daqp_module`."""
-
-        Model = RecordingModel
-
-    tracking.daqp_module = lambda: Recorder
-    _, design, _ = load_or_design(
-        "offline_design/scenarios/case1_paper.yaml", log=io.StringIO().write,
-        variants=["tube_mpc"],
-    )  # fmt: skip
-    simulate(design, "tube_mpc", duration=steps * design.case["Ts"])
+    tracking.TrackingMPC.solve_qp = recording
+    try:
+        _, design, _ = load_or_design(scenario, log=io.StringIO().write,
+                                      variants=["tube_mpc"], allow_uncertified=True)  # fmt: skip
+        simulate(design, "tube_mpc", duration=steps * design.case["Ts"])
+    finally:
+        tracking.TrackingMPC.solve_qp = solve_qp
     return qps
 
 
@@ -92,19 +74,78 @@ def _split(H, A, bu, bl):
 
 
 class DAQP:
-    """DAQP (dual active set): the project's solver, warm-started with the previous y."""
+    """DAQP (dual active set) on every row: its workspace kept while H and A are the same."""
 
-    name = "DAQP (dual active set, warm)"
+    name = "DAQP on every row (workspace kept)"
 
     def __init__(self):
         import daqp
 
-        self.daqp, self.y = daqp, None
+        self.daqp, self.model, self.y = daqp, None, None
 
     def solve(self, H, f, A, bu, bl, same):
-        y, _, flag, _ = self.daqp.solve(H, f, A, bu, bl, primal_start=self.y, iter_limit=2000)
-        self.y = np.asarray(y) if flag in (1, 2) else None
+        if not same or self.model is None:
+            self.model = self.daqp.Model()
+            self.model.settings = {"iter_limit": 2000}
+            if self.model.setup(H, f, A, bu, bl, primal_start=self.y)[0] < 0:
+                self.model = None
+                return None
+        else:
+            self.model.update(f=f, bupper=bu, blower=bl)
+        y, _, flag, _ = self.model.solve()
+        if flag not in (1, 2):
+            self.model = None
+            return None
+        self.y = np.asarray(y)
         return self.y
+
+
+class DAQPWorkingRows:
+    """DAQP on a working set of rows grown from the violated ones (constraint generation).
+
+    The first QP on every row, its active rows the set; each later QP solved on the set,
+    every row evaluated at the solution, the (at most ADD_AT_ONCE) most violated rows or
+    rows within 1e-7 of a bound added, solved again (new set-up), until no row outside
+    is violated: then it is the full QP's optimum. The set is carried across schedulings.
+    """
+
+    name = "DAQP on working rows (grown)"
+    ADD_AT_ONCE = 5
+
+    def __init__(self):
+        self.daqp = DAQP()
+        self.rows, self.model_rows = None, None  # the set; the rows DAQP's workspace has
+
+    def solve(self, H, f, A, bu, bl, same):
+        ny = H.shape[0]
+        if self.rows is None:
+            y = self.daqp.solve(H, f, A, bu, bl, False)
+            if y is not None:
+                self.rows = np.flatnonzero(_near(A @ y, bl[ny:], bu[ny:]))
+            return y
+        while True:
+            sel = np.concatenate([np.arange(ny), ny + self.rows])
+            kept = same and self.model_rows is self.rows
+            y = self.daqp.solve(H, f, A[self.rows], bu[sel], bl[sel], kept)
+            self.model_rows = self.rows
+            if y is None:
+                return None
+            r = A @ y
+            near = _near(r, bl[ny:], bu[ny:])
+            near[self.rows] = False
+            new = np.flatnonzero(near)
+            if new.size == 0:
+                return y
+            excess = np.maximum(r[new] - bu[ny + new], bl[ny + new] - r[new])
+            new = new[np.argsort(-excess, kind="stable")[: self.ADD_AT_ONCE]]
+            self.rows = np.union1d(self.rows, new)
+
+
+def _near(r, lo, hi, margin=1e-7):
+    """Rows whose value r is beyond or within `margin` (relative) of a bound."""
+    with np.errstate(invalid="ignore"):
+        return ((hi < BIG) & (r > hi - margin * (1 + np.abs(hi)))) | (
+            (lo > -BIG) & (r < lo + margin * (1 + np.abs(lo))))
 
 
 class OSQP:
@@ -242,28 +283,30 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=15000)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--scenario", default="offline_design/scenarios/case1_paper.yaml",
+                    help="the run whose QPs are recorded (its tube_mpc variant)")
     ap.add_argument("--smoke", action="store_true",
                     help=f"{SMOKE_STEPS} steps, one pass (CI: it still runs)")  # fmt: skip
     args = ap.parse_args()
     if args.smoke:
         args.steps, args.repeat = SMOKE_STEPS, 1
         print(f"smoke: {SMOKE_STEPS} steps, one pass (the figures mean nothing)")
-    qps = record(args.steps)
+    qps = record(args.steps, args.scenario)
     n_sched = len({id(q[0]) for q in qps})
     ny, nc = qps[0][0].shape[0], qps[0][2].shape[0]
     print(f"{len(qps)} QPs recorded over {args.steps} steps ({n_sched} distinct H), "
           f"{ny} variables, {nc} constraint rows + bounds")  # fmt: skip
     _, ref = run(DAQP, qps)
-    print(f"{'solver':34s} {'median':>9s} {'p99':>9s} {'max':>9s} {'unsolved':>9s} "
+    print(f"{'solver':38s} {'median':>9s} {'p99':>9s} {'max':>9s} {'unsolved':>9s} "
           f"{'max viol':>9s} {'obj gap':>9s}")  # fmt: skip
-    for cls in (DAQP, OSQP, Clarabel, PIQP, ProxQP):
+    for cls in (DAQP, DAQPWorkingRows, OSQP, Clarabel, PIQP, ProxQP):
         try:
             best = None
             for _ in range(args.repeat):
                 t, ys = run(cls, qps)
                 best = t if best is None else np.minimum(best, t)
         except ImportError as exc:
-            print(f"{cls.name:34s} not installed ({exc.name})")
+            print(f"{cls.name:38s} not installed ({exc.name})")
             continue
         ms = best * 1e3
         bad = sum(y is None for y in ys)
@@ -271,7 +314,7 @@ def main() -> None:
              if y is not None and r is not None]  # fmt: skip
         viol = max((v for v, _ in q), default=np.nan)
         gap = max((abs(g) for _, g in q), default=np.nan)
-        print(f"{cls.name:34s} {np.median(ms):7.3f}ms {np.percentile(ms, 99):7.3f}ms "
+        print(f"{cls.name:38s} {np.median(ms):7.3f}ms {np.percentile(ms, 99):7.3f}ms "
               f"{ms.max():7.3f}ms {bad:9d} {viol:9.1e} {gap:9.1e}")  # fmt: skip
 
 

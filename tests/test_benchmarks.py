@@ -34,7 +34,8 @@ FIGURES = {
     ],
     "bench_qp_solvers": [
         r"^[1-9]\d* QPs recorded over 100 steps \(\d+ distinct H\), \d+ variables",
-        rf"^DAQP \(dual active set, warm\)\s+{NUM}ms\s+{NUM}ms\s+{NUM}ms\s+0\s",
+        rf"^DAQP on every row \(workspace kept\)\s+{NUM}ms\s+{NUM}ms\s+{NUM}ms\s+0\s",
+        rf"^DAQP on working rows \(grown\)\s+{NUM}ms\s+{NUM}ms\s+{NUM}ms\s+0\s",
         rf"^Clarabel \(interior point\)\s+{NUM}ms\s+{NUM}ms\s+{NUM}ms\s+\d+\s",
     ],
     "bench_rmpc_step": [
