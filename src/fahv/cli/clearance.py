@@ -17,6 +17,15 @@ runs again (the worst cases' indices are in its `campaign.json`).
 
 writes the folder's table, `clearance.md` and figures again; `--against` adds the worst
 margins of a finished campaign of the same campaign file (e.g. its 1000 runs).
+
+    fahv clearance sweep CAMPAIGN.yaml [--input NAME ...] [--points P] [--requirement R ...]
+                         [--against CAMPAIGN_DIR] [--out DIR]
+
+sweeps each dispersed value one at a time over its range, the others at the centre of
+theirs (`fahv.clearance.sweep`), and prints per requirement the inputs by the margin's
+spread; `--against` sets each beside its PAWN index over a finished campaign, the check
+of the campaign report's attribution. `fahv clearance sweep report DIR [--against ...]`
+writes its `sweep.md` and figures again.
 """
 
 from __future__ import annotations
@@ -31,6 +40,8 @@ from fahv.campaign.robustness import SEARCHABLE
 from fahv.campaign.spec import load_campaign
 from fahv.clearance.report import report, summary_lines
 from fahv.clearance.run import clear
+from fahv.clearance.sweep import sweep
+from fahv.clearance.sweep_report import report as sweep_report
 from fahv.errors import CampaignError
 from fahv.sil.workspace import ROOT
 
@@ -44,6 +55,8 @@ def cmd_clearance(args) -> int:
         print("\n".join(summary_lines(man)))
         print(f"report: {Path(args.rest[0]) / 'clearance.md'}")
         return 0
+    if args.campaign == "sweep":
+        return _sweep(args)
     if args.rest:
         raise CampaignError(f"unexpected arguments {args.rest} after the campaign file")
     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
@@ -70,6 +83,29 @@ def cmd_clearance(args) -> int:
     return 1 if failed else 0
 
 
+def _sweep(args) -> int:
+    """`fahv clearance sweep CAMPAIGN.yaml` (or `sweep report DIR`): run or report a sweep."""
+    if args.rest[:1] == ["report"]:
+        if len(args.rest) != 2:
+            raise CampaignError("usage: fahv clearance sweep report DIR [--against CAMPAIGN_DIR]")
+        print("\n".join(sweep_report(args.rest[1], args.against)))
+        return 0
+    if len(args.rest) != 1:
+        raise CampaignError("usage: fahv clearance sweep CAMPAIGN.yaml [--input NAME ...] "
+                            "[--points P] [--requirement R ...] [--against CAMPAIGN_DIR]")
+    campaign = load_campaign(args.rest[0], duration=args.duration)
+    requirements = args.requirement or ["attitude", "settling"]
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    out = Path(args.out) if args.out else ROOT / "campaigns" / f"{campaign.name}_sweep_{stamp}"
+    print(f"one-at-a-time sweeps of {campaign.name}: {', '.join(requirements)}, runs of "
+          f"{campaign.duration:g} s, into {out}", file=sys.stderr)  # fmt: skip
+    sweep(campaign, requirements, out, args.input, args.points, args.scheduler, args.workers,
+          log=lambda line: print(line, file=sys.stderr))  # fmt: skip
+    print("\n".join(sweep_report(out, args.against)))
+    print(f"sweep folder: {out}")
+    return 0
+
+
 def add_parsers(sub) -> None:
     """Add the `clearance` subcommand."""
     p = sub.add_parser(
@@ -78,9 +114,10 @@ def add_parsers(sub) -> None:
         "(CMA-ES or differential evolution, batches on Dask)",
         description=__doc__.split("\n\n")[0],
     )
-    p.add_argument("campaign", help="campaign file (its scenario, dispersions, limits), or "
-                   "'report' followed by a clearance folder")
-    p.add_argument("rest", nargs="*", help="DIR (report)")
+    p.add_argument("campaign", help="campaign file (its scenario, dispersions, limits), "
+                   "'report' followed by a clearance folder, or 'sweep' followed by a "
+                   "campaign file (or by 'report' and a sweep folder)")
+    p.add_argument("rest", nargs="*", help="DIR (report); CAMPAIGN.yaml or report DIR (sweep)")
     p.add_argument("--against", help="a finished campaign folder of the same campaign file: "
                    "its worst margins beside the search's")
     p.add_argument("--requirement", action="append", choices=tuple(SEARCHABLE),
@@ -102,6 +139,11 @@ def add_parsers(sub) -> None:
     p.add_argument("--optimizer", choices=("cma", "de"), default="cma",
                    help="CMA-ES (default) or differential evolution")
     p.add_argument("--seed", type=int, default=0, help="seed of the search (default 0)")
+    p.add_argument("--input", action="append",
+                   help="sweep: a dispersed value to sweep (repeat; default every one, e.g. "
+                   "s.m, fault.loss)")
+    p.add_argument("--points", type=int, default=9,
+                   help="sweep: values of each input over its range (default 9)")
     p.add_argument("--runs", type=int, help="the campaign's draws (the Monte Carlo's pool)")
     p.add_argument("--duration", type=float, help="simulated time of each run [s]")
     p.add_argument("--out", help="folder (default campaigns/<name>_clearance_<time>)")
