@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
+
+from fahv.model.lpv_kernel import weights_kernel
 
 
 @dataclass(frozen=True)
@@ -88,17 +91,32 @@ class PolytopicLPV:
         Returns
         -------
         (B, R) ndarray
-            The weights of the R vertices, in the order of `A` and `B`.
+            The weights of the R vertices, in the order of `A` and `B` (compiled:
+            `fahv.model.lpv_kernel`, numpy's `np.interp` bit for bit).
+
+        Raises
+        ------
+        ValueError
+            If h and V are not two 1-d arrays of the same length.
         """
-        h = np.atleast_1d(np.asarray(h, dtype=float))
-        V = np.atleast_1d(np.asarray(V, dtype=float))
-        wh = np.stack(
-            [np.interp(h, self.h_grid, self.W_h[:, a]) for a in range(self.W_h.shape[1])], 1
-        )
-        wv = np.stack(
-            [np.interp(V, self.V_grid, self.W_V[:, b]) for b in range(self.W_V.shape[1])], 1
-        )
-        return (wh[:, :, None] * wv[:, None, :]).reshape(h.size, self.A.shape[0])
+        h = np.ascontiguousarray(np.atleast_1d(np.asarray(h, dtype=float)))
+        V = np.ascontiguousarray(np.atleast_1d(np.asarray(V, dtype=float)))
+        if h.shape != V.shape or h.ndim != 1:
+            raise ValueError(f"LPV weights: h {h.shape} and V {V.shape} must be (B,) alike")
+        h_grid, W_h, V_grid, W_V = self._weight_tables
+        out = np.empty((h.size, self.A.shape[0]))
+        return weights_kernel()(h, V, h_grid, W_h, V_grid, W_V, out)
+
+    @functools.cached_property
+    def _weight_tables(self) -> tuple[np.ndarray, ...]:
+        """(h_grid, W_h's columns as rows, V_grid, W_V's columns as rows), contiguous float64."""
+        def rows(W):
+            return np.ascontiguousarray(np.asarray(W, dtype=float).T)
+
+        def grid(g):
+            return np.ascontiguousarray(g, dtype=float)
+
+        return grid(self.h_grid), rows(self.W_h), grid(self.V_grid), rows(self.W_V)
 
     def system(self, h: float, V: float) -> tuple[np.ndarray, np.ndarray]:
         """(A(p) (n, n), B(p) (n, m)) at one point p = (h, V): `systems` of one point.
