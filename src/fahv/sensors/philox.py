@@ -54,6 +54,19 @@ def _mulhilo(a, b):
     return hi, a * b
 
 
+@numba.njit(cache=True, inline="always")
+def _block(x0, x1, x2, x3, y0, y1):
+    """Philox4x64-10 of one counter (x0, x1, x2, x3) under the key (y0, y1): 4 words."""
+    for r in range(_ROUNDS):
+        if r:
+            y0 += _W0
+            y1 += _W1
+        hi0, lo0 = _mulhilo(x0, _M0)
+        hi1, lo1 = _mulhilo(x2, _M1)
+        x0, x1, x2, x3 = hi1 ^ x1 ^ y0, lo1, hi0 ^ x3 ^ y1, lo0
+    return x0, x1, x2, x3
+
+
 @numba.njit(cache=True)
 def _blocks(c0, c1, c2, c3, k0, k1, out):
     """Philox4x64-10 of flat uint64 arrays (n,) into out (n, 4), element by element.
@@ -62,28 +75,37 @@ def _blocks(c0, c1, c2, c3, k0, k1, out):
     for the one draw of a channel and step.
     """
     for i in range(c0.size):
-        x0, x1, x2, x3 = c0[i], c1[i], c2[i], c3[i]
-        y0, y1 = k0[i], k1[i]
-        for r in range(_ROUNDS):
-            if r:
-                y0 += _W0
-                y1 += _W1
-            hi0, lo0 = _mulhilo(x0, _M0)
-            hi1, lo1 = _mulhilo(x2, _M1)
-            x0, x1, x2, x3 = hi1 ^ x1 ^ y0, lo1, hi0 ^ x3 ^ y1, lo0
-        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = x0, x1, x2, x3
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = _block(c0[i], c1[i], c2[i], c3[i],
+                                                            k0[i], k1[i])  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def _box_muller_row(w, out):
+    """Four N(0, 1) draws from four words w (4,) into out (4,) (see the module notes)."""
+    for j in (0, 2):
+        u1 = (float(w[j] >> _S11) + 1.0) * 2.0**-53
+        u2 = float(w[j + 1] >> _S11) * 2.0**-53
+        r = math.sqrt(-2.0 * math.log(u1))
+        out[j] = r * math.cos(2.0 * math.pi * u2)
+        out[j + 1] = r * math.sin(2.0 * math.pi * u2)
 
 
 @numba.njit(cache=True)
 def _box_muller(w, out):
     """Four N(0, 1) draws per row of words w (n, 4) into out (n, 4) (see the module notes)."""
     for i in range(w.shape[0]):
-        for j in (0, 2):
-            u1 = (float(w[i, j] >> _S11) + 1.0) * 2.0**-53
-            u2 = float(w[i, j + 1] >> _S11) * 2.0**-53
-            r = math.sqrt(-2.0 * math.log(u1))
-            out[i, j] = r * math.cos(2.0 * math.pi * u2)
-            out[i, j + 1] = r * math.sin(2.0 * math.pi * u2)
+        _box_muller_row(w[i], out[i])
+
+
+@numba.njit(cache=True)
+def _grid(seeds, channels, c0, c1, out):
+    """The draws of every (seed, channel) at counter (c0, c1, 0, 0) into out (B, m, 4)."""
+    w = np.empty(4, dtype=np.uint64)
+    zero = np.uint64(0)
+    for b in range(seeds.size):
+        for c in range(channels.size):
+            w[0], w[1], w[2], w[3] = _block(c0, c1, zero, zero, seeds[b], channels[c])
+            _box_muller_row(w, out[b, c])
 
 
 def philox4x64(counter: tuple, key: tuple) -> tuple[np.ndarray, ...]:
@@ -173,12 +195,8 @@ def normals_grid(seeds: np.ndarray, channels: np.ndarray, step: int,
     -------
     (B, m, 4) ndarray
     """
-    n = seeds.size * channels.size
-    c0 = np.full(n, step + 1, dtype=np.uint64)
-    c1 = np.full(n, stream, dtype=np.uint64)
-    zero = np.zeros(n, dtype=np.uint64)
-    w = np.empty((n, 4), dtype=np.uint64)
-    _blocks(c0, c1, zero, zero, np.repeat(seeds, channels.size), np.tile(channels, seeds.size), w)
-    out = np.empty((n, 4))
-    _box_muller(w, out)
-    return out.reshape(seeds.size, channels.size, 4)
+    out = np.empty((seeds.size, channels.size, 4))
+    _grid(np.ascontiguousarray(seeds, dtype=np.uint64),
+          np.ascontiguousarray(channels, dtype=np.uint64), np.uint64(step + 1),
+          np.uint64(stream), out)  # fmt: skip
+    return out
