@@ -29,7 +29,8 @@ from pathlib import Path
 
 DOCS = Path(__file__).resolve().parents[1]
 
-#: Marker name -> (module, function returning the Markdown table).
+#: Marker name -> (module, function returning the Markdown table, its arguments: paths
+#: relative to the repository's root).
 TABLES = {
     "design-keys": ("fahv.spec.schema", "design_spec"),
     "scenario-keys": ("fahv.spec.schema", "scenario_spec"),
@@ -38,6 +39,7 @@ TABLES = {
     "registry-tables": ("fahv.loop.graph", "registry_tables"),
     "margins-table": ("fahv.cli.margins", "docs_table"),
     "case1-verdict": ("fahv.cli.run", "docs_verdict_table"),
+    "cases-table": ("fahv.runs.results", "reference_table", "tests/data/results_reference.json"),
 }
 #: Specs whose table is `fahv.config.spec.markdown(spec())`; the others return Markdown.
 SPECS = {"design-keys", "scenario-keys", "campaign-keys"}
@@ -67,8 +69,8 @@ RST_LEFTOVERS = re.compile(
 
 def table(name: str) -> str:
     """The Markdown the code generates for the marker `name`."""
-    module, function = TABLES[name]
-    made = getattr(import_module(module), function)()
+    module, function, *args = TABLES[name]
+    made = getattr(import_module(module), function)(*(str(DOCS.parent / a) for a in args))
     if name in SPECS:
         from fahv.config.spec import markdown
 

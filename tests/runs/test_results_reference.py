@@ -13,9 +13,16 @@ from pathlib import Path
 import pytest
 
 from fahv.certificate.verified import load_or_design
-from fahv.runs.results import TOLERANCES, compare_reference, read_reference, run_case
+from fahv.runs.results import (
+    TOLERANCES,
+    compare_reference,
+    read_reference,
+    reference_table,
+    run_case,
+)
 
 REFERENCE = Path(__file__).parents[1] / "data" / "results_reference.json"
+CASES_PAGE = Path(__file__).parents[2] / "docs" / "results" / "cases.md"
 
 
 @pytest.fixture(scope="module")
@@ -51,3 +58,14 @@ def test_a_change_beyond_the_tolerance_is_reported():
     bad = compare_reference(new, {"case1_paper": ref["case1_paper"]})
     assert len(bad) == 1 and "rmpc h_err_final_ft" in bad[0]
     assert TOLERANCES["h_err_final_ft"] == (1e-3, 0.01)
+
+
+def test_the_docs_table_of_the_cases_is_the_references():
+    """docs/results/cases.md shows the reference file's numbers (docs/hooks/generated.py
+    writes them there), column by column in the docs' order, Tube-MPC variants first."""
+    page = CASES_PAGE.read_text()
+    shown = page.split("<!-- cases-table -->\n", 1)[1].split("<!-- /cases-table -->")[0]
+    assert shown.strip("\n") == reference_table(REFERENCE)
+    head = shown.splitlines()[0]
+    assert head.index("case1 `tube_mpc`") < head.index("case1 `rmpc`") < head.index("case1_paper")
+    assert "| 33.0 s / 33.4 s |" in shown.splitlines()[2]  # case1 tube_mpc's settling times

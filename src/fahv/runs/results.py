@@ -144,14 +144,18 @@ ROWS = (
 )  # fmt: skip
 
 
-def markdown_table(results: dict) -> str:
-    """The README's results table: one column per (case, variant)."""
+#: The rows of a table read from a reference file, which holds no wall times.
+REFERENCE_ROWS = ROWS[:-1]
+
+
+def markdown_table(results: dict, rows=ROWS) -> str:
+    """The README's results table: one column per (case, variant), one row per `rows`."""
     cols = [(c, v) for c, vs in results.items() for v in vs]
     lines = [
         "| metric | " + " | ".join(f"{c} `{v}`" for c, v in cols) + " |",
         "|---|" + "---|" * len(cols),
     ]
-    for label, fn in ROWS:
+    for label, fn in rows:
         cells = []
         for c, v in cols:
             m = dict(results[c][v])
@@ -159,6 +163,23 @@ def markdown_table(results: dict) -> str:
             cells.append(fn(m))
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def reference_table(path: str | Path) -> str:
+    """The results table of a reference file (`write_reference`), for the docs.
+
+    Cases in the file's order, each case's Tube-MPC variants first, then the others
+    (the RMPC baseline); the rows of `REFERENCE_ROWS` (no wall time: the file holds
+    none). The docs' table of Cases 1 and 2 is this table of
+    tests/data/results_reference.json, which `fahv results --write-reference` writes
+    and tests/runs/test_results_reference.py checks against fresh runs.
+    """
+    ref = read_reference(path)
+    def tube_first(v: str) -> tuple:
+        return not v.startswith("tube"), v
+
+    ordered = {c: {v: ref[c][v] for v in sorted(ref[c], key=tube_first)} for c in ref}
+    return markdown_table(ordered, REFERENCE_ROWS)
 
 
 def write_reference(results: dict, path: str | Path) -> Path:
