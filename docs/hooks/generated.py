@@ -40,6 +40,8 @@ TABLES = {
     "margins-table": ("fahv.cli.margins", "docs_table"),
     "case1-verdict": ("fahv.cli.run", "docs_verdict_table"),
     "cases-table": ("fahv.runs.results", "reference_table", "tests/data/results_reference.json"),
+    "case2-cm-table": ("fahv.runs.results", "reference_table",
+                       "studies/case2_on_cm/results_reference.json"),
 }
 #: Specs whose table is `fahv.config.spec.markdown(spec())`; the others return Markdown.
 SPECS = {"design-keys", "scenario-keys", "campaign-keys"}

@@ -14,6 +14,7 @@ import pytest
 
 from fahv.certificate.verified import load_or_design
 from fahv.runs.results import (
+    ROWS,
     TOLERANCES,
     compare_reference,
     read_reference,
@@ -60,12 +61,22 @@ def test_a_change_beyond_the_tolerance_is_reported():
     assert TOLERANCES["h_err_final_ft"] == (1e-3, 0.01)
 
 
-def test_the_docs_table_of_the_cases_is_the_references():
-    """docs/results/cases.md shows the reference file's numbers (docs/hooks/generated.py
+@pytest.mark.parametrize("marker, reference", [
+    ("cases-table", REFERENCE),
+    ("case2-cm-table", Path(__file__).parents[2] / "studies/case2_on_cm/results_reference.json"),
+])  # fmt: skip
+def test_the_docs_tables_of_the_cases_are_their_references(marker, reference):
+    """docs/results/cases.md shows the reference files' numbers (docs/hooks/generated.py
     writes them there), column by column in the docs' order, Tube-MPC variants first."""
     page = CASES_PAGE.read_text()
-    shown = page.split("<!-- cases-table -->\n", 1)[1].split("<!-- /cases-table -->")[0]
-    assert shown.strip("\n") == reference_table(REFERENCE)
+    shown = page.split(f"<!-- {marker} -->\n", 1)[1].split(f"<!-- /{marker} -->")[0]
+    assert shown.strip("\n") == reference_table(reference)
     head = shown.splitlines()[0]
-    assert head.index("case1 `tube_mpc`") < head.index("case1 `rmpc`") < head.index("case1_paper")
-    assert "| 33.0 s / 33.4 s |" in shown.splitlines()[2]  # case1 tube_mpc's settling times
+    assert head.index("`tube_mpc`") < head.index("`rmpc`")
+
+
+def test_a_fraction_below_one_is_never_shown_as_100_percent():
+    row = dict(ROWS)["steps with e in Z (max level)"]
+    assert row({"tube_fraction_inside": 1.0, "tube_level_max": 0.5}) == "100 % (0.500)"
+    assert row({"tube_fraction_inside": 0.99999, "tube_level_max": 1.2}) == "99.99 % (1.200)"
+    assert row({"tube_fraction_inside": 0.9981, "tube_level_max": 2.5}) == "99.81 % (2.500)"

@@ -369,7 +369,9 @@ def cmd_results(args) -> int:
 
     results = {}
     for path in args.cases:
-        case, design, vehicle = load_or_design(path, None, args.vehicle)
+        case, design, vehicle = load_or_design(
+            path, None, args.vehicle, allow_uncertified=args.allow_uncertified
+        )
         print(f"{case.name}: design {design.summary['design_hash']}", file=sys.stderr)
         log = lambda line: print(line, file=sys.stderr, flush=True)  # noqa: E731
         results[case.name] = run_case(design, case["variants"], vehicle.limits, log)
@@ -472,5 +474,8 @@ def _add_results_parsers(sub) -> None:
                    help="write the metrics of every case and variant as JSON")  # fmt: skip
     p.add_argument("--check", metavar="FILE", default=None,
                    help="compare with a reference JSON; exit 1 outside the tolerances")  # fmt: skip
+    p.add_argument("--allow-uncertified", action="store_true",
+                   help="run scenarios whose loop the design does not certify (e.g. on "
+                   "servos and sensors)")  # fmt: skip
     add_vehicle_option(p)
     p.set_defaults(func=cmd_results)

@@ -119,6 +119,11 @@ def _f(v, fmt: str) -> str:
     return "never" if math.isnan(v) else fmt.format(v)
 
 
+def _percent(fraction: float) -> str:
+    """A fraction in percent: "100 %" only when it is exactly one (99.98 % is not 100 %)."""
+    return "100 %" if fraction == 1.0 else f"{min(100 * fraction, 99.99):.2f} %"
+
+
 #: Rows of the README's results table: (label, function of a metrics dict -> text).
 ROWS = (
     ("settling time h (10 ft) / V (2 ft/s), from t = 0",
@@ -136,7 +141,7 @@ ROWS = (
     ("steps beyond input limits", lambda m: f"{m['input_limit_violations']}"),
     ("steps with e in Z (max level)",
      lambda m: "no tube" if math.isnan(_num(m.get("tube_fraction_inside")))
-     else f"{100 * m['tube_fraction_inside']:.0f} % ({m['tube_level_max']:.3f})"),
+     else f"{_percent(m['tube_fraction_inside'])} ({m['tube_level_max']:.3f})"),
     ("RMPC steps outside its largest ellipsoid",
      lambda m: "-" if "rmpc_lmi_failed" not in m and not m.get("_rmpc")
      else f"{m.get('rmpc_lmi_failed', 0)}"),
