@@ -1,6 +1,6 @@
 """Case 2 on the implementable loop (scenario case2_implementable): the Kalman filter runs
 on the CM part of the ECM design (fahv.model.cascade), the notch on the estimate's q, the
-adjustable Tube-MPC on the ECM state, with servos and noisy sensors; docs/theory/estimation.md."""
+adjustable Tube-MPC on the ECM state, with servos and noisy sensors; docs/results/estimation.md."""
 
 import numpy as np
 import pytest

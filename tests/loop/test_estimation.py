@@ -1,7 +1,7 @@
 """The gain-scheduled Kalman filter on Case 1's measurement (design cm_certified): the
 vertex gains exist and make every vertex's error dynamics stable; in the loop the filter
 estimates the attitude, h and V better than the sensors measure them, and its input
-disturbance takes up the elevator fault, with the figures of docs/theory/estimation.md."""
+disturbance takes up the elevator fault, with the figures of docs/results/estimation.md."""
 
 import numpy as np
 import pytest
