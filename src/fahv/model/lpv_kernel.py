@@ -22,6 +22,11 @@ def weights_kernel():
     """`tp_weights_into` compiled by numba (cached on disk), built at its first use.
 
     A process that never schedules an LPV model does not import numba.
+
+    Returns
+    -------
+    numba dispatcher
+        `tp_weights_into`, compiled.
     """
     import numba
 
@@ -41,7 +46,12 @@ def tp_weights_into(h, V, h_grid, W_h_columns, V_grid, W_V_columns, out):  # pra
     V_grid : (n_V,) ndarray
     W_V_columns : (r_V, n_V) C-contiguous ndarray
     out : (B, r_h r_V) ndarray
-        Written in place; also returned.
+        Written in place.
+
+    Returns
+    -------
+    (B, r_h r_V) ndarray
+        `out`, each row summing to one where the sampled weighting functions do.
     """
     r_V = W_V_columns.shape[0]
     for b in range(h.size):
