@@ -54,9 +54,12 @@ def tp_weights_into(h, V, h_grid, W_h_columns, V_grid, W_V_columns, out):  # pra
         `out`, each row summing to one where the sampled weighting functions do.
     """
     r_V = W_V_columns.shape[0]
+    w_V = np.empty(r_V)
     for b in range(h.size):
+        for c in range(r_V):
+            w_V[c] = np.interp(V[b], V_grid, W_V_columns[c])
         for a in range(W_h_columns.shape[0]):
             w_a = np.interp(h[b], h_grid, W_h_columns[a])
             for c in range(r_V):
-                out[b, a * r_V + c] = w_a * np.interp(V[b], V_grid, W_V_columns[c])
+                out[b, a * r_V + c] = w_a * w_V[c]
     return out
