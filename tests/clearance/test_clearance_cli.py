@@ -137,3 +137,28 @@ def test_the_report_beside_a_finished_campaign(cleared, tmp_path, capsys):
     assert np.isfinite(entry["margin"])
     assert main(["clearance", "report", str(out), "--against", str(out)]) == 2
     assert "not a campaign of case1" in capsys.readouterr().err
+
+
+def test_the_report_against_a_campaign_judges_input_rates_by_the_recorded_servo(tmp_path):
+    """A clearance records its elevator servo's rate limit; `report --against` judges the
+    campaign's input rates by it (before, without it, their margin was NaN)."""
+    from fahv.campaign import store
+    from fahv.clearance.report import report
+
+    clearance, campaign = tmp_path / "clearance", tmp_path / "campaign"
+    clearance.mkdir()
+    campaign.mkdir()
+    store.write_manifest(clearance, {
+        "kind": "clearance", "name": "c", "rate_limit_degps": 100.0, "design_hash": "d",
+        "budget": 10, "duration": 5.0,
+        "campaign": {"variants": ["tube_mpc"], "requirements": {}},
+        "requirements": [{"requirement": "input_rates", "unit": "deg/s",
+                          "search": {"margin": 5.0, "simulations": 10, "index": 1000},
+                          "monte_carlo": None}]})  # fmt: skip
+    store.write_manifest(campaign, {"kind": "campaign", "name": "c"})
+    store.write_part(campaign, store.RESULTS, "part-0", [
+        {"index": i, "variant": "tube_mpc", "status": "ok", "delta_e_rate_max_degps": r,
+         "actuators.rate_limit": f} for i, (r, f) in enumerate([(60.0, 1.0), (95.0, 0.9)])])
+    man = report(clearance, campaign)
+    worst = man["requirements"][0]["campaign"]
+    assert worst == {"margin": pytest.approx(100.0 * 0.9 - 95.0), "runs": 2, "index": 1}

@@ -190,7 +190,8 @@ def report(out_dir: str | Path, against: str | Path | None = None,
         A finished campaign folder of the same campaign file: its worst margins are
         added (manifest entry `campaign`, a column, a line in each figure).
     rate_limit_degps : float
-        The elevator servo's rate limit [deg/s] for `input_rates` (NaN: ideal).
+        The elevator servo's rate limit [deg/s] for `input_rates` (NaN: the one the
+        clearance recorded in its manifest, else none: ideal actuators).
 
     Raises
     ------
@@ -201,6 +202,8 @@ def report(out_dir: str | Path, against: str | Path | None = None,
     man = store.read_manifest(out)
     if man is None or man.get("kind") != "clearance":
         raise CampaignError(f"{out} is not a clearance folder")
+    if math.isnan(rate_limit_degps) and man.get("rate_limit_degps") is not None:
+        rate_limit_degps = float(man["rate_limit_degps"])
     if against is not None:
         for e in man["requirements"]:
             e["campaign"] = campaign_worst(Path(against), man, e["requirement"],

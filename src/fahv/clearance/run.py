@@ -156,6 +156,7 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
         "design_hash": design.summary["design_hash"], "code_version": __version__,
         "started": time.strftime("%Y-%m-%d %H:%M:%S"), "budget": budget, "seed": seed,
         "optimizer": optimizer, "population": population, "certificate": certificate,
+        "rate_limit_degps": _json_float(elevator_rate_limit_degps(campaign)),
         "variables": [vars(v) | {"choices": list(v.choices)} for v in space.variables],
         "fixed": space.fixed,
     })  # fmt: skip
@@ -193,6 +194,11 @@ def clear(campaign: Campaign, requirements: list[str], budget: int, out_dir: str
     store.write_manifest(out, man)
     report(out)
     return found
+
+
+def _json_float(v: float) -> float | None:
+    """A float for the manifest: None for NaN (JSON has no NaN)."""
+    return None if math.isnan(v) else float(v)
 
 
 def _write_rows(out: Path, requirement: str, search: str, s: Search) -> None:
