@@ -25,7 +25,7 @@ def stub_cases(monkeypatch):
 
     monkeypatch.setattr(
         run, "load_or_design",
-        lambda path, _o, _v: (Case(path.removesuffix(".yaml")),
+        lambda path, _o, _v, allow_uncertified=False: (Case(path.removesuffix(".yaml")),
                               SimpleNamespace(summary={"design_hash": "x"},
                                               name=path.removesuffix(".yaml")),
                               SimpleNamespace(limits=None)),
