@@ -155,7 +155,7 @@ def test_the_report_against_a_campaign_judges_input_rates_by_the_recorded_servo(
         "requirements": [{"requirement": "input_rates", "unit": "deg/s",
                           "search": {"margin": 5.0, "simulations": 10, "index": 1000},
                           "monte_carlo": None}]})  # fmt: skip
-    store.write_manifest(campaign, {"kind": "campaign", "name": "c"})
+    store.write_manifest(campaign, {"name": "c"})  # a campaign's manifest has no kind
     store.write_part(campaign, store.RESULTS, "part-0", [
         {"index": i, "variant": "tube_mpc", "status": "ok", "delta_e_rate_max_degps": r,
          "actuators.rate_limit": f} for i, (r, f) in enumerate([(60.0, 1.0), (95.0, 0.9)])])

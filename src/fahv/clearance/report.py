@@ -153,23 +153,39 @@ def _failing(rows: list[dict], requirement: str) -> dict:
     return {"runs": len(bad), "first": bad[0] + 1 if bad else None}
 
 
-def campaign_worst(campaign_dir: Path, manifest: dict, requirement: str,
-                   rate_limit_degps: float = math.nan) -> dict:  # fmt: skip
-    """The worst margin of `requirement` over a finished campaign of the same campaign file.
+def against_rows(campaign_dir: Path, manifest: dict) -> list[dict]:
+    """The rows of a finished campaign of the same campaign file as `manifest`'s folder.
+
+    The runs of the folder's variant (its campaign's first), read once; the yardstick
+    of a clearance (`report --against`) and of a sweep
+    (`fahv.clearance.sweep_report`).
 
     Raises
     ------
     CampaignError
-        If the folder is not a campaign of the clearance's campaign (by name), or holds
-        no run of its variant.
+        If the folder is not a campaign (a clearance or a sweep folder has a `kind`) of
+        the same campaign file (by name), or holds no run of its variant.
     """
     cm = store.read_manifest(Path(campaign_dir))
-    if cm is None or cm.get("kind") == "clearance" or cm["name"] != manifest["name"]:
+    if cm is None or cm.get("kind") is not None or cm["name"] != manifest["name"]:
         raise CampaignError(f"--against {campaign_dir}: not a campaign of {manifest['name']}")
     variant = manifest["campaign"]["variants"][0]
     rows = [r for r in store.read_rows(Path(campaign_dir)) if r["variant"] == variant]
     if not rows:
         raise CampaignError(f"--against {campaign_dir}: no run of variant {variant}")
+    return rows
+
+
+def campaign_worst(rows: list[dict], manifest: dict, requirement: str,
+                   rate_limit_degps: float = math.nan) -> dict:  # fmt: skip
+    """The worst margin of `requirement` over a finished campaign's rows (`against_rows`).
+
+    Returns
+    -------
+    dict
+        `margin` (the requirement's unit; None where it applies to no run), `runs`,
+        `index` (the worst run's).
+    """
     limits = manifest["campaign"]["requirements"]
     m = np.array([robustness(r, requirement, limits, rate_limit_degps) for r in rows], float)
     if np.all(np.isnan(m)):
@@ -205,10 +221,10 @@ def report(out_dir: str | Path, against: str | Path | None = None,
     if math.isnan(rate_limit_degps) and man.get("rate_limit_degps") is not None:
         rate_limit_degps = float(man["rate_limit_degps"])
     if against is not None:
+        campaign_rows = against_rows(Path(against), man)
         for e in man["requirements"]:
-            e["campaign"] = campaign_worst(Path(against), man, e["requirement"],
+            e["campaign"] = campaign_worst(campaign_rows, man, e["requirement"],
                                            rate_limit_degps)  # fmt: skip
-        store.write_manifest(out, man)
     rows = store.read_rows(out)
     for e in man["requirements"]:
         e["failing"] = _failing(rows, e["requirement"])

@@ -71,6 +71,20 @@ def elevator_rate_limit_degps(campaign: Campaign) -> float:
     return math.degrees(min(lim.rate_incr[1], lim.rate_decr[1]))
 
 
+def check_requirements(requirements: list[str]) -> None:
+    """Refuse a requirement whose margin a clearance cannot measure.
+
+    Raises
+    ------
+    CampaignError
+        Naming the requirement and those that can be searched.
+    """
+    for r in requirements:
+        if r not in SEARCHABLE:
+            raise CampaignError(f"--requirement {r}: not a requirement a clearance searches "
+                                f"({', '.join(SEARCHABLE)})")  # fmt: skip
+
+
 def check_request(requirements: list[str], budget: int) -> None:
     """Refuse a requirement a clearance cannot search, or a budget below one generation.
 
@@ -79,10 +93,7 @@ def check_request(requirements: list[str], budget: int) -> None:
     CampaignError
         Naming the requirement (and those that can be searched) or the budget.
     """
-    for r in requirements:
-        if r not in SEARCHABLE:
-            raise CampaignError(f"--requirement {r}: not a requirement a clearance searches "
-                                f"({', '.join(SEARCHABLE)})")  # fmt: skip
+    check_requirements(requirements)
     if budget < 10:
         raise CampaignError(f"--budget {budget}: below one generation of 10 simulations")
 

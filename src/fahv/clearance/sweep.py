@@ -34,7 +34,7 @@ from fahv.campaign import store
 from fahv.campaign.spec import Campaign
 from fahv.certificate.verified import load_or_design
 from fahv.clearance.evaluate import CampaignEvaluator
-from fahv.clearance.run import check_request, elevator_rate_limit_degps
+from fahv.clearance.run import check_requirements, elevator_rate_limit_degps
 from fahv.clearance.space import SearchSpace
 from fahv.cluster import dask_client
 from fahv.errors import CampaignError
@@ -138,7 +138,7 @@ def sweep(campaign: Campaign, requirements: list[str], out_dir: str | Path,
         On a requirement that cannot be measured, an unknown input, too few points, or
         a folder that holds results.
     """
-    check_request(requirements, 10)
+    check_requirements(requirements)
     out = Path(out_dir)
     if store.read_rows(out):
         raise CampaignError(f"{out} already holds results: use another --out")

@@ -19,6 +19,7 @@ from fahv.campaign import store
 from fahv.campaign.attribution import Attribution, attribute
 from fahv.campaign.figures import axis_of
 from fahv.campaign.robustness import SEARCHABLE
+from fahv.clearance.report import against_rows
 from fahv.clearance.sweep import KIND, Sweep
 from fahv.errors import CampaignError
 
@@ -46,16 +47,9 @@ def campaign_attribution(campaign_dir: Path, man: dict) -> dict[str, Attribution
     Raises
     ------
     CampaignError
-        If the folder is not a campaign of the sweep's campaign file (by name) or holds
-        no run of its variant.
+        As `fahv.clearance.report.against_rows`.
     """
-    cm = store.read_manifest(Path(campaign_dir))
-    if cm is None or cm.get("kind") in ("clearance", KIND) or cm["name"] != man["name"]:
-        raise CampaignError(f"--against {campaign_dir}: not a campaign of {man['name']}")
-    variant = man["campaign"]["variants"][0]
-    rows = [r for r in store.read_rows(Path(campaign_dir)) if r["variant"] == variant]
-    if not rows:
-        raise CampaignError(f"--against {campaign_dir}: no run of variant {variant}")
+    rows = against_rows(Path(campaign_dir), man)
     found = {r: attribute(rows, man["campaign"], r) for r in man["requirements"]}
     return {r: a for r, a in found.items() if a is not None}
 

@@ -124,8 +124,9 @@ def _percent(fraction: float) -> str:
     return "100 %" if fraction == 1.0 else f"{min(100 * fraction, 99.99):.2f} %"
 
 
-#: Rows of the README's results table: (label, function of a metrics dict -> text).
-ROWS = (
+#: Rows of the results table a reference file gives (it holds no wall times): (label,
+#: function of a metrics dict -> text).
+REFERENCE_ROWS = (
     ("settling time h (10 ft) / V (2 ft/s), from t = 0",
      lambda m: f"{_f(m.get('settling_time_h_s'), '{:.1f} s')} / "
                f"{_f(m.get('settling_time_V_s'), '{:.1f} s')}"),
@@ -145,12 +146,10 @@ ROWS = (
     ("RMPC steps outside its largest ellipsoid",
      lambda m: "-" if "rmpc_lmi_failed" not in m and not m.get("_rmpc")
      else f"{m.get('rmpc_lmi_failed', 0)}"),
-    ("wall time of the run (this machine)", lambda m: f"{m.get('wall_s', math.nan):.1f} s"),
 )  # fmt: skip
-
-
-#: The rows of a table read from a reference file, which holds no wall times.
-REFERENCE_ROWS = ROWS[:-1]
+#: Rows of the README's results table of fresh runs: the reference's and the wall time.
+ROWS = (*REFERENCE_ROWS,
+        ("wall time of the run (this machine)", lambda m: f"{m.get('wall_s', math.nan):.1f} s"))
 
 
 def markdown_table(results: dict, rows=ROWS) -> str:
@@ -178,8 +177,24 @@ def reference_table(path: str | Path) -> str:
     none). The docs' table of Cases 1 and 2 is this table of
     tests/data/results_reference.json, which `fahv results --write-reference` writes
     and tests/runs/test_results_reference.py checks against fresh runs.
+
+    Parameters
+    ----------
+    path : path
+        A reference file (`{case: {variant: metrics}}` JSON).
+
+    Returns
+    -------
+    str
+        The Markdown table, one column per (case, variant).
+
+    Raises
+    ------
+    OSError, ValueError
+        If the file cannot be read or is not JSON.
     """
     ref = read_reference(path)
+
     def tube_first(v: str) -> tuple:
         return not v.startswith("tube"), v
 
