@@ -52,6 +52,7 @@ class PolytopicLPV:
                 f"LPV weighting functions give {self.W_h.shape[1]} x {self.W_V.shape[1]} "
                 f"vertices, but there are {R} vertex systems"
             )
+        weights_kernel()  # compiled (or loaded) now, at start-up, not in a run's step
 
     def systems(self, h, V) -> tuple[np.ndarray, np.ndarray]:
         """(A(p) (B, n, n), B(p) (B, n, m)) = sum_i tau_i(p) [A_i, B_i] at B points p.

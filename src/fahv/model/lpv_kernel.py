@@ -21,7 +21,10 @@ import numpy as np
 def weights_kernel():
     """`tp_weights_into` compiled by numba (cached on disk), built at its first use.
 
-    A process that never schedules an LPV model does not import numba.
+    Compiled eagerly for its one signature (C-contiguous float64 arrays), so that the
+    model that first asks for it (`fahv.model.lpv.PolytopicLPV`, at its construction: a
+    node's start-up) pays the compile or the cache load, not a run's first step. A process
+    that never builds an LPV model does not import numba.
 
     Returns
     -------
@@ -30,7 +33,8 @@ def weights_kernel():
     """
     import numba
 
-    return numba.njit(cache=True)(tp_weights_into)
+    vec, mat = numba.float64[::1], numba.float64[:, ::1]
+    return numba.njit(mat(vec, vec, vec, mat, vec, mat, mat), cache=True)(tp_weights_into)
 
 
 def tp_weights_into(h, V, h_grid, W_h_columns, V_grid, W_V_columns, out):  # pragma: no cover

@@ -263,8 +263,11 @@ class Sensors:
         self._std = self._const[_STD] * disp[:, 0:1]
         #: Turn-on bias of each run and channel (B, n_y), drawn at step 0.
         self.turn_on = np.zeros((B, n_y))
-        for j, (c, n) in enumerate(zip(self.names, self.noise, strict=True)):
-            z = normals(self.seeds, CHANNEL_IDS[c], 0, STREAM_TURN_ON_BIAS)[:, 0]
+        # the draws of every channel in the one compiled call a step uses (compiled here,
+        # at the sensors' construction, not in a run's first step)
+        z_all = normals_grid(self.seeds, self._ids, 0, STREAM_TURN_ON_BIAS)[..., 0]
+        for j, n in enumerate(self.noise):
+            z = z_all[:, j]
             mean = n.bias_mean + disp[:, 2] * n.stddev
             self.turn_on[:, j] = mean + (n.bias_stddev * disp[:, 1]) * z
 
