@@ -124,3 +124,27 @@ def test_every_study_scenario_flies(path):
     variant = spec["variants"][0]
     run = simulate(design, variant, 0.2)
     assert run.t.size == 10 and spec.name == path.stem
+
+
+def test_an_extending_design_file_is_the_whole_file_it_stands_for(tmp_path):
+    """A design file that extends the certified design by name validates as the merged
+    file would, with its own entries in place; an estimate section gets its defaults, and
+    a bad value in it is refused naming the extending file and the key."""
+    from fahv.spec.files import load_design_file, spec_file
+    from fahv.spec.schema import design_spec
+
+    base = ROOT / "offline_design" / "designs" / "cm_certified.yaml"
+    text = ("extends: " + str(base) + "\nname: cm_on_estimate\ntube: {tau: 0.5}\n"
+            "estimate: {probability: 0.95}\n")  # fmt: skip
+    (tmp_path / "d.yaml").write_text(text)
+    got = load_design_file(tmp_path / "d.yaml")
+    whole = yaml.safe_load(base.read_text())
+    whole["name"], whole["tube"]["tau"] = "cm_on_estimate", 0.5
+    whole["estimate"] = {"probability": 0.95}
+    assert got.data == spec_file(whole, "whole", design_spec()).data
+    assert got.data["estimate"]["duration"] == 300.0
+    assert got.data["estimate"]["tau_candidates"] == [0.4, 0.6, 0.8, 1.0]
+    assert got.data["eight_state"]["attitude"] == 0.4  # the base's, untouched
+    (tmp_path / "bad.yaml").write_text(text.replace("0.95", "1.5"))
+    with pytest.raises(SpecError, match=r"bad\.yaml.*estimate\.probability"):
+        load_design_file(tmp_path / "bad.yaml")

@@ -33,6 +33,10 @@ respect; negative when it fails):
     E(Q) is invariant under K at every vertex (the tracking MPC's terminal set).
 `RMPC` (Wan & Kothare 2003)
     Every ellipsoid of the baseline's sequence: contraction, input bound, nesting.
+`estimate` (a design with an `estimate` section)
+    The covariance bound of the loop on the estimate at every vertex pair and the
+    attitude and elevator-rate claims with their probability
+    (`fahv.certificate.verify_estimate`).
 
 `verify` runs them; `verified_design` caches a pass by content hash
 (design hash, code hash, vehicle hash), so that a design is re-checked once per code
@@ -41,17 +45,17 @@ version, not once per run.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 from filelock import FileLock
 
+from fahv.certificate.check_result import CheckResult
+from fahv.certificate.eight_state import eight_state_vertices, elevator_rate_step
 from fahv.errors import DesignError
 from fahv.spec.artefacts import Design, code_hash
 
@@ -67,32 +71,6 @@ MODEL_RTOL = {"A": 1e-8, "B": 1e-8, "W_h": 1e-6, "W_V": 1e-6, "Dx": 1e-10, "Du":
               "trim_x": 1e-10, "trim_u": 1e-10}  # fmt: skip
 #: Tolerance of the tightening check (the stored limits are the same float expression).
 TIGHTENING_RTOL = 1e-9
-
-
-@dataclass(frozen=True)
-class CheckResult:
-    """One re-checked certificate.
-
-    Attributes
-    ----------
-    name : str
-        Which certificate (`model`, `tightening`, `tube RPI`, ...).
-    ok : bool
-        True if it holds.
-    margin : float
-        Distance to its bound in the check's own unit (negative: violated).
-    line : str
-        What was checked, the value, the bound and the margin.
-    """
-
-    name: str
-    ok: bool
-    margin: float
-    line: str
-
-    def text(self) -> str:
-        """The printed line: `name: line  OK` or `... FAILED`."""
-        return f"{self.name}: {self.line}  {'OK' if self.ok else 'FAILED'}"
 
 
 def rel_diff(a, b) -> float:
@@ -300,6 +278,10 @@ def checks_of(design: Design, vehicle) -> list[tuple[str, Callable[[], object]]]
         out.append(("tube RPI", partial(check_tube_rpi, design)))
     if "att_max" in design.arrays and "mpc" in design.case:
         out.append(("attitude", partial(check_attitude, design)))
+    if design.case.get("estimate") and "estimate_Sigma" in design.arrays:
+        from fahv.certificate.verify_estimate import check_estimate
+
+        out.append(("estimate", partial(check_estimate, design, vehicle)))
     out.append(("nominal K", partial(check_nominal, design)))
     if "K" in design.arrays and "Q" in design.arrays:
         out.append(("terminal set", partial(check_terminal, design)))
@@ -322,24 +304,12 @@ def check_eight_state(design: Design, vehicle) -> list[CheckResult]:
     """
     from fahv.bounds.domain import box_shortfall, nominal_box
     from fahv.bounds.one_step_bound import altitude_bound
-    from fahv.bounds.vertices import nominal_vertices
-    from fahv.model.trim import TrimMap
-    from fahv.plant.uncertainty import PAPER_UNCERTAINTY
     from fahv.synthesis.rpi_level import worst_level
 
     a, c, s = design.arrays, design.case, design.summary
     cert = s["certificate"]
-    nominal, box = nominal_box(c["eight_state"], vehicle.envelope)
-    unc = {k: v * c["uncertainty"]["scale"] for k, v in PAPER_UNCERTAINTY.items()}
-    tm = TrimMap(a["trim_h"], a["trim_V"], a["trim_x"], a["trim_u"])
-    scale = np.concatenate([a["Dx"], a["Du"]])
-    nv = nominal_vertices(box, vehicle, tm, unc, float(s["tube"]["rho_f"]), c["Ts"],
-                          c["plant_substeps"], scale, c["eight_state"]["k"], a["w_max"],
-                          np.asarray(cert["col_scale"], float))  # fmt: skip
-    tau = float(c["tube"]["tau"])
-    if tau < 1.0:
-        nv = dataclasses.replace(nv, tau=tau)
-    A, B = nv.vertices()
+    nominal, _ = nominal_box(c["eight_state"], vehicle.envelope)
+    nv, A, B = eight_state_vertices(design, vehicle)
     F_8, N_8 = np.asarray(a["F"], float)[:, 1:], np.asarray(a["N"], float)[1:, 1:]
     W_8 = np.asarray(cert["W_8"], float)
     ab = altitude_bound(nv, A, B, F_8, N_8, int(cert["moves"]))
@@ -394,11 +364,9 @@ def check_input_rate(A_8, B_8, F_8, N_8, W_8, case: dict, vehicle) -> list[Check
     """
     from fahv.bounds.input_rate import tube_rate
 
-    servo = (vehicle.actuators.get("second_order") or {}).get("delta_e")
-    rate = np.inf if servo is None else min(servo.rate_limit_incr, servo.rate_limit_decr)
-    if not np.isfinite(rate):
+    limit = float(np.degrees(elevator_rate_step(vehicle, float(case["Ts"]))))
+    if not np.isfinite(limit):
         return []
-    limit = float(np.degrees(rate)) * float(case["Ts"])
     r = tube_rate(A_8, B_8, F_8, N_8, W_8)
     tube, plan = float(np.degrees(r.per_step[1])), float((case.get("mpc") or {}).get(
         "du_max", (0.0, 0.0))[1])  # fmt: skip

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from fahv.config.spec import defaults_text
+from fahv.design.estimate import estimate_stage
 from fahv.design.results import (
     DesignModel,
     Disturbance,
@@ -152,5 +153,44 @@ def run_design(spec: SpecFile, vehicle=None, progress=None, log=print, clock=Non
     summary = summary_of(spec, veh, model, dist, vertex, tube, tightening, nominal, cert)
     certified, warm = split_warm_starts(arrays)
     design = Design(c, certified, summary, warm)
+    if c.get("estimate"):
+        tell("estimate")
+        design = with_estimate(design, veh, previous, done)
     design.summary["design_hash"] = design.content_hash()
     return design
+
+
+def with_estimate(design: Design, vehicle, previous, done) -> Design:
+    """The design with its estimate stage's arrays and summary (`fahv.design.estimate`).
+
+    Parameters
+    ----------
+    design : Design
+        The finished exact-state part of a design with an `estimate` section.
+    vehicle : fahv.model.vehicle.Vehicle
+    previous : Mapping[str, ndarray] or None
+        An earlier design's warm starts.
+    done : callable
+        Logs a stage result's lines and returns it.
+
+    Returns
+    -------
+    Design
+
+    Raises
+    ------
+    DesignError
+        If a claim fails or the covariance bound does (`estimate_stage`).
+    """
+    est = done(estimate_stage(design, vehicle, previous))
+    certified, warm = split_warm_starts(est.arrays())
+    c = est.claims
+    summary = {**design.summary, "estimate": {
+        "tau": c.tau, "p_claim": c.p_claim, "r_attitude": c.r_attitude, "r_rate": c.r_rate,
+        "std_attitude_deg": np.degrees(c.std_attitude).tolist(),
+        "std_step_deg": float(np.degrees(c.std_step)), "min_eig": est.tube.min_eig,
+        "rate_tube_deg": float(np.degrees(c.rate_tube)),
+        "rate_limit_deg": float(np.degrees(c.rate_limit)),
+        "model_t_worst": est.tube.model_t.tolist()}}
+    return Design(design.case, {**design.arrays, **certified}, summary,
+                  {**design.warm_starts, **warm})

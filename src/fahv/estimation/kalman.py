@@ -30,8 +30,8 @@ the correction leaves them to the model (the gains are the airframe's: with them
 predictor destabilises Case 1's bending mode, so the loop's default is the ideal one).
 
 It models no sensor delay, lag or sample-and-hold (the vehicle file's defaults have
-none). What its error certifies is in `fahv_studies.estimation.error_bound` and
-`fahv_studies.estimation.closed_loop`.
+none). What its error certifies is in `fahv.stochastic.error_bound` and
+`fahv.stochastic.closed_loop`.
 """
 
 from __future__ import annotations

@@ -115,7 +115,7 @@ class Design:
 
 
 #: Names of the warm-start arrays (`Design.warm_starts`), and prefixes of such names.
-WARM_START_KEYS = ("closure_vertices", "closure_points")
+WARM_START_KEYS = ("closure_vertices", "closure_points", "estimate_pairs")
 WARM_START_PREFIXES = ("ellipsoid_vertices_", "rmpc_guess_")
 
 

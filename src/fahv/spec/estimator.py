@@ -52,6 +52,46 @@ ESTIMATOR = (
           choices=STATE_DISTURBANCE_NAMES, default=NO_DISTURBANCE),
 )  # fmt: skip
 
+#: The keys of a design's `estimate` section (`estimate_design_section`): the loop on the
+#: estimate the design states a probability for (`fahv.design.estimate`).
+ESTIMATE_DESIGN = (
+    Field("probability", "float", "probability, per run, that every claim of the estimate "
+          "design holds at once (the attitude and the elevator servo's rate, each given half "
+          "of 1 - p: a union bound)", lo=0.5, hi=1.0, hi_open=True, default=0.99),
+    Field("duration", "float", "length of the run the probability is stated for (the union "
+          "bound over its steps)", unit="s", lo=1.0, hi=1e4, default=300.0),
+    Field("actuators", "str", "actuator model of the plant and of the filter's predictor "
+          "and gains", choices=ACTUATOR_MODELS, default="second_order"),
+    Field("state_disturbance", "str", "the filter's third disturbance (as the scenario's "
+          "estimator.state_disturbance)", choices=STATE_DISTURBANCE_NAMES,
+          default=NO_DISTURBANCE),
+    Field("nominal_est_tau", "float", "time constant of the nominal MPC's state-disturbance "
+          "estimate on the estimate (the design's mpc.est_tau is for the exact state)",
+          unit="s", lo=0.0, hi=1e3, lo_open=True, default=2.0),
+    Field("nominal_est_tau_elevator", "float", "the same along the elevator column",
+          unit="s", lo=0.0, hi=1e3, lo_open=True, default=5.0),
+    Field("nominal_est_start", "str", "start of the nominal MPC's state-disturbance estimate "
+          "on the estimate", choices=EST_STARTS, default="zero"),
+    Field("tau_candidates", "floats", "adjustable factors whose claims the design reports "
+          "beside its own tube.tau, for the designer's choice (the F of this design)",
+          lo=0.0, hi=1.0, lo_open=True, default=(0.4, 0.6, 0.8, 1.0), equation="eq. (53-54)"),
+)  # fmt: skip
+
+
+def estimate_design_section() -> Section:
+    """The `estimate` section of a design file: a design for the loop on the estimate.
+
+    Optional: absent, the design is for the exact state (the paper's loop). Present, `fahv
+    design` adds the probabilistic reachable set of the loop on the estimate and the
+    nominal's rows tightened by it (`fahv.design.estimate`), and the runs on the design
+    fly with its settings (`fahv.loop.params`).
+    """
+    return Section("estimate", ESTIMATE_DESIGN, "the loop on the state estimate the design "
+                   "is made for (sensors, servos and the Kalman filter of the vehicle file)",
+                   when=lambda r: False, when_text="a design for the loop on the estimate "
+                   "(optional: absent, the design is for the exact state)")  # fmt: skip
+
+
 
 def estimator_section() -> Section:
     """The `estimator` section of a scenario and a run spec: optional, left out when absent.

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from fahv.config import Section, validate
+from fahv.config.extends import resolve_extends
 from fahv.config.yamlio import load_yaml
 from fahv.errors import SpecError
 from fahv.spec.schema import design_spec, run_spec
@@ -89,9 +90,20 @@ def read_yaml_file(path: str | Path, what: str, error: type = SpecError) -> Any:
 def load_design_file(path: str | Path) -> SpecFile:
     """Read and validate a design file (`fahv.spec.schema.design_spec`).
 
+    A design file may begin with `extends: BASE` (`fahv.config.extends`): a design that
+    differs from another in a few entries (the design for the loop on the estimate from
+    the exact state's). A base given by name is `<name>.yaml` beside the file, then in
+    `offline_design/designs/` of the working folder.
+
     Raises
     ------
     SpecError
-        If the file is missing, is not YAML, or does not validate (naming the key).
+        If the file or a base is missing or is not YAML, `extends` makes a cycle, or the
+        merged file does not validate (naming the key).
     """
-    return spec_file(read_yaml_file(path, "design file"), str(path), design_spec())
+    def find(name: str, folder: Path) -> list[Path]:
+        return [folder / f"{name}.yaml", Path("offline_design") / "designs" / f"{name}.yaml"]
+
+    data = resolve_extends(read_yaml_file(path, "design file"), Path(path),
+                           lambda p: read_yaml_file(p, "design file"), find, SpecError)
+    return spec_file(data, str(path), design_spec())

@@ -32,9 +32,11 @@ from fahv.plant.uncertainty import PAPER_UNCERTAINTY
 from fahv.sensors.data import CHANNELS, DEFAULT_MEASURED, EXACT_STATE
 from fahv.sensors.faults import SENSOR_FAULTS, sensor_fault_fields
 from fahv.spec.estimator import (  # noqa: F401 - the scenario schema's estimator section
+    ESTIMATE_DESIGN,
     ESTIMATOR,
     ESTIMATORS,
     NO_ESTIMATOR,
+    estimate_design_section,
     estimator_kind,
     estimator_section,
     estimator_value,
@@ -402,6 +404,7 @@ def _design_items() -> tuple:
                   lo_open=True, default=0.999),
         ), "nominal gain K and its ellipsoid"),
         *_law_sections(),
+        estimate_design_section(),
     )  # fmt: skip
 
 

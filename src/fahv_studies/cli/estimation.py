@@ -142,14 +142,14 @@ def chance_lines(pt, arrays, p: float, steps: int, R: int, tau: float = 1.0,
                  rate_step: float = np.inf, rows=None) -> list[str]:  # fmt: skip
     """The lines `fahv-studies estimation` prints of a `ProbabilisticTube`.
 
-    `fahv_studies.estimation.closed_loop.ProbabilisticTube`.
+    `fahv.stochastic.closed_loop.ProbabilisticTube`.
 
     `tau` is the adjustable law's factor (eq. 53-54), `rate_step` the elevator servo's
     rate limit times Ts [rad per step] (inf: none), which the command's step is held
     against; `rows` (2,) the nominal's attitude rows the loop flies [rad] (None: the
     design's `att_max`; a scenario's `estimator.nominal_att_max` sets them lower).
     """
-    from fahv_studies.estimation.closed_loop import attitude_chance, radii
+    from fahv.stochastic.closed_loop import attitude_chance, radii
 
     r_step, r_run = radii(p, steps)
     req = np.radians(ATTITUDE_BOUND_DEG)
@@ -192,7 +192,7 @@ def chance_lines(pt, arrays, p: float, steps: int, R: int, tau: float = 1.0,
 def cmd_estimation(args) -> int:
     """Print the bounds of a scenario's Kalman filter and the tube's room for them."""
     # cvxpy and scipy.stats: here only
-    from fahv_studies.estimation.closed_loop import loop_tube
+    from fahv.stochastic.closed_loop import loop_tube
     from fahv_studies.estimation.output_feedback import output_feedback_tube
     from fahv_studies.estimation.study import estimate_study
 

@@ -23,7 +23,7 @@ beside the state-feedback tube of the design's W on the same vertices:
   not fit for the whole correction either;
 - **the estimation error's part** r ||(L_j C_z A_z,i S^1/2)_s||, the prior error of the
   noise-driven posterior error within its run-long ellipsoid (radius r, covariance bound
-  S of `fahv_studies.estimation.error_bound.covariance_bound`), at every pair of model vertex i
+  S of `fahv.stochastic.error_bound.covariance_bound`), at every pair of model vertex i
   and gain vertex j: reported beside the sensor part (its size, not a tube).
 
 The statement is the synthesis's (an ellipsoidal tube with one shape over the vertices,

@@ -1,7 +1,7 @@
 """The bounds of a design's Kalman filter on a scenario's sensors, and the tube's room for them.
 
 `estimate_study` gathers what `fahv-studies estimation` prints
-(`fahv_studies.estimation.error_bound` for the bounds): the noise-driven error's
+(`fahv.stochastic.error_bound` for the bounds): the noise-driven error's
 covariance bound over every vertex pair and the radius within which a whole run stays
 with probability p; the exact frozen-vertex worst cases of the noise and of the model
 error taken as bounded sequences; and what the noise-driven error adds to the tube's
@@ -25,7 +25,7 @@ from fahv.estimation.kalman import (
 )
 from fahv.sensors.data import SensorData
 from fahv.sensors.measure import noise_bound
-from fahv_studies.estimation.error_bound import (
+from fahv.stochastic.error_bound import (
     CovarianceBound,
     ErrorSystem,
     covariance_bound,

@@ -1,4 +1,4 @@
-"""The probabilistic tube of the implementable loop (fahv_studies.estimation.closed_loop with the
+"""The probabilistic tube of the implementable loop (fahv.stochastic.closed_loop with the
 plant's servos, the filter with their states and the scenario's altitude-rate disturbance,
 the adjustable law tau F): the joint bound holds at every pair, the nonlinear loop of
 case1_implementable deviates as it says, and the command's step it predicts for a whole
@@ -10,8 +10,8 @@ import pytest
 from fahv.certificate.verified import load_or_design
 from fahv.estimation.kalman import design_filter, measurement_covariance
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors
-from fahv_studies.estimation.closed_loop import joint_system, loop_tube, radii
-from fahv_studies.estimation.error_bound import error_system
+from fahv.stochastic.closed_loop import joint_system, loop_tube, radii
+from fahv.stochastic.error_bound import error_system
 
 MEASURED = list(DEFAULT_MEASURED)
 SCENARIO = "offline_design/scenarios/case1_implementable.yaml"
@@ -185,7 +185,7 @@ def test_the_flight_path_disturbance_joins_the_error_system(implementable):
     system's covariance bound holds at every pair (the exact re-check), its joint system
     with the servos has 28 states, and d_gamma's error is bounded (1 sigma 2.1e-5 rad/s from
     the sensors' noise, 10 %)."""
-    from fahv_studies.estimation.error_bound import covariance_bound
+    from fahv.stochastic.error_bound import covariance_bound
 
     design, vehicle, tau, _, _ = implementable
     a = design.arrays

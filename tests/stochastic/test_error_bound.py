@@ -1,4 +1,4 @@
-"""The bounds of the Kalman filter's estimation error (fahv_studies.estimation.error_bound, study):
+"""The bounds of the Kalman filter's estimation error (fahv.stochastic.error_bound, study):
 the covariance bound holds at every pair of model and gain vertex and above every frozen
 vertex's own covariance, random switching stays below it, the frozen worst case is
 reached by its sequence, and the nonlinear loop's error stays within the bounds; the
@@ -13,7 +13,7 @@ from fahv.estimation.kalman import design_filter, measurement_covariance
 from fahv.loop.simulate import simulate
 from fahv.model.vehicle import ALPHA, THETA, H, V
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors, replace_channel
-from fahv_studies.estimation.error_bound import peak_to_peak, worst_sequence
+from fahv.stochastic.error_bound import peak_to_peak, worst_sequence
 from fahv_studies.estimation.study import estimate_study, white_noise_only
 
 MEASURED = list(DEFAULT_MEASURED)
@@ -154,7 +154,7 @@ def test_the_filters_correction_bounds_are_reached(certified, study):
 def test_a_bound_started_from_its_own_pairs_is_the_same_bound(study):
     """`start`: the pairs the last solve held make the same S in one solve (so a study can
     ship them as a warm start); pairs that are not vertex pairs are refused, named."""
-    from fahv_studies.estimation.error_bound import covariance_bound
+    from fahv.stochastic.error_bound import covariance_bound
 
     cov = study.covariance
     Rv = measurement_covariance(MEASURED, load_sensors())

@@ -143,6 +143,30 @@ def _pair_margins(Ss: np.ndarray, Qs: np.ndarray, Ms: np.ndarray) -> np.ndarray:
     return np.linalg.eigvalsh(0.5 * (lhs + np.swapaxes(lhs, -1, -2)))[..., 0]
 
 
+def exact_margin(es: ErrorSystem, S: np.ndarray, R_v: np.ndarray) -> float:
+    """The exact re-check of a covariance bound: min over the pairs of the smallest eigenvalue.
+
+    Parameters
+    ----------
+    es : ErrorSystem
+    S : (n, n) ndarray
+        A covariance bound in the states' units (`CovarianceBound.S`).
+    R_v : (n_y, n_y) ndarray
+        The sensors' white-noise covariance.
+
+    Returns
+    -------
+    float
+        min over every pair (i, j) of the smallest eigenvalue of S - M_ij S M_ij' - N_j
+        R_v N_j' in the coordinates e / sigma (>= 0: S bounds the covariance).
+    """
+    D = es.sigma
+    Ms = es.M / D[None, None, :, None] * D[None, None, None, :]
+    Ns = es.N / D[None, :, None]
+    Qs = np.einsum("jab,bc,jdc->jad", Ns, np.asarray(R_v, float), Ns)
+    return float(_pair_margins(np.asarray(S, float) / np.outer(D, D), Qs, Ms).min())
+
+
 def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10,
                      start=None) -> CovarianceBound:  # fmt: skip
     """The smallest (in trace, scaled) common covariance bound of the noise-driven error.

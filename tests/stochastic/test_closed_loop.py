@@ -1,4 +1,4 @@
-"""The probabilistic tube of the loop on the estimate (fahv_studies.estimation.closed_loop): the
+"""The probabilistic tube of the loop on the estimate (fahv.stochastic.closed_loop): the
 joint covariance bound holds at every pair, random switching of the linear loop stays
 below it, and the nonlinear loop of case1_kalman deviates from its nominal as the bound
 says; the figures of docs/theory/estimation.md."""
@@ -10,8 +10,8 @@ from fahv.certificate.verified import load_or_design
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.estimation.kalman import design_filter, measurement_covariance
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors
-from fahv_studies.estimation.closed_loop import attitude_chance, joint_system, loop_tube, radii
-from fahv_studies.estimation.error_bound import error_system
+from fahv.stochastic.closed_loop import attitude_chance, joint_system, loop_tube, radii
+from fahv.stochastic.error_bound import error_system
 
 MEASURED = list(DEFAULT_MEASURED)
 SCENARIO = "studies/kalman_exact_design/scenarios/case1_kalman.yaml"

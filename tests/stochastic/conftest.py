@@ -55,7 +55,7 @@ def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0,
     t >= t_from, t = x - x_r - x_n (`Deviation`)."""
     from fahv.loop.simulate import simulate
     from fahv.model.vehicle import ALPHA, IQ, THETA, V
-    from fahv_studies.estimation.closed_loop import radii
+    from fahv.stochastic.closed_loop import radii
 
     run = simulate(design, "tube_mpc", duration=duration, overrides=overrides)
     k = run.t >= t_from

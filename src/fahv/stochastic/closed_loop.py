@@ -3,7 +3,7 @@
 On the estimate the tube law is u = v + F (x_hat - x_bar) (eq. 36 with the estimate in
 place of the state). With t = x - x_bar the true state's deviation from the nominal (the
 eight states after h, as in the tube) and e = z - z_hat the filter's a-posteriori error
-(`fahv_studies.estimation.error_bound`), the LPV model (eq. 11-12) at model vertex i and gain
+(`fahv.stochastic.error_bound`), the LPV model (eq. 11-12) at model vertex i and gain
 vertex j gives the joint system of xi = [t; e] (8 + 11,)
 
     t_k+1 = (A_i + B_i F) t_k - B_i F E e_k + w_k,
@@ -26,7 +26,7 @@ sum of three parts:
   design's certificate (eq. 24-28);
 - **the part driven by the sensor noise v** through the estimate, a Gaussian sequence:
   `joint_covariance` bounds its covariance at every pair (i, j) with one matrix Sigma
-  (the LMI of `fahv_studies.estimation.error_bound.covariance_bound` on the joint system,
+  (the LMI of `fahv.stochastic.error_bound.covariance_bound` on the joint system,
   re-checked exactly), so that at every step each state, input and input step stays
   within r sqrt(Sigma_ss) with the Gaussian probability of r; this is a probabilistic
   reachable set (Hewing and Zeilinger, "Stochastic model predictive control for linear
@@ -50,7 +50,7 @@ import scipy.linalg
 
 from fahv.estimation.servo_model import N_SERVO, servo_plants
 from fahv.sensors.measure import noise_bound
-from fahv_studies.estimation.error_bound import ErrorSystem, covariance_bound, peak_to_peak
+from fahv.stochastic.error_bound import ErrorSystem, covariance_bound, peak_to_peak
 
 #: Tube states: the eight states after h (V, alpha, theta, q, eta_1, eta_1_dot, eta_2,
 #: eta_2_dot), as the tube of the design.
@@ -137,7 +137,7 @@ def joint_system(es: ErrorSystem, A: np.ndarray, B: np.ndarray, F: np.ndarray,
     Parameters
     ----------
     es : ErrorSystem
-        The filter's error system (`fahv_studies.estimation.error_bound.error_system`), 11 states,
+        The filter's error system (`fahv.stochastic.error_bound.error_system`), 11 states,
         or 15 with the servos in the filter.
     A : (R, 9, 9) ndarray
         The design's LPV vertices A_i (eq. 12), deviation coordinates.
@@ -245,7 +245,7 @@ def model_part(js: JointSystem, g_max: np.ndarray) -> np.ndarray:
     -------
     (8,) ndarray
         max over the frozen vertices of the worst |t_s|
-        (`fahv_studies.estimation.error_bound.peak_to_peak`).
+        (`fahv.stochastic.error_bound.peak_to_peak`).
     """
     es = js.system
     xi = np.concatenate([np.asarray(g_max, float), np.zeros(es.N.shape[2])])
@@ -279,16 +279,39 @@ def probabilistic_tube(js: JointSystem, R_v: np.ndarray, g_max: np.ndarray,
 
     """
     cov = covariance_bound(js.system, R_v, start=start)
-    S = cov.S
+    return ProbabilisticTube(cov.S, cov.min_eig, cov.pairs_held,
+                             *standard_deviations(js, cov.S, R_v), model_part(js, g_max),
+                             cov.pairs)  # fmt: skip
+
+
+def standard_deviations(js: JointSystem, S: np.ndarray,
+                        R_v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The standard deviation bounds a covariance bound S of xi gives.
+
+    Parameters
+    ----------
+    js : JointSystem
+    S : (n_xi, n_xi) ndarray
+        A covariance bound of xi at every pair (`covariance_bound`'s S).
+    R_v : (n_y, n_y) ndarray
+        The sensors' white-noise covariance.
+
+    Returns
+    -------
+    std_t : (8,) ndarray
+        sqrt(diag S) of t [the tube states' units].
+    std_u : (2,) ndarray
+        Of the tube's input u - v [Phi, rad].
+    std_step : (2,) ndarray
+        Of its step from one step to the next, the largest over the pairs [Phi, rad per
+        step].
+    """
     Fx = js.input_rows()
     H, J = js.step_rows()
     step_var = (np.einsum("ijab,bc,ijac->ija", H, S, H)
                 + np.einsum("jab,bc,jac->ja", J, np.asarray(R_v, float), J)[None])  # fmt: skip
-    return ProbabilisticTube(
-        S, cov.min_eig, cov.pairs_held, np.sqrt(np.diag(S)[:8]),
-        np.sqrt(np.einsum("ab,bc,ac->a", Fx, S, Fx)), np.sqrt(step_var.max(axis=(0, 1))),
-        model_part(js, g_max), cov.pairs,
-    )  # fmt: skip
+    return (np.sqrt(np.diag(S)[:8]), np.sqrt(np.einsum("ab,bc,ac->a", Fx, S, Fx)),
+            np.sqrt(step_var.max(axis=(0, 1))))  # fmt: skip
 
 
 def loop_tube(es: ErrorSystem, flt, arrays, tau: float, R_v: np.ndarray,
@@ -298,7 +321,7 @@ def loop_tube(es: ErrorSystem, flt, arrays, tau: float, R_v: np.ndarray,
     Parameters
     ----------
     es : ErrorSystem
-        The filter's error system (`fahv_studies.estimation.error_bound.error_system` of `flt`).
+        The filter's error system (`fahv.stochastic.error_bound.error_system` of `flt`).
     flt : fahv.estimation.kalman.GainScheduledKalman
         The filter; its servos, if any, are the plant's (`joint_system`).
     arrays : mapping
