@@ -143,7 +143,8 @@ def test_an_extending_design_file_is_the_whole_file_it_stands_for(tmp_path):
     whole["estimate"] = {"probability": 0.95}
     assert got.data == spec_file(whole, "whole", design_spec()).data
     assert got.data["estimate"]["duration"] == 300.0
-    assert got.data["estimate"]["tau_candidates"] == [0.4, 0.6, 0.8, 1.0]
+    assert got.data["estimate"]["tau_candidates"] == [] and got.data["estimate"]["claims"] == [
+        "attitude", "elevator_rate"]
     assert got.data["eight_state"]["attitude"] == 0.4  # the base's, untouched
     (tmp_path / "bad.yaml").write_text(text.replace("0.95", "1.5"))
     with pytest.raises(SpecError, match=r"bad\.yaml.*estimate\.probability"):

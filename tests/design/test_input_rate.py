@@ -130,3 +130,24 @@ def test_the_tube_part_of_a_case1_run_stays_within_the_bound():
     e = run.x - run.x_r - run.x_n[:, :9]
     step = np.degrees(np.abs(np.diff(e @ np.asarray(design.arrays["F"], float)[1]))).max()
     assert 0.1 < step <= 1.649, step
+
+
+def test_the_adjustable_law_moves_its_command_by_tau_times_its_own_loops_move(tube_set_case1):
+    """The law tau F (eq. 53-54) closes A_i + tau B_i F, the vertex [A_i, tau B_i] of the
+    eight-state tube's gain vertices (eq. 48), and its command moves by tau times F's move
+    there: at tau = 0.8 on cm_certified's Z_8 1.200 deg per step against F's 1.649; the
+    vertices [A_i, B_i] alone (tau = 1) give F's."""
+    from dataclasses import replace
+
+    from fahv.bounds.input_rate import law_rate
+
+    d, *_, nv = tube_set_case1
+    A, B = replace(nv, tau=0.8).vertices()
+    args = (A[:, 1:, 1:], B[:, 1:, :], d["F"], d["N"], d["W"])
+    assert np.degrees(law_rate(*args, 0.8).per_step[1]) == pytest.approx(1.200, abs=0.002)
+    half = A.shape[0] // 2
+    full = tube_rate(A[:half, 1:, 1:], B[:half, 1:, :], d["F"], d["N"], d["W"])
+    one = law_rate(A[:half, 1:, 1:], B[:half, 1:, :], d["F"], d["N"], d["W"], 1.0)
+    np.testing.assert_array_equal(one.per_step, full.per_step)
+    with pytest.raises(ValueError, match="2R gain vertices"):
+        law_rate(A[:3, 1:, 1:], B[:3, 1:, :], d["F"], d["N"], d["W"], 0.8)

@@ -30,7 +30,7 @@ def test_rows_are_the_requirement_less_the_support_and_the_noise_at_the_run_radi
     design's; the rate rows what the servo leaves after the tube's and the noise's parts."""
     c = claims_at(tube(0.02, 0.2), 1.0, CASE, np.radians([0.1, 0.08]), np.radians(0.5),
                   np.radians(2.0))  # fmt: skip
-    assert len(CLAIMS) == 2 and c.p_claim == pytest.approx(0.995, abs=1e-15)
+    assert c.claimed == CLAIMS and c.p_claim == pytest.approx(0.995, abs=1e-15)
     r_att, r_rate = run_radius(0.995, 30000), run_radius(0.995, 15000)
     assert (c.r_attitude, c.r_rate) == (r_att, r_rate)
     np.testing.assert_allclose(np.degrees(c.rows_room), [0.4 - 0.02 * r_att,
@@ -43,7 +43,14 @@ def test_rows_are_the_requirement_less_the_support_and_the_noise_at_the_run_radi
     assert c.holds and tight.holds
     noisy = claims_at(tube(0.02, 0.5), 1.0, CASE, np.radians([0.1, 0.08]), np.radians(0.5),
                       np.radians(2.0))  # fmt: skip
-    assert noisy.du_plan < 0.0 and not noisy.holds
+    assert noisy.du_plan < 0.0 and not noisy.holds and noisy.attitude_holds
+    only = claims_at(tube(0.02, 0.5), 1.0, {**CASE, "estimate": {**CASE["estimate"],
+                     "claims": ["attitude"]}}, np.radians([0.1, 0.08]), np.radians(0.5),
+                     np.radians(2.0))  # fmt: skip
+    # one claim gets all of 1 - p; the rate, not claimed, keeps the design's rows
+    assert only.p_claim == pytest.approx(0.99, abs=1e-15) and only.holds
+    assert np.degrees(only.du_plan) == pytest.approx(0.2, abs=1e-12) and not only.rate_holds
+    assert only.r_attitude == run_radius(0.99, 30000) < r_att
 
 
 def test_the_estimate_stage_needs_the_eight_state_tube():

@@ -98,3 +98,47 @@ def tube_rate(A, B, F, N, W) -> TubeRate:
     C = F[None] @ (A + B @ F[None] - np.eye(n))  # (R, m, n): F (A_cl,i - I)
     ell = np.sqrt(np.maximum(np.einsum("rjk,kl,rjl->rj", C, N, C), 0.0))
     return TubeRate(ell.max(axis=0), np.abs(F) @ W, ell.argmax(axis=0))
+
+
+def law_rate(A, B, F, N, W, tau: float = 1.0) -> TubeRate:
+    """The one-step change of the command part tau F e the adjustable law applies.
+
+    The law u = v + tau F e (eq. 53-54) closes the loop A_i + tau B_i F, which is the
+    vertex [A_i, tau B_i] with the gain F, and its command moves by tau times F's move:
+    `tube_rate` over those vertices, times tau. At tau = 1 this is `tube_rate`.
+
+    Parameters
+    ----------
+    A, B : (R, n, n), (R, n, m) array_like
+        The tube's vertices; for tau < 1 the eight-state tube's own (eq. 48), [A_i, B_i]
+        and then [A_i, tau B_i] (`fahv.bounds.vertices.gain_vertices`, R even).
+    F, N, W : array_like
+        As `tube_rate`.
+    tau : float
+        The adjustable factor, 0 < tau <= 1.
+
+    Returns
+    -------
+    TubeRate
+        Of the law's command [input units per step].
+
+    Raises
+    ------
+    ValueError
+        As `tube_rate`, or if tau is not in (0, 1] or R is odd for tau < 1.
+
+    Examples
+    --------
+    >>> r = law_rate([[[1.0]], [[1.0]]], [[[0.5]], [[0.25]]], [[-1.0]], [[1.0]], [0.25], 0.5)
+    >>> r.per_step.tolist()  # 0.5 (|0.75 - 1| 1 + 0.25)
+    [0.25]
+    """
+    if not 0.0 < tau <= 1.0:
+        raise ValueError(f"law_rate: tau = {tau} must lie in (0, 1]")
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    if tau < 1.0:
+        if A.shape[0] % 2:
+            raise ValueError("law_rate: tau < 1 needs the tube's 2R gain vertices")
+        A, B = A[A.shape[0] // 2:], B[B.shape[0] // 2:]
+    r = tube_rate(A, B, F, N, W)
+    return TubeRate(tau * r.over_z, tau * r.over_w, r.vertex)

@@ -339,7 +339,7 @@ def check_eight_state(design: Design, vehicle) -> list[CheckResult]:
 
 
 def check_input_rate(A_8, B_8, F_8, N_8, W_8, case: dict, vehicle) -> list[CheckResult]:
-    """The elevator command's rate against the servo's (`fahv.bounds.input_rate.tube_rate`).
+    """The elevator command's rate against the servo's (`fahv.bounds.input_rate.law_rate`).
 
     The tube's part F e over Z_8, W_8 and the vertices, plus the nominal plan's rate rows
     (`mpc.du_max`), against the elevator servo's rate limit times Ts (the vehicle file's
@@ -362,12 +362,12 @@ def check_input_rate(A_8, B_8, F_8, N_8, W_8, case: dict, vehicle) -> list[Check
     list of CheckResult
         One line; none when the vehicle file gives no finite elevator rate limit.
     """
-    from fahv.bounds.input_rate import tube_rate
+    from fahv.bounds.input_rate import law_rate
 
     limit = float(np.degrees(elevator_rate_step(vehicle, float(case["Ts"]))))
     if not np.isfinite(limit):
         return []
-    r = tube_rate(A_8, B_8, F_8, N_8, W_8)
+    r = law_rate(A_8, B_8, F_8, N_8, W_8, float((case.get("tube") or {}).get("tau", 1.0)))
     tube, plan = float(np.degrees(r.per_step[1])), float((case.get("mpc") or {}).get(
         "du_max", (0.0, 0.0))[1])  # fmt: skip
     total = tube + plan

@@ -13,6 +13,7 @@ from fahv.errors import DesignError, SpecError
 from fahv.spec.artefacts import load_design, save_design
 from fahv.spec.files import load_design_file, read_yaml_file
 from fahv.spec.scenario import load_scenario
+from fahv.spec.schema import OPTIONAL_SECTIONS, SCENARIO_KEYS
 from fahv.spec.store import design_dir, stored_design
 
 
@@ -118,8 +119,13 @@ def resolve_design_file(path: str | Path) -> Path:
         else:
             raise SpecError(f"no design or scenario named {path!r} in offline_design/")
     data = read_yaml_file(p, "design or scenario file")
-    scenario = "design" in data or "extends" in data if isinstance(data, dict) else False
-    if scenario and "design_step" not in data:  # a scenario (whole, or extending another)
+    if not isinstance(data, dict) or "design_step" in data:
+        return p
+    # a scenario names its design or extends another scenario; a design file that extends
+    # another has an entry no scenario has (its estimate, tube, mpc, ...)
+    own = set(data) - {"extends", "name", "description"}
+    if "design" in data or ("extends" in data and own <= {*SCENARIO_KEYS, *OPTIONAL_SECTIONS,
+                                                          "vehicle"}):
         return load_scenario(p).design_file
     return p
 

@@ -25,8 +25,9 @@ import numpy as np
 from fahv.config import Field
 from fahv.config.spec import validate_flat
 from fahv.control import LAWS, NOMINAL_SOURCES, VARIANTS, variant_notch
-from fahv.errors import ConfigError, ParameterError
+from fahv.errors import ParameterError
 from fahv.estimation.state_disturbance import NO_DISTURBANCE, STATE_DISTURBANCE_NAMES
+from fahv.loop.estimate_settings import nominal_on_estimate
 from fahv.loop.graph import CONTROLLER_NODES
 from fahv.model.actuators import ACTUATOR_MODELS, IDEAL
 from fahv.model.cascade import AIRFRAME_ARRAYS, airframe_arrays
@@ -390,7 +391,7 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
     for name, value in law.node_values(a, c).items():
         controller.update(flat_parameter(name, value))
     nominal = {k: _plain(v) for k, v in law.nominal.node_values(a, c).items()}
-    nominal = _nominal_on_estimate(nominal, c)
+    nominal = nominal_on_estimate(nominal, c, a)
     return {
         **vehicle_parameters(design, common),
         "fault_injector": {**common, **fault},
@@ -416,44 +417,6 @@ def node_parameters(design, variant: str | None = None, watchdog_s: float = 10.0
         },
         law.node: controller,
     }
-
-
-def _nominal_on_estimate(nominal: dict, c: dict) -> dict:
-    """The nominal node's parameters with the scenario's settings for a loop on the estimate.
-
-    Parameters
-    ----------
-    nominal : dict
-        The nominal law's node values from the design (`mpc.est_tau`, `mpc.att_max` [deg],
-        ...); returned updated.
-    c : dict
-        The run spec; its `estimator` section's `nominal_est_tau`,
-        `nominal_est_tau_elevator`, `nominal_est_start` and `nominal_att_max` replace the
-        design's values when the flight computer estimates the state (0: the design's).
-
-    Raises
-    ------
-    fahv.errors.ConfigError
-        If `estimator.nominal_att_max` exceeds the design's attitude rows: rows wider
-        than the design's would take the nominal outside the range its tube covers.
-    """
-    if "mpc.est_tau" not in nominal or estimator_kind(c) == NO_ESTIMATOR:
-        return nominal
-    for key in ("est_tau", "est_tau_elevator"):
-        tau_s = float(estimator_value(c, f"nominal_{key}"))
-        if tau_s > 0.0:
-            nominal[f"mpc.{key}"] = tau_s
-    nominal["mpc.est_start"] = estimator_value(c, "nominal_est_start")
-    att = float(estimator_value(c, "nominal_att_max"))
-    if att > 0.0 and "mpc.att_max" in nominal:
-        design_rows = [float(v) for v in nominal["mpc.att_max"]]
-        if att > max(design_rows) + 1e-9:
-            raise ConfigError(
-                f"estimator.nominal_att_max = {att} deg exceeds the design's attitude rows "
-                f"{design_rows} deg (mpc.att_max): wider rows leave the range the tube covers"
-            )
-        nominal["mpc.att_max"] = [min(att, r) for r in design_rows]
-    return nominal
 
 
 def vehicle_parameters(design, common: dict) -> dict:

@@ -52,12 +52,18 @@ ESTIMATOR = (
           choices=STATE_DISTURBANCE_NAMES, default=NO_DISTURBANCE),
 )  # fmt: skip
 
+#: The claims an estimate design can make (`fahv.stochastic.claims`).
+ESTIMATE_CLAIMS = ("attitude", "elevator_rate")
 #: The keys of a design's `estimate` section (`estimate_design_section`): the loop on the
 #: estimate the design states a probability for (`fahv.design.estimate`).
 ESTIMATE_DESIGN = (
     Field("probability", "float", "probability, per run, that every claim of the estimate "
-          "design holds at once (the attitude and the elevator servo's rate, each given half "
-          "of 1 - p: a union bound)", lo=0.5, hi=1.0, hi_open=True, default=0.99),
+          "design holds at once (each claim given its share of 1 - p: a union bound)",
+          lo=0.5, hi=1.0, hi_open=True, default=0.99),
+    Field("claims", "strs", "what the design claims with the probability: the attitude "
+          "requirement (the nominal's rows tightened), the elevator servo's rate (its rate "
+          "rows tightened); a claim not made is reported with its numbers",
+          choices=ESTIMATE_CLAIMS, default=ESTIMATE_CLAIMS),
     Field("duration", "float", "length of the run the probability is stated for (the union "
           "bound over its steps)", unit="s", lo=1.0, hi=1e4, default=300.0),
     Field("actuators", "str", "actuator model of the plant and of the filter's predictor "
@@ -74,7 +80,7 @@ ESTIMATE_DESIGN = (
           "on the estimate", choices=EST_STARTS, default="zero"),
     Field("tau_candidates", "floats", "adjustable factors whose claims the design reports "
           "beside its own tube.tau, for the designer's choice (the F of this design)",
-          lo=0.0, hi=1.0, lo_open=True, default=(0.4, 0.6, 0.8, 1.0), equation="eq. (53-54)"),
+          lo=0.0, hi=1.0, lo_open=True, default=(), equation="eq. (53-54)"),
 )  # fmt: skip
 
 

@@ -34,6 +34,7 @@ from fahv.errors import SpecError
 from fahv.model.trim import TrimMap
 from fahv.plant.faults import make_fault
 from fahv.plant.uncertainty import PAPER_UNCERTAINTY, perturb, perturbed_params
+from fahv.sensors.data import DEFAULT_MEASURED, measured_channels
 from fahv.spec.artefacts import Design, load_arrays, save_arrays
 from fahv.spec.context import DesignContext
 from fahv.spec.files import SpecFile, load_design_file, read_yaml_file, spec_file
@@ -44,6 +45,8 @@ from fahv.spec.schema import (
     actuator_model,
     design_spec,
     estimator_kind,
+    estimator_value,
+    plant_choices,
     scenario_spec,
     sensor_fault_used,
 )
@@ -317,6 +320,8 @@ def uncertified(design: Design, spec: dict, vehicle) -> list[str]:
             f"the vehicle draw's uncertainty scale {spec['uncertainty']['scale']:g} exceeds the "
             f"design's parameter box ({rng['uncertainty_scale']:g} of the sec. 5.1 box)"
         )
+    if flies_its_estimate_design(spec):
+        return out  # the estimate design's claims cover the servos and the estimate
     if actuator_model(spec) != "ideal":
         out.append(
             f"the actuator model {actuator_model(spec)!r} (plant.actuators) is not in the "
@@ -328,6 +333,35 @@ def uncertified(design: Design, spec: dict, vehicle) -> list[str]:
             "for a controller that reads the exact state; the estimation error is not in it"
         )
     return out
+
+
+def flies_its_estimate_design(spec: dict) -> bool:
+    """Whether a run spec flies the loop its design's `estimate` section was made for.
+
+    The plant's servos and the filter's are the section's `actuators`, the filter is the
+    Kalman filter with its `state_disturbance` on the default sensors, and the scenario
+    does not replace the tube law's factor (`estimator.tube_tau`) or widen the nominal's
+    attitude rows: the design's probabilistic claims (`fahv.design.estimate`) are then
+    about this run.
+
+    Examples
+    --------
+    >>> est = {"actuators": "second_order", "state_disturbance": "none"}
+    >>> run = {"estimate": est, "plant": {"actuators": "second_order"},
+    ...        "estimator": {"kind": "kalman", "actuators": "second_order"}}
+    >>> flies_its_estimate_design(run), flies_its_estimate_design({**run, "estimate": None})
+    (True, False)
+    """
+    est = spec.get("estimate")
+    if not est or estimator_kind(spec) == NO_ESTIMATOR:
+        return False
+    measured = plant_choices(spec)["measured"]
+    return (actuator_model(spec) == est["actuators"]
+            and estimator_value(spec, "actuators") == est["actuators"]
+            and estimator_value(spec, "state_disturbance") == est["state_disturbance"]
+            and float(estimator_value(spec, "tube_tau")) == 0.0
+            and measured_channels(measured) == list(DEFAULT_MEASURED)
+            and (spec.get("sensor_fault") or {}).get("kind", "none") == "none")
 
 
 def _steps_equal(spec: dict, design: Design) -> bool:

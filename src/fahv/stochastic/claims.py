@@ -17,11 +17,12 @@ import numpy as np
 from fahv.control.base import ATTITUDE_BOUND_DEG
 from fahv.estimation.kalman import design_filter, measurement_covariance
 from fahv.sensors.data import DEFAULT_MEASURED, load_sensors
+from fahv.spec.estimator import ESTIMATE_CLAIMS
 from fahv.stochastic.closed_loop import ProbabilisticTube, loop_tube
 from fahv.stochastic.error_bound import error_system
 
-#: The probabilistic claims of an estimate design, in the order their probability is split.
-CLAIMS = ("attitude", "elevator rate")
+#: The probabilistic claims an estimate design can make (`estimate.claims`).
+CLAIMS = ESTIMATE_CLAIMS
 
 
 @dataclass(frozen=True)
@@ -32,8 +33,10 @@ class EstimateClaims:
     ----------
     tau : float
         The adjustable factor of the tube law (eq. 53-54).
+    claimed : tuple of str
+        The claims the design makes (`estimate.claims`, names of `CLAIMS`).
     p_claim : float
-        Each claim's probability per run (p split over `CLAIMS`).
+        Each claim's probability per run (p split over the claimed ones).
     r_attitude, r_rate : float
         Radii [standard deviations] a whole run stays within with p_claim (union bound
         over the steps, and the two attitude signals).
@@ -42,18 +45,23 @@ class EstimateClaims:
     std_step : float
         That of the tube's delta_e step [rad per step].
     rows : (2,) ndarray
-        The nominal's attitude rows the claim allows, at most the design's [rad].
+        The nominal's attitude rows: those the claim allows, at most the design's, when
+        the attitude is claimed; the design's otherwise [rad].
     rows_room : (2,) ndarray
         0.5 deg - support of Z_8 - r std: the rows the claim allows before the cap [rad].
     rate_tube, rate_limit : float
         The tube's worst-case part of the delta_e step, and the servo's rate limit times
         Ts [rad per step] (inf: ideal actuators).
     du_plan : float
-        The nominal's delta_e rate rows the claim allows, at most the design's [rad per
-        step]; <= 0: none (the claim fails at this tau).
+        The nominal's delta_e rate rows: what the servo leaves after the tube's and the
+        noise's parts, at most the design's, when the rate is claimed (<= 0: none, the
+        claim fails); the design's otherwise [rad per step].
+    rate_room : float
+        What the servo leaves after the tube's and the noise's parts [rad per step].
     """
 
     tau: float
+    claimed: tuple
     p_claim: float
     r_attitude: float
     r_rate: float
@@ -64,11 +72,23 @@ class EstimateClaims:
     rate_tube: float
     rate_limit: float
     du_plan: float
+    rate_room: float
+
+    @property
+    def attitude_holds(self) -> bool:
+        """The attitude claim holds: rows are left for the nominal."""
+        return bool(np.all(self.rows_room > 0.0))
+
+    @property
+    def rate_holds(self) -> bool:
+        """The elevator-rate claim holds: rate rows are left for the nominal."""
+        return bool(self.rate_room > 0.0)
 
     @property
     def holds(self) -> bool:
-        """Both claims hold: rows and rate rows are left for the nominal."""
-        return bool(np.all(self.rows > 0.0) and self.du_plan > 0.0)
+        """Every claimed claim holds."""
+        return all({"attitude": self.attitude_holds, "elevator_rate": self.rate_holds}[c]
+                   for c in self.claimed)  # fmt: skip
 
 
 def run_radius(p: float, samples: int) -> float:
@@ -156,17 +176,20 @@ def claims_at(pt: ProbabilisticTube, tau: float, case: dict, support: np.ndarray
     EstimateClaims
     """
     est, mpc = case["estimate"], case["mpc"]
+    claimed = tuple(est.get("claims", CLAIMS))
     steps = max(1, round(float(est["duration"]) / float(case["Ts"])))
-    p_claim = 1.0 - (1.0 - float(est["probability"])) / len(CLAIMS)
+    p_claim = 1.0 - (1.0 - float(est["probability"])) / max(1, len(claimed))
     r_att, r_rate = run_radius(p_claim, 2 * steps), run_radius(p_claim, steps)
     std_att = np.asarray(pt.std_t[1:3], float)
     room = np.radians(ATTITUDE_BOUND_DEG) - np.asarray(support, float) - r_att * std_att
-    rows = np.minimum(room, np.radians(float(mpc["att_max"])))
+    design_rows = np.full(2, np.radians(float(mpc["att_max"])))
+    rows = np.minimum(room, design_rows) if "attitude" in claimed else design_rows
     std_step = float(pt.std_step[1])
     du_design = np.radians(float(mpc["du_max"][1]))
-    du_plan = min(du_design, rate_limit - rate_tube - r_rate * std_step)
-    return EstimateClaims(tau, p_claim, r_att, r_rate, std_att, std_step, rows, room,
-                          rate_tube, rate_limit, du_plan)  # fmt: skip
+    rate_room = rate_limit - rate_tube - r_rate * std_step
+    du_plan = min(du_design, rate_room) if "elevator_rate" in claimed else du_design
+    return EstimateClaims(tau, claimed, p_claim, r_att, r_rate, std_att, std_step, rows,
+                          room, rate_tube, rate_limit, du_plan, rate_room)  # fmt: skip
 
 
 def estimate_bound(case: dict, vehicle, arrays, tau: float, start=None):
