@@ -73,10 +73,24 @@ def loop_deviation(design, pt, duration: float = 100.0, t_from: float = 40.0,
     return dev
 
 
+def joint_figures(js, pt, std_att_deg, std_u_deg: float, std_step_deg: float) -> None:
+    """Assert a joint bound: exact at every pair (scipy's eigvalsh, unscaled, to 1e-12 of
+    Sigma's largest entry), and its standard deviations of alpha and theta, of the tube's
+    elevator and of its step [deg, deg per step] within 1 %."""
+    from fahv.estimation.kalman import measurement_covariance
+    from fahv.sensors.data import DEFAULT_MEASURED, load_sensors
+
+    Rv = measurement_covariance(list(DEFAULT_MEASURED), load_sensors())
+    assert pair_min_eig(js.system, pt.Sigma, Rv) >= -1e-12 * np.abs(pt.Sigma).max()
+    assert np.degrees(pt.std_t[1:3]) == pytest.approx(std_att_deg, rel=0.01)
+    assert np.degrees(pt.std_u[1]) == pytest.approx(std_u_deg, rel=0.01)
+    assert np.degrees(pt.std_step[1]) == pytest.approx(std_step_deg, rel=0.01)
+
+
 @pytest.fixture
 def bound_checks():
-    """The two checks: (pair_min_eig, switched_variance)."""
-    return pair_min_eig, switched_variance
+    """The checks: (pair_min_eig, switched_variance, joint_figures)."""
+    return pair_min_eig, switched_variance, joint_figures
 
 
 @pytest.fixture

@@ -97,12 +97,8 @@ def test_the_joint_bound_with_the_servos_holds_at_every_pair(implementable, boun
     step 0.356 deg per step (without d_h, 27 states: 0.0221, 0.0222, 0.727 and 0.356)."""
     _, _, tau, js, pt = implementable
     assert tau == 0.8 and js.n_s == 4 and pt.Sigma.shape == (28, 28)
-    pair_min_eig, _ = bound_checks
-    Rv = measurement_covariance(MEASURED, load_sensors())
-    assert pair_min_eig(js.system, pt.Sigma, Rv) >= -1e-12 * np.abs(pt.Sigma).max()
-    assert np.degrees(pt.std_t[1:3]) == pytest.approx([0.0222, 0.0222], rel=0.01)
-    assert np.degrees(pt.std_u[1]) == pytest.approx(0.729, rel=0.01)
-    assert np.degrees(pt.std_step[1]) == pytest.approx(0.356, rel=0.01)
+    *_, joint_figures = bound_checks
+    joint_figures(js, pt, [0.0222, 0.0222], 0.729, 0.356)
 
 
 def test_the_command_step_stays_within_the_servo_rate_for_a_run(implementable):

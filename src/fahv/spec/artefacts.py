@@ -244,7 +244,8 @@ WARM_STARTS_FILE = "warm_starts.npz"
 
 #: Library packages a design depends on (their source is hashed into the provenance).
 DESIGN_PACKAGES = ("config", "synthesis", "model", "plant", "sensors", "control", "estimation",
-                   "spec", "bounds", "tube", "onset", "certificate", "design")  # fmt: skip
+                   "spec", "bounds", "tube", "stochastic", "onset", "certificate",
+                   "design")  # fmt: skip
 
 
 def save_arrays(arrays: dict, path: str | Path) -> Path:
