@@ -12,17 +12,19 @@ What the noise does to that loop is bounded as a probabilistic reachable set (He
 and Zeilinger, CDC 2018): `fahv.stochastic.closed_loop` bounds the covariance of the
 joint system of the deviation from the nominal, the servo states and the filter's error
 with one matrix Sigma at every pair of model and gain vertex (LMI, re-checked exactly).
-The design turns it into two claims per run, each with half of 1 - p (a union bound,
-so both hold at once with probability >= p), each itself a union bound over the run's
-steps (and, for the attitude, its two signals):
+The design turns it into the claims per run it makes (`estimate.claims`), each with its
+share of 1 - p (a union bound, so they hold at once with probability >= p), each itself
+a union bound over the run's steps (and, for the attitude, its two signals); a claim it
+does not make is reported with its numbers:
 
 - **attitude**: |alpha - alpha_r|, |theta - theta_r| <= 0.5 deg. The nominal's rows
   are tightened to rows = 0.5 deg - support of Z_8 - r std (r from the union bound),
-  at most the design's `mpc.att_max` (`estimate_att_max`);
+  at most the design's `mpc.att_max` (`estimate_att_max_deg`);
 - **elevator rate**: the command moves by at most the servo's rate limit times Ts per
   step. The tube's worst-case part (`fahv.bounds.input_rate`, as `fahv verify`'s
   `input rate` line) plus the noise part r std of the tube's step leave the nominal's
-  delta_e rate rows what is left (`estimate_du_max`, at most the design's `mpc.du_max`).
+  delta_e rate rows what is left (`estimate_du_max_elevator`, at most the design's
+  `mpc.du_max`).
 
 Assumed, and said in the certificate: the sensors' noise is white and Gaussian at the
 vehicle file's sigmas (the turn-on biases are not in it); the vertex sequence does not
@@ -40,7 +42,7 @@ import numpy as np
 
 from fahv.certificate.verify_estimate import rate_parts
 from fahv.control.base import ATTITUDE_BOUND_DEG
-from fahv.stochastic.claims import EstimateClaims, claims_at, estimate_bound
+from fahv.stochastic.claims import ASSUMPTIONS, EstimateClaims, claims_at, estimate_bound
 from fahv.stochastic.closed_loop import ProbabilisticTube
 
 
@@ -83,19 +85,6 @@ class EstimateDesign:
                 "estimate_pairs": np.array(self.tube.pairs, dtype=np.int64).reshape(-1, 2)}
 
 
-def verdict(c: EstimateClaims, claim: str) -> str:
-    """A claim's verdict: OK or FAILS when claimed, else what the numbers say, not claimed.
-
-    Returns
-    -------
-    str
-    """
-    holds = c.attitude_holds if claim == "attitude" else c.rate_holds
-    if claim in c.claimed:
-        return "OK" if holds else "FAILS"
-    return "(not claimed: it would hold)" if holds else "(not claimed: it does not hold)"
-
-
 def claim_lines(c: EstimateClaims, p: float, pt: ProbabilisticTube, R: int) -> list[str]:
     """The certificate lines of the claims at the design's tau, each with its margin.
 
@@ -105,9 +94,7 @@ def claim_lines(c: EstimateClaims, p: float, pt: ProbabilisticTube, R: int) -> l
     """
     deg = np.degrees
     every = (f"estimate: the claims {', '.join(c.claimed)} hold at once with p >= {p:g} per "
-             f"run (union bound over {len(c.claimed)}); assumed: white Gaussian sensor noise at "
-             "the vehicle file's sigmas (turn-on biases not in it), the model error inside W "
-             "reaching the deviation through Z_8, the servos' limits inactive")  # fmt: skip
+             f"run (union bound over {len(c.claimed)}); assumed: {ASSUMPTIONS}")
     return [
         f"estimate: covariance bound of [t; servo states; e] (joint system of the law "
         f"{c.tau:g} F on the estimate and the filter's error) over the {R * R} pairs of model "
@@ -118,11 +105,11 @@ def claim_lines(c: EstimateClaims, p: float, pt: ProbabilisticTube, R: int) -> l
         f"estimate attitude (p >= {c.p_claim:.4f} per run, {c.r_attitude:.2f} sigma): rows "
         f"{deg(c.rows[0]):.3f} / {deg(c.rows[1]):.3f} deg (room {deg(c.rows_room[0]):.3f} / "
         f"{deg(c.rows_room[1]):.3f}) + support of Z_8 + noise part <= "
-        f"{ATTITUDE_BOUND_DEG} deg  {verdict(c, 'attitude')}",
+        f"{ATTITUDE_BOUND_DEG} deg: {c.said('attitude')[1]}",
         f"estimate elevator rate (p >= {c.p_claim:.4f} per run, {c.r_rate:.2f} sigma): tube "
         f"{deg(c.rate_tube):.3f} + noise {deg(c.r_rate * c.std_step):.3f} leave "
         f"{deg(c.rate_room):.3f} of the servo's {deg(c.rate_limit):.3f} deg per step for the "
-        f"nominal's rate rows ({deg(c.du_plan):.3f})  {verdict(c, 'elevator_rate')}",
+        f"nominal's rate rows ({deg(c.du_plan):.3f}): {c.said('elevator_rate')[1]}",
         every,
     ]
 

@@ -23,6 +23,10 @@ from fahv.stochastic.error_bound import error_system
 
 #: The probabilistic claims an estimate design can make (`estimate.claims`).
 CLAIMS = ESTIMATE_CLAIMS
+#: What every claim assumes, printed with it by the design and by `fahv verify`.
+ASSUMPTIONS = ("white Gaussian sensor noise at the vehicle file's sigmas (turn-on biases not "
+               "in it), the model error inside W reaching the deviation through Z_8, the "
+               "servos' limits inactive")
 
 
 @dataclass(frozen=True)
@@ -83,6 +87,26 @@ class EstimateClaims:
     def rate_holds(self) -> bool:
         """The elevator-rate claim holds: rate rows are left for the nominal."""
         return bool(self.rate_room > 0.0)
+
+    def said(self, claim: str) -> tuple[bool, str]:
+        """Whether a claim passes its check, and what its line says of it.
+
+        Parameters
+        ----------
+        claim : str
+            A name of `CLAIMS`.
+
+        Returns
+        -------
+        (bool, str)
+            A claim the design makes passes when it holds ("certified" or "CLAIMED AND
+            NOT HELD"); one it does not make always passes, reported with what its
+            numbers say ("not claimed (it would hold)" or "(it does not hold)").
+        """
+        holds = self.attitude_holds if claim == "attitude" else self.rate_holds
+        if claim in self.claimed:
+            return holds, "certified" if holds else "CLAIMED AND NOT HELD"
+        return True, "not claimed (it would hold)" if holds else "not claimed (it does not hold)"
 
     @property
     def holds(self) -> bool:
