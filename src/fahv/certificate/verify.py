@@ -47,8 +47,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Callable
-from functools import partial
+from collections.abc import Callable, Collection
+from functools import cache, partial
 from pathlib import Path
 
 import numpy as np
@@ -272,8 +272,10 @@ def checks_of(design: Design, vehicle) -> list[tuple[str, Callable[[], object]]]
         ("model", partial(check_model, design, vehicle)),
         ("tightening", partial(check_tightening, design, vehicle)),
     ]
+    # the eight-state vertices (most of a re-check's time) built once for every check
+    vertices = cache(partial(eight_state_vertices, design, vehicle))
     if design.case["tube"]["form"] == "eight_state":
-        out.append(("eight-state tube", partial(check_eight_state, design, vehicle)))
+        out.append(("eight-state tube", partial(check_eight_state, design, vehicle, vertices)))
     else:
         out.append(("tube RPI", partial(check_tube_rpi, design)))
     if "att_max" in design.arrays and "mpc" in design.case:
@@ -281,7 +283,7 @@ def checks_of(design: Design, vehicle) -> list[tuple[str, Callable[[], object]]]
     if design.case.get("estimate") and "estimate_Sigma" in design.arrays:
         from fahv.certificate.verify_estimate import check_estimate
 
-        out.append(("estimate", partial(check_estimate, design, vehicle)))
+        out.append(("estimate", partial(check_estimate, design, vehicle, vertices)))
     out.append(("nominal K", partial(check_nominal, design)))
     if "K" in design.arrays and "Q" in design.arrays:
         out.append(("terminal set", partial(check_terminal, design)))
@@ -290,7 +292,7 @@ def checks_of(design: Design, vehicle) -> list[tuple[str, Callable[[], object]]]
     return out
 
 
-def check_eight_state(design: Design, vehicle) -> list[CheckResult]:
+def check_eight_state(design: Design, vehicle, vertices=None) -> list[CheckResult]:
     """The eight-state tube's certificate over its own domain, from the stored F_8, N_8, W_8.
 
     The vertices along the nominal over the scheduling box are rebuilt from the design
@@ -300,7 +302,8 @@ def check_eight_state(design: Design, vehicle) -> list[CheckResult]:
     lines: the one-step bound of the nonlinear plant over the domain inside W_8 (every
     row), the scheduling box holding the nominal box grown by the tube, and the exact
     worst one-step level of Z_8 (LMI 24 re-checked exactly); a fourth with the elevator
-    servo's rate limit (`check_input_rate`).
+    servo's rate limit (`check_input_rate`). `vertices`, if given, returns the vertices
+    (`fahv.certificate.eight_state.eight_state_vertices`, built once by `checks_of`).
     """
     from fahv.bounds.domain import box_shortfall, nominal_box
     from fahv.bounds.one_step_bound import altitude_bound
@@ -309,7 +312,7 @@ def check_eight_state(design: Design, vehicle) -> list[CheckResult]:
     a, c, s = design.arrays, design.case, design.summary
     cert = s["certificate"]
     nominal, _ = nominal_box(c["eight_state"], vehicle.envelope)
-    nv, A, B = eight_state_vertices(design, vehicle)
+    nv, A, B = vertices() if vertices is not None else eight_state_vertices(design, vehicle)
     F_8, N_8 = np.asarray(a["F"], float)[:, 1:], np.asarray(a["N"], float)[1:, 1:]
     W_8 = np.asarray(cert["W_8"], float)
     ab = altitude_bound(nv, A, B, F_8, N_8, int(cert["moves"]))
@@ -381,7 +384,8 @@ def check_input_rate(A_8, B_8, F_8, N_8, W_8, case: dict, vehicle) -> list[Check
     )]  # fmt: skip
 
 
-def verify(design: Design, vehicle, log: Callable[[str], None] = print) -> list[CheckResult]:
+def verify(design: Design, vehicle, log: Callable[[str], None] = print,
+           only: Collection[str] | None = None) -> list[CheckResult]:  # fmt: skip
     """Re-check every certificate of a stored design (module docstring); log each line.
 
     Parameters
@@ -392,15 +396,30 @@ def verify(design: Design, vehicle, log: Callable[[str], None] = print) -> list[
         The vehicle the design was made for.
     log : callable
         Receives one line per check.
+    only : collection of str, optional
+        Names of the checks to run (`check_names`), e.g. {"model"}; default every check
+        that applies.
 
     Returns
     -------
     list of CheckResult
         In the order checked; the caller decides what a failure means
         (`require_verified` raises).
+
+    Raises
+    ------
+    ValueError
+        If `only` names a check that does not apply to the design (naming those that do).
     """
+    checks = checks_of(design, vehicle)
+    if only is not None:
+        unknown = set(only) - {name for name, _ in checks}
+        if unknown:
+            raise ValueError(f"no check {sorted(unknown)} applies to this design; its "
+                             f"checks: {', '.join(name for name, _ in checks)}")  # fmt: skip
+        checks = [(name, check) for name, check in checks if name in only]
     out = []
-    for name, check in checks_of(design, vehicle):
+    for name, check in checks:
         try:
             res = check()
         except (KeyError, ValueError, np.linalg.LinAlgError) as exc:

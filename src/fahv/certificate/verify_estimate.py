@@ -21,7 +21,7 @@ from fahv.stochastic.error_bound import error_system, exact_margin
 ROWS_ATOL_DEG = 1e-9
 
 
-def rate_parts(design, vehicle) -> tuple[float, float]:
+def rate_parts(design, vehicle, vertices=None) -> tuple[float, float]:
     """The tube's worst-case part of the delta_e step and the servo's step [rad per step].
 
     The law runs tau F (the design's `tube.tau`, eq. 53-54), whose part of the command
@@ -34,6 +34,10 @@ def rate_parts(design, vehicle) -> tuple[float, float]:
     design : fahv.spec.artefacts.Design
         An eight-state design.
     vehicle : fahv.model.vehicle.Vehicle
+    vertices : callable, optional
+        Returns the design's eight-state vertices as
+        `fahv.certificate.eight_state.eight_state_vertices` does (`fahv verify` builds them
+        once for all its checks); default: that function on `design` and `vehicle`.
 
     Returns
     -------
@@ -44,14 +48,14 @@ def rate_parts(design, vehicle) -> tuple[float, float]:
     from fahv.certificate.eight_state import eight_state_vertices, elevator_rate_step
 
     a, c = design.arrays, design.case
-    _, A, B = eight_state_vertices(design, vehicle)
+    _, A, B = vertices() if vertices is not None else eight_state_vertices(design, vehicle)
     W_8 = np.asarray(design.summary["certificate"]["W_8"], float)
     r = law_rate(A[:, 1:, 1:], B[:, 1:, :], np.asarray(a["F"], float)[:, 1:],
                  np.asarray(a["N"], float)[1:, 1:], W_8, float(c["tube"]["tau"]))  # fmt: skip
     return float(r.per_step[1]), elevator_rate_step(vehicle, float(c["Ts"]))
 
 
-def check_estimate(design, vehicle) -> list[CheckResult]:
+def check_estimate(design, vehicle, vertices=None) -> list[CheckResult]:
     """The estimate design's covariance bound and claims, re-checked (module docstring).
 
     Parameters
@@ -59,6 +63,8 @@ def check_estimate(design, vehicle) -> list[CheckResult]:
     design : fahv.spec.artefacts.Design
         A design with an `estimate` section and its stored `estimate_*` arrays.
     vehicle : fahv.model.vehicle.Vehicle
+    vertices : callable, optional
+        The design's eight-state vertices (`rate_parts`).
 
     Returns
     -------
@@ -83,7 +89,8 @@ def check_estimate(design, vehicle) -> list[CheckResult]:
     )
     pt = ProbabilisticTube(S, margin, 0, *standard_deviations(js, S, R_v), np.zeros(8))
     claims = claims_at(pt, tau, c, np.asarray(a["att_support"], float), *rate_parts(design,
-                                                                                  vehicle))
+                                                                                  vehicle,
+                                                                                  vertices))
     rows_deg = np.degrees(claims.rows)
     same = np.allclose(rows_deg, a["estimate_att_max_deg"], rtol=0.0, atol=ROWS_ATOL_DEG)
     du_deg = float(np.degrees(claims.du_plan))

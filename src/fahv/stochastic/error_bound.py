@@ -38,13 +38,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cvxpy as cp
 import numpy as np
 
 from fahv.errors import DesignError
 from fahv.estimation.kalman import GainScheduledKalman
 from fahv.model.blas import one_blas_thread
-from fahv.synthesis.lmi import dual_support, solve_lmi
 
 #: Strict margin of the covariance LMI (in the coordinates scaled by the filter's own
 #: standard deviations, where S is of order 1): the exact re-check then needs none.
@@ -213,6 +211,10 @@ def covariance_bound(es: ErrorSystem, R_v: np.ndarray, add: int = 10,
     >>> round(float(covariance_bound(es, np.eye(1)).S[0, 0]), 5)
     0.33333
     """
+    import cvxpy as cp  # the solver where it is used: `fahv verify` re-checks without it
+
+    from fahv.synthesis.lmi import dual_support, solve_lmi
+
     D = es.sigma
     Ms = es.M / D[None, None, :, None] * D[None, None, None, :]
     Ns = es.N / D[None, :, None]
