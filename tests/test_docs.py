@@ -108,3 +108,23 @@ def test_the_readmes_verdict_example_is_the_generated_table():
     ours, theirs = _verdict_cells(excerpt), _verdict_cells(generated.splitlines())
     assert ours and all(theirs[k] == cells for k, cells in ours.items()), (ours, theirs)
     assert excerpt[-1].strip() == generated.rstrip().splitlines()[-1].strip()
+
+
+def test_every_evidence_file_a_page_shows_is_shown_as_it_is():
+    """A page's `evidence:` markers (docs/hooks/generated.py) hold the files a command wrote,
+    unedited (headings two levels down); a hand edit of either side fails here, and the
+    site's strict build fails the same way."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("generated", DOCS / "hooks" / "generated.py")
+    hook = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hook)
+    shown = [(page, m) for page in _pages() for m in hook.MARKER.finditer(page.read_text())
+             if m.group(1).startswith(hook.EVIDENCE)]  # fmt: skip
+    assert shown, "the results pages show evidence files"
+    for page, m in shown:
+        path = ROOT / m.group(1)[len(hook.EVIDENCE):]
+        assert path.is_file(), f"{page.name}: {path} is missing"
+        assert m.group(2).strip("\n") == hook.evidence(m.group(1)[len(hook.EVIDENCE):]), (
+            f"{page.name}: {path.name} differs from the page; run docs/hooks/generated.py")
+    assert hook.evidence(m.group(1)[len(hook.EVIDENCE):]).startswith("### "), "demoted"

@@ -9,6 +9,11 @@ Two kinds of generated content:
 
       .venv/bin/python docs/hooks/generated.py
 
+- **Evidence files** between `<!-- evidence:PATH -->` and `<!-- /evidence:PATH -->`: a
+  Markdown file a command wrote (e.g. `fahv campaign compare A B --write PATH`, kept
+  beside the study it supports), shown with its headings two levels down; the build
+  checks that the page holds the file as it is, and the command above rewrites it.
+
 - **The command-line reference**, made at build time from the `fahv` argument parser
   where a page holds `<!-- fahv-cli -->`; nothing of it is stored.
 
@@ -47,7 +52,9 @@ TABLES = {
 SPECS = {"design-keys", "scenario-keys", "campaign-keys"}
 
 CLI_MARKER = "<!-- fahv-cli -->"
-MARKER = re.compile(r"<!-- ([a-z0-9-]+) -->\n(.*?)<!-- /\1 -->", re.DOTALL)
+MARKER = re.compile(r"<!-- ([a-z0-9-]+(?::[\w./-]+)?) -->\n(.*?)<!-- /\1 -->", re.DOTALL)
+#: A marker's prefix for an evidence file (its path relative to the repository's root).
+EVIDENCE = "evidence:"
 
 #: An autorefs target holding ", " is a bracketed list in a docstring (units such as
 #: `[ft, ft/s]` after `[h, V]`, an index such as `[:, c_i]`), which Markdown reads as
@@ -69,8 +76,28 @@ RST_LEFTOVERS = re.compile(
 )
 
 
+def evidence(path: str) -> str:
+    """An evidence file's Markdown as a page shows it: its headings two levels down.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the file is missing (named by the page's marker).
+    """
+    text = (DOCS.parent / path).read_text()
+    return re.sub(r"^(#+) ", lambda m: "#" * min(len(m.group(1)) + 2, 6) + " ", text,
+                  flags=re.M).strip("\n")  # fmt: skip
+
+
+def generated(name: str) -> bool:
+    """Whether the marker `name` is one the code fills (a table or an evidence file)."""
+    return name in TABLES or name.startswith(EVIDENCE)
+
+
 def table(name: str) -> str:
     """The Markdown the code generates for the marker `name`."""
+    if name.startswith(EVIDENCE):
+        return evidence(name[len(EVIDENCE):])
     module, function, *args = TABLES[name]
     made = getattr(import_module(module), function)(*(str(DOCS.parent / a) for a in args))
     if name in SPECS:
@@ -85,7 +112,7 @@ def rewrite(text: str) -> str:
 
     def fresh(m: re.Match) -> str:
         name = m.group(1)
-        if name not in TABLES:
+        if not generated(name):
             return m.group(0)
         return f"<!-- {name} -->\n{table(name)}\n<!-- /{name} -->"
 
@@ -97,7 +124,7 @@ def stale_tables(text: str) -> list[str]:
     return [
         m.group(1)
         for m in MARKER.finditer(text)
-        if m.group(1) in TABLES and m.group(2).strip("\n") != table(m.group(1))
+        if generated(m.group(1)) and m.group(2).strip("\n") != table(m.group(1))
     ]
 
 

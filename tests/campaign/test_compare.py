@@ -103,3 +103,21 @@ def test_a_plants_rate_limit_is_not_applicable_against_ideal_actuators(tmp_path,
     assert (got["all_but_tube"].pass_a, got["all_but_tube"].pass_b) == (40, 38)
     assert main(["campaign", "compare", str(a), str(b)]) == 0
     assert "| commands within the servos' rate limits | n/a | 38 [" in capsys.readouterr().out
+
+
+def test_a_requirement_one_dataset_lacks_is_not_applicable_there(tmp_path, capsys):
+    """A's dataset predates the tube metric (no row has it), B's has it with 3 misses: the
+    tube is n/a on A's side (not 0 of 40 passing, no McNemar test), counted on B's; and
+    `--write` writes the comparison that the command prints."""
+    a = [{k: v for k, v in _row(i, 0.45).items() if k != "tube_fraction_inside"}
+         for i in range(40)]  # fmt: skip
+    b = [_row(i, 0.45, 0.0 if i < 3 else 1.0) for i in range(40)]
+    a, b = _folder(tmp_path / "a", a), _folder(tmp_path / "b", b)
+    got = {r.key: r for r in requirement_pairs(store.read_rows(a), store.read_rows(b), REQ)}
+    tube = got["tube"]
+    assert (tube.pass_a, tube.pass_b, tube.only_a, tube.only_b) == (None, 37, None, None)
+    out = tmp_path / "evidence" / "compare.md"
+    assert main(["campaign", "compare", str(a), str(b), "--write", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "| tube error inside Z at every step | n/a | 37 [" in printed
+    assert out.read_text() == printed.split(f"comparison written to {out}")[0]

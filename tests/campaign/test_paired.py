@@ -50,7 +50,7 @@ def test_paired_differences_and_intervals():
     s = res["stats"]["settling_s"]
     assert s.n == 100 and s.mean_diff == pytest.approx(10.0)  # over runs settled in both
     text = "\n".join(paired_text(res, "a", "b"))
-    assert "| |h - h_c| at the end [ft] | 200 |" in text and "a 100.0 %, b 50.0 %" in text
+    assert r"| \|h - h_c\| at the end [ft] | 200 |" in text and "a 100.0 %, b 50.0 %" in text
 
 
 def test_batches_interleave_the_variants_by_index_range():

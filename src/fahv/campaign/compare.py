@@ -28,10 +28,6 @@ from fahv.errors import CampaignError
 COMPARED = (*((k, label) for k, label in REQUIREMENTS if k != "nominal_range"),
             ("all_but_tube", "every requirement but the tube, at once"))  # fmt: skip
 
-#: Requirements of the plant rather than the law: on a side where no run has them (the
-#: servos' rate on ideal actuators, which have no rate limit) they are not applicable,
-#: shown as n/a, not counted as failed.
-PLANT_ONLY = ("input_rates",)
 
 #: The campaign-file keys that must agree for the draws to be the same.
 SAME_DRAWS = ("seed", "dispersions", "requirements")
@@ -47,7 +43,7 @@ class RequirementPair:
     n : int
         Run indices in both.
     pass_a, pass_b : int or None
-        Runs passing in each (None: not applicable on that side, `PLANT_ONLY`).
+        Runs passing in each (None: applicable to no run on that side).
     only_a, only_b : int or None
         Discordant pairs: indices passing in one campaign only (None with a side n/a).
     p_mcnemar : float
@@ -108,11 +104,11 @@ def requirement_pairs(rows_a: list[dict], rows_b: list[dict], req: dict) -> list
     Returns
     -------
     list of RequirementPair
-        In the order of `COMPARED`; a requirement not applicable to a run (the tube of a
-        law without one) counts as not passing, one applicable to no run of either list
-        (the servos' rate on ideal actuators, a metric earlier datasets lack) is left
-        out, and a `PLANT_ONLY` one applicable to no run of one list (ideal actuators
-        against servos) is n/a on that side: pass counts None, no McNemar test.
+        In the order of `COMPARED`; a requirement not applicable to a run of a list that
+        has it in other runs counts as not passing there, one applicable to no run of
+        either list is left out, and one applicable to no run of one list (the servos'
+        rate on ideal actuators against servos, the tube of a law without one, a metric
+        an earlier dataset lacks) is n/a on that side: pass counts None, no McNemar test.
     """
     va = {r["index"]: _passes(r, req) for r in rows_a}
     vb = {r["index"]: _passes(r, req) for r in rows_b}
@@ -121,7 +117,7 @@ def requirement_pairs(rows_a: list[dict], rows_b: list[dict], req: dict) -> list
     for key, label in COMPARED:
         if not any(key in va[i] or key in vb[i] for i in idx):
             continue
-        if key in PLANT_ONLY and not all(any(key in v[i] for i in idx) for v in (va, vb)):
+        if not all(any(key in v[i] for i in idx) for v in (va, vb)):
             counts = [sum(v[i].get(key, False) for i in idx)
                       if any(key in v[i] for i in idx) else None for v in (va, vb)]  # fmt: skip
             cis = [(math.nan, math.nan) if c is None else clopper_pearson(c, len(idx))
@@ -208,7 +204,8 @@ def compare_campaigns(dir_a, dir_b, variant: str | None = None,
     for r in pairs:  # no discordant pairs where one side's plant lacks the requirement
         test = ("- | - | -" if r.only_a is None else
                 f"{r.only_a} | {r.only_b} | {r.p_mcnemar:.3g}")  # fmt: skip
-        lines.append(f"| {r.label} | {cell(r.pass_a, r.ci_a)} | {cell(r.pass_b, r.ci_b)} | "
+        label = r.label.replace("|", "\\|")  # |h - h_c| inside a table cell
+        lines.append(f"| {label} | {cell(r.pass_a, r.ci_a)} | {cell(r.pass_b, r.ci_b)} | "
                      f"{test} |")  # fmt: skip
     res = paired_stats(rows_a + rows_b, la, lb, req["confidence"])
     return lines + [""] + paired_text(res, la, lb), pairs

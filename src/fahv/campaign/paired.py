@@ -200,6 +200,11 @@ def _g(v: float) -> str:
     return "nan" if not np.isfinite(v) else f"{v:.4g}"
 
 
+def _cell(text: str) -> str:
+    """`text` as a Markdown table cell: its bars escaped (|alpha - alpha_r| in a label)."""
+    return text.replace("|", "\\|")
+
+
 def paired_text(res: dict, a: str, b: str) -> list[str]:
     """Markdown lines of a paired comparison (`paired_stats`)."""
     sa, sb = res["settled"]
@@ -225,7 +230,7 @@ def paired_text(res: dict, a: str, b: str) -> list[str]:
     ]
     for s in res["stats"].values():
         lines.append(
-            f"| {s.label} | {s.n} | {_g(s.mean_a)} | {_g(s.mean_b)} | {_g(s.mean_diff)} | "
+            f"| {_cell(s.label)} | {s.n} | {_g(s.mean_a)} | {_g(s.mean_b)} | {_g(s.mean_diff)} | "
             f"[{_g(s.t_ci[0])}, {_g(s.t_ci[1])}] | [{_g(s.boot_ci[0])}, {_g(s.boot_ci[1])}] | "
             f"{_g(s.median_diff)} | {100 * s.frac_b_larger:.1f} % |"
         )

@@ -3,7 +3,7 @@
     fahv campaign CAMPAIGN.yaml [--scenario S] [--runs N] [--duration S] [--out DIR]
                   [--scheduler ADDRESS] [--workers N] [--resume] [--dashboard [ADDRESS]]
     fahv campaign report DIR [--no-figures]
-    fahv campaign compare DIR_A DIR_B [--variant V] [--variant-b W]
+    fahv campaign compare DIR_A DIR_B [--variant V] [--variant-b W] [--write FILE]
     fahv campaign rerun DIR INDEX [--variant V] [--sil] [--out BAGS]
     fahv campaign rerun RUN [--sil] [--out BAGS]
 
@@ -108,7 +108,12 @@ def cmd_report(args) -> int:
 def cmd_compare(args) -> int:
     """Two campaign folders of the same draws compared run by run (B - A), printed."""
     lines, _ = compare_campaigns(args.dir_a, args.dir_b, args.variant, args.variant_b)
-    print("\n".join(lines))
+    text = "\n".join(lines)
+    print(text)
+    if args.write:  # evidence a results page shows (docs/hooks/generated.py, `evidence:`)
+        Path(args.write).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.write).write_text(text + "\n")
+        print(f"comparison written to {args.write}")
     return 0
 
 
@@ -218,6 +223,8 @@ def add_parsers(sub) -> None:
                    "first)")  # fmt: skip
     p.add_argument("--variant-b", default=None, help="compare: the variant of DIR_B, when "
                    "another than --variant's")  # fmt: skip
+    p.add_argument("--write", default=None, metavar="FILE", help="compare: also write the "
+                   "comparison (Markdown) to FILE, e.g. the evidence a results page shows")
     p.add_argument("--sil", action="store_true", help="rerun through the ROS 2 node graph")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_dispatch)  # fmt: skip
