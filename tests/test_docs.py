@@ -23,8 +23,10 @@ PROCESS_WORDS = (
 
 
 def _pages() -> list[Path]:
-    """Every Markdown page of the site (docs/hooks/ holds code, not pages)."""
-    return sorted(p for p in DOCS.rglob("*.md") if "hooks" not in p.relative_to(DOCS).parts)
+    """Every Markdown page of the site (docs/hooks/ holds code and docs/evidence/ what
+    commands wrote for the pages to show, not pages)."""
+    return sorted(p for p in DOCS.rglob("*.md")
+                  if not {"hooks", "evidence"} & set(p.relative_to(DOCS).parts))  # fmt: skip
 
 
 def _nav_pages(entries) -> list[str]:

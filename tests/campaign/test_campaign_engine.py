@@ -306,6 +306,22 @@ def test_report_numbers(reference, report_page):
     assert f"### not certified: {n_not} of 12 draws" in rep.text
 
 
+def test_report_writes_its_head_as_evidence(reference, tmp_path, capsys):
+    """`--write FILE`: the report's head (title, dataset, wall times, pass rates), which
+    the report itself begins with, and no worst runs or figures."""
+    from fahv.cli import main
+
+    _, out = reference
+    evidence = tmp_path / "evidence" / "overview.md"
+    assert main(["campaign", "report", str(out), "--no-figures", "--write",
+                 str(evidence)]) == 0  # fmt: skip
+    assert f"overview written to {evidence}" in capsys.readouterr().out
+    head = evidence.read_text()
+    assert (out / "report" / "report.md").read_text().startswith(head)
+    assert head.startswith("# Campaign ") and "| every requirement at once | " in head
+    assert "wall time" in head and "## Worst" not in head and "![" not in head
+
+
 def test_report_command_prints_a_summary_and_the_path(reference, capsys):
     """The command prints a short summary and the report file, not the whole report."""
     from fahv.cli import main

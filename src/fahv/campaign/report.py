@@ -165,6 +165,12 @@ class Report:
     by_coverage : dict
         `{group: {variant: {requirement: (passed, applicable, bound)}}}` of the
         certified and the not certified draws (`coverage_lines`).
+    confidence : float
+        Of the failure-probability bounds.
+    overview : str
+        Markdown of the report's head: the title, the dataset and its parts' wall times,
+        and the pass-rate table (what `fahv campaign report DIR --write FILE` writes, the
+        evidence a results page shows).
     """
 
     text: str
@@ -173,6 +179,7 @@ class Report:
     n_runs: int
     by_coverage: dict = dataclass_field(default_factory=dict)
     confidence: float = 0.95
+    overview: str = ""
 
     def summary(self) -> str:
         """A few lines for the terminal: runs, then each requirement's pass count per variant.
@@ -254,6 +261,7 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
     lines = header_lines(man, rows)
     table, rate_lines = pass_rate_lines(data, per_variant, _certified_range(out))
     lines += rate_lines
+    overview = "\n".join(lines) + "\n"
     by_coverage, cov_lines = coverage_lines(data, per_variant, _certified_range(out))
     lines += cov_lines
     reasons = Counter(r["reason"].split(" at t =")[0] for r in rows if r["status"] != "ok")
@@ -292,7 +300,7 @@ def make_report(out_dir: str | Path, figures: bool = True, worst: int = 3) -> Re
     rep = out / "report"
     rep.mkdir(exist_ok=True)
     (rep / "report.md").write_text(text)
-    return Report(text, table, figs, len(rows), by_coverage, req["confidence"])
+    return Report(text, table, figs, len(rows), by_coverage, req["confidence"], overview)
 
 
 def header_lines(man: dict, rows: list[dict]) -> list[str]:

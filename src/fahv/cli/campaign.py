@@ -2,7 +2,7 @@
 
     fahv campaign CAMPAIGN.yaml [--scenario S] [--runs N] [--duration S] [--out DIR]
                   [--scheduler ADDRESS] [--workers N] [--resume] [--dashboard [ADDRESS]]
-    fahv campaign report DIR [--no-figures]
+    fahv campaign report DIR [--no-figures] [--write FILE]
     fahv campaign compare DIR_A DIR_B [--variant V] [--variant-b W] [--write FILE]
     fahv campaign rerun DIR INDEX [--variant V] [--sil] [--out BAGS]
     fahv campaign rerun RUN [--sil] [--out BAGS]
@@ -102,6 +102,10 @@ def cmd_report(args) -> int:
     rep = make_report(args.dir, figures=not args.no_figures)
     print(rep.summary())
     print(f"report: {Path(args.dir) / 'report' / 'report.md'} ({_contents(args)})")
+    if args.write:  # its head, the evidence a results page shows
+        Path(args.write).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.write).write_text(rep.overview)
+        print(f"overview written to {args.write}")
     return 0
 
 
@@ -223,8 +227,9 @@ def add_parsers(sub) -> None:
                    "first)")  # fmt: skip
     p.add_argument("--variant-b", default=None, help="compare: the variant of DIR_B, when "
                    "another than --variant's")  # fmt: skip
-    p.add_argument("--write", default=None, metavar="FILE", help="compare: also write the "
-                   "comparison (Markdown) to FILE, e.g. the evidence a results page shows")
+    p.add_argument("--write", default=None, metavar="FILE", help="report: also write the "
+                   "report's head (dataset, wall times, pass rates) to FILE; compare: the "
+                   "comparison; Markdown, e.g. the evidence a results page shows")
     p.add_argument("--sil", action="store_true", help="rerun through the ROS 2 node graph")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_dispatch)  # fmt: skip
