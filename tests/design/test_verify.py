@@ -67,7 +67,7 @@ def test_the_model_of_every_design_holds_whatever_the_blas_threads(name, threads
     records no pass."""
     res = _verify(name, "--only", "model", threads=threads)
     assert res.returncode == 0, res.stdout + res.stderr
-    assert "verified: 1 of the chosen checks hold" in res.stdout, res.stdout
+    assert "verified: 1 lines of the chosen checks (model) hold" in res.stdout, res.stdout
     assert [line.split(":")[0] for line in res.stdout.splitlines()[1:-1]] == ["model"]
     _model_line(res.stdout)
 

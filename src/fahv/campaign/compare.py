@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fahv.campaign import store
-from fahv.campaign.paired import mcnemar_p, paired_stats, paired_text
+from fahv.campaign.paired import mcnemar_p, paired_stats, paired_text, table_cell
 from fahv.campaign.report import REQUIREMENTS, verdicts
 from fahv.errors import CampaignError
 
@@ -204,8 +204,7 @@ def compare_campaigns(dir_a, dir_b, variant: str | None = None,
     for r in pairs:  # no discordant pairs where one side's plant lacks the requirement
         test = ("- | - | -" if r.only_a is None else
                 f"{r.only_a} | {r.only_b} | {r.p_mcnemar:.3g}")  # fmt: skip
-        label = r.label.replace("|", "\\|")  # |h - h_c| inside a table cell
-        lines.append(f"| {label} | {cell(r.pass_a, r.ci_a)} | {cell(r.pass_b, r.ci_b)} | "
-                     f"{test} |")  # fmt: skip
+        lines.append(f"| {table_cell(r.label)} | {cell(r.pass_a, r.ci_a)} | "
+                     f"{cell(r.pass_b, r.ci_b)} | {test} |")  # fmt: skip
     res = paired_stats(rows_a + rows_b, la, lb, req["confidence"])
     return lines + [""] + paired_text(res, la, lb), pairs

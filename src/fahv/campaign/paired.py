@@ -200,8 +200,18 @@ def _g(v: float) -> str:
     return "nan" if not np.isfinite(v) else f"{v:.4g}"
 
 
-def _cell(text: str) -> str:
-    """`text` as a Markdown table cell: its bars escaped (|alpha - alpha_r| in a label)."""
+def table_cell(text: str) -> str:
+    r"""`text` as a Markdown table cell: its bars escaped (|h - h_c|, |alpha - alpha_r|).
+
+    Parameters
+    ----------
+    text : str
+
+    Returns
+    -------
+    str
+        `text` with every `|` as `\|`, so that a table does not split at it.
+    """
     return text.replace("|", "\\|")
 
 
@@ -230,8 +240,9 @@ def paired_text(res: dict, a: str, b: str) -> list[str]:
     ]
     for s in res["stats"].values():
         lines.append(
-            f"| {_cell(s.label)} | {s.n} | {_g(s.mean_a)} | {_g(s.mean_b)} | {_g(s.mean_diff)} | "
-            f"[{_g(s.t_ci[0])}, {_g(s.t_ci[1])}] | [{_g(s.boot_ci[0])}, {_g(s.boot_ci[1])}] | "
+            f"| {table_cell(s.label)} | {s.n} | {_g(s.mean_a)} | {_g(s.mean_b)} | "
+            f"{_g(s.mean_diff)} | [{_g(s.t_ci[0])}, {_g(s.t_ci[1])}] | "
+            f"[{_g(s.boot_ci[0])}, {_g(s.boot_ci[1])}] | "
             f"{_g(s.median_diff)} | {100 * s.frac_b_larger:.1f} % |"
         )
     return lines + [""]

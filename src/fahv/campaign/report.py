@@ -44,7 +44,7 @@ from fahv.campaign import store
 from fahv.campaign.attribution import attribute_all, attribution_figure, attribution_lines
 from fahv.campaign.draws import scatter_columns
 from fahv.campaign.figures import WORST_METRICS, draw_figures, metric
-from fahv.campaign.paired import paired_figures, paired_stats, paired_text
+from fahv.campaign.paired import paired_figures, paired_stats, paired_text, table_cell
 from fahv.spec.coverage import NOT_CERTIFIED, is_certified
 from fahv.spec.requirements import judge, limits_of
 
@@ -390,8 +390,7 @@ def rate_table(data: dict, verd: dict) -> tuple[dict, list[str]]:
             cells.append(
                 "n/a" if n == 0 else f"{ok}/{n} ({100.0 * ok / n:.1f} %), p_fail < {bound:.3g}"
             )
-        text = desc.format(**req).replace("|", "\\|")  # |h - h_c| inside a table cell
-        lines.append(f"| {text} | " + " | ".join(cells) + " |")
+        lines.append(f"| {table_cell(desc.format(**req))} | " + " | ".join(cells) + " |")
     return table, lines
 
 

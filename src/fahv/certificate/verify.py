@@ -397,8 +397,8 @@ def verify(design: Design, vehicle, log: Callable[[str], None] = print,
     log : callable
         Receives one line per check.
     only : collection of str, optional
-        Names of the checks to run (`check_names`), e.g. {"model"}; default every check
-        that applies.
+        Names of the checks to run (the names `checks_of` gives), e.g. {"model"}; default
+        every check that applies.
 
     Returns
     -------

@@ -150,7 +150,8 @@ def cmd_verify(args) -> int:
         return 1
     if args.only is None:  # the runs of this design reuse a whole pass, never a part
         record_pass(design, vehicle, folder, results)
-    what = "certificates hold" if args.only is None else "of the chosen checks hold"
+    what = ("certificates hold" if args.only is None
+            else f"lines of the chosen checks ({', '.join(args.only)}) hold")  # fmt: skip
     print(f"verified: {len(results)} {what} ({time.monotonic() - t0:.1f} s)")
     return 0
 
